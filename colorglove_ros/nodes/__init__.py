@@ -1,0 +1,1 @@
+"""Thin rclpy node shells around :mod:`colorglove_ros.core`."""

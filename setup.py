@@ -1,0 +1,40 @@
+"""Install the colorglove_ros ament_python package."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE_NAME = 'colorglove_ros'
+
+NODE_SCRIPTS = {
+    'camera_node': 'colorglove_ros.nodes.camera_node:main',
+    'segmentation_node': 'colorglove_ros.nodes.segmentation_node:main',
+    'lookup_node': 'colorglove_ros.nodes.lookup_node:main',
+    'ik_node': 'colorglove_ros.nodes.ik_node:main',
+}
+
+TOOL_SCRIPTS = {
+    'colorglove_launch': 'colorglove_ros.launcher:main',
+}
+
+setup(
+    name=PACKAGE_NAME,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE_NAME}']),
+        (f'share/{PACKAGE_NAME}', ['package.xml']),
+        (f'share/{PACKAGE_NAME}/config', glob('config/*.yaml')),
+        (f'share/{PACKAGE_NAME}/launch', glob('launch/*.launch.py')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='colorglove_ros maintainers',
+    maintainer_email='maintainers@colorglove-ros.org',
+    description='Colour-glove articulated hand tracking (Wang and Popovic 2009) as ROS 2 nodes.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [f'{name} = {target}'
+                            for name, target in {**NODE_SCRIPTS, **TOOL_SCRIPTS}.items()],
+    },
+)
