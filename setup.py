@@ -1,5 +1,6 @@
 """Install the colorglove_ros ament_python package."""
 from glob import glob
+from pathlib import Path
 
 from setuptools import find_packages, setup
 
@@ -12,9 +13,12 @@ NODE_SCRIPTS = {
     'ik_node': 'colorglove_ros.nodes.ik_node:main',
 }
 
-TOOL_SCRIPTS = {
-    'colorglove_launch': 'colorglove_ros.launcher:main',
-}
+TOOL_SCRIPTS = {'colorglove_launch': 'colorglove_ros.launcher:main'}
+# Every command-line tool colorglove_ros/tools/<name>.py becomes colorglove_<name>.
+TOOL_SCRIPTS.update({
+    f'colorglove_{Path(path).stem}': f'colorglove_ros.tools.{Path(path).stem}:main'
+    for path in sorted(glob('colorglove_ros/tools/*.py')) if not Path(path).stem.startswith('_')
+})
 
 setup(
     name=PACKAGE_NAME,

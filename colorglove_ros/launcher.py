@@ -1,0 +1,189 @@
+"""Start a set of nodes as separate processes from one YAML file and stop them cleanly.
+
+``ros2 launch`` is not installable from PyPI, so this is the launcher on pip-only
+machines. The YAML (see ``config/pipeline.launch.yaml``)::
+
+    nodes:
+      - executable: camera_node          # console script / ros2 run executable name
+        name: camera                     # optional node name (__node remap)
+        parameters: [config/camera.yaml] # optional parameter files (relative to the YAML)
+        remappings: {image_raw: /camera/image_raw}
+        arguments: []                    # optional extra command-line arguments
+
+On Ctrl-C or SIGTERM every node gets SIGINT, then SIGTERM, then SIGKILL after grace
+periods. If one node exits, the others are stopped too (unless ``respawn: true``).
+"""
+from __future__ import annotations
+
+import argparse
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+__all__ = ['LaunchError', 'NodeSpec', 'load_launch_file', 'node_command', 'Launcher', 'main']
+
+
+class LaunchError(Exception):
+    """A launch file is missing or malformed, or an executable cannot be found."""
+
+
+@dataclass
+class NodeSpec:
+    """One process to start."""
+
+    executable: str
+    name: str = ''
+    parameters: list[Path] = field(default_factory=list)
+    remappings: dict[str, str] = field(default_factory=dict)
+    arguments: list[str] = field(default_factory=list)
+    respawn: bool = False
+
+
+def load_launch_file(path: str | Path) -> list[NodeSpec]:
+    """Parse a launch YAML into node specs; parameter paths resolve relative to it."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError as exc:
+        raise LaunchError(f'launch file not found: {path}') from exc
+    except yaml.YAMLError as exc:
+        raise LaunchError(f'launch file is not valid YAML: {path}: {exc}') from exc
+    if not isinstance(data, dict) or not isinstance(data.get('nodes'), list) or not data['nodes']:
+        raise LaunchError(f'launch file {path} needs a non-empty list under "nodes"')
+    specs = []
+    for index, entry in enumerate(data['nodes']):
+        if not isinstance(entry, dict) or 'executable' not in entry:
+            raise LaunchError(f'{path}: node {index} has no "executable"')
+        params = entry.get('parameters', [])
+        params = [params] if isinstance(params, str) else params
+        specs.append(NodeSpec(
+            executable=str(entry['executable']),
+            name=str(entry.get('name', '')),
+            parameters=[(path.parent / p).resolve() for p in params],
+            remappings={str(k): str(v) for k, v in (entry.get('remappings') or {}).items()},
+            arguments=[str(a) for a in entry.get('arguments', [])],
+            respawn=bool(entry.get('respawn', False)),
+        ))
+    return specs
+
+
+def node_command(spec: NodeSpec) -> list[str]:
+    """The command line that starts ``spec`` (console script + ``--ros-args``)."""
+    executable = shutil.which(spec.executable)
+    if executable is None:
+        raise LaunchError(f'executable {spec.executable!r} not found on PATH '
+                          '(is the colorglove_ros venv active?)')
+    command = [executable, *spec.arguments, '--ros-args']
+    if spec.name:
+        command += ['-r', f'__node:={spec.name}']
+    for param_file in spec.parameters:
+        if not param_file.is_file():
+            raise LaunchError(f'parameter file not found: {param_file}')
+        command += ['--params-file', str(param_file)]
+    for source, target in spec.remappings.items():
+        command += ['-r', f'{source}:={target}']
+    return command
+
+
+class Launcher:
+    """Runs node processes, prefixes their output, and stops them in order."""
+
+    def __init__(self, specs: list[NodeSpec], sigint_grace_s: float = 5.0,
+                 sigterm_grace_s: float = 3.0) -> None:
+        self.specs = specs
+        self.commands = [node_command(spec) for spec in specs]
+        self.processes: list[subprocess.Popen | None] = [None] * len(specs)
+        self.sigint_grace_s = sigint_grace_s
+        self.sigterm_grace_s = sigterm_grace_s
+
+    def _label(self, index: int) -> str:
+        return self.specs[index].name or self.specs[index].executable
+
+    def _start(self, index: int) -> None:
+        process = subprocess.Popen(self.commands[index], stdout=subprocess.PIPE,
+                                   stderr=subprocess.STDOUT, text=True, bufsize=1,
+                                   start_new_session=True)
+        self.processes[index] = process
+        label = self._label(index)
+        threading.Thread(target=_relay, args=(process, label), daemon=True).start()
+        print(f'[launch] started {label} (pid {process.pid})', flush=True)
+
+    def start(self) -> None:
+        """Start every node."""
+        for index in range(len(self.specs)):
+            self._start(index)
+
+    def watch(self, stop_event: threading.Event) -> int:
+        """Wait until ``stop_event`` is set or a non-respawning node exits; return its code."""
+        while not stop_event.wait(0.2):
+            for index, process in enumerate(self.processes):
+                code = process.poll() if process else None
+                if code is None:
+                    continue
+                label = self._label(index)
+                if self.specs[index].respawn:
+                    print(f'[launch] {label} exited with {code}; respawning', flush=True)
+                    self._start(index)
+                else:
+                    print(f'[launch] {label} exited with {code}; stopping the rest', flush=True)
+                    return code
+        return 0
+
+    def stop(self) -> None:
+        """SIGINT every running node, then SIGTERM, then SIGKILL after grace periods."""
+        for sig, grace in ((signal.SIGINT, self.sigint_grace_s),
+                           (signal.SIGTERM, self.sigterm_grace_s), (signal.SIGKILL, 5.0)):
+            running = [p for p in self.processes if p is not None and p.poll() is None]
+            if not running:
+                return
+            for process in running:
+                process.send_signal(sig)
+            deadline = time.monotonic() + grace
+            for process in running:
+                try:
+                    process.wait(timeout=max(0.0, deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    pass
+
+
+def _relay(process: subprocess.Popen, label: str) -> None:
+    for line in process.stdout:
+        sys.stdout.write(f'[{label}] {line}')
+        sys.stdout.flush()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point: ``colorglove_launch LAUNCH_YAML [--duration S]``."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('launch_file', help='YAML listing the nodes to start')
+    parser.add_argument('--duration', type=float, default=0.0,
+                        help='stop everything after this many seconds (0 = run until Ctrl-C)')
+    args = parser.parse_args(argv)
+    try:
+        launcher = Launcher(load_launch_file(args.launch_file))
+    except LaunchError as exc:
+        print(f'colorglove_launch: {exc}', file=sys.stderr)
+        return 2
+    stop_event = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop_event.set())
+    if args.duration > 0:
+        threading.Timer(args.duration, stop_event.set).start()
+    launcher.start()
+    try:
+        code = launcher.watch(stop_event)
+    finally:
+        launcher.stop()
+        print('[launch] all nodes stopped', flush=True)
+    return code
+
+
+if __name__ == '__main__':
+    sys.exit(main())

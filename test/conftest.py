@@ -1,0 +1,21 @@
+"""Shared pytest fixtures."""
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+TEST_DIR = Path(__file__).resolve().parent
+REPO_DIR = TEST_DIR.parent
+sys.path.insert(0, str(TEST_DIR))
+
+
+@pytest.fixture
+def isolated_ros_domain(monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
+    """A ROS domain of this test run's own, on loopback only; returns the environment to pass on."""
+    domain = str(100 + os.getpid() % 100)
+    monkeypatch.setenv('ROS_DOMAIN_ID', domain)
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    return dict(os.environ)

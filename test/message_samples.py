@@ -1,0 +1,54 @@
+"""Deterministic custom messages for the DDS round-trip test (shared by both processes)."""
+from __future__ import annotations
+
+import numpy as np
+
+from colorglove_msgs.msg import (
+    HandObservation,
+    HandPoseCandidates,
+    PatchBlob,
+    PatchConstraint,
+    PoseCandidate,
+)
+
+
+def sample_observation(seq: int) -> HandObservation:
+    """An observation whose every field depends on ``seq``."""
+    rng = np.random.default_rng(seq)
+    msg = HandObservation()
+    msg.header.stamp.sec = 1000 + seq
+    msg.header.stamp.nanosec = 123456789
+    msg.header.frame_id = 'camera_optical_frame'
+    msg.hand_found = True
+    msg.status = f'frame {seq}'
+    msg.image_width, msg.image_height = 640, 480
+    msg.tiny_labels = rng.integers(0, 11, HandObservation.TINY_SIZE ** 2, dtype=np.uint8).tolist()
+    msg.crop_scale, msg.crop_offset_x, msg.crop_offset_y = 3.25, 100.5 + seq, 80.25
+    msg.blobs = [PatchBlob(color_label=c, x=10.0 * c + 0.5, y=20.0 * c, pixel_count=100 * c)
+                 for c in range(1, 11)]
+    msg.glove_pixel_count = 5500
+    msg.processing_time_ms = 4.5
+    return msg
+
+
+def sample_candidates(seq: int) -> HandPoseCandidates:
+    """A candidates message with 10 poses of 26 DOFs and the observation inside."""
+    rng = np.random.default_rng(1000 + seq)
+    msg = HandPoseCandidates()
+    msg.header = sample_observation(seq).header
+    msg.hand_found = True
+    msg.dof_names = [f'dof_{i}' for i in range(26)]
+    msg.candidates = [
+        PoseCandidate(database_index=int(i * 97 + seq), pose=rng.standard_normal(26).tolist(),
+                      image_distance=float(i) * 0.5, weight=0.1) for i in range(10)]
+    msg.blended_pose = rng.standard_normal(26).tolist()
+    msg.constraints = [PatchConstraint(patch_id=p, color_label=p % 10 + 1, vertex_index=37 * p,
+                                       tiny_x=float(p), tiny_y=39.0 - p, pixel_count=5 + p)
+                       for p in range(20)]
+    msg.observation = sample_observation(seq)
+    msg.lookup_time_ms = 1.25
+    return msg
+
+
+SAMPLES = {'observation': (HandObservation, sample_observation),
+           'candidates': (HandPoseCandidates, sample_candidates)}
