@@ -29,6 +29,7 @@ setup(
         (f'share/{PACKAGE_NAME}', ['package.xml']),
         (f'share/{PACKAGE_NAME}/config', glob('config/*.yaml')),
         (f'share/{PACKAGE_NAME}/launch', glob('launch/*.launch.py')),
+        (f'share/{PACKAGE_NAME}/urdf', glob('urdf/*.urdf')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

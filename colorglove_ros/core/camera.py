@@ -38,7 +38,7 @@ class PinholeCamera:
     frame_id: str = 'camera_optical_frame'
 
     @property
-    def K(self) -> np.ndarray:
+    def K(self) -> np.ndarray:  # noqa: N802 (the intrinsic matrix is K everywhere)
         """3x3 intrinsic matrix."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
@@ -141,12 +141,13 @@ def load_calibration(path: str | Path) -> Calibration:
 
 
 def look_at_extrinsics(eye: np.ndarray, target: np.ndarray,
-                       down: np.ndarray = np.array([0.0, 1.0, 0.0])) -> tuple[np.ndarray, np.ndarray]:
+                       down: tuple[float, float, float] = (0.0, 1.0, 0.0),
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """Rotation and translation (world -> optical frame) of a camera at ``eye`` looking
     at ``target``, with image rows running along ``down``."""
     z_axis = np.asarray(target, float) - np.asarray(eye, float)
     z_axis /= np.linalg.norm(z_axis)
-    x_axis = np.cross(down, z_axis)
+    x_axis = np.cross(np.asarray(down, float), z_axis)
     x_axis /= np.linalg.norm(x_axis)
     y_axis = np.cross(z_axis, x_axis)
     rotation = np.stack([x_axis, y_axis, z_axis])

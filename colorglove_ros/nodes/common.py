@@ -1,0 +1,76 @@
+"""Helpers shared by the node shells: parameter declaration and the Jazzy ``main`` pattern."""
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import rclpy
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+
+__all__ = ['declare', 'reject_parameter_changes', 'run_node']
+
+
+def declare(node: Node, name: str, default: Any, description: str,
+            minimum: float | None = None, maximum: float | None = None,
+            read_only: bool = False) -> Any:
+    """Declare a parameter with a description (and a range for numbers); return its value."""
+    descriptor = ParameterDescriptor(description=description, read_only=read_only)
+    if minimum is not None and maximum is not None:
+        if isinstance(default, bool):
+            pass
+        elif isinstance(default, int):
+            descriptor.integer_range = [IntegerRange(from_value=int(minimum),
+                                                     to_value=int(maximum), step=0)]
+        elif isinstance(default, float):
+            descriptor.floating_point_range = [FloatingPointRange(
+                from_value=float(minimum), to_value=float(maximum), step=0.0)]
+    return node.declare_parameter(name, default, descriptor).value
+
+
+def reject_parameter_changes(node: Node, names: set[str]) -> None:
+    """Refuse run-time changes to parameters read only at start-up, with a clear reason."""
+    def callback(params) -> SetParametersResult:
+        for param in params:
+            if param.name in names:
+                return SetParametersResult(
+                    successful=False,
+                    reason=f'{param.name} is read at start-up; restart the node to change it')
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(callback)
+
+
+def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
+    """Init rclpy, spin the node made by ``factory`` until shutdown, and clean up (Jazzy style).
+
+    A node that cannot start (bad configuration) logs the reason and exits with code 1.
+    """
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = factory()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except StartupError as exc:
+        print(f'[FATAL] {exc}', flush=True)
+        return 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+class StartupError(Exception):
+    """A node cannot start: missing device, file, database or bad configuration."""
+
+
+__all__ += ['StartupError']
