@@ -1,0 +1,137 @@
+"""Publish a rosbag2 (sqlite3 or MCAP) into the ROS graph, with its original timing or paced by
+the pipeline's output (next frame as soon as the previous one has produced a result)."""
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+import time
+from pathlib import Path
+
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, QoSReliabilityPolicy
+from rosbags.highlevel import AnyReader
+
+from colorglove_ros.typestore import colorglove_typestore
+
+__all__ = ['BagPlayer', 'main']
+
+
+def _import_message_class(msgtype: str):
+    package, _, name = msgtype.split('/')
+    module = __import__(f'{package}.msg', fromlist=[name])
+    return getattr(module, name)
+
+
+class BagPlayer(Node):
+    """Publishes every message of a bag as raw CDR on its original topic and type."""
+
+    def __init__(self, bag: Path, topics: list[str] | None = None, **kwargs) -> None:
+        super().__init__('bag_player', **kwargs)
+        self.reader = AnyReader([bag], default_typestore=colorglove_typestore())
+        self.reader.open()
+        self.connections = [c for c in self.reader.connections
+                            if not topics or c.topic in topics]
+        if not self.connections:
+            raise ValueError(f'bag {bag} has none of the topics {topics}')
+        qos = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE)
+        self.publishers_by_topic = {
+            c.topic: self.create_publisher(_import_message_class(c.msgtype), c.topic, qos)
+            for c in self.connections}
+        self.output_event = threading.Event()
+
+    def wait_for_subscribers(self, topic: str, timeout_s: float) -> bool:
+        """Wait until ``topic`` has a subscriber (so the first frames are not lost)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if self.publishers_by_topic[topic].get_subscription_count() > 0:
+                return True
+            time.sleep(0.05)
+        return False
+
+    def play(self, rate: float, pace_topic: str | None, pace_on: str | None,
+             pace_timeout_s: float) -> int:
+        """Publish all messages; return how many were published."""
+        start_wall = time.monotonic()
+        first_stamp = None
+        count = 0
+        for connection, timestamp, rawdata in self.reader.messages(connections=self.connections):
+            if first_stamp is None:
+                first_stamp = timestamp
+            if pace_on is None and rate > 0:
+                due = start_wall + (timestamp - first_stamp) * 1e-9 / rate
+                delay = due - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+            if pace_on is not None and connection.topic == pace_on:
+                self.output_event.clear()
+            self.publishers_by_topic[connection.topic].publish(bytes(rawdata))
+            count += 1
+            if pace_on is not None and connection.topic == pace_on:
+                self.output_event.wait(pace_timeout_s)
+        return count
+
+    def close(self) -> None:
+        """Close the bag."""
+        self.reader.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``colorglove_play_bag BAG [--rate R | --paced]``."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('bag', type=Path, help='rosbag2 folder (sqlite3 or MCAP)')
+    parser.add_argument('--topics', nargs='*', help='only these topics (default: all)')
+    parser.add_argument('--rate', type=float, default=1.0,
+                        help='playback speed factor of the original timing (0 = no delays)')
+    parser.add_argument('--paced', action='store_true',
+                        help='publish each frame after the previous one produced --pace-topic')
+    parser.add_argument('--pace-on', default='/camera/image_raw',
+                        help='the input topic that waits for the output when --paced')
+    parser.add_argument('--pace-topic', default='/hand/joint_states',
+                        help='the output topic whose messages release the next frame')
+    parser.add_argument('--pace-timeout', type=float, default=1.0,
+                        help='longest wait for an output before going on, seconds')
+    parser.add_argument('--wait-subscribers', type=float, default=10.0,
+                        help='wait this long for a subscriber on --pace-on before starting')
+    parser.add_argument('--linger', type=float, default=1.0,
+                        help='seconds to stay up after the last message, for late deliveries')
+    args, ros_args = parser.parse_known_args(argv)
+    if not args.bag.exists():
+        print(f'colorglove_play_bag: no bag at {args.bag}', file=sys.stderr)
+        return 2
+    rclpy.init(args=ros_args)
+    player = None
+    executor = rclpy.executors.SingleThreadedExecutor()
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    try:
+        player = BagPlayer(args.bag, args.topics)
+        executor.add_node(player)
+        if args.paced:
+            output_type = _import_message_class('sensor_msgs/msg/JointState')
+            player.create_subscription(output_type, args.pace_topic,
+                                       lambda _msg: player.output_event.set(), 10)
+        spinner.start()
+        if args.pace_on in player.publishers_by_topic:
+            player.wait_for_subscribers(args.pace_on, args.wait_subscribers)
+        started = time.monotonic()
+        count = player.play(args.rate, args.pace_topic if args.paced else None,
+                            args.pace_on if args.paced else None, args.pace_timeout)
+        elapsed = time.monotonic() - started
+        print(f'published {count} messages in {elapsed:.1f} s', flush=True)
+        time.sleep(args.linger)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        executor.shutdown()
+        if spinner.is_alive():
+            spinner.join(timeout=5.0)
+        if player is not None:
+            player.close()
+            player.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

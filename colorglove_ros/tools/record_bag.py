@@ -1,0 +1,98 @@
+"""Record ROS topics (the tracker's outputs by default) into a rosbag2 (MCAP) with rosbags,
+playable by ``ros2 bag play`` on a native install."""
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, QoSReliabilityPolicy
+from rosbags.rosbag2 import StoragePlugin, Writer
+
+from colorglove_ros.typestore import colorglove_typestore
+
+__all__ = ['DEFAULT_TOPICS', 'BagRecorder', 'main']
+
+DEFAULT_TOPICS = ('/hand/joint_states', '/hand/wrist_pose', '/hand/markers',
+                  '/hand/pose_candidates', '/hand/observation')
+
+
+class BagRecorder(Node):
+    """Subscribes to topics as raw CDR and writes every message to an MCAP bag."""
+
+    def __init__(self, output: Path, topics: list[str], **kwargs) -> None:
+        super().__init__('bag_recorder', **kwargs)
+        self.typestore = colorglove_typestore()
+        self.writer = Writer(output, version=9, storage_plugin=StoragePlugin.MCAP)
+        self.writer.open()
+        self.lock = threading.Lock()
+        self.pending = set(topics)
+        self.connections = {}
+        self.counts: dict[str, int] = {}
+        self.create_timer(0.2, self.discover)
+
+    def discover(self) -> None:
+        """Subscribe to requested topics as soon as they appear in the graph."""
+        for topic, types in self.get_topic_names_and_types():
+            if topic not in self.pending or not types:
+                continue
+            msgtype = types[0]
+            self.pending.discard(topic)
+            with self.lock:
+                self.connections[topic] = self.writer.add_connection(
+                    topic, msgtype, typestore=self.typestore)
+            package, _, name = msgtype.split('/')
+            msg_class = getattr(__import__(f'{package}.msg', fromlist=[name]), name)
+            qos = QoSProfile(depth=100, reliability=QoSReliabilityPolicy.BEST_EFFORT)
+            self.create_subscription(msg_class, topic,
+                                     lambda data, t=topic: self.write(t, data), qos, raw=True)
+            self.get_logger().info(f'recording {topic} [{msgtype}]')
+
+    def write(self, topic: str, data: bytes) -> None:
+        """Write one serialized message with the receive time."""
+        with self.lock:
+            self.writer.write(self.connections[topic], time.time_ns(), data)
+            self.counts[topic] = self.counts.get(topic, 0) + 1
+
+    def close(self) -> None:
+        """Finish the bag file."""
+        with self.lock:
+            self.writer.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``colorglove_record_bag OUTPUT [--topics ...] [--duration S]``."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('output', type=Path, help='bag folder to create (must not exist)')
+    parser.add_argument('--topics', nargs='*', default=list(DEFAULT_TOPICS))
+    parser.add_argument('--duration', type=float, default=0.0, help='seconds (0 = until Ctrl-C)')
+    args, ros_args = parser.parse_known_args(argv)
+    if args.output.exists():
+        print(f'colorglove_record_bag: {args.output} exists already', file=sys.stderr)
+        return 2
+    rclpy.init(args=ros_args)
+    recorder = BagRecorder(args.output, args.topics)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    deadline = time.monotonic() + args.duration if args.duration > 0 else float('inf')
+    try:
+        while not stop.is_set() and time.monotonic() < deadline and rclpy.ok():
+            rclpy.spin_once(recorder, timeout_sec=0.1)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        recorder.close()
+        for topic, count in sorted(recorder.counts.items()):
+            print(f'{topic}: {count} messages', flush=True)
+        recorder.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
