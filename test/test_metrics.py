@@ -1,0 +1,74 @@
+"""Accuracy, jitter and latency figures."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from colorglove_ros.core.hand_model import HandModel
+from colorglove_ros.core.metrics import (
+    FINGERTIP_INDICES,
+    fingertip_errors_mm,
+    jitter_mm,
+    joint_angle_error_deg,
+    latency_summary_ms,
+    pose_accuracy,
+    translation_errors_mm,
+)
+
+MODEL = HandModel()
+
+
+def _poses(count: int) -> np.ndarray:
+    poses = np.tile(MODEL.rest_pose(), (count, 1))
+    poses[:, 6:] = np.clip(0.3 + 0.1 * np.sin(np.arange(count))[:, None],
+                           MODEL.lower_limits[6:], MODEL.upper_limits[6:])
+    return poses
+
+
+def test_five_fingertips() -> None:
+    assert len(FINGERTIP_INDICES) == 5
+
+
+def test_identical_sequences_have_zero_error() -> None:
+    poses = _poses(8)
+    figures = pose_accuracy(MODEL, poses, poses)
+    for key in ('joint_mae_deg', 'fingertip_mm', 'wrist_plane_mm', 'wrist_depth_mm'):
+        assert figures[key] == pytest.approx(0.0, abs=1e-9)
+    assert figures['jitter_mm'] == pytest.approx(figures['jitter_truth_mm'])
+
+
+def test_joint_error_in_degrees() -> None:
+    truth = _poses(3)
+    estimated = truth.copy()
+    estimated[:, 6:] += np.radians(2.0)
+    np.testing.assert_allclose(joint_angle_error_deg(estimated, truth), 2.0)
+
+
+def test_translation_split_into_plane_and_depth() -> None:
+    truth = _poses(1)
+    truth[0, 0:3] = [0.0, 0.0, 0.5]
+    estimated = truth.copy()
+    estimated[0, 0:3] = [0.003, -0.004, 0.52]
+    plane, depth = translation_errors_mm(estimated, truth)
+    assert plane[0] == pytest.approx(5.0) and depth[0] == pytest.approx(20.0)
+    # a pure wrist shift moves every fingertip by the same amount, and nothing relative to it
+    assert fingertip_errors_mm(MODEL, estimated, truth)[0] == pytest.approx(np.hypot(5, 20))
+    assert fingertip_errors_mm(MODEL, estimated, truth, relative_to_wrist=True)[0] == \
+        pytest.approx(0.0, abs=1e-9)
+
+
+def test_jitter_sees_alternating_noise_not_smooth_motion() -> None:
+    smooth = np.tile(MODEL.rest_pose(), (20, 1))
+    smooth[:, 0] = np.linspace(0.0, 0.1, 20)    # constant velocity: the local average follows it
+    assert jitter_mm(MODEL, smooth) < 1e-6
+    noisy = smooth.copy()
+    noisy[::2, 0] += 0.004
+    assert jitter_mm(MODEL, noisy) > jitter_mm(MODEL, smooth) + 1.0
+    assert np.isnan(jitter_mm(MODEL, smooth[:3]))
+
+
+def test_latency_summary() -> None:
+    summary = latency_summary_ms([0.010] * 95 + [0.100] * 5)
+    assert summary['p50'] == pytest.approx(10.0)
+    assert summary['max'] == pytest.approx(100.0)
+    assert np.isnan(latency_summary_ms([])['p95'])
