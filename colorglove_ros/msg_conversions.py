@@ -9,12 +9,18 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, JointState
 from std_msgs.msg import Header
 
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates, PatchConstraint, PoseCandidate
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.hand_model import FINGER_DOF_NAMES
+from colorglove_ros.core.crop import TINY_SIZE, CropTransform
+from colorglove_ros.core.hand_model import DOF_NAMES, FINGER_DOF_NAMES
+from colorglove_ros.core.ik import Blobs, CameraObservation, EntryConstraints, PosePrior
+from colorglove_ros.core.search import LookupResult
 
 __all__ = [
     'stamp_to_seconds', 'seconds_to_stamp', 'camera_info_from_camera', 'joint_state_from_pose',
-    'pose_stamped_from_pose', 'pose_from_joint_state',
+    'pose_stamped_from_pose', 'pose_from_joint_state', 'crop_from_observation',
+    'tiny_labels_from_observation', 'blobs_from_observation', 'camera_observation_from_msg',
+    'candidates_msg', 'pose_prior_from_candidates',
 ]
 
 
@@ -61,3 +67,77 @@ def pose_stamped_from_pose(pose: np.ndarray, header: Header) -> PoseStamped:
     return PoseStamped(header=header, pose=Pose(
         position=Point(x=float(pose[0]), y=float(pose[1]), z=float(pose[2])),
         orientation=Quaternion(x=float(x), y=float(y), z=float(z), w=float(w))))
+
+
+# --------------------------------------------------------------- observation and candidates
+def crop_from_observation(msg: HandObservation) -> CropTransform:
+    """The tiny -> full-image crop transform carried by an observation."""
+    return CropTransform(scale=msg.crop_scale, offset_x=msg.crop_offset_x,
+                         offset_y=msg.crop_offset_y)
+
+
+def tiny_labels_from_observation(msg: HandObservation) -> np.ndarray:
+    """The observation's 40x40 label image; raises ValueError if its size is wrong."""
+    labels = np.asarray(msg.tiny_labels, dtype=np.uint8)
+    if labels.size != TINY_SIZE * TINY_SIZE:
+        raise ValueError(f'tiny_labels holds {labels.size} values, expected {TINY_SIZE ** 2}')
+    return labels.reshape(TINY_SIZE, TINY_SIZE)
+
+
+def blobs_from_observation(msg: HandObservation) -> Blobs:
+    """The observation's glove blobs (colour, full-image centroid, pixel count)."""
+    if not msg.blobs:
+        return Blobs.empty()
+    return Blobs(color=np.array([b.color_label for b in msg.blobs]),
+                 centroid_px=np.array([[b.x, b.y] for b in msg.blobs]),
+                 pixel_count=np.array([b.pixel_count for b in msg.blobs], dtype=float))
+
+
+def camera_observation_from_msg(msg: HandObservation) -> CameraObservation:
+    """An observation message as the IK's per-camera input."""
+    if not msg.hand_found:
+        return CameraObservation(hand_found=False)
+    return CameraObservation(hand_found=True, blobs=blobs_from_observation(msg),
+                             crop=crop_from_observation(msg))
+
+
+def candidates_msg(observation: HandObservation, result: LookupResult | None,
+                   status: str = '', lookup_time_ms: float = 0.0) -> HandPoseCandidates:
+    """The lookup node's output: neighbours, blend and the nearest entry's constraints, with
+    the observation it came from. ``result`` None means no hand (``status`` says why)."""
+    msg = HandPoseCandidates(header=observation.header, observation=observation,
+                             dof_names=list(DOF_NAMES), lookup_time_ms=float(lookup_time_ms))
+    if result is None:
+        msg.hand_found = False
+        msg.status = status or observation.status or 'no hand'
+        return msg
+    msg.hand_found = True
+    msg.candidates = [
+        PoseCandidate(database_index=int(index), pose=[float(v) for v in pose],
+                      image_distance=float(distance), weight=float(weight))
+        for index, pose, distance, weight in zip(result.indices, result.poses, result.distances,
+                                                 result.weights, strict=True)]
+    msg.blended_pose = [float(v) for v in result.blended]
+    c = result.constraints
+    msg.constraints = [
+        PatchConstraint(patch_id=int(p), color_label=int(col), vertex_index=int(v),
+                        tiny_x=float(xy[0]), tiny_y=float(xy[1]), pixel_count=int(round(n)))
+        for p, col, v, xy, n in zip(c.patch_ids, c.colors, c.vertices, c.tiny_xy,
+                                    c.pixel_counts, strict=True)]
+    return msg
+
+
+def pose_prior_from_candidates(msg: HandPoseCandidates) -> PosePrior:
+    """The IK's starting point from a candidates message (blended pose + constraints)."""
+    if list(msg.dof_names) != list(DOF_NAMES):
+        raise ValueError(f'candidates carry DOFs {list(msg.dof_names)[:3]}..., '
+                         f'expected {list(DOF_NAMES)[:3]}...')
+    constraints = msg.constraints
+    return PosePrior(
+        q_blend=np.asarray(msg.blended_pose, dtype=float),
+        constraints=EntryConstraints(
+            patch_id=np.array([c.patch_id for c in constraints], dtype=np.int64),
+            color=np.array([c.color_label for c in constraints], dtype=np.int64),
+            vertex=np.array([c.vertex_index for c in constraints], dtype=np.int64),
+            tiny_xy=np.array([[c.tiny_x, c.tiny_y] for c in constraints], dtype=float),
+            pixel_count=np.array([c.pixel_count for c in constraints], dtype=float)))

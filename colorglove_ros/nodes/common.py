@@ -13,8 +13,17 @@ from rcl_interfaces.msg import (
 )
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 
-__all__ = ['declare', 'reject_parameter_changes', 'run_node']
+__all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'reject_parameter_changes', 'run_node']
+
+# Between pipeline stages keep only the newest message: a slow stage drops old frames instead
+# of queueing them without bound.
+LATEST_ONLY = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=QoSReliabilityPolicy.RELIABLE)
+# Camera images: sensor-data style (best effort matches reliable and best-effort publishers).
+LATEST_IMAGE = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=1,
+                          reliability=QoSReliabilityPolicy.BEST_EFFORT)
 
 
 def declare(node: Node, name: str, default: Any, description: str,

@@ -1,0 +1,94 @@
+"""lookup_node: ``HandObservation`` -> ``HandPoseCandidates`` (Hamming search over learned
+binary codes, exact re-rank, Gaussian-weighted blend of the nearest database poses)."""
+from __future__ import annotations
+
+import sys
+import time
+
+import yaml
+from rclpy.node import Node
+
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates
+from colorglove_ros.core.camera import CalibrationError, load_calibration
+from colorglove_ros.core.database import DatabaseError, load_database
+from colorglove_ros.core.search import PoseLookup, SearchError
+from colorglove_ros.msg_conversions import (
+    candidates_msg,
+    crop_from_observation,
+    tiny_labels_from_observation,
+)
+from colorglove_ros.nodes.common import (
+    LATEST_ONLY,
+    StartupError,
+    declare,
+    reject_parameter_changes,
+    run_node,
+)
+from colorglove_ros.paths import resolve_path
+
+
+def database_path_from_config(config_file: str) -> str:
+    """The database folder named by a database YAML (key ``database.path``)."""
+    path = resolve_path(config_file)
+    try:
+        data = yaml.safe_load(path.read_text())
+        return str(resolve_path(data['database']['path']))
+    except FileNotFoundError as exc:
+        raise DatabaseError(f'database config not found: {path}') from exc
+    except (yaml.YAMLError, KeyError, TypeError) as exc:
+        raise DatabaseError(f'database config {path} has no database.path: {exc}') from exc
+
+
+class LookupNode(Node):
+    """Looks every observation up in the pose database."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('lookup', **kwargs)
+        database_config = declare(self, 'database_config', 'config/database.yaml',
+                                  'YAML naming the pose database folder (database.path)')
+        database_path = declare(self, 'database_path', '',
+                                'pose database folder; overrides database_config when set')
+        calibration_file = declare(self, 'calibration_file', 'config/calibration.yaml',
+                                   'camera calibration YAML (camera 0 is the lookup camera)')
+        num_candidates = declare(self, 'num_candidates', 300,
+                                 'entries re-ranked with the exact distance', 1, 100000)
+        num_neighbors = declare(self, 'num_neighbors', 10, 'nearest entries blended', 1, 300)
+        reject_parameter_changes(self, {'database_config', 'database_path', 'calibration_file',
+                                        'num_candidates', 'num_neighbors'})
+        try:
+            path = database_path or database_path_from_config(database_config)
+            self.camera = load_calibration(resolve_path(calibration_file)).primary
+            started = time.perf_counter()
+            self.lookup = PoseLookup(load_database(path), num_candidates, num_neighbors)
+        except (DatabaseError, CalibrationError) as exc:
+            raise StartupError(f'lookup_node cannot start: {exc}') from exc
+        self.get_logger().info(f'loaded {len(self.lookup.db)} database entries from {path} '
+                               f'in {time.perf_counter() - started:.1f} s')
+        self.publisher = self.create_publisher(HandPoseCandidates, 'hand/pose_candidates', 10)
+        self.create_subscription(HandObservation, 'hand/observation', self.on_observation,
+                                 LATEST_ONLY)
+
+    def on_observation(self, observation: HandObservation) -> None:
+        """Look one observation up and publish the candidates (or a 'no hand' message)."""
+        started = time.perf_counter()
+        if not observation.hand_found:
+            self.publisher.publish(candidates_msg(observation, None))
+            return
+        try:
+            result = self.lookup.lookup(tiny_labels_from_observation(observation),
+                                        crop_from_observation(observation), self.camera)
+        except (SearchError, ValueError) as exc:
+            self.get_logger().warn(f'lookup failed: {exc}', throttle_duration_sec=1.0)
+            self.publisher.publish(candidates_msg(observation, None, status=f'lookup: {exc}'))
+            return
+        elapsed_ms = 1e3 * (time.perf_counter() - started)
+        self.publisher.publish(candidates_msg(observation, result, lookup_time_ms=elapsed_ms))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``lookup_node``."""
+    return run_node(LookupNode, args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
