@@ -7,20 +7,22 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, JointState
-from std_msgs.msg import Header
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker, MarkerArray
 
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates, PatchConstraint, PoseCandidate
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.crop import TINY_SIZE, CropTransform
 from colorglove_ros.core.hand_model import DOF_NAMES, FINGER_DOF_NAMES
 from colorglove_ros.core.ik import Blobs, CameraObservation, EntryConstraints, PosePrior
+from colorglove_ros.core.overlay import SKELETON_BONES
 from colorglove_ros.core.search import LookupResult
 
 __all__ = [
     'stamp_to_seconds', 'seconds_to_stamp', 'camera_info_from_camera', 'joint_state_from_pose',
     'pose_stamped_from_pose', 'pose_from_joint_state', 'crop_from_observation',
     'tiny_labels_from_observation', 'blobs_from_observation', 'camera_observation_from_msg',
-    'candidates_msg', 'pose_prior_from_candidates',
+    'candidates_msg', 'pose_prior_from_candidates', 'skeleton_markers',
 ]
 
 
@@ -141,3 +143,23 @@ def pose_prior_from_candidates(msg: HandPoseCandidates) -> PosePrior:
             vertex=np.array([c.vertex_index for c in constraints], dtype=np.int64),
             tiny_xy=np.array([[c.tiny_x, c.tiny_y] for c in constraints], dtype=float),
             pixel_count=np.array([c.pixel_count for c in constraints], dtype=float)))
+
+
+def skeleton_markers(keypoints_camera: np.ndarray | None, header: Header,
+                     namespace: str = 'hand') -> MarkerArray:
+    """The hand skeleton as a LINE_LIST (bones) and a SPHERE_LIST (joints) in the camera frame;
+    ``None`` (no hand) clears the markers."""
+    if keypoints_camera is None:
+        return MarkerArray(markers=[Marker(header=header, ns=namespace, action=Marker.DELETEALL)])
+    points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in keypoints_camera]
+    bones = Marker(header=header, ns=namespace, id=0, type=Marker.LINE_LIST, action=Marker.ADD)
+    bones.scale.x = 0.004
+    bones.color = ColorRGBA(r=1.0, g=0.8, b=0.1, a=1.0)
+    bones.points = [points[i] for bone in SKELETON_BONES for i in bone]
+    bones.pose.orientation.w = 1.0
+    joints = Marker(header=header, ns=namespace, id=1, type=Marker.SPHERE_LIST,
+                    action=Marker.ADD, points=points)
+    joints.scale.x = joints.scale.y = joints.scale.z = 0.008
+    joints.color = ColorRGBA(r=1.0, g=1.0, b=1.0, a=1.0)
+    joints.pose.orientation.w = 1.0
+    return MarkerArray(markers=[bones, joints])

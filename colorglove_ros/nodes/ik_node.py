@@ -1,0 +1,154 @@
+"""ik_node: ``HandPoseCandidates`` -> ``JointState`` (URDF joint names), the wrist pose, a
+skeleton ``MarkerArray`` and an overlay image, by Gauss-Newton IK with temporal smoothing over
+one or several calibrated cameras."""
+from __future__ import annotations
+
+import sys
+from collections import deque
+from dataclasses import replace
+
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+from sensor_msgs.msg import Image, JointState
+from std_msgs.msg import String
+from visualization_msgs.msg import MarkerArray
+
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates
+from colorglove_ros.core.camera import CalibrationError, load_calibration
+from colorglove_ros.core.glove import default_hand
+from colorglove_ros.core.ik import CameraObservation, HandTracker, IKConfigError, load_ik_config
+from colorglove_ros.core.overlay import draw_skeleton
+from colorglove_ros.msg_conversions import (
+    camera_observation_from_msg,
+    joint_state_from_pose,
+    pose_prior_from_candidates,
+    pose_stamped_from_pose,
+    skeleton_markers,
+    stamp_to_seconds,
+)
+from colorglove_ros.nodes.common import (
+    LATEST_IMAGE,
+    LATEST_ONLY,
+    StartupError,
+    declare,
+    reject_parameter_changes,
+    run_node,
+)
+from colorglove_ros.paths import resolve_path
+from colorglove_ros.ros_image import ImageEncodingError, array_to_image, image_to_rgb8
+
+STAMP_MATCH_TOLERANCE_S = 0.02   # an extra camera's frame within this of the primary's counts
+
+
+class IKNode(Node):
+    """Refines the looked-up pose and publishes the tracker's outputs."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('ik', **kwargs)
+        calibration_file = declare(self, 'calibration_file', 'config/calibration.yaml',
+                                   'camera calibration YAML; camera 0 is the lookup camera')
+        ik_config = declare(self, 'ik_config', 'config/ik.yaml', 'IK settings and covariances')
+        enable_ik = declare(self, 'enable_ik', True, 'false: publish the blended lookup pose')
+        enable_smoothing = declare(self, 'enable_smoothing', True,
+                                   'use the previous frame as a prior (temporal smoothing)')
+        self.publish_overlay = declare(self, 'publish_overlay', True,
+                                       'draw the fitted skeleton on the camera image')
+        extra_topics = declare(self, 'extra_observation_topics', '',
+                               'comma-separated HandObservation topics of cameras 1..N-1')
+        reject_parameter_changes(self, {'calibration_file', 'ik_config', 'enable_ik',
+                                        'enable_smoothing', 'extra_observation_topics'})
+        try:
+            calibration = load_calibration(resolve_path(calibration_file))
+            config = load_ik_config(resolve_path(ik_config))
+            model, mesh, _ = default_hand(calibration.hand_length_m)
+            config = replace(config, enable_ik=enable_ik, enable_smoothing=enable_smoothing)
+            self.tracker = HandTracker(model, mesh, calibration.cameras, config)
+        except (CalibrationError, IKConfigError, ValueError) as exc:
+            raise StartupError(f'ik_node cannot start: {exc}') from exc
+        self.model = model
+        self.cameras = calibration.cameras
+        topics = [t.strip() for t in extra_topics.split(',') if t.strip()]
+        if len(topics) != len(self.cameras) - 1:
+            raise StartupError(
+                f'ik_node cannot start: {len(self.cameras)} cameras calibrated but '
+                f'{len(topics)} extra observation topic(s) given; set extra_observation_topics')
+        self.extra_observations = [deque(maxlen=30) for _ in topics]
+        for index, topic in enumerate(topics):
+            self.create_subscription(HandObservation, topic,
+                                     lambda msg, i=index: self.extra_observations[i].append(msg),
+                                     10)
+        self.recent_images: deque[Image] = deque(maxlen=15)
+        self.joint_pub = self.create_publisher(JointState, 'hand/joint_states', 10)
+        self.wrist_pub = self.create_publisher(PoseStamped, 'hand/wrist_pose', 10)
+        self.marker_pub = self.create_publisher(MarkerArray, 'hand/markers', 10)
+        self.overlay_pub = self.create_publisher(Image, 'hand/overlay', 2)
+        self.status_pub = self.create_publisher(String, 'hand/tracking_status', 10)
+        self.create_subscription(HandPoseCandidates, 'hand/pose_candidates', self.on_candidates,
+                                 LATEST_ONLY)
+        if self.publish_overlay:
+            self.create_subscription(Image, 'camera/image_raw', self.recent_images.append,
+                                     LATEST_IMAGE)
+        self.hand_was_found = False
+        self.get_logger().info(f'tracking with {len(self.cameras)} camera(s)')
+
+    def _extra_camera_observations(self, stamp: float) -> list[CameraObservation]:
+        observations = []
+        for queue in self.extra_observations:
+            match = min(queue, key=lambda m: abs(stamp_to_seconds(m.header.stamp) - stamp),
+                        default=None)
+            if match is None or abs(stamp_to_seconds(match.header.stamp) - stamp) > \
+                    STAMP_MATCH_TOLERANCE_S:
+                observations.append(CameraObservation(hand_found=False))
+            else:
+                observations.append(camera_observation_from_msg(match))
+        return observations
+
+    def on_candidates(self, msg: HandPoseCandidates) -> None:
+        """Run the tracker on one frame's candidates and publish the results."""
+        stamp = stamp_to_seconds(msg.header.stamp)
+        observations = [camera_observation_from_msg(msg.observation),
+                        *self._extra_camera_observations(stamp)]
+        try:
+            prior = pose_prior_from_candidates(msg) if msg.hand_found else None
+        except ValueError as exc:
+            self.get_logger().error(f'bad candidates message: {exc}', throttle_duration_sec=1.0)
+            prior = None
+        result = self.tracker.update(prior, observations, stamp)
+        if not result.found:
+            if self.hand_was_found:
+                self.marker_pub.publish(skeleton_markers(None, msg.header))
+            self.hand_was_found = False
+            self.status_pub.publish(String(data=f'no hand: {msg.status or "lost"}'))
+            return
+        self.hand_was_found = True
+        self.joint_pub.publish(joint_state_from_pose(result.q, msg.header))
+        self.wrist_pub.publish(pose_stamped_from_pose(result.q, msg.header))
+        keypoints = self.model.keypoints(result.q)
+        self.marker_pub.publish(skeleton_markers(keypoints, msg.header))
+        self.status_pub.publish(String(
+            data=f'tracking: {result.num_constraints} constraints, reprojection '
+                 f'{result.reprojection_error_px:.1f} px, IK {result.time_ms:.1f} ms'))
+        if self.publish_overlay:
+            self._publish_overlay(msg, keypoints, result.reprojection_error_px)
+
+    def _publish_overlay(self, msg: HandPoseCandidates, keypoints, error_px: float) -> None:
+        stamp = msg.header.stamp
+        image = next((m for m in reversed(self.recent_images) if m.header.stamp == stamp), None)
+        if image is None:
+            return
+        try:
+            rgb = image_to_rgb8(image)
+        except ImageEncodingError:
+            return
+        drawn = draw_skeleton(rgb, keypoints, self.cameras[0],
+                              label=f'reprojection {error_px:.1f} px')
+        self.overlay_pub.publish(array_to_image(drawn, 'rgb8', msg.header))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``ik_node``."""
+    return run_node(IKNode, args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
