@@ -1,0 +1,224 @@
+"""Mean-shift glove crop and label-preserving scaling to 40x40 tiny images."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+__all__ = [
+    'TINY_SIZE', 'CropError', 'CropTransform', 'TinyCrop', 'mean_shift_crop', 'crop_to_tiny',
+    'crop_window', 'DEFAULT_BANDWIDTH_FACTOR', 'DEFAULT_MIN_PIXELS', 'DEFAULT_GLOVE_FRACTION',
+]
+
+TINY_SIZE = 40
+DEFAULT_BANDWIDTH_FACTOR = 2.0
+DEFAULT_MIN_PIXELS = 20
+DEFAULT_GLOVE_FRACTION = 0.4
+
+
+class CropError(ValueError):
+    """The input of a crop function has the wrong type, shape or parameters."""
+
+
+@dataclass(frozen=True)
+class CropTransform:
+    """Maps tiny-image pixel centres to full-image pixel centres: ``full = offset + scale * tiny``.
+
+    Both coordinates are (column x, row y) with the origin at the centre of the top-left pixel.
+    """
+
+    scale: float
+    offset_x: float
+    offset_y: float
+
+    def to_full(self, tiny_xy: np.ndarray) -> np.ndarray:
+        """Tiny-image points (..., 2) -> full-image points (..., 2)."""
+        xy = np.asarray(tiny_xy, dtype=np.float64)
+        return xy * self.scale + np.array([self.offset_x, self.offset_y])
+
+    def to_tiny(self, full_xy: np.ndarray) -> np.ndarray:
+        """Full-image points (..., 2) -> tiny-image points (..., 2)."""
+        xy = np.asarray(full_xy, dtype=np.float64)
+        return (xy - np.array([self.offset_x, self.offset_y])) / self.scale
+
+    @property
+    def half_size(self) -> float:
+        """Half the side of the square crop window in full-image pixels."""
+        return 0.5 * self.scale * TINY_SIZE
+
+    @property
+    def center_xy(self) -> tuple[float, float]:
+        """Centre of the crop window in full-image pixels."""
+        c = 0.5 * (TINY_SIZE - 1)
+        return (self.offset_x + self.scale * c, self.offset_y + self.scale * c)
+
+    @classmethod
+    def from_window(cls, center_xy: tuple[float, float], half_size: float,
+                    size: int = TINY_SIZE) -> CropTransform:
+        """The transform of the square window ``center +- half_size`` split into size^2 cells."""
+        scale = 2.0 * float(half_size) / size
+        return cls(scale=scale, offset_x=float(center_xy[0]) - half_size + 0.5 * scale,
+                   offset_y=float(center_xy[1]) - half_size + 0.5 * scale)
+
+
+@dataclass(frozen=True)
+class TinyCrop:
+    """A 40x40 label image and the transform from its pixels to the full image."""
+
+    labels: np.ndarray
+    transform: CropTransform
+
+
+def _as_mask(image: np.ndarray) -> np.ndarray:
+    arr = np.asarray(image)
+    if arr.ndim != 2:
+        raise CropError(f'expected a 2-D mask or label image, got shape {arr.shape}')
+    if arr.size == 0:
+        raise CropError(f'empty image of shape {arr.shape}')
+    return arr != 0
+
+
+def _window_bounds(c: float, h: float, n: int) -> tuple[int, int]:
+    """Integer index range [lo, hi) of pixel centres within c +- h, clipped to [0, n)."""
+    lo = max(int(np.ceil(c - h)), 0)
+    hi = min(int(np.floor(c + h)) + 1, n)
+    return lo, hi
+
+
+def _moments(sat: np.ndarray, xs: np.ndarray, ys: np.ndarray,
+             x0: int, x1: int, y0: int, y1: int) -> tuple[float, float, float, float, float]:
+    """Count, means and variances of mask pixels in the box [x0,x1) x [y0,y1)."""
+    n = float(sat[y1, x1] - sat[y0, x1] - sat[y1, x0] + sat[y0, x0])
+    if n <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0
+    col_counts = np.diff(sat[y1, x0:x1 + 1] - sat[y0, x0:x1 + 1]).astype(np.float64)
+    row_counts = np.diff(sat[y0:y1 + 1, x1] - sat[y0:y1 + 1, x0]).astype(np.float64)
+    xv = xs[x0:x1]
+    yv = ys[y0:y1]
+    mx = float(col_counts @ xv) / n
+    my = float(row_counts @ yv) / n
+    vx = max(float(col_counts @ (xv * xv)) / n - mx * mx, 0.0)
+    vy = max(float(row_counts @ (yv * yv)) / n - my * my, 0.0)
+    return n, mx, my, vx, vy
+
+
+def mean_shift_crop(mask: np.ndarray, bandwidth_factor: float = DEFAULT_BANDWIDTH_FACTOR,
+                    min_pixels: int = DEFAULT_MIN_PIXELS, max_iterations: int = 50,
+                    tolerance: float = 0.05, min_half_size: float = 2.0,
+                    ) -> tuple[tuple[float, float], float] | None:
+    """Find the glove by mean-shift with a uniform square kernel of variable bandwidth.
+
+    ``mask`` is a boolean mask or a label image (nonzero = glove). Starts at the image
+    centre with a window spanning the whole image; each iteration moves the centre to the
+    mean of the glove pixels inside the window and sets the next half-width to
+    ``bandwidth_factor`` times their (larger per-axis) standard deviation, until the centre
+    and half-width change by less than ``tolerance`` pixels. Returns ``((cx, cy), half_size)``
+    in full-image pixels, or None when fewer than ``min_pixels`` glove pixels end up inside.
+    """
+    m = _as_mask(mask)
+    if bandwidth_factor <= 0.0:
+        raise CropError(f'bandwidth_factor must be positive, got {bandwidth_factor}')
+    H, W = m.shape
+    # Summed-area table: the moments of a box cost O(W + H) per iteration.
+    sat = cv2.integral(m.view(np.uint8), sdepth=cv2.CV_32S)
+    if sat[H, W] < min_pixels:
+        return None
+    xs = np.arange(W, dtype=np.float64)
+    ys = np.arange(H, dtype=np.float64)
+    cx, cy = 0.5 * (W - 1), 0.5 * (H - 1)
+    h = 0.5 * max(W, H)
+    for _ in range(max_iterations):
+        x0, x1 = _window_bounds(cx, h, W)
+        y0, y1 = _window_bounds(cy, h, H)
+        n, mx, my, vx, vy = _moments(sat, xs, ys, x0, x1, y0, y1)
+        if n < min_pixels:
+            return None
+        new_h = max(bandwidth_factor * float(np.sqrt(max(vx, vy))), min_half_size)
+        done = abs(mx - cx) < tolerance and abs(my - cy) < tolerance and abs(new_h - h) < tolerance
+        cx, cy, h = mx, my, new_h
+        if done:
+            break
+    x0, x1 = _window_bounds(cx, h, W)
+    y0, y1 = _window_bounds(cy, h, H)
+    n = _moments(sat, xs, ys, x0, x1, y0, y1)[0]
+    if n < min_pixels:
+        return None
+    return (cx, cy), h
+
+
+def crop_window(labels: np.ndarray, transform: CropTransform,
+                glove_fraction: float = DEFAULT_GLOVE_FRACTION, size: int = TINY_SIZE,
+                ) -> np.ndarray:
+    """Resample a label image into the ``size x size`` grid of ``transform``, keeping labels.
+
+    Every full-image pixel votes for the cell containing its centre. A cell is glove when at
+    least ``glove_fraction`` of its in-image pixels are glove, and then takes the most frequent
+    glove label (ties to the lower label); otherwise it is background (0). Cells that contain
+    no pixel centre (upsampling) take the label of the pixel nearest to the cell centre; pixels
+    outside the image count as background.
+    """
+    lab = np.asarray(labels)
+    if lab.ndim != 2 or lab.size == 0:
+        raise CropError(f'expected a non-empty 2-D label image, got shape {lab.shape}')
+    if lab.dtype != np.uint8:
+        lab = lab.astype(np.uint8) if lab.dtype == np.bool_ else np.clip(lab, 0, 255).astype(
+            np.uint8)
+    H, W = lab.shape
+    s = transform.scale
+    if not s > 0.0:
+        raise CropError(f'crop scale must be positive, got {s}')
+    left = transform.offset_x - 0.5 * s
+    top = transform.offset_y - 0.5 * s
+    x0, x1 = _window_bounds(left + 0.5 * size * s, 0.5 * size * s, W)
+    y0, y1 = _window_bounds(top + 0.5 * size * s, 0.5 * size * s, H)
+    counts = np.zeros((size * size, 2), dtype=np.intp)
+    if x1 > x0 and y1 > y0:
+        cell_x = np.floor((np.arange(x0, x1) - left) / s).astype(np.intp)
+        cell_y = np.floor((np.arange(y0, y1) - top) / s).astype(np.intp)
+        # Cells are monotonic in the pixel index: keep the contiguous run inside the grid.
+        kx0, kx1 = np.searchsorted(cell_x, 0), np.searchsorted(cell_x, size)
+        ky0, ky1 = np.searchsorted(cell_y, 0), np.searchsorted(cell_y, size)
+        sub = lab[y0 + ky0:y0 + ky1, x0 + kx0:x0 + kx1]
+        if sub.size:
+            nl = max(int(sub.max()) + 1, 2)
+            flat = ((cell_y[ky0:ky1] * (size * nl))[:, None]
+                    + (cell_x[kx0:kx1] * nl)[None, :]) + sub
+            counts = np.bincount(flat.ravel(), minlength=size * size * nl).reshape(
+                size * size, nl)
+    total = counts.sum(axis=1)
+    glove = counts[:, 1:]
+    glove_total = glove.sum(axis=1)
+    out = np.where(glove_total >= glove_fraction * np.maximum(total, 1),
+                   np.argmax(glove, axis=1) + 1, 0)
+    out[(glove_total == 0)] = 0
+    empty = total == 0
+    if np.any(empty):
+        idx = np.nonzero(empty)[0]
+        tx = transform.offset_x + s * (idx % size)
+        ty = transform.offset_y + s * (idx // size)
+        px = np.floor(tx + 0.5).astype(np.int64)
+        py = np.floor(ty + 0.5).astype(np.int64)
+        inside = (px >= 0) & (px < W) & (py >= 0) & (py < H)
+        vals = np.zeros(idx.shape, dtype=np.int64)
+        vals[inside] = lab[py[inside], px[inside]]
+        out[idx] = vals
+    return out.reshape(size, size).astype(np.uint8)
+
+
+def crop_to_tiny(label_image: np.ndarray, bandwidth_factor: float = DEFAULT_BANDWIDTH_FACTOR,
+                 min_pixels: int = DEFAULT_MIN_PIXELS,
+                 glove_fraction: float = DEFAULT_GLOVE_FRACTION) -> TinyCrop | None:
+    """Crop the glove with :func:`mean_shift_crop` and scale the square to a 40x40 tiny image.
+
+    ``label_image`` is (H, W) uint8 (0 = background, 1..10 = glove colours). Deterministic;
+    the database builder and the camera pipeline both call this. None if too few glove pixels.
+    """
+    result = mean_shift_crop(label_image, bandwidth_factor=bandwidth_factor,
+                             min_pixels=min_pixels)
+    if result is None:
+        return None
+    center, half = result
+    transform = CropTransform.from_window(center, half)
+    tiny = crop_window(label_image, transform, glove_fraction=glove_fraction)
+    return TinyCrop(labels=tiny, transform=transform)
