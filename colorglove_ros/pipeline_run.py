@@ -1,0 +1,229 @@
+"""Run the four tracker nodes as separate processes over DDS and measure them: frames tracked,
+rate, latency from camera frame to JointState, and accuracy against ground truth. Shared by the
+demo, the benchmark and the end-to-end test."""
+from __future__ import annotations
+
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+import yaml
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+from sensor_msgs.msg import Image, JointState
+
+from colorglove_msgs.msg import HandPoseCandidates
+from colorglove_ros.core.metrics import latency_summary_ms, pose_accuracy
+from colorglove_ros.launcher import Launcher, NodeSpec
+from colorglove_ros.msg_conversions import pose_from_joint_state
+from colorglove_ros.ros_image import image_to_rgb8
+
+__all__ = ['PipelineMonitor', 'PipelineRun', 'node_specs', 'run_pipeline', 'summarize']
+
+_RELIABLE = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=200,
+                       reliability=QoSReliabilityPolicy.RELIABLE)
+_BEST_EFFORT = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=200,
+                          reliability=QoSReliabilityPolicy.BEST_EFFORT)
+
+
+def _key(msg: Any) -> tuple[int, int]:
+    return (msg.header.stamp.sec, msg.header.stamp.nanosec)
+
+
+def _pose_from(joints: JointState, wrist: PoseStamped) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    p, o = wrist.pose.position, wrist.pose.orientation
+    rotvec = Rotation.from_quat([o.x, o.y, o.z, o.w]).as_rotvec()
+    return np.concatenate([[p.x, p.y, p.z], rotvec, pose_from_joint_state(joints)])
+
+
+class PipelineMonitor(Node):
+    """Records, with receive times, camera frames, ground truth and the tracker's outputs."""
+
+    def __init__(self, keep_overlays: int = 8, overlay_stride: int = 10, **kwargs) -> None:
+        super().__init__('pipeline_monitor', **kwargs)
+        self.lock = threading.Lock()
+        self.frame_times: dict[tuple[int, int], float] = {}
+        self.output_times: dict[tuple[int, int], float] = {}
+        self.joints: dict[tuple[int, int], JointState] = {}
+        self.wrists: dict[tuple[int, int], PoseStamped] = {}
+        self.truth_joints: dict[tuple[int, int], JointState] = {}
+        self.truth_wrists: dict[tuple[int, int], PoseStamped] = {}
+        self.lookup_ms: dict[tuple[int, int], float] = {}
+        self.segmentation_ms: dict[tuple[int, int], float] = {}
+        self.overlays: list[np.ndarray] = []
+        self.keep_overlays = keep_overlays
+        self.overlay_stride = overlay_stride
+        self.overlay_count = 0
+        self.create_subscription(Image, '/camera/image_raw', self._on_frame, _BEST_EFFORT)
+        self.create_subscription(JointState, '/hand/joint_states', self._on_joints, _RELIABLE)
+        self.create_subscription(PoseStamped, '/hand/wrist_pose', self._store(self.wrists),
+                                 _RELIABLE)
+        self.create_subscription(JointState, '/hand/ground_truth/joint_states',
+                                 self._store(self.truth_joints), _RELIABLE)
+        self.create_subscription(PoseStamped, '/hand/ground_truth/wrist_pose',
+                                 self._store(self.truth_wrists), _RELIABLE)
+        self.create_subscription(HandPoseCandidates, '/hand/pose_candidates',
+                                 self._on_candidates, _RELIABLE)
+        self.create_subscription(Image, '/hand/overlay', self._on_overlay, _BEST_EFFORT)
+
+    def _store(self, table: dict):
+        def callback(msg: Any) -> None:
+            with self.lock:
+                table[_key(msg)] = msg
+        return callback
+
+    def _on_frame(self, msg: Image) -> None:
+        with self.lock:
+            self.frame_times.setdefault(_key(msg), time.monotonic())
+
+    def _on_joints(self, msg: JointState) -> None:
+        with self.lock:
+            self.output_times.setdefault(_key(msg), time.monotonic())
+            self.joints[_key(msg)] = msg
+
+    def _on_candidates(self, msg: HandPoseCandidates) -> None:
+        with self.lock:
+            self.lookup_ms[_key(msg)] = msg.lookup_time_ms
+            self.segmentation_ms[_key(msg)] = msg.observation.processing_time_ms
+
+    def _on_overlay(self, msg: Image) -> None:
+        self.overlay_count += 1
+        if len(self.overlays) < self.keep_overlays and self.overlay_count % self.overlay_stride == 0:
+            self.overlays.append(image_to_rgb8(msg))
+
+    def wait_for_frames(self, count: int, timeout_s: float, settle_s: float = 2.0) -> None:
+        """Wait until ``count`` frames were seen and outputs stopped arriving for ``settle_s``."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            with self.lock:
+                seen = len(self.frame_times)
+                last = max(self.output_times.values(), default=0.0)
+                last = max(last, max(self.frame_times.values(), default=0.0))
+            if seen >= count and time.monotonic() - last > settle_s:
+                return
+            time.sleep(0.1)
+
+
+@dataclass
+class PipelineRun:
+    """What a run measured (see :func:`summarize`)."""
+
+    frames: int
+    tracked: int
+    duration_s: float
+    latencies_s: list[float]
+    estimated: np.ndarray
+    truth: np.ndarray
+    segmentation_ms: list[float]
+    lookup_ms: list[float]
+    overlays: list[np.ndarray] = field(default_factory=list)
+
+
+def node_specs(params_file: Path, with_camera: bool) -> list[NodeSpec]:
+    """The tracker's node processes, all reading ``params_file``."""
+    names = [('segmentation_node', 'segmentation'), ('lookup_node', 'lookup'), ('ik_node', 'ik')]
+    if with_camera:
+        names.insert(0, ('camera_node', 'camera'))
+    return [NodeSpec(executable, name, [params_file]) for executable, name in names]
+
+
+def write_params(parameters: dict[str, dict[str, Any]], folder: Path) -> Path:
+    """A ROS 2 parameter file from {node name: {parameter: value}}."""
+    path = folder / 'params.yaml'
+    path.write_text(yaml.safe_dump({name: {'ros__parameters': values}
+                                    for name, values in parameters.items()}))
+    return path
+
+
+def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
+                 feed: Any = None, timeout_s: float = 600.0, startup_s: float = 60.0,
+                 keep_overlays: int = 8) -> PipelineRun:
+    """Start the nodes with ``parameters`` (camera_node too unless ``feed`` is given: a
+    callable started once the graph is up, e.g. a bag player), monitor until
+    ``expected_frames`` frames passed, stop everything, and return the measurements."""
+    with tempfile.TemporaryDirectory() as folder:
+        params_file = write_params(parameters, Path(folder))
+        context = rclpy.Context()
+        rclpy.init(context=context)
+        monitor = PipelineMonitor(keep_overlays=keep_overlays,
+                                  overlay_stride=max(1, expected_frames // (keep_overlays + 1)),
+                                  context=context)
+        executor = rclpy.executors.MultiThreadedExecutor(num_threads=2, context=context)
+        executor.add_node(monitor)
+        spinner = threading.Thread(target=executor.spin, daemon=True)
+        spinner.start()
+        launcher = Launcher(node_specs(params_file, with_camera=feed is None))
+        try:
+            if feed is not None:
+                launcher.start()
+                _wait_for_graph(monitor, startup_s)
+                started = time.monotonic()
+                feeder = threading.Thread(target=feed, daemon=True)
+                feeder.start()
+            else:
+                started = time.monotonic()
+                launcher.start()
+            monitor.wait_for_frames(expected_frames, timeout_s)
+            duration = time.monotonic() - started
+        finally:
+            launcher.stop()
+            executor.shutdown()
+            spinner.join(timeout=5.0)
+            monitor.destroy_node()
+            rclpy.try_shutdown(context=context)
+    return _collect(monitor, duration)
+
+
+def _wait_for_graph(monitor: PipelineMonitor, timeout_s: float) -> None:
+    """Wait until the segmentation node subscribes to images and ik_node publishes joints."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if monitor.count_publishers('/hand/joint_states') > 0 and \
+                monitor.count_subscribers('/camera/image_raw') > 1 and \
+                monitor.count_subscribers('/hand/observation') > 0:
+            return
+        time.sleep(0.2)
+    raise TimeoutError(f'the tracker nodes did not come up within {timeout_s:.0f} s')
+
+
+def _collect(monitor: PipelineMonitor, duration: float) -> PipelineRun:
+    with monitor.lock:
+        latencies = [monitor.output_times[k] - monitor.frame_times[k]
+                     for k in monitor.output_times if k in monitor.frame_times]
+        matched = [k for k in sorted(monitor.joints) if k in monitor.wrists
+                   and k in monitor.truth_joints and k in monitor.truth_wrists]
+        estimated = np.array([_pose_from(monitor.joints[k], monitor.wrists[k]) for k in matched])
+        truth = np.array([_pose_from(monitor.truth_joints[k], monitor.truth_wrists[k])
+                          for k in matched])
+        return PipelineRun(
+            frames=len(monitor.frame_times), tracked=len(monitor.joints), duration_s=duration,
+            latencies_s=latencies, estimated=estimated.reshape(-1, 26),
+            truth=truth.reshape(-1, 26),
+            segmentation_ms=list(monitor.segmentation_ms.values()),
+            lookup_ms=list(monitor.lookup_ms.values()), overlays=list(monitor.overlays))
+
+
+def summarize(run: PipelineRun, model) -> dict[str, float]:
+    """The figures of a run: counts, rate, latency percentiles, stage times, accuracy."""
+    latency = latency_summary_ms(run.latencies_s)
+    figures = {
+        'frames_seen': run.frames, 'frames_tracked': run.tracked,
+        'tracked_fraction': run.tracked / run.frames if run.frames else 0.0,
+        'output_rate_hz': run.tracked / run.duration_s if run.duration_s > 0 else 0.0,
+        'latency_mean_ms': latency['mean'], 'latency_p50_ms': latency['p50'],
+        'latency_p95_ms': latency['p95'],
+        'segmentation_ms': float(np.mean(run.segmentation_ms)) if run.segmentation_ms else 0.0,
+        'lookup_ms': float(np.mean(run.lookup_ms)) if run.lookup_ms else 0.0,
+        'frames_with_truth': len(run.truth),
+    }
+    if len(run.truth):
+        figures.update(pose_accuracy(model, run.estimated, run.truth))
+    return figures
