@@ -96,7 +96,8 @@ class PipelineMonitor(Node):
 
     def _on_overlay(self, msg: Image) -> None:
         self.overlay_count += 1
-        if len(self.overlays) < self.keep_overlays and self.overlay_count % self.overlay_stride == 0:
+        wanted = self.overlay_count % self.overlay_stride == 0
+        if wanted and len(self.overlays) < self.keep_overlays:
             self.overlays.append(image_to_rgb8(msg))
 
     def wait_for_frames(self, count: int, timeout_s: float, settle_s: float = 2.0) -> None:
