@@ -138,3 +138,16 @@ def test_export_ply(hand, tmp_path: Path) -> None:
     assert np.array_equal(loaded.visual.face_colors[:, :3], glove.face_rgb)
     glb = export_glove_mesh(mesh, glove, model, tmp_path / 'glove.glb')
     assert glb.stat().st_size > 10000
+
+
+def test_export_tool(tmp_path: Path) -> None:
+    from colorglove_ros.tools.export_glove import main
+
+    assert main(['--out', str(tmp_path), '--json', str(tmp_path / 'summary.json')]) == 0
+    for name in ('glove.ply', 'glove.glb', 'glove.png', 'summary.json'):
+        assert (tmp_path / name).stat().st_size > 1000
+    import json
+
+    summary = json.loads((tmp_path / 'summary.json').read_text())
+    assert len(summary['patches']) == NUM_PATCHES
+    assert sum(p['faces'] for p in summary['patches']) == summary['faces']

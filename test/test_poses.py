@@ -115,3 +115,16 @@ def test_pose_distance(hand, collection: np.ndarray) -> None:
     # symmetric and triangle inequality on a sample
     assert np.allclose(dist, dist.T, atol=1e-7)
     assert np.all(dist[0][:, None] <= dist[0][None, :] + dist + 1e-6)
+
+
+def test_subsampled_features_approximate(hand, collection: np.ndarray) -> None:
+    model, mesh, _ = hand
+    sample = collection[::97]
+    exact = pose_features(mesh, model, sample)
+    approx = pose_features(mesh, model, sample, max_vertices=300)
+    assert approx.shape == (len(sample), 900)
+    de = np.linalg.norm(exact[:, None] - exact[None], axis=2)
+    da = np.linalg.norm(approx[:, None] - approx[None], axis=2)
+    off = ~np.eye(len(sample), dtype=bool)
+    rel = np.abs(da[off] - de[off]) / de[off]
+    assert np.median(rel) < 0.05 and np.corrcoef(da[off], de[off])[0, 1] > 0.99

@@ -12,7 +12,7 @@ patches share a colour.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
@@ -61,7 +61,8 @@ class Glove:
 
     face_patch: np.ndarray    # (F,) int64 in 0..19
     patch_color: np.ndarray   # (20,) uint8 in 1..10
-    seed_faces: np.ndarray    # (20,) int64 triangle index of each patch's seed
+    seed_faces: np.ndarray = field(  # (20,) triangle index of each patch's seed, if known
+        default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     @property
     def face_labels(self) -> np.ndarray:
@@ -138,7 +139,10 @@ def make_glove(mesh: HandMesh, seed: int = 0, model: HandModel | None = None) ->
         if conflicts == 0:
             break
     assert best is not None
-    return Glove(face_patch, best.astype(np.uint8), np.array(seeds, dtype=np.int64))
+    glove = Glove(face_patch, best.astype(np.uint8), np.array(seeds, dtype=np.int64))
+    for arr in (glove.face_patch, glove.patch_color, glove.seed_faces):
+        arr.setflags(write=False)
+    return glove
 
 
 def export_glove_mesh(mesh: HandMesh, glove: Glove, model: HandModel, path: str | Path,

@@ -30,7 +30,7 @@ __all__ = [
     'DIGITS', 'DOF_NAMES', 'FINGER_DOF_NAMES', 'GLOBAL_DOF_NAMES', 'NUM_DOFS',
     'NUM_FINGER_DOFS', 'KEYPOINT_NAMES', 'LINK_NAMES', 'DIP_PIP_RATIO',
     'HandModelError', 'HandModel', 'rotvec_to_matrix', 'matrix_to_rotvec',
-    'so3_left_jacobian', 'digit_link_index',
+    'so3_left_jacobian', 'digit_link_index', 'JointSpec',
 ]
 
 DIGITS: tuple[str, ...] = ('thumb', 'index', 'middle', 'ring', 'little')
@@ -129,7 +129,7 @@ def _ry(a: float) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class _Joint:
+class JointSpec:
     """A revolute joint: frame = parent frame * [fixed_rot, fixed_trans] * Rot(axis, q[dof])."""
 
     name: str
@@ -199,7 +199,7 @@ class HandModel:
 
     # ------------------------------------------------------------------ construction
     def _build(self, s: float) -> None:
-        joints: list[_Joint] = []
+        joints: list[JointSpec] = []
         link_frame: list[int] = [0]          # frame index of each link (frame 0 = palm)
         lengths = np.zeros(16)
         radii = np.zeros(16)
@@ -221,11 +221,11 @@ class HandModel:
             ex = np.array([1.0, 0.0, 0.0])
             zero = np.zeros(3)
             f0 = len(joints) + 1
-            joints.append(_Joint(FINGER_DOF_NAMES[4 * d], 0, R0, anchor, a1, base))
-            joints.append(_Joint(FINGER_DOF_NAMES[4 * d + 1], f0, eye, zero, a2, base + 1))
-            joints.append(_Joint(FINGER_DOF_NAMES[4 * d + 2], f0 + 1, eye,
+            joints.append(JointSpec(FINGER_DOF_NAMES[4 * d], 0, R0, anchor, a1, base))
+            joints.append(JointSpec(FINGER_DOF_NAMES[4 * d + 1], f0, eye, zero, a2, base + 1))
+            joints.append(JointSpec(FINGER_DOF_NAMES[4 * d + 2], f0 + 1, eye,
                                  np.array([0.0, -seg_len[0] * s, 0.0]), ex, base + 2))
-            joints.append(_Joint(FINGER_DOF_NAMES[4 * d + 3], f0 + 2, eye,
+            joints.append(JointSpec(FINGER_DOF_NAMES[4 * d + 3], f0 + 2, eye,
                                  np.array([0.0, -seg_len[1] * s, 0.0]), ex, base + 3))
             for k in range(3):
                 li = digit_link_index(d, k)
@@ -233,6 +233,9 @@ class HandModel:
                 lengths[li] = seg_len[k] * s
                 radii[li] = seg_rad[k] * s
         self._joints = joints
+        self._joint_consts = [
+            (j.fixed_rot, j.fixed_rot @ _skew(j.axis), j.fixed_rot @ np.outer(j.axis, j.axis))
+            for j in joints]
         self._num_frames = len(joints) + 1
         self._link_frame = np.array(link_frame, dtype=np.int64)
         self.link_lengths = lengths
@@ -261,7 +264,7 @@ class HandModel:
         self.keypoint_local = np.array(kp_local)
 
     @property
-    def joints(self) -> tuple[_Joint, ...]:
+    def joints(self) -> tuple[JointSpec, ...]:
         """The 20 revolute joints (fixed transform from parent frame, local axis, dof)."""
         return tuple(self._joints)
 
@@ -311,30 +314,44 @@ class HandModel:
             raise HandModelError(f'pose must have shape (26,), got {q.shape}')
         return q
 
-    def _frames_batch(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Rotations (B, F, 3, 3) and translations (B, F, 3) of every frame in the camera."""
+    def _frames_batch(self, Q: np.ndarray, dtype: type = np.float64
+                      ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
+        """(B, 16, 4, 4) link transforms plus views of every frame's rotation (B, 3, 3) and
+        translation (B, 3) in the camera (link frames are views into the first array)."""
         B = Q.shape[0]
-        Rs = np.empty((B, self._num_frames, 3, 3))
-        ts = np.empty((B, self._num_frames, 3))
-        Rs[:, 0] = rotvec_to_matrix(Q[:, 3:6])
-        ts[:, 0] = Q[:, 0:3]
+        T = np.zeros((B, 16, 4, 4), dtype=dtype)
+        T[:, :, 3, 3] = 1.0
+        frame_link = {int(f): li for li, f in enumerate(self._link_frame)}
+        Rs: list[np.ndarray] = []
+        ts: list[np.ndarray] = []
+        for f in range(self._num_frames):
+            if f in frame_link:
+                Rs.append(T[:, frame_link[f], :3, :3])
+                ts.append(T[:, frame_link[f], :3, 3])
+            else:
+                Rs.append(np.empty((B, 3, 3), dtype=dtype))
+                ts.append(np.empty((B, 3), dtype=dtype))
+        Rs[0][...] = rotvec_to_matrix(Q[:, 3:6])
+        ts[0][...] = Q[:, 0:3]
         for f, j in enumerate(self._joints, start=1):
-            Rp = Rs[:, j.parent_frame]
-            ts[:, f] = ts[:, j.parent_frame] + Rp @ j.fixed_trans
-            Rs[:, f] = (Rp @ j.fixed_rot) @ _rot_axis(j.axis, Q[:, j.dof])
-        return Rs, ts
+            Rp = Rs[j.parent_frame]
+            np.add(ts[j.parent_frame], Rp @ j.fixed_trans.astype(dtype), out=ts[f])
+            # fixed_rot @ Rot(a, th) = c (F - F a a^T) + s F [a]_x + F a a^T
+            F, FK, Faa = self._joint_consts[f - 1]
+            th = Q[:, j.dof].astype(dtype)
+            local = np.cos(th)[:, None, None] * (F - Faa).astype(dtype)
+            local += np.sin(th)[:, None, None] * FK.astype(dtype)
+            local += Faa.astype(dtype)
+            np.matmul(Rp, local, out=Rs[f])
+        return T, Rs, ts
 
-    def link_transforms_batch(self, Q: np.ndarray) -> np.ndarray:
-        """(B, 26) poses -> (B, 16, 4, 4) link-to-camera transforms."""
+    def link_transforms_batch(self, Q: np.ndarray, dtype: type = np.float64) -> np.ndarray:
+        """(B, 26) poses -> (B, 16, 4, 4) link-to-camera transforms (``dtype`` float32 halves
+        the memory for large batches)."""
         Q = np.asarray(Q, dtype=float)
         if Q.ndim != 2 or Q.shape[1] != NUM_DOFS:
             raise HandModelError(f'poses must have shape (B, 26), got {Q.shape}')
-        Rs, ts = self._frames_batch(Q)
-        T = np.zeros((Q.shape[0], 16, 4, 4))
-        T[:, :, :3, :3] = Rs[:, self._link_frame]
-        T[:, :, :3, 3] = ts[:, self._link_frame]
-        T[:, :, 3, 3] = 1.0
-        return T
+        return self._frames_batch(Q, dtype)[0]
 
     def link_transforms(self, q: np.ndarray) -> np.ndarray:
         """(26,) pose -> (16, 4, 4) link-to-camera transforms."""
@@ -361,8 +378,9 @@ class HandModel:
         P = np.asarray(local_points, dtype=float)
         if P.ndim != 2 or P.shape[1] != 3 or len(P) != len(link_index):
             raise HandModelError('local_points must be (N, 3) matching link_index (N,)')
-        Rs, ts = self._frames_batch(q[None])
-        Rs, ts = Rs[0], ts[0]
+        _, Rl, tl = self._frames_batch(q[None])
+        Rs = np.stack([r[0] for r in Rl])
+        ts = np.stack([t[0] for t in tl])
         fr = self._link_frame[link_index]
         p = np.einsum('nij,nj->ni', Rs[fr], P) + ts[fr]
         J = np.zeros((len(P), 3, NUM_DOFS))

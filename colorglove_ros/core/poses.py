@@ -59,7 +59,7 @@ _T_OUT = (45, -5, 0, 0)          # abducted, as in L
 _T_SIDE = (-10, 10, 10, 5)        # along the side of the index, as in A
 _T_ACROSS = (-15, 55, 35, 25)     # folded across the palm, as in B
 _T_OVER = (-5, 45, 45, 35)        # over the curled fingers, as in S or a fist
-_T_UNDER = (-10, 60, 50, 45)      # tucked under fingers, as in M, N
+_T_UNDER = (-10, 50, 40, 35)      # tucked under fingers, as in M, N
 _T_OPPOSE = (25, 40, 25, 30)      # opposed to the fingertips, as in O
 
 
@@ -240,15 +240,22 @@ def skin_fingers(mesh: HandMesh, model: HandModel, fingers: np.ndarray,
 
 
 def pose_features(mesh: HandMesh, model: HandModel, fingers: np.ndarray,
-                  chunk: int = 2048) -> np.ndarray:
+                  chunk: int = 2048, max_vertices: int | None = None) -> np.ndarray:
     """(N, D) float32 features whose Euclidean distances equal ``pose_distance``.
 
     Palm vertices never move with the fingers and are left out (the scaling keeps the RMS
-    over all V vertices)."""
+    over all V vertices). With ``max_vertices`` only that many evenly spaced finger
+    vertices are used: a cheaper approximation (D = 3 * max_vertices) for large searches.
+    """
     fingers = np.atleast_2d(np.asarray(fingers, dtype=float))
-    moving = mesh.vertex_link != 0
-    scale = np.float32(1.0 / np.sqrt(mesh.num_vertices))
-    out = np.empty((len(fingers), int(moving.sum()) * 3), dtype=np.float32)
+    moving = np.flatnonzero(mesh.vertex_link != 0)
+    n_moving = len(moving)
+    if max_vertices is not None and max_vertices < n_moving:
+        if max_vertices < 1:
+            raise PosesError(f'max_vertices must be >= 1, got {max_vertices}')
+        moving = moving[np.linspace(0, n_moving - 1, max_vertices).round().astype(np.int64)]
+    scale = np.float32(np.sqrt(n_moving / (mesh.num_vertices * len(moving))))
+    out = np.empty((len(fingers), len(moving) * 3), dtype=np.float32)
     for s in range(0, len(fingers), chunk):
         v = skin_fingers(mesh, model, fingers[s:s + chunk])[:, moving]
         out[s:s + chunk] = v.reshape(len(v), -1) * scale
