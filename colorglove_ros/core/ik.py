@@ -1,0 +1,1092 @@
+"""Gauss-Newton IK on patch projection constraints, with temporal smoothing and N cameras."""
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Protocol
+
+import cv2
+import numpy as np
+import yaml
+from scipy.optimize import linear_sum_assignment
+
+from .camera import Calibration, PinholeCamera
+from .hand_mesh import build_hand_mesh
+from .hand_model import DOF_NAMES, NUM_DOFS, HandModel
+
+__all__ = [
+    'IK_CONFIG_VERSION', 'COVARIANCE_FORMAT', 'COVARIANCE_VERSION',
+    'IKError', 'IKConfigError', 'FastKinematics', 'EntryConstraints', 'Blobs',
+    'CameraObservation', 'PosePrior', 'Correspondences', 'IKCovariances', 'IKConfig',
+    'IKSolution', 'IKResult', 'MeshLike', 'VertexTable', 'TRACKER_MODES',
+    'default_covariances', 'load_covariances', 'save_covariances', 'load_ik_config',
+    'extract_blobs', 'match_by_color', 'match_primary', 'match_extra_camera',
+    'project_correspondences', 'estimate_translation', 'solve_ik', 'reprojection_errors',
+    'HandTracker', 'align_rotation_vector',
+]
+
+IK_CONFIG_VERSION = 1
+COVARIANCE_FORMAT = 'colorglove_ik_covariances'
+COVARIANCE_VERSION = 1
+TRACKER_MODES = ('blend', 'ik', 'ik_smooth')
+_EPS_LIMIT = 1e-9
+
+
+class IKError(Exception):
+    """Invalid input to the inverse kinematics (shapes, cameras, model mismatch)."""
+
+
+class IKConfigError(IKError):
+    """An IK configuration or covariance file is missing, malformed or of another version."""
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    K = np.zeros(v.shape[:-1] + (3, 3))
+    K[..., 0, 1], K[..., 0, 2] = -v[..., 2], v[..., 1]
+    K[..., 1, 0], K[..., 1, 2] = v[..., 2], -v[..., 0]
+    K[..., 2, 0], K[..., 2, 1] = -v[..., 1], v[..., 0]
+    return K
+
+
+def _field(obj: Any, *names: str) -> Any:
+    for name in names:
+        if hasattr(obj, name):
+            return getattr(obj, name)
+    raise IKError(f'hand-model joint has none of the fields {names}')
+
+
+def _rotvec_matrix_and_jl(r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation matrix and SO(3) left Jacobian of one rotation vector (scalar fast path)."""
+    theta = math.sqrt(float(r @ r))
+    K = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+    KK = K @ K
+    if theta < 1e-5:
+        a, b = 1.0 - theta**2 / 6.0, 0.5 - theta**2 / 24.0
+        c = 1.0 / 6.0 - theta**2 / 120.0
+    else:
+        st, ct = math.sin(theta), math.cos(theta)
+        a, b = st / theta, (1.0 - ct) / theta**2
+        c = (theta - st) / theta**3
+    eye = np.eye(3)
+    return eye + a * K + b * KK, eye + b * K + c * KK
+
+
+class FastKinematics:
+    """Forward kinematics and analytic point Jacobians of a :class:`HandModel` in one pass.
+
+    Same numbers as ``model.transform_points`` / ``model.point_jacobian`` (checked at
+    construction), with the joints processed level by level so one IK iteration costs a
+    few dozen numpy calls instead of several hundred.
+    """
+
+    def __init__(self, model: HandModel) -> None:
+        joints = model.joints
+        self.model = model
+        self.lower = np.asarray(model.lower_limits, dtype=float)
+        self.upper = np.asarray(model.upper_limits, dtype=float)
+        n = len(joints)
+        self._parent = np.array([j.parent_frame for j in joints], dtype=np.int64)
+        if np.any(self._parent > np.arange(n)):
+            raise IKError('joint parents must precede their children')
+        self._fixed_R = np.stack([np.asarray(_field(j, 'fixed_rot', 'fixed_R'), float)
+                                  for j in joints])
+        self._fixed_t = np.stack([np.asarray(_field(j, 'fixed_trans', 'fixed_t'), float)
+                                  for j in joints])
+        axes = np.stack([np.asarray(j.axis, float) for j in joints])
+        self._axis = axes / np.linalg.norm(axes, axis=1, keepdims=True)
+        self._K = _skew(self._axis)
+        self._KK = self._K @ self._K
+        self._dof = np.array([j.dof for j in joints], dtype=np.int64)
+        if len(set(self._dof.tolist())) != n:
+            raise IKError('each joint must drive its own DOF')
+        depth = np.zeros(n + 1, dtype=np.int64)
+        ancestors = np.zeros((n + 1, n), dtype=float)
+        for f, j in enumerate(joints, start=1):
+            depth[f] = depth[j.parent_frame] + 1
+            ancestors[f] = ancestors[j.parent_frame]
+            ancestors[f, f - 1] = 1.0
+        self._levels = [np.flatnonzero(depth == d) for d in range(1, int(depth.max()) + 1)]
+        self._ancestors = ancestors
+        self._level_pairs = [(lvl - 1, self._parent[lvl - 1]) for lvl in self._levels]
+        self._eye = np.eye(3)
+        rng = np.random.default_rng(0)
+        lo = np.where(np.isfinite(self.lower), self.lower, -1.0)
+        hi = np.where(np.isfinite(self.upper), self.upper, 1.0)
+        q = lo + (hi - lo) * rng.uniform(0.2, 0.8, NUM_DOFS)
+        Rs, ts, _ = self.frames(q)
+        T = model.link_transforms(q)
+        link_frame = []
+        for li in range(len(T)):
+            err = (np.abs(Rs - T[li, :3, :3]).sum(axis=(1, 2))
+                   + np.abs(ts - T[li, :3, 3]).sum(axis=1))
+            f = int(np.argmin(err))
+            if err[f] > 1e-9:
+                raise IKError(f'link {li} matches no kinematic frame (error {err[f]:.3g})')
+            link_frame.append(f)
+        self.link_frame = np.array(link_frame, dtype=np.int64)
+
+    def frames(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rotations (F, 3, 3) and origins (F, 3) of all kinematic frames (0 = palm), and the
+        SO(3) left Jacobian of the wrist rotation vector."""
+        n = len(self._dof)
+        Rs = np.empty((n + 1, 3, 3))
+        ts = np.empty((n + 1, 3))
+        Rs[0], jl = _rotvec_matrix_and_jl(q[3:6])
+        ts[0] = q[0:3]
+        ang = q[self._dof]
+        Rj = self._eye + np.sin(ang)[:, None, None] * self._K
+        Rj += (1.0 - np.cos(ang))[:, None, None] * self._KK
+        local_R = self._fixed_R @ Rj
+        for jidx, p in self._level_pairs:
+            Rp = Rs[p]
+            ts[jidx + 1] = ts[p] + (Rp @ self._fixed_t[jidx][:, :, None])[:, :, 0]
+            Rs[jidx + 1] = Rp @ local_R[jidx]
+        return Rs, ts, jl
+
+    def points(self, q: np.ndarray, link: np.ndarray, local: np.ndarray,
+               jacobian: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+        """Camera-frame points (N, 3) of link-fixed points and optionally d/dq (N, 3, 26)."""
+        Rs, ts, jl = self.frames(q)
+        fr = self.link_frame[link]
+        p = (Rs[fr] @ local[:, :, None])[:, :, 0] + ts[fr]
+        if not jacobian:
+            return p, None
+        J = np.zeros((len(p), 3, NUM_DOFS))
+        J[:, 0, 0] = J[:, 1, 1] = J[:, 2, 2] = 1.0
+        J[:, :, 3:6] = -_skew(p - ts[0]) @ jl
+        w = (Rs[1:] @ self._axis[:, :, None])[:, :, 0]                     # (nj, 3)
+        d = p[:, None, :] - ts[None, 1:]                                   # (N, nj, 3)
+        mask = self._ancestors[fr]                                         # (N, nj)
+        cx = (w[None, :, 1] * d[:, :, 2] - w[None, :, 2] * d[:, :, 1]) * mask
+        cy = (w[None, :, 2] * d[:, :, 0] - w[None, :, 0] * d[:, :, 2]) * mask
+        cz = (w[None, :, 0] * d[:, :, 1] - w[None, :, 1] * d[:, :, 0]) * mask
+        J[:, 0, self._dof] = cx
+        J[:, 1, self._dof] = cy
+        J[:, 2, self._dof] = cz
+        return p, J
+
+    def clamp(self, q: np.ndarray) -> np.ndarray:
+        """Clip a pose into the joint limits."""
+        return np.clip(q, self.lower, self.upper)
+
+
+# ---------------------------------------------------------------------------- data types
+def _arr(x: Any, dtype: Any, shape_tail: tuple[int, ...], name: str) -> np.ndarray:
+    a = np.asarray(x, dtype=dtype)
+    if a.ndim == 1 and shape_tail == () or a.ndim == 2 and a.shape[1:] == shape_tail:
+        return a
+    if a.size == 0:
+        return a.reshape((0, *shape_tail))
+    raise IKError(f'{name} must have shape (N, {", ".join(map(str, shape_tail))}), got {a.shape}')
+
+
+@dataclass(frozen=True)
+class EntryConstraints:
+    """Projection constraints of one database entry: per visible patch its id, colour
+    (1..10), the mesh vertex nearest its centroid, the centroid in the entry's 40x40 tiny
+    image (x, y) and its pixel count."""
+
+    patch_id: np.ndarray
+    color: np.ndarray
+    vertex: np.ndarray
+    tiny_xy: np.ndarray
+    pixel_count: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, 'patch_id', _arr(self.patch_id, np.int64, (), 'patch_id'))
+        object.__setattr__(self, 'color', _arr(self.color, np.int64, (), 'color'))
+        object.__setattr__(self, 'vertex', _arr(self.vertex, np.int64, (), 'vertex'))
+        object.__setattr__(self, 'tiny_xy', _arr(self.tiny_xy, float, (2,), 'tiny_xy'))
+        object.__setattr__(self, 'pixel_count',
+                           _arr(self.pixel_count, float, (), 'pixel_count'))
+        n = len(self.patch_id)
+        if not all(len(a) == n for a in (self.color, self.vertex, self.tiny_xy,
+                                          self.pixel_count)):
+            raise IKError('EntryConstraints arrays must all have the same length')
+
+    def __len__(self) -> int:
+        return len(self.patch_id)
+
+
+@dataclass(frozen=True)
+class Blobs:
+    """Measured glove blobs of one camera image: colour (1..10), centroid in full-image
+    pixels (x, y, as measured, i.e. still distorted) and pixel count."""
+
+    color: np.ndarray
+    centroid_px: np.ndarray
+    pixel_count: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, 'color', _arr(self.color, np.int64, (), 'color'))
+        object.__setattr__(self, 'centroid_px', _arr(self.centroid_px, float, (2,), 'centroid'))
+        object.__setattr__(self, 'pixel_count',
+                           _arr(self.pixel_count, float, (), 'pixel_count'))
+        if not len(self.color) == len(self.centroid_px) == len(self.pixel_count):
+            raise IKError('Blobs arrays must all have the same length')
+
+    def __len__(self) -> int:
+        return len(self.color)
+
+    @classmethod
+    def empty(cls) -> Blobs:
+        """No blob."""
+        return cls(np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros(0))
+
+
+@dataclass(frozen=True)
+class CameraObservation:
+    """What one camera saw in a frame: whether the glove was found, its blobs, and (for
+    the primary camera) the crop transform tiny -> full image of the lookup query."""
+
+    hand_found: bool
+    blobs: Blobs = field(default_factory=Blobs.empty)
+    crop: Any = None    # core.crop.CropTransform (scale, offset_x, offset_y)
+
+
+@dataclass(frozen=True)
+class PosePrior:
+    """The lookup result the IK starts from: blended pose and the nearest entry's
+    projection constraints."""
+
+    q_blend: np.ndarray
+    constraints: EntryConstraints
+
+    @classmethod
+    def from_lookup(cls, result: Any) -> PosePrior:
+        """From a ``core.search.LookupResult`` (``blended`` and ``constraints`` with
+        ``patch_ids, colors, vertices, tiny_xy, pixel_counts``)."""
+        try:
+            c = result.constraints
+            cons = EntryConstraints(c.patch_ids, c.colors, c.vertices, c.tiny_xy,
+                                    c.pixel_counts)
+            q_blend = np.asarray(result.blended, dtype=float)
+        except AttributeError as exc:
+            raise IKError(f'not a lookup result: {exc}') from exc
+        if q_blend.shape != (NUM_DOFS,):
+            raise IKError(f'blended pose must have shape (26,), got {q_blend.shape}')
+        return cls(q_blend, cons)
+
+
+@dataclass(frozen=True)
+class Correspondences:
+    """Matched constraints over all cameras: camera index, the constrained point as
+    (link, point in the link frame), the undistorted target pixel, patch id and vertex."""
+
+    camera: np.ndarray
+    link: np.ndarray
+    local: np.ndarray
+    target_px: np.ndarray
+    patch_id: np.ndarray
+    vertex: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.camera)
+
+    @classmethod
+    def empty(cls) -> Correspondences:
+        """No correspondence."""
+        z = np.zeros(0, np.int64)
+        return cls(z, z, np.zeros((0, 3)), np.zeros((0, 2)), z, z)
+
+    @classmethod
+    def concat(cls, items: Sequence[Correspondences]) -> Correspondences:
+        """Join several sets (e.g. one per camera)."""
+        items = [c for c in items if len(c)]
+        if not items:
+            return cls.empty()
+        return cls(*(np.concatenate([getattr(c, k) for c in items]) for k in
+                     ('camera', 'link', 'local', 'target_px', 'patch_id', 'vertex')))
+
+    def select(self, mask: np.ndarray) -> Correspondences:
+        """The subset picked by a boolean mask or index array."""
+        return Correspondences(self.camera[mask], self.link[mask], self.local[mask],
+                               self.target_px[mask], self.patch_id[mask], self.vertex[mask])
+
+    def same_as(self, other: Correspondences) -> bool:
+        """True if both hold the same (camera, patch, target) triples in the same order."""
+        return (len(self) == len(other) and np.array_equal(self.camera, other.camera)
+                and np.array_equal(self.patch_id, other.patch_id)
+                and np.array_equal(self.target_px, other.target_px))
+
+    def counts(self, num_cameras: int) -> tuple[int, ...]:
+        """Number of correspondences per camera."""
+        return tuple(int(v) for v in np.bincount(self.camera, minlength=num_cameras))
+
+
+class MeshLike(Protocol):
+    """What the tracker needs from ``core.hand_mesh.HandMesh``."""
+
+    vertex_link: np.ndarray
+    local_vertices: np.ndarray
+
+
+@dataclass(frozen=True)
+class VertexTable:
+    """Minimal :class:`MeshLike`: link index and link-frame position per vertex."""
+
+    vertex_link: np.ndarray
+    local_vertices: np.ndarray
+
+
+# ---------------------------------------------------------------------------- covariances
+@dataclass(frozen=True)
+class IKCovariances:
+    """Diagonal covariances: R per pixel axis (px^2), Q (blended pose error) and P
+    (frame-to-frame deviation) per DOF in m^2 / rad^2."""
+
+    r_var_px2: np.ndarray
+    q_var: np.ndarray
+    p_var: np.ndarray
+    source: str = 'defaults'
+
+    def __post_init__(self) -> None:
+        r = np.asarray(self.r_var_px2, float).reshape(-1)
+        if r.size == 1:
+            r = np.repeat(r, 2)
+        q = np.asarray(self.q_var, float).reshape(-1)
+        p = np.asarray(self.p_var, float).reshape(-1)
+        if r.shape != (2,) or q.shape != (NUM_DOFS,) or p.shape != (NUM_DOFS,):
+            raise IKConfigError(f'covariances need r (2), q (26), p (26); got {r.shape}, '
+                                f'{q.shape}, {p.shape}')
+        for name, v in (('r_var_px2', r), ('q_var', q), ('p_var', p)):
+            if not np.all(np.isfinite(v)) or np.any(v <= 0):
+                raise IKConfigError(f'{name} must be finite and positive, got {v.tolist()}')
+        object.__setattr__(self, 'r_var_px2', r)
+        object.__setattr__(self, 'q_var', q)
+        object.__setattr__(self, 'p_var', p)
+
+
+def _group_std(entry: Any, where: str) -> np.ndarray:
+    """26 standard deviations from {translation_m: 3|1, rotation_rad: 3|1, fingers_rad: 20|1}."""
+    if not isinstance(entry, dict):
+        raise IKConfigError(f'{where} must be a mapping with translation_m, rotation_rad, '
+                            'fingers_rad')
+    out = []
+    for key, n in (('translation_m', 3), ('rotation_rad', 3), ('fingers_rad', 20)):
+        try:
+            v = np.asarray(entry[key], dtype=float).reshape(-1)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise IKConfigError(f'{where}.{key} missing or not numeric: {exc}') from exc
+        if v.size == 1:
+            v = np.repeat(v, n)
+        if v.size != n:
+            raise IKConfigError(f'{where}.{key} needs 1 or {n} values, got {v.size}')
+        out.append(v)
+    return np.concatenate(out)
+
+
+def default_covariances() -> IKCovariances:
+    """Hand-set covariances used when no learned file is given (same as config/ik.yaml)."""
+    q_std = np.concatenate([[0.03, 0.03, 0.08], [0.3] * 3, [0.35] * 20])
+    p_std = np.concatenate([[0.01, 0.01, 0.015], [0.06] * 3, [0.12] * 20])
+    return IKCovariances(np.array([3.0**2, 3.0**2]), q_std**2, p_std**2)
+
+
+def save_covariances(path: str | Path, cov: IKCovariances, **provenance: Any) -> Path:
+    """Write learned covariances to a versioned YAML file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    data = {
+        'format': COVARIANCE_FORMAT, 'version': COVARIANCE_VERSION,
+        'dof_names': list(DOF_NAMES),
+        'r_var_px2': [float(v) for v in cov.r_var_px2],
+        'q_var': [float(v) for v in cov.q_var],
+        'p_var': [float(v) for v in cov.p_var],
+        'provenance': {k: (v if isinstance(v, (int, float, str, bool)) else str(v))
+                       for k, v in provenance.items()},
+    }
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def load_covariances(path: str | Path) -> IKCovariances:
+    """Read a covariance file written by :func:`save_covariances`; raise
+    :class:`IKConfigError` naming what is wrong."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError as exc:
+        raise IKConfigError(f'IK covariance file not found: {path}') from exc
+    except yaml.YAMLError as exc:
+        raise IKConfigError(f'IK covariance file is not valid YAML: {path}: {exc}') from exc
+    if not isinstance(data, dict) or data.get('format') != COVARIANCE_FORMAT:
+        raise IKConfigError(f'{path} is not a {COVARIANCE_FORMAT} file')
+    if data.get('version') != COVARIANCE_VERSION:
+        raise IKConfigError(f'{path} has version {data.get("version")!r}, '
+                            f'expected {COVARIANCE_VERSION}')
+    if list(data.get('dof_names', [])) != list(DOF_NAMES):
+        raise IKConfigError(f'{path}: dof_names do not match the 26-DOF hand model')
+    try:
+        return IKCovariances(data['r_var_px2'], data['q_var'], data['p_var'], source=str(path))
+    except KeyError as exc:
+        raise IKConfigError(f'{path}: missing field {exc}') from exc
+    except (TypeError, ValueError) as exc:
+        raise IKConfigError(f'{path}: bad values: {exc}') from exc
+
+
+# ---------------------------------------------------------------------------- configuration
+@dataclass(frozen=True)
+class IKConfig:
+    """Tracker options (see ``config/ik.yaml`` for the meaning of each)."""
+
+    enable_ik: bool = True
+    enable_smoothing: bool = True
+    max_iterations: int = 6
+    refine_iterations: int = 3
+    lambda_init: float = 1e-3
+    step_tol: float = 1e-5
+    cost_tol: float = 1e-4
+    init_translation: bool = True
+    min_constraints: int = 3
+    min_blob_pixels: int = 4
+    gate_tiny_px: float = 8.0
+    gate_min_px: float = 10.0
+    extra_gate_px: float = 30.0
+    extra_shift_max_px: float = 150.0
+    extra_inlier_px: float = 15.0
+    extra_rematch: bool = True
+    outlier_px: float = 20.0
+    max_gap_s: float = 0.25
+    min_depth_m: float = 0.05
+    covariances: IKCovariances = field(default_factory=default_covariances)
+
+    def with_mode(self, mode: str) -> IKConfig:
+        """The evaluation variants: 'blend' (blended NN only), 'ik', 'ik_smooth'."""
+        if mode not in TRACKER_MODES:
+            raise IKConfigError(f'unknown tracker mode {mode!r}, expected one of {TRACKER_MODES}')
+        return replace(self, enable_ik=mode != 'blend', enable_smoothing=mode == 'ik_smooth')
+
+
+_CONFIG_FIELDS = {
+    'enable_ik': bool, 'enable_smoothing': bool, 'max_iterations': int,
+    'refine_iterations': int, 'lambda_init': float, 'step_tol': float, 'cost_tol': float,
+    'init_translation': bool, 'min_constraints': int, 'min_blob_pixels': int,
+    'gate_tiny_px': float, 'gate_min_px': float, 'extra_gate_px': float,
+    'extra_shift_max_px': float, 'extra_inlier_px': float, 'extra_rematch': bool,
+    'outlier_px': float,
+    'max_gap_s': float, 'min_depth_m': float,
+}
+
+
+def load_ik_config(path: str | Path) -> IKConfig:
+    """Read ``config/ik.yaml``; a non-empty ``covariance_file`` (relative to the YAML's
+    folder or absolute) overrides the default covariances written in the file."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError as exc:
+        raise IKConfigError(f'IK config file not found: {path}') from exc
+    except yaml.YAMLError as exc:
+        raise IKConfigError(f'IK config file is not valid YAML: {path}: {exc}') from exc
+    if not isinstance(data, dict):
+        raise IKConfigError(f'IK config file {path} does not hold a mapping')
+    if data.get('version') != IK_CONFIG_VERSION:
+        raise IKConfigError(f'IK config {path} has version {data.get("version")!r}, '
+                            f'expected {IK_CONFIG_VERSION}')
+    unknown = set(data) - set(_CONFIG_FIELDS) - {'version', 'covariances', 'covariance_file'}
+    if unknown:
+        raise IKConfigError(f'IK config {path}: unknown keys {sorted(unknown)}')
+    kwargs: dict[str, Any] = {}
+    for key, typ in _CONFIG_FIELDS.items():
+        if key in data:
+            value = data[key]
+            if typ is bool and not isinstance(value, bool):
+                raise IKConfigError(f'IK config {path}: {key} must be true or false')
+            try:
+                kwargs[key] = typ(value)
+            except (TypeError, ValueError) as exc:
+                raise IKConfigError(f'IK config {path}: {key}: {exc}') from exc
+    cov_file = data.get('covariance_file') or ''
+    if cov_file:
+        cov_path = Path(cov_file)
+        if not cov_path.is_absolute():
+            cov_path = path.parent / cov_path
+        kwargs['covariances'] = load_covariances(cov_path)
+    elif 'covariances' in data:
+        c = data['covariances']
+        if not isinstance(c, dict):
+            raise IKConfigError(f'IK config {path}: covariances must be a mapping')
+        try:
+            r_std = np.asarray(c['r_std_px'], dtype=float)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise IKConfigError(f'IK config {path}: covariances.r_std_px: {exc}') from exc
+        q_std = _group_std(c.get('q_std'), f'{path}: covariances.q_std')
+        p_std = _group_std(c.get('p_std'), f'{path}: covariances.p_std')
+        kwargs['covariances'] = IKCovariances(r_std**2, q_std**2, p_std**2, source=str(path))
+    return IKConfig(**kwargs)
+
+
+# ---------------------------------------------------------------------------- blobs, matching
+def extract_blobs(labels: np.ndarray, min_pixels: int = 4, num_colors: int = 10) -> Blobs:
+    """Connected components of each glove colour of a label image (0 = background)."""
+    labels = np.asarray(labels)
+    if labels.ndim != 2:
+        raise IKError(f'label image must be 2-D, got shape {labels.shape}')
+    colors, cents, counts = [], [], []
+    for c in np.unique(labels):
+        if c == 0 or c > num_colors:
+            continue
+        n, _, stats, centroids = cv2.connectedComponentsWithStats(
+            (labels == c).astype(np.uint8), connectivity=8)
+        for k in range(1, n):
+            area = int(stats[k, cv2.CC_STAT_AREA])
+            if area >= min_pixels:
+                colors.append(int(c))
+                cents.append(centroids[k])
+                counts.append(area)
+    if not colors:
+        return Blobs.empty()
+    return Blobs(np.array(colors), np.array(cents, float), np.array(counts, float))
+
+
+def match_by_color(pred_xy: np.ndarray, pred_color: np.ndarray, blob_xy: np.ndarray,
+                   blob_color: np.ndarray, gate_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """One-to-one matching of predicted points to blobs of the same colour (Hungarian on
+    distance per colour); pairs farther than ``gate_px`` are dropped. Returns index arrays
+    (into the predictions, into the blobs)."""
+    pred_xy = np.asarray(pred_xy, float).reshape(-1, 2)
+    blob_xy = np.asarray(blob_xy, float).reshape(-1, 2)
+    empty = np.zeros(0, np.int64)
+    if len(pred_xy) == 0 or len(blob_xy) == 0:
+        return empty, empty
+    d = np.linalg.norm(pred_xy[:, None, :] - blob_xy[None, :, :], axis=2)
+    ok = (np.asarray(pred_color)[:, None] == np.asarray(blob_color)[None, :]) & (d <= gate_px)
+    if not ok.any():
+        return empty, empty
+    # one assignment over all colours: forbidden pairs cost more than any allowed set
+    big = (gate_px + 1.0) * (min(d.shape) + 1)
+    r, c = linear_sum_assignment(np.where(ok, d, big))
+    keep = ok[r, c]
+    return r[keep].astype(np.int64), c[keep].astype(np.int64)
+
+
+def _usable(blobs: Blobs, min_pixels: int) -> np.ndarray:
+    return np.flatnonzero(blobs.pixel_count >= min_pixels)
+
+
+def match_primary(constraints: EntryConstraints, blobs: Blobs, crop: Any,
+                  camera: PinholeCamera, mesh: MeshLike, gate_tiny_px: float = 8.0,
+                  gate_min_px: float = 10.0, min_blob_pixels: int = 4) -> Correspondences:
+    """Match the entry's constraints (tiny-image centroids mapped to full-image pixels with
+    the query's crop, ``full = offset + scale * tiny``) to same-colour blobs of the primary
+    camera; targets are the undistorted blob centroids."""
+    if crop is None:
+        raise IKError('the primary observation needs the crop transform of the lookup query')
+    if len(constraints) == 0 or len(blobs) == 0:
+        return Correspondences.empty()
+    scale = float(crop.scale)
+    pred = constraints.tiny_xy * scale + np.array([float(crop.offset_x), float(crop.offset_y)])
+    keep = _usable(blobs, min_blob_pixels)
+    gate = max(gate_min_px, gate_tiny_px * scale)
+    k, m = match_by_color(pred, constraints.color, blobs.centroid_px[keep],
+                          blobs.color[keep], gate)
+    m = keep[m]
+    return _make_corr(0, constraints, k, camera.undistort_pixels(blobs.centroid_px[m]), mesh)
+
+
+def _make_corr(cam: int, constraints: EntryConstraints, k: np.ndarray, target: np.ndarray,
+               mesh: MeshLike) -> Correspondences:
+    v = constraints.vertex[k]
+    nv = len(mesh.vertex_link)
+    if np.any((v < 0) | (v >= nv)):
+        raise IKError(f'constraint vertex index out of range [0, {nv})')
+    return Correspondences(np.full(len(k), cam, np.int64),
+                           np.asarray(mesh.vertex_link, np.int64)[v],
+                           np.asarray(mesh.local_vertices, float)[v],
+                           np.asarray(target, float).reshape(-1, 2),
+                           constraints.patch_id[k].copy(), v.copy())
+
+
+def match_extra_camera(cam_index: int, camera: PinholeCamera, constraints: EntryConstraints,
+                       predicted_world: np.ndarray, blobs: Blobs, mesh: MeshLike,
+                       gate_px: float = 30.0, shift_max_px: float = 150.0,
+                       inlier_px: float = 15.0, min_blob_pixels: int = 4,
+                       min_depth_m: float = 0.05,
+                       normals_world: np.ndarray | None = None) -> Correspondences:
+    """Match constraints to same-colour blobs of a camera with no lookup: project the
+    constraint vertices (``predicted_world``, (K, 3) in the primary frame, at the current
+    pose), find the common image shift with most same-colour inliers (absorbs the weak
+    depth of the pose), then Hungarian-match inside ``gate_px``. With ``normals_world``
+    (K, 3), vertices whose surface faces away from this camera are skipped."""
+    if len(constraints) == 0 or len(blobs) == 0:
+        return Correspondences.empty()
+    pc = camera.world_to_camera(predicted_world)
+    front = pc[:, 2] > min_depth_m
+    if normals_world is not None:
+        center = -camera.rotation.T @ camera.translation
+        front &= np.einsum('ni,ni->n', normals_world, center - predicted_world) > 0.0
+    pred = np.full((len(pc), 2), np.nan)
+    pred[front] = camera.project(pc[front])
+    margin = gate_px
+    inside = front & (pred[:, 0] > -margin) & (pred[:, 0] < camera.width + margin) \
+        & (pred[:, 1] > -margin) & (pred[:, 1] < camera.height + margin)
+    ks = np.flatnonzero(inside)
+    keep = _usable(blobs, min_blob_pixels)
+    if len(ks) == 0 or len(keep) == 0:
+        return Correspondences.empty()
+    bxy = camera.undistort_pixels(blobs.centroid_px[keep])
+    bcol = blobs.color[keep]
+    kcol = constraints.color[ks]
+    same = kcol[:, None] == bcol[None, :]
+    diff = bxy[None, :, :] - pred[ks][:, None, :]          # (K, M, 2)
+    shift = np.zeros(2)
+    hyp = diff[same]
+    hyp = hyp[np.linalg.norm(hyp, axis=1) <= shift_max_px]
+    if len(hyp):
+        # distance of every (pred + shift) to every same-colour blob, per hypothesis
+        res = diff[None] - hyp[:, None, None, :]
+        dist = np.where(same[None], np.linalg.norm(res, axis=3), np.inf).min(axis=2)
+        inl = dist <= inlier_px
+        score = inl.sum(axis=1) - 1e-3 * np.where(inl, dist, 0.0).sum(axis=1) / inlier_px
+        best = int(np.argmax(score))
+        if inl[best].sum() >= 2:
+            # refine: mean residual of the inliers
+            r = res[best]
+            dsel = np.where(same, np.linalg.norm(r, axis=2), np.inf)
+            nearest = np.argmin(dsel, axis=1)
+            rows = np.flatnonzero(inl[best])
+            shift = hyp[best] + r[rows, nearest[rows]].mean(axis=0)
+    k, m = match_by_color(pred[ks] + shift, kcol, bxy, bcol, gate_px)
+    return _make_corr(cam_index, constraints, ks[k], bxy[m], mesh)
+
+
+def align_rotation_vector(r: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """The rotation vector equivalent to ``r`` (angle +- 2 pi along its axis) closest to
+    ``ref``, so that differences such as ``q_b - q`` stay small across the pi wrap."""
+    r = np.asarray(r, dtype=float)
+    theta = float(np.linalg.norm(r))
+    if theta < 1e-9:
+        return r.copy()
+    axis = r / theta
+    cands = [axis * (theta + 2.0 * math.pi * k) for k in (-1, 0, 1)]
+    return min(cands, key=lambda c: float(np.sum((c - ref) ** 2)))
+
+
+# ---------------------------------------------------------------------------- projection / IK
+@dataclass(frozen=True)
+class _PerPoint:
+    """Camera parameters repeated per correspondence, so all cameras project in one pass."""
+
+    R: np.ndarray       # (K, 3, 3)
+    t: np.ndarray       # (K, 3)
+    f: np.ndarray       # (K, 2)
+    c: np.ndarray       # (K, 2)
+
+
+def _per_point(cameras: Sequence[PinholeCamera], corr: Correspondences) -> _PerPoint:
+    if len(corr) and (corr.camera.min() < 0 or corr.camera.max() >= len(cameras)):
+        raise IKError(f'correspondence camera index outside [0, {len(cameras)})')
+    Rs = np.stack([c.rotation for c in cameras])
+    ts = np.stack([c.translation for c in cameras])
+    fs = np.array([[c.fx, c.fy] for c in cameras])
+    cs = np.array([[c.cx, c.cy] for c in cameras])
+    k = corr.camera
+    return _PerPoint(Rs[k], ts[k], fs[k], cs[k])
+
+
+def project_correspondences(kin: FastKinematics, cameras: Sequence[PinholeCamera],
+                            corr: Correspondences, q: np.ndarray, jacobian: bool = False,
+                            per_point: _PerPoint | None = None
+                            ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """Predicted pixels f(q) (K, 2), optionally df/dq (2K, 26) (rows x0, y0, x1, ...) and
+    the depth of every point in its camera (K,). Pinhole projection without distortion
+    (targets are undistorted); each camera's rotation is chained into the Jacobian."""
+    pp = per_point if per_point is not None else _per_point(cameras, corr)
+    p, Jp = kin.points(q, corr.link, corr.local, jacobian)
+    pc = np.einsum('nij,nj->ni', pp.R, p) + pp.t
+    depth = pc[:, 2].copy()
+    z = np.where(np.abs(depth) < 1e-9, 1e-9, depth)
+    xy = pc[:, :2] / z[:, None]
+    pix = xy * pp.f + pp.c
+    if not jacobian or Jp is None:
+        return pix, None, depth
+    # d pixel / d world point (K, 2, 3) = (f / z) (R[0:2] - xy R[2]), chained with Jp
+    A = (pp.f / z[:, None])[:, :, None] * (pp.R[:, :2, :] - xy[:, :, None] * pp.R[:, 2:3, :])
+    J = np.einsum('nik,nkd->nid', A, Jp)
+    return pix, J.reshape(-1, NUM_DOFS), depth
+
+
+def reprojection_errors(kin: FastKinematics, cameras: Sequence[PinholeCamera],
+                        corr: Correspondences, q: np.ndarray) -> np.ndarray:
+    """Euclidean pixel distance between each constraint's projection and its target."""
+    if len(corr) == 0:
+        return np.zeros(0)
+    pix, _, _ = project_correspondences(kin, cameras, corr, q)
+    return np.linalg.norm(pix - corr.target_px, axis=1)
+
+
+def estimate_translation(kin: FastKinematics, cameras: Sequence[PinholeCamera],
+                         corr: Correspondences, q: np.ndarray,
+                         min_depth_m: float = 0.05, prior_var: np.ndarray | None = None,
+                         r_var_px2: float = 9.0, outlier_px: float = 0.0) -> np.ndarray:
+    """Keep rotation and fingers of ``q`` and solve the wrist translation that best
+    projects the constraint points onto their targets: linear least squares on the
+    cross-multiplied projection equations of all cameras, each row weighted as a pixel
+    residual of variance ``r_var_px2``, optionally regularised toward ``q[0:3]`` with
+    per-axis variances ``prior_var`` (m^2), and refitted once without the constraints
+    farther than ``outlier_px`` (0 = no trimming). Returns the new pose; raises
+    :class:`IKError` if the points are too few or the solution is behind a camera."""
+    if len(corr) < 2:
+        raise IKError('translation needs at least 2 correspondences')
+    p, _ = kin.points(q, corr.link, corr.local)
+    rows, rhs, wts = [], [], []
+    for c in np.unique(corr.camera):
+        cam = cameras[int(c)]
+        sel = corr.camera == c
+        a = (corr.target_px[sel, 0] - cam.cx) / cam.fx
+        b = (corr.target_px[sel, 1] - cam.cy) / cam.fy
+        R, t = cam.rotation, cam.translation
+        z = np.maximum(cam.world_to_camera(p[sel])[:, 2], min_depth_m)
+        for coef, row, f in ((a, 0, cam.fx), (b, 1, cam.fy)):
+            G = R[row][None, :] - coef[:, None] * R[2][None, :]       # (n, 3)
+            rows.append(G)
+            rhs.append(-(G * p[sel]).sum(axis=1) - (t[row] - coef * t[2]))
+            wts.append((f / z) ** 2 / r_var_px2)      # row residual * f / z ~ pixels
+    A = np.concatenate(rows)
+    y = np.concatenate(rhs)
+    w = np.concatenate(wts)
+    reg = np.zeros((3, 3)) if prior_var is None else np.diag(1.0 / np.asarray(prior_var, float))
+    keep = np.ones(len(A), dtype=bool)
+    dt = np.zeros(3)
+    for _ in range(2 if outlier_px > 0 else 1):
+        Ak, wk = A[keep], w[keep]
+        H = (Ak.T * wk) @ Ak + reg
+        try:
+            dt = np.linalg.solve(H, (Ak.T * wk) @ y[keep])
+        except np.linalg.LinAlgError as exc:
+            raise IKError('translation is not determined by the correspondences') from exc
+        if outlier_px <= 0:
+            break
+        trial = np.array(q, dtype=float)
+        trial[0:3] = q[0:3] + dt
+        pix, _, _ = project_correspondences(kin, cameras, corr, trial)
+        good = np.linalg.norm(pix - corr.target_px, axis=1) <= outlier_px
+        if good.all() or good.sum() < 3:
+            break
+        # rows are ordered camera by camera, x rows then y rows: rebuild the row mask
+        keep = np.concatenate([np.tile(good[corr.camera == c], 2)
+                               for c in np.unique(corr.camera)])
+    out = np.array(q, dtype=float)
+    out[0:3] = q[0:3] + dt
+    pw = p + dt
+    for c in np.unique(corr.camera):
+        if np.any(cameras[int(c)].world_to_camera(pw[corr.camera == c])[:, 2] <= min_depth_m):
+            raise IKError('translation estimate puts the hand behind a camera')
+    return kin.clamp(out)
+
+
+@dataclass(frozen=True)
+class IKSolution:
+    """Result of :func:`solve_ik`."""
+
+    q: np.ndarray
+    iterations: int
+    cost: float
+    initial_cost: float
+    converged: bool
+
+
+def _cost(r: np.ndarray, w: np.ndarray, q: np.ndarray, q_blend: np.ndarray, q_inv: np.ndarray,
+          q_prev: np.ndarray | None, p_inv: np.ndarray | None) -> float:
+    c = float(r @ (w * r)) + float(((q - q_blend) ** 2 * q_inv).sum())
+    if q_prev is not None and p_inv is not None:
+        c += float(((q - q_prev) ** 2 * p_inv).sum())
+    return c
+
+
+def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Correspondences,
+             q_init: np.ndarray, q_blend: np.ndarray, cov: IKCovariances,
+             q_prev: np.ndarray | None = None, max_iterations: int = 6,
+             lambda_init: float = 1e-3, step_tol: float = 1e-5,
+             min_depth_m: float = 0.05, cost_tol: float = 1e-4) -> IKSolution:
+    """Minimise |f(q) - c|^2_{R^-1} + |q - q_b|^2_{Q^-1} (+ |q - q_prev|^2_{P^-1}) by
+    Levenberg-damped Gauss-Newton steps
+    dq = (J^T R^-1 J + Q^-1 + P^-1 + lambda diag)^-1 (J^T R^-1 (c - f) + Q^-1 (q_b - q)
+    + P^-1 (q_prev - q)), projected onto the joint limits (DOFs at a bound whose step
+    points outward are frozen). ``max_iterations`` counts linear solves; it stops early when
+    the largest DOF change is below ``step_tol`` or the cost falls by less than the
+    fraction ``cost_tol``."""
+    q = kin.clamp(np.asarray(q_init, dtype=float))
+    q_blend = np.asarray(q_blend, dtype=float)
+    q_inv = 1.0 / cov.q_var
+    p_inv = 1.0 / cov.p_var if q_prev is not None else None
+    w = np.tile(1.0 / cov.r_var_px2, len(corr))
+    target = corr.target_px.reshape(-1)
+    per_point = _per_point(cameras, corr)
+
+    def evaluate(qq: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        pix, J, depth = project_correspondences(kin, cameras, corr, qq, True, per_point)
+        if len(depth) and depth.min() <= min_depth_m:
+            return math.inf, np.zeros(0), np.zeros((0, NUM_DOFS))
+        r = target - pix.reshape(-1)
+        return _cost(r, w, qq, q_blend, q_inv, q_prev, p_inv), r, J
+
+    cost, r, J = evaluate(q)
+    if not math.isfinite(cost):
+        raise IKError('initial pose puts constraint points behind a camera')
+    initial = cost
+    lam = lambda_init
+    it = 0
+    converged = False
+    while it < max_iterations:
+        JW = J.T * w
+        H = JW @ J + np.diag(q_inv)
+        g = JW @ r + q_inv * (q_blend - q)
+        if p_inv is not None:
+            H += np.diag(p_inv)
+            g += p_inv * (q_prev - q)
+        at_lo = (q <= kin.lower + _EPS_LIMIT) & (g < 0)
+        at_hi = (q >= kin.upper - _EPS_LIMIT) & (g > 0)
+        free = ~(at_lo | at_hi)
+        Hf = H[np.ix_(free, free)]
+        gf = g[free]
+        accepted = False
+        while it < max_iterations:
+            it += 1
+            A = Hf + lam * np.diag(np.diag(Hf))
+            try:
+                dqf = np.linalg.solve(A, gf)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            dq = np.zeros(NUM_DOFS)
+            dq[free] = dqf
+            q_new = kin.clamp(q + dq)
+            cost_new, r_new, J_new = evaluate(q_new)
+            if cost_new < cost:
+                step = float(np.abs(q_new - q).max())
+                rel = (cost - cost_new) / max(cost, 1e-12)
+                q, cost, r, J = q_new, cost_new, r_new, J_new
+                lam = max(lam / 10.0, 1e-9)
+                accepted = True
+                if step < step_tol or rel < cost_tol:
+                    converged = True
+                break
+            lam *= 10.0
+        if not accepted or converged:
+            converged = converged or not accepted and lam > 1e6
+            break
+    return IKSolution(q, it, cost, initial, converged)
+
+
+# ---------------------------------------------------------------------------- tracker
+@dataclass(frozen=True)
+class IKResult:
+    """One tracker output. ``reprojection_error_px`` is the mean pixel distance of the
+    matched constraints at the output pose (NaN when none); ``q`` is None when no hand.
+    ``q_blend`` is the lookup's blended pose as given, ``q_prior`` the IK prior q_b (the
+    blend with its translation refitted to the constraints)."""
+
+    found: bool
+    stamp: float
+    q: np.ndarray | None = None
+    q_blend: np.ndarray | None = None
+    reprojection_error_px: float = math.nan
+    reprojection_error_per_camera: tuple[float, ...] = ()
+    iterations: int = 0
+    time_ms: float = 0.0
+    num_constraints: int = 0
+    constraints_per_camera: tuple[int, ...] = ()
+    smoothed: bool = False
+    reset: bool = False
+    correspondences: Correspondences | None = None
+    num_rejected: int = 0
+    q_prior: np.ndarray | None = None
+
+
+def _local_vertex_normals(mesh: MeshLike) -> np.ndarray | None:
+    """Area-weighted vertex normals in the link frames, or None if the mesh has no faces
+    (then no back-facing test is made for the other cameras)."""
+    faces = getattr(mesh, 'faces', None)
+    if faces is None:
+        return None
+    faces = np.asarray(faces, dtype=np.int64)
+    links = np.asarray(mesh.vertex_link)
+    if faces.ndim != 2 or faces.shape[1] != 3 or np.any(links[faces[:, 0]] != links[faces[:, 1]]) \
+            or np.any(links[faces[:, 0]] != links[faces[:, 2]]):
+        return None
+    v = np.asarray(mesh.local_vertices, float)
+    fn = np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]])
+    n = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(n, faces[:, k], fn)
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    return n / np.where(norm > 0, norm, 1.0)
+
+
+class HandTracker:
+    """Temporal IK tracker: blended lookup pose -> refined pose, several cameras.
+
+    The world frame is the primary camera's optical frame (``cameras[0]`` must have
+    identity extrinsics); poses are expressed in it.
+    """
+
+    def __init__(self, model: HandModel, mesh: MeshLike, cameras: Sequence[PinholeCamera],
+                 config: IKConfig | None = None) -> None:
+        if not cameras:
+            raise IKError('the tracker needs at least one camera')
+        c0 = cameras[0]
+        if not (np.allclose(c0.rotation, np.eye(3)) and np.allclose(c0.translation, 0.0)):
+            raise IKError('cameras[0] (primary) must have identity extrinsics')
+        if len(mesh.vertex_link) != len(mesh.local_vertices):
+            raise IKError('mesh vertex_link and local_vertices differ in length')
+        self.model = model
+        self.kin = FastKinematics(model)
+        self.mesh = mesh
+        self.cameras = tuple(cameras)
+        self.config = config or IKConfig()
+        self._q_prev: np.ndarray | None = None
+        self._stamp_prev: float | None = None
+        self._local_normals = _local_vertex_normals(mesh)
+
+    @classmethod
+    def from_calibration(cls, calibration: Calibration, config: IKConfig | None = None,
+                         mesh: MeshLike | None = None) -> HandTracker:
+        """A tracker for a calibrated rig: the hand model (and, if not given, the mesh) is
+        scaled to the user's ``hand_length_m``."""
+        model = HandModel(calibration.hand_length_m)
+        if mesh is None:
+            mesh = build_hand_mesh(model)
+        mesh_length = getattr(mesh, 'hand_length_m', None)
+        if mesh_length is not None and abs(float(mesh_length) - model.hand_length_m) > 1e-9:
+            raise IKError(f'mesh is for a {mesh_length} m hand, calibration says '
+                          f'{model.hand_length_m} m')
+        return cls(model, mesh, calibration.cameras, config)
+
+    def reset(self) -> None:
+        """Forget the previous pose (hand lost, long gap, new sequence)."""
+        self._q_prev = None
+        self._stamp_prev = None
+
+    @property
+    def previous_pose(self) -> np.ndarray | None:
+        """The last output pose, or None after a reset."""
+        return None if self._q_prev is None else self._q_prev.copy()
+
+    def _match_extras(self, prior: PosePrior, observations: Sequence[CameraObservation],
+                      q: np.ndarray) -> list[Correspondences]:
+        cfg = self.config
+        cons = prior.constraints
+        v = cons.vertex
+        if np.any((v < 0) | (v >= len(self.mesh.vertex_link))):
+            raise IKError('constraint vertex index out of range of the mesh')
+        links = np.asarray(self.mesh.vertex_link)[v]
+        pw, _ = self.kin.points(q, links, np.asarray(self.mesh.local_vertices, float)[v])
+        normals = None
+        if self._local_normals is not None:
+            Rs, _, _ = self.kin.frames(q)
+            normals = (Rs[self.kin.link_frame[links]] @ self._local_normals[v][:, :, None])[..., 0]
+        out = []
+        for ci in range(1, len(self.cameras)):
+            obs = observations[ci] if ci < len(observations) else None
+            if obs is None or not obs.hand_found or len(obs.blobs) == 0:
+                continue
+            out.append(match_extra_camera(
+                ci, self.cameras[ci], cons, pw, obs.blobs, self.mesh, cfg.extra_gate_px,
+                cfg.extra_shift_max_px, cfg.extra_inlier_px, cfg.min_blob_pixels,
+                cfg.min_depth_m, normals))
+        return out
+
+    def _solve(self, corr: Correspondences, q_init: np.ndarray, q_b: np.ndarray,
+               q_prev: np.ndarray | None, iterations: int) -> IKSolution:
+        cfg = self.config
+        return solve_ik(self.kin, self.cameras, corr, q_init, q_b, cfg.covariances, q_prev,
+                        iterations, cfg.lambda_init, cfg.step_tol, cfg.min_depth_m,
+                        cfg.cost_tol)
+
+    def update(self, prior: PosePrior | Any | None, observations: Sequence[CameraObservation],
+               stamp: float) -> IKResult:
+        """Track one frame: ``prior`` from the lookup on the primary camera (a
+        :class:`PosePrior` or a ``core.search.LookupResult``; None if the lookup found
+        nothing), one observation per camera (primary first), time in seconds."""
+        t0 = time.perf_counter()
+        cfg = self.config
+        if prior is not None and not isinstance(prior, PosePrior):
+            prior = PosePrior.from_lookup(prior)
+        primary = observations[0] if observations else None
+        if prior is None or primary is None or not primary.hand_found:
+            self.reset()
+            return IKResult(False, stamp, reset=True, time_ms=1e3 * (time.perf_counter() - t0))
+        was_reset = False
+        if self._stamp_prev is not None:
+            gap = stamp - self._stamp_prev
+            if not 0.0 < gap <= cfg.max_gap_s:
+                self.reset()
+                was_reset = True
+        q_blend = self.kin.clamp(np.asarray(prior.q_blend, dtype=float).reshape(NUM_DOFS))
+        if self._q_prev is not None:
+            q_blend[3:6] = align_rotation_vector(q_blend[3:6], self._q_prev[3:6])
+        corr0 = match_primary(prior.constraints, primary.blobs, primary.crop, self.cameras[0],
+                              self.mesh, cfg.gate_tiny_px, cfg.gate_min_px,
+                              cfg.min_blob_pixels)
+        q_b = q_blend
+        if cfg.init_translation and len(corr0) >= 3:
+            try:
+                q_b = estimate_translation(
+                    self.kin, self.cameras, corr0, q_blend, cfg.min_depth_m,
+                    cfg.covariances.q_var[0:3], float(cfg.covariances.r_var_px2.mean()),
+                    cfg.outlier_px)
+            except IKError:
+                q_b = q_blend
+        q_prev = self._q_prev if (cfg.enable_smoothing and self._q_prev is not None) else None
+        iterations = 0
+        q = q_b
+        corr = corr0
+        rejected = 0
+        multi = len(self.cameras) > 1
+        if cfg.enable_ik and (len(corr0) >= cfg.min_constraints or multi):
+            if not multi:
+                sol = self._solve(corr0, q_b, q_b, q_prev, cfg.max_iterations)
+                q, iterations = sol.q, sol.iterations
+            else:
+                # predict the other cameras' patches from the last pose while tracking, else
+                # from a short primary-camera solve; then solve on all cameras together
+                # (a patch seen by one camera only still counts)
+                q_start = q_match = q_b
+                if self._q_prev is not None:
+                    q_match = self._q_prev
+                elif len(corr0) >= cfg.min_constraints:
+                    sol = self._solve(corr0, q_b, q_b, q_prev, cfg.refine_iterations)
+                    q_match = q_start = q = sol.q
+                    iterations = sol.iterations
+                corr = Correspondences.concat(
+                    [corr0, *self._match_extras(prior, observations, q_match)])
+                if len(corr) >= cfg.min_constraints:
+                    sol = self._solve(corr, q_start, q_b, q_prev, cfg.max_iterations)
+                    q = sol.q
+                    iterations += sol.iterations
+                    if cfg.extra_rematch and len(corr) > len(corr0):
+                        again = Correspondences.concat(
+                            [corr0, *self._match_extras(prior, observations, q)])
+                        if not again.same_as(corr) and len(again) >= cfg.min_constraints:
+                            corr = again
+                            sol = self._solve(corr, q, q_b, q_prev, cfg.refine_iterations)
+                            q = sol.q
+                            iterations += sol.iterations
+            if cfg.outlier_px > 0 and iterations > 0:
+                bad = reprojection_errors(self.kin, self.cameras, corr, q) > cfg.outlier_px
+                if bad.any() and int((~bad).sum()) >= cfg.min_constraints:
+                    rejected = int(bad.sum())
+                    corr = corr.select(~bad)
+                    sol = self._solve(corr, q, q_b, q_prev, cfg.refine_iterations)
+                    q = sol.q
+                    iterations += sol.iterations
+        elif multi:
+            corr = Correspondences.concat([corr0, *self._match_extras(prior, observations, q)])
+        q = q.copy()
+        q[3:6] = align_rotation_vector(q[3:6], np.zeros(3))      # angle in [0, pi]
+        err = reprojection_errors(self.kin, self.cameras, corr, q)
+        n_cam = len(self.cameras)
+        per_cam = tuple(float(err[corr.camera == c].mean()) if np.any(corr.camera == c)
+                        else math.nan for c in range(n_cam))
+        self._q_prev = q.copy()
+        self._stamp_prev = stamp
+        return IKResult(
+            True, stamp, q.copy(), q_blend, float(err.mean()) if len(err) else math.nan,
+            per_cam, iterations, 1e3 * (time.perf_counter() - t0), len(corr),
+            corr.counts(n_cam), q_prev is not None and iterations > 0, was_reset, corr, rejected,
+            q_b.copy())

@@ -1,0 +1,483 @@
+"""Tests of core.ik: Jacobian chain, Gauss-Newton recovery, cameras, matching, tracker state."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.crop import CropTransform
+from colorglove_ros.core.hand_mesh import build_hand_mesh
+from colorglove_ros.core.hand_model import KEYPOINT_NAMES, HandModel
+from colorglove_ros.core.ik import (
+    Blobs,
+    CameraObservation,
+    Correspondences,
+    EntryConstraints,
+    FastKinematics,
+    HandTracker,
+    IKConfig,
+    IKConfigError,
+    IKCovariances,
+    IKError,
+    PosePrior,
+    default_covariances,
+    estimate_translation,
+    extract_blobs,
+    load_covariances,
+    load_ik_config,
+    match_by_color,
+    match_extra_camera,
+    match_primary,
+    project_correspondences,
+    save_covariances,
+    solve_ik,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+TIPS = [KEYPOINT_NAMES.index(f'{d}_tip') for d in ('thumb', 'index', 'middle', 'ring', 'little')]
+
+
+@pytest.fixture(scope='module')
+def rig():
+    model = HandModel(0.19)
+    mesh = build_hand_mesh(model)
+    kin = FastKinematics(model)
+    mono = load_calibration(ROOT / 'config' / 'calibration.yaml').cameras
+    stereo = load_calibration(ROOT / 'config' / 'calibration_stereo.yaml').cameras
+    # 20 constraint vertices spread over the hand (farthest-point sampling), one per patch
+    P = mesh.skin(model, model.rest_pose())
+    idx = [0]
+    d = np.linalg.norm(P - P[0], axis=1)
+    for _ in range(19):
+        i = int(np.argmax(d))
+        idx.append(i)
+        d = np.minimum(d, np.linalg.norm(P - P[i], axis=1))
+    return model, mesh, kin, mono, stereo, np.array(idx)
+
+
+def true_pose(model: HandModel, rng: np.random.Generator) -> np.ndarray:
+    q = model.rest_pose()
+    q[2] = 0.55
+    q[3:6] = rng.normal(0.0, 0.25, 3)
+    q[6:] = 0.5 * rng.uniform(model.lower_limits[6:], model.upper_limits[6:])
+    return model.clamp(q)
+
+
+def synthetic_corr(rig, q, cams, rng, noise_px):
+    model, mesh, kin, *_rest, verts = rig
+    out = []
+    for c, cam in enumerate(cams):
+        pw, _ = kin.points(q, mesh.vertex_link[verts], mesh.local_vertices[verts])
+        pix = cam.project(cam.world_to_camera(pw)) + rng.normal(0.0, noise_px, (len(verts), 2))
+        out.append(Correspondences(np.full(len(verts), c), mesh.vertex_link[verts],
+                                   mesh.local_vertices[verts], pix, np.arange(len(verts)), verts))
+    return Correspondences.concat(out)
+
+
+def tip_error(model, q, q_true):
+    return float(np.linalg.norm(model.keypoints(q)[TIPS] - model.keypoints(q_true)[TIPS],
+                                axis=1).mean())
+
+
+def test_fast_kinematics_matches_model(rig):
+    model, mesh, kin, *_ = rig
+    rng = np.random.default_rng(3)
+    q = model.clamp(model.rest_pose() + rng.normal(0.0, 0.6, 26))
+    idx = rng.integers(0, mesh.num_vertices, 50)
+    p, J = kin.points(q, mesh.vertex_link[idx], mesh.local_vertices[idx], jacobian=True)
+    np.testing.assert_allclose(p, mesh.skin(model, q)[idx], atol=1e-12)
+    np.testing.assert_allclose(J, mesh.vertex_jacobian(model, q, idx), atol=1e-12)
+
+
+def test_jacobian_chain_matches_finite_differences(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    rng = np.random.default_rng(4)
+    q = true_pose(model, rng)
+    corr = synthetic_corr(rig, q, stereo, rng, 0.0)
+    _, J, _ = project_correspondences(kin, stereo, corr, q, jacobian=True)
+    assert J.shape == (2 * len(corr), 26)
+    h = 1e-6
+    J_fd = np.empty_like(J)
+    for i in range(26):
+        dq = np.zeros(26)
+        dq[i] = h
+        plus, _, _ = project_correspondences(kin, stereo, corr, q + dq)
+        minus, _, _ = project_correspondences(kin, stereo, corr, q - dq)
+        J_fd[:, i] = (plus - minus).reshape(-1) / (2 * h)
+    scale = np.abs(J_fd).max()
+    assert np.abs(J - J_fd).max() < 1e-5 * scale
+    # the second camera's rows really involve its rotation (differ from the primary's)
+    assert np.abs(J[:2 * len(verts)] - J[2 * len(verts):]).max() > 0.1 * scale
+
+
+def test_one_camera_recovers_perturbed_pose(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    errors, starts, reproj = [], [], []
+    for seed in range(5):
+        rng = np.random.default_rng(seed)
+        q_true = true_pose(model, rng)
+        q0 = q_true.copy()
+        q0[0:3] += rng.normal(0.0, [0.01, 0.01, 0.03])
+        q0[3:6] += rng.normal(0.0, 0.1, 3)
+        q0[6:] += rng.normal(0.0, 0.15, 20)
+        q0 = model.clamp(q0)
+        corr = synthetic_corr(rig, q_true, mono, rng, 0.0)
+        wide = IKCovariances([1.0, 1.0], np.full(26, 1.0), np.full(26, 1.0))
+        sol = solve_ik(kin, mono, corr, q0, q0, wide, max_iterations=15)
+        assert sol.cost < sol.initial_cost
+        errors.append(tip_error(model, sol.q, q_true))
+        starts.append(tip_error(model, q0, q_true))
+        pix, _, _ = project_correspondences(kin, mono, corr, sol.q)
+        reproj.append(np.linalg.norm(pix - corr.target_px, axis=1).mean())
+    assert np.mean(starts) > 0.02
+    assert np.mean(errors) < 0.004       # mean fingertip error under 4 mm
+    assert np.mean(reproj) < 0.5
+
+
+def test_two_cameras_cut_depth_error(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    cov = default_covariances()
+    depth_err = {1: [], 2: []}
+    for seed in range(8):
+        for ncam, cams in ((1, stereo[:1]), (2, stereo)):
+            rng = np.random.default_rng(100 + seed)
+            q_true = true_pose(model, rng)
+            q_b = q_true.copy()
+            q_b[2] += 0.06                      # blended pose 6 cm too far
+            q_b[6:] += rng.normal(0.0, 0.2, 20)
+            q_b = model.clamp(q_b)
+            corr = synthetic_corr(rig, q_true, cams, rng, 2.0)
+            sol = solve_ik(kin, cams, corr, q_b, q_b, cov, max_iterations=10)
+            depth_err[ncam].append(abs(sol.q[2] - q_true[2]))
+    mono_err, stereo_err = np.mean(depth_err[1]), np.mean(depth_err[2])
+    assert stereo_err < 0.005
+    assert stereo_err < 0.3 * mono_err
+
+
+def test_joint_limits_respected(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    rng = np.random.default_rng(7)
+    q_true = true_pose(model, rng)
+    q_true[6:] = model.lower_limits[6:] - 0.3      # hyper-extended: outside the limits
+    corr = synthetic_corr(rig, q_true, mono, rng, 0.0)
+    q0 = model.clamp(q_true)
+    wide = IKCovariances([1.0, 1.0], np.full(26, 10.0), np.full(26, 10.0))
+    sol = solve_ik(kin, mono, corr, q0, q0, wide, max_iterations=10)
+    assert model.within_limits(sol.q)
+    assert np.all(sol.q[6:] >= model.lower_limits[6:])
+    # fingers pinned at the lower bound (the nearest feasible flexion)
+    flex = [i for i, n in enumerate(model.dof_names) if n.endswith('_flex') and 'thumb' not in n]
+    assert np.sum(np.abs(sol.q[flex] - model.lower_limits[flex]) < 1e-6) >= 10
+    assert np.all(sol.q[flex] - model.lower_limits[flex] < 0.2)
+
+
+def test_translation_estimate_from_constraints(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    rng = np.random.default_rng(8)
+    q_true = true_pose(model, rng)
+    corr = synthetic_corr(rig, q_true, mono, rng, 0.0)
+    q_bad = q_true.copy()
+    q_bad[0:3] = [0.05, -0.04, 0.35]
+    q_fit = estimate_translation(kin, mono, corr, q_bad)
+    np.testing.assert_allclose(q_fit[0:3], q_true[0:3], atol=1e-6)
+    np.testing.assert_array_equal(q_fit[3:], q_bad[3:])
+    # one wild target: the trimmed refit ignores it, the plain fit does not
+    wild = Correspondences(corr.camera, corr.link, corr.local, corr.target_px.copy(),
+                           corr.patch_id, corr.vertex)
+    wild.target_px[0] += [80.0, 60.0]
+    plain = estimate_translation(kin, mono, wild, q_bad)
+    trimmed = estimate_translation(kin, mono, wild, q_bad, outlier_px=20.0)
+    assert np.abs(plain[0:3] - q_true[0:3]).max() > 1e-3
+    np.testing.assert_allclose(trimmed[0:3], q_true[0:3], atol=1e-6)
+
+
+def test_match_by_color_picks_right_blob():
+    pred = np.array([[10.0, 10.0], [100.0, 10.0], [50.0, 50.0]])
+    pred_col = np.array([3, 3, 5])
+    # two colour-3 blobs given in swapped order, a colour-5 blob near a colour-3 prediction,
+    # a far colour-5 blob outside the gate
+    blob = np.array([[102.0, 12.0], [12.0, 9.0], [11.0, 11.0], [400.0, 400.0]])
+    blob_col = np.array([3, 3, 5, 5])
+    k, m = match_by_color(pred, pred_col, blob, blob_col, gate_px=20.0)
+    pairs = dict(zip(k.tolist(), m.tolist(), strict=True))
+    assert pairs == {0: 1, 1: 0}
+
+
+def test_match_primary_uses_crop(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    crop = CropTransform(scale=4.0, offset_x=200.0, offset_y=100.0)
+    cons = EntryConstraints([4, 14], [5, 5], verts[:2], [[5.0, 5.0], [30.0, 20.0]], [30, 40])
+    # full-image positions 220,120 and 320,180; blobs listed the other way round plus noise
+    blobs = Blobs([5, 5, 2], [[322.0, 181.0], [219.0, 118.0], [221.0, 120.0]], [100, 90, 80])
+    corr = match_primary(cons, blobs, crop, mono[0], mesh)
+    order = np.argsort(corr.patch_id)
+    np.testing.assert_array_equal(corr.patch_id[order], [4, 14])
+    np.testing.assert_allclose(corr.target_px[order], [[219.0, 118.0], [322.0, 181.0]])
+    np.testing.assert_array_equal(corr.vertex[order], verts[:2])
+
+
+def test_extra_camera_matching_survives_depth_error(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    rng = np.random.default_rng(9)
+    q_true = true_pose(model, rng)
+    colors = np.arange(20) % 10 + 1
+    cons = EntryConstraints(np.arange(20), colors, verts, np.zeros((20, 2)), np.full(20, 30))
+    cam = stereo[1]
+    pw_true, _ = kin.points(q_true, mesh.vertex_link[verts], mesh.local_vertices[verts])
+    blob_xy = cam.project(cam.world_to_camera(pw_true))
+    blobs = Blobs(colors, blob_xy + rng.normal(0.0, 1.0, (20, 2)), np.full(20, 50))
+    q_pred = q_true.copy()
+    q_pred[2] += 0.07                          # depth off by 7 cm
+    pw, _ = kin.points(q_pred, mesh.vertex_link[verts], mesh.local_vertices[verts])
+    corr = match_extra_camera(1, cam, cons, pw, blobs, mesh)
+    assert len(corr) >= 17
+    assert np.all(corr.camera == 1)
+    np.testing.assert_allclose(corr.target_px, blobs.centroid_px[corr.patch_id])
+
+
+def test_extra_camera_skips_back_facing(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    q = true_pose(model, np.random.default_rng(10))
+    cons = EntryConstraints(np.arange(20), COLORS, verts, np.zeros((20, 2)), np.full(20, 30))
+    cam = stereo[1]
+    pw, _ = kin.points(q, mesh.vertex_link[verts], mesh.local_vertices[verts])
+    blobs = Blobs(COLORS, cam.project(cam.world_to_camera(pw)), np.full(20, 50))
+    center = -cam.rotation.T @ cam.translation
+    toward = (center - pw) / np.linalg.norm(center - pw, axis=1, keepdims=True)
+    normals = np.where(np.arange(20)[:, None] < 8, -toward, toward)   # first 8 face away
+    corr = match_extra_camera(1, cam, cons, pw, blobs, mesh, normals_world=normals)
+    assert sorted(corr.patch_id.tolist()) == list(range(8, 20))
+
+
+def test_extract_blobs():
+    labels = np.zeros((40, 60), np.uint8)
+    labels[5:10, 5:10] = 3
+    labels[20:30, 40:50] = 3
+    labels[30:32, 2:4] = 7
+    labels[0, 59] = 2                          # single pixel: below min_pixels
+    b = extract_blobs(labels, min_pixels=4)
+    found = sorted(zip(b.color.tolist(), b.pixel_count.tolist(), strict=True))
+    assert found == [(3, 25), (3, 100), (7, 4)]
+    c = b.centroid_px[np.argmax(b.pixel_count)]
+    np.testing.assert_allclose(c, [44.5, 24.5])
+
+
+# ---------------------------------------------------------------------------- tracker
+CROP = CropTransform(scale=6.0, offset_x=200.0, offset_y=120.0)
+COLORS = np.arange(20) % 10 + 1
+
+
+def observe(rig, q_true, q_blend, cams, rng, noise_px=1.0, tiny_noise=0.3):
+    model, mesh, kin, *_rest, verts = rig
+    pw, _ = kin.points(q_true, mesh.vertex_link[verts], mesh.local_vertices[verts])
+    obs = []
+    for cam in cams:
+        pix = cam.project(cam.world_to_camera(pw))
+        obs.append(CameraObservation(True, Blobs(COLORS, pix + rng.normal(0, noise_px, pix.shape),
+                                                 np.full(20, 60)), CROP))
+    pix0 = cams[0].project(pw)
+    tiny = CROP.to_tiny(pix0) + rng.normal(0.0, tiny_noise, pix0.shape)
+    prior = PosePrior(q_blend, EntryConstraints(np.arange(20), COLORS, verts, tiny,
+                                                np.full(20, 30)))
+    return prior, obs
+
+
+def run_sequence(rig, cams, mode, n=30, seed=0):
+    model, mesh, kin, *_ = rig
+    rng = np.random.default_rng(seed)
+    tracker = HandTracker(model, mesh, cams, IKConfig().with_mode(mode))
+    base = true_pose(model, np.random.default_rng(42))
+    out, truth = [], []
+    for i in range(n):
+        q_true = base.copy()
+        q_true[0] += 0.002 * i
+        q_true[6:] = model.clamp(base + 0.1 * np.sin(0.1 * i))[6:]
+        q_b = q_true.copy()
+        q_b[0:3] += rng.normal(0.0, 0.01, 3)
+        q_b[3:6] += rng.normal(0.0, 0.05, 3)
+        q_b[6:] += rng.normal(0.0, 0.1, 20)
+        prior, obs = observe(rig, q_true, model.clamp(q_b), cams, rng, noise_px=2.0)
+        res = tracker.update(prior, obs, stamp=i / 30.0)
+        assert res.found
+        out.append(res)
+        truth.append(q_true)
+    return out, np.array(truth)
+
+
+def jitter(Q: np.ndarray) -> float:
+    avg = np.stack([Q[i - 2:i + 3].mean(axis=0) for i in range(2, len(Q) - 2)])
+    return float(np.abs(Q[2:-2] - avg).mean())
+
+
+def test_smoothing_lowers_jitter(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    res_ik, truth = run_sequence(rig, mono, 'ik')
+    res_sm, _ = run_sequence(rig, mono, 'ik_smooth')
+    q_ik = np.array([r.q for r in res_ik])
+    q_sm = np.array([r.q for r in res_sm])
+    assert not res_ik[5].smoothed and res_sm[5].smoothed
+    j_ik, j_sm = jitter(q_ik[:, 6:]), jitter(q_sm[:, 6:])
+    assert j_sm < 0.7 * j_ik
+    # without losing accuracy: finger error against the truth no worse than 10 %
+    e_ik = np.abs(q_ik[:, 6:] - truth[:, 6:]).mean()
+    e_sm = np.abs(q_sm[:, 6:] - truth[:, 6:]).mean()
+    assert e_sm < 1.1 * e_ik
+    # IK beats the blended pose on reprojection error
+    res_b, _ = run_sequence(rig, mono, 'blend')
+    assert np.mean([r.reprojection_error_px for r in res_ik]) < \
+        0.7 * np.mean([r.reprojection_error_px for r in res_b])
+
+
+def test_tracker_two_cameras(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    res, truth = run_sequence(rig, stereo, 'ik_smooth', n=8)
+    # vertices facing away from the second camera are not matched there
+    assert all(6 <= r.constraints_per_camera[1] <= 16 for r in res)
+    assert all(r.reprojection_error_per_camera[1] < 5.0 for r in res)
+    depth = np.abs(np.array([r.q[2] for r in res]) - truth[:, 2])
+    assert depth.mean() < 0.01
+
+
+def test_patches_seen_by_second_camera_only_count(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    rng = np.random.default_rng(13)
+    q = true_pose(model, rng)
+    q_b = q.copy()
+    q_b[6:] += rng.normal(0.0, 0.1, 20)
+    prior, obs = observe(rig, q, model.clamp(q_b), stereo, rng, noise_px=0.5)
+    b0 = obs[0].blobs
+    keep = np.array([0, 1])                     # the primary camera sees two patches only
+    obs[0] = CameraObservation(True, Blobs(b0.color[keep], b0.centroid_px[keep],
+                                           b0.pixel_count[keep]), CROP)
+    res = HandTracker(model, mesh, stereo).update(prior, obs, 0.0)
+    assert res.constraints_per_camera[0] == 2 and res.constraints_per_camera[1] >= 6
+    assert res.iterations > 0
+    assert res.reprojection_error_per_camera[1] < 3.0
+    assert tip_error(model, res.q, q) < tip_error(model, model.clamp(q_b), q)
+
+
+def test_tracker_resets_when_hand_lost(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    tracker = HandTracker(model, mesh, mono, IKConfig())
+    rng = np.random.default_rng(5)
+    q = true_pose(model, rng)
+    prior, obs = observe(rig, q, q, mono, rng)
+    r1 = tracker.update(prior, obs, 0.0)
+    r2 = tracker.update(prior, obs, 1 / 30)
+    assert r1.found and r2.found and r2.smoothed and not r1.smoothed
+    lost = tracker.update(prior, [CameraObservation(False)], 2 / 30)
+    assert not lost.found and lost.q is None and lost.reset
+    assert tracker.previous_pose is None
+    r3 = tracker.update(prior, obs, 3 / 30)
+    assert r3.found and not r3.smoothed
+    nothing = tracker.update(None, obs, 4 / 30)
+    assert not nothing.found and tracker.previous_pose is None
+    tracker.update(prior, obs, 5 / 30)
+    late = tracker.update(prior, obs, 5 / 30 + 1.0)       # gap longer than max_gap_s
+    assert late.found and late.reset and not late.smoothed
+    assert late.num_constraints == 20 and late.iterations > 0
+
+
+def test_tracker_from_calibration_uses_hand_length():
+    cal = load_calibration(ROOT / 'config' / 'calibration_stereo.yaml')
+    tracker = HandTracker.from_calibration(cal, load_ik_config(ROOT / 'config' / 'ik.yaml'))
+    assert tracker.model.hand_length_m == pytest.approx(cal.hand_length_m)
+    assert len(tracker.cameras) == 2
+    with pytest.raises(IKError, match='mesh'):
+        HandTracker.from_calibration(cal, mesh=build_hand_mesh(HandModel(0.17)))
+
+
+def test_tracker_accepts_lookup_result(rig):
+    from colorglove_ros.core.search import LookupResult, ProjectionConstraints
+    model, mesh, kin, mono, stereo, verts = rig
+    rng = np.random.default_rng(12)
+    q = true_pose(model, rng)
+    prior, obs = observe(rig, q, q, mono, rng)
+    c = prior.constraints
+    lookup = LookupResult(
+        np.arange(3), np.zeros(3), np.full(3, 1 / 3), np.tile(q, (3, 1)), q,
+        ProjectionConstraints(c.patch_id, c.color.astype(np.uint8), c.vertex, c.tiny_xy,
+                              CROP.to_full(c.tiny_xy), c.pixel_count), 3)
+    res = HandTracker(model, mesh, mono).update(lookup, obs, 0.0)
+    assert res.found and res.num_constraints == 20
+    assert tip_error(model, res.q, q) < 0.005
+
+
+def test_blend_mode_fits_translation_only(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    rng = np.random.default_rng(6)
+    q = true_pose(model, rng)
+    q_b = q.copy()
+    q_b[0:3] += [0.03, -0.02, 0.1]
+    prior, obs = observe(rig, q, q_b, mono, rng, noise_px=0.0, tiny_noise=0.0)
+    res = HandTracker(model, mesh, mono, IKConfig().with_mode('blend')).update(prior, obs, 0.0)
+    assert res.iterations == 0
+    np.testing.assert_allclose(res.q[3:], q_b[3:], atol=1e-12)
+    # the translation prior (Q) pulls a little toward the blend: under 1 mm here
+    np.testing.assert_allclose(res.q[0:3], q[0:3], atol=1e-3)
+    assert res.reprojection_error_px < 0.5
+
+
+def test_wrong_match_is_rejected(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    rng = np.random.default_rng(11)
+    q = true_pose(model, rng)
+    q_b = q.copy()
+    q_b[6:] += rng.normal(0.0, 0.1, 20)
+    prior, obs = observe(rig, q, model.clamp(q_b), mono, rng, noise_px=0.5)
+    moved = obs[0].blobs.centroid_px.copy()
+    moved[3] += [30.0, -25.0]                 # a spurious blob, still inside the match gate
+    obs = [CameraObservation(True, Blobs(COLORS, moved, np.full(20, 60)), CROP)]
+    errs = {}
+    for outlier_px in (0.0, 20.0):
+        cfg = IKConfig(outlier_px=outlier_px, enable_smoothing=False)
+        res = HandTracker(model, mesh, mono, cfg).update(prior, obs, 0.0)
+        errs[outlier_px] = tip_error(model, res.q, q)
+        if outlier_px:
+            assert res.num_rejected == 1 and res.num_constraints == 19
+            assert 3 not in res.correspondences.patch_id
+    assert errs[20.0] < 0.8 * errs[0.0]
+
+
+# ---------------------------------------------------------------------------- configuration
+def test_config_file_loads():
+    cfg = load_ik_config(ROOT / 'config' / 'ik.yaml')
+    assert cfg.enable_ik and cfg.enable_smoothing
+    np.testing.assert_allclose(cfg.covariances.r_var_px2, [9.0, 9.0])
+    np.testing.assert_allclose(cfg.covariances.q_var[2], 0.08**2)
+    np.testing.assert_allclose(cfg.covariances.p_var[6:], 0.12**2)
+    assert cfg.with_mode('blend').enable_ik is False
+    with pytest.raises(IKConfigError):
+        cfg.with_mode('fancy')
+
+
+def test_covariance_file_round_trip_and_errors(tmp_path):
+    cov = IKCovariances([4.0, 5.0], np.arange(1, 27) * 1e-3, np.arange(1, 27) * 1e-4)
+    path = save_covariances(tmp_path / 'cov.yaml', cov, frames=12)
+    back = load_covariances(path)
+    np.testing.assert_allclose(back.q_var, cov.q_var)
+    np.testing.assert_allclose(back.r_var_px2, [4.0, 5.0])
+    (tmp_path / 'ik.yaml').write_text('version: 1\ncovariance_file: cov.yaml\nmax_iterations: 4\n')
+    cfg = load_ik_config(tmp_path / 'ik.yaml')
+    assert cfg.max_iterations == 4
+    np.testing.assert_allclose(cfg.covariances.p_var, cov.p_var)
+    bad = {
+        'missing.yaml': None,
+        'v2.yaml': path.read_text().replace('version: 1', 'version: 2'),
+        'neg.yaml': path.read_text().replace('- 4.0', '- -4.0'),
+        'other.yaml': 'format: something\nversion: 1\n',
+        'broken.yaml': 'format: [unclosed\n',
+    }
+    for name, text in bad.items():
+        if text is not None:
+            (tmp_path / name).write_text(text)
+        with pytest.raises(IKConfigError):
+            load_covariances(tmp_path / name)
+    (tmp_path / 'ik_bad.yaml').write_text('version: 1\ncovariance_file: nowhere.yaml\n')
+    with pytest.raises(IKConfigError, match='not found'):
+        load_ik_config(tmp_path / 'ik_bad.yaml')
+    (tmp_path / 'ik_typo.yaml').write_text('version: 1\nmax_iteration: 4\n')
+    with pytest.raises(IKConfigError, match='unknown keys'):
+        load_ik_config(tmp_path / 'ik_typo.yaml')
