@@ -10,19 +10,27 @@ from sensor_msgs.msg import CameraInfo, JointState
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from colorglove_msgs.msg import HandObservation, HandPoseCandidates, PatchConstraint, PoseCandidate
+from colorglove_msgs.msg import (
+    HandObservation,
+    HandPoseCandidates,
+    PatchBlob,
+    PatchConstraint,
+    PoseCandidate,
+)
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.crop import TINY_SIZE, CropTransform
 from colorglove_ros.core.hand_model import DOF_NAMES, FINGER_DOF_NAMES
 from colorglove_ros.core.ik import Blobs, CameraObservation, EntryConstraints, PosePrior
 from colorglove_ros.core.overlay import SKELETON_BONES
 from colorglove_ros.core.search import LookupResult
+from colorglove_ros.core.segmentation import Observation
 
 __all__ = [
     'stamp_to_seconds', 'seconds_to_stamp', 'camera_info_from_camera', 'joint_state_from_pose',
     'pose_stamped_from_pose', 'pose_from_joint_state', 'crop_from_observation',
     'tiny_labels_from_observation', 'blobs_from_observation', 'camera_observation_from_msg',
     'candidates_msg', 'pose_prior_from_candidates', 'skeleton_markers',
+    'observation_msg',
 ]
 
 
@@ -163,3 +171,23 @@ def skeleton_markers(keypoints_camera: np.ndarray | None, header: Header,
     joints.color = ColorRGBA(r=1.0, g=1.0, b=1.0, a=1.0)
     joints.pose.orientation.w = 1.0
     return MarkerArray(markers=[bones, joints])
+
+
+def observation_msg(observation: Observation, header: Header) -> HandObservation:
+    """The segmentation result as a ``HandObservation`` (stamp and frame from the camera)."""
+    msg = HandObservation(header=header, hand_found=bool(observation.hand_found),
+                          image_width=int(observation.image_width),
+                          image_height=int(observation.image_height),
+                          glove_pixel_count=int(observation.glove_pixel_count),
+                          processing_time_ms=float(observation.timings_ms.get('total', 0.0)))
+    msg.status = '' if observation.hand_found else observation.status
+    if observation.crop is not None:
+        msg.crop_scale = float(observation.crop.scale)
+        msg.crop_offset_x = float(observation.crop.offset_x)
+        msg.crop_offset_y = float(observation.crop.offset_y)
+    if observation.hand_found and observation.tiny_labels is not None:
+        msg.tiny_labels = np.ascontiguousarray(observation.tiny_labels, np.uint8).ravel().tolist()
+    blobs = sorted(observation.blobs, key=lambda b: -b.pixel_count)
+    msg.blobs = [PatchBlob(color_label=int(b.color_label), x=float(b.centroid_x),
+                           y=float(b.centroid_y), pixel_count=int(b.pixel_count)) for b in blobs]
+    return msg

@@ -90,27 +90,33 @@ def _folder_source(folder: Path, loop: bool) -> FrameSource:
 
 
 def _synthetic_source(camera: PinholeCamera, seed: int, num_frames: int, loop: bool,
-                      hand_length_m: float) -> FrameSource:
+                      hand_length_m: float, prerender: bool) -> FrameSource:
     from colorglove_ros.core.synth import SyntheticSequenceRenderer
 
     renderer = SyntheticSequenceRenderer(camera, seed=seed, num_frames=num_frames,
                                          hand_length_m=hand_length_m, split='test')
 
-    def read(index: int) -> Frame:
+    def render(index: int) -> Frame:
         frame = renderer.render(index)
         return Frame(frame.image_rgb, frame.pose, frame.keypoints_3d)
 
-    return FrameSource(f'synthetic sequence (seed {seed}, {num_frames} frames)', read,
-                       num_frames, loop, renderer.close)
+    description = f'synthetic sequence (seed {seed}, {num_frames} frames)'
+    if not prerender:
+        return FrameSource(description, render, num_frames, loop, renderer.close)
+    frames = [render(index) for index in range(num_frames)]
+    renderer.close()
+    return FrameSource(f'{description}, pre-rendered', frames.__getitem__, num_frames, loop)
 
 
 def open_frame_source(spec: str, camera: PinholeCamera, *, seed: int = 1, num_frames: int = 300,
-                      loop: bool = True, hand_length_m: float = 0.19) -> FrameSource:
+                      loop: bool = True, hand_length_m: float = 0.19,
+                      prerender: bool = False) -> FrameSource:
     """Open ``spec``: 'synthetic', a V4L2 index ('0') or device path ('/dev/video0'), a video
-    file, or a folder of images. Raise :class:`FrameSourceError` if it cannot be opened."""
+    file, or a folder of images. Raise :class:`FrameSourceError` if it cannot be opened.
+    ``prerender`` renders a synthetic sequence up front (memory for speed at run time)."""
     spec = str(spec).strip()
     if spec in ('', 'synthetic'):
-        return _synthetic_source(camera, seed, num_frames, loop, hand_length_m)
+        return _synthetic_source(camera, seed, num_frames, loop, hand_length_m, prerender)
     if spec.isdigit():
         return _capture_source(int(spec), f'V4L2 camera index {spec}', loop)
     path = Path(spec).expanduser()

@@ -35,15 +35,19 @@ class CameraNode(Node):
         seed = declare(self, 'synthetic_seed', 1, 'seed of the synthetic sequence', 0, 2**31 - 1)
         num_frames = declare(self, 'synthetic_frames', 300, 'synthetic sequence length', 1, 10**6)
         loop = declare(self, 'loop', True, 'restart finite sources at their end')
+        prerender = declare(self, 'synthetic_prerender', False,
+                            'render the whole synthetic sequence at start-up (steady frame rate)')
         self.max_frames = declare(self, 'max_frames', 0,
                                   'stop publishing after this many frames (0 = never)', 0, 10**9)
         reject_parameter_changes(self, {'source', 'calibration_file', 'rate_hz', 'synthetic_seed',
-                                        'synthetic_frames', 'loop', 'max_frames'})
+                                        'synthetic_frames', 'loop', 'max_frames',
+                                        'synthetic_prerender'})
         try:
             calibration = load_calibration(resolve_path(calibration_file))
             self.camera = calibration.primary
             self.source = open_frame_source(source, self.camera, seed=seed, num_frames=num_frames,
-                                            loop=loop, hand_length_m=calibration.hand_length_m)
+                                            loop=loop, hand_length_m=calibration.hand_length_m,
+                                            prerender=prerender)
         except (CalibrationError, FrameSourceError) as exc:
             raise StartupError(f'camera_node cannot start: {exc}') from exc
         self.image_pub = self.create_publisher(Image, 'camera/image_raw', qos_profile_sensor_data)

@@ -1,0 +1,103 @@
+"""The main job: render the default synthetic sequence, run the four tracker nodes as separate
+processes over DDS, and report frames, rate, latency and accuracy against ground truth, with an
+overlay strip (PNG) a person can look at. Missing assets (colour calibration, pose database)
+are made first, once."""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from colorglove_ros.core.colorspace import read_calibration_config
+from colorglove_ros.core.glove import default_hand
+from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.paths import resolve_path
+from colorglove_ros.pipeline_run import run_pipeline, summarize
+from colorglove_ros.tools import build_database, calibrate_colors
+
+__all__ = ['prepare_assets', 'pipeline_parameters', 'overlay_strip', 'main']
+
+COLOR_CONFIG = 'config/color_calibration.yaml'
+DATABASE_CONFIG = 'config/database.yaml'
+
+
+def prepare_assets(database: Path) -> None:
+    """Make the colour calibration and the pose database if they do not exist yet."""
+    calibration_file = read_calibration_config(COLOR_CONFIG)['calibration_file']
+    if not Path(calibration_file).is_file():
+        print(f'[demo] no colour calibration at {calibration_file}: calibrating from 12 '
+              'rendered training frames (once)', flush=True)
+        if calibrate_colors.main(['--synthetic', '12', '--config', COLOR_CONFIG]) != 0:
+            raise RuntimeError('colour calibration failed')
+    if not (database / 'manifest.json').is_file():
+        print(f'[demo] no pose database at {database}: building it (once; the default '
+              '100,000 entries take several minutes on 2 cores)', flush=True)
+        if build_database.main(['--output', str(database)]) != 0:
+            raise RuntimeError('database build failed')
+
+
+def pipeline_parameters(database: Path, seed: int, frames: int, rate_hz: float,
+                        calibration: str = 'config/calibration.yaml') -> dict[str, dict]:
+    """Node parameters of a run on a synthetic sequence."""
+    return {
+        'camera': {'source': 'synthetic', 'synthetic_seed': seed, 'synthetic_frames': frames,
+                   'synthetic_prerender': True, 'loop': False, 'rate_hz': rate_hz,
+                   'calibration_file': calibration},
+        'segmentation': {'color_calibration_file': COLOR_CONFIG},
+        'lookup': {'database_path': str(database), 'calibration_file': calibration},
+        'ik': {'calibration_file': calibration, 'publish_overlay': True},
+    }
+
+
+def overlay_strip(images: list[np.ndarray], columns: int = 4, width: int = 320) -> np.ndarray:
+    """Tile overlay frames into one RGB image, ``columns`` wide, each scaled to ``width``."""
+    if not images:
+        raise ValueError('no overlay images to tile')
+    scaled = [cv2.resize(img, (width, int(img.shape[0] * width / img.shape[1])))
+              for img in images]
+    rows = [scaled[i:i + columns] for i in range(0, len(scaled), columns)]
+    blank = np.zeros_like(scaled[0])
+    return np.vstack([np.hstack(row + [blank] * (columns - len(row))) for row in rows])
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``colorglove_demo [--frames N] [--seed S] [--json PATH]``."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--frames', type=int, default=150, help='sequence length (frames)')
+    parser.add_argument('--seed', type=int, default=1, help='seed of the synthetic sequence')
+    parser.add_argument('--rate', type=float, default=30.0, help='camera rate, frames/s')
+    parser.add_argument('--database', type=Path, help='pose database (default: config)')
+    parser.add_argument('--output', type=Path, default=Path('out/demo'),
+                        help='folder for the overlay strip')
+    parser.add_argument('--json', type=Path, help='write the figures as JSON')
+    args = parser.parse_args(argv)
+    _, default_db, _ = build_database.load_build_config(resolve_path(DATABASE_CONFIG))
+    database = args.database or default_db
+    started = time.perf_counter()
+    prepare_assets(database)
+    print(f'[demo] running camera_node (synthetic seed {args.seed}, {args.frames} frames at '
+          f'{args.rate:g} Hz), segmentation_node, lookup_node, ik_node', flush=True)
+    run = run_pipeline(pipeline_parameters(database, args.seed, args.frames, args.rate),
+                       expected_frames=args.frames, timeout_s=120.0 + args.frames / 5.0)
+    figures = summarize(run, default_hand()[0])
+    print_table([{'figure': key, 'value': value} for key, value in figures.items()],
+                title=f'colorglove demo: {args.frames} synthetic frames, database {database}')
+    args.output.mkdir(parents=True, exist_ok=True)
+    if run.overlays:
+        strip = args.output / 'overlay_strip.png'
+        cv2.imwrite(str(strip), cv2.cvtColor(overlay_strip(run.overlays), cv2.COLOR_RGB2BGR))
+        print(f'overlay strip: {strip}')
+    else:
+        print('no overlay images arrived (no frame was tracked)')
+    if args.json:
+        write_json(args.json, figures)
+    print(f'demo finished in {time.perf_counter() - started:.0f} s')
+    return 0 if figures['frames_tracked'] > 0 else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())
