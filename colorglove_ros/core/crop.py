@@ -9,12 +9,15 @@ import numpy as np
 __all__ = [
     'TINY_SIZE', 'CropError', 'CropTransform', 'TinyCrop', 'mean_shift_crop', 'crop_to_tiny',
     'crop_window', 'DEFAULT_BANDWIDTH_FACTOR', 'DEFAULT_MIN_PIXELS', 'DEFAULT_GLOVE_FRACTION',
+    'DEFAULT_RESCUE_SHARE', 'DEFAULT_INITIAL_BANDWIDTH_FACTOR',
 ]
 
 TINY_SIZE = 40
-DEFAULT_BANDWIDTH_FACTOR = 2.0
+DEFAULT_BANDWIDTH_FACTOR = 2.5
+DEFAULT_INITIAL_BANDWIDTH_FACTOR = 2.0
 DEFAULT_MIN_PIXELS = 20
 DEFAULT_GLOVE_FRACTION = 0.4
+DEFAULT_RESCUE_SHARE = 0.2
 
 
 class CropError(ValueError):
@@ -106,19 +109,23 @@ def _moments(sat: np.ndarray, xs: np.ndarray, ys: np.ndarray,
 def mean_shift_crop(mask: np.ndarray, bandwidth_factor: float = DEFAULT_BANDWIDTH_FACTOR,
                     min_pixels: int = DEFAULT_MIN_PIXELS, max_iterations: int = 50,
                     tolerance: float = 0.05, min_half_size: float = 2.0,
+                    initial_bandwidth_factor: float = DEFAULT_INITIAL_BANDWIDTH_FACTOR,
                     ) -> tuple[tuple[float, float], float] | None:
     """Find the glove by mean-shift with a uniform square kernel of variable bandwidth.
 
     ``mask`` is a boolean mask or a label image (nonzero = glove). Starts at the image
     centre with a window spanning the whole image; each iteration moves the centre to the
-    mean of the glove pixels inside the window and sets the next half-width to
-    ``bandwidth_factor`` times their (larger per-axis) standard deviation, until the centre
-    and half-width change by less than ``tolerance`` pixels. Returns ``((cx, cy), half_size)``
+    mean of the glove pixels inside the window and sets the next half-width to a factor times
+    their (larger per-axis) standard deviation, until the centre and half-width change by
+    less than ``tolerance`` pixels. The factor is ``initial_bandwidth_factor`` until
+    convergence (a tight window that sheds outlying blobs), then ``bandwidth_factor`` until
+    convergence again (grows the window over the fingers). Returns ``((cx, cy), half_size)``
     in full-image pixels, or None when fewer than ``min_pixels`` glove pixels end up inside.
     """
     m = _as_mask(mask)
-    if bandwidth_factor <= 0.0:
-        raise CropError(f'bandwidth_factor must be positive, got {bandwidth_factor}')
+    if bandwidth_factor <= 0.0 or initial_bandwidth_factor <= 0.0:
+        raise CropError(f'bandwidth factors must be positive, got {initial_bandwidth_factor}, '
+                        f'{bandwidth_factor}')
     H, W = m.shape
     # Summed-area table: the moments of a box cost O(W + H) per iteration.
     sat = cv2.integral(m.view(np.uint8), sdepth=cv2.CV_32S)
@@ -128,17 +135,21 @@ def mean_shift_crop(mask: np.ndarray, bandwidth_factor: float = DEFAULT_BANDWIDT
     ys = np.arange(H, dtype=np.float64)
     cx, cy = 0.5 * (W - 1), 0.5 * (H - 1)
     h = 0.5 * max(W, H)
-    for _ in range(max_iterations):
-        x0, x1 = _window_bounds(cx, h, W)
-        y0, y1 = _window_bounds(cy, h, H)
-        n, mx, my, vx, vy = _moments(sat, xs, ys, x0, x1, y0, y1)
-        if n < min_pixels:
-            return None
-        new_h = max(bandwidth_factor * float(np.sqrt(max(vx, vy))), min_half_size)
-        done = abs(mx - cx) < tolerance and abs(my - cy) < tolerance and abs(new_h - h) < tolerance
-        cx, cy, h = mx, my, new_h
-        if done:
-            break
+    factors = (initial_bandwidth_factor, bandwidth_factor) \
+        if initial_bandwidth_factor != bandwidth_factor else (bandwidth_factor,)
+    for factor in factors:
+        for _ in range(max_iterations):
+            x0, x1 = _window_bounds(cx, h, W)
+            y0, y1 = _window_bounds(cy, h, H)
+            n, mx, my, vx, vy = _moments(sat, xs, ys, x0, x1, y0, y1)
+            if n < min_pixels:
+                return None
+            new_h = max(factor * float(np.sqrt(max(vx, vy))), min_half_size)
+            done = (abs(mx - cx) < tolerance and abs(my - cy) < tolerance
+                    and abs(new_h - h) < tolerance)
+            cx, cy, h = mx, my, new_h
+            if done:
+                break
     x0, x1 = _window_bounds(cx, h, W)
     y0, y1 = _window_bounds(cy, h, H)
     n = _moments(sat, xs, ys, x0, x1, y0, y1)[0]
@@ -149,12 +160,14 @@ def mean_shift_crop(mask: np.ndarray, bandwidth_factor: float = DEFAULT_BANDWIDT
 
 def crop_window(labels: np.ndarray, transform: CropTransform,
                 glove_fraction: float = DEFAULT_GLOVE_FRACTION, size: int = TINY_SIZE,
-                ) -> np.ndarray:
+                rescue_share: float = DEFAULT_RESCUE_SHARE) -> np.ndarray:
     """Resample a label image into the ``size x size`` grid of ``transform``, keeping labels.
 
     Every full-image pixel votes for the cell containing its centre. A cell is glove when at
     least ``glove_fraction`` of its in-image pixels are glove, and then takes the most frequent
-    glove label (ties to the lower label); otherwise it is background (0). Cells that contain
+    glove label (ties to the lower label); otherwise it is background (0). A glove colour that
+    thereby vanishes from the grid is given back the one cell where it holds its largest share
+    of pixels, if that share is at least ``rescue_share`` (keeps thin patches). Cells that contain
     no pixel centre (upsampling) take the label of the pixel nearest to the cell centre; pixels
     outside the image count as background.
     """
@@ -172,7 +185,8 @@ def crop_window(labels: np.ndarray, transform: CropTransform,
     top = transform.offset_y - 0.5 * s
     x0, x1 = _window_bounds(left + 0.5 * size * s, 0.5 * size * s, W)
     y0, y1 = _window_bounds(top + 0.5 * size * s, 0.5 * size * s, H)
-    counts = np.zeros((size * size, 2), dtype=np.intp)
+    ncell = size * size
+    counts = np.zeros((2, ncell), dtype=np.intp)   # (label, cell): rows are contiguous
     if x1 > x0 and y1 > y0:
         cell_x = np.floor((np.arange(x0, x1) - left) / s).astype(np.intp)
         cell_y = np.floor((np.arange(y0, y1) - top) / s).astype(np.intp)
@@ -182,16 +196,30 @@ def crop_window(labels: np.ndarray, transform: CropTransform,
         sub = lab[y0 + ky0:y0 + ky1, x0 + kx0:x0 + kx1]
         if sub.size:
             nl = max(int(sub.max()) + 1, 2)
-            flat = ((cell_y[ky0:ky1] * (size * nl))[:, None]
-                    + (cell_x[kx0:kx1] * nl)[None, :]) + sub
-            counts = np.bincount(flat.ravel(), minlength=size * size * nl).reshape(
-                size * size, nl)
-    total = counts.sum(axis=1)
-    glove = counts[:, 1:]
-    glove_total = glove.sum(axis=1)
-    out = np.where(glove_total >= glove_fraction * np.maximum(total, 1),
-                   np.argmax(glove, axis=1) + 1, 0)
-    out[(glove_total == 0)] = 0
+            flat = ((cell_y[ky0:ky1] * size)[:, None] + cell_x[kx0:kx1][None, :]
+                    + sub.astype(np.intp) * ncell)
+            counts = np.bincount(flat.ravel(), minlength=nl * ncell).reshape(nl, ncell)
+    glove = counts[1:]
+    glove_total = glove.sum(axis=0)
+    total = glove_total + counts[0]
+    best = np.argmax(glove, axis=0) + 1
+    out = np.where((glove_total > 0) & (glove_total >= glove_fraction * total), best, 0)
+    if rescue_share > 0.0:
+        # Thin patches (narrower than a cell) lose every majority vote: a colour that vanished
+        # gets back the cells where its share is >= rescue_share and >= half its best share,
+        # never taking the last cell of another colour.
+        used = np.bincount(out, minlength=len(counts))
+        for k in np.flatnonzero((used[1:] == 0) & (glove.max(axis=1) > 0)):
+            share = glove[k] / np.maximum(total, 1)
+            top_share = float(share.max())
+            if top_share < rescue_share:
+                continue
+            for cell in np.flatnonzero(share >= max(rescue_share, 0.5 * top_share)):
+                if out[cell] > 0 and used[out[cell]] <= 1:
+                    continue
+                used[out[cell]] -= 1
+                out[cell] = k + 1
+                used[k + 1] += 1
     empty = total == 0
     if np.any(empty):
         idx = np.nonzero(empty)[0]

@@ -86,8 +86,8 @@ class IKNode(Node):
         self.create_subscription(HandPoseCandidates, 'hand/pose_candidates', self.on_candidates,
                                  LATEST_ONLY)
         if self.publish_overlay:
-            self.create_subscription(Image, 'camera/image_raw', self.recent_images.append,
-                                     LATEST_IMAGE)
+            self.create_subscription(Image, 'camera/image_raw',
+                                     lambda image: self.recent_images.append(image), LATEST_IMAGE)
         self.hand_was_found = False
         self.get_logger().info(f'tracking with {len(self.cameras)} camera(s)')
 

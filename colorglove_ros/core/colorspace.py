@@ -1,0 +1,399 @@
+"""Chong-Gortler-Zickler colour space, glove colour calibration and the RGB lookup table."""
+from __future__ import annotations
+
+import json
+import zipfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+__all__ = [
+    'CALIBRATION_FORMAT', 'CALIBRATION_FORMAT_VERSION', 'CGZ_A', 'CGZ_B', 'SRGB_TO_XYZ',
+    'ColorCalibrationError', 'ColorCalibration', 'GaussianMixtureParams',
+    'srgb_to_linear', 'linear_rgb_to_xyz', 'xyz_to_cgz', 'rgb_to_cgz', 'cgz_intensity_axis',
+    'cgz_chroma', 'rgb_features', 'fit_color_calibration', 'lut_index',
+    'save_calibration', 'load_calibration', 'read_calibration_config',
+    'load_calibration_from_config',
+]
+
+CALIBRATION_FORMAT = 'colorglove_color_calibration'
+CALIBRATION_FORMAT_VERSION = 1
+
+#: Linear sRGB (D65) -> CIE XYZ.
+SRGB_TO_XYZ = np.array([[0.4124564, 0.3575761, 0.1804375],
+                        [0.2126729, 0.7151522, 0.0721750],
+                        [0.0193339, 0.1191920, 0.9503041]])
+#: Chong, Gortler and Zickler (2008): F(x) = A ln(B x), x linear XYZ.
+CGZ_B = np.array([[0.9465229, 0.2946927, -0.1313419],
+                  [-0.1179179, 0.9929960, 0.007371554],
+                  [0.09230461, -0.04645794, 0.9946464]])
+CGZ_A = np.array([[27.07439, -22.80783, -1.806681],
+                  [-5.646736, -7.722125, 12.86503],
+                  [-4.163133, -4.579428, -4.576049]])
+#: Lower clamp of XYZ and of B x before the logarithm (linear units, white = 1).
+CGZ_EPS = 1e-3
+
+FEATURE_KINDS = ('chroma', 'cgz')
+
+
+class ColorCalibrationError(Exception):
+    """A colour calibration cannot be fitted, or its file is missing, corrupt or of another
+    version."""
+
+
+def srgb_to_linear(rgb: np.ndarray) -> np.ndarray:
+    """sRGB (uint8 0..255, or float 0..1) -> linear RGB float64 in 0..1 (undo the gamma)."""
+    arr = np.asarray(rgb)
+    c = arr.astype(np.float64) / 255.0 if arr.dtype == np.uint8 else arr.astype(np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def linear_rgb_to_xyz(linear_rgb: np.ndarray) -> np.ndarray:
+    """Linear sRGB (..., 3) -> CIE XYZ (..., 3)."""
+    return np.asarray(linear_rgb, dtype=np.float64) @ SRGB_TO_XYZ.T
+
+
+def xyz_to_cgz(xyz: np.ndarray, eps: float = CGZ_EPS) -> np.ndarray:
+    """CIE XYZ (..., 3) -> CGZ space ``A ln(B x)``; XYZ and ``B x`` are clamped to >= eps."""
+    x = np.maximum(np.asarray(xyz, dtype=np.float64), eps)
+    return np.log(np.maximum(x @ CGZ_B.T, eps)) @ CGZ_A.T
+
+
+def rgb_to_cgz(rgb: np.ndarray, eps: float = CGZ_EPS) -> np.ndarray:
+    """sRGB (..., 3) uint8 or float -> CGZ coordinates (..., 3)."""
+    return xyz_to_cgz(linear_rgb_to_xyz(srgb_to_linear(rgb)), eps)
+
+
+def cgz_intensity_axis() -> np.ndarray:
+    """Unit vector along which a change of light level (x -> k x) moves a CGZ point.
+
+    ``A ln(B k x) = A ln(B x) + ln(k) A 1``, so the direction is ``A 1`` normalised.
+    """
+    v = CGZ_A @ np.ones(3)
+    return v / np.linalg.norm(v)
+
+
+def _chroma_basis() -> np.ndarray:
+    v = cgz_intensity_axis()
+    # Orthonormal basis: two chroma axes orthogonal to v, then v itself.
+    q, _ = np.linalg.qr(np.column_stack([v, np.eye(3)[:, :2]]))
+    basis = np.column_stack([q[:, 1], q[:, 2], v])
+    return basis
+
+
+_BASIS = _chroma_basis()
+
+
+def cgz_chroma(cgz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Split CGZ points (..., 3) into chroma (..., 2), invariant to the light level, and the
+    intensity coordinate (...) along :func:`cgz_intensity_axis` (ln k times |A 1|)."""
+    p = np.asarray(cgz, dtype=np.float64) @ _BASIS
+    return p[..., :2], p[..., 2]
+
+
+def rgb_features(rgb: np.ndarray, kind: str = 'chroma', intensity_weight: float = 0.1,
+                 eps: float = CGZ_EPS) -> np.ndarray:
+    """Classification features of sRGB colours (..., 3) -> (..., 3) float64.
+
+    ``'cgz'``: the CGZ coordinates. ``'chroma'``: the two light-level-invariant CGZ chroma
+    axes plus the intensity coordinate scaled by ``intensity_weight`` (so brightness changes
+    move a colour little, yet black and white stay separable from saturated colours).
+    """
+    cgz = rgb_to_cgz(rgb, eps)
+    if kind == 'cgz':
+        return cgz
+    if kind == 'chroma':
+        p = cgz @ _BASIS
+        p[..., 2] *= intensity_weight
+        return p
+    raise ColorCalibrationError(f'unknown feature kind {kind!r}; expected one of {FEATURE_KINDS}')
+
+
+def lut_index(rgb: np.ndarray, bits: int) -> np.ndarray:
+    """Index into a (2^bits)^3 table of quantised RGB colours, for uint8 (..., 3) colours."""
+    shift = 8 - bits
+    q = np.asarray(rgb, dtype=np.uint8) >> shift
+    idx = q[..., 0].astype(np.int32) << (2 * bits)
+    idx |= q[..., 1].astype(np.int32) << bits
+    idx |= q[..., 2]
+    return idx
+
+
+@dataclass(frozen=True)
+class GaussianMixtureParams:
+    """A fitted Gaussian mixture (full covariances) in feature space."""
+
+    weights: np.ndarray      # (K,)
+    means: np.ndarray        # (K, D)
+    covariances: np.ndarray  # (K, D, D)
+
+    def log_likelihood(self, x: np.ndarray) -> np.ndarray:
+        """log p(x) for points (N, D)."""
+        x = np.asarray(x, dtype=np.float64)
+        out = np.empty((x.shape[0], len(self.weights)))
+        for k, (w, mu, cov) in enumerate(zip(self.weights, self.means, self.covariances,
+                                             strict=True)):
+            chol = np.linalg.cholesky(cov)
+            z = np.linalg.solve(chol, (x - mu).T)
+            logdet = 2.0 * np.sum(np.log(np.diag(chol)))
+            out[:, k] = (np.log(w) - 0.5 * np.sum(z * z, axis=0) - 0.5 * logdet
+                         - 0.5 * x.shape[1] * np.log(2.0 * np.pi))
+        m = out.max(axis=1)
+        return m + np.log(np.exp(out - m[:, None]).sum(axis=1))
+
+
+@dataclass
+class ColorCalibration:
+    """Per-class Gaussian mixtures (0 = background, 1..N glove colours) compiled into a LUT.
+
+    ``lut`` has one uint8 label per quantised RGB colour; :meth:`classify` is one table read.
+    """
+
+    lut: np.ndarray
+    bits: int
+    num_colors: int
+    feature_kind: str
+    intensity_weight: float
+    mixtures: list[GaussianMixtureParams]
+    thresholds: np.ndarray  # (num_colors + 1,) min log-likelihood to accept a glove class
+    log_priors: np.ndarray  # (num_colors + 1,)
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def features(self, rgb: np.ndarray) -> np.ndarray:
+        """Feature vectors of sRGB colours (..., 3)."""
+        return rgb_features(rgb, self.feature_kind, self.intensity_weight)
+
+    def log_likelihoods(self, rgb: np.ndarray) -> np.ndarray:
+        """Per-class log-likelihoods (N, num_colors + 1) of uint8 colours (N, 3)."""
+        f = self.features(np.asarray(rgb).reshape(-1, 3))
+        return np.column_stack([g.log_likelihood(f) for g in self.mixtures])
+
+    def decide(self, rgb: np.ndarray) -> np.ndarray:
+        """Exact (non-quantised) decision for colours (N, 3) -> labels (N,) uint8."""
+        ll = self.log_likelihoods(rgb)
+        label = np.argmax(ll + self.log_priors, axis=1)
+        rows = np.arange(len(label))
+        reject = ll[rows, label] < self.thresholds[label]
+        label[reject] = 0
+        return label.astype(np.uint8)
+
+    def classify(self, image_rgb: np.ndarray) -> np.ndarray:
+        """Label every pixel of an (H, W, 3) uint8 RGB image -> (H, W) uint8 by table lookup."""
+        return self.lut[lut_index(image_rgb, self.bits)]
+
+
+def _compile_lut(cal: ColorCalibration, chunk: int = 65536) -> np.ndarray:
+    n = 1 << cal.bits
+    step = 256 // n
+    levels = (np.arange(n) * step + (step - 1) / 2.0)  # bin centres in 0..255
+    grid = np.stack(np.meshgrid(levels, levels, levels, indexing='ij'), axis=-1).reshape(-1, 3)
+    lut = np.empty(len(grid), dtype=np.uint8)
+    for s in range(0, len(grid), chunk):
+        lut[s:s + chunk] = cal.decide(grid[s:s + chunk] / 255.0)
+    return lut
+
+
+def _sample_pixels(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_colors: int,
+                   max_per_class: int, erode: int, rng: np.random.Generator,
+                   ) -> list[np.ndarray]:
+    per_class: list[list[np.ndarray]] = [[] for _ in range(num_colors + 1)]
+    kernel = np.ones((2 * erode + 1, 2 * erode + 1), np.uint8) if erode > 0 else None
+    for i, (image, mask) in enumerate(frames):
+        image = np.asarray(image)
+        mask = np.asarray(mask)
+        if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
+            raise ColorCalibrationError(
+                f'frame {i}: image must be (H, W, 3) uint8, got {image.shape} {image.dtype}')
+        if mask.shape != image.shape[:2]:
+            raise ColorCalibrationError(
+                f'frame {i}: mask shape {mask.shape} != image shape {image.shape[:2]}')
+        if mask.max(initial=0) > num_colors:
+            raise ColorCalibrationError(
+                f'frame {i}: mask label {int(mask.max())} > num_colors {num_colors}')
+        mask = mask.astype(np.uint8)
+        for c in range(num_colors + 1):
+            m = (mask == c).astype(np.uint8)
+            if kernel is not None:
+                m = cv2.erode(m, kernel)  # drop mixed pixels on patch borders
+            pix = image[m.astype(bool)]
+            if len(pix):
+                per_class[c].append(pix)
+    out = []
+    for c, chunks in enumerate(per_class):
+        if not chunks:
+            raise ColorCalibrationError(f'no training pixels for class {c}')
+        pix = np.concatenate(chunks)
+        if len(pix) > max_per_class:
+            pix = pix[rng.choice(len(pix), max_per_class, replace=False)]
+        out.append(pix)
+    return out
+
+
+def _augment(pix: np.ndarray, rng: np.random.Generator, light: tuple[float, float],
+             white_balance: float, noise: float) -> np.ndarray:
+    """Re-light sRGB pixels: random level and per-channel gains in linear RGB, plus noise."""
+    lin = srgb_to_linear(pix)
+    k = np.exp(rng.uniform(np.log(light[0]), np.log(light[1]), (len(pix), 1)))
+    gains = k * np.exp(rng.uniform(-white_balance, white_balance, (len(pix), 3)))
+    lin = np.clip(lin * gains, 0.0, 1.0)
+    srgb = np.where(lin <= 0.0031308, lin * 12.92, 1.055 * lin ** (1 / 2.4) - 0.055) * 255.0
+    srgb += rng.normal(0.0, noise, srgb.shape)
+    return np.clip(np.round(srgb), 0, 255).astype(np.uint8)
+
+
+def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_colors: int = 10,
+                          components: int = 3, background_components: int = 12,
+                          feature_kind: str = 'chroma', intensity_weight: float = 0.1,
+                          bits: int = 6, background_prior: float = 0.5,
+                          reject_quantile: float = 1e-4, max_per_class: int = 5000,
+                          erode: int = 1, glove_covariance_floor: float = 1.0,
+                          augment_copies: int = 2, augment_light: tuple[float, float] = (0.4, 1.8),
+                          augment_white_balance: float = 0.3, augment_noise: float = 3.0,
+                          seed: int = 0, min_frames: int = 8,
+                          metadata: Mapping[str, Any] | None = None) -> ColorCalibration:
+    """Fit one Gaussian mixture per glove colour and one for the background, build the LUT.
+
+    ``frames`` are (image (H, W, 3) uint8 RGB, label mask (H, W), 0 = background). Glove
+    training pixels are augmented with ``augment_copies`` re-lit copies (light level in
+    ``augment_light``, per-channel gains ``exp(+-augment_white_balance)``, noise) so a few
+    labelled frames cover other light levels and colour temperatures, and glove covariances
+    get ``glove_covariance_floor`` added to their diagonal. A glove class is accepted only
+    where its likelihood is above the ``reject_quantile`` quantile of its own training
+    pixels, so unseen colours fall to background.
+    """
+    from sklearn.mixture import GaussianMixture
+
+    if feature_kind not in FEATURE_KINDS:
+        raise ColorCalibrationError(f'unknown feature kind {feature_kind!r}')
+    if len(frames) < min_frames:
+        raise ColorCalibrationError(
+            f'need at least {min_frames} labelled frames, got {len(frames)}')
+    if not 1 <= bits <= 8:
+        raise ColorCalibrationError(f'bits must be in 1..8, got {bits}')
+    rng = np.random.default_rng(seed)
+    samples = _sample_pixels(frames, num_colors, max_per_class, erode, rng)
+    mixtures: list[GaussianMixtureParams] = []
+    thresholds = np.full(num_colors + 1, -np.inf)
+    counts = []
+    for c, pix in enumerate(samples):
+        counts.append(len(pix))
+        if c > 0 and augment_copies > 0:
+            pix = np.concatenate([pix] + [
+                _augment(pix, rng, augment_light, augment_white_balance, augment_noise)
+                for _ in range(augment_copies)])
+        feats = rgb_features(pix, feature_kind, intensity_weight)
+        k = background_components if c == 0 else components
+        k = max(1, min(k, len(np.unique(pix, axis=0))))
+        gmm = GaussianMixture(n_components=k, covariance_type='full',
+                              reg_covar=1e-1 if c == 0 else glove_covariance_floor,
+                              random_state=seed, max_iter=200).fit(feats)
+        params = GaussianMixtureParams(gmm.weights_.copy(), gmm.means_.copy(),
+                                       gmm.covariances_.copy())
+        mixtures.append(params)
+        if c > 0:
+            thresholds[c] = float(np.quantile(params.log_likelihood(feats), reject_quantile))
+    priors = np.full(num_colors + 1, (1.0 - background_prior) / num_colors)
+    priors[0] = background_prior
+    meta = {'num_frames': len(frames), 'pixels_per_class': counts, 'components': components,
+            'background_components': background_components, 'reject_quantile': reject_quantile,
+            'background_prior': background_prior, 'augment_copies': augment_copies,
+            'augment_light': list(augment_light), 'augment_white_balance': augment_white_balance,
+            'glove_covariance_floor': glove_covariance_floor, 'seed': seed,
+            **dict(metadata or {})}
+    cal = ColorCalibration(lut=np.zeros(0, np.uint8), bits=bits, num_colors=num_colors,
+                           feature_kind=feature_kind, intensity_weight=intensity_weight,
+                           mixtures=mixtures, thresholds=thresholds, log_priors=np.log(priors),
+                           metadata=meta)
+    cal.lut = _compile_lut(cal)
+    return cal
+
+
+def save_calibration(cal: ColorCalibration, path: str | Path) -> Path:
+    """Write a calibration as a versioned ``.npz`` file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    arrays: dict[str, np.ndarray] = {
+        'format': np.array(CALIBRATION_FORMAT), 'version': np.array(CALIBRATION_FORMAT_VERSION),
+        'lut': cal.lut, 'bits': np.array(cal.bits), 'num_colors': np.array(cal.num_colors),
+        'feature_kind': np.array(cal.feature_kind),
+        'intensity_weight': np.array(cal.intensity_weight),
+        'thresholds': cal.thresholds, 'log_priors': cal.log_priors,
+        'metadata_json': np.array(json.dumps(cal.metadata)),
+    }
+    for c, g in enumerate(cal.mixtures):
+        arrays[f'gmm{c}_weights'] = g.weights
+        arrays[f'gmm{c}_means'] = g.means
+        arrays[f'gmm{c}_covariances'] = g.covariances
+    with path.open('wb') as fh:
+        np.savez_compressed(fh, **arrays)
+    return path
+
+
+def load_calibration(path: str | Path) -> ColorCalibration:
+    """Read a calibration written by :func:`save_calibration`; raise ColorCalibrationError if it
+    is missing, corrupt or of another format version."""
+    path = Path(path)
+    if not path.is_file():
+        raise ColorCalibrationError(f'colour calibration file not found: {path}')
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise ColorCalibrationError(f'cannot read colour calibration {path}: {exc}') from exc
+    if str(data.get('format', '')) != CALIBRATION_FORMAT:
+        raise ColorCalibrationError(f'{path} is not a colour calibration file')
+    version = int(data.get('version', -1))
+    if version != CALIBRATION_FORMAT_VERSION:
+        raise ColorCalibrationError(
+            f'{path} has format version {version}, expected {CALIBRATION_FORMAT_VERSION}; '
+            're-run colorglove_calibrate_colors')
+    try:
+        bits = int(data['bits'])
+        num_colors = int(data['num_colors'])
+        mixtures = [GaussianMixtureParams(data[f'gmm{c}_weights'], data[f'gmm{c}_means'],
+                                          data[f'gmm{c}_covariances'])
+                    for c in range(num_colors + 1)]
+        cal = ColorCalibration(
+            lut=data['lut'].astype(np.uint8), bits=bits, num_colors=num_colors,
+            feature_kind=str(data['feature_kind']),
+            intensity_weight=float(data['intensity_weight']), mixtures=mixtures,
+            thresholds=data['thresholds'].astype(np.float64),
+            log_priors=data['log_priors'].astype(np.float64),
+            metadata=json.loads(str(data['metadata_json'])))
+    except (KeyError, ValueError, TypeError) as exc:
+        raise ColorCalibrationError(f'corrupt colour calibration {path}: {exc}') from exc
+    if cal.lut.shape != (1 << (3 * bits),) or cal.lut.max(initial=0) > num_colors:
+        raise ColorCalibrationError(f'corrupt colour calibration {path}: bad lookup table')
+    return cal
+
+
+def read_calibration_config(config_path: str | Path) -> dict[str, Any]:
+    """Read ``config/color_calibration.yaml``: ``calibration_file`` (resolved to an absolute
+    path) and the ``segmenter`` settings (a dict, possibly empty)."""
+    import yaml
+
+    from ..paths import resolve_path
+
+    path = resolve_path(config_path)
+    if not path.is_file():
+        raise ColorCalibrationError(f'colour calibration config not found: {path}')
+    try:
+        cfg = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise ColorCalibrationError(f'cannot parse {path}: {exc}') from exc
+    if not isinstance(cfg, dict) or 'calibration_file' not in cfg:
+        raise ColorCalibrationError(f'{path}: missing key calibration_file')
+    segmenter = cfg.get('segmenter') or {}
+    if not isinstance(segmenter, dict):
+        raise ColorCalibrationError(f'{path}: segmenter must be a mapping')
+    return {'calibration_file': resolve_path(str(cfg['calibration_file'])),
+            'segmenter': dict(segmenter), 'config_path': path}
+
+
+def load_calibration_from_config(config_path: str | Path) -> ColorCalibration:
+    """Load the calibration file named by a ``color_calibration.yaml``."""
+    return load_calibration(read_calibration_config(config_path)['calibration_file'])

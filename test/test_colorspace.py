@@ -1,0 +1,166 @@
+"""Tests for the CGZ colour space, the glove colour calibration and its file format."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from colorglove_ros.core.colorspace import (
+    CALIBRATION_FORMAT_VERSION,
+    CGZ_A,
+    ColorCalibrationError,
+    cgz_chroma,
+    cgz_intensity_axis,
+    fit_color_calibration,
+    linear_rgb_to_xyz,
+    load_calibration,
+    lut_index,
+    rgb_to_cgz,
+    save_calibration,
+    srgb_to_linear,
+    xyz_to_cgz,
+)
+from colorglove_ros.core.glove import GLOVE_PALETTE_RGB
+from colorglove_ros.tools.eval_segmentation import render_blob_frame, sample_blob_conditions
+
+FAST = dict(max_per_class=1500, bits=5, augment_copies=1, background_components=6)
+
+
+@pytest.fixture(scope='module')
+def frames() -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
+    rng = np.random.default_rng(7)
+    train = [render_blob_frame(rng, sample_blob_conditions(rng, 'train'), 320, 240)
+             for _ in range(8)]
+    held = [render_blob_frame(rng, sample_blob_conditions(rng, 'train'), 320, 240)
+            for _ in range(3)]
+    return {'train': train, 'held': held}
+
+
+@pytest.fixture(scope='module')
+def calibration(frames):
+    return fit_color_calibration(frames['train'], seed=0, **FAST)
+
+
+def test_srgb_linear_xyz_reference_values() -> None:
+    np.testing.assert_allclose(srgb_to_linear(np.array([0, 255, 128], np.uint8)),
+                               [0.0, 1.0, 0.2158605], atol=1e-6)
+    # D65 white point
+    np.testing.assert_allclose(linear_rgb_to_xyz(np.ones(3)), [0.95047, 1.0, 1.08883],
+                               atol=1e-4)
+
+
+def test_cgz_light_level_is_a_translation_along_intensity_axis() -> None:
+    rng = np.random.default_rng(1)
+    xyz = rng.uniform(0.05, 0.8, (50, 3))
+    for k in (0.3, 2.5):
+        d = xyz_to_cgz(k * xyz) - xyz_to_cgz(xyz)
+        # every point moves by ln(k) * A 1
+        np.testing.assert_allclose(d, np.tile(np.log(k) * CGZ_A @ np.ones(3), (50, 1)),
+                                   atol=1e-9)
+        c0, i0 = cgz_chroma(xyz_to_cgz(xyz))
+        c1, i1 = cgz_chroma(xyz_to_cgz(k * xyz))
+        np.testing.assert_allclose(c1, c0, atol=1e-9)
+        np.testing.assert_allclose(i1 - i0, np.log(k) * np.linalg.norm(CGZ_A @ np.ones(3)),
+                                   atol=1e-9)
+    assert np.linalg.norm(cgz_intensity_axis()) == pytest.approx(1.0)
+
+
+def test_cgz_vectorised_and_finite_on_black() -> None:
+    img = np.zeros((4, 5, 3), np.uint8)
+    img[0, 0] = (255, 255, 255)
+    img[1, 1] = (255, 0, 0)
+    out = rgb_to_cgz(img)
+    assert out.shape == (4, 5, 3)
+    assert np.all(np.isfinite(out))
+    # the palette colours are far apart in CGZ space (well separated classes)
+    p = rgb_to_cgz(GLOVE_PALETTE_RGB)
+    d = np.linalg.norm(p[:, None] - p[None], axis=-1) + np.eye(len(p)) * 1e9
+    assert d.min() > 5.0
+
+
+def test_lut_index_layout() -> None:
+    rgb = np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255], [4, 8, 12]], np.uint8)
+    np.testing.assert_array_equal(lut_index(rgb, 6),
+                                  [63 << 12, 63 << 6, 63, (1 << 12) | (2 << 6) | 3])
+
+
+def test_calibration_classifies_held_out_frames(calibration, frames) -> None:
+    k3 = np.ones((3, 3), np.uint8)
+    correct = total = fp = bg = 0
+    for img, lab in frames['held']:
+        pred = calibration.classify(cv2.bilateralFilter(img, 5, 30, 3))
+        assert pred.shape == lab.shape and pred.dtype == np.uint8
+        interior = (cv2.erode(lab, k3) == cv2.dilate(lab, k3)) & (lab > 0)
+        correct += int((pred[interior] == lab[interior]).sum())
+        total += int(interior.sum())
+        fp += int((pred[lab == 0] > 0).sum())
+        bg += int((lab == 0).sum())
+    assert correct / total > 0.93
+    assert fp / bg < 0.03
+
+
+def test_unseen_colours_fall_to_background(calibration) -> None:
+    greys = np.array([[0, 0, 0], [128, 128, 128], [255, 255, 255], [90, 60, 40]], np.uint8)
+    assert np.all(calibration.classify(greys[None])[0] == 0)
+    # the pure palette colours are recognised
+    labels = calibration.classify(GLOVE_PALETTE_RGB[None])[0]
+    assert np.mean(labels == np.arange(1, 11)) >= 0.9
+
+
+def test_lut_matches_exact_decision_at_bin_centres(calibration) -> None:
+    rng = np.random.default_rng(3)
+    step = 256 >> calibration.bits
+    bins = rng.integers(0, 1 << calibration.bits, (300, 3))
+    centres = bins * step + (step - 1) / 2.0
+    exact = calibration.decide(centres / 255.0)
+    via_lut = calibration.classify((bins * step).astype(np.uint8)[None])[0]
+    np.testing.assert_array_equal(via_lut, exact)
+
+
+def test_save_load_roundtrip(calibration, tmp_path: Path) -> None:
+    path = save_calibration(calibration, tmp_path / 'cal.npz')
+    loaded = load_calibration(path)
+    np.testing.assert_array_equal(loaded.lut, calibration.lut)
+    assert loaded.bits == calibration.bits and loaded.num_colors == 10
+    assert loaded.metadata['num_frames'] == 8
+    img = np.random.default_rng(0).integers(0, 256, (20, 30, 3)).astype(np.uint8)
+    np.testing.assert_array_equal(loaded.classify(img), calibration.classify(img))
+    np.testing.assert_allclose(loaded.log_likelihoods(img[0]),
+                               calibration.log_likelihoods(img[0]))
+
+
+def test_load_errors(calibration, tmp_path: Path) -> None:
+    with pytest.raises(ColorCalibrationError, match='not found'):
+        load_calibration(tmp_path / 'missing.npz')
+    bad = tmp_path / 'garbage.npz'
+    bad.write_bytes(b'not a zip file at all')
+    with pytest.raises(ColorCalibrationError, match='cannot read'):
+        load_calibration(bad)
+    other = tmp_path / 'other.npz'
+    np.savez(other, x=np.zeros(3))
+    with pytest.raises(ColorCalibrationError, match='not a colour calibration'):
+        load_calibration(other)
+    good = save_calibration(calibration, tmp_path / 'v.npz')
+    with np.load(good) as z:
+        data = {k: z[k] for k in z.files}
+    data['version'] = np.array(CALIBRATION_FORMAT_VERSION + 1)
+    np.savez(tmp_path / 'v2.npz', **data)
+    with pytest.raises(ColorCalibrationError, match='version'):
+        load_calibration(tmp_path / 'v2.npz')
+    del data['lut']
+    data['version'] = np.array(CALIBRATION_FORMAT_VERSION)
+    np.savez(tmp_path / 'nolut.npz', **data)
+    with pytest.raises(ColorCalibrationError, match='corrupt'):
+        load_calibration(tmp_path / 'nolut.npz')
+
+
+def test_fit_input_errors(frames) -> None:
+    with pytest.raises(ColorCalibrationError, match='at least 8'):
+        fit_color_calibration(frames['train'][:3])
+    img, lab = frames['train'][0]
+    with pytest.raises(ColorCalibrationError, match='mask shape'):
+        fit_color_calibration([(img, lab[:-1])] * 8)
+    with pytest.raises(ColorCalibrationError, match='uint8'):
+        fit_color_calibration([(img.astype(np.float32), lab)] * 8)

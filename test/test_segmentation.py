@@ -1,0 +1,189 @@
+"""Tests for the glove segmenter, its no-hand handling and the calibration/eval tools."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from colorglove_ros.core.colorspace import fit_color_calibration
+from colorglove_ros.core.crop import TINY_SIZE, crop_to_tiny
+from colorglove_ros.core.glove import GLOVE_PALETTE_RGB
+from colorglove_ros.core.segmentation import (
+    STAGES,
+    STATUS_NO_GLOVE,
+    STATUS_OK,
+    STATUS_OUT_OF_FRAME,
+    STATUS_TOO_SMALL,
+    GloveSegmenter,
+    SegmentationConfigError,
+    SegmentationInputError,
+    keep_multicolor_components,
+    load_segmenter,
+)
+from colorglove_ros.tools import calibrate_colors, eval_segmentation
+from colorglove_ros.tools.eval_segmentation import (
+    BlobConditions,
+    frame_metrics,
+    render_blob_frame,
+    sample_blob_conditions,
+)
+
+FAST = dict(max_per_class=1500, bits=5, augment_copies=1, background_components=6)
+VALID = {STATUS_OK, STATUS_NO_GLOVE, STATUS_TOO_SMALL, STATUS_OUT_OF_FRAME}
+
+
+@pytest.fixture(scope='module')
+def calibration():
+    rng = np.random.default_rng(11)
+    train = [render_blob_frame(rng, sample_blob_conditions(rng, 'train')) for _ in range(8)]
+    return fit_color_calibration(train, seed=0, **FAST)
+
+
+@pytest.fixture(scope='module')
+def segmenter(calibration) -> GloveSegmenter:
+    return GloveSegmenter(calibration)
+
+
+def test_held_out_frames_crop_and_centroids(segmenter) -> None:
+    rng = np.random.default_rng(5)
+    ious, errs = [], []
+    for _ in range(4):
+        img, lab = render_blob_frame(rng, sample_blob_conditions(rng, 'train'))
+        obs = segmenter.process(img)
+        assert obs.hand_found and obs.status == STATUS_OK
+        assert obs.tiny_labels.shape == (TINY_SIZE, TINY_SIZE)
+        assert obs.tiny_labels.dtype == np.uint8
+        assert (obs.image_width, obs.image_height) == (640, 480)
+        assert set(obs.timings_ms) == {*STAGES, 'total'}
+        assert obs.glove_pixel_count == pytest.approx(np.count_nonzero(lab), rel=0.25)
+        m = frame_metrics(segmenter, img, lab, obs)
+        ious.append(m['iou'])
+        errs.append(m['centroid_err_px'])
+        # The crop transform maps the tiny image back onto the glove.
+        ty, tx = np.nonzero(obs.tiny_labels)
+        back = obs.crop.to_full(np.array([tx.mean(), ty.mean()]))
+        gy, gx = np.nonzero(lab)
+        assert np.hypot(*(back - [gx.mean(), gy.mean()])) < 2.0 * obs.crop.scale
+        assert all(b.pixel_count >= segmenter.min_blob_pixels for b in obs.blobs)
+        assert {b.color_label for b in obs.blobs} <= set(np.unique(lab)) - {0}
+    assert np.mean(ious) > 0.85
+    assert np.nanmean(errs) < 3.0
+
+
+def test_no_hand_frames_never_raise(segmenter) -> None:
+    rng = np.random.default_rng(2)
+    frames = [np.zeros((480, 640, 3), np.uint8), np.full((480, 640, 3), 255, np.uint8),
+              rng.integers(0, 256, (480, 640, 3)).astype(np.uint8),
+              np.zeros((1, 1, 3), np.uint8), np.zeros((7, 5, 3), np.uint8),
+              rng.integers(0, 256, (3, 900, 3)).astype(np.uint8)]
+    img, lab = render_blob_frame(rng, sample_blob_conditions(rng, 'test'))
+    frames.append(np.where(lab[..., None] > 0, np.uint8(120), img))  # glove painted out
+    for f in frames:
+        obs = segmenter.process(f)
+        assert not obs.hand_found
+        assert obs.status in VALID - {STATUS_OK}
+    assert segmenter.process(frames[0]).status == STATUS_NO_GLOVE
+
+
+def test_strided_and_readonly_frames(segmenter) -> None:
+    rng = np.random.default_rng(9)
+    img, _ = render_blob_frame(rng, sample_blob_conditions(rng, 'train'))
+    ref = segmenter.process(img)
+    ro = img.copy()
+    ro.setflags(write=False)
+    for view in (ro, np.asfortranarray(img), img[:, :, ::-1][:, :, ::-1]):
+        obs = segmenter.process(view)
+        assert obs.hand_found
+        np.testing.assert_array_equal(obs.tiny_labels, ref.tiny_labels)
+    assert segmenter.process(img[::-1, ::-1]).hand_found  # rotated 180 degrees
+
+
+def test_single_colour_clutter_is_not_a_hand(segmenter) -> None:
+    img = np.full((480, 640, 3), 110, np.uint8)
+    img[100:300, 200:400] = GLOVE_PALETTE_RGB[2]  # a big blue box
+    img[350:420, 50:120] = GLOVE_PALETTE_RGB[0]   # a separate red one
+    obs = segmenter.process(img)
+    assert not obs.hand_found and obs.status == STATUS_NO_GLOVE
+
+
+def test_hand_mostly_out_of_frame(segmenter) -> None:
+    rng = np.random.default_rng(8)
+    img, lab = render_blob_frame(rng, BlobConditions(1.0, (1.0, 1.0, 1.0), 2.0, 0, False, 1.5))
+    ys, xs = np.nonzero(lab)
+    assert segmenter.process(img).hand_found
+    # shift the glove so only a sliver stays inside the right edge
+    shift = int(640 - xs.min() - 0.25 * (xs.max() - xs.min()))
+    moved = np.full_like(img, 110)
+    moved[:, shift:] = img[:, :640 - shift]
+    obs = segmenter.process(moved)
+    assert not obs.hand_found
+    assert obs.status in (STATUS_OUT_OF_FRAME, STATUS_TOO_SMALL, STATUS_NO_GLOVE)
+
+
+@pytest.mark.parametrize('bad', [
+    np.zeros((10, 10, 3), np.float32), np.zeros((10, 10), np.uint8),
+    np.zeros((10, 10, 4), np.uint8), np.zeros((0, 0, 3), np.uint8), [[0, 0, 0]],
+])
+def test_bad_input_raises_typed_error(segmenter, bad) -> None:
+    with pytest.raises(SegmentationInputError):
+        segmenter.process(bad)
+
+
+def test_keep_multicolor_components() -> None:
+    lab = np.zeros((40, 60), np.uint8)
+    lab[5:15, 5:10], lab[5:15, 10:15], lab[5:15, 15:20] = 1, 2, 3   # three colours touching
+    lab[25:35, 30:50] = 4                                             # one colour alone
+    lab[25:35, 52:55] = 5
+    out = keep_multicolor_components(lab, min_colors=3)
+    np.testing.assert_array_equal(out[5:15, 5:20], lab[5:15, 5:20])
+    assert not out[20:].any()
+
+
+def test_roi_reduction_keeps_crop_consistent(calibration) -> None:
+    """A big glove is processed at reduced resolution; the crop must still match."""
+    rng = np.random.default_rng(21)
+    img, lab = render_blob_frame(rng, BlobConditions(1.0, (1.0, 1.0, 1.0), 2.0, 3, False, 2.2))
+    fine = GloveSegmenter(calibration, max_roi_cells=400).process(img)
+    coarse = GloveSegmenter(calibration, max_roi_cells=60).process(img)
+    truth = crop_to_tiny(lab)
+    for obs in (fine, coarse):
+        assert obs.hand_found
+        err = np.hypot(*np.subtract(obs.crop.center_xy, truth.transform.center_xy))
+        assert err < 0.06 * truth.transform.half_size
+        assert obs.crop.half_size == pytest.approx(truth.transform.half_size, rel=0.1)
+
+
+def test_tools_calibrate_and_evaluate(tmp_path: Path, capsys) -> None:
+    rng = np.random.default_rng(4)
+    frames = [render_blob_frame(rng, sample_blob_conditions(rng, 'train'), 320, 240)
+              for _ in range(8)]
+    calibrate_colors.write_labelled_frames(tmp_path / 'frames', frames)
+    back = calibrate_colors.read_labelled_frames(tmp_path / 'frames')
+    assert len(back) == 8
+    np.testing.assert_array_equal(back[3][0], frames[3][0])
+    np.testing.assert_array_equal(back[3][1], frames[3][1])
+    cal_path = tmp_path / 'cal.npz'
+    assert calibrate_colors.main(['--frames', str(tmp_path / 'frames'), '--output',
+                                  str(cal_path), '--bits', '5', '--max-pixels', '1000']) == 0
+    config = tmp_path / 'color.yaml'
+    config.write_text(f'calibration_file: {cal_path}\nsegmenter:\n  min_glove_pixels: 200\n')
+    seg = load_segmenter(str(config))
+    assert seg.min_glove_pixels == 200
+    out = tmp_path / 'eval.json'
+    assert eval_segmentation.main(['--config', str(config), '--source', 'blobs', '--frames',
+                                   '3', '--empty', '1', '--repeats', '1', '--json',
+                                   str(out)]) == 0
+    figures = json.loads(out.read_text())
+    s = figures['summary']
+    assert s['frames'] == 4 and s['hand_detect_tn'] == 1
+    assert 0.5 < s['interior_pixel_accuracy'] <= 1.0
+    assert 'crop_iou_mean' in s and len(figures['timings']) == len(STAGES) + 1
+    assert 'time per 640x480 frame' in capsys.readouterr().out
+    config.write_text(f'calibration_file: {cal_path}\nsegmenter:\n  no_such_key: 1\n')
+    with pytest.raises(SegmentationConfigError, match='no_such_key'):
+        load_segmenter(str(config))
+    # a missing calibration is a clean error, not a traceback
+    config.write_text(f'calibration_file: {tmp_path / "none.npz"}\n')
+    assert eval_segmentation.main(['--config', str(config), '--frames', '1']) == 1
