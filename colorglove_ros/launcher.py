@@ -16,6 +16,7 @@ periods. If one node exits, the others are stopped too (unless ``respawn: true``
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import signal
 import subprocess
@@ -27,7 +28,21 @@ from pathlib import Path
 
 import yaml
 
-__all__ = ['LaunchError', 'NodeSpec', 'load_launch_file', 'node_command', 'Launcher', 'main']
+__all__ = ['LaunchError', 'NodeSpec', 'load_launch_file', 'node_command', 'Launcher',
+           'use_fastdds_profile', 'main']
+
+FASTDDS_PROFILE_VARIABLE = 'FASTRTPS_DEFAULT_PROFILES_FILE'
+
+
+def use_fastdds_profile() -> str:
+    """Point Fast DDS at ``config/fastdds_profile.xml`` (large shared-memory segments for
+    images) for this process and its children, unless the user set a profile already.
+    Returns the profile in effect."""
+    from colorglove_ros.paths import share_dir
+
+    if not os.environ.get(FASTDDS_PROFILE_VARIABLE):
+        os.environ[FASTDDS_PROFILE_VARIABLE] = str(share_dir() / 'config' / 'fastdds_profile.xml')
+    return os.environ[FASTDDS_PROFILE_VARIABLE]
 
 
 class LaunchError(Exception):
@@ -116,7 +131,8 @@ class Launcher:
         print(f'[launch] started {label} (pid {process.pid})', flush=True)
 
     def start(self) -> None:
-        """Start every node."""
+        """Start every node (with the Fast DDS profile of :func:`use_fastdds_profile`)."""
+        use_fastdds_profile()
         for index in range(len(self.specs)):
             self._start(index)
 

@@ -3,6 +3,7 @@ rate, latency from camera frame to JointState, and accuracy against ground truth
 demo, the benchmark and the end-to-end test."""
 from __future__ import annotations
 
+import struct
 import tempfile
 import threading
 import time
@@ -16,15 +17,16 @@ import yaml
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image, JointState
 
-from colorglove_msgs.msg import HandPoseCandidates
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from colorglove_ros.core.metrics import latency_summary_ms, pose_accuracy
-from colorglove_ros.launcher import Launcher, NodeSpec
+from colorglove_ros.launcher import Launcher, NodeSpec, use_fastdds_profile
 from colorglove_ros.msg_conversions import pose_from_joint_state
 from colorglove_ros.ros_image import image_to_rgb8
 
-__all__ = ['PipelineMonitor', 'PipelineRun', 'node_specs', 'run_pipeline', 'summarize']
+__all__ = ['PipelineMonitor', 'PipelineRun', 'bag_feed', 'node_specs', 'run_pipeline', 'summarize']
 
 _RELIABLE = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=200,
                        reliability=QoSReliabilityPolicy.RELIABLE)
@@ -34,6 +36,15 @@ _BEST_EFFORT = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=200,
 
 def _key(msg: Any) -> tuple[int, int]:
     return (msg.header.stamp.sec, msg.header.stamp.nanosec)
+
+
+def _raw_stamp_key(data: bytes) -> tuple[int, int]:
+    """The header stamp of a serialized message that starts with a ``std_msgs/Header``
+    (CDR: 4 bytes of encapsulation, then sec int32 and nanosec uint32), without
+    deserializing the rest (a 640x480 image is ~1 MB)."""
+    order = '<' if data[1] == 1 else '>'
+    sec, nanosec = struct.unpack_from(f'{order}iI', data, 4)
+    return (sec, nanosec)
 
 
 def _pose_from(joints: JointState, wrist: PoseStamped) -> np.ndarray:
@@ -58,11 +69,14 @@ class PipelineMonitor(Node):
         self.truth_wrists: dict[tuple[int, int], PoseStamped] = {}
         self.lookup_ms: dict[tuple[int, int], float] = {}
         self.segmentation_ms: dict[tuple[int, int], float] = {}
+        self.observation_times: dict[tuple[int, int], float] = {}
+        self.candidate_times: dict[tuple[int, int], float] = {}
         self.overlays: list[np.ndarray] = []
         self.keep_overlays = keep_overlays
         self.overlay_stride = overlay_stride
         self.overlay_count = 0
-        self.create_subscription(Image, '/camera/image_raw', self._on_frame, _BEST_EFFORT)
+        self.create_subscription(Image, '/camera/image_raw', self._on_frame, _BEST_EFFORT,
+                                 raw=True)
         self.create_subscription(JointState, '/hand/joint_states', self._on_joints, _RELIABLE)
         self.create_subscription(PoseStamped, '/hand/wrist_pose', self._store(self.wrists),
                                  _RELIABLE)
@@ -72,7 +86,10 @@ class PipelineMonitor(Node):
                                  self._store(self.truth_wrists), _RELIABLE)
         self.create_subscription(HandPoseCandidates, '/hand/pose_candidates',
                                  self._on_candidates, _RELIABLE)
-        self.create_subscription(Image, '/hand/overlay', self._on_overlay, _BEST_EFFORT)
+        self.create_subscription(HandObservation, '/hand/observation', self._on_observation,
+                                 _RELIABLE)
+        self.create_subscription(Image, '/hand/overlay', self._on_overlay, _BEST_EFFORT,
+                                 raw=True)
 
     def _store(self, table: dict):
         def callback(msg: Any) -> None:
@@ -80,25 +97,39 @@ class PipelineMonitor(Node):
                 table[_key(msg)] = msg
         return callback
 
-    def _on_frame(self, msg: Image) -> None:
+    def _on_frame(self, data: bytes) -> None:
+        received = time.monotonic()
         with self.lock:
-            self.frame_times.setdefault(_key(msg), time.monotonic())
+            self.frame_times.setdefault(_raw_stamp_key(data), received)
 
     def _on_joints(self, msg: JointState) -> None:
+        received = time.monotonic()
         with self.lock:
-            self.output_times.setdefault(_key(msg), time.monotonic())
+            self.output_times.setdefault(_key(msg), received)
             self.joints[_key(msg)] = msg
+
+    def _on_observation(self, msg: HandObservation) -> None:
+        with self.lock:
+            self.observation_times.setdefault(_key(msg), time.monotonic())
 
     def _on_candidates(self, msg: HandPoseCandidates) -> None:
         with self.lock:
+            self.candidate_times.setdefault(_key(msg), time.monotonic())
             self.lookup_ms[_key(msg)] = msg.lookup_time_ms
             self.segmentation_ms[_key(msg)] = msg.observation.processing_time_ms
 
-    def _on_overlay(self, msg: Image) -> None:
+    def _on_overlay(self, data: bytes) -> None:
         self.overlay_count += 1
         wanted = self.overlay_count % self.overlay_stride == 0
         if wanted and len(self.overlays) < self.keep_overlays:
-            self.overlays.append(image_to_rgb8(msg))
+            self.overlays.append(image_to_rgb8(deserialize_message(data, Image)))
+
+    def active_duration(self) -> float:
+        """Seconds from the first camera frame seen to the last JointState (0 if none)."""
+        with self.lock:
+            if not self.frame_times or not self.output_times:
+                return 0.0
+            return max(self.output_times.values()) - min(self.frame_times.values())
 
     def wait_for_frames(self, count: int, timeout_s: float, settle_s: float = 2.0) -> None:
         """Wait until ``count`` frames were seen and outputs stopped arriving for ``settle_s``."""
@@ -117,7 +148,9 @@ class PipelineMonitor(Node):
 class PipelineRun:
     """What a run measured (see :func:`summarize`)."""
 
+    frames_published: int
     frames: int
+    segmented: int
     tracked: int
     duration_s: float
     latencies_s: list[float]
@@ -125,6 +158,7 @@ class PipelineRun:
     truth: np.ndarray
     segmentation_ms: list[float]
     lookup_ms: list[float]
+    stage_latencies_s: dict[str, list[float]] = field(default_factory=dict)
     overlays: list[np.ndarray] = field(default_factory=list)
 
 
@@ -150,6 +184,7 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
     """Start the nodes with ``parameters`` (camera_node too unless ``feed`` is given: a
     callable started once the graph is up, e.g. a bag player), monitor until
     ``expected_frames`` frames passed, stop everything, and return the measurements."""
+    use_fastdds_profile()
     with tempfile.TemporaryDirectory() as folder:
         params_file = write_params(parameters, Path(folder))
         context = rclpy.Context()
@@ -173,14 +208,14 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
                 started = time.monotonic()
                 launcher.start()
             monitor.wait_for_frames(expected_frames, timeout_s)
-            duration = time.monotonic() - started
+            duration = monitor.active_duration() or time.monotonic() - started
         finally:
             launcher.stop()
             executor.shutdown()
             spinner.join(timeout=5.0)
             monitor.destroy_node()
             rclpy.try_shutdown(context=context)
-    return _collect(monitor, duration)
+    return _collect(monitor, duration, expected_frames)
 
 
 def _wait_for_graph(monitor: PipelineMonitor, timeout_s: float) -> None:
@@ -195,36 +230,72 @@ def _wait_for_graph(monitor: PipelineMonitor, timeout_s: float) -> None:
     raise TimeoutError(f'the tracker nodes did not come up within {timeout_s:.0f} s')
 
 
-def _collect(monitor: PipelineMonitor, duration: float) -> PipelineRun:
+def _collect(monitor: PipelineMonitor, duration: float, published: int) -> PipelineRun:
     with monitor.lock:
         latencies = [monitor.output_times[k] - monitor.frame_times[k]
                      for k in monitor.output_times if k in monitor.frame_times]
+        stages = {
+            'segmentation': _delays(monitor.frame_times, monitor.observation_times),
+            'lookup': _delays(monitor.observation_times, monitor.candidate_times),
+            'ik': _delays(monitor.candidate_times, monitor.output_times),
+        }
         matched = [k for k in sorted(monitor.joints) if k in monitor.wrists
                    and k in monitor.truth_joints and k in monitor.truth_wrists]
         estimated = np.array([_pose_from(monitor.joints[k], monitor.wrists[k]) for k in matched])
         truth = np.array([_pose_from(monitor.truth_joints[k], monitor.truth_wrists[k])
                           for k in matched])
         return PipelineRun(
-            frames=len(monitor.frame_times), tracked=len(monitor.joints), duration_s=duration,
+            frames_published=published, frames=len(monitor.frame_times),
+            segmented=len(monitor.observation_times), tracked=len(monitor.joints),
+            duration_s=duration,
             latencies_s=latencies, estimated=estimated.reshape(-1, 26),
             truth=truth.reshape(-1, 26),
             segmentation_ms=list(monitor.segmentation_ms.values()),
-            lookup_ms=list(monitor.lookup_ms.values()), overlays=list(monitor.overlays))
+            lookup_ms=list(monitor.lookup_ms.values()), stage_latencies_s=stages,
+            overlays=list(monitor.overlays))
+
+
+def _delays(earlier: dict, later: dict) -> list[float]:
+    return [later[k] - earlier[k] for k in later if k in earlier]
 
 
 def summarize(run: PipelineRun, model) -> dict[str, float]:
     """The figures of a run: counts, rate, latency percentiles, stage times, accuracy."""
     latency = latency_summary_ms(run.latencies_s)
     figures = {
-        'frames_seen': run.frames, 'frames_tracked': run.tracked,
-        'tracked_fraction': run.tracked / run.frames if run.frames else 0.0,
+        'frames_published': run.frames_published, 'frames_seen_by_monitor': run.frames,
+        'frames_segmented': run.segmented, 'frames_tracked': run.tracked,
+        'tracked_fraction': run.tracked / run.frames_published if run.frames_published else 0.0,
         'output_rate_hz': run.tracked / run.duration_s if run.duration_s > 0 else 0.0,
         'latency_mean_ms': latency['mean'], 'latency_p50_ms': latency['p50'],
         'latency_p95_ms': latency['p95'],
-        'segmentation_ms': float(np.mean(run.segmentation_ms)) if run.segmentation_ms else 0.0,
-        'lookup_ms': float(np.mean(run.lookup_ms)) if run.lookup_ms else 0.0,
+        'segmentation_compute_ms': _mean(run.segmentation_ms),
+        'lookup_compute_ms': _mean(run.lookup_ms),
         'frames_with_truth': len(run.truth),
     }
+    for stage, delays in run.stage_latencies_s.items():
+        figures[f'{stage}_stage_p50_ms'] = latency_summary_ms(delays)['p50']
     if len(run.truth):
         figures.update(pose_accuracy(model, run.estimated, run.truth))
     return figures
+
+
+def _mean(values: list[float]) -> float:
+    return float(np.mean(values)) if values else float('nan')
+
+
+def bag_feed(bag: Path, rate: float = 1.0, paced: bool = False) -> Any:
+    """A feed for :func:`run_pipeline`: play ``bag`` with ``colorglove_play_bag`` (a separate
+    process) at ``rate`` times its original timing, or paced by the tracker's output."""
+    import shutil
+    import subprocess
+
+    player = shutil.which('colorglove_play_bag')
+    if player is None:
+        raise FileNotFoundError('colorglove_play_bag not on PATH (is the venv active?)')
+    command = [player, str(bag), '--rate', str(rate)] + (['--paced'] if paced else [])
+
+    def feed() -> None:
+        subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+
+    return feed

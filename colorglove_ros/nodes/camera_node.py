@@ -6,7 +6,7 @@ import sys
 
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Header
 
@@ -20,6 +20,9 @@ from colorglove_ros.msg_conversions import (
 from colorglove_ros.nodes.common import StartupError, declare, reject_parameter_changes, run_node
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros_image import array_to_image
+
+CAMERA_QOS = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=2,
+                        reliability=QoSReliabilityPolicy.RELIABLE)
 
 
 class CameraNode(Node):
@@ -50,9 +53,9 @@ class CameraNode(Node):
                                             prerender=prerender)
         except (CalibrationError, FrameSourceError) as exc:
             raise StartupError(f'camera_node cannot start: {exc}') from exc
-        self.image_pub = self.create_publisher(Image, 'camera/image_raw', qos_profile_sensor_data)
-        self.info_pub = self.create_publisher(CameraInfo, 'camera/camera_info',
-                                              qos_profile_sensor_data)
+        # Reliable publishers match both reliable and best-effort (sensor-data) subscribers.
+        self.image_pub = self.create_publisher(Image, 'camera/image_raw', CAMERA_QOS)
+        self.info_pub = self.create_publisher(CameraInfo, 'camera/camera_info', CAMERA_QOS)
         self.gt_joint_pub = self.create_publisher(JointState, 'hand/ground_truth/joint_states', 10)
         self.gt_wrist_pub = self.create_publisher(PoseStamped, 'hand/ground_truth/wrist_pose', 10)
         self.published = 0

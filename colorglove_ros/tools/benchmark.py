@@ -1,0 +1,80 @@
+"""Throughput and latency of the four-node pipeline: a 640x480 synthetic bag played at the
+camera rate into segmentation_node, lookup_node and ik_node (separate processes over DDS) with
+the configured (default 100,000-entry) database; camera-frame-to-JointState latency p50/p95 and
+the per-stage split."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from colorglove_ros.core.glove import default_hand
+from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.paths import resolve_path
+from colorglove_ros.pipeline_run import bag_feed, run_pipeline, summarize
+from colorglove_ros.tools import build_database, make_bag
+from colorglove_ros.tools.demo import DATABASE_CONFIG, pipeline_parameters, prepare_assets
+
+__all__ = ['TARGETS', 'ensure_bag', 'main']
+
+# name: (figure, comparison, bound)
+TARGETS = {
+    'throughput >= 30 frames/s': ('output_rate_hz', '>=', 30.0),
+    'latency p95 < 60 ms': ('latency_p95_ms', '<', 60.0),
+}
+
+
+def ensure_bag(seed: int, frames: int) -> Path:
+    """The benchmark bag for (seed, frames), written once under data/bags/."""
+    bag = resolve_path('data') / 'bags' / f'benchmark_seed{seed}_{frames}'
+    if not (bag / 'metadata.yaml').is_file():
+        print(f'[benchmark] writing {bag} ({frames} frames, once)', flush=True)
+        code = make_bag.main(['--seed', str(seed), '--frames', str(frames), '--output', str(bag),
+                              '--split', 'test'])
+        if code != 0:
+            raise RuntimeError('make_bag failed')
+    return bag
+
+
+def check_targets(figures: dict[str, float]) -> list[dict[str, object]]:
+    """One row per target: measured value and PASS/FAIL."""
+    rows = []
+    for name, (key, op, bound) in TARGETS.items():
+        value = figures[key]
+        ok = value >= bound if op == '>=' else value < bound
+        rows.append({'target': name, 'measured': value, 'result': 'PASS' if ok else 'FAIL'})
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``colorglove_benchmark [--frames N] [--rate R] [--json PATH]``."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--frames', type=int, default=300, help='frames in the bag')
+    parser.add_argument('--seed', type=int, default=2, help='seed of the synthetic bag')
+    parser.add_argument('--rate', type=float, default=1.0,
+                        help='playback speed (1.0 = the 30 Hz camera rate)')
+    parser.add_argument('--database', type=Path, help='pose database (default: config)')
+    parser.add_argument('--json', type=Path, help='write the figures as JSON')
+    args = parser.parse_args(argv)
+    _, default_db, _ = build_database.load_build_config(resolve_path(DATABASE_CONFIG))
+    database = args.database or default_db
+    prepare_assets(database)
+    bag = ensure_bag(args.seed, args.frames)
+    parameters = pipeline_parameters(database, args.seed, args.frames, 30.0)
+    del parameters['camera']
+    run = run_pipeline(parameters, expected_frames=args.frames,
+                       feed=bag_feed(bag, rate=args.rate), timeout_s=120.0 + args.frames / 5.0)
+    figures = summarize(run, default_hand()[0])
+    figures['playback_rate_hz'] = 30.0 * args.rate
+    print_table([{'figure': k, 'value': v} for k, v in figures.items()],
+                title=f'pipeline benchmark: {bag.name} at {30.0 * args.rate:g} Hz, '
+                      f'{database.name}')
+    targets = check_targets(figures)
+    print_table(targets, title='targets (measured on this machine)')
+    if args.json:
+        write_json(args.json, {'figures': figures, 'targets': targets})
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
