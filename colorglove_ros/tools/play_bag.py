@@ -88,8 +88,9 @@ def main(argv: list[str] | None = None) -> int:
                         help='publish each frame after the previous one produced --pace-topic')
     parser.add_argument('--pace-on', default='/camera/image_raw',
                         help='the input topic that waits for the output when --paced')
-    parser.add_argument('--pace-topic', default='/hand/joint_states',
-                        help='the output topic whose messages release the next frame')
+    parser.add_argument('--pace-topic', default='/hand/tracking_status',
+                        help='the output topic (std_msgs/String, one per processed frame, '
+                             'hand or no hand) whose messages release the next frame')
     parser.add_argument('--pace-timeout', type=float, default=1.0,
                         help='longest wait for an output before going on, seconds')
     parser.add_argument('--wait-subscribers', type=float, default=10.0,
@@ -108,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         player = BagPlayer(args.bag, args.topics)
         executor.add_node(player)
         if args.paced:
-            output_type = _import_message_class('sensor_msgs/msg/JointState')
+            output_type = _import_message_class('std_msgs/msg/String')
             player.create_subscription(output_type, args.pace_topic,
                                        lambda _msg: player.output_event.set(), 10)
         spinner.start()
