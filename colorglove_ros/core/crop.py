@@ -7,7 +7,8 @@ import cv2
 import numpy as np
 
 __all__ = [
-    'TINY_SIZE', 'CropError', 'CropTransform', 'TinyCrop', 'mean_shift_crop', 'crop_to_tiny',
+    'TINY_SIZE', 'CROP_ALGORITHM_VERSION', 'crop_signature',
+    'CropError', 'CropTransform', 'TinyCrop', 'mean_shift_crop', 'crop_to_tiny',
     'crop_window', 'DEFAULT_BANDWIDTH_FACTOR', 'DEFAULT_MIN_PIXELS', 'DEFAULT_GLOVE_FRACTION',
     'DEFAULT_RESCUE_SHARE', 'DEFAULT_INITIAL_BANDWIDTH_FACTOR',
 ]
@@ -18,6 +19,18 @@ DEFAULT_INITIAL_BANDWIDTH_FACTOR = 2.0
 DEFAULT_MIN_PIXELS = 20
 DEFAULT_GLOVE_FRACTION = 0.4
 DEFAULT_RESCUE_SHARE = 0.2
+#: Bump when the crop algorithm changes: pose databases record it and are refused when it differs.
+CROP_ALGORITHM_VERSION = 2
+
+
+def crop_signature() -> dict[str, float]:
+    """The crop algorithm version and default parameters. A pose database stores this and is
+    refused if it differs, since both sides of the lookup must be normalised identically."""
+    return {'version': CROP_ALGORITHM_VERSION, 'tiny_size': TINY_SIZE,
+            'bandwidth_factor': DEFAULT_BANDWIDTH_FACTOR,
+            'initial_bandwidth_factor': DEFAULT_INITIAL_BANDWIDTH_FACTOR,
+            'min_pixels': DEFAULT_MIN_PIXELS, 'glove_fraction': DEFAULT_GLOVE_FRACTION,
+            'rescue_share': DEFAULT_RESCUE_SHARE}
 
 
 class CropError(ValueError):

@@ -1,0 +1,263 @@
+"""Database lookup: Hamming scan of binary codes, exact re-rank, Gaussian-weighted pose blend."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.codes import hamming_distances, pack_codes
+from colorglove_ros.core.database import PoseDatabase
+from colorglove_ros.core.distance import ABSENT_PENALTY, DT_SCALE, QueryDistance
+
+__all__ = ['SearchError', 'ProjectionConstraints', 'LookupResult', 'PoseLookup',
+           'top_k_with_ties', 'blend_weights', 'blend_poses', 'estimate_translation']
+
+
+class SearchError(Exception):
+    """Bad lookup input (image shape, empty query, camera)."""
+
+
+@dataclass(frozen=True)
+class ProjectionConstraints:
+    """Visible patches of the nearest database entry, for inverse kinematics.
+
+    ``tiny_xy`` are patch centroids in tiny-image pixels and ``full_xy`` the same points
+    mapped into the query's full image with the query's crop transform."""
+
+    patch_ids: np.ndarray     # (M,) int
+    colors: np.ndarray        # (M,) uint8 glove colour label 1..10
+    vertices: np.ndarray      # (M,) int mesh vertex nearest the patch centroid
+    tiny_xy: np.ndarray       # (M, 2) float
+    full_xy: np.ndarray       # (M, 2) float
+    pixel_counts: np.ndarray  # (M,) float, patch area in tiny-image pixels
+
+
+@dataclass(frozen=True)
+class LookupResult:
+    """Outcome of one lookup. The neighbour arrays are sorted by image distance."""
+
+    indices: np.ndarray         # (k,) database entries blended
+    distances: np.ndarray       # (k,) image distances (px)
+    weights: np.ndarray         # (k,) normalised blend weights
+    poses: np.ndarray           # (k, 26) neighbour poses, translation moved to the query
+    blended: np.ndarray         # (26,) blended pose q_b
+    constraints: ProjectionConstraints
+    num_candidates: int         # entries re-ranked (top by Hamming, ties kept)
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+
+def top_k_with_ties(values: np.ndarray, k: int) -> np.ndarray:
+    """Indices (ascending) of the k smallest ``values`` plus every index tied with the k-th.
+
+    Non-negative integer values (Hamming distances) use a histogram of the values to find
+    the cut, which is several times faster than ``argpartition`` on 100k entries."""
+    n = len(values)
+    if k >= n:
+        return np.arange(n)
+    if values.dtype.kind == 'u' and values.dtype.itemsize <= 2:
+        cum = np.cumsum(np.bincount(values))
+        cut = int(np.searchsorted(cum, k))      # smallest value with >= k entries at or below
+    else:
+        cut = values[np.argpartition(values, k - 1)[:k]].max()
+    return np.flatnonzero(values <= cut)
+
+
+def blend_weights(distances: np.ndarray) -> np.ndarray:
+    """Normalised weights exp(-d^2 / sigma^2) with sigma = mean distance (paper eq. 1); if all
+    distances are zero the weights are equal."""
+    d = np.asarray(distances, np.float64)
+    sigma = float(d.mean())
+    if sigma <= 0.0:
+        return np.full(len(d), 1.0 / len(d))
+    w = np.exp(-(d / sigma) ** 2)
+    return w / w.sum()
+
+
+def blend_poses(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Weighted blend of (k, 26) poses: translation and finger DOFs linearly, the global
+    rotation as the weighted quaternion mean (Markley), returned as a rotation vector."""
+    poses = np.asarray(poses, np.float64)
+    w = np.asarray(weights, np.float64)
+    out = w @ poses
+    out[3:6] = _quat_to_rotvec(_quat_mean(_rotvec_to_quat(poses[:, 3:6]), w))
+    return out
+
+
+def _rotvec_to_quat(rv: np.ndarray) -> np.ndarray:
+    """(k, 3) rotation vectors -> (k, 4) unit quaternions (x, y, z, w)."""
+    angle = np.linalg.norm(rv, axis=1)
+    half = 0.5 * angle
+    # sin(a/2)/a, with its series near 0
+    small = angle < 1e-6
+    k = np.where(small, 0.5 - angle ** 2 / 48.0, np.sin(half) / np.where(small, 1.0, angle))
+    return np.concatenate([rv * k[:, None], np.cos(half)[:, None]], axis=1)
+
+
+def _quat_mean(quats: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Weighted quaternion mean (Markley et al. 2007): principal eigenvector of sum w q q^T."""
+    m = (quats * weights[:, None]).T @ quats
+    _, vecs = np.linalg.eigh(m)
+    return vecs[:, -1]
+
+
+def _quat_to_rotvec(q: np.ndarray) -> np.ndarray:
+    q = q / np.linalg.norm(q)
+    if q[3] < 0:
+        q = -q
+    s = float(np.linalg.norm(q[:3]))
+    if s < 1e-12:
+        return 2.0 * q[:3]
+    return q[:3] * (2.0 * np.arctan2(s, q[3]) / s)
+
+
+def estimate_translation(entry_translation: np.ndarray, entry_crop: np.ndarray,
+                         render_camera: dict, query_crop: tuple[float, float, float],
+                         camera: PinholeCamera, entry_rotvec: np.ndarray | None = None,
+                         anchor_local: np.ndarray | None = None) -> np.ndarray:
+    """Wrist position (k, 3) in the query camera for entries rendered at
+    ``entry_translation`` (k, 3) with crops ``entry_crop`` (k, 3) (scale, offset_x, offset_y).
+
+    The anchor point (the hand frame point ``anchor_local`` with rotations ``entry_rotvec``,
+    e.g. the hand's centre; the wrist if None) keeps its depth ratio and its tiny-image
+    position: depth from the ratio of crop scales (apparent size ~ f / z),
+    z_q = z_e (f_q / f_r) (s_e / s_q); x, y by mapping the anchor's tiny-image position into
+    the query image with the query crop, undistorting and back-projecting at z_q. The wrist
+    keeps its 3-D offset from the anchor."""
+    t = np.asarray(entry_translation, np.float64).reshape(-1, 3)
+    crop = np.asarray(entry_crop, np.float64).reshape(-1, 3)
+    offset = np.zeros_like(t)
+    if anchor_local is not None and entry_rotvec is not None:
+        rv = np.asarray(entry_rotvec, np.float64).reshape(-1, 3)
+        offset = np.stack([_rotvec_matrix(r) @ np.asarray(anchor_local, np.float64) for r in rv])
+    anchor = t + offset
+    fr = 0.5 * (render_camera['fx'] + render_camera['fy'])
+    fq = 0.5 * (camera.fx + camera.fy)
+    sq, oqx, oqy = (float(v) for v in query_crop)
+    z_q = anchor[:, 2] * (fq / fr) * (crop[:, 0] / sq)
+    u = render_camera['fx'] * anchor[:, 0] / anchor[:, 2] + render_camera['cx']
+    v = render_camera['fy'] * anchor[:, 1] / anchor[:, 2] + render_camera['cy']
+    tiny_x = (u - crop[:, 1]) / crop[:, 0]
+    tiny_y = (v - crop[:, 2]) / crop[:, 0]
+    full = np.stack([oqx + sq * tiny_x, oqy + sq * tiny_y], axis=1)
+    full = camera.undistort_pixels(full)
+    x = (full[:, 0] - camera.cx) / camera.fx * z_q
+    y = (full[:, 1] - camera.cy) / camera.fy * z_q
+    return np.stack([x, y, z_q], axis=1) - offset
+
+
+def _rotvec_matrix(r: np.ndarray) -> np.ndarray:
+    angle = float(np.linalg.norm(r))
+    if angle < 1e-12:
+        return np.eye(3)
+    k = r / angle
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * kx + (1.0 - np.cos(angle)) * kx @ kx
+
+
+def _crop_tuple(crop_transform: object) -> tuple[float, float, float]:
+    if hasattr(crop_transform, 'scale'):
+        vals = (crop_transform.scale, crop_transform.offset_x, crop_transform.offset_y)
+    else:
+        vals = tuple(np.asarray(crop_transform, float).ravel())
+    if len(vals) != 3 or not float(vals[0]) > 0.0:
+        raise SearchError(f'bad crop transform {crop_transform!r}')
+    return float(vals[0]), float(vals[1]), float(vals[2])
+
+
+class PoseLookup:
+    """Nearest-neighbour pose lookup in a :class:`PoseDatabase`.
+
+    Buffers for the Hamming scan are allocated once; one instance is not thread-safe."""
+
+    def __init__(self, database: PoseDatabase, num_candidates: int = 300,
+                 num_blend: int = 10) -> None:
+        if num_candidates < 1 or num_blend < 1:
+            raise SearchError('num_candidates and num_blend must be positive')
+        self.db = database
+        self.num_candidates = int(num_candidates)
+        self.num_blend = int(num_blend)
+        n = len(database)
+        self._columns = np.ascontiguousarray(database.codes)
+        self._ham = np.empty(n, np.uint16)
+        self._xor = np.empty(n, np.uint64)
+        self._cnt = np.empty(n, np.uint8)
+        self._dts_flat = database.dts.reshape(n, -1)
+        self._dts_all = database.dts.reshape(-1)
+        anchor = database.meta.get('hand_centre_local')
+        self._anchor = None if anchor is None else np.asarray(anchor, np.float64)
+
+    def hamming(self, tiny_labels: np.ndarray) -> np.ndarray:
+        """Hamming distances (N,) uint16 of a query to every entry (a view of a reused buffer)."""
+        qd = QueryDistance(tiny_labels)
+        return self._hamming_dts(qd.dts).copy()
+
+    def _hamming_dts(self, dts: np.ndarray) -> np.ndarray:
+        code = pack_codes(self.db.encoder.bits_from_dts(dts[None]))[0]
+        return hamming_distances(self._columns, code, self._ham, self._xor, self._cnt)
+
+    def rerank(self, query: QueryDistance, indices: np.ndarray) -> np.ndarray:
+        """Exact image distances (k,) from the query to database entries ``indices``."""
+        idx = np.asarray(indices, np.intp)
+        counts = self.db.pixel_counts[idx].astype(np.float64)
+        width = max(1, int(counts.max()) if len(idx) else 1)
+        keys = self.db.pixel_keys[idx, :width]      # keys beyond a row's count are padding
+        table = np.append(query.dts.ravel(), np.float32(0.0))
+        cand_sum = table.take(keys, mode='clip').sum(axis=1).astype(np.float64)
+        nq = query.num_pixels
+        if nq:
+            flat_idx = idx[:, None] * self._dts_flat.shape[1] + query.glove_index[None, :]
+            q_sum = self._dts_all.take(flat_idx, mode='clip').sum(axis=1, dtype=np.uint32)
+            q_sum = q_sum / DT_SCALE
+            d_qc = q_sum / nq
+            d_cq = np.where(counts > 0, cand_sum / np.maximum(counts, 1.0), ABSENT_PENALTY)
+        else:
+            d_qc = np.where(counts > 0, ABSENT_PENALTY, 0.0)
+            d_cq = d_qc
+        return 0.5 * (d_qc + d_cq)
+
+    def lookup(self, tiny_labels: np.ndarray, crop_transform: object,
+               camera: PinholeCamera) -> LookupResult:
+        """Look up a (40, 40) label image cropped from ``camera``'s image with
+        ``crop_transform`` (``CropTransform`` or (scale, offset_x, offset_y))."""
+        t0 = time.perf_counter()
+        crop = _crop_tuple(crop_transform)
+        try:
+            query = QueryDistance(tiny_labels)
+        except Exception as exc:
+            raise SearchError(f'bad query image: {exc}') from exc
+        if query.num_pixels == 0:
+            raise SearchError('query tiny image has no glove pixels')
+        t1 = time.perf_counter()
+        ham = self._hamming_dts(query.dts)
+        cand = top_k_with_ties(ham, self.num_candidates)
+        t2 = time.perf_counter()
+        dist = self.rerank(query, cand)
+        k = min(self.num_blend, len(cand))
+        near = np.argpartition(dist, k - 1)[:k] if k < len(cand) else np.arange(len(cand))
+        near = near[np.lexsort((cand[near], dist[near]))]
+        idx, d = cand[near], dist[near]
+        t3 = time.perf_counter()
+        weights = blend_weights(d)
+        poses = np.asarray(self.db.poses[idx], np.float64)
+        poses[:, 0:3] = estimate_translation(poses[:, 0:3], self.db.crop[idx],
+                                             self.db.render_camera, crop, camera,
+                                             poses[:, 3:6], self._anchor)
+        blended = blend_poses(poses, weights)
+        constraints = self._constraints(int(idx[0]), crop)
+        t4 = time.perf_counter()
+        timings = {'encode_ms': 1e3 * (t1 - t0), 'hamming_ms': 1e3 * (t2 - t1),
+                   'rerank_ms': 1e3 * (t3 - t2), 'blend_ms': 1e3 * (t4 - t3),
+                   'total_ms': 1e3 * (t4 - t0)}
+        return LookupResult(idx, d, weights, poses, blended, constraints, len(cand), timings)
+
+    def _constraints(self, entry: int, crop: tuple[float, float, float]
+                     ) -> ProjectionConstraints:
+        vis = np.flatnonzero(self.db.patch_vertex[entry] >= 0)
+        tiny_xy = np.asarray(self.db.patch_xy[entry, vis], np.float64)
+        full_xy = tiny_xy * crop[0] + np.array([crop[1], crop[2]])
+        return ProjectionConstraints(vis, np.asarray(self.db.patch_color[vis]),
+                                     np.asarray(self.db.patch_vertex[entry, vis], np.int64),
+                                     tiny_xy, full_xy,
+                                     np.asarray(self.db.patch_pixels[entry, vis], np.float64))

@@ -1,0 +1,169 @@
+"""Tests for the pose database: sampling, building, storage and its refusals."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from colorglove_ros.core.database import (
+    DATABASE_VERSION,
+    BuildConfig,
+    DatabaseError,
+    assemble_database,
+    build_database,
+    farthest_point_sampling,
+    load_database,
+    pixel_keys,
+    save_database,
+)
+from colorglove_ros.core.distance import TINY_SIZE
+
+RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5, 'cy': 63.5}
+
+
+def _small_db(n: int = 120):
+    rng = np.random.default_rng(5)
+    yy, xx = np.mgrid[0:40, 0:40]
+    tiny = np.zeros((n, 40, 40), np.uint8)
+    for i in range(n):
+        for _ in range(4):
+            c, x, y, r = rng.integers(1, 11), *rng.integers(6, 34, 2), rng.integers(3, 8)
+            tiny[i][(xx - x) ** 2 + (yy - y) ** 2 <= r * r] = c
+    poses = rng.normal(size=(n, 26))
+    crop = rng.uniform(1, 2, (n, 3))
+    return assemble_database(tiny, poses, crop, RENDER_CAM, num_bits=32, num_pairs=200,
+                             meta={'note': 'test'})
+
+
+def test_farthest_point_sampling_is_low_dispersion() -> None:
+    pts = np.array([[0.0], [1.0], [2.0], [10.0], [2.5], [9.0], [5.0]])
+    idx, radius = farthest_point_sampling(pts, 3, seed=0)
+    assert len(set(idx.tolist())) == 3
+    first = pts[idx[0], 0]
+    assert pts[idx[1], 0] == (0.0 if first >= 5.0 else 10.0)   # farthest from the start
+    assert radius[-1] == pytest.approx(np.abs(pts - pts[idx].T).min(axis=1).max())
+    assert np.all(np.diff(radius) <= 1e-12)          # dispersion never grows
+    # brute-force check of the greedy rule on random points
+    rng = np.random.default_rng(1)
+    pts = rng.normal(size=(200, 5))
+    idx, _ = farthest_point_sampling(pts, 20, seed=2)
+    for i in range(1, 20):
+        d = np.linalg.norm(pts[:, None] - pts[idx[:i]][None], axis=2).min(axis=1)
+        assert d[idx[i]] == pytest.approx(d.max(), rel=1e-4)
+
+
+def test_pixel_keys() -> None:
+    tiny = np.zeros((2, 40, 40), np.uint8)
+    tiny[0, 1, 2] = 3
+    tiny[1, 39, 39] = 10
+    tiny[1, 0, 0] = 1
+    keys, counts = pixel_keys(tiny)
+    assert counts.tolist() == [1, 2]
+    assert keys[0, 0] == 2 * 1600 + 1 * 40 + 2
+    assert keys[0, 1] == 16000                       # padding reads a zero
+    assert sorted(keys[1].tolist()) == [0, 9 * 1600 + 1599]
+
+
+def test_round_trip(tmp_path: Path) -> None:
+    db = _small_db()
+    save_database(db, tmp_path / 'db')
+    loaded = load_database(tmp_path / 'db')
+    assert len(loaded) == len(db) and loaded.num_bits == 32
+    for name in ('poses', 'tiny', 'dts', 'codes', 'crop', 'pixel_keys', 'patch_xy'):
+        np.testing.assert_array_equal(np.asarray(getattr(loaded, name)), getattr(db, name))
+    assert isinstance(loaded.tiny, np.memmap)
+    np.testing.assert_array_equal(loaded.encoder.dims, db.encoder.dims)
+    assert loaded.meta['note'] == 'test' and loaded.render_camera == RENDER_CAM
+
+
+def _corrupt(path: Path, how: str) -> None:
+    manifest = path / 'manifest.json'
+    if how == 'version':
+        data = json.loads(manifest.read_text())
+        data['version'] = DATABASE_VERSION + 1
+        manifest.write_text(json.dumps(data))
+    elif how == 'manifest':
+        manifest.write_text('{not json')
+    elif how == 'no_manifest':
+        manifest.unlink()
+    elif how == 'truncated':
+        f = path / 'tiny.npy'
+        f.write_bytes(f.read_bytes()[:-100])
+    elif how == 'flipped':
+        f = path / 'codes.npy'
+        raw = bytearray(f.read_bytes())
+        raw[-5] ^= 0xFF
+        f.write_bytes(bytes(raw))
+    elif how == 'missing_file':
+        (path / 'dts.npy').unlink()
+
+
+@pytest.mark.parametrize('how', ['version', 'manifest', 'no_manifest', 'truncated', 'flipped',
+                                 'missing_file'])
+def test_refuses_damaged_database(tmp_path: Path, how: str) -> None:
+    save_database(_small_db(40), tmp_path / 'db')
+    _corrupt(tmp_path / 'db', how)
+    with pytest.raises(DatabaseError):
+        load_database(tmp_path / 'db')
+
+
+def test_refuses_missing_directory(tmp_path: Path) -> None:
+    with pytest.raises(DatabaseError, match='not found'):
+        load_database(tmp_path / 'nothing_here')
+
+
+def test_build_small_database_with_renderer(tmp_path: Path) -> None:
+    from colorglove_ros.core.glove import default_hand
+    from colorglove_ros.core.search import PoseLookup
+
+    cfg = BuildConfig(entries=96, orientations_per_config=16, collection_size=400,
+                      num_bits=32, num_pairs=200, batch=64)
+    db = build_database(cfg)
+    assert len(db) == 96 and db.meta['num_configs'] >= 6
+    assert np.all(db.tiny.max(axis=(1, 2)) >= 1)
+    assert db.tiny.shape == (96, TINY_SIZE, TINY_SIZE)
+    # the hand's centre sits on the optical axis at the configured distance
+    _, mesh, glove = default_hand()
+    # constraints: a visible patch has a centroid inside the render (it may fall outside the
+    # tiny crop window), a positive area and a vertex of that patch; an invisible one has none
+    vis = db.patch_vertex >= 0
+    assert vis.sum(axis=1).min() >= 3
+    full = db.patch_xy * db.crop[:, None, :1] + db.crop[:, None, 1:]
+    assert np.all((full[vis] > -0.5) & (full[vis] < 127.5))
+    assert np.all(np.isnan(db.patch_xy[~vis]))
+    assert np.all(db.patch_pixels[vis] > 0) and np.all(db.patch_pixels[~vis] == 0)
+    for e in range(0, 96, 17):
+        for p in np.flatnonzero(vis[e]):
+            patch_faces = mesh.faces[glove.face_patch == p]
+            assert db.patch_vertex[e, p] in patch_faces
+            # the centroid's colour in the tiny image is the patch colour nearby
+            x, y = np.rint(db.patch_xy[e, p]).astype(int)
+            if 0 <= x < TINY_SIZE and 0 <= y < TINY_SIZE and db.patch_pixels[e, p] >= 6:
+                win = db.tiny[e, max(0, y - 3):y + 4, max(0, x - 3):x + 4]
+                assert glove.patch_color[p] in win
+    save_database(db, tmp_path / 'db')
+    loaded = load_database(tmp_path / 'db')
+    lookup = PoseLookup(loaded, num_candidates=30, num_blend=5)
+    from colorglove_ros.core.camera import PinholeCamera
+    rc = loaded.render_camera
+    cam = PinholeCamera(rc['width'], rc['height'], rc['fx'], rc['fy'], rc['cx'], rc['cy'])
+    res = lookup.lookup(np.asarray(loaded.tiny[10]), loaded.crop[10], cam)
+    assert res.distances[0] == 0.0
+    same = np.flatnonzero(np.all(loaded.tiny == loaded.tiny[10], axis=(1, 2)))
+    assert res.indices[0] in same
+    # rendered at the entry's own crop and camera: the translation is recovered
+    np.testing.assert_allclose(res.poses[0, :3], loaded.poses[res.indices[0], :3], atol=1e-5)
+
+
+def test_retrain_codes_in_place(tmp_path: Path) -> None:
+    from colorglove_ros.core.database import retrain_codes
+    from colorglove_ros.core.distance import dequantize_dts
+
+    save_database(_small_db(60), tmp_path / 'db')
+    retrain_codes(tmp_path / 'db', num_bits=80, num_pairs=120, seed=4)
+    db = load_database(tmp_path / 'db')
+    assert db.num_bits == 80 and db.codes.shape == (2, 60)
+    expected = db.encoder.encode_dts(dequantize_dts(db.dts))
+    np.testing.assert_array_equal(np.asarray(db.codes).T, expected)

@@ -1,0 +1,151 @@
+"""Tests for the lookup: candidate selection with ties, blending, translation, exact match."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.database import assemble_database
+from colorglove_ros.core.distance import image_distance
+from colorglove_ros.core.search import (
+    PoseLookup,
+    SearchError,
+    blend_poses,
+    blend_weights,
+    estimate_translation,
+    top_k_with_ties,
+)
+
+RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5, 'cy': 63.5}
+
+
+def _blob_images(seed: int, n: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:40, 0:40]
+    out = np.zeros((n, 40, 40), np.uint8)
+    for i in range(n):
+        for _ in range(5):
+            c, x, y, r = rng.integers(1, 11), *rng.integers(6, 34, 2), rng.integers(3, 8)
+            out[i][(xx - x) ** 2 + (yy - y) ** 2 <= r * r] = c
+    return out
+
+
+@pytest.fixture(scope='module')
+def blob_db():
+    rng = np.random.default_rng(0)
+    base = _blob_images(0, 150)
+    shifted = [np.roll(base, (dy, dx), axis=(1, 2)) for dy, dx in ((1, 0), (0, -1), (2, 1))]
+    tiny = np.concatenate([base, *shifted])
+    n = len(tiny)
+    poses = np.zeros((n, 26))
+    poses[:, 2] = 0.5
+    poses[:, 3:6] = rng.normal(0.0, 0.4, (n, 3))
+    poses[:, 6:] = rng.uniform(0.0, 1.0, (n, 20))
+    crop = np.tile([1.2, 40.0, 41.0], (n, 1))
+    patch_vertex = np.full((n, 20), -1, np.int32)
+    patch_vertex[:, :3] = [[11, 22, 33]]
+    patch_xy = np.full((n, 20, 2), np.nan, np.float32)
+    patch_xy[:, :3] = [[5.0, 6.0], [10.0, 12.0], [20.0, 30.0]]
+    return assemble_database(tiny, poses, crop, RENDER_CAM, num_bits=64, num_pairs=600,
+                             patch_vertex=patch_vertex, patch_xy=patch_xy,
+                             patch_pixels=np.ones((n, 20)), patch_color=np.arange(1, 21) % 10 + 1)
+
+
+def test_top_k_keeps_ties() -> None:
+    values = np.array([5, 0, 1, 1, 1, 2, 7], np.uint16)
+    assert sorted(top_k_with_ties(values, 2).tolist()) == [1, 2, 3, 4]
+    assert sorted(top_k_with_ties(values, 1).tolist()) == [1]
+    assert sorted(top_k_with_ties(values, 5).tolist()) == [1, 2, 3, 4, 5]
+    assert len(top_k_with_ties(values, 50)) == 7
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        v = rng.integers(0, 40, 5000).astype(np.uint16)
+        k = int(rng.integers(1, 400))
+        got = top_k_with_ties(v, k)
+        cut = np.sort(v)[k - 1]
+        np.testing.assert_array_equal(got, np.flatnonzero(v <= cut))
+        np.testing.assert_array_equal(top_k_with_ties(v.astype(np.float64), k), got)
+
+
+def test_blend_weights() -> None:
+    d = np.array([1.0, 2.0, 3.0])
+    w = blend_weights(d)
+    want = np.exp(-(d / 2.0) ** 2)
+    np.testing.assert_allclose(w, want / want.sum())
+    assert np.all(np.diff(w) < 0)
+    np.testing.assert_allclose(blend_weights(np.zeros(4)), 0.25)
+
+
+def test_blend_poses_rotation_and_fingers() -> None:
+    rng = np.random.default_rng(1)
+    poses = np.zeros((10, 26))
+    center = Rotation.from_rotvec([0.4, -1.2, 2.5])
+    poses[:, 3:6] = (center * Rotation.from_rotvec(rng.normal(0, 0.15, (10, 3)))).as_rotvec()
+    poses[:, 6:] = rng.uniform(0, 1, (10, 20))
+    w = blend_weights(rng.uniform(0.5, 3.0, 10))
+    q = blend_poses(poses, w)
+    np.testing.assert_allclose(q[6:], w @ poses[:, 6:])
+    ref = Rotation.from_rotvec(poses[:, 3:6]).mean(weights=w)
+    assert (Rotation.from_rotvec(q[3:6]) * ref.inv()).magnitude() < 1e-9
+    # rotation vectors near pi flip sign; a naive mean would fail here
+    flip = np.zeros((2, 26))
+    flip[0, 3:6] = [0, 0, np.pi - 0.01]
+    flip[1, 3:6] = [0, 0, -(np.pi - 0.01)]
+    q = blend_poses(flip, np.array([0.5, 0.5]))
+    assert abs(abs(q[5]) - np.pi) < 1e-6
+
+
+def test_translation_from_crop() -> None:
+    t_e = np.array([[0.02, -0.03, 0.5]])
+    crop_e = np.array([[1.1, 40.0, 35.0]])
+    cam = PinholeCamera(128, 128, 150.0, 150.0, 63.5, 63.5)
+    np.testing.assert_allclose(
+        estimate_translation(t_e, crop_e, RENDER_CAM, (1.1, 40.0, 35.0), cam), t_e)
+    # the hand twice as far away looks half as big: same tiny image, half the crop scale
+    big = PinholeCamera(640, 480, 600.0, 600.0, 320.0, 240.0)
+    t = estimate_translation(t_e, crop_e, RENDER_CAM, (0.55 * 4.0, 100.0, 80.0), big)[0]
+    assert t[2] == pytest.approx(0.5 * (600 / 150) * (1.1 / 2.2))
+    # the wrist projects to the same tiny-image position in both crops
+    u_e = 150.0 * t_e[0, 0] / t_e[0, 2] + 63.5
+    tiny_x = (u_e - 40.0) / 1.1
+    assert 600.0 * t[0] / t[2] + 320.0 == pytest.approx(100.0 + 2.2 * tiny_x)
+
+
+def test_lookup_finds_exact_entry(blob_db) -> None:
+    lookup = PoseLookup(blob_db, num_candidates=60, num_blend=10)
+    cam = PinholeCamera(640, 480, 600.0, 600.0, 320.0, 240.0)
+    for entry in (0, 37, 151, 420):
+        res = lookup.lookup(blob_db.tiny[entry], (1.2, 40.0, 41.0), cam)
+        assert res.indices[0] == entry
+        assert res.distances[0] == 0.0
+        assert np.argmax(res.weights) == 0
+        assert res.weights.sum() == pytest.approx(1.0)
+        assert np.all(np.diff(res.distances) >= 0)
+        assert res.num_candidates >= 60
+        # re-ranked distances are the exact distance (uint8 storage: within 0.125 px)
+        for i, d in zip(res.indices[:3], res.distances[:3], strict=True):
+            assert abs(d - image_distance(blob_db.tiny[entry], blob_db.tiny[i])) <= 0.125
+        np.testing.assert_array_equal(res.constraints.vertices, [11, 22, 33])
+        np.testing.assert_allclose(res.constraints.full_xy[1], [40.0 + 12.0, 41.0 + 14.4])
+        assert set(res.timings_ms) >= {'hamming_ms', 'rerank_ms', 'blend_ms', 'total_ms'}
+    # a shifted copy of an entry finds an entry of the same base image among the first few
+    res = lookup.lookup(np.roll(blob_db.tiny[3], (1, 1), axis=(0, 1)), (1.2, 40.0, 41.0), cam)
+    assert {3, 153, 303, 453} & set(res.indices[:4].tolist())
+
+
+def test_hamming_scan_matches_naive(blob_db) -> None:
+    lookup = PoseLookup(blob_db)
+    ham = lookup.hamming(blob_db.tiny[9])
+    codes = np.ascontiguousarray(blob_db.codes.T)
+    bits = np.unpackbits(codes.view(np.uint8), axis=1, bitorder='little')
+    np.testing.assert_array_equal(ham, (bits != bits[9]).sum(axis=1))
+
+
+def test_lookup_rejects_empty_query(blob_db) -> None:
+    lookup = PoseLookup(blob_db)
+    cam = PinholeCamera(640, 480, 600.0, 600.0, 320.0, 240.0)
+    with pytest.raises(SearchError):
+        lookup.lookup(np.zeros((40, 40), np.uint8), (1.0, 0.0, 0.0), cam)
+    with pytest.raises(SearchError):
+        lookup.lookup(blob_db.tiny[0], (0.0, 0.0, 0.0), cam)
