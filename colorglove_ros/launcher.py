@@ -26,7 +26,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import yaml
+from colorglove_ros.core.yaml_io import load_yaml_mapping
 
 __all__ = ['LaunchError', 'NodeSpec', 'load_launch_file', 'node_command', 'Launcher',
            'use_fastdds_profile', 'main']
@@ -64,13 +64,8 @@ class NodeSpec:
 def load_launch_file(path: str | Path) -> list[NodeSpec]:
     """Parse a launch YAML into node specs; parameter paths resolve relative to it."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except FileNotFoundError as exc:
-        raise LaunchError(f'launch file not found: {path}') from exc
-    except yaml.YAMLError as exc:
-        raise LaunchError(f'launch file is not valid YAML: {path}: {exc}') from exc
-    if not isinstance(data, dict) or not isinstance(data.get('nodes'), list) or not data['nodes']:
+    data = load_yaml_mapping(path, LaunchError, 'launch file')
+    if not isinstance(data.get('nodes'), list) or not data['nodes']:
         raise LaunchError(f'launch file {path} needs a non-empty list under "nodes"')
     specs = []
     for index, entry in enumerate(data['nodes']):

@@ -6,7 +6,8 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
+
+from colorglove_ros.core.yaml_io import load_yaml_mapping
 
 __all__ = [
     'CALIBRATION_VERSION', 'CalibrationError', 'PinholeCamera', 'Calibration',
@@ -118,14 +119,7 @@ def _camera_from_dict(entry: dict, where: str) -> PinholeCamera:
 def load_calibration(path: str | Path) -> Calibration:
     """Read a calibration YAML; raise :class:`CalibrationError` naming what is wrong."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except FileNotFoundError as exc:
-        raise CalibrationError(f'calibration file not found: {path}') from exc
-    except yaml.YAMLError as exc:
-        raise CalibrationError(f'calibration file is not valid YAML: {path}: {exc}') from exc
-    if not isinstance(data, dict):
-        raise CalibrationError(f'calibration file {path} does not hold a mapping')
+    data = load_yaml_mapping(path, CalibrationError, 'calibration file')
     if data.get('version') != CALIBRATION_VERSION:
         raise CalibrationError(
             f'calibration file {path} has version {data.get("version")!r}, '

@@ -16,6 +16,7 @@ from scipy.optimize import linear_sum_assignment
 from .camera import Calibration, PinholeCamera
 from .hand_mesh import build_hand_mesh
 from .hand_model import DOF_NAMES, NUM_DOFS, HandModel
+from .yaml_io import load_yaml_mapping
 
 __all__ = [
     'IK_CONFIG_VERSION', 'COVARIANCE_FORMAT', 'COVARIANCE_VERSION',
@@ -407,13 +408,8 @@ def load_covariances(path: str | Path) -> IKCovariances:
     """Read a covariance file written by :func:`save_covariances`; raise
     :class:`IKConfigError` naming what is wrong."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except FileNotFoundError as exc:
-        raise IKConfigError(f'IK covariance file not found: {path}') from exc
-    except yaml.YAMLError as exc:
-        raise IKConfigError(f'IK covariance file is not valid YAML: {path}: {exc}') from exc
-    if not isinstance(data, dict) or data.get('format') != COVARIANCE_FORMAT:
+    data = load_yaml_mapping(path, IKConfigError, 'IK covariance file')
+    if data.get('format') != COVARIANCE_FORMAT:
         raise IKConfigError(f'{path} is not a {COVARIANCE_FORMAT} file')
     if data.get('version') != COVARIANCE_VERSION:
         raise IKConfigError(f'{path} has version {data.get("version")!r}, '
@@ -476,14 +472,7 @@ def load_ik_config(path: str | Path) -> IKConfig:
     """Read ``config/ik.yaml``; a non-empty ``covariance_file`` (relative to the YAML's
     folder or absolute) overrides the default covariances written in the file."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except FileNotFoundError as exc:
-        raise IKConfigError(f'IK config file not found: {path}') from exc
-    except yaml.YAMLError as exc:
-        raise IKConfigError(f'IK config file is not valid YAML: {path}: {exc}') from exc
-    if not isinstance(data, dict):
-        raise IKConfigError(f'IK config file {path} does not hold a mapping')
+    data = load_yaml_mapping(path, IKConfigError, 'IK config file')
     if data.get('version') != IK_CONFIG_VERSION:
         raise IKConfigError(f'IK config {path} has version {data.get("version")!r}, '
                             f'expected {IK_CONFIG_VERSION}')
