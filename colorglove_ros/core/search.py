@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.codes import hamming_distances, pack_codes
+from colorglove_ros.core.codes import QueryEncoder, hamming_distances
 from colorglove_ros.core.database import PoseDatabase
 from colorglove_ros.core.distance import ABSENT_PENALTY, DT_SCALE, QueryDistance
 
@@ -130,7 +130,7 @@ def estimate_translation(entry_translation: np.ndarray, entry_crop: np.ndarray,
     offset = np.zeros_like(t)
     if anchor_local is not None and entry_rotvec is not None:
         rv = np.asarray(entry_rotvec, np.float64).reshape(-1, 3)
-        offset = np.stack([_rotvec_matrix(r) @ np.asarray(anchor_local, np.float64) for r in rv])
+        offset = _rotate(rv, np.asarray(anchor_local, np.float64))
     anchor = t + offset
     fr = 0.5 * (render_camera['fx'] + render_camera['fy'])
     fq = 0.5 * (camera.fx + camera.fy)
@@ -147,13 +147,17 @@ def estimate_translation(entry_translation: np.ndarray, entry_crop: np.ndarray,
     return np.stack([x, y, z_q], axis=1) - offset
 
 
-def _rotvec_matrix(r: np.ndarray) -> np.ndarray:
-    angle = float(np.linalg.norm(r))
-    if angle < 1e-12:
-        return np.eye(3)
-    k = r / angle
-    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + np.sin(angle) * kx + (1.0 - np.cos(angle)) * kx @ kx
+def _rotate(rotvecs: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """Rotate one point (3,) by each rotation vector (k, 3) (Rodrigues), vectorised."""
+    angle = np.linalg.norm(rotvecs, axis=1)
+    safe = np.where(angle < 1e-12, 1.0, angle)
+    axis = rotvecs / safe[:, None]
+    cos, sin = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    cross = np.cross(axis, point)
+    dot = axis @ point
+    out = point * cos + cross * sin + axis * (dot[:, None] * (1.0 - cos))
+    out[angle < 1e-12] = point
+    return out
 
 
 def _crop_tuple(crop_transform: object) -> tuple[float, float, float]:
@@ -161,7 +165,7 @@ def _crop_tuple(crop_transform: object) -> tuple[float, float, float]:
         vals = (crop_transform.scale, crop_transform.offset_x, crop_transform.offset_y)
     else:
         vals = tuple(np.asarray(crop_transform, float).ravel())
-    if len(vals) != 3 or not float(vals[0]) > 0.0:
+    if len(vals) != 3 or not np.all(np.isfinite(vals)) or not float(vals[0]) > 0.0:
         raise SearchError(f'bad crop transform {crop_transform!r}')
     return float(vals[0]), float(vals[1]), float(vals[2])
 
@@ -180,37 +184,56 @@ class PoseLookup:
         self.num_blend = int(num_blend)
         n = len(database)
         self._columns = np.ascontiguousarray(database.codes)
-        self._ham = np.empty(n, np.uint16)
+        # Hamming distances fit a byte up to 255 bits: uint8 accumulation halves the traffic.
+        self._ham = np.empty(n, np.uint8 if database.num_bits <= 255 else np.uint16)
         self._xor = np.empty(n, np.uint64)
         self._cnt = np.empty(n, np.uint8)
-        self._dts_flat = database.dts.reshape(n, -1)
-        self._dts_all = database.dts.reshape(-1)
+        self._qenc = QueryEncoder(database.encoder)
+        # plain ndarray views of the (memory-mapped) arrays: no np.memmap indexing overhead
+        self._a = {name: np.asarray(getattr(database, name)) for name in (
+            'dts', 'pixel_keys', 'poses', 'crop', 'patch_vertex', 'patch_xy', 'patch_color',
+            'patch_pixels')}
+        self._dts_flat = self._a['dts'].reshape(n, -1)
+        self._row = self._dts_flat.shape[1]
+        self._dts_all = self._a['dts'].reshape(-1)
+        self._counts = np.asarray(database.pixel_counts, np.float64)
+        # query DT lookup table, last slot (the padding key 16000) reads zero
+        self._table = np.zeros(self._row + 1, np.float32)
+        self._rerank_groups = 4
         anchor = database.meta.get('hand_centre_local')
         self._anchor = None if anchor is None else np.asarray(anchor, np.float64)
 
     def hamming(self, tiny_labels: np.ndarray) -> np.ndarray:
-        """Hamming distances (N,) uint16 of a query to every entry (a view of a reused buffer)."""
+        """Hamming distances (N,) of a query to every entry (a copy)."""
         qd = QueryDistance(tiny_labels)
         return self._hamming_dts(qd.dts).copy()
 
     def _hamming_dts(self, dts: np.ndarray) -> np.ndarray:
-        code = pack_codes(self.db.encoder.bits_from_dts(dts[None]))[0]
+        code = self._qenc.encode(dts)
         return hamming_distances(self._columns, code, self._ham, self._xor, self._cnt)
 
     def rerank(self, query: QueryDistance, indices: np.ndarray) -> np.ndarray:
         """Exact image distances (k,) from the query to database entries ``indices``."""
         idx = np.asarray(indices, np.intp)
-        counts = self.db.pixel_counts[idx].astype(np.float64)
-        width = max(1, int(counts.max()) if len(idx) else 1)
-        keys = self.db.pixel_keys[idx, :width]      # keys beyond a row's count are padding
-        table = np.append(query.dts.ravel(), np.float32(0.0))
-        cand_sum = table.take(keys, mode='clip').sum(axis=1).astype(np.float64)
+        counts = self._counts[idx]
+        table = self._table
+        table[:-1] = query.dts.reshape(-1)
+        cand_sum = np.empty(len(idx), np.float64)
+        # Candidates in groups of similar glove-pixel count, each gathered only up to its
+        # largest count: far fewer padding keys than one block as wide as the largest count.
+        order = np.argsort(counts, kind='stable')
+        for grp in np.array_split(order, min(self._rerank_groups, max(1, len(idx)))):
+            if len(grp) == 0:
+                continue
+            width = max(1, int(counts[grp[-1]]))
+            rows = idx[grp]
+            keys = self._a['pixel_keys'][rows, :width].astype(np.intp)   # padding reads zero
+            cand_sum[grp] = table.take(keys, mode='clip').sum(axis=1)
         nq = query.num_pixels
         if nq:
-            flat_idx = idx[:, None] * self._dts_flat.shape[1] + query.glove_index[None, :]
+            flat_idx = idx[:, None] * self._row + query.glove_index
             q_sum = self._dts_all.take(flat_idx, mode='clip').sum(axis=1, dtype=np.uint32)
-            q_sum = q_sum / DT_SCALE
-            d_qc = q_sum / nq
+            d_qc = q_sum * (1.0 / (DT_SCALE * nq))
             d_cq = np.where(counts > 0, cand_sum / np.maximum(counts, 1.0), ABSENT_PENALTY)
         else:
             d_qc = np.where(counts > 0, ABSENT_PENALTY, 0.0)
@@ -240,8 +263,8 @@ class PoseLookup:
         idx, d = cand[near], dist[near]
         t3 = time.perf_counter()
         weights = blend_weights(d)
-        poses = np.asarray(self.db.poses[idx], np.float64)
-        poses[:, 0:3] = estimate_translation(poses[:, 0:3], self.db.crop[idx],
+        poses = self._a['poses'][idx].astype(np.float64)
+        poses[:, 0:3] = estimate_translation(poses[:, 0:3], self._a['crop'][idx],
                                              self.db.render_camera, crop, camera,
                                              poses[:, 3:6], self._anchor)
         blended = blend_poses(poses, weights)
@@ -254,10 +277,10 @@ class PoseLookup:
 
     def _constraints(self, entry: int, crop: tuple[float, float, float]
                      ) -> ProjectionConstraints:
-        vis = np.flatnonzero(self.db.patch_vertex[entry] >= 0)
-        tiny_xy = np.asarray(self.db.patch_xy[entry, vis], np.float64)
+        vis = np.flatnonzero(self._a['patch_vertex'][entry] >= 0)
+        tiny_xy = self._a['patch_xy'][entry, vis].astype(np.float64)
         full_xy = tiny_xy * crop[0] + np.array([crop[1], crop[2]])
-        return ProjectionConstraints(vis, np.asarray(self.db.patch_color[vis]),
-                                     np.asarray(self.db.patch_vertex[entry, vis], np.int64),
+        return ProjectionConstraints(vis, self._a['patch_color'][vis],
+                                     self._a['patch_vertex'][entry, vis].astype(np.int64),
                                      tiny_xy, full_xy,
-                                     np.asarray(self.db.patch_pixels[entry, vis], np.float64))
+                                     self._a['patch_pixels'][entry, vis].astype(np.float64))

@@ -16,7 +16,13 @@ from visualization_msgs.msg import MarkerArray
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from colorglove_ros.core.camera import CalibrationError, load_calibration
 from colorglove_ros.core.glove import default_hand
-from colorglove_ros.core.ik import CameraObservation, HandTracker, IKConfigError, load_ik_config
+from colorglove_ros.core.ik import (
+    CameraObservation,
+    HandTracker,
+    IKConfigError,
+    IKError,
+    load_ik_config,
+)
 from colorglove_ros.core.overlay import draw_skeleton
 from colorglove_ros.msg_conversions import (
     camera_observation_from_msg,
@@ -110,15 +116,14 @@ class IKNode(Node):
                         *self._extra_camera_observations(stamp)]
         try:
             prior = pose_prior_from_candidates(msg) if msg.hand_found else None
-        except ValueError as exc:
-            self.get_logger().error(f'bad candidates message: {exc}', throttle_duration_sec=1.0)
-            prior = None
-        result = self.tracker.update(prior, observations, stamp)
+            result = self.tracker.update(prior, observations, stamp)
+        except (IKError, ValueError) as exc:
+            self.get_logger().warn(f'bad candidates message: {exc}', throttle_duration_sec=1.0)
+            self.tracker.reset()
+            self._report_no_hand(msg, f'bad candidates: {exc}')
+            return
         if not result.found:
-            if self.hand_was_found:
-                self.marker_pub.publish(skeleton_markers(None, msg.header))
-            self.hand_was_found = False
-            self.status_pub.publish(String(data=f'no hand: {msg.status or "lost"}'))
+            self._report_no_hand(msg, msg.status or 'lost')
             return
         self.hand_was_found = True
         self.joint_pub.publish(joint_state_from_pose(result.q, msg.header))
@@ -130,6 +135,12 @@ class IKNode(Node):
                  f'{result.reprojection_error_px:.1f} px, IK {result.time_ms:.1f} ms'))
         if self.publish_overlay:
             self._publish_overlay(msg, keypoints, result.reprojection_error_px)
+
+    def _report_no_hand(self, msg: HandPoseCandidates, reason: str) -> None:
+        if self.hand_was_found:
+            self.marker_pub.publish(skeleton_markers(None, msg.header))
+        self.hand_was_found = False
+        self.status_pub.publish(String(data=f'no hand: {reason}'))
 
     def _publish_overlay(self, msg: HandPoseCandidates, keypoints, error_px: float) -> None:
         stamp = msg.header.stamp

@@ -1,0 +1,449 @@
+"""The four node shells in one process (real DDS on loopback), and their start-up failures as
+separate processes: inputs in, outputs checked against the core modules run directly."""
+from __future__ import annotations
+
+import copy
+import shutil
+import subprocess
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseStamped
+from node_fixtures import (
+    NodeAssets,
+    background_rgb,
+    glove_frame,
+    hand_far_out_of_frame_rgb,
+    header,
+    node_assets,
+    params,
+    running,
+    start_node_process,
+)
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import String
+from visualization_msgs.msg import Marker, MarkerArray
+
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates
+from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.crop import TINY_SIZE
+from colorglove_ros.core.database import load_database
+from colorglove_ros.core.hand_model import DOF_NAMES, FINGER_DOF_NAMES
+from colorglove_ros.core.search import PoseLookup
+from colorglove_ros.core.segmentation import load_segmenter
+from colorglove_ros.msg_conversions import (
+    crop_from_observation,
+    observation_msg,
+    tiny_labels_from_observation,
+)
+from colorglove_ros.nodes.camera_node import CameraNode
+from colorglove_ros.nodes.ik_node import IKNode
+from colorglove_ros.nodes.lookup_node import LookupNode
+from colorglove_ros.nodes.segmentation_node import DEBUG_PALETTE, SegmentationNode
+from colorglove_ros.ros_image import array_to_image
+
+# every test gets a ROS domain of its own on loopback (other runs on this machine share domain 0)
+pytestmark = [pytest.mark.dds, pytest.mark.usefixtures('isolated_ros_domain')]
+
+REPO_DIR = Path(__file__).resolve().parent.parent
+GOOD_SEED = 1
+
+
+@pytest.fixture(scope='session')
+def assets(tmp_path_factory: pytest.TempPathFactory) -> NodeAssets:
+    return node_assets(tmp_path_factory)
+
+
+@pytest.fixture(scope='session')
+def good_rgb() -> np.ndarray:
+    return glove_frame(GOOD_SEED).image_rgb
+
+
+@pytest.fixture(scope='session')
+def good_observation(assets: NodeAssets, good_rgb: np.ndarray) -> HandObservation:
+    """What the segmenter makes of the good frame, as the segmentation node would send it."""
+    observation = load_segmenter(str(assets.color_config)).process(good_rgb)
+    assert observation.hand_found, observation.status
+    return observation_msg(observation, header(200, 500, 'camera_optical_frame'))
+
+
+def _segmentation(assets: NodeAssets):
+    return lambda ctx: SegmentationNode(context=ctx, parameter_overrides=params(
+        color_calibration_file=str(assets.color_config)))
+
+
+def _lookup(assets: NodeAssets):
+    return lambda ctx: LookupNode(context=ctx, parameter_overrides=params(
+        database_path=str(assets.database), num_candidates=40, num_neighbors=10))
+
+
+def _ik(**overrides):
+    return lambda ctx: IKNode(context=ctx, parameter_overrides=params(**overrides))
+
+
+# ------------------------------------------------------------------------ segmentation_node
+def test_segmentation_node_rgb8_and_bgr8(assets: NodeAssets, good_rgb: np.ndarray) -> None:
+    expected = load_segmenter(str(assets.color_config)).process(good_rgb)
+    with running(_segmentation(assets)) as h:
+        out = h.collect(HandObservation, 'hand/observation')
+        pub = h.publisher(Image, 'camera/image_raw')
+        rgb_msg = h.exchange(pub, array_to_image(good_rgb, 'rgb8', header(100, 7, 'cam_rgb')),
+                             out)
+        bgr_msg = h.exchange(pub, array_to_image(np.ascontiguousarray(good_rgb[..., ::-1]),
+                                                 'bgr8', header(101, 9, 'cam_bgr')), out)
+    for msg, (sec, nanosec, frame) in ((rgb_msg, (100, 7, 'cam_rgb')),
+                                       (bgr_msg, (101, 9, 'cam_bgr'))):
+        assert msg.hand_found and msg.status == ''
+        assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (sec, nanosec)
+        assert msg.header.frame_id == frame
+        assert (msg.image_width, msg.image_height) == (640, 480)
+        tiny = tiny_labels_from_observation(msg)
+        assert tiny.shape == (TINY_SIZE, TINY_SIZE) and len(msg.tiny_labels) == 1600
+        np.testing.assert_array_equal(tiny, expected.tiny_labels)
+        colors = [b.color_label for b in msg.blobs]
+        assert set(colors) <= set(range(1, 11)) and len(set(colors)) >= 8
+        counts = [b.pixel_count for b in msg.blobs]
+        assert counts == sorted(counts, reverse=True)
+        assert all(0 <= b.x < 640 and 0 <= b.y < 480 for b in msg.blobs)
+        assert msg.crop_scale == pytest.approx(expected.crop.scale)
+        assert msg.crop_offset_x == pytest.approx(expected.crop.offset_x)
+        assert msg.glove_pixel_count == expected.glove_pixel_count
+    # the same pixels in either channel order give the same observation
+    assert list(rgb_msg.tiny_labels) == list(bgr_msg.tiny_labels)
+    assert [(b.color_label, b.pixel_count) for b in rgb_msg.blobs] == \
+        [(b.color_label, b.pixel_count) for b in bgr_msg.blobs]
+
+
+def test_segmentation_node_padded_rows_and_debug_image(assets: NodeAssets,
+                                                        good_rgb: np.ndarray) -> None:
+    """Rows padded to a larger ``step`` segment like packed rows; the debug image shows the
+    glove colours where the segmenter found glove."""
+    packed = array_to_image(good_rgb, 'rgb8')
+    padded_rows = np.zeros((480, 1920 + 64), np.uint8)
+    padded_rows[:, :1920] = good_rgb.reshape(480, 1920)
+    padded = Image(header=header(120, 0, 'cam'), height=480, width=640, encoding='rgb8',
+                   step=1920 + 64, data=padded_rows.tobytes())
+    factory = lambda ctx: SegmentationNode(context=ctx, parameter_overrides=params(  # noqa: E731
+        color_calibration_file=str(assets.color_config), publish_debug_image=True))
+    with running(factory) as h:
+        out = h.collect(HandObservation, 'hand/observation')
+        debug = h.collect(Image, 'hand/segmentation_debug')
+        pub = h.publisher(Image, 'camera/image_raw')
+        packed.header = header(119, 0, 'cam')
+        first = h.exchange(pub, packed, out)
+        second = h.exchange(pub, padded, out)
+        assert h.spin_until(lambda: len(debug) >= 2, 5.0)
+    assert first.hand_found and list(first.tiny_labels) == list(second.tiny_labels)
+    assert [b.pixel_count for b in first.blobs] == [b.pixel_count for b in second.blobs]
+    image = debug[1]
+    assert (image.width, image.height, image.encoding) == (640, 480, 'rgb8')
+    assert image.header.stamp.sec == 120 and image.header.frame_id == 'cam'
+    pixels = np.frombuffer(bytes(image.data), np.uint8).reshape(480, 640, 3)
+    glove = np.any(pixels > 0, axis=2)
+    palette = {tuple(int(v) for v in c) for c in DEBUG_PALETTE[1:]}
+    assert {tuple(int(v) for v in p) for p in pixels[glove][::50]} <= palette
+    # the glove pixels the debug image shows cover at least the crop's glove pixels
+    assert glove.sum() >= 0.8 * second.glove_pixel_count
+
+
+def _bad_images(rgb: np.ndarray) -> dict[str, tuple[Image, str]]:
+    mono = array_to_image(np.ascontiguousarray(rgb[..., 1]), 'mono8')
+    empty = Image(encoding='rgb8', width=0, height=0, step=0)
+    short = array_to_image(rgb, 'rgb8')
+    short.data = bytes(short.data[:short.step * 100])          # 100 of 480 rows
+    yuv = Image(encoding='yuv422', width=640, height=480, step=1280, data=bytes(1280 * 480))
+    return {'mono8': (mono, 'mono8'), 'empty': (empty, 'empty image'),
+            'short': (short, 'image data holds'), 'yuv422': (yuv, 'yuv422')}
+
+
+def test_segmentation_node_reports_bad_frames_and_keeps_going(assets: NodeAssets,
+                                                               good_rgb: np.ndarray) -> None:
+    with running(_segmentation(assets)) as h:
+        out = h.collect(HandObservation, 'hand/observation')
+        pub = h.publisher(Image, 'camera/image_raw')
+        for sec, (name, (bad, problem)) in enumerate(_bad_images(good_rgb).items()):
+            bad.header = header(10 + 2 * sec, 0, 'bad')
+            msg = h.exchange(pub, bad, out)
+            assert not msg.hand_found, name
+            assert msg.status.startswith('bad image') and problem in msg.status, msg.status
+            assert msg.header.stamp.sec == 10 + 2 * sec and msg.header.frame_id == 'bad'
+            assert len(msg.tiny_labels) == 0 and len(msg.blobs) == 0
+            good = h.exchange(pub, array_to_image(good_rgb, 'rgb8', header(11 + 2 * sec)), out)
+            assert good.hand_found and good.header.stamp.sec == 11 + 2 * sec, name
+
+
+def test_segmentation_node_no_hand_and_hand_out_of_frame(assets: NodeAssets,
+                                                         good_rgb: np.ndarray) -> None:
+    frames = {'background': background_rgb(),
+              'far_left': hand_far_out_of_frame_rgb(4),
+              **{f'border_{s}': glove_frame(s, out_of_frame=True).image_rgb for s in (2, 5, 9)}}
+    with running(_segmentation(assets)) as h:
+        out = h.collect(HandObservation, 'hand/observation')
+        pub = h.publisher(Image, 'camera/image_raw')
+        results = {name: h.exchange(pub, array_to_image(rgb, 'rgb8', header(50 + i)), out)
+                   for i, (name, rgb) in enumerate(frames.items())}
+        after = h.exchange(pub, array_to_image(good_rgb, 'rgb8', header(99)), out)
+    background = results.pop('background')
+    assert not background.hand_found and background.status == 'no_glove'
+    assert len(background.tiny_labels) == 0
+    for name, msg in results.items():
+        if msg.hand_found:
+            assert len(msg.tiny_labels) == 1600 and msg.status == '', name
+        else:
+            assert msg.status in ('out_of_frame', 'too_small', 'no_glove'), (name, msg.status)
+            assert len(msg.tiny_labels) == 0, name
+    # the hand 60 px left of the image is mostly outside: never a valid observation
+    assert not results['far_left'].hand_found
+    assert after.hand_found
+
+
+# ------------------------------------------------------------------------------ lookup_node
+def test_lookup_node_candidates(assets: NodeAssets, good_observation: HandObservation) -> None:
+    lookup = PoseLookup(load_database(assets.database), 40, 10)
+    camera = load_calibration(REPO_DIR / 'config' / 'calibration.yaml').primary
+    expected = lookup.lookup(tiny_labels_from_observation(good_observation),
+                             crop_from_observation(good_observation), camera)
+    with running(_lookup(assets)) as h:
+        out = h.collect(HandPoseCandidates, 'hand/pose_candidates')
+        pub = h.publisher(HandObservation, 'hand/observation')
+        msg = h.exchange(pub, good_observation, out)
+    assert msg.hand_found and msg.status == ''
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (200, 500)
+    assert msg.header.frame_id == 'camera_optical_frame'
+    assert list(msg.dof_names) == list(DOF_NAMES) and len(msg.dof_names) == 26
+    assert len(msg.candidates) == 10
+    distances = [c.image_distance for c in msg.candidates]
+    assert distances == sorted(distances)
+    assert sum(c.weight for c in msg.candidates) == pytest.approx(1.0, abs=1e-9)
+    assert all(len(c.pose) == 26 for c in msg.candidates)
+    assert [c.database_index for c in msg.candidates] == [int(i) for i in expected.indices]
+    np.testing.assert_allclose(msg.blended_pose, expected.blended, atol=1e-9)
+    assert len(msg.blended_pose) == 26
+    assert len(msg.constraints) > 0
+    assert all(1 <= c.color_label <= 10 and 0 <= c.patch_id < 20 for c in msg.constraints)
+    assert list(msg.observation.tiny_labels) == list(good_observation.tiny_labels)
+    assert msg.observation.crop_scale == good_observation.crop_scale
+    assert len(msg.observation.blobs) == len(good_observation.blobs)
+    assert msg.lookup_time_ms > 0.0
+
+
+def test_lookup_node_passes_no_hand_through(assets: NodeAssets) -> None:
+    no_hand = HandObservation(header=header(300, 1, 'cam'), hand_found=False,
+                              status='out_of_frame', image_width=640, image_height=480)
+    bad_size = HandObservation(header=header(301, 0, 'cam'), hand_found=True, image_width=640,
+                               image_height=480, tiny_labels=[1] * 100, crop_scale=3.0)
+    with running(_lookup(assets)) as h:
+        out = h.collect(HandPoseCandidates, 'hand/pose_candidates')
+        pub = h.publisher(HandObservation, 'hand/observation')
+        msg = h.exchange(pub, no_hand, out)
+        bad = h.exchange(pub, bad_size, out)
+    assert not msg.hand_found and msg.status == 'out_of_frame'
+    assert msg.header.stamp.sec == 300 and msg.header.frame_id == 'cam'
+    assert len(msg.candidates) == 0 and len(msg.blended_pose) == 0
+    assert msg.observation.status == 'out_of_frame'
+    assert not bad.hand_found and 'tiny_labels holds 100 values' in bad.status
+
+
+def test_lookup_node_rejects_non_finite_crop(assets: NodeAssets,
+                                             good_observation: HandObservation) -> None:
+    bad = copy.deepcopy(good_observation)
+    bad.crop_offset_x = float('inf')
+    with running(_lookup(assets)) as h:
+        out = h.collect(HandPoseCandidates, 'hand/pose_candidates')
+        pub = h.publisher(HandObservation, 'hand/observation')
+        msg = h.exchange(pub, bad, out)
+    assert not msg.hand_found and msg.status.startswith('lookup:'), msg.status
+    assert np.all(np.isfinite(msg.blended_pose))
+
+
+# ------------------------------------------------------------------------------ ik_node
+@pytest.fixture(scope='session')
+def good_candidates(assets: NodeAssets, good_observation: HandObservation) -> HandPoseCandidates:
+    from colorglove_ros.msg_conversions import candidates_msg
+
+    lookup = PoseLookup(load_database(assets.database), 40, 10)
+    camera = load_calibration(REPO_DIR / 'config' / 'calibration.yaml').primary
+    result = lookup.lookup(tiny_labels_from_observation(good_observation),
+                           crop_from_observation(good_observation), camera)
+    return candidates_msg(good_observation, result, lookup_time_ms=1.0)
+
+
+def test_ik_node_outputs(good_candidates: HandPoseCandidates, good_rgb: np.ndarray) -> None:
+    no_hand = HandPoseCandidates(header=header(200, 600_000_000, 'camera_optical_frame'),
+                                 hand_found=False, status='no_glove',
+                                 dof_names=list(DOF_NAMES))
+    with running(_ik()) as h:
+        joints = h.collect(JointState, 'hand/joint_states')
+        wrist = h.collect(PoseStamped, 'hand/wrist_pose')
+        markers = h.collect(MarkerArray, 'hand/markers')
+        status = h.collect(String, 'hand/tracking_status')
+        overlay = h.collect(Image, 'hand/overlay')
+        image_pub = h.publisher(Image, 'camera/image_raw')
+        image_pub.publish(array_to_image(good_rgb, 'rgb8', good_candidates.header))
+        h.settle(0.3)
+        pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
+        first = h.exchange(pub, good_candidates, status)
+        assert h.spin_until(lambda: joints and wrist and markers and overlay, 10.0), \
+            (len(joints), len(wrist), len(markers), len(overlay))
+        lost = h.exchange(pub, no_hand, status)
+        assert h.spin_until(lambda: len(markers) >= 2, 5.0)
+        h.settle(0.5)
+    assert first.data.startswith('tracking:'), first.data
+    joint_state = joints[0]
+    assert list(joint_state.name) == list(FINGER_DOF_NAMES) and len(joint_state.name) == 20
+    assert np.all(np.isfinite(joint_state.position)) and len(joint_state.position) == 20
+    for msg in (joint_state, wrist[0], markers[0], overlay[0]):
+        stamp = msg.markers[0].header.stamp if isinstance(msg, MarkerArray) else msg.header.stamp
+        assert (stamp.sec, stamp.nanosec) == (200, 500)
+    assert wrist[0].header.frame_id == 'camera_optical_frame'
+    position = wrist[0].pose.position
+    assert 0.2 < position.z < 1.0               # in front of the camera, near the sampled depth
+    q = wrist[0].pose.orientation
+    assert q.x ** 2 + q.y ** 2 + q.z ** 2 + q.w ** 2 == pytest.approx(1.0)
+    kinds = sorted(m.type for m in markers[0].markers)
+    assert kinds == sorted([Marker.LINE_LIST, Marker.SPHERE_LIST])
+    assert all(len(m.points) > 0 for m in markers[0].markers)
+    assert (overlay[0].width, overlay[0].height, overlay[0].encoding) == (640, 480, 'rgb8')
+    # hand lost: a status, the markers cleared, and no joint state or wrist pose
+    assert lost.data == 'no hand: no_glove'
+    assert markers[1].markers[0].action == Marker.DELETEALL
+    assert len(joints) == 1 and len(wrist) == 1
+
+
+def test_ik_node_survives_malformed_candidates(good_candidates: HandPoseCandidates) -> None:
+    """A candidates message with hand_found and wrong DOF names is reported, not fatal."""
+    wrong_names = HandPoseCandidates()
+    wrong_names.header = header(200, 400_000_000, 'camera_optical_frame')
+    wrong_names.hand_found = True
+    wrong_names.observation = good_candidates.observation
+    wrong_names.dof_names = ['a', 'b']
+    wrong_names.blended_pose = [0.0, 0.0]
+    with running(_ik(publish_overlay=False)) as h:
+        status = h.collect(String, 'hand/tracking_status')
+        pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
+        bad = h.exchange(pub, wrong_names, status)
+        good = h.exchange(pub, good_candidates, status)
+    assert bad.data.startswith('no hand')
+    assert good.data.startswith('tracking:')
+
+
+def _short_pose(msg: HandPoseCandidates) -> None:
+    msg.blended_pose = [0.0] * 5
+
+
+def _vertex_out_of_range(msg: HandPoseCandidates) -> None:
+    for constraint in msg.constraints:
+        constraint.vertex_index = 1_000_000
+
+
+def _nan_pose(msg: HandPoseCandidates) -> None:
+    msg.blended_pose = [float('nan')] * 26
+
+
+@pytest.mark.parametrize('spoil', [_short_pose, _vertex_out_of_range, _nan_pose],
+                         ids=['short_pose', 'vertex_out_of_range', 'nan_pose'])
+def test_ik_node_survives_bad_candidates(spoil, good_candidates: HandPoseCandidates) -> None:
+    """A hand_found candidates message the tracker cannot use is reported as 'no hand' and the
+    node goes on with the next frame."""
+    bad = copy.deepcopy(good_candidates)
+    bad.header = header(200, 400_000_000, 'camera_optical_frame')
+    spoil(bad)
+    with running(_ik(publish_overlay=False)) as h:
+        status = h.collect(String, 'hand/tracking_status')
+        joints = h.collect(JointState, 'hand/joint_states')
+        pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
+        reported = h.exchange(pub, bad, status)
+        good = h.exchange(pub, good_candidates, status)
+        h.settle(0.2)
+    assert reported.data.startswith('no hand'), reported.data
+    assert good.data.startswith('tracking:')
+    assert [m.header.stamp.nanosec for m in joints] == [500]
+
+
+# ------------------------------------------------------------------------------ camera_node
+def test_camera_node_image_folder(tmp_path: Path) -> None:
+    rng = np.random.default_rng(0)
+    images = [rng.integers(0, 256, (480, 640, 3), dtype=np.uint8) for _ in range(3)]
+    for i, rgb in enumerate(images):
+        cv2.imwrite(str(tmp_path / f'frame_{i}.png'), np.ascontiguousarray(rgb[..., ::-1]))
+    (tmp_path / 'notes.txt').write_text('not an image')
+    with running(lambda ctx: CameraNode(context=ctx, parameter_overrides=params(
+            source=str(tmp_path), rate_hz=20.0, loop=True))) as h:
+        frames = h.collect(Image, 'camera/image_raw', qos_profile_sensor_data)
+        infos = h.collect(CameraInfo, 'camera/camera_info', qos_profile_sensor_data)
+        assert h.spin_until(lambda: len(frames) >= 6 and len(infos) >= 6, 20.0)
+    seen = []
+    info_by_stamp = {(m.header.stamp.sec, m.header.stamp.nanosec): m for m in infos}
+    for image in frames:
+        assert (image.encoding, image.width, image.height, image.step) == ('rgb8', 640, 480,
+                                                                           1920)
+        pixels = np.frombuffer(bytes(image.data), np.uint8).reshape(480, 640, 3)
+        matches = [i for i, rgb in enumerate(images) if np.array_equal(pixels, rgb)]
+        assert len(matches) == 1, 'a published frame equals none of the folder images'
+        seen.append(matches[0])
+        assert image.header.frame_id == 'camera_optical_frame'
+        info = info_by_stamp.get((image.header.stamp.sec, image.header.stamp.nanosec))
+        if info is not None:
+            assert info.header.frame_id == image.header.frame_id
+    assert set(seen) == {0, 1, 2}
+    # consecutive frames follow the folder's sorted order, looping (losses aside)
+    steps = [(b - a) % 3 for a, b in zip(seen, seen[1:], strict=False)]
+    assert steps.count(1) >= len(steps) - 1
+    assert len(info_by_stamp) >= 6
+    for info in infos:
+        assert (info.width, info.height) == (640, 480)
+        np.testing.assert_allclose(info.k, [600.0, 0.0, 319.5, 0.0, 600.0, 239.5, 0, 0, 1])
+        assert info.distortion_model == 'plumb_bob' and list(info.d) == [0.0] * 5
+        assert info.header.frame_id == 'camera_optical_frame'
+    matched = sum((f.header.stamp.sec, f.header.stamp.nanosec) in info_by_stamp for f in frames)
+    assert matched >= len(frames) - 1
+
+
+# ------------------------------------------------------------------------ start-up failures
+def test_nodes_exit_with_code_1_on_bad_startup(tmp_path: Path, assets: NodeAssets,
+                                               isolated_ros_domain: dict) -> None:
+    """Each node process given a bad device, file, database or config prints why and exits 1.
+    The processes run side by side (each takes seconds to import on a loaded machine)."""
+    corrupt = tmp_path / 'corrupt_db'
+    shutil.copytree(assets.database, corrupt)
+    (corrupt / 'manifest.json').write_text('{not json')
+    missing_db = tmp_path / 'no_database_here'
+    missing_ik = tmp_path / 'no_ik.yaml'
+    missing_cal = tmp_path / 'no_colors.yaml'
+    cases = {
+        'lookup, no database': ('lookup_node', {'database_path': missing_db},
+                                ['lookup_node cannot start', str(missing_db)]),
+        'lookup, corrupt manifest': ('lookup_node', {'database_path': corrupt},
+                                     ['lookup_node cannot start', 'manifest']),
+        'ik, no config': ('ik_node', {'ik_config': missing_ik},
+                          ['ik_node cannot start', 'IK config file not found', str(missing_ik)]),
+        'camera, no device': ('camera_node', {'source': '/dev/video99'},
+                              ['camera_node cannot start', '/dev/video99 does not exist']),
+        'camera, no file': ('camera_node', {'source': tmp_path / 'missing.mp4'},
+                            ['camera_node cannot start', 'is neither', 'missing.mp4']),
+        'segmentation, no colour config': (
+            'segmentation_node', {'color_calibration_file': missing_cal},
+            ['segmentation_node cannot start', str(missing_cal)]),
+    }
+    processes = {name: start_node_process(executable, {k: str(v) for k, v in values.items()},
+                                          isolated_ros_domain)
+                 for name, (executable, values, _) in cases.items()}
+    problems = []
+    for name, process in processes.items():
+        try:
+            output, _ = process.communicate(timeout=90)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            output, _ = process.communicate()
+            problems.append(f'{name}: still running after 90 s')
+            continue
+        missing = [text for text in cases[name][2] if text not in output]
+        if process.returncode != 1 or missing:
+            problems.append(f'{name}: exit code {process.returncode}, missing {missing} in '
+                            f'{output!r}')
+        elif '[FATAL]' not in output:
+            problems.append(f'{name}: no [FATAL] line in {output!r}')
+    assert not problems, '\n'.join(problems)
