@@ -21,7 +21,7 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image, JointState
 
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
-from colorglove_ros.core.metrics import latency_summary_ms, pose_accuracy
+from colorglove_ros.core.metrics import jitter_runs_mm, latency_summary_ms, pose_accuracy
 from colorglove_ros.launcher import Launcher, NodeSpec, use_fastdds_profile
 from colorglove_ros.msg_conversions import pose_from_joint_state
 from colorglove_ros.ros_image import image_to_rgb8
@@ -159,6 +159,7 @@ class PipelineRun:
     segmentation_ms: list[float]
     lookup_ms: list[float]
     stage_latencies_s: dict[str, list[float]] = field(default_factory=dict)
+    frame_index: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     overlays: list[np.ndarray] = field(default_factory=list)
 
 
@@ -242,6 +243,9 @@ def _collect(monitor: PipelineMonitor, duration: float, published: int) -> Pipel
         matched = [k for k in sorted(monitor.joints) if k in monitor.wrists
                    and k in monitor.truth_joints and k in monitor.truth_wrists]
         estimated = np.array([_pose_from(monitor.joints[k], monitor.wrists[k]) for k in matched])
+        # position of each matched frame among all camera frames seen, in stamp order
+        frame_order = {k: i for i, k in enumerate(sorted(monitor.frame_times))}
+        frame_index = np.array([frame_order.get(k, -1) for k in matched], dtype=int)
         truth = np.array([_pose_from(monitor.truth_joints[k], monitor.truth_wrists[k])
                           for k in matched])
         return PipelineRun(
@@ -252,6 +256,7 @@ def _collect(monitor: PipelineMonitor, duration: float, published: int) -> Pipel
             truth=truth.reshape(-1, 26),
             segmentation_ms=list(monitor.segmentation_ms.values()),
             lookup_ms=list(monitor.lookup_ms.values()), stage_latencies_s=stages,
+            frame_index=frame_index,
             overlays=list(monitor.overlays))
 
 
@@ -277,6 +282,14 @@ def summarize(run: PipelineRun, model) -> dict[str, float]:
         figures[f'{stage}_stage_p50_ms'] = latency_summary_ms(delays)['p50']
     if len(run.truth):
         figures.update(pose_accuracy(model, run.estimated, run.truth))
+        # frames missing from the output break the 5-frame windows: jitter over unbroken runs
+        valid = run.frame_index >= 0
+        tracked = np.zeros(run.frames, bool)
+        tracked[run.frame_index[valid]] = True
+        for key, poses in (('jitter_mm', run.estimated), ('jitter_truth_mm', run.truth)):
+            on_grid = np.zeros((run.frames, 26))
+            on_grid[run.frame_index[valid]] = poses[valid]
+            figures[key] = jitter_runs_mm(model, on_grid, tracked)
     return figures
 
 

@@ -17,7 +17,7 @@ __all__ = [
     'FEATURE_POOL', 'FEATURE_SIDE', 'FEATURE_DIM', 'CodeError', 'BinaryEncoder',
     'features_from_dts', 'pack_codes', 'unpack_codes', 'hamming_distances',
     'hamming_naive', 'train_ssc', 'train_random_projections', 'train_pca_itq',
-    'encoder_from_arrays',
+    'encoder_from_arrays', 'QueryEncoder',
 ]
 
 FEATURE_POOL = 2
@@ -152,6 +152,52 @@ class BinaryEncoder:
             arrays['encoder_mean'] = np.asarray(self.mean, np.float32)
             arrays['encoder_projection'] = np.asarray(self.projection, np.float32)
         return arrays
+
+
+class QueryEncoder:
+    """Fast packed code of one query from its float32 distance transforms (10, 40, 40).
+
+    For SSC only the pixels under the stumps' pooling blocks are read (4 per bit), with the
+    same float32 arithmetic as :func:`features_from_dts`, so the bits equal
+    ``encoder.bits_from_dts``; other encoders fall back to the full feature path.
+    Buffers are reused: one instance is not thread-safe."""
+
+    def __init__(self, encoder: BinaryEncoder) -> None:
+        self.encoder = encoder
+        self.words = (encoder.num_bits + 63) // 64
+        self._bytes = np.zeros(self.words * 8, np.uint8)
+        self._pixels: np.ndarray | None = None
+        if encoder.kind == 'ssc':
+            dims = np.asarray(encoder.dims, np.intp)
+            area = FEATURE_SIDE * FEATURE_SIDE
+            color, rem = np.divmod(dims, area)
+            by, bx = np.divmod(rem, FEATURE_SIDE)
+            p = FEATURE_POOL
+            cols = []
+            for dy in range(p):            # same order as the accumulation in features_from_dts
+                for dx in range(p):
+                    cols.append(color * TINY_SIZE * TINY_SIZE
+                                + (p * by + dy) * TINY_SIZE + p * bx + dx)
+            self._pixels = np.stack(cols, axis=1)                  # (B, p*p)
+            self._thresholds = np.asarray(encoder.thresholds, np.float32)
+
+    def bits(self, dts: np.ndarray) -> np.ndarray:
+        """(B,) bool bits of one query's float32 distance transforms (10, 40, 40)."""
+        if self._pixels is None:
+            return self.encoder.bits_from_dts(np.asarray(dts, np.float32)[None])[0]
+        vals = np.asarray(dts, np.float32).reshape(-1)[self._pixels]
+        np.multiply(vals, vals, out=vals)
+        acc = vals[:, 0].copy()
+        for j in range(1, vals.shape[1]):
+            acc += vals[:, j]
+        acc *= np.float32(1.0 / (FEATURE_POOL * FEATURE_POOL))
+        return acc > self._thresholds
+
+    def encode(self, dts: np.ndarray) -> np.ndarray:
+        """Packed (W,) uint64 code (layout of :func:`pack_codes`)."""
+        packed = np.packbits(self.bits(dts), bitorder='little')
+        self._bytes[:len(packed)] = packed
+        return self._bytes.view('<u8').astype(np.uint64)
 
 
 def encoder_from_arrays(kind: str, arrays: dict[str, np.ndarray]) -> BinaryEncoder:

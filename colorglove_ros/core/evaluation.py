@@ -24,7 +24,12 @@ from .ik import (
     extract_blobs,
 )
 from .ik_training import LOCAL_WINDOW, TrainingFrame, training_frame
-from .metrics import jitter_mm, latency_summary_ms, pose_accuracy
+from .metrics import (
+    contiguous_runs,
+    jitter_runs_mm,
+    latency_summary_ms,
+    pose_accuracy,
+)
 
 __all__ = [
     'LABEL_SOURCES', 'EVAL_SEED_BASE', 'TRAIN_SEED_BASE', 'SEED_SPAN', 'EvaluationError',
@@ -273,26 +278,6 @@ class SequenceEvaluator:
 
 
 # ---------------------------------------------------------------------------- figures
-def contiguous_runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """(start, stop) of the runs of True in a boolean mask."""
-    m = np.concatenate([[False], np.asarray(mask, bool), [False]])
-    d = np.diff(m.astype(np.int8))
-    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(),
-                    strict=True))
-
-
-def jitter_runs_mm(model: HandModel, poses: np.ndarray, valid: np.ndarray,
-                   window: int = LOCAL_WINDOW) -> float:
-    """``metrics.jitter_mm`` over each run of consecutive valid frames (>= ``window``),
-    averaged weighted by the frames each run contributes; NaN if no run is long enough."""
-    total, weight = 0.0, 0
-    for a, b in contiguous_runs(valid):
-        if b - a >= window:
-            total += jitter_mm(model, poses[a:b], window) * (b - a - 2 * (window // 2))
-            weight += b - a - 2 * (window // 2)
-    return total / weight if weight else math.nan
-
-
 def summarize(model: HandModel, runs: Sequence[TrackedSequence]) -> dict[str, float]:
     """Figures of one (rig, mode) over sequences: ``metrics.pose_accuracy`` on the tracked
     frames (joint MAE deg, fingertip / wrist image-plane / depth error mm), jitter as the

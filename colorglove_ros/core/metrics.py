@@ -2,6 +2,7 @@
 IK evaluation, the end-to-end demo and the benchmark)."""
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -10,7 +11,7 @@ from colorglove_ros.core.hand_model import KEYPOINT_NAMES, HandModel
 
 __all__ = [
     'FINGERTIP_INDICES', 'joint_angle_error_deg', 'fingertip_errors_mm', 'translation_errors_mm',
-    'jitter_mm', 'latency_summary_ms', 'pose_accuracy',
+    'jitter_mm', 'contiguous_runs', 'jitter_runs_mm', 'latency_summary_ms', 'pose_accuracy',
 ]
 
 FINGERTIP_INDICES = np.array([i for i, name in enumerate(KEYPOINT_NAMES) if name.endswith('_tip')])
@@ -62,6 +63,26 @@ def jitter_mm(model: HandModel, poses: np.ndarray, window: int = 5) -> float:
                                              tips[:, k]) for k in range(tips.shape[1])], axis=1)
     centred = tips[half:len(tips) - half]
     return float(1000.0 * np.linalg.norm(centred - averaged, axis=2).mean())
+
+
+def contiguous_runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of the runs of True in a boolean mask."""
+    m = np.concatenate([[False], np.asarray(mask, bool), [False]])
+    d = np.diff(m.astype(np.int8))
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(),
+                    strict=True))
+
+
+def jitter_runs_mm(model: HandModel, poses: np.ndarray, valid: np.ndarray,
+                   window: int = 5) -> float:
+    """``metrics.jitter_mm`` over each run of consecutive valid frames (>= ``window``),
+    averaged weighted by the frames each run contributes; NaN if no run is long enough."""
+    total, weight = 0.0, 0
+    for a, b in contiguous_runs(valid):
+        if b - a >= window:
+            total += jitter_mm(model, poses[a:b], window) * (b - a - 2 * (window // 2))
+            weight += b - a - 2 * (window // 2)
+    return total / weight if weight else math.nan
 
 
 def latency_summary_ms(latencies_s: Sequence[float]) -> dict[str, float]:

@@ -17,6 +17,8 @@ from colorglove_ros.core.codes import (
     train_ssc,
 )
 from colorglove_ros.core.database import (
+    SSC_HARD_NEGATIVES,
+    SSC_SHORTLIST,
     BuildConfig,
     DatabaseError,
     PoseDatabase,
@@ -105,7 +107,9 @@ def _code_study(db: PoseDatabase, q_dts: np.ndarray, nn: np.ndarray, k: int, see
         sub = np.sort(rng.choice(len(db), size=min(len(db), 20_000), replace=False))
         sub_tiny, sub_dts = np.asarray(db.tiny[sub]), np.asarray(db.dts[sub])
         t0 = time.perf_counter()
-        pairs, similar = nearest_neighbour_pairs(sub_tiny, sub_dts, pairs_count, seed=seed + 1)
+        pairs, similar = nearest_neighbour_pairs(
+            sub_tiny, sub_dts, pairs_count, seed=seed + 1, shortlist=SSC_SHORTLIST,
+            exclude=np.asarray(db.config_index)[sub], hard_negatives=SSC_HARD_NEGATIVES)
         feats = features_from_dts(dequantize_dts(sub_dts))
         encoders = {
             'ssc': train_ssc(feats, pairs, similar, num_bits=max_bits, seed=seed + 1),

@@ -1,0 +1,76 @@
+"""Tests for the fast lookup paths: query encoder, grouped re-rank, vectorised translation."""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from colorglove_ros.core.codes import QueryEncoder, pack_codes, train_random_projections
+from colorglove_ros.core.database import assemble_database
+from colorglove_ros.core.distance import QueryDistance, distance_transforms_batch
+from colorglove_ros.core.search import PoseLookup, _rotate, top_k_with_ties
+
+RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5, 'cy': 63.5}
+
+
+def _blobs(seed: int, n: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:40, 0:40]
+    out = np.zeros((n, 40, 40), np.uint8)
+    for i in range(n):
+        for _ in range(int(rng.integers(1, 7))):      # very different glove-pixel counts
+            c, x, y, r = rng.integers(1, 11), *rng.integers(6, 34, 2), rng.integers(2, 10)
+            out[i][(xx - x) ** 2 + (yy - y) ** 2 <= r * r] = c
+    return out
+
+
+def _db(n: int = 240):
+    rng = np.random.default_rng(1)
+    tiny = _blobs(3, n)
+    tiny[5] = 0
+    tiny[5, 10:12, 10:12] = 4                          # a 4-pixel entry
+    poses = np.zeros((n, 26))
+    poses[:, 2] = 0.5
+    poses[:, 3:6] = rng.normal(0.0, 0.5, (n, 3))
+    return assemble_database(tiny, poses, np.tile([1.0, 0.0, 0.0], (n, 1)), RENDER_CAM,
+                             num_bits=96, num_pairs=400)
+
+
+def test_query_encoder_equals_full_feature_path() -> None:
+    db = _db()
+    qe = QueryEncoder(db.encoder)
+    imgs = _blobs(9, 30)
+    dts = distance_transforms_batch(imgs)
+    want = db.encoder.bits_from_dts(dts)
+    for i in range(len(imgs)):
+        np.testing.assert_array_equal(qe.bits(dts[i]), want[i])
+        np.testing.assert_array_equal(qe.encode(dts[i]), pack_codes(want[i:i + 1])[0])
+    # stored database codes are the same function of the (quantised) transforms
+    lookup = PoseLookup(db)
+    ham = lookup.hamming(imgs[0])
+    np.testing.assert_array_equal(qe.encode(dts[0]).shape, (2,))
+    assert ham.dtype == np.uint8 and ham.max() <= 96
+    # projection codes use the generic path
+    rp = train_random_projections(np.random.default_rng(0).normal(size=(50, 4000)), 70)
+    dense = QueryEncoder(rp)
+    np.testing.assert_array_equal(dense.bits(dts[3]), rp.bits_from_dts(dts[3:4])[0])
+
+
+def test_grouped_rerank_matches_reference_distance() -> None:
+    db = _db()
+    lookup = PoseLookup(db)
+    for q in (_blobs(11, 1)[0], np.asarray(db.tiny[5]), np.asarray(db.tiny[17])):
+        qd = QueryDistance(q)
+        cand = top_k_with_ties(lookup.hamming(q), 120)
+        ref = qd.to_many(np.asarray(db.tiny[cand]), np.asarray(db.dts[cand]))
+        for groups in (1, 3, 4, 500):
+            lookup._rerank_groups = groups
+            np.testing.assert_allclose(lookup.rerank(qd, cand), ref, atol=2e-4)
+    assert lookup.rerank(QueryDistance(db.tiny[5]), np.array([5]))[0] == 0.0
+
+
+def test_vectorised_rotation_matches_scipy() -> None:
+    rv = np.random.default_rng(2).normal(0.0, 1.5, (20, 3))
+    rv[3] = 0.0
+    point = np.array([0.01, -0.08, 0.03])
+    np.testing.assert_allclose(_rotate(rv, point), Rotation.from_rotvec(rv).apply(point),
+                               atol=1e-12)
