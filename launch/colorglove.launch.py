@@ -1,7 +1,8 @@
 """Native ROS 2 launch file: the four tracker nodes as separate processes.
 
-``ros2 launch colorglove_ros colorglove.launch.py [params_file:=...] [use_robot_state_publisher:=true]``
-(on pip-only machines use ``colorglove_launch config/pipeline.launch.yaml``).
+``ros2 launch colorglove_ros colorglove.launch.py [params_file:=...]
+[use_robot_state_publisher:=true]`` (on pip-only machines use
+``colorglove_launch config/pipeline.launch.yaml``).
 """
 import os
 
@@ -30,7 +31,8 @@ def generate_launch_description() -> LaunchDescription:
         remappings=[('joint_states', '/hand/joint_states')],
         condition=IfCondition(LaunchConfiguration('use_robot_state_publisher')))
     return LaunchDescription([
-        DeclareLaunchArgument('params_file', default_value=os.path.join(share, 'config', 'nodes.yaml'),
+        DeclareLaunchArgument('params_file',
+                              default_value=os.path.join(share, 'config', 'nodes.yaml'),
                               description='ROS 2 parameter file for the four nodes'),
         DeclareLaunchArgument('use_robot_state_publisher', default_value='true',
                               description='also publish the hand URDF as TF'),
