@@ -4,12 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
-from scipy.spatial.transform import Rotation
-from sensor_msgs.msg import CameraInfo, JointState
-from std_msgs.msg import ColorRGBA, Header
-from visualization_msgs.msg import Marker, MarkerArray
-
 from colorglove_msgs.msg import (
     HandObservation,
     HandPoseCandidates,
@@ -17,6 +11,12 @@ from colorglove_msgs.msg import (
     PatchConstraint,
     PoseCandidate,
 )
+from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import CameraInfo, JointState
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker, MarkerArray
+
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.crop import TINY_SIZE, CropTransform
 from colorglove_ros.core.hand_model import DOF_NAMES, FINGER_DOF_NAMES

@@ -14,13 +14,13 @@ from typing import Any
 import numpy as np
 import rclpy
 import yaml
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image, JointState
 
-from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from colorglove_ros.core.metrics import jitter_runs_mm, latency_summary_ms, pose_accuracy
 from colorglove_ros.launcher import Launcher, NodeSpec, use_fastdds_profile
 from colorglove_ros.msg_conversions import pose_from_joint_state

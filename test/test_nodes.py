@@ -10,6 +10,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from geometry_msgs.msg import PoseStamped
 from node_fixtures import (
     NodeAssets,
@@ -27,7 +28,6 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.crop import TINY_SIZE
 from colorglove_ros.core.database import load_database

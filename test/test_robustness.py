@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from colorglove_msgs.msg import HandPoseCandidates
 from node_fixtures import (
     NodeAssets,
     background_rgb,
@@ -22,7 +23,6 @@ from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import String
 
-from colorglove_msgs.msg import HandPoseCandidates
 from colorglove_ros.launcher import Launcher, NodeSpec
 from colorglove_ros.ros_image import array_to_image
 

@@ -7,13 +7,13 @@ import sys
 from collections import deque
 from dataclasses import replace
 
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from colorglove_ros.core.camera import CalibrationError, load_calibration
 from colorglove_ros.core.glove import default_hand
 from colorglove_ros.core.ik import (

@@ -6,9 +6,9 @@ import sys
 import time
 
 import yaml
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from rclpy.node import Node
 
-from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from colorglove_ros.core.camera import CalibrationError, load_calibration
 from colorglove_ros.core.database import DatabaseError, load_database
 from colorglove_ros.core.search import PoseLookup, SearchError

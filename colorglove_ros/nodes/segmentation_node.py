@@ -5,10 +5,10 @@ from __future__ import annotations
 import sys
 
 import numpy as np
+from colorglove_msgs.msg import HandObservation
 from rclpy.node import Node
 from sensor_msgs.msg import Image
 
-from colorglove_msgs.msg import HandObservation
 from colorglove_ros.core.colorspace import ColorCalibrationError
 from colorglove_ros.core.glove import GLOVE_PALETTE_RGB
 from colorglove_ros.core.segmentation import SegmentationInputError, load_segmenter
