@@ -122,6 +122,10 @@ def test_hand_leaves_and_reenters_view(tmp_path: Path, assets: NodeAssets,
         with running() as h:
             stream = Stream(h)
             stream.stream_until(hand_frames, True, 1, timeout=40.0)      # nodes starting
+            warm_up_deadline = time.monotonic() + 20.0                   # IK's first frames
+            while not stream.joints:
+                assert time.monotonic() < warm_up_deadline, 'no JointState while warming up'
+                stream.send(hand_frames[stream.index % len(hand_frames)])
             before = stream.stream_until(hand_frames, True, 3, timeout=10.0)
             away = stream.stream_until(background_rgb(), False, 3, timeout=10.0)
             back = stream.stream_until(hand_frames, True, 3, timeout=10.0)
