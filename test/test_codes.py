@@ -40,11 +40,14 @@ def test_hamming_matches_naive() -> None:
     out = np.empty(500, np.uint16)
     scratch = np.empty(500, np.uint64)
     count = np.empty(500, np.uint8)
+    out8 = np.full(500, 77, np.uint8)                     # stale contents must not matter
     for q in (0, 17, 499):
         got = hamming_distances(columns, packed[q], out, scratch, count).copy()
         np.testing.assert_array_equal(got, (bits != bits[q]).sum(axis=1))
         np.testing.assert_array_equal(got, hamming_naive(packed, packed[q]))
         assert got[q] == 0
+        np.testing.assert_array_equal(hamming_distances(columns, packed[q], out8, scratch, count),
+                                      got)
 
 
 def test_features_are_pooled_squared_distances() -> None:

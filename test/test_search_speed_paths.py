@@ -74,3 +74,32 @@ def test_vectorised_rotation_matches_scipy() -> None:
     point = np.array([0.01, -0.08, 0.03])
     np.testing.assert_allclose(_rotate(rv, point), Rotation.from_rotvec(rv).apply(point),
                                atol=1e-12)
+
+
+def test_top_k_uint8_binary_search_matches_sort() -> None:
+    rng = np.random.default_rng(4)
+    for k in (1, 7, 50, 299, 300):
+        vals = rng.integers(0, 193, 1000).astype(np.uint8)
+        got = top_k_with_ties(vals, k)
+        cut = np.sort(vals)[k - 1]
+        np.testing.assert_array_equal(got, np.flatnonzero(vals <= cut))
+        np.testing.assert_array_equal(got, top_k_with_ties(vals.astype(np.uint16), k))
+        np.testing.assert_array_equal(got, top_k_with_ties(vals.astype(np.int64), k))
+
+
+def test_precomputed_anchor_offset_gives_same_translation() -> None:
+    from colorglove_ros.core.camera import PinholeCamera
+    from colorglove_ros.core.search import estimate_translation
+
+    rng = np.random.default_rng(6)
+    t = rng.normal([0.0, 0.0, 0.5], 0.02, (5, 3))
+    rv = rng.normal(0.0, 1.0, (5, 3))
+    crop = np.tile([1.1, 30.0, 35.0], (5, 1))
+    anchor = np.array([0.0, -0.07, 0.01])
+    cam = PinholeCamera(640, 480, 600.0, 600.0, 320.0, 240.0)
+    a = estimate_translation(t, crop, RENDER_CAM, (2.0, 100.0, 90.0), cam, rv, anchor)
+    b = estimate_translation(t, crop, RENDER_CAM, (2.0, 100.0, 90.0), cam,
+                             anchor_offset=Rotation.from_rotvec(rv).apply(anchor))
+    np.testing.assert_allclose(a, b, atol=1e-12)
+    c = estimate_translation(t, crop, RENDER_CAM, (2.0, 100.0, 90.0), cam)
+    assert np.abs(a - c).max() > 1e-4                # the anchor matters

@@ -87,10 +87,16 @@ def hamming_distances(columns: np.ndarray, query: np.ndarray, out: np.ndarray,
     """Hamming distances of one packed query (W,) uint64 against a database stored as
     per-word columns (W, N) uint64 (each row contiguous), with no big temporaries.
 
-    ``out`` (N,) uint16 receives the distances; ``scratch`` (N,) uint64 and
-    ``scratch_count`` (N,) uint8 are reused buffers."""
-    out[:] = 0
-    for w in range(columns.shape[0]):
+    ``out`` (N,) uint8 (codes up to 255 bits) or uint16 receives the distances; ``scratch``
+    (N,) uint64 and ``scratch_count`` (N,) uint8 are reused buffers."""
+    start = 0
+    if out.dtype == np.uint8 and columns.shape[0] > 0:
+        np.bitwise_xor(columns[0], query[0], out=scratch)
+        np.bitwise_count(scratch, out=out)            # first word: no zeroing, no add
+        start = 1
+    else:
+        out[:] = 0
+    for w in range(start, columns.shape[0]):
         np.bitwise_xor(columns[w], query[w], out=scratch)
         np.bitwise_count(scratch, out=scratch_count)
         np.add(out, scratch_count, out=out)

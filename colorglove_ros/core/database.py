@@ -648,7 +648,10 @@ def retrain_codes(path: str | Path, num_bits: int = 192, num_pairs: int = 10_000
     arrays = {'codes': np.ascontiguousarray(codes.T), **encoder.to_arrays()}
     for name, arr in arrays.items():
         file = path / f'{name}.npy'
-        np.save(file, arr, allow_pickle=False)
+        tmp = path / f'.{name}.npy.tmp'
+        with tmp.open('wb') as fh:           # new inode: readers holding a memory map of the
+            np.save(fh, arr, allow_pickle=False)   # old file keep valid (old) data, no SIGBUS
+        tmp.replace(file)
         manifest['arrays'][name] = {'file': file.name, 'dtype': str(arr.dtype),
                                     'shape': list(arr.shape), 'bytes': file.stat().st_size,
                                     'crc32': _crc32(file)}
