@@ -21,8 +21,9 @@ __all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'reject_parameter_changes',
 # of queueing them without bound.
 LATEST_ONLY = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=1,
                          reliability=QoSReliabilityPolicy.RELIABLE)
-# Camera images: sensor-data style (best effort matches reliable and best-effort publishers).
-LATEST_IMAGE = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=1,
+# Camera images: sensor-data style (best effort matches reliable and best-effort publishers);
+# a queue of 3 absorbs a burst of frames without building up latency.
+LATEST_IMAGE = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=3,
                           reliability=QoSReliabilityPolicy.BEST_EFFORT)
 
 
