@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from label_samples import random_blob_images
 
 from colorglove_ros.core.codes import (
     CodeError,
@@ -60,12 +61,7 @@ def test_features_are_pooled_squared_distances() -> None:
 def _blob_pairs(seed: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Images, pairs and similar flags: each base image with a 1-2 px shifted copy."""
     rng = np.random.default_rng(seed)
-    yy, xx = np.mgrid[0:40, 0:40]
-    base = np.zeros((n, 40, 40), np.uint8)
-    for i in range(n):
-        for _ in range(5):
-            c, x, y, r = rng.integers(1, 11), *rng.integers(6, 34, 2), rng.integers(3, 8)
-            base[i][(xx - x) ** 2 + (yy - y) ** 2 <= r * r] = c
+    base = random_blob_images(rng, n)
     shifted = np.stack([np.roll(b, tuple(rng.integers(-2, 3, 2)), axis=(0, 1)) for b in base])
     imgs = np.concatenate([base, shifted])
     pos = np.stack([np.arange(n), np.arange(n) + n], axis=1)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from label_samples import random_blob_images
 
 from colorglove_ros.core.database import (
     DATABASE_VERSION,
@@ -25,12 +26,7 @@ RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5,
 
 def _small_db(n: int = 120):
     rng = np.random.default_rng(5)
-    yy, xx = np.mgrid[0:40, 0:40]
-    tiny = np.zeros((n, 40, 40), np.uint8)
-    for i in range(n):
-        for _ in range(4):
-            c, x, y, r = rng.integers(1, 11), *rng.integers(6, 34, 2), rng.integers(3, 8)
-            tiny[i][(xx - x) ** 2 + (yy - y) ** 2 <= r * r] = c
+    tiny = random_blob_images(rng, n, blobs=4)
     poses = rng.normal(size=(n, 26))
     crop = rng.uniform(1, 2, (n, 3))
     return assemble_database(tiny, poses, crop, RENDER_CAM, num_bits=32, num_pairs=200,

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from label_samples import random_blob_images
 
 from colorglove_ros.core.database import DatabaseError, nearest_neighbour_pairs, train_encoder
 from colorglove_ros.core.distance import (
@@ -13,14 +14,7 @@ from colorglove_ros.core.distance import (
 
 
 def _images(n: int = 90) -> np.ndarray:
-    rng = np.random.default_rng(7)
-    yy, xx = np.mgrid[0:40, 0:40]
-    out = np.zeros((n, 40, 40), np.uint8)
-    for i in range(n):
-        for _ in range(4):
-            c, x, y, r = rng.integers(1, 11), *rng.integers(6, 34, 2), rng.integers(3, 8)
-            out[i][(xx - x) ** 2 + (yy - y) ** 2 <= r * r] = c
-    return out
+    return random_blob_images(np.random.default_rng(7), n, blobs=4)
 
 
 def test_hard_negatives_are_farther_than_the_neighbour() -> None:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from label_samples import random_blob_images
 from scipy.spatial.transform import Rotation
 
 from colorglove_ros.core.camera import PinholeCamera
@@ -21,14 +22,7 @@ RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5,
 
 
 def _blob_images(seed: int, n: int) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    yy, xx = np.mgrid[0:40, 0:40]
-    out = np.zeros((n, 40, 40), np.uint8)
-    for i in range(n):
-        for _ in range(5):
-            c, x, y, r = rng.integers(1, 11), *rng.integers(6, 34, 2), rng.integers(3, 8)
-            out[i][(xx - x) ** 2 + (yy - y) ** 2 <= r * r] = c
-    return out
+    return random_blob_images(np.random.default_rng(seed), n)
 
 
 @pytest.fixture(scope='module')
