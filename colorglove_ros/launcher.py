@@ -118,7 +118,8 @@ class Launcher:
 
     def _start(self, index: int) -> None:
         process = subprocess.Popen(self.commands[index], stdout=subprocess.PIPE,
-                                   stderr=subprocess.STDOUT, text=True, bufsize=1,
+                                   stderr=subprocess.STDOUT, text=True, errors='replace',
+                                   bufsize=1,
                                    start_new_session=True)
         self.processes[index] = process
         label = self._label(index)
@@ -185,12 +186,15 @@ def main(argv: list[str] | None = None) -> int:
     stop_event = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop_event.set())
+    timer = threading.Timer(args.duration, stop_event.set)
+    timer.daemon = True
     if args.duration > 0:
-        threading.Timer(args.duration, stop_event.set).start()
-    launcher.start()
+        timer.start()
     try:
+        launcher.start()
         code = launcher.watch(stop_event)
     finally:
+        timer.cancel()
         launcher.stop()
         print('[launch] all nodes stopped', flush=True)
     return code

@@ -26,7 +26,7 @@ from colorglove_ros.core.search import LookupResult
 from colorglove_ros.core.segmentation import Observation
 
 __all__ = [
-    'stamp_to_seconds', 'seconds_to_stamp', 'camera_info_from_camera', 'joint_state_from_pose',
+    'stamp_to_seconds', 'camera_info_from_camera', 'joint_state_from_pose',
     'pose_stamped_from_pose', 'pose_from_joint_state', 'crop_from_observation',
     'tiny_labels_from_observation', 'blobs_from_observation', 'camera_observation_from_msg',
     'candidates_msg', 'pose_prior_from_candidates', 'skeleton_markers',
@@ -37,12 +37,6 @@ __all__ = [
 def stamp_to_seconds(stamp: Time) -> float:
     """A header stamp as float seconds."""
     return stamp.sec + stamp.nanosec * 1e-9
-
-
-def seconds_to_stamp(seconds: float) -> Time:
-    """Float seconds as a header stamp."""
-    sec = int(np.floor(seconds))
-    return Time(sec=sec, nanosec=min(int(round((seconds - sec) * 1e9)), 999_999_999))
 
 
 def camera_info_from_camera(camera: PinholeCamera, header: Header) -> CameraInfo:
@@ -142,7 +136,11 @@ def pose_prior_from_candidates(msg: HandPoseCandidates) -> PosePrior:
     if list(msg.dof_names) != list(DOF_NAMES):
         raise ValueError(f'candidates carry DOFs {list(msg.dof_names)[:3]}..., '
                          f'expected {list(DOF_NAMES)[:3]}...')
+    if len(msg.blended_pose) != len(DOF_NAMES) or not np.all(np.isfinite(msg.blended_pose)):
+        raise ValueError('blended_pose must hold 26 finite values')
     constraints = msg.constraints
+    if not all(np.isfinite([c.tiny_x, c.tiny_y]).all() for c in constraints):
+        raise ValueError('constraint centroids must be finite')
     return PosePrior(
         q_blend=np.asarray(msg.blended_pose, dtype=float),
         constraints=EntryConstraints(

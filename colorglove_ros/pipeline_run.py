@@ -125,14 +125,15 @@ class PipelineMonitor(Node):
             self.overlays.append(image_to_rgb8(deserialize_message(data, Image)))
 
     def active_duration(self) -> float:
-        """Seconds from the first camera frame seen to the last JointState (0 if none)."""
+        """Seconds from the first to the last JointState received (0 if fewer than two)."""
         with self.lock:
-            if not self.frame_times or not self.output_times:
+            if len(self.output_times) < 2:
                 return 0.0
-            return max(self.output_times.values()) - min(self.frame_times.values())
+            return max(self.output_times.values()) - min(self.output_times.values())
 
-    def wait_for_frames(self, count: int, timeout_s: float, settle_s: float = 2.0) -> None:
-        """Wait until ``count`` frames were seen and outputs stopped arriving for ``settle_s``."""
+    def wait_for_frames(self, count: int, timeout_s: float, settle_s: float = 2.0) -> bool:
+        """Wait until ``count`` frames were seen and outputs stopped arriving for ``settle_s``;
+        False if ``timeout_s`` passed first."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             with self.lock:
@@ -140,15 +141,16 @@ class PipelineMonitor(Node):
                 last = max(self.output_times.values(), default=0.0)
                 last = max(last, max(self.frame_times.values(), default=0.0))
             if seen >= count and time.monotonic() - last > settle_s:
-                return
+                return True
             time.sleep(0.1)
+        return False
 
 
 @dataclass
 class PipelineRun:
     """What a run measured (see :func:`summarize`)."""
 
-    frames_published: int
+    frames_expected: int
     frames: int
     segmented: int
     tracked: int
@@ -160,6 +162,7 @@ class PipelineRun:
     lookup_ms: list[float]
     stage_latencies_s: dict[str, list[float]] = field(default_factory=dict)
     frame_index: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    timed_out: bool = False
     overlays: list[np.ndarray] = field(default_factory=list)
 
 
@@ -208,7 +211,7 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
             else:
                 started = time.monotonic()
                 launcher.start()
-            monitor.wait_for_frames(expected_frames, timeout_s)
+            completed = monitor.wait_for_frames(expected_frames, timeout_s)
             duration = monitor.active_duration() or time.monotonic() - started
         finally:
             launcher.stop()
@@ -216,19 +219,29 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
             spinner.join(timeout=5.0)
             monitor.destroy_node()
             rclpy.try_shutdown(context=context)
-    return _collect(monitor, duration, expected_frames)
+    run = _collect(monitor, duration, expected_frames)
+    run.timed_out = not completed
+    return run
+
+
+# Each stage's input topic and the node that must subscribe to it before frames flow.
+STAGE_INPUTS = {'/camera/image_raw': 'segmentation', '/hand/observation': 'lookup',
+                '/hand/pose_candidates': 'ik'}
 
 
 def _wait_for_graph(monitor: PipelineMonitor, timeout_s: float) -> None:
-    """Wait until the segmentation node subscribes to images and ik_node publishes joints."""
+    """Wait until every stage node (not just the monitor) subscribes to its input topic."""
     deadline = time.monotonic() + timeout_s
+    missing = dict(STAGE_INPUTS)
     while time.monotonic() < deadline:
-        if monitor.count_publishers('/hand/joint_states') > 0 and \
-                monitor.count_subscribers('/camera/image_raw') > 1 and \
-                monitor.count_subscribers('/hand/observation') > 0:
+        missing = {topic: node for topic, node in STAGE_INPUTS.items()
+                   if node not in {info.node_name
+                                   for info in monitor.get_subscriptions_info_by_topic(topic)}}
+        if not missing:
             return
         time.sleep(0.2)
-    raise TimeoutError(f'the tracker nodes did not come up within {timeout_s:.0f} s')
+    raise TimeoutError(f'the tracker nodes did not come up within {timeout_s:.0f} s: '
+                       f'no subscriber {missing}')
 
 
 def _collect(monitor: PipelineMonitor, duration: float, published: int) -> PipelineRun:
@@ -249,7 +262,7 @@ def _collect(monitor: PipelineMonitor, duration: float, published: int) -> Pipel
         truth = np.array([_pose_from(monitor.truth_joints[k], monitor.truth_wrists[k])
                           for k in matched])
         return PipelineRun(
-            frames_published=published, frames=len(monitor.frame_times),
+            frames_expected=published, frames=len(monitor.frame_times),
             segmented=len(monitor.observation_times), tracked=len(monitor.joints),
             duration_s=duration,
             latencies_s=latencies, estimated=estimated.reshape(-1, 26),
@@ -268,10 +281,11 @@ def summarize(run: PipelineRun, model) -> dict[str, float]:
     """The figures of a run: counts, rate, latency percentiles, stage times, accuracy."""
     latency = latency_summary_ms(run.latencies_s)
     figures = {
-        'frames_published': run.frames_published, 'frames_seen_by_monitor': run.frames,
+        'frames_expected': run.frames_expected, 'frames_seen_by_monitor': run.frames,
         'frames_segmented': run.segmented, 'frames_tracked': run.tracked,
-        'tracked_fraction': run.tracked / run.frames_published if run.frames_published else 0.0,
-        'output_rate_hz': run.tracked / run.duration_s if run.duration_s > 0 else 0.0,
+        'tracked_fraction': run.tracked / run.frames_expected if run.frames_expected else 0.0,
+        # JointStates per second between the first and the last one received
+        'output_rate_hz': (run.tracked - 1) / run.duration_s if run.duration_s > 0 else 0.0,
         'latency_mean_ms': latency['mean'], 'latency_p50_ms': latency['p50'],
         'latency_p95_ms': latency['p95'],
         'segmentation_compute_ms': _mean(run.segmentation_ms),

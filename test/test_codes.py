@@ -51,6 +51,23 @@ def test_hamming_matches_naive() -> None:
                                       got)
 
 
+def test_hamming_blocks_match_whole_scan(monkeypatch) -> None:
+    """Blocks of 7 entries (a partial last block) give the same distances as one pass."""
+    import colorglove_ros.core.codes as codes_mod
+
+    rng = np.random.default_rng(4)
+    bits = rng.random((53, 130)) < 0.5
+    packed = pack_codes(bits)
+    columns = np.ascontiguousarray(packed.T)
+    want = (bits != bits[5]).sum(axis=1)
+    monkeypatch.setattr(codes_mod, 'HAMMING_BLOCK', 7)
+    for dtype in (np.uint8, np.uint16):
+        out = np.full(53, 200, dtype)
+        got = hamming_distances(columns, packed[5], out, np.empty(7, np.uint64),
+                                np.empty(7, np.uint8))
+        np.testing.assert_array_equal(got, want)
+
+
 def test_features_are_pooled_squared_distances() -> None:
     rng = np.random.default_rng(0)
     dts = rng.random((3, 10, 40, 40)).astype(np.float32) * 50

@@ -25,8 +25,13 @@ def _poses(count: int) -> np.ndarray:
     return poses
 
 
-def test_five_fingertips() -> None:
-    assert len(FINGERTIP_INDICES) == 5
+def test_fingertips_are_the_last_keypoint_of_each_digit() -> None:
+    from colorglove_ros.core.hand_model import DIGITS, KEYPOINT_NAMES
+
+    last_of_digit = [max(i for i, name in enumerate(KEYPOINT_NAMES) if name.startswith(f'{d}_'))
+                     for d in DIGITS]
+    assert FINGERTIP_INDICES.tolist() == last_of_digit
+    assert [KEYPOINT_NAMES[i] for i in FINGERTIP_INDICES] == [f'{d}_tip' for d in DIGITS]
 
 
 def test_identical_sequences_have_zero_error() -> None:

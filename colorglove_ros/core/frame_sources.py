@@ -68,6 +68,8 @@ def _capture_source(target: str | int, description: str, loop: bool) -> FrameSou
             capture.set(cv2.CAP_PROP_POS_FRAMES, 0)
         ok, bgr = capture.read()
         if not ok or bgr is None:
+            if length is None:     # a live device: a failed read is an error, not the end
+                raise FrameSourceError(f'{description}: frame read failed')
             return None
         return Frame(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
 

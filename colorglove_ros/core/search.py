@@ -1,13 +1,14 @@
 """Database lookup: Hamming scan of binary codes, exact re-rank, Gaussian-weighted pose blend."""
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.codes import QueryEncoder, hamming_distances
+from colorglove_ros.core.codes import HAMMING_BLOCK, QueryEncoder, hamming_distances
 from colorglove_ros.core.database import PoseDatabase
 from colorglove_ros.core.distance import ABSENT_PENALTY, DT_SCALE, QueryDistance
 
@@ -51,27 +52,28 @@ class LookupResult:
 def top_k_with_ties(values: np.ndarray, k: int) -> np.ndarray:
     """Indices (ascending) of the k smallest ``values`` plus every index tied with the k-th.
 
-    Small unsigned integer values (Hamming distances) find the cut by counting (uint8: binary
-    search; uint16: histogram), several times faster than ``argpartition`` on 100k entries."""
+    Small unsigned integer values (Hamming distances) find the cut by counting instead of
+    ``argpartition`` (several times slower on 100k entries): a strided sample gives a value
+    that about 2k + 400 entries are expected to be at or below, one pass keeps those, and a
+    histogram of the kept entries gives the exact cut; if the guess keeps fewer than k
+    entries, the histogram is taken over all values."""
+    values = np.asarray(values)
     n = len(values)
     if k >= n:
         return np.arange(n)
-    if values.dtype == np.uint8:
-        # binary search for the smallest value with >= k entries at or below it: 8 counting
-        # passes over bytes beat a histogram (which first widens every value to intp)
-        lo, hi = 0, int(values.max())
-        while lo < hi:
-            mid = (lo + hi) // 2
-            if np.count_nonzero(values <= mid) >= k:
-                hi = mid
-            else:
-                lo = mid + 1
-        cut = lo
-    elif values.dtype.kind == 'u' and values.dtype.itemsize <= 2:
-        cum = np.cumsum(np.bincount(values))
+    if values.dtype.kind == 'u' and values.dtype.itemsize <= 2:
+        step = max(1, n // 2048)
+        sample = values[::step]
+        j = min(len(sample) - 1, (2 * k) // step + 8)
+        guess = int(np.partition(sample, j)[j])
+        sel = np.flatnonzero(values <= guess)
+        if len(sel) < k:
+            sel = np.arange(n)
+        sub = values[sel]
+        cum = np.cumsum(np.bincount(sub))
         cut = int(np.searchsorted(cum, k))      # smallest value with >= k entries at or below
-    else:
-        cut = values[np.argpartition(values, k - 1)[:k]].max()
+        return sel[sub <= cut]
+    cut = values[np.argpartition(values, k - 1)[:k]].max()
     return np.flatnonzero(values <= cut)
 
 
@@ -98,12 +100,12 @@ def blend_poses(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 def _rotvec_to_quat(rv: np.ndarray) -> np.ndarray:
     """(k, 3) rotation vectors -> (k, 4) unit quaternions (x, y, z, w)."""
-    angle = np.linalg.norm(rv, axis=1)
-    half = 0.5 * angle
-    # sin(a/2)/a, with its series near 0
-    small = angle < 1e-6
-    k = np.where(small, 0.5 - angle ** 2 / 48.0, np.sin(half) / np.where(small, 1.0, angle))
-    return np.concatenate([rv * k[:, None], np.cos(half)[:, None]], axis=1)
+    angle = np.sqrt(np.einsum('ij,ij->i', rv, rv))
+    out = np.empty((len(rv), 4))
+    # sin(a/2)/a = sinc(a/(2 pi))/2, exact at a = 0
+    np.multiply(rv, 0.5 * np.sinc(angle * (0.5 / np.pi))[:, None], out=out[:, :3])
+    np.cos(0.5 * angle, out=out[:, 3])
+    return out
 
 
 def _quat_mean(quats: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -114,13 +116,15 @@ def _quat_mean(quats: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 
 def _quat_to_rotvec(q: np.ndarray) -> np.ndarray:
-    q = q / np.linalg.norm(q)
-    if q[3] < 0:
-        q = -q
-    s = float(np.linalg.norm(q[:3]))
-    if s < 1e-12:
-        return 2.0 * q[:3]
-    return q[:3] * (2.0 * np.arctan2(s, q[3]) / s)
+    x, y, z, w = (float(v) for v in q)
+    if w < 0.0:
+        x, y, z, w = -x, -y, -z, -w
+    s = math.sqrt(x * x + y * y + z * z)
+    if s < 1e-12 * math.hypot(s, w):
+        f = 2.0 / math.hypot(s, w)
+    else:
+        f = 2.0 * math.atan2(s, w) / s
+    return np.array([x * f, y * f, z * f])
 
 
 def estimate_translation(entry_translation: np.ndarray, entry_crop: np.ndarray,
@@ -203,8 +207,8 @@ class PoseLookup:
         self._columns = np.ascontiguousarray(database.codes)
         # Hamming distances fit a byte up to 255 bits: uint8 accumulation halves the traffic.
         self._ham = np.empty(n, np.uint8 if database.num_bits <= 255 else np.uint16)
-        self._xor = np.empty(n, np.uint64)
-        self._cnt = np.empty(n, np.uint8)
+        self._xor = np.empty(min(n, HAMMING_BLOCK), np.uint64)
+        self._cnt = np.empty(min(n, HAMMING_BLOCK), np.uint8)
         self._qenc = QueryEncoder(database.encoder)
         # plain ndarray views of the (memory-mapped) arrays: no np.memmap indexing overhead
         self._a = {name: np.asarray(getattr(database, name)) for name in (
@@ -222,6 +226,7 @@ class PoseLookup:
         # the anchor (hand centre) rotated by every entry's global rotation, once
         self._offsets = (None if self._anchor is None else
                          _rotate(self._a['poses'][:, 3:6].astype(np.float64), self._anchor))
+        self._anchor_table = self._anchor_terms()
 
     def hamming(self, tiny_labels: np.ndarray) -> np.ndarray:
         """Hamming distances (N,) of a query to every entry (a copy)."""
@@ -285,10 +290,7 @@ class PoseLookup:
         t3 = time.perf_counter()
         weights = blend_weights(d)
         poses = self._a['poses'][idx].astype(np.float64)
-        poses[:, 0:3] = estimate_translation(poses[:, 0:3], self._a['crop'][idx],
-                                             self.db.render_camera, crop, camera,
-                                             anchor_offset=(None if self._offsets is None
-                                                            else self._offsets[idx]))
+        poses[:, 0:3] = self._translation(idx, crop, camera)
         blended = blend_poses(poses, weights)
         constraints = self._constraints(int(idx[0]), crop)
         t4 = time.perf_counter()
@@ -296,6 +298,38 @@ class PoseLookup:
                    'rerank_ms': 1e3 * (t3 - t2), 'blend_ms': 1e3 * (t4 - t3),
                    'total_ms': 1e3 * (t4 - t0)}
         return LookupResult(idx, d, weights, poses, blended, constraints, len(cand), timings)
+
+    def _anchor_terms(self) -> np.ndarray:
+        """Per entry, the query-independent part of :func:`estimate_translation`: (N, 6)
+        anchor tiny-image x, y, anchor depth times crop scale, and the anchor offset."""
+        t = self._a['poses'][:, 0:3].astype(np.float64)
+        crop = np.asarray(self._a['crop'], np.float64)
+        offset = np.zeros_like(t) if self._offsets is None else self._offsets
+        anchor = t + offset
+        rc = self.db.render_camera
+        u = rc['fx'] * anchor[:, 0] / anchor[:, 2] + rc['cx']
+        v = rc['fy'] * anchor[:, 1] / anchor[:, 2] + rc['cy']
+        return np.column_stack([(u - crop[:, 1]) / crop[:, 0], (v - crop[:, 2]) / crop[:, 0],
+                                anchor[:, 2] * crop[:, 0], offset])
+
+    def _translation(self, idx: np.ndarray, crop: tuple[float, float, float],
+                     camera: PinholeCamera) -> np.ndarray:
+        """:func:`estimate_translation` of entries ``idx`` (with the hand-centre anchor)
+        from the precomputed per-entry terms: a handful of operations on k rows."""
+        a = self._anchor_table[idx]
+        rc = self.db.render_camera
+        sq, oqx, oqy = crop
+        z_q = a[:, 2] * ((0.5 * (camera.fx + camera.fy)) / (0.5 * (rc['fx'] + rc['fy'])) / sq)
+        full = a[:, 0:2] * sq
+        full += (oqx, oqy)
+        if np.any(camera.distortion):
+            full = camera.undistort_pixels(full)
+        out = np.empty((len(idx), 3))
+        out[:, 0] = (full[:, 0] - camera.cx) * (z_q / camera.fx)
+        out[:, 1] = (full[:, 1] - camera.cy) * (z_q / camera.fy)
+        out[:, 2] = z_q
+        out -= a[:, 3:6]
+        return out
 
     def _constraints(self, entry: int, crop: tuple[float, float, float]
                      ) -> ProjectionConstraints:

@@ -28,10 +28,9 @@ LATEST_IMAGE = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=3,
 
 
 def declare(node: Node, name: str, default: Any, description: str,
-            minimum: float | None = None, maximum: float | None = None,
-            read_only: bool = False) -> Any:
+            minimum: float | None = None, maximum: float | None = None) -> Any:
     """Declare a parameter with a description (and a range for numbers); return its value."""
-    descriptor = ParameterDescriptor(description=description, read_only=read_only)
+    descriptor = ParameterDescriptor(description=description)
     if minimum is not None and maximum is not None:
         if isinstance(default, bool):
             pass

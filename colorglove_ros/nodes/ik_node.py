@@ -7,6 +7,7 @@ import sys
 from collections import deque
 from dataclasses import replace
 
+import numpy as np
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
@@ -19,7 +20,6 @@ from colorglove_ros.core.glove import default_hand
 from colorglove_ros.core.ik import (
     CameraObservation,
     HandTracker,
-    IKConfigError,
     IKError,
     load_ik_config,
 )
@@ -62,14 +62,15 @@ class IKNode(Node):
         extra_topics = declare(self, 'extra_observation_topics', '',
                                'comma-separated HandObservation topics of cameras 1..N-1')
         reject_parameter_changes(self, {'calibration_file', 'ik_config', 'enable_ik',
-                                        'enable_smoothing', 'extra_observation_topics'})
+                                        'enable_smoothing', 'extra_observation_topics',
+                                        'publish_overlay'})
         try:
             calibration = load_calibration(resolve_path(calibration_file))
             config = load_ik_config(resolve_path(ik_config))
             model, mesh, _ = default_hand(calibration.hand_length_m)
             config = replace(config, enable_ik=enable_ik, enable_smoothing=enable_smoothing)
             self.tracker = HandTracker(model, mesh, calibration.cameras, config)
-        except (CalibrationError, IKConfigError, ValueError) as exc:
+        except (CalibrationError, IKError, ValueError) as exc:
             raise StartupError(f'ik_node cannot start: {exc}') from exc
         self.model = model
         self.cameras = calibration.cameras
@@ -124,6 +125,11 @@ class IKNode(Node):
             return
         if not result.found:
             self._report_no_hand(msg, msg.status or 'lost')
+            return
+        if not np.all(np.isfinite(result.q)):
+            self.get_logger().warn('IK gave a non-finite pose; dropped', throttle_duration_sec=1.0)
+            self.tracker.reset()
+            self._report_no_hand(msg, 'non-finite pose')
             return
         self.hand_was_found = True
         self.joint_pub.publish(joint_state_from_pose(result.q, msg.header))

@@ -56,7 +56,8 @@ class LookupNode(Node):
         reject_parameter_changes(self, {'database_config', 'database_path', 'calibration_file',
                                         'num_candidates', 'num_neighbors'})
         try:
-            path = database_path or database_path_from_config(database_config)
+            path = str(resolve_path(database_path)) if database_path else \
+                database_path_from_config(database_config)
             self.camera = load_calibration(resolve_path(calibration_file)).primary
             started = time.perf_counter()
             self.lookup = PoseLookup(load_database(path), num_candidates, num_neighbors)

@@ -1,7 +1,8 @@
-"""Throughput and latency of the four-node pipeline: a 640x480 synthetic bag played at the
-camera rate into segmentation_node, lookup_node and ik_node (separate processes over DDS) with
-the configured (default 100,000-entry) database; camera-frame-to-JointState latency p50/p95 and
-the per-stage split."""
+"""Throughput and latency of the four-node pipeline: a 640x480 synthetic bag played into
+segmentation_node, lookup_node and ik_node (separate processes over DDS) with the configured
+(default 100,000-entry) database. Latency (camera frame to JointState, p50/p95, per-stage split)
+is measured at the 30 Hz camera rate; throughput in a second pass that offers frames faster
+(--throughput-rate times 30 Hz), as JointStates per second delivered."""
 from __future__ import annotations
 
 import argparse
@@ -19,7 +20,7 @@ __all__ = ['TARGETS', 'ensure_bag', 'main']
 
 # name: (figure, comparison, bound)
 TARGETS = {
-    'throughput >= 30 frames/s': ('output_rate_hz', '>=', 30.0),
+    'throughput >= 30 frames/s': ('throughput_hz', '>=', 30.0),
     'latency p95 < 60 ms': ('latency_p95_ms', '<', 60.0),
 }
 
@@ -52,7 +53,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--frames', type=int, default=300, help='frames in the bag')
     parser.add_argument('--seed', type=int, default=2, help='seed of the synthetic bag')
     parser.add_argument('--rate', type=float, default=1.0,
-                        help='playback speed (1.0 = the 30 Hz camera rate)')
+                        help='playback speed of the latency pass (1.0 = the 30 Hz camera rate)')
+    parser.add_argument('--throughput-rate', type=float, default=2.0,
+                        help='playback speed of the throughput pass (2.0 = offered at 60 Hz)')
     parser.add_argument('--database', type=Path, help='pose database (default: config)')
     parser.add_argument('--json', type=Path, help='write the figures as JSON')
     args = parser.parse_args(argv)
@@ -62,13 +65,24 @@ def main(argv: list[str] | None = None) -> int:
     bag = ensure_bag(args.seed, args.frames)
     parameters = pipeline_parameters(database, args.seed, args.frames, 30.0)
     del parameters['camera']
-    run = run_pipeline(parameters, expected_frames=args.frames,
-                       feed=bag_feed(bag, rate=args.rate), timeout_s=120.0 + args.frames / 5.0)
-    figures = summarize(run, default_hand()[0])
+    model = default_hand()[0]
+    runs = {}
+    for name, rate in (('latency', args.rate), ('throughput', args.throughput_rate)):
+        print(f'[benchmark] {name} pass: bag played at {30.0 * rate:g} Hz', flush=True)
+        runs[name] = run_pipeline(parameters, expected_frames=args.frames,
+                                  feed=bag_feed(bag, rate=rate),
+                                  timeout_s=120.0 + args.frames / 5.0)
+        if runs[name].timed_out:
+            print(f'[benchmark] {name} pass timed out', flush=True)
+            return 1
+    figures = summarize(runs['latency'], model)
     figures['playback_rate_hz'] = 30.0 * args.rate
+    throughput = summarize(runs['throughput'], model)
+    figures['throughput_offered_hz'] = 30.0 * args.throughput_rate
+    figures['throughput_hz'] = throughput['output_rate_hz']
+    figures['throughput_tracked_fraction'] = throughput['tracked_fraction']
     print_table([{'figure': k, 'value': v} for k, v in figures.items()],
-                title=f'pipeline benchmark: {bag.name} at {30.0 * args.rate:g} Hz, '
-                      f'{database.name}')
+                title=f'pipeline benchmark: {bag.name}, {database.name}')
     targets = check_targets(figures)
     print_table(targets, title='targets (measured on this machine)')
     if args.json:
