@@ -30,7 +30,7 @@ __all__ = [
     'pose_stamped_from_pose', 'pose_from_joint_state', 'crop_from_observation',
     'tiny_labels_from_observation', 'blobs_from_observation', 'camera_observation_from_msg',
     'candidates_msg', 'pose_prior_from_candidates', 'skeleton_markers',
-    'observation_msg',
+    'observation_msg', 'tf_message_from_pose',
 ]
 
 
@@ -189,3 +189,17 @@ def observation_msg(observation: Observation, header: Header) -> HandObservation
     msg.blobs = [PatchBlob(color_label=int(b.color_label), x=float(b.centroid_x),
                            y=float(b.centroid_y), pixel_count=int(b.pixel_count)) for b in blobs]
     return msg
+
+
+def tf_message_from_pose(pose: PoseStamped, child_frame_id: str):
+    """A ``tf2_msgs/TFMessage`` carrying ``pose`` as the transform header.frame_id -> child
+    (tf2_msgs is imported here because it exists only on native ROS 2 installs)."""
+    from geometry_msgs.msg import Transform, TransformStamped, Vector3
+    from tf2_msgs.msg import TFMessage
+
+    p = pose.pose.position
+    transform = Transform(translation=Vector3(x=p.x, y=p.y, z=p.z),
+                          rotation=pose.pose.orientation)
+    return TFMessage(transforms=[TransformStamped(header=pose.header,
+                                                  child_frame_id=child_frame_id,
+                                                  transform=transform)])

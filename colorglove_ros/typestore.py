@@ -1,13 +1,14 @@
 """A rosbags type store that knows the Jazzy standard messages and this package's own."""
 from __future__ import annotations
 
+import importlib
 from functools import cache
 from pathlib import Path
 
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-__all__ = ['colorglove_typestore', 'colorglove_msg_files', 'deserialize_cdr']
+__all__ = ['colorglove_typestore', 'colorglove_msg_files', 'deserialize_cdr', 'message_class']
 
 _MSG_PACKAGE = 'colorglove_msgs'
 
@@ -48,3 +49,10 @@ def deserialize_cdr(data: bytes | memoryview, msgtype: str, store: Typestore | N
     func = msgdef.deserialize_cdr_le if raw[1] else msgdef.deserialize_cdr_be
     message, _ = func(raw[4:], 0, msgdef.cls, store)
     return message
+
+
+def message_class(msgtype: str) -> type:
+    """The rclpy message class of a type name such as ``sensor_msgs/msg/Image``."""
+    package, _, name = msgtype.split('/')
+    module = importlib.import_module(f'{package}.msg')
+    return getattr(module, name)

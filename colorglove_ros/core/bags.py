@@ -27,6 +27,7 @@ from scipy.spatial.transform import Rotation
 
 from .camera import PinholeCamera
 from .hand_model import FINGER_DOF_NAMES, KEYPOINT_NAMES, NUM_DOFS
+from .overlay import SKELETON_BONES
 
 __all__ = [
     'BagError', 'BagFrame', 'SequenceBagWriter', 'write_sequence_bag', 'read_sequence_bag',
@@ -43,10 +44,6 @@ TOPIC_KEYPOINTS = '/hand/ground_truth/keypoints'
 FRAME_ID = 'camera_optical_frame'
 DEFAULT_START_NS = 1_700_000_000 * 10**9     # fixed so bags from one seed are identical
 _KEYPOINTS_NS = 'keypoints'
-# bones as keypoint index pairs: wrist to each digit base, then along every digit
-SKELETON_BONES: tuple[tuple[int, int], ...] = tuple(
-    pair for d in range(5) for pair in
-    [(0, 1 + 4 * d)] + [(1 + 4 * d + k, 2 + 4 * d + k) for k in range(3)])
 
 _TYPES = {
     TOPIC_IMAGE: 'sensor_msgs/msg/Image',

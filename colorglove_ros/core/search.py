@@ -101,10 +101,14 @@ def blend_poses(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
 def _rotvec_to_quat(rv: np.ndarray) -> np.ndarray:
     """(k, 3) rotation vectors -> (k, 4) unit quaternions (x, y, z, w)."""
     angle = np.sqrt(np.einsum('ij,ij->i', rv, rv))
+    half = 0.5 * angle
+    k = np.sin(half)
+    small = angle <= 1e-8
+    np.divide(k, angle, out=k, where=~small)
+    k[small] = 0.5            # sin(a/2)/a = 1/2 - a^2/48 + ...: exactly 1/2 in doubles here
     out = np.empty((len(rv), 4))
-    # sin(a/2)/a = sinc(a/(2 pi))/2, exact at a = 0
-    np.multiply(rv, 0.5 * np.sinc(angle * (0.5 / np.pi))[:, None], out=out[:, :3])
-    np.cos(0.5 * angle, out=out[:, 3])
+    np.multiply(rv, k[:, None], out=out[:, :3])
+    np.cos(half, out=out[:, 3])
     return out
 
 
@@ -221,12 +225,21 @@ class PoseLookup:
         # query DT lookup table, last slot (the padding key 16000) reads zero
         self._table = np.zeros(self._row + 1, np.float32)
         self._rerank_groups = 4
+        self._buffers: dict[str, np.ndarray] = {}
         anchor = database.meta.get('hand_centre_local')
         self._anchor = None if anchor is None else np.asarray(anchor, np.float64)
         # the anchor (hand centre) rotated by every entry's global rotation, once
         self._offsets = (None if self._anchor is None else
                          _rotate(self._a['poses'][:, 3:6].astype(np.float64), self._anchor))
         self._anchor_table = self._anchor_terms()
+
+    def _buffer(self, name: str, size: int, dtype: type) -> np.ndarray:
+        """A reused flat scratch array of at least ``size`` entries (grown as needed)."""
+        buf = self._buffers.get(name)
+        if buf is None or len(buf) < size:
+            buf = np.empty(max(size, 2 * (0 if buf is None else len(buf))), dtype)
+            self._buffers[name] = buf
+        return buf[:size]
 
     def hamming(self, tiny_labels: np.ndarray) -> np.ndarray:
         """Hamming distances (N,) of a query to every entry (a copy)."""
@@ -246,19 +259,27 @@ class PoseLookup:
         cand_sum = np.empty(len(idx), np.float64)
         # Candidates in groups of similar glove-pixel count, each gathered only up to its
         # largest count: far fewer padding keys than one block as wide as the largest count.
+        # Gathers go through reused buffers (fresh megabyte temporaries cost page faults).
         order = np.argsort(counts, kind='stable')
-        for grp in np.array_split(order, min(self._rerank_groups, max(1, len(idx)))):
+        groups = min(self._rerank_groups, max(1, len(idx)))
+        bounds = (len(idx) * np.arange(groups + 1)) // groups
+        for g in range(groups):
+            grp = order[bounds[g]:bounds[g + 1]]
             if len(grp) == 0:
                 continue
             width = max(1, int(counts[grp[-1]]))
-            rows = idx[grp]
-            keys = self._a['pixel_keys'][rows, :width].astype(np.intp)   # padding reads zero
-            cand_sum[grp] = table.take(keys, mode='clip').sum(axis=1)
+            keys = self._buffer('keys', len(grp) * width, np.intp).reshape(len(grp), width)
+            np.copyto(keys, self._a['pixel_keys'][idx[grp], :width])   # padding reads zero
+            vals = self._buffer('vals', keys.size, np.float32).reshape(keys.shape)
+            table.take(keys, out=vals, mode='clip')
+            cand_sum[grp] = vals.sum(axis=1)
         nq = query.num_pixels
         if nq:
-            flat_idx = np.empty((len(idx), nq), np.intp)
+            flat_idx = self._buffer('flat', len(idx) * nq, np.intp).reshape(len(idx), nq)
             np.add((idx * self._row)[:, None], query.glove_index, out=flat_idx)
-            q_sum = self._dts_all.take(flat_idx, mode='clip').sum(axis=1, dtype=np.uint32)
+            got = self._buffer('dt', flat_idx.size, np.uint8).reshape(flat_idx.shape)
+            self._dts_all.take(flat_idx, out=got, mode='clip')
+            q_sum = got.sum(axis=1, dtype=np.uint32)
             d_qc = q_sum * (1.0 / (DT_SCALE * nq))
             d_cq = np.where(counts > 0, cand_sum / np.maximum(counts, 1.0), ABSENT_PENALTY)
         else:

@@ -31,6 +31,7 @@ from colorglove_ros.msg_conversions import (
     pose_stamped_from_pose,
     skeleton_markers,
     stamp_to_seconds,
+    tf_message_from_pose,
 )
 from colorglove_ros.nodes.common import (
     LATEST_IMAGE,
@@ -96,7 +97,20 @@ class IKNode(Node):
             self.create_subscription(Image, 'camera/image_raw',
                                      lambda image: self.recent_images.append(image), LATEST_IMAGE)
         self.hand_was_found = False
+        self.tf_pub = self._tf_publisher()
         self.get_logger().info(f'tracking with {len(self.cameras)} camera(s)')
+
+    def _tf_publisher(self):
+        """A /tf publisher for the camera -> palm transform (so robot_state_publisher's URDF
+        frames hang off the camera), when tf2_msgs is installed (native ROS 2; it is not on
+        PyPI, where the wrist pose is on /hand/wrist_pose only)."""
+        try:
+            from tf2_msgs.msg import TFMessage
+        except ImportError:
+            self.get_logger().info('tf2_msgs not installed: camera->palm TF not broadcast '
+                                   '(the wrist pose is on hand/wrist_pose)')
+            return None
+        return self.create_publisher(TFMessage, '/tf', 10)
 
     def _extra_camera_observations(self, stamp: float) -> list[CameraObservation]:
         observations = []
@@ -133,7 +147,10 @@ class IKNode(Node):
             return
         self.hand_was_found = True
         self.joint_pub.publish(joint_state_from_pose(result.q, msg.header))
-        self.wrist_pub.publish(pose_stamped_from_pose(result.q, msg.header))
+        wrist = pose_stamped_from_pose(result.q, msg.header)
+        self.wrist_pub.publish(wrist)
+        if self.tf_pub is not None:
+            self.tf_pub.publish(tf_message_from_pose(wrist, child_frame_id='palm'))
         keypoints = self.model.keypoints(result.q)
         self.marker_pub.publish(skeleton_markers(keypoints, msg.header))
         self.status_pub.publish(String(

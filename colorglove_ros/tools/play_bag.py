@@ -13,15 +13,9 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 from rosbags.highlevel import AnyReader
 
-from colorglove_ros.typestore import colorglove_typestore
+from colorglove_ros.typestore import colorglove_typestore, message_class
 
 __all__ = ['BagPlayer', 'main']
-
-
-def _import_message_class(msgtype: str):
-    package, _, name = msgtype.split('/')
-    module = __import__(f'{package}.msg', fromlist=[name])
-    return getattr(module, name)
 
 
 class BagPlayer(Node):
@@ -37,7 +31,7 @@ class BagPlayer(Node):
             raise ValueError(f'bag {bag} has none of the topics {topics}')
         qos = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE)
         self.publishers_by_topic = {
-            c.topic: self.create_publisher(_import_message_class(c.msgtype), c.topic, qos)
+            c.topic: self.create_publisher(message_class(c.msgtype), c.topic, qos)
             for c in self.connections}
         self.output_event = threading.Event()
 
@@ -109,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         player = BagPlayer(args.bag, args.topics)
         executor.add_node(player)
         if args.paced:
-            output_type = _import_message_class('std_msgs/msg/String')
+            output_type = message_class('std_msgs/msg/String')
             player.create_subscription(output_type, args.pace_topic,
                                        lambda _msg: player.output_event.set(), 10)
         spinner.start()

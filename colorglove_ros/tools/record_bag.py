@@ -14,7 +14,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from colorglove_ros.typestore import colorglove_typestore
+from colorglove_ros.typestore import colorglove_typestore, message_class
 
 __all__ = ['DEFAULT_TOPICS', 'BagRecorder', 'main']
 
@@ -46,8 +46,7 @@ class BagRecorder(Node):
             with self.lock:
                 self.connections[topic] = self.writer.add_connection(
                     topic, msgtype, typestore=self.typestore)
-            package, _, name = msgtype.split('/')
-            msg_class = getattr(__import__(f'{package}.msg', fromlist=[name]), name)
+            msg_class = message_class(msgtype)
             qos = QoSProfile(depth=100, reliability=QoSReliabilityPolicy.BEST_EFFORT)
             self.create_subscription(msg_class, topic,
                                      lambda data, t=topic: self.write(t, data), qos, raw=True)
