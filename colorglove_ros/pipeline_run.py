@@ -75,7 +75,9 @@ class PipelineMonitor(Node):
         self.keep_overlays = keep_overlays
         self.overlay_stride = overlay_stride
         self.overlay_count = 0
-        self.create_subscription(Image, '/camera/image_raw', self._on_frame, _BEST_EFFORT,
+        # reliable: the camera_node and the bag player publish reliably, and the latency of
+        # every frame needs its arrival time (a best-effort reader loses large images)
+        self.create_subscription(Image, '/camera/image_raw', self._on_frame, _RELIABLE,
                                  raw=True)
         self.create_subscription(JointState, '/hand/joint_states', self._on_joints, _RELIABLE)
         self.create_subscription(PoseStamped, '/hand/wrist_pose', self._store(self.wrists),
