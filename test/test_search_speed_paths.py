@@ -2,12 +2,19 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
-from colorglove_ros.core.codes import QueryEncoder, pack_codes, train_random_projections
+from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.codes import (
+    QueryEncoder,
+    hamming_naive,
+    pack_codes,
+    train_random_projections,
+)
 from colorglove_ros.core.database import assemble_database
 from colorglove_ros.core.distance import QueryDistance, distance_transforms_batch
-from colorglove_ros.core.search import PoseLookup, _rotate, top_k_with_ties
+from colorglove_ros.core.search import PoseLookup, SearchError, _rotate, top_k_with_ties
 
 RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5, 'cy': 63.5}
 
@@ -103,3 +110,42 @@ def test_precomputed_anchor_offset_gives_same_translation() -> None:
     np.testing.assert_allclose(a, b, atol=1e-12)
     c = estimate_translation(t, crop, RENDER_CAM, (2.0, 100.0, 90.0), cam)
     assert np.abs(a - c).max() > 1e-4                # the anchor matters
+
+
+def test_threaded_lookup_equals_single_thread(monkeypatch) -> None:
+    """The worker-thread split (Hamming halves, re-rank gathers) changes no result."""
+    import colorglove_ros.core.codes as codes_mod
+    import colorglove_ros.core.search as search_mod
+
+    db = _db()
+    monkeypatch.setattr(search_mod, 'HAMMING_BLOCK', 16)     # small db: force the split
+    monkeypatch.setattr(codes_mod, 'HAMMING_BLOCK', 16)
+    one = PoseLookup(db, num_candidates=40, threads=1)
+    two = PoseLookup(db, num_candidates=40, threads=2)
+    assert two._pool is not None and len(db) >= 32
+    cam = PinholeCamera(128, 128, 150.0, 150.0, 63.5, 63.5)
+    for q in (_blobs(21, 1)[0], np.asarray(db.tiny[9])):
+        np.testing.assert_array_equal(one.hamming(q), two.hamming(q))
+        np.testing.assert_array_equal(one.hamming(q), hamming_naive(
+            np.ascontiguousarray(np.asarray(db.codes).T), db.encoder.encode(q[None])[0]))
+        a, b = one.lookup(q, (1.5, 10.0, 12.0), cam), two.lookup(q, (1.5, 10.0, 12.0), cam)
+        np.testing.assert_array_equal(a.indices, b.indices)
+        np.testing.assert_array_equal(a.distances, b.distances)
+        np.testing.assert_array_equal(a.blended, b.blended)
+    with pytest.raises(SearchError):
+        PoseLookup(db, threads=3)
+
+
+def test_buffer_bytes_counts_tables() -> None:
+    db = _db()
+    lookup = PoseLookup(db, num_candidates=40)
+    before = lookup.buffer_bytes
+    assert before >= len(db) * (1 + 6 * 8)                 # Hamming output + anchor table
+    lookup.lookup(np.asarray(db.tiny[9]), (1.0, 0.0, 0.0),
+                  PinholeCamera(128, 128, 150.0, 150.0, 63.5, 63.5))
+    assert lookup.buffer_bytes > before                    # re-rank buffers now allocated
+    import colorglove_ros.core.search as search_mod
+
+    big = lookup._buffer('flat', search_mod._BUFFER_CAP + 1, np.intp)
+    assert len(big) == search_mod._BUFFER_CAP + 1
+    assert lookup.buffer_bytes < 2 * search_mod._BUFFER_CAP * 8     # not kept

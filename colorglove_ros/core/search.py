@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -14,6 +15,10 @@ from colorglove_ros.core.distance import ABSENT_PENALTY, DT_SCALE, QueryDistance
 
 __all__ = ['SearchError', 'ProjectionConstraints', 'LookupResult', 'PoseLookup',
            'top_k_with_ties', 'blend_weights', 'blend_poses', 'estimate_translation']
+
+
+_BUFFER_CAP = 1 << 20
+"""Largest reused re-rank buffer (entries): 8 MB of indices, 20x a 300-candidate lookup."""
 
 
 class SearchError(Exception):
@@ -198,12 +203,19 @@ def _crop_tuple(crop_transform: object) -> tuple[float, float, float]:
 class PoseLookup:
     """Nearest-neighbour pose lookup in a :class:`PoseDatabase`.
 
-    Buffers for the Hamming scan are allocated once; one instance is not thread-safe."""
+    Buffers for the Hamming scan and re-rank are reused; one instance is not thread-safe.
+    ``threads=2`` (default) splits the Hamming scan (two halves) and the re-rank (its two
+    gathers) between the caller and one worker thread; ``threads=1`` runs everything in the
+    caller (same results)."""
 
     def __init__(self, database: PoseDatabase, num_candidates: int = 300,
-                 num_blend: int = 10) -> None:
+                 num_blend: int = 10, threads: int = 2) -> None:
         if num_candidates < 1 or num_blend < 1:
             raise SearchError('num_candidates and num_blend must be positive')
+        if threads not in (1, 2):
+            raise SearchError(f'threads must be 1 or 2, got {threads}')
+        # one worker thread for the re-rank's second gather (None: all in the caller)
+        self._pool = ThreadPoolExecutor(1, 'pose-lookup') if threads == 2 else None
         self.db = database
         self.num_candidates = int(num_candidates)
         self.num_blend = int(num_blend)
@@ -213,6 +225,7 @@ class PoseLookup:
         self._ham = np.empty(n, np.uint8 if database.num_bits <= 255 else np.uint16)
         self._xor = np.empty(min(n, HAMMING_BLOCK), np.uint64)
         self._cnt = np.empty(min(n, HAMMING_BLOCK), np.uint8)
+        self._xor2, self._cnt2 = np.empty_like(self._xor), np.empty_like(self._cnt)
         self._qenc = QueryEncoder(database.encoder)
         # plain ndarray views of the (memory-mapped) arrays: no np.memmap indexing overhead
         self._a = {name: np.asarray(getattr(database, name)) for name in (
@@ -233,11 +246,26 @@ class PoseLookup:
                          _rotate(self._a['poses'][:, 3:6].astype(np.float64), self._anchor))
         self._anchor_table = self._anchor_terms()
 
+    @property
+    def buffer_bytes(self) -> int:
+        """Memory held by this lookup besides the database: scan and re-rank buffers and
+        the per-entry tables computed at construction."""
+        arrays = [self._ham, self._xor, self._cnt, self._xor2, self._cnt2, self._table,
+                  self._anchor_table, *self._buffers.values()]
+        if self._offsets is not None:
+            arrays.append(self._offsets)
+        return int(sum(a.nbytes for a in arrays))
+
     def _buffer(self, name: str, size: int, dtype: type) -> np.ndarray:
-        """A reused flat scratch array of at least ``size`` entries (grown as needed)."""
+        """A reused flat scratch array of ``size`` entries (grown as needed up to
+        :data:`_BUFFER_CAP` entries; larger requests, e.g. a re-rank of a whole database in
+        chunks, get a fresh array so the lookup does not keep it)."""
+        if size > _BUFFER_CAP:
+            return np.empty(size, dtype)
         buf = self._buffers.get(name)
         if buf is None or len(buf) < size:
-            buf = np.empty(max(size, 2 * (0 if buf is None else len(buf))), dtype)
+            buf = np.empty(min(_BUFFER_CAP, max(size, 2 * (0 if buf is None else len(buf)))),
+                           dtype)
             self._buffers[name] = buf
         return buf[:size]
 
@@ -248,11 +276,37 @@ class PoseLookup:
 
     def _hamming_dts(self, dts: np.ndarray) -> np.ndarray:
         code = self._qenc.encode(dts)
-        return hamming_distances(self._columns, code, self._ham, self._xor, self._cnt)
+        n = self._columns.shape[1]
+        if self._pool is None or n < 2 * HAMMING_BLOCK:
+            return hamming_distances(self._columns, code, self._ham, self._xor, self._cnt)
+        # two halves, one in the worker thread (own scratch buffers), one here
+        half = n // 2
+        pending = self._pool.submit(hamming_distances, self._columns[:, :half], code,
+                                    self._ham[:half], self._xor2, self._cnt2)
+        hamming_distances(self._columns[:, half:], code, self._ham[half:], self._xor,
+                          self._cnt)
+        pending.result()
+        return self._ham
+
+    def _query_sums(self, query: QueryDistance, idx: np.ndarray) -> np.ndarray:
+        """Sum (k,) of each candidate's stored (quantised) distance transform at the query's
+        glove pixels: the query -> candidate term, one gather of k x num_pixels bytes."""
+        nq = query.num_pixels
+        flat_idx = self._buffer('flat', len(idx) * nq, np.intp).reshape(len(idx), nq)
+        np.add((idx * self._row)[:, None], query.glove_index, out=flat_idx)
+        got = self._buffer('dt', flat_idx.size, np.uint8).reshape(flat_idx.shape)
+        self._dts_all.take(flat_idx, out=got, mode='clip')
+        return got.sum(axis=1, dtype=np.uint32)
 
     def rerank(self, query: QueryDistance, indices: np.ndarray) -> np.ndarray:
-        """Exact image distances (k,) from the query to database entries ``indices``."""
+        """Exact image distances (k,) from the query to database entries ``indices``.
+
+        With ``threads=2`` the query -> candidate gather runs in a worker thread while this
+        thread does the candidate -> query one (numpy releases the GIL in both)."""
         idx = np.asarray(indices, np.intp)
+        nq = query.num_pixels
+        pending = (self._pool.submit(self._query_sums, query, idx)
+                   if nq and self._pool is not None else None)
         counts = self._counts[idx]
         table = self._table
         table[:-1] = query.dts.reshape(-1)
@@ -273,13 +327,8 @@ class PoseLookup:
             vals = self._buffer('vals', keys.size, np.float32).reshape(keys.shape)
             table.take(keys, out=vals, mode='clip')
             cand_sum[grp] = vals.sum(axis=1)
-        nq = query.num_pixels
         if nq:
-            flat_idx = self._buffer('flat', len(idx) * nq, np.intp).reshape(len(idx), nq)
-            np.add((idx * self._row)[:, None], query.glove_index, out=flat_idx)
-            got = self._buffer('dt', flat_idx.size, np.uint8).reshape(flat_idx.shape)
-            self._dts_all.take(flat_idx, out=got, mode='clip')
-            q_sum = got.sum(axis=1, dtype=np.uint32)
+            q_sum = pending.result() if pending is not None else self._query_sums(query, idx)
             d_qc = q_sum * (1.0 / (DT_SCALE * nq))
             d_cq = np.where(counts > 0, cand_sum / np.maximum(counts, 1.0), ABSENT_PENALTY)
         else:

@@ -279,8 +279,8 @@ def main(argv: list[str] | None = None) -> int:
                                     q_true)
     mem = {'entries': len(db), 'database_MB': db.nbytes / 1e6,
            'codes_MB': db.codes.nbytes / 1e6, 'dts_MB': db.dts.nbytes / 1e6,
-           'pixel_keys_MB': db.pixel_keys.nbytes / 1e6, 'lookup_buffers_MB':
-           (lookup._ham.nbytes + lookup._xor.nbytes + lookup._cnt.nbytes) / 1e6}
+           'pixel_keys_MB': db.pixel_keys.nbytes / 1e6,
+           'lookup_buffers_MB': lookup.buffer_bytes / 1e6}
     timing_row = {'entries': len(db), 'bits': db.num_bits,
                   'lookup_finds_true_nn': found, **timing}
     print_table([timing_row], 'lookup time per query (ms)')
