@@ -210,10 +210,13 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
                 started = time.monotonic()
                 feeder = threading.Thread(target=feed, daemon=True)
                 feeder.start()
+                feeder.join(timeout_s)
+                # the feed has ended: wait for the last outputs (no frame count needed)
+                completed = not feeder.is_alive() and monitor.wait_for_frames(0, 60.0)
             else:
                 started = time.monotonic()
                 launcher.start()
-            completed = monitor.wait_for_frames(expected_frames, timeout_s)
+                completed = monitor.wait_for_frames(expected_frames, timeout_s)
             duration = monitor.active_duration() or time.monotonic() - started
         finally:
             launcher.stop()
@@ -322,7 +325,9 @@ def bag_feed(bag: Path, rate: float = 1.0, paced: bool = False) -> Any:
     player = shutil.which('colorglove_play_bag')
     if player is None:
         raise FileNotFoundError('colorglove_play_bag not on PATH (is the venv active?)')
-    command = [player, str(bag), '--rate', str(rate)] + (['--paced'] if paced else [])
+    # two image subscribers before the first frame: segmentation_node and the monitor
+    command = [player, str(bag), '--rate', str(rate), '--min-subscribers', '2'] + \
+        (['--paced'] if paced else [])
 
     def feed() -> None:
         subprocess.run(command, check=True, stdout=subprocess.DEVNULL)

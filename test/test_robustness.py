@@ -192,5 +192,6 @@ def test_graph_recovers_after_a_node_is_killed(victim: int, input_topic: str, tm
     print(f'killed at frame {killed_at}, respawned node subscribed at {ready_at}, '
           f'hand candidates again at {recovered[0]}, {len(after)} frames streamed after')
     # the respawned process still has to handle its first frame and be discovered downstream
-    assert recovered[0] <= ready_at + 15, (killed_at, ready_at, recovered)
+    # measured 1-9 frames on an idle machine; 25 (5 s at 5 Hz) leaves room for a loaded one
+    assert recovered[0] <= ready_at + 25, (killed_at, ready_at, recovered)
     assert not stream.found_since(killed_at + 1, False), 'a hand frame came back as no hand'

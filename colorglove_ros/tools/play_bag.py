@@ -35,11 +35,11 @@ class BagPlayer(Node):
             for c in self.connections}
         self.output_event = threading.Event()
 
-    def wait_for_subscribers(self, topic: str, timeout_s: float) -> bool:
-        """Wait until ``topic`` has a subscriber (so the first frames are not lost)."""
+    def wait_for_subscribers(self, topic: str, timeout_s: float, count: int = 1) -> bool:
+        """Wait until ``topic`` has ``count`` subscribers (so the first frames are not lost)."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
-            if self.publishers_by_topic[topic].get_subscription_count() > 0:
+            if self.publishers_by_topic[topic].get_subscription_count() >= count:
                 return True
             time.sleep(0.05)
         return False
@@ -89,6 +89,8 @@ def main(argv: list[str] | None = None) -> int:
                         help='longest wait for an output before going on, seconds')
     parser.add_argument('--wait-subscribers', type=float, default=10.0,
                         help='wait this long for a subscriber on --pace-on before starting')
+    parser.add_argument('--min-subscribers', type=int, default=1,
+                        help='subscribers on --pace-on to wait for before starting')
     parser.add_argument('--linger', type=float, default=1.0,
                         help='seconds to stay up after the last message, for late deliveries')
     args, ros_args = parser.parse_known_args(argv)
@@ -108,7 +110,8 @@ def main(argv: list[str] | None = None) -> int:
                                        lambda _msg: player.output_event.set(), 10)
         spinner.start()
         if args.pace_on in player.publishers_by_topic:
-            player.wait_for_subscribers(args.pace_on, args.wait_subscribers)
+            player.wait_for_subscribers(args.pace_on, args.wait_subscribers,
+                                        args.min_subscribers)
         started = time.monotonic()
         count = player.play(args.rate, args.pace_topic if args.paced else None,
                             args.pace_on if args.paced else None, args.pace_timeout)
