@@ -36,7 +36,7 @@ __all__ = [
     'eval_seeds', 'train_seeds', 'Observer', 'observe_camera', 'truth_observer',
     'segmenter_observer', 'make_observer', 'FramePrior', 'LookupStage', 'TrackedSequence',
     'SequenceEvaluator', 'same_camera', 'jitter_runs_mm', 'contiguous_runs', 'summarize',
-    'training_sequences', 'find_database',
+    'training_sequences', 'find_database', 'open_database',
 ]
 
 LABEL_SOURCES = ('truth', 'segmented')
@@ -357,3 +357,15 @@ def find_database(root: str | Path) -> Path | None:
             if best is None or n > best[0]:
                 best = (n, cand)
     return None if best is None else best[1]
+
+
+def open_database(path: str | Path | None, root: str | Path) -> tuple[Path, Any]:
+    """The pose database at ``path``, or else the largest under ``root`` (see
+    :func:`find_database`), loaded; :class:`EvaluationError` if there is none."""
+    from .database import load_database
+
+    db_path = Path(path) if path else find_database(root)
+    if db_path is None:
+        raise EvaluationError(f'no pose database under {root}: build one with '
+                              'colorglove_build_database')
+    return db_path, load_database(db_path)

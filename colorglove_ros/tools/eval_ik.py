@@ -20,16 +20,17 @@ from colorglove_ros.core.evaluation import (
     EvaluationError,
     SequenceEvaluator,
     eval_seeds,
-    find_database,
     make_observer,
+    open_database,
     summarize,
 )
 from colorglove_ros.core.ik import TRACKER_MODES, IKConfigError, load_covariances, load_ik_config
 from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.paths import share_dir
 
 __all__ = ['main', 'TARGETS', 'evaluate_targets', 'JSON_KEYS', 'PACKAGE_ROOT']
 
-PACKAGE_ROOT = Path(__file__).resolve().parents[2]
+PACKAGE_ROOT = share_dir()   # source checkout, or the installed share folder
 MODE_LABELS = {'blend': 'blended NN only', 'ik': '+ IK', 'ik_smooth': '+ IK + smoothing'}
 JSON_KEYS = ('settings', 'rows', 'targets', 'plot')
 # (rig, mode, figure, threshold, description); 'ik_ms_mean' targets apply to both IK modes
@@ -156,16 +157,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--json', help='write the figures to this JSON file')
     args = parser.parse_args(argv)
     from colorglove_ros.core.colorspace import ColorCalibrationError
-    from colorglove_ros.core.database import DatabaseError, load_database
+    from colorglove_ros.core.database import DatabaseError
     from colorglove_ros.core.search import PoseLookup
 
     try:
-        db_path = Path(args.database) if args.database else find_database(PACKAGE_ROOT / 'data')
-        if db_path is None:
-            raise EvaluationError('no pose database under data/: build one with python -m '
-                                  'colorglove_ros.tools.build_database --entries 20000 '
-                                  '--output data/database_20k')
-        db = load_database(db_path)
+        db_path, db = open_database(args.database, PACKAGE_ROOT / 'data')
         config = load_ik_config(args.ik_config)
         if args.covariances:
             config = dataclasses.replace(config, covariances=load_covariances(args.covariances))

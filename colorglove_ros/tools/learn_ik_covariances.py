@@ -23,8 +23,8 @@ from colorglove_ros.core.evaluation import (
     LABEL_SOURCES,
     EvaluationError,
     SequenceEvaluator,
-    find_database,
     make_observer,
+    open_database,
     train_seeds,
     training_sequences,
 )
@@ -37,10 +37,11 @@ from colorglove_ros.core.ik import (
 )
 from colorglove_ros.core.ik_training import LOCAL_WINDOW, IKTrainingError, learn_covariances
 from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.paths import share_dir
 
 __all__ = ['main', 'covariance_rows', 'PACKAGE_ROOT', 'DEFAULT_OUTPUT']
 
-PACKAGE_ROOT = Path(__file__).resolve().parents[2]
+PACKAGE_ROOT = share_dir()   # source checkout, or the installed share folder
 DEFAULT_OUTPUT = PACKAGE_ROOT / 'config' / 'ik_covariances.yaml'
 
 
@@ -97,16 +98,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--json', help='write the learned figures to this JSON file')
     args = parser.parse_args(argv)
     from colorglove_ros.core.colorspace import ColorCalibrationError
-    from colorglove_ros.core.database import DatabaseError, load_database
+    from colorglove_ros.core.database import DatabaseError
     from colorglove_ros.core.search import PoseLookup
 
     t0 = time.perf_counter()
     try:
-        db_path = Path(args.database) if args.database else find_database(PACKAGE_ROOT / 'data')
-        if db_path is None:
-            raise EvaluationError('no pose database under data/: build one with python -m '
-                                  'colorglove_ros.tools.build_database')
-        db = load_database(db_path)
+        db_path, db = open_database(args.database, PACKAGE_ROOT / 'data')
         config = load_ik_config(args.ik_config)
         cal = load_calibration(args.calibration)
         observer = make_observer(args.labels, args.color_config, config.min_blob_pixels)
