@@ -17,6 +17,7 @@ from colorglove_ros.core.database import (
     farthest_point_sampling,
     load_database,
     pixel_keys,
+    read_database_config,
     save_database,
 )
 from colorglove_ros.core.distance import TINY_SIZE
@@ -163,3 +164,14 @@ def test_retrain_codes_in_place(tmp_path: Path) -> None:
     assert db.num_bits == 80 and db.codes.shape == (2, 60)
     expected = db.encoder.encode_dts(dequantize_dts(db.dts))
     np.testing.assert_array_equal(np.asarray(db.codes).T, expected)
+
+
+def test_database_config_reads_and_refuses(tmp_path: Path) -> None:
+    config, path, lookup = read_database_config(Path(__file__).parents[1] / 'config'
+                                                / 'database.yaml')
+    assert config.entries == 100_000 and path.name == 'database_100k'
+    assert lookup['num_candidates'] == 300
+    bad = tmp_path / 'database.yaml'
+    bad.write_text('database: {build: {entries: 5}}\n')
+    with pytest.raises(DatabaseError, match='no database.path'):
+        read_database_config(bad)

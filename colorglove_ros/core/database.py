@@ -5,7 +5,7 @@ import json
 import time
 import zlib
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +30,7 @@ from colorglove_ros.core.distance import (
 )
 
 __all__ = [
+    'read_database_config',
     'DATABASE_VERSION', 'NUM_PATCHES', 'DatabaseError', 'PoseDatabase', 'pixel_keys',
     'save_database', 'load_database', 'farthest_point_sampling', 'nearest_neighbour_pairs',
     'train_encoder', 'assemble_database', 'BuildConfig', 'build_database', 'render_views',
@@ -62,6 +63,25 @@ _ARRAYS: dict[str, tuple[str, tuple]] = {
     'patch_vertex': ('int32', ('N', NUM_PATCHES)),
     'patch_color': ('uint8', (NUM_PATCHES,)),
 }
+
+
+def read_database_config(path: str | Path) -> tuple[BuildConfig, Path, dict[str, Any]]:
+    """Build parameters, the database folder (resolved like every configured path, see
+    :func:`colorglove_ros.paths.resolve_path`) and lookup settings of ``config/database.yaml``;
+    :class:`DatabaseError` if the file is missing or malformed."""
+    from colorglove_ros.core.yaml_io import load_yaml_mapping
+    from colorglove_ros.paths import resolve_path
+
+    data = load_yaml_mapping(resolve_path(path), DatabaseError, 'database config').get('database')
+    if not isinstance(data, dict) or 'path' not in data:
+        raise DatabaseError(f'database config {path} has no database.path')
+    known = {f.name for f in fields(BuildConfig)}
+    build = {k: v for k, v in (data.get('build') or {}).items() if k in known}
+    try:
+        config = BuildConfig(**build)
+    except TypeError as exc:
+        raise DatabaseError(f'database config {path}: bad build settings: {exc}') from exc
+    return config, resolve_path(str(data['path'])), dict(data.get('lookup') or {})
 
 
 class DatabaseError(Exception):

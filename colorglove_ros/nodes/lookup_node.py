@@ -5,12 +5,11 @@ from __future__ import annotations
 import sys
 import time
 
-import yaml
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from rclpy.node import Node
 
 from colorglove_ros.core.camera import CalibrationError, load_calibration
-from colorglove_ros.core.database import DatabaseError, load_database
+from colorglove_ros.core.database import DatabaseError, load_database, read_database_config
 from colorglove_ros.core.search import PoseLookup, SearchError
 from colorglove_ros.msg_conversions import (
     candidates_msg,
@@ -25,18 +24,6 @@ from colorglove_ros.nodes.common import (
     run_node,
 )
 from colorglove_ros.paths import resolve_path
-
-
-def database_path_from_config(config_file: str) -> str:
-    """The database folder named by a database YAML (key ``database.path``)."""
-    path = resolve_path(config_file)
-    try:
-        data = yaml.safe_load(path.read_text())
-        return str(resolve_path(data['database']['path']))
-    except FileNotFoundError as exc:
-        raise DatabaseError(f'database config not found: {path}') from exc
-    except (yaml.YAMLError, KeyError, TypeError) as exc:
-        raise DatabaseError(f'database config {path} has no database.path: {exc}') from exc
 
 
 class LookupNode(Node):
@@ -56,8 +43,8 @@ class LookupNode(Node):
         reject_parameter_changes(self, {'database_config', 'database_path', 'calibration_file',
                                         'num_candidates', 'num_neighbors'})
         try:
-            path = str(resolve_path(database_path)) if database_path else \
-                database_path_from_config(database_config)
+            path = str(resolve_path(database_path) if database_path
+                       else read_database_config(database_config)[1])
             self.camera = load_calibration(resolve_path(calibration_file)).primary
             started = time.perf_counter()
             self.lookup = PoseLookup(load_database(path), num_candidates, num_neighbors)

@@ -6,33 +6,27 @@ import dataclasses
 import time
 from pathlib import Path
 
-import yaml
 from tqdm import tqdm
 
 from colorglove_ros.core.database import (
     BuildConfig,
     DatabaseError,
     build_database,
+    read_database_config,
     retrain_codes,
     save_database,
 )
 from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.paths import share_dir
 
 __all__ = ['main', 'load_build_config', 'DEFAULT_CONFIG']
 
-PACKAGE_ROOT = Path(__file__).resolve().parents[2]
-DEFAULT_CONFIG = PACKAGE_ROOT / 'config' / 'database.yaml'
+DEFAULT_CONFIG = share_dir() / 'config' / 'database.yaml'
 
 
 def load_build_config(path: str | Path = DEFAULT_CONFIG) -> tuple[BuildConfig, Path, dict]:
     """Build parameters, default database path and lookup parameters from the YAML."""
-    data = yaml.safe_load(Path(path).read_text())['database']
-    fields = {f.name for f in dataclasses.fields(BuildConfig)}
-    build = {k: v for k, v in (data.get('build') or {}).items() if k in fields}
-    db_path = Path(data['path'])
-    if not db_path.is_absolute():
-        db_path = PACKAGE_ROOT / db_path
-    return BuildConfig(**build), db_path, dict(data.get('lookup') or {})
+    return read_database_config(path)
 
 
 def main(argv: list[str] | None = None) -> int:
