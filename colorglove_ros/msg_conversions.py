@@ -12,7 +12,6 @@ from colorglove_msgs.msg import (
     PoseCandidate,
 )
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
-from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, JointState
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
@@ -22,12 +21,14 @@ from colorglove_ros.core.crop import TINY_SIZE, CropTransform
 from colorglove_ros.core.hand_model import DOF_NAMES, FINGER_DOF_NAMES
 from colorglove_ros.core.ik import Blobs, CameraObservation, EntryConstraints, PosePrior
 from colorglove_ros.core.overlay import SKELETON_BONES
+from colorglove_ros.core.pose_fields import pose_from_fields, wrist_quaternion
 from colorglove_ros.core.search import LookupResult
 from colorglove_ros.core.segmentation import Observation
 
 __all__ = [
     'stamp_to_seconds', 'camera_info_from_camera', 'joint_state_from_pose',
-    'pose_stamped_from_pose', 'pose_from_joint_state', 'crop_from_observation',
+    'pose_stamped_from_pose', 'pose_from_joint_state', 'pose_from_messages',
+    'crop_from_observation',
     'tiny_labels_from_observation', 'blobs_from_observation', 'camera_observation_from_msg',
     'candidates_msg', 'pose_prior_from_candidates', 'skeleton_markers',
     'observation_msg', 'tf_message_from_pose',
@@ -40,16 +41,8 @@ def stamp_to_seconds(stamp: Time) -> float:
 
 
 def camera_info_from_camera(camera: PinholeCamera, header: Header) -> CameraInfo:
-    """``sensor_msgs/CameraInfo`` (plumb_bob) for a calibrated camera."""
-    info = CameraInfo(header=header, width=camera.width, height=camera.height)
-    info.distortion_model = 'plumb_bob'
-    info.d = [float(v) for v in camera.distortion]
-    info.k = [float(v) for v in camera.K.ravel()]
-    info.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
-    projection = np.zeros((3, 4))
-    projection[:, :3] = camera.K
-    info.p = [float(v) for v in projection.ravel()]
-    return info
+    """``sensor_msgs/CameraInfo`` (plumb_bob or rational_polynomial) for a calibrated camera."""
+    return CameraInfo(header=header, **camera.camera_info_fields())
 
 
 def joint_state_from_pose(pose: np.ndarray, header: Header) -> JointState:
@@ -64,10 +57,16 @@ def pose_from_joint_state(msg: JointState) -> np.ndarray:
     return np.array([positions[name] for name in FINGER_DOF_NAMES])
 
 
+def pose_from_messages(joints: JointState, wrist: PoseStamped) -> np.ndarray:
+    """The 26-DOF pose of a ``JointState`` (finger joints) and a wrist ``PoseStamped``."""
+    p, o = wrist.pose.position, wrist.pose.orientation
+    return pose_from_fields([p.x, p.y, p.z], [o.x, o.y, o.z, o.w], pose_from_joint_state(joints))
+
+
 def pose_stamped_from_pose(pose: np.ndarray, header: Header) -> PoseStamped:
     """The wrist position and orientation of a 26-DOF pose as ``PoseStamped`` (camera frame)."""
     pose = np.asarray(pose, dtype=float)
-    x, y, z, w = Rotation.from_rotvec(pose[3:6]).as_quat()
+    x, y, z, w = wrist_quaternion(pose)
     return PoseStamped(header=header, pose=Pose(
         position=Point(x=float(pose[0]), y=float(pose[1]), z=float(pose[2])),
         orientation=Quaternion(x=float(x), y=float(y), z=float(z), w=float(w))))

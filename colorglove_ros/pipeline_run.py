@@ -7,7 +7,8 @@ import struct
 import tempfile
 import threading
 import time
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -20,10 +21,11 @@ from rclpy.node import Node
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image, JointState
+from std_msgs.msg import String
 
 from colorglove_ros.core.metrics import jitter_runs_mm, latency_summary_ms, pose_accuracy
 from colorglove_ros.launcher import Launcher, NodeSpec, use_fastdds_profile
-from colorglove_ros.msg_conversions import pose_from_joint_state
+from colorglove_ros.msg_conversions import pose_from_messages
 from colorglove_ros.ros_image import image_to_rgb8
 
 __all__ = ['PipelineMonitor', 'PipelineRun', 'bag_feed', 'node_specs', 'run_pipeline', 'summarize']
@@ -47,14 +49,6 @@ def _raw_stamp_key(data: bytes) -> tuple[int, int]:
     return (sec, nanosec)
 
 
-def _pose_from(joints: JointState, wrist: PoseStamped) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
-
-    p, o = wrist.pose.position, wrist.pose.orientation
-    rotvec = Rotation.from_quat([o.x, o.y, o.z, o.w]).as_rotvec()
-    return np.concatenate([[p.x, p.y, p.z], rotvec, pose_from_joint_state(joints)])
-
-
 class PipelineMonitor(Node):
     """Records, with receive times, camera frames, ground truth and the tracker's outputs."""
 
@@ -72,6 +66,7 @@ class PipelineMonitor(Node):
         self.observation_times: dict[tuple[int, int], float] = {}
         self.candidate_times: dict[tuple[int, int], float] = {}
         self.overlays: list[np.ndarray] = []
+        self.statuses: list[str] = []
         self.keep_overlays = keep_overlays
         self.overlay_stride = overlay_stride
         self.overlay_count = 0
@@ -92,6 +87,7 @@ class PipelineMonitor(Node):
                                  _RELIABLE)
         self.create_subscription(Image, '/hand/overlay', self._on_overlay, _BEST_EFFORT,
                                  raw=True)
+        self.create_subscription(String, '/hand/tracking_status', self._on_status, _RELIABLE)
 
     def _store(self, table: dict):
         def callback(msg: Any) -> None:
@@ -119,6 +115,10 @@ class PipelineMonitor(Node):
             self.candidate_times.setdefault(_key(msg), time.monotonic())
             self.lookup_ms[_key(msg)] = msg.lookup_time_ms
             self.segmentation_ms[_key(msg)] = msg.observation.processing_time_ms
+
+    def _on_status(self, msg: String) -> None:
+        with self.lock:
+            self.statuses.append(msg.data)
 
     def _on_overlay(self, data: bytes) -> None:
         self.overlay_count += 1
@@ -166,6 +166,7 @@ class PipelineRun:
     frame_index: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     timed_out: bool = False
     overlays: list[np.ndarray] = field(default_factory=list)
+    statuses: list[str] = field(default_factory=list)      # ik_node's tracking status lines
 
 
 def node_specs(params_file: Path, with_camera: bool) -> list[NodeSpec]:
@@ -179,17 +180,21 @@ def node_specs(params_file: Path, with_camera: bool) -> list[NodeSpec]:
 def write_params(parameters: dict[str, dict[str, Any]], folder: Path) -> Path:
     """A ROS 2 parameter file from {node name: {parameter: value}}."""
     path = folder / 'params.yaml'
-    path.write_text(yaml.safe_dump({name: {'ros__parameters': values}
+    # copies: a dict shared by two nodes would become a YAML alias, which rcl refuses
+    path.write_text(yaml.safe_dump({name: {'ros__parameters': dict(values)}
                                     for name, values in parameters.items()}))
     return path
 
 
 def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
                  feed: Any = None, timeout_s: float = 600.0, startup_s: float = 60.0,
-                 keep_overlays: int = 8) -> PipelineRun:
+                 keep_overlays: int = 8, extra_nodes: Sequence[NodeSpec] = (),
+                 extra_inputs: dict[str, str] | None = None) -> PipelineRun:
     """Start the nodes with ``parameters`` (camera_node too unless ``feed`` is given: a
     callable started once the graph is up, e.g. a bag player), monitor until
-    ``expected_frames`` frames passed, stop everything, and return the measurements."""
+    ``expected_frames`` frames passed, stop everything, and return the measurements.
+    ``extra_nodes`` (e.g. a second camera's segmentation_node) also read the parameter file;
+    ``extra_inputs`` maps their input topics to their node names, awaited like the stages'."""
     use_fastdds_profile()
     with tempfile.TemporaryDirectory() as folder:
         params_file = write_params(parameters, Path(folder))
@@ -202,11 +207,12 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
         executor.add_node(monitor)
         spinner = threading.Thread(target=executor.spin, daemon=True)
         spinner.start()
-        launcher = Launcher(node_specs(params_file, with_camera=feed is None))
+        launcher = Launcher(node_specs(params_file, with_camera=feed is None) + [
+            replace(spec, parameters=[params_file, *spec.parameters]) for spec in extra_nodes])
         try:
             if feed is not None:
                 launcher.start()
-                _wait_for_graph(monitor, startup_s)
+                _wait_for_graph(monitor, startup_s, {**STAGE_INPUTS, **(extra_inputs or {})})
                 started = time.monotonic()
                 feeder = threading.Thread(target=feed, daemon=True)
                 feeder.start()
@@ -234,12 +240,13 @@ STAGE_INPUTS = {'/camera/image_raw': 'segmentation', '/hand/observation': 'looku
                 '/hand/pose_candidates': 'ik'}
 
 
-def _wait_for_graph(monitor: PipelineMonitor, timeout_s: float) -> None:
-    """Wait until every stage node (not just the monitor) subscribes to its input topic."""
+def _wait_for_graph(monitor: PipelineMonitor, timeout_s: float, inputs: dict[str, str]) -> None:
+    """Wait until every node of ``inputs`` (input topic -> node name) subscribes to its
+    input topic."""
     deadline = time.monotonic() + timeout_s
-    missing = dict(STAGE_INPUTS)
+    missing = dict(inputs)
     while time.monotonic() < deadline:
-        missing = {topic: node for topic, node in STAGE_INPUTS.items()
+        missing = {topic: node for topic, node in inputs.items()
                    if node not in {info.node_name
                                    for info in monitor.get_subscriptions_info_by_topic(topic)}}
         if not missing:
@@ -260,11 +267,12 @@ def _collect(monitor: PipelineMonitor, duration: float, published: int) -> Pipel
         }
         matched = [k for k in sorted(monitor.joints) if k in monitor.wrists
                    and k in monitor.truth_joints and k in monitor.truth_wrists]
-        estimated = np.array([_pose_from(monitor.joints[k], monitor.wrists[k]) for k in matched])
+        estimated = np.array([pose_from_messages(monitor.joints[k], monitor.wrists[k])
+                              for k in matched])
         # position of each matched frame among all camera frames seen, in stamp order
         frame_order = {k: i for i, k in enumerate(sorted(monitor.frame_times))}
         frame_index = np.array([frame_order.get(k, -1) for k in matched], dtype=int)
-        truth = np.array([_pose_from(monitor.truth_joints[k], monitor.truth_wrists[k])
+        truth = np.array([pose_from_messages(monitor.truth_joints[k], monitor.truth_wrists[k])
                           for k in matched])
         return PipelineRun(
             frames_expected=published, frames=len(monitor.frame_times),
@@ -275,7 +283,7 @@ def _collect(monitor: PipelineMonitor, duration: float, published: int) -> Pipel
             segmentation_ms=list(monitor.segmentation_ms.values()),
             lookup_ms=list(monitor.lookup_ms.values()), stage_latencies_s=stages,
             frame_index=frame_index,
-            overlays=list(monitor.overlays))
+            overlays=list(monitor.overlays), statuses=list(monitor.statuses))
 
 
 def _delays(earlier: dict, later: dict) -> list[float]:

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from message_samples import sample_observation
 from rclpy.serialization import serialize_message
+from rosbag2_compat import check_jazzy_bag
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from sensor_msgs.msg import JointState
@@ -71,6 +72,10 @@ def test_play_then_record_round_trip(tmp_path: Path, isolated_ros_domain: dict) 
         sent['/test/observation'][-len(received['/test/observation']):]
     assert len(received['/test/observation']) >= 3
     np.testing.assert_array_equal(decoded[-1].position, [19.0, -19.0])
+    # colorglove_msgs too decode with an independent reader from the schema in the bag
+    observations = check_jazzy_bag(tmp_path / 'recorded')['/test/observation']
+    assert [m.crop_offset_x for m in observations] == \
+        [sample_observation(i).crop_offset_x for i in range(0, 20, 4)][-len(observations):]
 
 
 def test_missing_bag_is_a_clear_error(tmp_path: Path) -> None:

@@ -18,12 +18,13 @@ from colorglove_ros.core.bags import (
     BagError,
     SequenceBagWriter,
     bag_camera,
-    image_msg_to_rgb,
+    camera_info_to_pinhole,
     read_sequence_bag,
     write_sequence_bag,
 )
-from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.camera import CalibrationError, PinholeCamera, load_calibration
 from colorglove_ros.core.hand_model import FINGER_DOF_NAMES
+from colorglove_ros.core.image_codec import ImageEncodingError, image_to_rgb8
 from colorglove_ros.core.synth import SyntheticSequenceRenderer
 from colorglove_ros.tools import make_bag
 
@@ -111,20 +112,23 @@ def test_image_conversion_honours_encoding_and_step(encoding: str, order: tuple,
     rgb = rng.integers(0, 256, (7, 9, 3), dtype=np.uint8)
     channels = np.concatenate([rgb, np.full((7, 9, 1), 200, np.uint8)], axis=2)
     stored = np.ascontiguousarray(channels[..., list(order)])
-    np.testing.assert_array_equal(image_msg_to_rgb(_msg(encoding, stored, pad)), rgb)
+    np.testing.assert_array_equal(image_to_rgb8(_msg(encoding, stored, pad)), rgb)
 
 
 @pytest.mark.parametrize('bigendian', [False, True])
 def test_image_conversion_16bit_and_mono(bigendian: bool) -> None:
     rng = np.random.default_rng(1)
     rgb16 = rng.integers(0, 65536, (4, 5, 3), dtype=np.uint16)
-    out = image_msg_to_rgb(_msg('rgb16', rgb16, 2, bigendian))
+    out = image_to_rgb8(_msg('rgb16', rgb16, 2, bigendian))
     np.testing.assert_array_equal(out, (rgb16 >> 8).astype(np.uint8))
     mono = rng.integers(0, 256, (4, 5), dtype=np.uint8)
-    np.testing.assert_array_equal(image_msg_to_rgb(_msg('mono8', mono[..., None], 1)),
+    np.testing.assert_array_equal(image_to_rgb8(_msg('mono8', mono[..., None], 1),
+                                                allow_mono=True),
                                   np.repeat(mono[..., None], 3, axis=2))
-    with pytest.raises(BagError):
-        image_msg_to_rgb(_msg('yuv422', mono[..., None]))
+    with pytest.raises(ImageEncodingError, match='colour image.*mono8'):
+        image_to_rgb8(_msg('mono8', mono[..., None], 1))
+    with pytest.raises(ImageEncodingError, match='yuv422'):
+        image_to_rgb8(_msg('yuv422', mono[..., None]))
 
 
 def test_make_bag_tool(tmp_path: Path, capsys) -> None:
@@ -138,3 +142,67 @@ def test_make_bag_tool(tmp_path: Path, capsys) -> None:
     seq = SyntheticSequenceRenderer(bag_camera(out), seed=2, num_frames=3, split='train')
     np.testing.assert_array_equal(back[1].image_rgb, seq.render(1).image_rgb)
     seq.close()
+
+
+def test_stereo_bag_from_make_bag(tmp_path: Path) -> None:
+    """A two-camera calibration gives both views at the same stamps, each with its frame_id and
+    intrinsics, the extra view written before the primary one within a frame."""
+    calib_path = Path(__file__).resolve().parent.parent / 'config' / 'calibration_stereo.yaml'
+    calibration = load_calibration(calib_path)
+    out = tmp_path / 'stereo'
+    assert make_bag.main(['--seed', '4', '--frames', '2', '--output', str(out),
+                          '--calibration', str(calib_path)]) == 0
+    second = calibration.cameras[1]
+    order, stamps, frame_ids = [], {}, {}
+    with AnyReader([out]) as reader:
+        for conn, log_ns, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            header = msg.markers[0].header if conn.topic == TOPIC_KEYPOINTS else msg.header
+            order.append(conn.topic)
+            stamps.setdefault(conn.topic, []).append(log_ns)
+            frame_ids[conn.topic] = header.frame_id
+            if conn.topic == '/camera2/camera/camera_info':
+                assert camera_info_to_pinhole(msg).fx == second.fx
+    assert stamps['/camera2/camera/image_raw'] == stamps[TOPIC_IMAGE]
+    assert len(stamps[TOPIC_IMAGE]) == 2
+    assert frame_ids['/camera2/camera/image_raw'] == second.frame_id == 'camera2_optical_frame'
+    assert frame_ids[TOPIC_IMAGE] == FRAME_ID
+    assert order.index('/camera2/camera/image_raw') < order.index(TOPIC_IMAGE)
+    # the two views differ (another viewpoint) but both show the glove
+    back = list(read_sequence_bag(out))
+    assert len(back) == 2 and back[0].pose is not None
+
+
+def test_writer_checks_extra_images(tmp_path: Path, frames) -> None:
+    other = PinholeCamera(160, 120, 150.0, 150.0, 79.5, 59.5, name='side', frame_id='side_frame')
+    with SequenceBagWriter(tmp_path / 'two', CAM, extra_cameras=[other]) as writer:
+        with pytest.raises(BagError, match='1 extra camera'):
+            writer.write(frames[0])
+        with pytest.raises(BagError, match='camera 1'):
+            writer.write(frames[0], extra_images=[np.zeros((5, 5, 3), np.uint8)])
+        writer.write(frames[0], extra_images=[frames[1].image_rgb])
+    with pytest.raises(BagError, match='distinct names'):
+        SequenceBagWriter(tmp_path / 'dup', CAM, extra_cameras=[other, other])
+
+
+@pytest.mark.parametrize('coefficients', [0, 4, 6, 14])
+def test_distortion_of_wrong_length_is_refused(coefficients: int) -> None:
+    with pytest.raises(CalibrationError, match=f'got shape \\({coefficients},\\)'):
+        PinholeCamera(160, 120, 150.0, 150.0, 79.5, 59.5, distortion=np.zeros(coefficients))
+    info = SimpleNamespace(width=160, height=120, k=CAM.K.ravel(), d=np.zeros(coefficients),
+                           distortion_model='plumb_bob',
+                           header=SimpleNamespace(frame_id=FRAME_ID))
+    with pytest.raises(BagError, match='distortion needs 5'):
+        camera_info_to_pinhole(info)
+
+
+def test_camera_info_model_follows_the_coefficients() -> None:
+    eight = PinholeCamera(160, 120, 150.0, 150.0, 79.5, 59.5, distortion=np.full(8, 0.01))
+    fields = eight.camera_info_fields()
+    assert fields['distortion_model'] == 'rational_polynomial' and len(fields['d']) == 8
+    assert fields['p'][:3] == [150.0, 0.0, 79.5] and fields['p'][3] == 0.0
+    info = SimpleNamespace(width=160, height=120, k=np.asarray(fields['k']),
+                           d=np.asarray(fields['d']), distortion_model='plumb_bob',
+                           header=SimpleNamespace(frame_id=FRAME_ID))
+    with pytest.raises(BagError, match="model 'plumb_bob' with 8"):
+        camera_info_to_pinhole(info)

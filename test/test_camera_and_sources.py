@@ -50,6 +50,10 @@ def test_look_at_puts_the_target_on_the_axis() -> None:
     ('version: 1\ncameras: [{width: 640, height: 480, fx: -1, fy: 1, cx: 0, cy: 0}]', 'positive'),
     ('version: [1\n', 'not valid YAML'),
     ('just text', 'does not hold a mapping'),
+    ('version: 1\ncameras: [{width: 640, height: 480, fx: 1, fy: 1, cx: 0, cy: 0, '
+     'distortion: [0.1, 0.0, 0.0]}]', r'camera 0: .*distortion needs 5 .* got shape \(3,\)'),
+    ('version: 1\ncameras: [{width: 640, height: 480, fx: 1, fy: 1, cx: 0, cy: 0}, '
+     '{width: 640, height: 480, fx: 1, fy: 1, cx: 0, cy: 0}]', 'distinct frame_id'),
 ])
 def test_bad_calibration_files_are_refused(tmp_path: Path, text: str, message: str) -> None:
     path = tmp_path / 'calibration.yaml'

@@ -40,6 +40,7 @@ from colorglove_ros.msg_conversions import (
     tiny_labels_from_observation,
 )
 from colorglove_ros.nodes.camera_node import CameraNode
+from colorglove_ros.nodes.common import StartupError
 from colorglove_ros.nodes.ik_node import IKNode
 from colorglove_ros.nodes.lookup_node import LookupNode
 from colorglove_ros.nodes.segmentation_node import DEBUG_PALETTE, SegmentationNode
@@ -400,6 +401,42 @@ def test_camera_node_image_folder(tmp_path: Path) -> None:
         assert info.header.frame_id == 'camera_optical_frame'
     matched = sum((f.header.stamp.sec, f.header.stamp.nanosec) in info_by_stamp for f in frames)
     assert matched >= len(frames) - 1
+
+
+def test_camera_node_refuses_frames_of_another_size(tmp_path: Path) -> None:
+    """Frames whose size differs from the calibration are not published (an error is logged
+    per second instead); the node keeps running."""
+    cv2.imwrite(str(tmp_path / 'small.png'), np.zeros((240, 320, 3), np.uint8))
+    with running(lambda ctx: CameraNode(context=ctx, parameter_overrides=params(
+            source=str(tmp_path), rate_hz=20.0, loop=True))) as h:
+        frames = h.collect(Image, 'camera/image_raw', qos_profile_sensor_data)
+        h.settle(1.5)
+        node = h.nodes[0]
+        assert node.published == 0 and not frames
+        assert not node.timer.is_canceled()
+
+
+def test_camera_node_publishes_the_calibrated_camera_it_is(tmp_path: Path) -> None:
+    """camera_index picks the camera of a several-camera calibration: its frame_id and
+    intrinsics are published; an index outside the calibration, or the synthetic source
+    for a camera other than 0, cannot start."""
+    stereo = REPO_DIR / 'config' / 'calibration_stereo.yaml'
+    second = load_calibration(stereo).cameras[1]
+    cv2.imwrite(str(tmp_path / 'frame.png'), np.zeros((480, 640, 3), np.uint8))
+    with running(lambda ctx: CameraNode(context=ctx, parameter_overrides=params(
+            source=str(tmp_path), calibration_file=str(stereo), camera_index=1,
+            rate_hz=20.0))) as h:
+        infos = h.collect(CameraInfo, 'camera/camera_info', qos_profile_sensor_data)
+        assert h.spin_until(lambda: infos, 10.0)
+    assert infos[0].header.frame_id == second.frame_id == 'camera2_optical_frame'
+    np.testing.assert_allclose(infos[0].k, second.K.ravel())
+    for index, source, message in ((2, str(tmp_path), 'lists 2 camera'),
+                                   (1, 'synthetic', 'renders camera 0 only')):
+        with pytest.raises(StartupError, match=message), running(
+                lambda ctx, i=index, src=source: CameraNode(
+                    context=ctx, parameter_overrides=params(
+                        source=src, calibration_file=str(stereo), camera_index=i))):
+            pass
 
 
 # ------------------------------------------------------------------------ start-up failures

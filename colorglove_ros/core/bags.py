@@ -12,10 +12,17 @@ message of a frame carries the same header stamp and frame_id ``camera_optical_f
 * ``/hand/ground_truth/keypoints``: ``visualization_msgs/msg/MarkerArray`` holding marker
   ns ``keypoints`` id 0 of type POINTS with the 21 keypoints in ``KEYPOINT_NAMES`` order
   (metres, camera frame), plus ns ``skeleton`` id 1, a LINE_LIST of the bones for RViz.
+
+A bag of a calibrated rig also holds, for every extra camera k >= 1 named ``NAME`` in the
+calibration, ``/NAME/camera/image_raw`` and ``/NAME/camera/camera_info`` (the topics of a
+``camera_node`` run in namespace ``NAME``) with the same stamps and that camera's frame_id;
+within a frame they are written before the primary image, so a player paced on the primary
+image has published every view of the frame when it waits. Ground truth stays in camera 0's
+frame.
 """
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,15 +30,16 @@ import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
-from scipy.spatial.transform import Rotation
 
-from .camera import PinholeCamera
+from .camera import CalibrationError, PinholeCamera
 from .hand_model import FINGER_DOF_NAMES, KEYPOINT_NAMES, NUM_DOFS
+from .image_codec import ImageEncodingError, image_to_rgb8
 from .overlay import SKELETON_BONES
+from .pose_fields import pose_from_fields, wrist_quaternion
 
 __all__ = [
     'BagError', 'BagFrame', 'SequenceBagWriter', 'write_sequence_bag', 'read_sequence_bag',
-    'bag_camera', 'image_msg_to_rgb', 'camera_info_to_pinhole', 'TOPIC_IMAGE',
+    'bag_camera', 'camera_info_to_pinhole', 'camera_topics', 'TOPIC_IMAGE',
     'TOPIC_CAMERA_INFO', 'TOPIC_JOINTS', 'TOPIC_WRIST', 'TOPIC_KEYPOINTS', 'FRAME_ID',
     'DEFAULT_START_NS', 'SKELETON_BONES', 'bag_size_bytes',
 ]
@@ -52,17 +60,6 @@ _TYPES = {
     TOPIC_WRIST: 'geometry_msgs/msg/PoseStamped',
     TOPIC_KEYPOINTS: 'visualization_msgs/msg/MarkerArray',
 }
-
-# encoding -> (channels, dtype, channel order to reach RGB); alpha is dropped
-_ENCODINGS: dict[str, tuple[int, str, tuple[int, ...]]] = {
-    'rgb8': (3, 'u1', (0, 1, 2)), 'bgr8': (3, 'u1', (2, 1, 0)),
-    'rgba8': (4, 'u1', (0, 1, 2)), 'bgra8': (4, 'u1', (2, 1, 0)),
-    'mono8': (1, 'u1', (0, 0, 0)), '8UC3': (3, 'u1', (2, 1, 0)), '8UC1': (1, 'u1', (0, 0, 0)),
-    'rgb16': (3, 'u2', (0, 1, 2)), 'bgr16': (3, 'u2', (2, 1, 0)),
-    'rgba16': (4, 'u2', (0, 1, 2)), 'bgra16': (4, 'u2', (2, 1, 0)),
-    'mono16': (1, 'u2', (0, 0, 0)),
-}
-
 
 class BagError(Exception):
     """A bag cannot be written or read, or holds an unsupported message."""
@@ -86,30 +83,40 @@ class BagFrame:
         """The 26-vector q, or None unless both the wrist pose and the joints are present."""
         if self.wrist_position is None or self.joint_positions is None:
             return None
-        q = np.zeros(NUM_DOFS)
-        q[0:3] = self.wrist_position
-        q[3:6] = Rotation.from_quat(self.wrist_quaternion).as_rotvec()
-        q[6:] = self.joint_positions
-        return q
+        return pose_from_fields(self.wrist_position, self.wrist_quaternion,
+                                self.joint_positions)
 
 
 def _typestore():
     return get_typestore(Stores.ROS2_JAZZY)
 
 
+def camera_topics(camera: PinholeCamera, index: int) -> tuple[str, str]:
+    """The image and CameraInfo topics of camera ``index`` of a rig: the default topics for
+    camera 0, those of a ``camera_node`` in namespace ``camera.name`` for the others."""
+    prefix = '' if index == 0 else f'/{camera.name}'
+    return prefix + TOPIC_IMAGE, prefix + TOPIC_CAMERA_INFO
+
+
 class SequenceBagWriter:
     """Write frames one at a time: ``with SequenceBagWriter(path, camera) as w: w.write(f)``.
     A frame is anything with ``image_rgb`` (H, W, 3) uint8, ``pose`` (26,) and
-    ``keypoints_3d`` (21, 3) attributes (e.g. ``synth.SyntheticFrame``)."""
+    ``keypoints_3d`` (21, 3) attributes (e.g. ``synth.SyntheticFrame``). ``extra_cameras``
+    (cameras 1.. of a calibrated rig) add their images at the same stamps."""
 
     def __init__(self, path: str | Path, camera: PinholeCamera, *, fps: float = 30.0,
-                 start_ns: int = DEFAULT_START_NS, frame_id: str = FRAME_ID) -> None:
+                 start_ns: int = DEFAULT_START_NS, frame_id: str = FRAME_ID,
+                 extra_cameras: Sequence[PinholeCamera] = ()) -> None:
         if fps <= 0:
             raise BagError(f'fps must be positive, got {fps}')
         self.path = Path(path)
         if self.path.exists():
             raise BagError(f'{self.path} exists; rosbag2 writers need a new directory')
         self.camera = camera
+        self.extra_cameras = tuple(extra_cameras)
+        names = [c.name for c in self.extra_cameras]
+        if len(set(names)) != len(names) or not all(n.isidentifier() for n in names):
+            raise BagError(f'extra cameras need distinct names usable as a namespace: {names}')
         self.fps = float(fps)
         self.start_ns = int(start_ns)
         self.frame_id = frame_id
@@ -125,11 +132,20 @@ class SequenceBagWriter:
     def __exit__(self, exc_type, exc, tb) -> None:
         self.close()
 
+    def _topic_types(self) -> dict[str, str]:
+        types = {}
+        for index, camera in enumerate(self.extra_cameras, start=1):
+            image, info = camera_topics(camera, index)
+            types[image] = _TYPES[TOPIC_IMAGE]
+            types[info] = _TYPES[TOPIC_CAMERA_INFO]
+        return {**types, **_TYPES}
+
     def open(self) -> None:
         """Create the bag directory and its topics."""
         self._writer.open()
-        for topic, msgtype in _TYPES.items():
-            self._conns[topic] = self._writer.add_connection(topic, msgtype, typestore=self._ts)
+        for topic, msgtype in self._topic_types().items():
+            self._conns[topic] = (self._writer.add_connection(topic, msgtype,
+                                                              typestore=self._ts), msgtype)
 
     def close(self) -> None:
         """Finish the bag (writes metadata.yaml)."""
@@ -139,41 +155,61 @@ class SequenceBagWriter:
         """Header stamp (ns) of frame ``index``."""
         return self.start_ns + int(round(index * 1e9 / self.fps))
 
-    def write(self, frame: object, stamp_ns: int | None = None) -> int:
-        """Write one frame's five messages; return its stamp (ns)."""
-        image = np.asarray(frame.image_rgb)
+    def _header(self, stamp: int, frame_id: str):
+        t = self._ts.types
+        return t['std_msgs/msg/Header'](
+            stamp=t['builtin_interfaces/msg/Time'](sec=stamp // 10**9, nanosec=stamp % 10**9),
+            frame_id=frame_id)
+
+    def _camera_msgs(self, camera: PinholeCamera, index: int, image: np.ndarray, header
+                     ) -> dict:
+        image = np.asarray(image)
+        if image.dtype != np.uint8 or image.shape != (camera.height, camera.width, 3):
+            raise BagError(f'image of camera {index} must be ({camera.height}, {camera.width}, '
+                           f'3) uint8, got {image.shape} {image.dtype}')
+        t = self._ts.types
+        image_topic, info_topic = camera_topics(camera, index)
+        return {
+            image_topic: t['sensor_msgs/msg/Image'](
+                header=header, height=camera.height, width=camera.width, encoding='rgb8',
+                is_bigendian=0, step=camera.width * 3,
+                data=np.ascontiguousarray(image).reshape(-1)),
+            info_topic: _camera_info(self._ts, header, camera),
+        }
+
+    def write(self, frame: object, stamp_ns: int | None = None,
+              extra_images: Sequence[np.ndarray] = ()) -> int:
+        """Write one frame's messages (``extra_images``: one RGB image per extra camera, seen
+        at the same instant); return its stamp (ns)."""
         pose = np.asarray(frame.pose, dtype=float)
         keypoints = np.asarray(frame.keypoints_3d, dtype=float)
-        cam = self.camera
-        if image.dtype != np.uint8 or image.shape != (cam.height, cam.width, 3):
-            raise BagError(f'image must be ({cam.height}, {cam.width}, 3) uint8, got '
-                           f'{image.shape} {image.dtype}')
         if pose.shape != (NUM_DOFS,) or keypoints.shape != (len(KEYPOINT_NAMES), 3):
             raise BagError(f'pose must be (26,) and keypoints (21, 3), got {pose.shape}, '
                            f'{keypoints.shape}')
+        if len(extra_images) != len(self.extra_cameras):
+            raise BagError(f'{len(self.extra_cameras)} extra camera(s) but '
+                           f'{len(extra_images)} extra image(s)')
         stamp = self.stamp_of(self.count) if stamp_ns is None else int(stamp_ns)
         ts = self._ts
         t = ts.types
-        header = t['std_msgs/msg/Header'](
-            stamp=t['builtin_interfaces/msg/Time'](sec=stamp // 10**9, nanosec=stamp % 10**9),
-            frame_id=self.frame_id)
-        msgs = {
-            TOPIC_IMAGE: t['sensor_msgs/msg/Image'](
-                header=header, height=cam.height, width=cam.width, encoding='rgb8',
-                is_bigendian=0, step=cam.width * 3,
-                data=np.ascontiguousarray(image).reshape(-1)),
-            TOPIC_CAMERA_INFO: _camera_info(ts, header, cam),
+        msgs = {}
+        for index, (camera, image) in enumerate(zip(self.extra_cameras, extra_images,
+                                                    strict=True), start=1):
+            msgs.update(self._camera_msgs(camera, index, image,
+                                          self._header(stamp, camera.frame_id)))
+        header = self._header(stamp, self.frame_id)
+        msgs.update(self._camera_msgs(self.camera, 0, frame.image_rgb, header))
+        msgs.update({
             TOPIC_JOINTS: t['sensor_msgs/msg/JointState'](
                 header=header, name=list(FINGER_DOF_NAMES), position=pose[6:].copy(),
                 velocity=np.zeros(0), effort=np.zeros(0)),
             TOPIC_WRIST: t['geometry_msgs/msg/PoseStamped'](
-                header=header, pose=_pose_msg(ts, pose[0:3], Rotation.from_rotvec(
-                    pose[3:6]).as_quat())),
+                header=header, pose=_pose_msg(ts, pose[0:3], wrist_quaternion(pose))),
             TOPIC_KEYPOINTS: _keypoint_markers(ts, header, keypoints),
-        }
+        })
         for topic, msg in msgs.items():
-            self._writer.write(self._conns[topic], stamp,
-                               ts.serialize_cdr(msg, _TYPES[topic]))
+            connection, msgtype = self._conns[topic]
+            self._writer.write(connection, stamp, ts.serialize_cdr(msg, msgtype))
         self.count += 1
         return stamp
 
@@ -189,15 +225,11 @@ def _pose_msg(ts, position: np.ndarray, quat_xyzw: np.ndarray):
 
 def _camera_info(ts, header, cam: PinholeCamera):
     t = ts.types
-    d = np.zeros(5)
-    dist = np.asarray(cam.distortion, dtype=float)
-    d[:min(5, len(dist))] = dist[:5]
-    K = cam.K
-    P = np.hstack([K, np.zeros((3, 1))])
+    fields = cam.camera_info_fields()
+    arrays = {key: np.asarray(fields[key], dtype=float) for key in ('d', 'k', 'r', 'p')}
     return t['sensor_msgs/msg/CameraInfo'](
-        header=header, height=cam.height, width=cam.width, distortion_model='plumb_bob',
-        d=d, k=K.reshape(-1).astype(float), r=np.eye(3).reshape(-1), p=P.reshape(-1),
-        binning_x=0, binning_y=0,
+        header=header, height=fields['height'], width=fields['width'],
+        distortion_model=fields['distortion_model'], **arrays, binning_x=0, binning_y=0,
         roi=t['sensor_msgs/msg/RegionOfInterest'](x_offset=0, y_offset=0, height=0, width=0,
                                                   do_rectify=False))
 
@@ -244,35 +276,21 @@ def write_sequence_bag(path: str | Path, frames: Iterable[object], camera: Pinho
 
 
 # ----------------------------------------------------------------------------- reading
-def image_msg_to_rgb(msg: object) -> np.ndarray:
-    """(H, W, 3) uint8 RGB from a sensor_msgs/Image honouring ``encoding``, ``step`` and
-    ``is_bigendian`` (16-bit images keep their high byte; mono is replicated)."""
-    enc = str(msg.encoding)
-    if enc not in _ENCODINGS:
-        raise BagError(f'unsupported image encoding {enc!r}')
-    channels, kind, order = _ENCODINGS[enc]
-    h, w, step = int(msg.height), int(msg.width), int(msg.step)
-    itemsize = 2 if kind == 'u2' else 1
-    row = w * channels * itemsize
-    data = np.asarray(msg.data, dtype=np.uint8)
-    if step < row or data.size < h * step:
-        raise BagError(f'image data too short: {data.size} bytes for {h} rows of step {step}')
-    rows = data[:h * step].reshape(h, step)[:, :row]
-    if itemsize == 2:
-        dtype = np.dtype('>u2' if msg.is_bigendian else '<u2')
-        pix = np.ascontiguousarray(rows).view(dtype).reshape(h, w, channels)
-        pix = (pix >> 8).astype(np.uint8)
-    else:
-        pix = rows.reshape(h, w, channels)
-    return np.ascontiguousarray(pix[..., list(order)])
-
-
 def camera_info_to_pinhole(msg: object, name: str = 'camera') -> PinholeCamera:
-    """A PinholeCamera from a sensor_msgs/CameraInfo (K and D; identity extrinsics)."""
+    """A PinholeCamera from a sensor_msgs/CameraInfo (K and D; identity extrinsics); a D
+    that does not fit its distortion model is a :class:`BagError`."""
     K = np.asarray(msg.k, dtype=float).reshape(3, 3)
-    return PinholeCamera(int(msg.width), int(msg.height), float(K[0, 0]), float(K[1, 1]),
-                         float(K[0, 2]), float(K[1, 2]), np.asarray(msg.d, dtype=float).copy(),
-                         name=name, frame_id=str(msg.header.frame_id))
+    try:
+        camera = PinholeCamera(int(msg.width), int(msg.height), float(K[0, 0]), float(K[1, 1]),
+                               float(K[0, 2]), float(K[1, 2]),
+                               np.asarray(msg.d, dtype=float).copy(), name=name,
+                               frame_id=str(msg.header.frame_id))
+    except CalibrationError as exc:
+        raise BagError(f'CameraInfo: {exc}') from exc
+    if camera.distortion_model != msg.distortion_model:
+        raise BagError(f'CameraInfo: distortion model {msg.distortion_model!r} with '
+                       f'{len(camera.distortion)} coefficients')
+    return camera
 
 
 def _stamp(msg: object) -> int:
@@ -308,7 +326,10 @@ def read_sequence_bag(path: str | Path, *, with_images: bool = True,
 
 def _fill(frame: BagFrame, topic: str, msg: object) -> None:
     if topic == TOPIC_IMAGE:
-        frame.image_rgb = image_msg_to_rgb(msg)
+        try:
+            frame.image_rgb = image_to_rgb8(msg, allow_mono=True)
+        except ImageEncodingError as exc:
+            raise BagError(f'{TOPIC_IMAGE}: {exc}') from exc
     elif topic == TOPIC_CAMERA_INFO:
         frame.camera = camera_info_to_pinhole(msg)
     elif topic == TOPIC_JOINTS:

@@ -10,11 +10,13 @@ import numpy as np
 from colorglove_ros.core.yaml_io import load_yaml_mapping
 
 __all__ = [
-    'CALIBRATION_VERSION', 'CalibrationError', 'PinholeCamera', 'Calibration',
-    'load_calibration', 'look_at_extrinsics',
+    'CALIBRATION_VERSION', 'DISTORTION_MODELS', 'CalibrationError', 'PinholeCamera',
+    'Calibration', 'load_calibration', 'look_at_extrinsics',
 ]
 
 CALIBRATION_VERSION = 1
+# number of distortion coefficients -> the sensor_msgs/CameraInfo distortion model (OpenCV order)
+DISTORTION_MODELS = {5: 'plumb_bob', 8: 'rational_polynomial'}
 
 
 class CalibrationError(Exception):
@@ -37,6 +39,31 @@ class PinholeCamera:
     translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
     name: str = 'camera'
     frame_id: str = 'camera_optical_frame'
+
+    def __post_init__(self) -> None:
+        size = np.shape(self.distortion)
+        if len(size) != 1 or size[0] not in DISTORTION_MODELS:
+            raise CalibrationError(
+                f'camera {self.name!r}: distortion needs 5 (plumb_bob: k1 k2 p1 p2 k3) or 8 '
+                f'(rational_polynomial) coefficients, got shape {size}')
+
+    @property
+    def distortion_model(self) -> str:
+        """The CameraInfo distortion model of the coefficients (plumb_bob or
+        rational_polynomial)."""
+        return DISTORTION_MODELS[len(self.distortion)]
+
+    def camera_info_fields(self) -> dict:
+        """The fields of a ``sensor_msgs/CameraInfo`` for this camera as plain numbers:
+        size, distortion model and D, K, R (identity: no rectification), P = [K | 0]."""
+        projection = np.zeros((3, 4))
+        projection[:, :3] = self.K
+        return {'height': int(self.height), 'width': int(self.width),
+                'distortion_model': self.distortion_model,
+                'd': [float(v) for v in self.distortion],
+                'k': [float(v) for v in self.K.ravel()],
+                'r': [float(v) for v in np.eye(3).ravel()],
+                'p': [float(v) for v in projection.ravel()]}
 
     @property
     def K(self) -> np.ndarray:  # noqa: N802 (the intrinsic matrix is K everywhere)
@@ -108,12 +135,15 @@ def _camera_from_dict(entry: dict, where: str) -> PinholeCamera:
         raise CalibrationError(f'{where}: bad or missing camera field: {exc}') from exc
     if width <= 0 or height <= 0 or fx <= 0 or fy <= 0:
         raise CalibrationError(f'{where}: image size and focal lengths must be positive')
-    if rvec.shape != (3,) or translation.shape != (3,) or distortion.ndim != 1:
+    if rvec.shape != (3,) or translation.shape != (3,):
         raise CalibrationError(f'{where}: rotation_vector and translation need 3 values')
     rotation = cv2.Rodrigues(rvec)[0]
-    return PinholeCamera(width, height, fx, fy, cx, cy, distortion, rotation, translation,
-                         str(entry.get('name', 'camera')),
-                         str(entry.get('frame_id', 'camera_optical_frame')))
+    try:
+        return PinholeCamera(width, height, fx, fy, cx, cy, distortion, rotation, translation,
+                             str(entry.get('name', 'camera')),
+                             str(entry.get('frame_id', 'camera_optical_frame')))
+    except CalibrationError as exc:
+        raise CalibrationError(f'{where}: {exc}') from exc
 
 
 def load_calibration(path: str | Path) -> Calibration:
@@ -128,6 +158,9 @@ def load_calibration(path: str | Path) -> Calibration:
     if not isinstance(entries, list) or not entries:
         raise CalibrationError(f'calibration file {path} lists no cameras')
     cameras = tuple(_camera_from_dict(e, f'{path}: camera {i}') for i, e in enumerate(entries))
+    frame_ids = [camera.frame_id for camera in cameras]
+    if len(set(frame_ids)) != len(frame_ids):
+        raise CalibrationError(f'{path}: cameras need distinct frame_id values, got {frame_ids}')
     hand_length = float(data.get('hand_length_m', 0.19))
     if not 0.08 < hand_length < 0.35:
         raise CalibrationError(f'{path}: hand_length_m {hand_length} is not a human hand')

@@ -33,7 +33,10 @@ class CameraNode(Node):
         source = declare(self, 'source', 'synthetic',
                          'synthetic | V4L2 index or /dev/videoN | video file | image folder')
         calibration_file = declare(self, 'calibration_file', 'config/calibration.yaml',
-                                   'camera calibration YAML (intrinsics of camera 0 are published)')
+                                   'camera calibration YAML')
+        camera_index = declare(self, 'camera_index', 0,
+                               'which camera of the calibration this is (intrinsics, frame_id)',
+                               0, 63)
         rate_hz = declare(self, 'rate_hz', 30.0, 'publish rate, frames per second', 0.1, 240.0)
         seed = declare(self, 'synthetic_seed', 1, 'seed of the synthetic sequence', 0, 2**31 - 1)
         num_frames = declare(self, 'synthetic_frames', 300, 'synthetic sequence length', 1, 10**6)
@@ -42,12 +45,20 @@ class CameraNode(Node):
                             'render the whole synthetic sequence at start-up (steady frame rate)')
         self.max_frames = declare(self, 'max_frames', 0,
                                   'stop publishing after this many frames (0 = never)', 0, 10**9)
-        reject_parameter_changes(self, {'source', 'calibration_file', 'rate_hz', 'synthetic_seed',
+        reject_parameter_changes(self, {'source', 'calibration_file', 'camera_index', 'rate_hz',
+                                        'synthetic_seed',
                                         'synthetic_frames', 'loop', 'max_frames',
                                         'synthetic_prerender'})
         try:
             calibration = load_calibration(resolve_path(calibration_file))
-            self.camera = calibration.primary
+            if camera_index >= len(calibration.cameras):
+                raise CalibrationError(f'camera_index {camera_index}, but {calibration_file} '
+                                       f'lists {len(calibration.cameras)} camera(s)')
+            if camera_index > 0 and source == 'synthetic':
+                raise FrameSourceError(
+                    'the synthetic source renders camera 0 only; for synchronised views of '
+                    'several cameras play a bag from colorglove_make_bag --calibration')
+            self.camera = calibration.cameras[camera_index]
             self.source = open_frame_source(source, self.camera, seed=seed, num_frames=num_frames,
                                             loop=loop, hand_length_m=calibration.hand_length_m,
                                             prerender=prerender)
@@ -74,6 +85,14 @@ class CameraNode(Node):
         if frame is None:
             self.get_logger().info('source exhausted; no more frames')
             self.timer.cancel()
+            return
+        size = frame.image_rgb.shape[1::-1]
+        if size != (self.camera.width, self.camera.height):
+            self.get_logger().error(
+                f'frame of {size[0]}x{size[1]} does not match the calibrated '
+                f'{self.camera.width}x{self.camera.height} of camera {self.camera.name!r}: '
+                'not published (fix calibration_file or the source)',
+                throttle_duration_sec=1.0)
             return
         header = Header(stamp=self.get_clock().now().to_msg(), frame_id=self.camera.frame_id)
         self.image_pub.publish(array_to_image(frame.image_rgb, 'rgb8', header))

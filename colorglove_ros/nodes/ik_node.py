@@ -62,9 +62,12 @@ class IKNode(Node):
                                        'draw the fitted skeleton on the camera image')
         extra_topics = declare(self, 'extra_observation_topics', '',
                                'comma-separated HandObservation topics of cameras 1..N-1')
+        wait_s = declare(self, 'extra_observation_wait_s', 0.05,
+                         'longest wait for the extra cameras\' observations of a frame, seconds',
+                         0.0, 1.0)
         reject_parameter_changes(self, {'calibration_file', 'ik_config', 'enable_ik',
                                         'enable_smoothing', 'extra_observation_topics',
-                                        'publish_overlay'})
+                                        'publish_overlay', 'extra_observation_wait_s'})
         try:
             calibration = load_calibration(resolve_path(calibration_file))
             config = load_ik_config(resolve_path(ik_config))
@@ -80,11 +83,14 @@ class IKNode(Node):
             raise StartupError(
                 f'ik_node cannot start: {len(self.cameras)} cameras calibrated but '
                 f'{len(topics)} extra observation topic(s) given; set extra_observation_topics')
-        self.extra_observations = [deque(maxlen=30) for _ in topics]
+        self.extra_observations: list[deque[HandObservation]] = [deque(maxlen=30)
+                                                                 for _ in topics]
         for index, topic in enumerate(topics):
             self.create_subscription(HandObservation, topic,
-                                     lambda msg, i=index: self.extra_observations[i].append(msg),
-                                     10)
+                                     lambda msg, i=index: self.on_extra_observation(i, msg), 10)
+        # candidates waiting for the other cameras' observations of the same frame
+        self.pending: HandPoseCandidates | None = None
+        self.pending_timer = self.create_timer(wait_s, self._process_pending, autostart=False)
         self.recent_images: deque[Image] = deque(maxlen=15)
         self.joint_pub = self.create_publisher(JointState, 'hand/joint_states', 10)
         self.wrist_pub = self.create_publisher(PoseStamped, 'hand/wrist_pose', 10)
@@ -112,19 +118,60 @@ class IKNode(Node):
             return None
         return self.create_publisher(TFMessage, '/tf', 10)
 
+    def _matching_observation(self, index: int, stamp: float) -> HandObservation | None:
+        """Extra camera ``index``'s observation nearest to ``stamp``, if within tolerance."""
+        match = min(self.extra_observations[index],
+                    key=lambda m: abs(stamp_to_seconds(m.header.stamp) - stamp), default=None)
+        if match is None or abs(stamp_to_seconds(match.header.stamp) - stamp) > \
+                STAMP_MATCH_TOLERANCE_S:
+            return None
+        return match
+
     def _extra_camera_observations(self, stamp: float) -> list[CameraObservation]:
+        """The extra cameras' observations of the frame at ``stamp``; a camera with none
+        matching in time, or whose frame_id is not its calibrated one, did not see the hand."""
         observations = []
-        for queue in self.extra_observations:
-            match = min(queue, key=lambda m: abs(stamp_to_seconds(m.header.stamp) - stamp),
-                        default=None)
-            if match is None or abs(stamp_to_seconds(match.header.stamp) - stamp) > \
-                    STAMP_MATCH_TOLERANCE_S:
-                observations.append(CameraObservation(hand_found=False))
-            else:
-                observations.append(camera_observation_from_msg(match))
+        for index, camera in enumerate(self.cameras[1:]):
+            match = self._matching_observation(index, stamp)
+            if match is not None and match.header.frame_id != camera.frame_id:
+                self.get_logger().warn(
+                    f'observation of camera {index + 1} has frame_id '
+                    f'{match.header.frame_id!r}, calibrated {camera.frame_id!r}: ignored',
+                    throttle_duration_sec=1.0)
+                match = None
+            observations.append(CameraObservation(hand_found=False) if match is None
+                                else camera_observation_from_msg(match))
         return observations
 
+    def _all_extras_arrived(self, msg: HandPoseCandidates) -> bool:
+        stamp = stamp_to_seconds(msg.header.stamp)
+        return all(self._matching_observation(i, stamp) is not None
+                   for i in range(len(self.extra_observations)))
+
+    def on_extra_observation(self, index: int, msg: HandObservation) -> None:
+        """Keep an extra camera's observation; release waiting candidates once complete."""
+        self.extra_observations[index].append(msg)
+        if self.pending is not None and self._all_extras_arrived(self.pending):
+            self._process_pending()
+
+    def _process_pending(self) -> None:
+        """Track the waiting frame with whatever the extra cameras delivered."""
+        self.pending_timer.cancel()
+        msg, self.pending = self.pending, None
+        if msg is not None:
+            self.track(msg)
+
     def on_candidates(self, msg: HandPoseCandidates) -> None:
+        """Track a frame now, or once the extra cameras' observations of it have arrived
+        (at most ``extra_observation_wait_s`` later)."""
+        self._process_pending()
+        if not msg.hand_found or self._all_extras_arrived(msg):
+            self.track(msg)
+            return
+        self.pending = msg
+        self.pending_timer.reset()
+
+    def track(self, msg: HandPoseCandidates) -> None:
         """Run the tracker on one frame's candidates and publish the results."""
         stamp = stamp_to_seconds(msg.header.stamp)
         observations = [camera_observation_from_msg(msg.observation),
@@ -153,8 +200,10 @@ class IKNode(Node):
             self.tf_pub.publish(tf_message_from_pose(wrist, child_frame_id='palm'))
         keypoints = self.model.keypoints(result.q)
         self.marker_pub.publish(skeleton_markers(keypoints, msg.header))
+        per_camera = ', '.join(f'{camera.name} {count}' for camera, count in
+                               zip(self.cameras, result.constraints_per_camera, strict=False))
         self.status_pub.publish(String(
-            data=f'tracking: {result.num_constraints} constraints, reprojection '
+            data=f'tracking: {result.num_constraints} constraints ({per_camera}), reprojection '
                  f'{result.reprojection_error_px:.1f} px, IK {result.time_ms:.1f} ms'))
         if self.publish_overlay:
             self._publish_overlay(msg, keypoints, result.reprojection_error_px)

@@ -1,16 +1,24 @@
-"""Write a synthetic test sequence (camera images + hand ground truth) as an MCAP rosbag2."""
+"""Write a synthetic test sequence (camera images + hand ground truth) as an MCAP rosbag2; with a
+several-camera calibration, every camera's view of each frame."""
 from __future__ import annotations
 
 import argparse
 import time
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
-from ..core.bags import bag_size_bytes, write_sequence_bag
+from ..core.bags import SequenceBagWriter, bag_size_bytes
 from ..core.camera import CalibrationError, load_calibration
 from ..core.report import print_table, write_json
-from ..core.synth import SPLITS, SynthError, SyntheticSequenceRenderer, default_camera
+from ..core.synth import (
+    SPLITS,
+    SynthError,
+    SyntheticSequenceRenderer,
+    default_camera,
+    render_frames_multi,
+)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -21,7 +29,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--fps', type=float, default=30.0, help='frame rate of the stamps')
     parser.add_argument('--output', '-o', required=True, help='bag directory to create')
     parser.add_argument('--calibration', default=None,
-                        help='calibration YAML (primary camera); default 640x480, f = 600')
+                        help='calibration YAML; every camera listed is rendered (extra cameras '
+                             'on /NAME/camera/...); default one camera, 640x480, f = 600')
     parser.add_argument('--split', choices=SPLITS, default='test',
                         help="conditions range: 'test' (held out) or 'train'")
     parser.add_argument('--hand-length', type=float, default=None,
@@ -34,9 +43,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.calibration:
             calib = load_calibration(args.calibration)
-            camera, hand_length = calib.primary, calib.hand_length_m
+            cameras, hand_length = calib.cameras, calib.hand_length_m
         else:
-            camera, hand_length = default_camera(), 0.19
+            cameras, hand_length = (default_camera(),), 0.19
     except CalibrationError as exc:
         parser.error(str(exc))
     if args.hand_length is not None:
@@ -45,20 +54,31 @@ def main(argv: list[str] | None = None) -> int:
         parser.error('--frames must be >= 1')
     t0 = time.perf_counter()
     try:
-        seq = SyntheticSequenceRenderer(camera, seed=args.seed, num_frames=args.frames,
+        seq = SyntheticSequenceRenderer(cameras[0], seed=args.seed, num_frames=args.frames,
                                         fps=args.fps, hand_length_m=hand_length,
                                         split=args.split)
     except SynthError as exc:
         parser.error(str(exc))
     try:
-        frames = (seq.render(i) for i in tqdm(range(args.frames), desc='frames', unit='frame'))
-        written = write_sequence_bag(output, frames, camera, fps=args.fps)
+        with SequenceBagWriter(output, cameras[0], fps=args.fps,
+                               extra_cameras=cameras[1:]) as writer:
+            for i in tqdm(range(args.frames), desc='frames', unit='frame'):
+                if len(cameras) == 1:
+                    writer.write(seq.render(i))
+                    continue
+                # one instant seen by every camera (as colorglove_eval_ik renders it)
+                views = render_frames_multi(seq.poses[i], cameras,
+                                            np.random.default_rng([args.seed, i, 11]),
+                                            seq.conditions, synthesizer=seq.synth)
+                writer.write(views[0], extra_images=[v.image_rgb for v in views[1:]])
+        written = writer.count
     finally:
         seq.close()
     elapsed = time.perf_counter() - t0
     size = bag_size_bytes(output)
     c = seq.conditions
-    row = {'bag': str(output), 'frames': written, 'size_MB': size / 1e6, 'seconds': elapsed,
+    row = {'bag': str(output), 'frames': written, 'cameras': len(cameras),
+           'size_MB': size / 1e6, 'seconds': elapsed,
            'frames_per_s': written / elapsed, 'split': args.split,
            'background': c.background_kind, 'gain': c.gain,
            'temperature_K': c.color_temperature_k}

@@ -10,16 +10,41 @@ import time
 from pathlib import Path
 
 import rclpy
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
+from rosbags.interfaces import (
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from colorglove_ros.typestore import colorglove_typestore, message_class
 
-__all__ = ['DEFAULT_TOPICS', 'BagRecorder', 'main']
+__all__ = ['DEFAULT_TOPICS', 'BagRecorder', 'main', 'offered_qos']
 
 DEFAULT_TOPICS = ('/hand/joint_states', '/hand/wrist_pose', '/hand/markers',
                   '/hand/pose_candidates', '/hand/observation')
+
+
+def _time(duration: Duration) -> QosTime:
+    sec, nsec = divmod(duration.nanoseconds, 10**9)
+    return QosTime(sec, nsec)
+
+
+def offered_qos(profile: QoSProfile) -> Qos:
+    """A publisher's offered QoS as rosbags writes it into rosbag2 metadata (as ``ros2 bag
+    record`` does: discovery reports no history, so it is ``unknown`` with depth 0)."""
+    return Qos(QosHistory(int(profile.history)), int(profile.depth),
+               QosReliability(int(profile.reliability)), QosDurability(int(profile.durability)),
+               _time(profile.deadline), _time(profile.lifespan),
+               QosLiveliness(int(profile.liveliness)),
+               _time(profile.liveliness_lease_duration),
+               bool(profile.avoid_ros_namespace_conventions))
 
 
 class BagRecorder(Node):
@@ -43,9 +68,11 @@ class BagRecorder(Node):
                 continue
             msgtype = types[0]
             self.pending.discard(topic)
+            offered = [offered_qos(info.qos_profile)
+                       for info in self.get_publishers_info_by_topic(topic)]
             with self.lock:
                 self.connections[topic] = self.writer.add_connection(
-                    topic, msgtype, typestore=self.typestore)
+                    topic, msgtype, typestore=self.typestore, offered_qos_profiles=offered)
             msg_class = message_class(msgtype)
             qos = QoSProfile(depth=100, reliability=QoSReliabilityPolicy.BEST_EFFORT)
             self.create_subscription(msg_class, topic,
