@@ -23,7 +23,11 @@ from colorglove_ros.core.colorspace import (
     xyz_to_cgz,
 )
 from colorglove_ros.core.glove import GLOVE_PALETTE_RGB
-from colorglove_ros.tools.eval_segmentation import render_blob_frame, sample_blob_conditions
+from colorglove_ros.tools.eval_segmentation import (
+    BlobConditions,
+    render_blob_frame,
+    sample_blob_conditions,
+)
 
 FAST = dict(max_per_class=1500, bits=5, augment_copies=1, background_components=6)
 
@@ -99,6 +103,36 @@ def test_calibration_classifies_held_out_frames(calibration, frames) -> None:
         bg += int((lab == 0).sum())
     assert correct / total > 0.93
     assert fp / bg < 0.03
+
+
+def _interior_accuracy_and_fp(calibration, frames) -> tuple[float, float]:
+    k3 = np.ones((3, 3), np.uint8)
+    correct = total = fp = bg = 0
+    for img, lab in frames:
+        pred = calibration.classify(cv2.bilateralFilter(img, 5, 30, 3))
+        interior = (cv2.erode(lab, k3) == cv2.dilate(lab, k3)) & (lab > 0)
+        correct += int((pred[interior] == lab[interior]).sum())
+        total += int(interior.sum())
+        fp += int((pred[lab == 0] > 0).sum())
+        bg += int((lab == 0).sum())
+    return correct / total, fp / bg
+
+
+def test_warm_cool_augmentation_covers_tinted_light(frames) -> None:
+    """Fitted on neutral-light frames only, the warm/cool re-lighting must carry the colours
+    to a strongly warm light without claiming more background under neutral light."""
+    plain, tinted = (fit_color_calibration(frames['train'], seed=0, bits=5, max_per_class=1000,
+                                           background_components=6, augment_warm_cool=w)
+                     for w in (0.0, 1.1))
+    rng = np.random.default_rng(9)
+    warm = [render_blob_frame(rng, BlobConditions(1.0, (1.2, 1.0, 0.8), 2.0, 6, True, 1.4),
+                              320, 240) for _ in range(3)]
+    acc_plain, _ = _interior_accuracy_and_fp(plain, warm)
+    acc_tinted, _ = _interior_accuracy_and_fp(tinted, warm)
+    assert acc_tinted > max(acc_plain + 0.1, 0.9)
+    _, fp_plain = _interior_accuracy_and_fp(plain, frames['held'])
+    _, fp_tinted = _interior_accuracy_and_fp(tinted, frames['held'])
+    assert fp_tinted < fp_plain + 0.005
 
 
 def test_unseen_colours_fall_to_background(calibration) -> None:

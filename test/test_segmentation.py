@@ -4,10 +4,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
-from colorglove_ros.core.colorspace import fit_color_calibration
+from colorglove_ros.core.colorspace import fit_color_calibration, srgb_to_linear
 from colorglove_ros.core.crop import TINY_SIZE, crop_to_tiny
 from colorglove_ros.core.glove import GLOVE_PALETTE_RGB
 from colorglove_ros.core.segmentation import (
@@ -21,6 +22,7 @@ from colorglove_ros.core.segmentation import (
     SegmentationInputError,
     keep_multicolor_components,
     load_segmenter,
+    relabel_borders,
 )
 from colorglove_ros.tools import calibrate_colors, eval_segmentation
 from colorglove_ros.tools.eval_segmentation import (
@@ -141,6 +143,83 @@ def test_keep_multicolor_components() -> None:
     assert not out[20:].any()
 
 
+def _mixed_edge(width: int = 40, height: int = 12, edge: float = 19.5, blur: float = 4.0
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A red | yellow edge at x = ``edge`` blurred over ``blur`` pixels (mixed in linear
+    light, like motion blur) -> (image, true labels, red share of each column)."""
+    red = srgb_to_linear(GLOVE_PALETTE_RGB[0])
+    yellow = srgb_to_linear(GLOVE_PALETTE_RGB[3])
+    x = np.arange(width, dtype=float)
+    share = np.clip((edge + 0.5 * blur - 0.5 - x) / blur + 0.5 / blur, 0.0, 1.0)
+    lin = share[:, None] * red + (1.0 - share[:, None]) * yellow
+    srgb = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055)
+    image = np.broadcast_to(np.round(255 * srgb).astype(np.uint8), (height, width, 3)).copy()
+    truth = np.broadcast_to(np.where(x < edge, 1, 4).astype(np.uint8), (height, width)).copy()
+    return image, truth, share
+
+
+def test_relabel_borders_gives_mixed_pixels_their_majority_colour() -> None:
+    image, truth, share = _mixed_edge()
+    band = np.flatnonzero((share > 0) & (share < 1))
+    assert len(band) >= 3
+    # The classifier put the mixed band into background and orange (red + yellow).
+    labels = truth.copy()
+    labels[:, band] = np.where(np.arange(len(band)) % 2, 7, 0)
+    np.testing.assert_array_equal(relabel_borders(image, labels, passes=0), labels)
+    out = relabel_borders(image, labels)
+    np.testing.assert_array_equal(out, truth)
+    # A 4-pixel band all in background: one pass fixes its outer pixels, the second the rest.
+    image, truth, share = _mixed_edge(blur=5.0)
+    labels = np.where((share > 0) & (share < 1), np.uint8(0), truth)
+    assert np.mean(relabel_borders(image, labels, passes=1) == truth) < 1.0
+    np.testing.assert_array_equal(relabel_borders(image, labels, passes=2), truth)
+
+
+def test_relabel_borders_leaves_clean_regions_and_unknown_colours() -> None:
+    rng = np.random.default_rng(3)
+    image = np.zeros((30, 30, 3), np.uint8)
+    labels = np.zeros((30, 30), np.uint8)
+    image[:, 8:24] = GLOVE_PALETTE_RGB[2]
+    labels[:, 8:24] = 3
+    # sharp patches 5 pixels wide or more keep a sure pixel in reach of their edges: no change
+    image[:, 13:18] = GLOVE_PALETTE_RGB[5]
+    labels[:, 13:18] = 6
+    np.testing.assert_array_equal(relabel_borders(image, labels), labels)
+    # a sharp 3-pixel strip has no sure pixel in reach of its edges, but its colour is no mix
+    # of its neighbours' colours: it stays (a mixed band of the same width does not)
+    strip = np.zeros((20, 24), np.uint8)
+    strip[:, 10:13] = 1
+    strip_image = np.where(strip[..., None] > 0, GLOVE_PALETTE_RGB[1], GLOVE_PALETTE_RGB[0])
+    strip_labels = np.where(strip > 0, 2, 1).astype(np.uint8)
+    np.testing.assert_array_equal(relabel_borders(strip_image, strip_labels), strip_labels)
+    assert not (relabel_borders(strip_image, strip_labels, min_residual=1e9)
+                == 2).any()
+    # no border at all: returned unchanged
+    flat = np.full((8, 8), 2, np.uint8)
+    np.testing.assert_array_equal(relabel_borders(rng.integers(0, 256, (8, 8, 3)).astype(
+        np.uint8), flat), flat)
+    # a lone speck with no sure pixel of its own takes its surroundings' label
+    labels[5, 2] = 9
+    assert relabel_borders(image, labels)[5, 2] == 0
+
+
+def test_border_relabel_raises_pixel_accuracy_on_blurred_frames(calibration) -> None:
+    """The held-out blob frames, motion-blurred: relabelling borders must help clearly."""
+    rng = np.random.default_rng(17)
+    kernel = np.zeros((5, 5), np.float32)
+    kernel[2, :] = 1.0 / 5.0
+    with_relabel = GloveSegmenter(calibration)
+    without = GloveSegmenter(calibration, border_passes=0)
+    gain = []
+    for _ in range(3):
+        img, lab = render_blob_frame(rng, sample_blob_conditions(rng, 'test'))
+        img = cv2.filter2D(img, -1, kernel)
+        g = lab > 0
+        acc = [np.mean(seg.classify_full(img)[g] == lab[g]) for seg in (with_relabel, without)]
+        gain.append(acc[0] - acc[1])
+    assert np.mean(gain) > 0.01
+
+
 def test_roi_reduction_keeps_crop_consistent(calibration) -> None:
     """A big glove is processed at reduced resolution; the crop must still match."""
     rng = np.random.default_rng(21)
@@ -180,6 +259,16 @@ def test_tools_calibrate_and_evaluate(tmp_path: Path, capsys) -> None:
     assert s['frames'] == 4 and s['hand_detect_tn'] == 1
     assert 0.5 < s['interior_pixel_accuracy'] <= 1.0
     assert 'crop_iou_mean' in s and len(figures['timings']) == len(STAGES) + 1
+    assert all(np.isfinite(row['glove_median_ms']) for row in figures['timings'])
+    # every missed glove pixel is counted once by what it became and once by where it is
+    missed = 1.0 - s['glove_pixel_accuracy']
+    assert s['miss_as_background'] + s['miss_as_other_colour'] == pytest.approx(missed)
+    assert s['miss_silhouette'] + s['miss_colour_border'] + s['miss_interior'] == (
+        pytest.approx(missed))
+    assert {row['condition'] for row in figures['conditions']} == {'light level',
+                                                                   'sensor noise'}
+    assert sum(row['frames'] for row in figures['conditions']
+               if row['condition'] == 'light level') == 3     # the glove frames
     assert 'time per 640x480 frame' in capsys.readouterr().out
     config.write_text(f'calibration_file: {cal_path}\nsegmenter:\n  no_such_key: 1\n')
     with pytest.raises(SegmentationConfigError, match='no_such_key'):

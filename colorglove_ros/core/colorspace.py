@@ -233,12 +233,18 @@ def _sample_pixels(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_colors: 
     return out
 
 
+#: Log-gain direction of a warmer light (more red, less blue), as along the Planckian locus.
+_WARM_AXIS = np.array([0.5, 0.0, -0.5])
+
+
 def _augment(pix: np.ndarray, rng: np.random.Generator, light: tuple[float, float],
-             white_balance: float, noise: float) -> np.ndarray:
-    """Re-light sRGB pixels: random level and per-channel gains in linear RGB, plus noise."""
+             white_balance: float, warm_cool: float, noise: float) -> np.ndarray:
+    """Re-light sRGB pixels: random level, warm/cool cast and per-channel gains in linear RGB,
+    plus noise."""
     lin = srgb_to_linear(pix)
     k = np.exp(rng.uniform(np.log(light[0]), np.log(light[1]), (len(pix), 1)))
-    gains = k * np.exp(rng.uniform(-white_balance, white_balance, (len(pix), 3)))
+    cast = rng.uniform(-warm_cool, warm_cool, (len(pix), 1)) * _WARM_AXIS
+    gains = k * np.exp(cast + rng.uniform(-white_balance, white_balance, (len(pix), 3)))
     lin = np.clip(lin * gains, 0.0, 1.0)
     srgb = np.where(lin <= 0.0031308, lin * 12.92, 1.055 * lin ** (1 / 2.4) - 0.055) * 255.0
     srgb += rng.normal(0.0, noise, srgb.shape)
@@ -252,18 +258,22 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_c
                           reject_quantile: float = 1e-4, max_per_class: int = 5000,
                           erode: int = 1, glove_covariance_floor: float = 1.0,
                           augment_copies: int = 2, augment_light: tuple[float, float] = (0.4, 1.8),
-                          augment_white_balance: float = 0.3, augment_noise: float = 3.0,
+                          augment_white_balance: float = 0.3, augment_warm_cool: float = 1.1,
+                          augment_noise: float = 3.0,
                           seed: int = 0, min_frames: int = 8,
                           metadata: Mapping[str, Any] | None = None) -> ColorCalibration:
     """Fit one Gaussian mixture per glove colour and one for the background, build the LUT.
 
-    ``frames`` are (image (H, W, 3) uint8 RGB, label mask (H, W), 0 = background). Glove
-    training pixels are augmented with ``augment_copies`` re-lit copies (light level in
-    ``augment_light``, per-channel gains ``exp(+-augment_white_balance)``, noise) so a few
-    labelled frames cover other light levels and colour temperatures, and glove covariances
-    get ``glove_covariance_floor`` added to their diagonal. A glove class is accepted only
-    where its likelihood is above the ``reject_quantile`` quantile of its own training
-    pixels, so unseen colours fall to background.
+    ``frames`` are (image (H, W, 3) uint8 RGB, label mask (H, W), 0 = background). The
+    training pixels of every class are augmented with ``augment_copies`` re-lit copies (light
+    level in ``augment_light``; a warm/cool cast with red/blue gain ratio up to
+    ``exp(+-augment_warm_cool)``, 1.1 being 3800 K light under a 6500 K white balance;
+    per-channel gains ``exp(+-augment_white_balance)``; noise)
+    so a few labelled frames cover other light levels and colour temperatures; the
+    background is re-lit too, or the widened glove classes would claim re-lit background.
+    Glove covariances get ``glove_covariance_floor`` added to their diagonal. A glove class
+    is accepted only where its likelihood is above the ``reject_quantile`` quantile of its
+    own training pixels, so unseen colours fall to background.
     """
     from sklearn.mixture import GaussianMixture
 
@@ -281,9 +291,10 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_c
     counts = []
     for c, pix in enumerate(samples):
         counts.append(len(pix))
-        if c > 0 and augment_copies > 0:
+        if augment_copies > 0:
             pix = np.concatenate([pix] + [
-                _augment(pix, rng, augment_light, augment_white_balance, augment_noise)
+                _augment(pix, rng, augment_light, augment_white_balance, augment_warm_cool,
+                         augment_noise)
                 for _ in range(augment_copies)])
         feats = rgb_features(pix, feature_kind, intensity_weight)
         k = background_components if c == 0 else components
@@ -302,6 +313,7 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_c
             'background_components': background_components, 'reject_quantile': reject_quantile,
             'background_prior': background_prior, 'augment_copies': augment_copies,
             'augment_light': list(augment_light), 'augment_white_balance': augment_white_balance,
+            'augment_warm_cool': augment_warm_cool,
             'glove_covariance_floor': glove_covariance_floor, 'seed': seed,
             **dict(metadata or {})}
     cal = ColorCalibration(lut=np.zeros(0, np.uint8), bits=bits, num_colors=num_colors,

@@ -7,14 +7,19 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .colorspace import ColorCalibration, load_calibration, read_calibration_config
+from .colorspace import (
+    ColorCalibration,
+    load_calibration,
+    read_calibration_config,
+    srgb_to_linear,
+)
 from .crop import TINY_SIZE, CropTransform, crop_to_tiny, mean_shift_crop
 
 __all__ = [
     'SegmentationInputError', 'SegmentationConfigError', 'Blob', 'Observation', 'GloveSegmenter',
     'STATUS_OK',
     'STATUS_NO_GLOVE', 'STATUS_TOO_SMALL', 'STATUS_OUT_OF_FRAME', 'STAGES', 'load_segmenter',
-    'keep_multicolor_components',
+    'keep_multicolor_components', 'relabel_borders',
 ]
 
 STATUS_OK = 'ok'
@@ -22,7 +27,7 @@ STATUS_NO_GLOVE = 'no_glove'          # (almost) no glove-coloured pixels in the
 STATUS_TOO_SMALL = 'too_small'        # glove found but too few pixels for a tiny image
 STATUS_OUT_OF_FRAME = 'out_of_frame'  # the crop window lies mostly outside the image
 #: Timed stages, in pipeline order (``Observation.timings_ms`` also has ``'total'``).
-STAGES = ('coarse', 'filter', 'classify', 'cleanup', 'crop', 'blobs')
+STAGES = ('coarse', 'filter', 'classify', 'cleanup', 'borders', 'crop', 'blobs')
 
 
 class SegmentationInputError(ValueError):
@@ -80,6 +85,124 @@ def keep_multicolor_components(labels: np.ndarray, min_colors: int = 3,
     return np.where(keep[comp], labels, 0).astype(np.uint8)
 
 
+#: sRGB byte -> linear RGB in 0..255 (float32): mixed pixels are linear mixes there.
+_LINEAR_RGB = (255.0 * srgb_to_linear(np.arange(256, dtype=np.uint8))).astype(np.float32)
+_CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+_UNSURE = 255
+_FAR = 1e4   # a colour value far outside 0..255
+_NO_KEY = np.int32(np.iinfo(np.int32).max)   # larger than every sort key; label bits 255
+
+
+def _reference_steps(distances: tuple[int, ...], row_stride: int) -> np.ndarray:
+    """Flat index steps to the pixels ``distances`` away along the 8 compass directions."""
+    return np.array([d * (sy * row_stride + sx) for d in distances
+                     for sy in (-1, 0, 1) for sx in (-1, 0, 1) if sy or sx])
+
+
+def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 2,
+                    distances: tuple[int, ...] = (2, 4), mix_tolerance: float = 0.25,
+                    min_residual: float = 10.0) -> np.ndarray:
+    """Re-decide the labels of pixels on a label border, i.e. with a 4-neighbour of another
+    label (colour borders and the glove silhouette).
+
+    Such pixels often mix two colours (anti-aliasing, motion blur, JPEG chroma subsampling)
+    and so fall outside every colour model (background) or into a third colour between the
+    two (orange between red and yellow). Each takes the label of the *sure* pixel (not on a
+    border), among those ``distances`` pixels away in the 8 compass directions, whose
+    linear-RGB colour ``a`` is nearest its own ``c``: for a mix of two colours, the one it
+    holds more of. A pixel with a glove label keeps it, though, when ``c`` is no mix of
+    ``a`` and the nearest sure colour ``b`` of another label: farther from the segment
+    ``a``-``b`` than ``mix_tolerance`` times its length and than ``min_residual`` (linear
+    RGB, 0..255); so a thin patch of a real colour survives. With no sure pixel in reach a
+    label stays. ``passes`` repeats this: a band of wrong labels 3 or more pixels wide has a
+    sure core of its own, and each pass peels a pixel off each side. Only the bounding box
+    of the border pixels is read; ``image`` is the (H, W, 3) uint8 RGB image ``labels`` came
+    from.
+    """
+    labels = np.asarray(labels, dtype=np.uint8)
+    if passes < 1 or not distances or min(labels.shape) < 3:
+        return labels
+    border = cv2.erode(labels, _CROSS) != cv2.dilate(labels, _CROSS)
+    bx, by, bw, bh = cv2.boundingRect(border.view(np.uint8))
+    if not bw:
+        return labels
+    pad = max(distances)
+    h, w = labels.shape
+    y0, y1 = max(by - pad, 0), min(by + bh + pad, h)
+    x0, x1 = max(bx - pad, 0), min(bx + bw + pad, w)
+    # Work on the bounding box padded by the reach, as flat arrays: a step is an offset.
+    box = cv2.copyMakeBorder(labels[y0:y1, x0:x1], pad, pad, pad, pad, cv2.BORDER_CONSTANT,
+                             value=_UNSURE)
+    colour = cv2.LUT(cv2.copyMakeBorder(np.ascontiguousarray(image[y0:y1, x0:x1]), pad, pad,
+                                        pad, pad, cv2.BORDER_CONSTANT), _LINEAR_RGB)
+    planes = [p.ravel() for p in cv2.split(colour)]
+    steps = _reference_steps(distances, box.shape[1])[:, None]
+    red = planes[0].reshape(box.shape)
+    inner = box[pad:-pad, pad:-pad]   # a view of the box without the padding
+    flat = box.ravel()
+    for k in range(passes):
+        if k:
+            border = cv2.erode(inner, _CROSS) != cv2.dilate(inner, _CROSS)
+        else:
+            border = border[y0:y1, x0:x1]
+        border_box = cv2.copyMakeBorder(border.view(np.uint8), pad, pad, pad, pad,
+                                        cv2.BORDER_CONSTANT).view(bool)
+        at = np.flatnonzero(border_box)
+        if not len(at):
+            break
+        sure = np.where(border_box, np.uint8(_UNSURE), box)
+        ref = at + steps                      # (references, border pixels)
+        ref_labels = sure.ravel().take(ref)
+        # A reference that is not sure (or is padding) gets a red channel far out of range,
+        # so any sure reference is nearer.
+        far_red = np.where(sure == _UNSURE, np.float32(_FAR), red).ravel()
+        own = [plane.take(at) for plane in planes]
+        dist = np.zeros(ref.shape, np.float32)
+        for ref_plane, own_plane in zip((far_red, *planes[1:]), own, strict=True):
+            diff = ref_plane.take(ref)
+            diff -= own_plane
+            diff *= diff
+            dist += diff
+        # Non-negative float32 values order like their int32 bit patterns: put the label in
+        # the lowest 8 mantissa bits, and one min over the references gives the nearest
+        # reference's label (255 = no sure reference).
+        key = dist.view(np.int32)
+        key &= ~0xFF
+        key |= ref_labels
+        label_a = (key.min(axis=0) & 0xFF).astype(np.uint8)
+        current = flat[at]
+        new = np.where(label_a == _UNSURE, current, label_a)
+        # Glove pixels about to change: keep their label if their colour is no mix of a and b.
+        check = np.flatnonzero((new != current) & (current != 0))
+        if len(check):
+            key = key[:, check]
+            nearest = key.argmin(axis=0)
+            others = np.where(ref_labels[:, check] == label_a[check], _NO_KEY, key)
+            second = others.argmin(axis=0)
+            columns = np.arange(len(check))
+            has_b = (others[second, columns] & 0xFF) != _UNSURE
+            second = np.where(has_b, second, nearest)   # no other label: b = a
+            ref_a = ref[nearest, check]
+            ref_b = ref[second, check]
+            # squared distance of c from the segment a-b, and the segment's squared length
+            length2, along, off2 = (np.zeros(len(check), np.float32) for _ in range(3))
+            for plane, own_plane in zip(planes, own, strict=True):
+                a = plane.take(ref_a)
+                span = plane.take(ref_b) - a
+                rel = own_plane[check] - a
+                length2 += span * span
+                along += rel * span
+                off2 += rel * rel
+            t = np.clip(along / np.maximum(length2, 1e-6), 0.0, 1.0)
+            off2 -= t * (2.0 * along - t * length2)   # |rel - t span|^2
+            not_a_mix = off2 > np.maximum(mix_tolerance ** 2 * length2, min_residual ** 2)
+            new[check[not_a_mix]] = current[check[not_a_mix]]
+        flat[at] = new
+    out = labels.copy()
+    out[y0:y1, x0:x1] = inner
+    return out
+
+
 def _check_image(image: object) -> np.ndarray:
     if not isinstance(image, np.ndarray):
         raise SegmentationInputError(f'expected a numpy array, got {type(image).__name__}')
@@ -98,20 +221,26 @@ class GloveSegmenter:
     Pipeline: a coarse pass (area-downsampled frame, table lookup, median, mean-shift) finds
     the glove; only a region around it (``roi_margin`` times the coarse window, reduced so
     the crop spans at most ``max_roi_cells`` pixels) is bilateral-filtered, classified at
-    (near) full resolution and cleaned with a median filter; :func:`crop_to_tiny` there gives
-    the tiny image and crop; connected components per colour give the blobs.
+    (near) full resolution and cleaned (median filter, :func:`keep_multicolor_components`,
+    then :func:`relabel_borders`); :func:`crop_to_tiny` there gives the tiny image and crop;
+    connected components per colour give the blobs.
     """
 
     def __init__(self, calibration: ColorCalibration, *, coarse_factor: int = 4,
                  roi_margin: float = 1.5, max_roi_cells: int = 160,
-                 bilateral_diameter: int = 5, bilateral_sigma_color: float = 30.0,
+                 bilateral_diameter: int = 3, bilateral_sigma_color: float = 45.0,
                  bilateral_sigma_space: float = 3.0, median_size: int = 3,
+                 border_passes: int = 2, border_distances: tuple[int, ...] = (2, 4),
                  min_glove_pixels: int = 300, min_inside_fraction: float = 0.5,
                  min_blob_pixels: int = 12, min_component_colors: int = 3) -> None:
         if coarse_factor < 1 or max_roi_cells < TINY_SIZE or roi_margin < 1.0:
             raise SegmentationConfigError(
                 f'need coarse_factor >= 1, max_roi_cells >= {TINY_SIZE}, roi_margin >= 1; got '
                 f'{coarse_factor}, {max_roi_cells}, {roi_margin}')
+        if border_passes < 0 or not all(int(d) >= 1 for d in border_distances):
+            raise SegmentationConfigError(
+                f'need border_passes >= 0 and border_distances >= 1; got {border_passes}, '
+                f'{border_distances}')
         self.calibration = calibration
         self.coarse_factor = int(coarse_factor)
         self.roi_margin = float(roi_margin)
@@ -120,6 +249,8 @@ class GloveSegmenter:
         self.bilateral_sigma_color = float(bilateral_sigma_color)
         self.bilateral_sigma_space = float(bilateral_sigma_space)
         self.median_size = int(median_size)
+        self.border_passes = int(border_passes)
+        self.border_distances = tuple(int(d) for d in border_distances)
         self.min_glove_pixels = int(min_glove_pixels)
         self.min_inside_fraction = float(min_inside_fraction)
         self.min_blob_pixels = int(min_blob_pixels)
@@ -134,9 +265,7 @@ class GloveSegmenter:
             sx, sy = w / (w // f), h / (h // f)
         else:
             small, sx, sy = image, 1.0, 1.0
-        labels = self.calibration.classify(small)
-        if self.median_size > 1 and min(labels.shape) >= self.median_size:
-            labels = cv2.medianBlur(labels, self.median_size)
+        labels = self._median(self.calibration.classify(small))
         if self.min_component_colors > 1:
             labels = keep_multicolor_components(labels, self.min_component_colors, min_pixels=2)
         min_px = max(int(self.min_glove_pixels / (sx * sy)), 1)
@@ -155,15 +284,11 @@ class GloveSegmenter:
         blobs: list[Blob] = []
         min_px = max(int(np.ceil(self.min_blob_pixels / (r * r))), 1)
         counts = np.bincount(sub.ravel(), minlength=self.calibration.num_colors + 1)
-        for c in np.flatnonzero(counts >= min_px):
-            if c == 0:
-                continue
-            m = sub == c
-            rows = np.flatnonzero(m.any(axis=1))
-            cols = np.flatnonzero(m.any(axis=0))
-            bx, by = int(cols[0]), int(rows[0])
-            box = m[by:int(rows[-1]) + 1, bx:int(cols[-1]) + 1].view(np.uint8)
-            n, _, stats, cents = cv2.connectedComponentsWithStats(box, connectivity=8)
+        for c in np.flatnonzero(counts[1:] >= min_px) + 1:
+            m = cv2.compare(sub, int(c), cv2.CMP_EQ)
+            bx, by, bw, bh = cv2.boundingRect(m)
+            n, _, stats, cents = cv2.connectedComponentsWithStats(m[by:by + bh, bx:bx + bw],
+                                                                  connectivity=8)
             for k in range(1, n):
                 area = int(stats[k, cv2.CC_STAT_AREA])
                 if area < min_px:
@@ -173,17 +298,25 @@ class GloveSegmenter:
                 blobs.append(Blob(int(c), float(fx), float(fy), area * r * r))
         return blobs
 
-    def classify_full(self, image_rgb: np.ndarray) -> np.ndarray:
-        """Filter, classify and clean a whole frame at full resolution (as :meth:`process`
-        does inside its region of interest); for evaluation and debug images."""
-        image = _check_image(image_rgb)
+    def _filter(self, image: np.ndarray) -> np.ndarray:
         if self.bilateral_diameter > 0 and min(image.shape[:2]) > self.bilateral_diameter:
-            image = cv2.bilateralFilter(np.ascontiguousarray(image), self.bilateral_diameter,
-                                        self.bilateral_sigma_color, self.bilateral_sigma_space)
-        labels = self.calibration.classify(image)
+            return cv2.bilateralFilter(np.ascontiguousarray(image), self.bilateral_diameter,
+                                       self.bilateral_sigma_color, self.bilateral_sigma_space)
+        return image
+
+    def _median(self, labels: np.ndarray) -> np.ndarray:
         if self.median_size > 1 and min(labels.shape) >= self.median_size:
-            labels = cv2.medianBlur(labels, self.median_size)
+            return cv2.medianBlur(labels, self.median_size)
         return labels
+
+    def classify_full(self, image_rgb: np.ndarray) -> np.ndarray:
+        """Filter, classify, median-filter and relabel borders on a whole frame at full
+        resolution (as :meth:`process` does inside its region of interest, less the clutter
+        filter); for evaluation and debug images."""
+        filtered = self._filter(_check_image(image_rgb))
+        labels = self._median(self.calibration.classify(filtered))
+        return relabel_borders(filtered, labels, self.border_passes,
+                               self.border_distances)
 
     # ------------------------------------------------------------------ main entry
     def process(self, image_rgb: np.ndarray, keep_labels: bool = False) -> Observation:
@@ -217,18 +350,17 @@ class GloveSegmenter:
         if r > 1:
             roi = cv2.resize(roi, ((x1 - x0) // r, (y1 - y0) // r),
                              interpolation=cv2.INTER_AREA)
-        if self.bilateral_diameter > 0 and min(roi.shape[:2]) > self.bilateral_diameter:
-            roi = cv2.bilateralFilter(np.ascontiguousarray(roi), self.bilateral_diameter,
-                                      self.bilateral_sigma_color, self.bilateral_sigma_space)
+        roi = self._filter(roi)
         t = tick('filter', t)
         labels = self.calibration.classify(roi)
         t = tick('classify', t)
-        if self.median_size > 1 and min(labels.shape) >= self.median_size:
-            labels = cv2.medianBlur(labels, self.median_size)
+        labels = self._median(labels)
         if self.min_component_colors > 1:
             labels = keep_multicolor_components(labels, self.min_component_colors,
                                                 min_pixels=max(self.min_blob_pixels // (r * r), 2))
         t = tick('cleanup', t)
+        labels = relabel_borders(roi, labels, self.border_passes, self.border_distances)
+        t = tick('borders', t)
         if keep_labels:
             full = np.zeros((h, w), np.uint8)
             up = labels if r == 1 else np.repeat(np.repeat(labels, r, 0), r, 1)

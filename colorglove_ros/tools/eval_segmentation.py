@@ -4,7 +4,9 @@ Frames come from ``core/synth.py`` (``sample_conditions(rng, 'test')``: other li
 colour temperatures, noise, blur, JPEG and unseen cluttered backgrounds than the 'train'
 frames the calibration was fitted on) or, with ``--source blobs``, from a simple 2-D stand-in
 glove (:func:`render_blob_frame`). Ground-truth crop = :func:`crop_to_tiny` on the true label
-image, so a perfect segmenter scores IoU 1.
+image, so a perfect segmenter scores IoU 1. Missed glove pixels are split by what they became
+(background, another colour) and where they are (silhouette, colour border, interior), also
+per imaging condition; stage times are given over all frames and over glove frames only.
 """
 from __future__ import annotations
 
@@ -128,20 +130,21 @@ def render_blob_frame(rng: np.random.Generator, cond: BlobConditions, width: int
 
 # ----------------------------------------------------------------------------- evaluation
 def test_frames(source: str, count: int, seed: int, empty: int = 0
-                ) -> list[tuple[np.ndarray, np.ndarray]]:
+                ) -> list[tuple[np.ndarray, np.ndarray, dict[str, float]]]:
     """``count`` held-out 'test' frames with ground truth labels, plus ``empty`` frames with
-    no glove (hand moved out of view)."""
+    no glove (hand moved out of view): (image, labels, imaging conditions) each."""
     rng = np.random.default_rng(seed)
-    frames: list[tuple[np.ndarray, np.ndarray]] = []
+    frames: list[tuple[np.ndarray, np.ndarray, dict[str, float]]] = []
     if source == 'blobs':
         for i in range(count + empty):
-            img, lab = render_blob_frame(rng, sample_blob_conditions(rng, 'test'))
+            cond = sample_blob_conditions(rng, 'test')
+            img, lab = render_blob_frame(rng, cond)
             if i >= count:
                 img, lab = render_blob_frame(rng, sample_blob_conditions(rng, 'test'))
                 keep = lab == 0
                 img = np.where(keep[..., None], img, np.uint8(90))
                 lab = np.zeros_like(lab)
-            frames.append((img, lab))
+            frames.append((img, lab, {'gain': cond.light, 'noise': cond.noise_sigma / 255.0}))
         return frames
     if source != 'synth':
         raise ValueError(f"source must be 'synth' or 'blobs', got {source!r}")
@@ -152,9 +155,38 @@ def test_frames(source: str, count: int, seed: int, empty: int = 0
         q = synth.sample_pose(rng, camera)
         if i >= count:
             q[0] += 10.0  # far outside the field of view: background only
-        f = synth.render_frame(q, camera, rng, synth.sample_conditions(rng, 'test'))
-        frames.append((f.image_rgb, f.labels))
+        cond = synth.sample_conditions(rng, 'test')
+        f = synth.render_frame(q, camera, rng, cond)
+        frames.append((f.image_rgb, f.labels, {
+            'blur_px': cond.blur_px, 'jpeg_quality': cond.jpeg_quality, 'gain': cond.gain,
+            'temperature_k': cond.color_temperature_k, 'noise': cond.noise_sigma}))
     return frames
+
+
+#: Condition bins of the accuracy breakdown: (name, condition key, bin edges, bin labels),
+#: cut at the synthetic 'test' ranges (noise: read noise as a fraction of full scale).
+CONDITION_BINS = (
+    ('motion blur', 'blur_px', (1.0, 2.5), ('none', '1-2.5 px', '2.5-5 px')),
+    ('JPEG', 'jpeg_quality', (1, 84), ('none', 'q 75-83', 'q 84-92')),
+    ('light level', 'gain', (1.0,), ('dim (< 1)', 'bright (> 1)')),
+    ('colour temperature', 'temperature_k', (6500.0,), ('warm (< 6500 K)', 'cool (> 6500 K)')),
+    ('sensor noise', 'noise', (0.012, 0.016), ('low', 'mid', 'high')),
+)
+
+
+def condition_breakdown(per_frame: list[dict[str, float]],
+                        conditions: list[dict[str, float]]) -> list[dict[str, object]]:
+    """Mean glove-pixel accuracy and error split per imaging-condition bin (glove frames)."""
+    rows: list[dict[str, object]] = []
+    for name, key, edges, names in CONDITION_BINS:
+        for b, label in enumerate(names):
+            sel = [m for m, c in zip(per_frame, conditions, strict=True)
+                   if key in c and np.isfinite(m['glove_acc'])
+                   and int(np.searchsorted(edges, c[key], side='right')) == b]
+            if sel:
+                rows.append({'condition': name, 'bin': label, 'frames': len(sel),
+                             **{k: float(np.mean([m[k] for m in sel])) for k in _SPLIT_KEYS}})
+    return rows
 
 
 def _window(t: CropTransform) -> tuple[float, float, float, float]:
@@ -184,6 +216,10 @@ def _gt_blobs(labels: np.ndarray, min_pixels: int) -> list[tuple[int, float, flo
     return out
 
 
+_SPLIT_KEYS = ('glove_acc', 'miss_as_background', 'miss_as_other_colour', 'miss_silhouette',
+               'miss_colour_border', 'miss_interior')
+
+
 def frame_metrics(seg: GloveSegmenter, image: np.ndarray, truth: np.ndarray,
                   obs: Observation, min_blob_pixels: int = 30) -> dict[str, float]:
     """Pixel, crop and centroid figures of one frame (NaN where undefined)."""
@@ -191,11 +227,27 @@ def frame_metrics(seg: GloveSegmenter, image: np.ndarray, truth: np.ndarray,
     g = truth > 0
     k3 = np.ones((3, 3), np.uint8)
     interior = (cv2.erode(truth, k3) == cv2.dilate(truth, k3)) & g
+    silhouette = g & (cv2.erode(g.view(np.uint8), k3) == 0)   # a background 8-neighbour
+    colour_border = g & ~interior & ~silhouette
     nan = float('nan')
+
+    def acc(m: np.ndarray) -> float:
+        return float(np.mean(pred[m] == truth[m])) if m.any() else nan
+
+    def share(m: np.ndarray) -> float:
+        return float(np.count_nonzero(m & (pred != truth)) / g.sum()) if g.any() else nan
+
     out = {
-        'glove_acc': float(np.mean(pred[g] == truth[g])) if g.any() else nan,
-        'interior_acc': float(np.mean(pred[interior] == truth[interior])) if interior.any()
-        else nan,
+        'glove_acc': acc(g),
+        'interior_acc': acc(interior),
+        'silhouette_acc': acc(silhouette),
+        'colour_border_acc': acc(colour_border),
+        # errors as fractions of all glove pixels: where they are and what they became
+        'miss_as_background': share(g & (pred == 0)),
+        'miss_as_other_colour': share(g & (pred > 0)),
+        'miss_silhouette': share(silhouette),
+        'miss_colour_border': share(colour_border),
+        'miss_interior': share(interior),
         'bg_fp_rate': float(np.mean(pred[~g] > 0)),
         'iou': nan, 'tiny_agree': nan, 'centroid_err_px': nan, 'blob_recall': nan,
     }
@@ -220,19 +272,25 @@ def frame_metrics(seg: GloveSegmenter, image: np.ndarray, truth: np.ndarray,
     return out
 
 
-def evaluate(seg: GloveSegmenter, frames: list[tuple[np.ndarray, np.ndarray]],
+def evaluate(seg: GloveSegmenter,
+             frames: list[tuple[np.ndarray, np.ndarray, dict[str, float]]],
              repeats: int = 3) -> dict[str, object]:
-    """Run the segmenter on every frame (timed ``repeats`` times) and gather the figures."""
+    """Run the segmenter on every (image, labels, conditions) frame (timed ``repeats``
+    times) and gather the figures. Times are given over all 640x480 frames and over those
+    with a glove in the ground truth (frames without one exit early)."""
     per_frame = []
     timings: dict[str, list[float]] = {k: [] for k in (*STAGES, 'total')}
+    glove_timings: dict[str, list[float]] = {k: [] for k in timings}
     detect = {'tp': 0, 'fn': 0, 'fp': 0, 'tn': 0}
-    for image, truth in frames:
+    for image, truth, _ in frames:
         obs = seg.process(image)
         for _ in range(repeats):
             o = seg.process(image)
             if image.shape[:2] == (480, 640):
                 for k in timings:
                     timings[k].append(o.timings_ms.get(k, 0.0))
+                    if truth.any():
+                        glove_timings[k].append(o.timings_ms.get(k, 0.0))
         m = frame_metrics(seg, image, truth, obs)
         gt_found = m['gt_hand'] > 0
         # a ground-truth hand counts only if its crop is mostly inside the image, like ours
@@ -257,6 +315,9 @@ def evaluate(seg: GloveSegmenter, frames: list[tuple[np.ndarray, np.ndarray]],
         'frames': len(frames),
         'glove_pixel_accuracy': agg('glove_acc'),
         'interior_pixel_accuracy': agg('interior_acc'),
+        'silhouette_pixel_accuracy': agg('silhouette_acc'),
+        'colour_border_pixel_accuracy': agg('colour_border_acc'),
+        **{k: agg(k) for k in _SPLIT_KEYS[1:]},
         'background_fp_rate': agg('bg_fp_rate'),
         'crop_iou_mean': agg('iou'),
         'crop_iou_median': agg('iou', np.nanmedian),
@@ -267,10 +328,15 @@ def evaluate(seg: GloveSegmenter, frames: list[tuple[np.ndarray, np.ndarray]],
         'hand_detect_tp': detect['tp'], 'hand_detect_fn': detect['fn'],
         'hand_detect_fp': detect['fp'], 'hand_detect_tn': detect['tn'],
     }
-    timing_rows = [{'stage': k, 'median_ms': float(np.median(v)) if v else float('nan'),
-                    'p90_ms': float(np.percentile(v, 90)) if v else float('nan')}
-                   for k, v in timings.items()]
-    return {'summary': summary, 'timings': timing_rows, 'per_frame': per_frame}
+    def pct(v: list[float], q: float) -> float:
+        return float(np.percentile(v, q)) if v else float('nan')
+
+    timing_rows = [{'stage': k, 'median_ms': pct(v, 50), 'p90_ms': pct(v, 90),
+                    'glove_median_ms': pct(glove_timings[k], 50),
+                    'glove_p90_ms': pct(glove_timings[k], 90)} for k, v in timings.items()]
+    return {'summary': summary, 'timings': timing_rows,
+            'conditions': condition_breakdown(per_frame, [f[2] for f in frames]),
+            'per_frame': per_frame}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -297,7 +363,10 @@ def main(argv: list[str] | None = None) -> int:
     print_table([{'metric': k, 'value': v} for k, v in summary.items()],
                 title=f'segmentation on {len(frames)} held-out {args.source} frames '
                       f'(calibration {cal_path})')
-    print_table(result['timings'], title='time per 640x480 frame by stage (ms)')
+    print_table(result['conditions'], title='glove frames by imaging condition: accuracy and '
+                'misses (fractions of glove pixels)')
+    print_table(result['timings'], title='time per 640x480 frame by stage (ms): all frames, '
+                'and glove frames only')
     load = ' '.join(Path('/proc/loadavg').read_text().split()[:3]) \
         if Path('/proc/loadavg').is_file() else 'n/a'
     print(f'evaluation took {time.perf_counter() - t0:.1f} s; load average {load}')
