@@ -64,6 +64,14 @@ def test_seed_sets_are_disjoint():
         eval_seeds(0)
 
 
+def test_tuning_seeds_are_offset_from_the_reported_ones():
+    assert eval_seeds(2, 1000) == [1000, 1001]
+    assert not set(eval_seeds(2, 1000)) & set(eval_seeds(4))
+    assert not set(eval_seeds(2, 1000)) & set(train_seeds(50))
+    with pytest.raises(EvaluationError):
+        eval_seeds(2, -1)
+
+
 def test_contiguous_runs_and_jitter(synth):
     assert contiguous_runs(np.array([1, 1, 0, 1, 0, 0, 1, 1, 1], bool)) == [(0, 2), (3, 4),
                                                                            (6, 9)]
@@ -171,7 +179,10 @@ def test_ik_lowers_fingertip_error_on_ground_truth_neighbours(rigs, synth):
     stage = LookupStage(oracle, cam)
     err = {'blend': [], 'ik': []}
     for seed in (3, 4, 5):
-        trackers = {m: HandTracker(synth.model, synth.mesh, [cam], IKConfig().with_mode(m))
+        # the oracle's constraint vertices are the ones nearest the true patch centroids, the
+        # 'vertex' constraint model's assumption
+        cfg = IKConfig(constraint_model='vertex')
+        trackers = {m: HandTracker(synth.model, synth.mesh, [cam], cfg.with_mode(m))
                     for m in err}
         Q = generate_sequence(seed, 8, camera=cam, model=synth.model)
         for i, q in enumerate(Q):
@@ -203,14 +214,26 @@ def test_eval_ik_cli_writes_documented_json(tiny_db_path, tmp_path, capsys):
     for row in data['rows']:
         for key in ('cameras', 'mode', 'joint_mae_deg', 'fingertip_mm', 'wrist_plane_mm',
                     'wrist_depth_mm', 'reprojection_px', 'jitter_mm', 'ik_ms_mean',
-                    'ik_ms_p95'):
+                    'ik_ms_p95', 'fingertip_rel_wrist_mm', 'fingertip_hand_frame_mm',
+                    'fingertip_rotation_only_mm'):
             assert key in row
         assert math.isfinite(row['fingertip_mm'])
+        assert math.isfinite(row['fingertip_hand_frame_mm'])
     assert {t['result'] for t in data['targets']} <= {'PASS', 'FAIL'}
     assert any('depth error < 10 mm' in t['target'] for t in data['targets'])
+    fingertip = [t['target'] for t in data['targets'] if '< 15 mm' in t['target']]
+    assert any('absolute' in t for t in fingertip)
+    assert any('relative to the wrist position' in t for t in fingertip)
     assert data['settings']['seeds'] == [0]
     assert png.stat().st_size > 1000
     assert 'Targets' in capsys.readouterr().out
+
+
+def test_eval_ik_cli_refuses_a_database_without_its_hand_length(tmp_path, capsys, monkeypatch):
+    db = SimpleNamespace(meta={'build': {'glove_seed': 0}})
+    monkeypatch.setattr(eval_ik, 'open_database', lambda path, root: (tmp_path, db))
+    assert eval_ik.main(['--plot', '']) == 1
+    assert 'hand length' in capsys.readouterr().out
 
 
 def test_eval_ik_cli_reports_missing_database(tmp_path, capsys):

@@ -1,6 +1,7 @@
 """Tests of core.ik: Jacobian chain, Gauss-Newton recovery, cameras, matching, tracker state."""
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +37,9 @@ from colorglove_ros.core.ik import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
+# the synthetic observations below put each blob at the projection of its constraint vertex,
+# which is what the 'vertex' constraint model predicts (the 'patch' model is tested on renders)
+VERTEX = IKConfig(constraint_model='vertex')
 TIPS = [KEYPOINT_NAMES.index(f'{d}_tip') for d in ('thumb', 'index', 'middle', 'ring', 'little')]
 
 
@@ -287,7 +291,7 @@ def observe(rig, q_true, q_blend, cams, rng, noise_px=1.0, tiny_noise=0.3):
 def run_sequence(rig, cams, mode, n=30, seed=0):
     model, mesh, kin, *_ = rig
     rng = np.random.default_rng(seed)
-    tracker = HandTracker(model, mesh, cams, IKConfig().with_mode(mode))
+    tracker = HandTracker(model, mesh, cams, VERTEX.with_mode(mode))
     base = true_pose(model, np.random.default_rng(42))
     out, truth = [], []
     for i in range(n):
@@ -351,7 +355,7 @@ def test_patches_seen_by_second_camera_only_count(rig):
     keep = np.array([0, 1])                     # the primary camera sees two patches only
     obs[0] = CameraObservation(True, Blobs(b0.color[keep], b0.centroid_px[keep],
                                            b0.pixel_count[keep]), CROP)
-    res = HandTracker(model, mesh, stereo).update(prior, obs, 0.0)
+    res = HandTracker(model, mesh, stereo, VERTEX).update(prior, obs, 0.0)
     assert res.constraints_per_camera[0] == 2 and res.constraints_per_camera[1] >= 6
     assert res.iterations > 0
     assert res.reprojection_error_per_camera[1] < 3.0
@@ -360,7 +364,7 @@ def test_patches_seen_by_second_camera_only_count(rig):
 
 def test_tracker_resets_when_hand_lost(rig):
     model, mesh, kin, mono, stereo, verts = rig
-    tracker = HandTracker(model, mesh, mono, IKConfig())
+    tracker = HandTracker(model, mesh, mono, VERTEX)
     rng = np.random.default_rng(5)
     q = true_pose(model, rng)
     prior, obs = observe(rig, q, q, mono, rng)
@@ -400,7 +404,7 @@ def test_tracker_accepts_lookup_result(rig):
         np.arange(3), np.zeros(3), np.full(3, 1 / 3), np.tile(q, (3, 1)), q,
         ProjectionConstraints(c.patch_id, c.color.astype(np.uint8), c.vertex, c.tiny_xy,
                               CROP.to_full(c.tiny_xy), c.pixel_count), 3)
-    res = HandTracker(model, mesh, mono).update(lookup, obs, 0.0)
+    res = HandTracker(model, mesh, mono, VERTEX).update(lookup, obs, 0.0)
     assert res.found and res.num_constraints == 20
     assert tip_error(model, res.q, q) < 0.005
 
@@ -412,7 +416,7 @@ def test_blend_mode_fits_translation_only(rig):
     q_b = q.copy()
     q_b[0:3] += [0.03, -0.02, 0.1]
     prior, obs = observe(rig, q, q_b, mono, rng, noise_px=0.0, tiny_noise=0.0)
-    res = HandTracker(model, mesh, mono, IKConfig().with_mode('blend')).update(prior, obs, 0.0)
+    res = HandTracker(model, mesh, mono, VERTEX.with_mode('blend')).update(prior, obs, 0.0)
     assert res.iterations == 0
     np.testing.assert_allclose(res.q[3:], q_b[3:], atol=1e-12)
     # the translation prior (Q) pulls a little toward the blend: under 1 mm here
@@ -432,7 +436,7 @@ def test_wrong_match_is_rejected(rig):
     obs = [CameraObservation(True, Blobs(COLORS, moved, np.full(20, 60)), CROP)]
     errs = {}
     for outlier_px in (0.0, 20.0):
-        cfg = IKConfig(outlier_px=outlier_px, enable_smoothing=False)
+        cfg = replace(VERTEX, outlier_px=outlier_px, enable_smoothing=False)
         res = HandTracker(model, mesh, mono, cfg).update(prior, obs, 0.0)
         errs[outlier_px] = tip_error(model, res.q, q)
         if outlier_px:

@@ -172,7 +172,8 @@ def test_learn_from_tracker_run(training_sequence):
     crop = CropTransform(scale=6.0, offset_x=200.0, offset_y=120.0)
     colors = np.arange(20) % 10 + 1
     rng = np.random.default_rng(2)
-    tracker = HandTracker(model, mesh, [cam], IKConfig().with_mode('ik'))
+    # blobs at the constraint vertices' projections: the 'vertex' constraint model
+    tracker = HandTracker(model, mesh, [cam], IKConfig(constraint_model='vertex').with_mode('ik'))
     out = []
     for f in frames[:30]:
         verts = f.correspondences.vertex[:20]

@@ -7,6 +7,7 @@ import pytest
 from colorglove_ros.core.hand_model import HandModel
 from colorglove_ros.core.metrics import (
     FINGERTIP_INDICES,
+    fingertip_error_split_mm,
     fingertip_errors_mm,
     jitter_mm,
     joint_angle_error_deg,
@@ -60,6 +61,33 @@ def test_translation_split_into_plane_and_depth() -> None:
     assert fingertip_errors_mm(MODEL, estimated, truth)[0] == pytest.approx(np.hypot(5, 20))
     assert fingertip_errors_mm(MODEL, estimated, truth, relative_to_wrist=True)[0] == \
         pytest.approx(0.0, abs=1e-9)
+
+
+def test_wrist_rotation_error_counts_relative_to_wrist_but_not_in_the_hand_frame() -> None:
+    truth = _poses(2)
+    truth[:, 0:3] = [0.0, 0.0, 0.5]
+    estimated = truth.copy()
+    estimated[:, 3] += 0.1                     # 0.1 rad wrist rotation error only
+    rel = fingertip_errors_mm(MODEL, estimated, truth, relative_to_wrist=True)
+    split = fingertip_error_split_mm(MODEL, estimated, truth)
+    assert np.all(rel > 5.0)                   # fingertips ~0.1-0.2 m from the wrist
+    np.testing.assert_allclose(split['hand_frame'], 0.0, atol=1e-9)
+    np.testing.assert_allclose(split['rotation_only'], rel)
+
+
+def test_finger_error_shows_in_the_hand_frame_and_not_in_rotation_only() -> None:
+    truth = _poses(2)
+    estimated = truth.copy()
+    estimated[:, 3:6] = [0.3, -0.2, 0.1]       # same rotation error in both poses ...
+    truth[:, 3:6] = estimated[:, 3:6]
+    estimated[:, 6:] += np.radians(5.0)        # ... and only the fingers differ
+    split = fingertip_error_split_mm(MODEL, estimated, truth)
+    np.testing.assert_allclose(split['rotation_only'], 0.0, atol=1e-9)
+    np.testing.assert_allclose(split['hand_frame'],
+                               fingertip_errors_mm(MODEL, estimated, truth), rtol=1e-9)
+    assert np.all(split['hand_frame'] > 1.0)
+    figures = pose_accuracy(MODEL, estimated, truth)
+    assert figures['fingertip_hand_frame_mm'] == pytest.approx(split['hand_frame'].mean())
 
 
 def test_jitter_sees_alternating_noise_not_smooth_motion() -> None:

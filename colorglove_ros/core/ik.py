@@ -5,6 +5,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -14,6 +15,7 @@ import yaml
 from scipy.optimize import linear_sum_assignment
 
 from .camera import Calibration, PinholeCamera
+from .glove import default_hand
 from .hand_mesh import build_hand_mesh
 from .hand_model import DOF_NAMES, NUM_DOFS, HandModel
 from .yaml_io import load_yaml_mapping
@@ -22,17 +24,19 @@ __all__ = [
     'IK_CONFIG_VERSION', 'COVARIANCE_FORMAT', 'COVARIANCE_VERSION',
     'IKError', 'IKConfigError', 'FastKinematics', 'EntryConstraints', 'Blobs',
     'CameraObservation', 'PosePrior', 'Correspondences', 'IKCovariances', 'IKConfig',
-    'IKSolution', 'IKResult', 'MeshLike', 'VertexTable', 'TRACKER_MODES',
+    'IKSolution', 'IKResult', 'MeshLike', 'VertexTable', 'PatchSurface', 'TRACKER_MODES',
+    'CONSTRAINT_MODELS',
     'default_covariances', 'load_covariances', 'save_covariances', 'load_ik_config',
     'extract_blobs', 'match_by_color', 'match_primary', 'match_extra_camera',
-    'project_correspondences', 'estimate_translation', 'solve_ik', 'reprojection_errors',
-    'HandTracker', 'align_rotation_vector',
+    'constraint_points', 'project_correspondences', 'estimate_translation', 'solve_ik',
+    'reprojection_errors', 'HandTracker', 'align_rotation_vector',
 ]
 
 IK_CONFIG_VERSION = 1
 COVARIANCE_FORMAT = 'colorglove_ik_covariances'
 COVARIANCE_VERSION = 1
 TRACKER_MODES = ('blend', 'ik', 'ik_smooth')
+CONSTRAINT_MODELS = ('vertex', 'patch')
 _EPS_LIMIT = 1e-9
 
 
@@ -103,6 +107,9 @@ class FastKinematics:
         self._dof = np.array([j.dof for j in joints], dtype=np.int64)
         if len(set(self._dof.tolist())) != n:
             raise IKError('each joint must drive its own DOF')
+        contiguous = np.array_equal(self._dof, np.arange(self._dof[0], self._dof[0] + n))
+        self._joint_dofs: slice | np.ndarray = (slice(int(self._dof[0]), int(self._dof[0]) + n)
+                                                if contiguous else self._dof)
         depth = np.zeros(n + 1, dtype=np.int64)
         ancestors = np.zeros((n + 1, n), dtype=float)
         for f, j in enumerate(joints, start=1):
@@ -111,8 +118,10 @@ class FastKinematics:
             ancestors[f, f - 1] = 1.0
         self._levels = [np.flatnonzero(depth == d) for d in range(1, int(depth.max()) + 1)]
         self._ancestors = ancestors
-        self._level_pairs = [(lvl - 1, self._parent[lvl - 1]) for lvl in self._levels]
+        self._level_data = [(lvl, lvl - 1, self._parent[lvl - 1],
+                             self._fixed_t[lvl - 1][:, :, None]) for lvl in self._levels]
         self._eye = np.eye(3)
+        self._cache: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         rng = np.random.default_rng(0)
         lo = np.where(np.isfinite(self.lower), self.lower, -1.0)
         hi = np.where(np.isfinite(self.upper), self.upper, 1.0)
@@ -129,9 +138,15 @@ class FastKinematics:
             link_frame.append(f)
         self.link_frame = np.array(link_frame, dtype=np.int64)
 
-    def frames(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def frames(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rotations (F, 3, 3) and origins (F, 3) of all kinematic frames (0 = palm), and the
-        SO(3) left Jacobian of the wrist rotation vector."""
+        SO(3) left Jacobian of the wrist rotation vector (read-only arrays; the last few poses
+        are remembered, as a frame's matching, IK and error checks revisit the same poses)."""
+        q = np.asarray(q, dtype=float)
+        key = q.tobytes()
+        hit = self._cache.get(key)
+        if hit is not None:
+            return hit
         n = len(self._dof)
         Rs = np.empty((n + 1, 3, 3))
         ts = np.empty((n + 1, 3))
@@ -141,10 +156,15 @@ class FastKinematics:
         Rj = self._eye + np.sin(ang)[:, None, None] * self._K
         Rj += (1.0 - np.cos(ang))[:, None, None] * self._KK
         local_R = self._fixed_R @ Rj
-        for jidx, p in self._level_pairs:
+        for lvl, jidx, p, fixed_t in self._level_data:
             Rp = Rs[p]
-            ts[jidx + 1] = ts[p] + (Rp @ self._fixed_t[jidx][:, :, None])[:, :, 0]
-            Rs[jidx + 1] = Rp @ local_R[jidx]
+            ts[lvl] = ts[p] + (Rp @ fixed_t)[:, :, 0]
+            Rs[lvl] = Rp @ local_R[jidx]
+        for a in (Rs, ts, jl):
+            a.setflags(write=False)
+        if len(self._cache) >= 8:
+            del self._cache[next(iter(self._cache))]
+        self._cache[key] = (Rs, ts, jl)
         return Rs, ts, jl
 
     def points(self, q: np.ndarray, link: np.ndarray, local: np.ndarray,
@@ -155,18 +175,18 @@ class FastKinematics:
         p = (Rs[fr] @ local[:, :, None])[:, :, 0] + ts[fr]
         if not jacobian:
             return p, None
-        J = np.zeros((len(p), 3, NUM_DOFS))
-        J[:, 0, 0] = J[:, 1, 1] = J[:, 2, 2] = 1.0
+        J = np.empty((len(p), 3, NUM_DOFS))
+        J[:, :, 0:3] = self._eye
         J[:, :, 3:6] = -_skew(p - ts[0]) @ jl
+        # revolute joint j: w_j x (p - o_j), zero unless joint j moves p
         w = (Rs[1:] @ self._axis[:, :, None])[:, :, 0]                     # (nj, 3)
         d = p[:, None, :] - ts[None, 1:]                                   # (N, nj, 3)
-        mask = self._ancestors[fr]                                         # (N, nj)
-        cx = (w[None, :, 1] * d[:, :, 2] - w[None, :, 2] * d[:, :, 1]) * mask
-        cy = (w[None, :, 2] * d[:, :, 0] - w[None, :, 0] * d[:, :, 2]) * mask
-        cz = (w[None, :, 0] * d[:, :, 1] - w[None, :, 1] * d[:, :, 0]) * mask
-        J[:, 0, self._dof] = cx
-        J[:, 1, self._dof] = cy
-        J[:, 2, self._dof] = cz
+        cross = np.empty((len(p), 3, len(w)))
+        cross[:, 0] = w[None, :, 1] * d[:, :, 2] - w[None, :, 2] * d[:, :, 1]
+        cross[:, 1] = w[None, :, 2] * d[:, :, 0] - w[None, :, 0] * d[:, :, 2]
+        cross[:, 2] = w[None, :, 0] * d[:, :, 1] - w[None, :, 1] * d[:, :, 0]
+        cross *= self._ancestors[fr][:, None, :]
+        J[:, :, self._joint_dofs] = cross
         return p, J
 
     def clamp(self, q: np.ndarray) -> np.ndarray:
@@ -274,8 +294,13 @@ class PosePrior:
 
 @dataclass(frozen=True)
 class Correspondences:
-    """Matched constraints over all cameras: camera index, the constrained point as
-    (link, point in the link frame), the undistorted target pixel, patch id and vertex."""
+    """Matched constraints over all cameras: camera index, the constrained point, the
+    undistorted target pixel, patch id and the database's constraint vertex.
+
+    The constrained point of row k is the weighted mean of S link-fixed points
+    (``link[k, s]``, ``local[k, s]`` in that link's frame, ``weight[k, s]`` summing to 1):
+    one vertex (S = 1), or the visible part of a glove patch spread over several links
+    (:class:`PatchSurface`). 1-D ``link`` and (K, 3) ``local`` mean S = 1."""
 
     camera: np.ndarray
     link: np.ndarray
@@ -283,6 +308,22 @@ class Correspondences:
     target_px: np.ndarray
     patch_id: np.ndarray
     vertex: np.ndarray
+    weight: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        link = np.asarray(self.link, np.int64)
+        local = np.asarray(self.local, float)
+        if link.ndim == 1:
+            link, local = link[:, None], local.reshape(-1, 1, 3)
+        weight = (np.ones(link.shape) if self.weight is None
+                  else np.asarray(self.weight, float))
+        if local.shape != (*link.shape, 3) or weight.shape != link.shape \
+                or len(link) != len(self.camera):
+            raise IKError(f'correspondence points: link {link.shape}, local {local.shape}, '
+                          f'weight {weight.shape} for {len(self.camera)} rows')
+        object.__setattr__(self, 'link', link)
+        object.__setattr__(self, 'local', local)
+        object.__setattr__(self, 'weight', weight)
 
     def __len__(self) -> int:
         return len(self.camera)
@@ -295,17 +336,41 @@ class Correspondences:
 
     @classmethod
     def concat(cls, items: Sequence[Correspondences]) -> Correspondences:
-        """Join several sets (e.g. one per camera)."""
+        """Join several sets (e.g. one per camera); point lists are padded with zero weights
+        to the longest."""
         items = [c for c in items if len(c)]
         if not items:
             return cls.empty()
-        return cls(*(np.concatenate([getattr(c, k) for c in items]) for k in
-                     ('camera', 'link', 'local', 'target_px', 'patch_id', 'vertex')))
+        s = max(c.link.shape[1] for c in items)
+        k = sum(len(c) for c in items)
+        link, local, weight = np.zeros((k, s), np.int64), np.zeros((k, s, 3)), np.zeros((k, s))
+        row = 0
+        for c in items:
+            n, m = c.link.shape
+            link[row:row + n, :m], local[row:row + n, :m] = c.link, c.local
+            weight[row:row + n, :m] = c.weight
+            row += n
+        cat = {key: np.concatenate([getattr(c, key) for c in items])
+               for key in ('camera', 'target_px', 'patch_id', 'vertex')}
+        return cls(cat['camera'], link, local, cat['target_px'], cat['patch_id'], cat['vertex'],
+                   weight)
 
     def select(self, mask: np.ndarray) -> Correspondences:
         """The subset picked by a boolean mask or index array."""
         return Correspondences(self.camera[mask], self.link[mask], self.local[mask],
-                               self.target_px[mask], self.patch_id[mask], self.vertex[mask])
+                               self.target_px[mask], self.patch_id[mask], self.vertex[mask],
+                               self.weight[mask])
+
+    @cached_property
+    def point_mix(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The points of non-zero weight (links (M,), link-frame points (M, 3)) and the
+        (K, M) matrix averaging them into the rows (None when every row is one point)."""
+        if self.link.shape[1] == 1:
+            return self.link[:, 0], self.local[:, 0], None
+        rows, cols = np.nonzero(self.weight)
+        mix = np.zeros((len(self), len(rows)))
+        mix[rows, np.arange(len(rows))] = self.weight[rows, cols]
+        return self.link[rows, cols], self.local[rows, cols], mix
 
     def same_as(self, other: Correspondences) -> bool:
         """True if both hold the same (camera, patch, target) triples in the same order."""
@@ -331,6 +396,137 @@ class VertexTable:
 
     vertex_link: np.ndarray
     local_vertices: np.ndarray
+
+
+class PatchSurface:
+    """The glove's patches as link-fixed mesh faces, to predict the centroid of the part of
+    each patch a camera sees: the projected-area-weighted mean of the patch's visible faces
+    (weight = area x cosine toward the camera / depth^2), kept per link as one link-fixed
+    point so the weights stay fixed while the pose is solved.
+
+    A face is visible if it faces the camera and no front face projecting into the same
+    cell of a coarse depth buffer (cells ``cell_m`` wide at the hand's depth) is more than
+    ``depth_tol_m`` nearer. A patch whose visible faces carry less than
+    ``min_visible_fraction`` of its front-facing weight (hidden, or the pose is off) uses
+    all its front faces instead. Faces are merged into elements (same patch, link and facing,
+    one ``element_m`` voxel); links with less than ``min_link_weight`` of a patch's visible
+    weight are left out."""
+
+    def __init__(self, kin: FastKinematics, mesh: MeshLike, face_patch: np.ndarray,
+                 cell_m: float = 0.004, depth_tol_m: float = 0.004,
+                 element_m: float = 0.006, min_link_weight: float = 0.1,
+                 min_visible_fraction: float = 0.2) -> None:
+        faces = np.asarray(getattr(mesh, 'faces', np.zeros((0, 3))), np.int64)
+        face_patch = np.asarray(face_patch, np.int64)
+        links = np.asarray(mesh.vertex_link, np.int64)
+        if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0 \
+                or len(face_patch) != len(faces):
+            raise IKError(f'the patch model needs mesh faces (F, 3) and one patch per face; got '
+                          f'{faces.shape} faces and {face_patch.shape} patch ids')
+        face_link = links[faces[:, 0]]
+        if np.any(links[faces[:, 1]] != face_link) or np.any(links[faces[:, 2]] != face_link):
+            raise IKError('the patch model needs every mesh face on one link')
+        v = np.asarray(mesh.local_vertices, float)[faces]                  # (F, 3, 3)
+        centre = v.mean(axis=1)
+        area_normal = 0.5 * np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        area = np.linalg.norm(area_normal, axis=1)
+        # surface elements: the faces of one patch and link in one element_m voxel, facing the
+        # same way (dominant normal axis and sign); sorted by kinematic frame, so each
+        # frame's block of elements moves with one transform
+        dominant = np.argmax(np.abs(area_normal), axis=1)
+        facing = 2 * dominant + (area_normal[np.arange(len(faces)), dominant] > 0)
+        key = np.column_stack([kin.link_frame[face_link], face_patch, face_link, facing,
+                               np.floor(centre / element_m).astype(np.int64)])
+        keys, elem = np.unique(key, axis=0, return_inverse=True)
+        elem = elem.reshape(-1)
+        n = len(keys)
+        elem_area = np.bincount(elem, area, n)
+        self._centre = np.stack([np.bincount(elem, area * centre[:, i], n) for i in range(3)],
+                                axis=1) / elem_area[:, None]
+        self._area_normal = np.stack([np.bincount(elem, area_normal[:, i], n)
+                                      for i in range(3)], axis=1)
+        frame, elem_patch, elem_link = keys[:, 0], keys[:, 1], keys[:, 2]
+        self._block_frame, start = np.unique(frame, return_index=True)
+        self._blocks = [slice(int(a), int(b)) for a, b in
+                        zip(start, [*start[1:], len(frame)], strict=True)]
+        self._elem_patch = elem_patch
+        self._kin = kin
+        pairs, self._group = np.unique(np.stack([elem_patch, elem_link], axis=1), axis=0,
+                                       return_inverse=True)
+        self._group = self._group.reshape(-1)
+        self._group_xyz = (3 * self._group[:, None] + np.arange(3)).reshape(-1)
+        num_patches = int(elem_patch.max()) + 1
+        slots = np.bincount(pairs[:, 0], minlength=num_patches)
+        self.max_links = int(slots.max())
+        self._table = np.full((num_patches, self.max_links), -1, np.int64)
+        first = np.concatenate([[0], np.cumsum(slots)[:-1]])
+        for g, (p, _) in enumerate(pairs):
+            self._table[p, g - first[p]] = g
+        self._group_link = pairs[:, 1]
+        self.num_patches = num_patches
+        self.cell_m = float(cell_m)
+        self.depth_tol_m = float(depth_tol_m)
+        self.min_visible_fraction = float(min_visible_fraction)
+        self.min_link_weight = float(min_link_weight)
+
+    def _visible(self, pc: np.ndarray, front: np.ndarray, camera: PinholeCamera) -> np.ndarray:
+        """Front elements not hidden behind another front element (coarse depth buffer)."""
+        idx = np.flatnonzero(front)
+        if len(idx) == 0:
+            return front
+        z = pc[idx, 2]
+        cell_px = self.cell_m / float(z.mean())
+        u = np.floor(pc[idx, 0] / z / cell_px * camera.fx / camera.fy).astype(np.int64)
+        v = np.floor(pc[idx, 1] / z / cell_px).astype(np.int64)
+        u -= u.min()
+        v -= v.min()
+        cell = v * (int(u.max()) + 1) + u
+        zbuf = np.full(int(cell.max()) + 1, np.inf)
+        np.minimum.at(zbuf, cell, z)
+        out = np.zeros(len(front), dtype=bool)
+        out[idx] = z <= zbuf[cell] + self.depth_tol_m
+        return out
+
+    def points(self, q: np.ndarray, camera: PinholeCamera, patch_id: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """For each patch id: links (K, S), link-frame points (K, S, 3) and weights (K, S)
+        of its visible part seen by ``camera`` at pose ``q``, and whether any of it faces the
+        camera (K,) (rows that do not keep weight 0)."""
+        patch_id = np.asarray(patch_id, np.int64)
+        if len(patch_id) and (patch_id.min() < 0 or patch_id.max() >= self.num_patches):
+            raise IKError(f'patch id outside [0, {self.num_patches})')
+        Rs, ts, _ = self._kin.frames(q)
+        M = camera.rotation @ Rs[self._block_frame]                          # link -> camera
+        T = ts[self._block_frame] @ camera.rotation.T + camera.translation
+        pc = np.empty_like(self._centre)
+        normal = np.empty_like(self._centre)
+        for b, sl in enumerate(self._blocks):
+            pc[sl] = self._centre[sl] @ M[b].T + T[b]
+            normal[sl] = self._area_normal[sl] @ M[b].T
+        dist = np.sqrt(np.einsum('fi,fi->f', pc, pc))
+        depth = np.maximum(pc[:, 2], 1e-3)
+        w = np.maximum(-np.einsum('fi,fi->f', normal, pc), 0.0) / (dist * depth**2)
+        ng = len(self._group_link)
+        w_vis = np.where(self._visible(pc, (w > 0) & (pc[:, 2] > 0), camera), w, 0.0)
+        # patches mostly hidden in the depth buffer fall back to all their front faces
+        np_ = self.num_patches
+        vis_frac = (np.bincount(self._elem_patch, w_vis, np_)
+                    / np.maximum(np.bincount(self._elem_patch, w, np_), 1e-300))
+        w = np.where(vis_frac[self._elem_patch] < self.min_visible_fraction, w, w_vis)
+        wg = np.bincount(self._group, w, ng)
+        mean = (np.bincount(self._group_xyz, (w[:, None] * self._centre).reshape(-1), 3 * ng)
+                .reshape(ng, 3) / np.maximum(wg, 1e-300)[:, None])
+        groups = self._table[patch_id]                                       # (K, S)
+        valid = groups >= 0
+        g = np.where(valid, groups, 0)
+        weight = np.where(valid, wg[g], 0.0)
+        total = weight.sum(axis=1)
+        seen = total > 0
+        weight = weight / np.where(seen, total, 1.0)[:, None]
+        # links holding a sliver of the visible patch are dropped (fewer points to move)
+        weight[weight < self.min_link_weight] = 0.0
+        weight /= np.where(seen, weight.sum(axis=1), 1.0)[:, None]
+        return self._group_link[g], mean[g], weight, seen
 
 
 # ---------------------------------------------------------------------------- covariances
@@ -382,7 +578,7 @@ def _group_std(entry: Any, where: str) -> np.ndarray:
 
 def default_covariances() -> IKCovariances:
     """Hand-set covariances used when no learned file is given (same as config/ik.yaml)."""
-    q_std = np.concatenate([[0.03, 0.03, 0.08], [0.3] * 3, [0.35] * 20])
+    q_std = np.concatenate([[0.03, 0.03, 0.08], [0.2] * 3, [0.25] * 20])
     p_std = np.concatenate([[0.01, 0.01, 0.015], [0.06] * 3, [0.12] * 20])
     return IKCovariances(np.array([3.0**2, 3.0**2]), q_std**2, p_std**2)
 
@@ -431,8 +627,8 @@ class IKConfig:
 
     enable_ik: bool = True
     enable_smoothing: bool = True
-    max_iterations: int = 6
-    refine_iterations: int = 3
+    max_iterations: int = 3
+    refine_iterations: int = 2
     lambda_init: float = 1e-3
     step_tol: float = 1e-5
     cost_tol: float = 1e-4
@@ -444,10 +640,12 @@ class IKConfig:
     extra_gate_px: float = 30.0
     extra_shift_max_px: float = 150.0
     extra_inlier_px: float = 15.0
-    extra_rematch: bool = True
+    extra_rematch: bool = False
     outlier_px: float = 20.0
     max_gap_s: float = 0.25
     min_depth_m: float = 0.05
+    constraint_model: str = 'patch'
+    glove_seed: int = 0
     covariances: IKCovariances = field(default_factory=default_covariances)
 
     def with_mode(self, mode: str) -> IKConfig:
@@ -455,6 +653,11 @@ class IKConfig:
         if mode not in TRACKER_MODES:
             raise IKConfigError(f'unknown tracker mode {mode!r}, expected one of {TRACKER_MODES}')
         return replace(self, enable_ik=mode != 'blend', enable_smoothing=mode == 'ik_smooth')
+
+    def __post_init__(self) -> None:
+        if self.constraint_model not in CONSTRAINT_MODELS:
+            raise IKConfigError(f'constraint_model must be one of {CONSTRAINT_MODELS}, got '
+                                f'{self.constraint_model!r}')
 
 
 _CONFIG_FIELDS = {
@@ -464,7 +667,7 @@ _CONFIG_FIELDS = {
     'gate_tiny_px': float, 'gate_min_px': float, 'extra_gate_px': float,
     'extra_shift_max_px': float, 'extra_inlier_px': float, 'extra_rematch': bool,
     'outlier_px': float,
-    'max_gap_s': float, 'min_depth_m': float,
+    'max_gap_s': float, 'min_depth_m': float, 'constraint_model': str, 'glove_seed': int,
 }
 
 
@@ -677,6 +880,20 @@ def _per_point(cameras: Sequence[PinholeCamera], corr: Correspondences) -> _PerP
     return _PerPoint(Rs[k], ts[k], fs[k], cs[k])
 
 
+def constraint_points(kin: FastKinematics, corr: Correspondences, q: np.ndarray,
+                      jacobian: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """Primary-frame constrained points (K, 3) at pose ``q`` (each the weighted mean of its
+    link-fixed points) and optionally d/dq (K, 3, 26), the same weighted mean of the point
+    Jacobians."""
+    link, local, mix = corr.point_mix
+    p, Jp = kin.points(q, link, local, jacobian)
+    if mix is None:
+        return p, Jp
+    if Jp is not None:
+        Jp = (mix @ Jp.reshape(len(p), -1)).reshape(len(mix), 3, NUM_DOFS)
+    return mix @ p, Jp
+
+
 def project_correspondences(kin: FastKinematics, cameras: Sequence[PinholeCamera],
                             corr: Correspondences, q: np.ndarray, jacobian: bool = False,
                             per_point: _PerPoint | None = None
@@ -685,13 +902,20 @@ def project_correspondences(kin: FastKinematics, cameras: Sequence[PinholeCamera
     the depth of every point in its camera (K,). Pinhole projection without distortion
     (targets are undistorted); each camera's rotation is chained into the Jacobian."""
     pp = per_point if per_point is not None else _per_point(cameras, corr)
-    p, Jp = kin.points(q, corr.link, corr.local, jacobian)
+    p, Jp = constraint_points(kin, corr, q, jacobian)
+    return _project_points(pp, p, Jp if jacobian else None)
+
+
+def _project_points(pp: _PerPoint, p: np.ndarray, Jp: np.ndarray | None
+                    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """Pixels, pixel Jacobian (if ``Jp``, the points' d/dq, is given) and depths of
+    primary-frame points ``p``, each in its own camera."""
     pc = np.einsum('nij,nj->ni', pp.R, p) + pp.t
     depth = pc[:, 2].copy()
     z = np.where(np.abs(depth) < 1e-9, 1e-9, depth)
     xy = pc[:, :2] / z[:, None]
     pix = xy * pp.f + pp.c
-    if not jacobian or Jp is None:
+    if Jp is None:
         return pix, None, depth
     # d pixel / d world point (K, 2, 3) = (f / z) (R[0:2] - xy R[2]), chained with Jp
     A = (pp.f / z[:, None])[:, :, None] * (pp.R[:, :2, :] - xy[:, :, None] * pp.R[:, 2:3, :])
@@ -721,7 +945,7 @@ def estimate_translation(kin: FastKinematics, cameras: Sequence[PinholeCamera],
     :class:`IKError` if the points are too few or the solution is behind a camera."""
     if len(corr) < 2:
         raise IKError('translation needs at least 2 correspondences')
-    p, _ = kin.points(q, corr.link, corr.local)
+    p, _ = constraint_points(kin, corr, q)
     rows, rhs, wts = [], [], []
     for c in np.unique(corr.camera):
         cam = cameras[int(c)]
@@ -750,9 +974,7 @@ def estimate_translation(kin: FastKinematics, cameras: Sequence[PinholeCamera],
             raise IKError('translation is not determined by the correspondences') from exc
         if outlier_px <= 0:
             break
-        trial = np.array(q, dtype=float)
-        trial[0:3] = q[0:3] + dt
-        pix, _, _ = project_correspondences(kin, cameras, corr, trial)
+        pix, _, _ = _project_points(_per_point(cameras, corr), p + dt, None)
         good = np.linalg.norm(pix - corr.target_px, axis=1) <= outlier_px
         if good.all() or good.sum() < 3:
             break
@@ -911,11 +1133,14 @@ class HandTracker:
     """Temporal IK tracker: blended lookup pose -> refined pose, several cameras.
 
     The world frame is the primary camera's optical frame (``cameras[0]`` must have
-    identity extrinsics); poses are expressed in it.
+    identity extrinsics); poses are expressed in it. With ``constraint_model: patch`` the
+    tracker needs the glove's patch of every mesh face: ``glove`` (a ``core.glove.Glove``),
+    or else the standard glove ``default_hand(hand length, config.glove_seed)``, which must
+    have been made on the same mesh.
     """
 
     def __init__(self, model: HandModel, mesh: MeshLike, cameras: Sequence[PinholeCamera],
-                 config: IKConfig | None = None) -> None:
+                 config: IKConfig | None = None, glove: Any = None) -> None:
         if not cameras:
             raise IKError('the tracker needs at least one camera')
         c0 = cameras[0]
@@ -931,6 +1156,35 @@ class HandTracker:
         self._q_prev: np.ndarray | None = None
         self._stamp_prev: float | None = None
         self._local_normals = _local_vertex_normals(mesh)
+        self._patches = (PatchSurface(self.kin, mesh, self._face_patch(glove))
+                         if self.config.constraint_model == 'patch' else None)
+
+    def _face_patch(self, glove: Any) -> np.ndarray:
+        if glove is None:
+            _, std_mesh, glove = default_hand(self.model.hand_length_m, self.config.glove_seed)
+            faces = getattr(self.mesh, 'faces', None)
+            if faces is None or not np.array_equal(np.asarray(faces), std_mesh.faces):
+                raise IKError('constraint_model patch: pass the glove of this mesh (the '
+                              'standard glove is made on another mesh)')
+        return np.asarray(glove.face_patch)
+
+    def _with_patch_points(self, corr: Correspondences, q: np.ndarray) -> Correspondences:
+        """``corr`` with each constraint moved from its vertex to the predicted centroid of
+        the patch's visible part at pose ``q`` (rows whose patch faces away keep the
+        vertex)."""
+        if self._patches is None or not len(corr):
+            return corr
+        s = self._patches.max_links
+        link = np.zeros((len(corr), s), np.int64)
+        local = np.zeros((len(corr), s, 3))
+        weight = np.zeros((len(corr), s))
+        link[:, 0], local[:, 0], weight[:, 0] = corr.link[:, 0], corr.local[:, 0], 1.0
+        for c in np.unique(corr.camera):
+            rows = np.flatnonzero(corr.camera == c)
+            lk, lc, wt, seen = self._patches.points(q, self.cameras[int(c)], corr.patch_id[rows])
+            rows = rows[seen]
+            link[rows], local[rows], weight[rows] = lk[seen], lc[seen], wt[seen]
+        return replace(corr, link=link, local=local, weight=weight)
 
     @classmethod
     def from_calibration(cls, calibration: Calibration, config: IKConfig | None = None,
@@ -978,7 +1232,7 @@ class HandTracker:
                 ci, self.cameras[ci], cons, pw, obs.blobs, self.mesh, cfg.extra_gate_px,
                 cfg.extra_shift_max_px, cfg.extra_inlier_px, cfg.min_blob_pixels,
                 cfg.min_depth_m, normals))
-        return out
+        return [self._with_patch_points(c, q) for c in out]
 
     def _solve(self, corr: Correspondences, q_init: np.ndarray, q_b: np.ndarray,
                q_prev: np.ndarray | None, iterations: int) -> IKSolution:
@@ -1012,6 +1266,7 @@ class HandTracker:
         corr0 = match_primary(prior.constraints, primary.blobs, primary.crop, self.cameras[0],
                               self.mesh, cfg.gate_tiny_px, cfg.gate_min_px,
                               cfg.min_blob_pixels)
+        corr0 = self._with_patch_points(corr0, q_blend)
         q_b = q_blend
         if cfg.init_translation and len(corr0) >= 3:
             try:
@@ -1026,6 +1281,7 @@ class HandTracker:
         q = q_b
         corr = corr0
         rejected = 0
+        err: np.ndarray | None = None
         multi = len(self.cameras) > 1
         if cfg.enable_ik and (len(corr0) >= cfg.min_constraints or multi):
             if not multi:
@@ -1057,18 +1313,21 @@ class HandTracker:
                             q = sol.q
                             iterations += sol.iterations
             if cfg.outlier_px > 0 and iterations > 0:
-                bad = reprojection_errors(self.kin, self.cameras, corr, q) > cfg.outlier_px
+                err = reprojection_errors(self.kin, self.cameras, corr, q)
+                bad = err > cfg.outlier_px
                 if bad.any() and int((~bad).sum()) >= cfg.min_constraints:
                     rejected = int(bad.sum())
                     corr = corr.select(~bad)
                     sol = self._solve(corr, q, q_b, q_prev, cfg.refine_iterations)
                     q = sol.q
                     iterations += sol.iterations
+                    err = None
         elif multi:
             corr = Correspondences.concat([corr0, *self._match_extras(prior, observations, q)])
+        if err is None:
+            err = reprojection_errors(self.kin, self.cameras, corr, q)
         q = q.copy()
         q[3:6] = align_rotation_vector(q[3:6], np.zeros(3))      # angle in [0, pi]
-        err = reprojection_errors(self.kin, self.cameras, corr, q)
         n_cam = len(self.cameras)
         per_cam = tuple(float(err[corr.camera == c].mean()) if np.any(corr.camera == c)
                         else math.nan for c in range(n_cam))

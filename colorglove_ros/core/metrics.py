@@ -10,7 +10,8 @@ import numpy as np
 from colorglove_ros.core.hand_model import KEYPOINT_NAMES, HandModel
 
 __all__ = [
-    'FINGERTIP_INDICES', 'joint_angle_error_deg', 'fingertip_errors_mm', 'translation_errors_mm',
+    'FINGERTIP_INDICES', 'joint_angle_error_deg', 'fingertip_errors_mm',
+    'fingertip_error_split_mm', 'translation_errors_mm',
     'jitter_mm', 'contiguous_runs', 'jitter_runs_mm', 'latency_summary_ms', 'pose_accuracy',
 ]
 
@@ -29,13 +30,31 @@ def _fingertips(model: HandModel, poses: np.ndarray) -> np.ndarray:
 
 def fingertip_errors_mm(model: HandModel, estimated: np.ndarray, truth: np.ndarray,
                         relative_to_wrist: bool = False) -> np.ndarray:
-    """Per-frame mean 3-D fingertip error, mm: (N,). With ``relative_to_wrist`` the wrist
-    translation error is removed first (articulation only)."""
+    """Per-frame mean 3-D fingertip error, mm: (N,). With ``relative_to_wrist`` the
+    fingertips are taken relative to each pose's wrist position, which removes the wrist
+    translation error only: the wrist rotation error stays in (see
+    :func:`fingertip_error_split_mm` for the articulation alone)."""
     est, gt = _fingertips(model, estimated), _fingertips(model, truth)
     if relative_to_wrist:
         est = est - np.asarray(estimated)[:, None, 0:3]
         gt = gt - np.asarray(truth)[:, None, 0:3]
     return 1000.0 * np.linalg.norm(est - gt, axis=2).mean(axis=1)
+
+
+def fingertip_error_split_mm(model: HandModel, estimated: np.ndarray,
+                             truth: np.ndarray) -> dict[str, np.ndarray]:
+    """Per-frame mean fingertip errors, mm, (N,) each, split by cause:
+    ``hand_frame``: in the hand frame (wrist translation and rotation of both poses removed),
+    i.e. finger articulation only; ``rotation_only``: the true pose with the estimated wrist
+    rotation, i.e. what the rotation error alone costs."""
+    est, gt = np.array(estimated, float), np.array(truth, float)
+    rot = gt.copy()
+    rot[:, 3:6] = est[:, 3:6]
+    est[:, 0:6] = 0.0
+    local = gt.copy()
+    local[:, 0:6] = 0.0
+    return {'hand_frame': fingertip_errors_mm(model, est, local),
+            'rotation_only': fingertip_errors_mm(model, rot, gt)}
 
 
 def translation_errors_mm(estimated: np.ndarray,
@@ -99,11 +118,14 @@ def pose_accuracy(model: HandModel, estimated: np.ndarray, truth: np.ndarray) ->
     """Mean accuracy figures of an estimated pose sequence against ground truth."""
     estimated, truth = np.atleast_2d(estimated), np.atleast_2d(truth)
     plane, depth = translation_errors_mm(estimated, truth)
+    split = fingertip_error_split_mm(model, estimated, truth)
     return {
         'joint_mae_deg': float(joint_angle_error_deg(estimated, truth).mean()),
         'fingertip_mm': float(fingertip_errors_mm(model, estimated, truth).mean()),
         'fingertip_rel_wrist_mm': float(
             fingertip_errors_mm(model, estimated, truth, relative_to_wrist=True).mean()),
+        'fingertip_hand_frame_mm': float(split['hand_frame'].mean()),
+        'fingertip_rotation_only_mm': float(split['rotation_only'].mean()),
         'wrist_plane_mm': float(plane.mean()),
         'wrist_depth_mm': float(depth.mean()),
         'jitter_mm': jitter_mm(model, estimated),

@@ -1,7 +1,8 @@
 """Figure 11 with ground truth: blend / + IK / + IK and smoothing, one and two cameras.
 
-Synthetic sequences (core.synth.generate_sequence) with seeds 0..S-1 (evaluation seeds,
-core.evaluation.eval_seeds; the covariances are learned on seeds 100000.. by
+Synthetic sequences (core.synth.generate_sequence) with seeds O..O+S-1 (evaluation seeds,
+core.evaluation.eval_seeds; O = --seed-offset, 0 for the reported figures, another offset such
+as 1000 to tune IK settings on; the covariances are learned on seeds 100000.. by
 learn_ik_covariances) are rendered with every camera of config/calibration_stereo.yaml;
 per frame the primary camera's labels are cropped and looked up once, then one tracker per
 (cameras, mode) runs on the same lookup. Targets are measured, not asserted.
@@ -33,9 +34,15 @@ __all__ = ['main', 'TARGETS', 'evaluate_targets', 'JSON_KEYS', 'PACKAGE_ROOT']
 PACKAGE_ROOT = share_dir()   # source checkout, or the installed share folder
 MODE_LABELS = {'blend': 'blended NN only', 'ik': '+ IK', 'ik_smooth': '+ IK + smoothing'}
 JSON_KEYS = ('settings', 'rows', 'targets', 'plot')
-# (rig, mode, figure, threshold, description); 'ik_ms_mean' targets apply to both IK modes
+# (rig, mode, figure, threshold, description); 'ik_ms_mean' targets apply to both IK modes.
+# The issue's 15 mm fingertip target is shown against the absolute error (which includes the
+# wrist depth error, itself allowed up to 25 mm) and against the error relative to the wrist
+# position (translation removed, rotation kept).
 TARGETS = (
-    ('1 camera', 'ik_smooth', 'fingertip_mm', 15.0, 'fingertip 3-D error < 15 mm (mean)'),
+    ('1 camera', 'ik_smooth', 'fingertip_mm', 15.0,
+     'fingertip 3-D error < 15 mm (mean), absolute'),
+    ('1 camera', 'ik_smooth', 'fingertip_rel_wrist_mm', 15.0,
+     'fingertip 3-D error < 15 mm (mean), relative to the wrist position'),
     ('1 camera', 'ik_smooth', 'wrist_depth_mm', 25.0, 'depth error < 25 mm (mean)'),
     ('2 cameras', 'ik_smooth', 'wrist_depth_mm', 10.0, 'depth error < 10 mm (mean)'),
 )
@@ -57,6 +64,8 @@ def _row(rig: str, mode: str, ncam: int, s: dict[str, float]) -> dict[str, Any]:
             'ik_cpu_ms_p95': s.get('ik_cpu_ms_p95', nan),
             'tracked': s.get('tracked_fraction', nan),
             'fingertip_rel_wrist_mm': s.get('fingertip_rel_wrist_mm', nan),
+            'fingertip_hand_frame_mm': s.get('fingertip_hand_frame_mm', nan),
+            'fingertip_rotation_only_mm': s.get('fingertip_rotation_only_mm', nan),
             'jitter_truth_mm': s.get('jitter_truth_mm', nan),
             'lookup_ms_mean': s.get('lookup_ms_mean', nan),
             'iterations_mean': s.get('iterations_mean', nan),
@@ -136,7 +145,9 @@ def main(argv: list[str] | None = None) -> int:
                         'under data/)')
     parser.add_argument('--frames', type=int, default=150, help='frames per sequence')
     parser.add_argument('--sequences', type=int, default=4, help='evaluation sequences '
-                        '(seeds 0..S-1)')
+                        '(seeds O..O+S-1)')
+    parser.add_argument('--seed-offset', type=int, default=0, help='first sequence seed O: '
+                        '0 for the reported figures, another (e.g. 1000) to tune on')
     parser.add_argument('--labels', choices=LABEL_SOURCES, default='truth',
                         help="'truth': renderer labels (IK alone); 'segmented': the colour "
                         'segmentation (core.segmentation) of the rendered images')
@@ -167,14 +178,23 @@ def main(argv: list[str] | None = None) -> int:
             config = dataclasses.replace(config, covariances=load_covariances(args.covariances))
         mono = load_calibration(args.calibration)
         stereo = load_calibration(args.stereo_calibration)
-        db_hand = float(db.meta.get('build', {}).get('hand_length_m', mono.hand_length_m))
-        if abs(mono.hand_length_m - db_hand) > 1e-9:
-            raise EvaluationError('the database was built for another hand length')
+        build = db.meta.get('build', {})
+        if 'hand_length_m' not in build or 'glove_seed' not in build:
+            raise EvaluationError(f'database {db_path} does not record the hand length and '
+                                  'glove seed it was built for (meta.build.hand_length_m, '
+                                  'glove_seed): rebuild it with colorglove_build_database')
+        if abs(mono.hand_length_m - float(build['hand_length_m'])) > 1e-9:
+            raise EvaluationError(f'the database was built for a {build["hand_length_m"]} m '
+                                  f'hand, the calibration says {mono.hand_length_m} m')
+        if int(build['glove_seed']) != config.glove_seed:
+            raise EvaluationError(f'the database was built for glove seed '
+                                  f'{build["glove_seed"]}, the IK config says '
+                                  f'{config.glove_seed}')
         observer = make_observer(args.labels, args.color_config, config.min_blob_pixels)
         evaluator = SequenceEvaluator(
             PoseLookup(db), {'1 camera': mono.cameras, '2 cameras': stereo.cameras},
             args.modes, config, observer, fps=args.fps)
-        seeds = eval_seeds(args.sequences)
+        seeds = eval_seeds(args.sequences, args.seed_offset)
     except (EvaluationError, DatabaseError, IKConfigError, CalibrationError,
             ColorCalibrationError) as exc:
         print(f'eval_ik: {exc}')
@@ -190,17 +210,21 @@ def main(argv: list[str] | None = None) -> int:
     evaluator.close()
     rows = [_row(rig, mode, len(evaluator.rigs[rig]), summarize(evaluator.model, r))
             for (rig, mode), r in runs.items()]
-    shown = ['cameras', 'mode', 'joint_mae_deg', 'fingertip_mm', 'wrist_plane_mm',
-             'wrist_depth_mm', 'reprojection_px', 'jitter_mm', 'ik_ms_mean', 'ik_ms_p95',
-             'ik_cpu_ms_mean', 'tracked']
+    shown = ['cameras', 'mode', 'joint_mae_deg', 'fingertip_mm', 'fingertip_rel_wrist_mm',
+             'wrist_plane_mm', 'wrist_depth_mm', 'reprojection_px', 'jitter_mm', 'ik_ms_mean',
+             'ik_ms_p95', 'ik_cpu_ms_mean', 'tracked']
     title = (f'IK against ground truth: {len(seeds)} sequences x {args.frames} frames '
              f'(seeds {seeds[0]}..{seeds[-1]}), labels={args.labels}, database {db_path} '
              f'({len(db)} entries), covariances: {config.covariances.source}')
     print_table([{k: r[k] for k in shown} for r in rows], title)
-    print(f'(true motion jitter {rows[0]["jitter_truth_mm"]:.3g} mm; fingertip error relative '
-          'to the wrist, mm: ' + ', '.join(f'{r["cameras"]}/{r["mode_key"]} '
-                                           f'{r["fingertip_rel_wrist_mm"]:.3g}' for r in rows)
-          + ')')
+    print(f'(true motion jitter {rows[0]["jitter_truth_mm"]:.3g} mm; fingertip_rel_wrist_mm: '
+          'relative to the wrist position, i.e. wrist translation error removed, rotation kept)')
+    print_table([{k: r[k] for k in ('cameras', 'mode', 'fingertip_mm', 'fingertip_rel_wrist_mm',
+                                    'fingertip_hand_frame_mm', 'fingertip_rotation_only_mm')}
+                 for r in rows],
+                'Fingertip error split, mm (diagnostic): absolute; relative to the wrist '
+                'position; in the hand frame (wrist translation and rotation removed: finger '
+                'articulation only); true pose with the estimated wrist rotation (rotation only)')
     targets = evaluate_targets(rows)
     print_table(targets, 'Targets (measured, not asserted)')
     plot = ''
@@ -208,7 +232,8 @@ def main(argv: list[str] | None = None) -> int:
         plot = str(_plot(rows, Path(args.plot)))
         print(f'plot: {plot}')
     settings = {'database': str(db_path), 'entries': len(db), 'seeds': seeds,
-                'frames_per_sequence': args.frames, 'labels': args.labels,
+                'seed_offset': args.seed_offset, 'frames_per_sequence': args.frames,
+                'labels': args.labels,
                 'ik_config': args.ik_config, 'covariances': config.covariances.source,
                 'calibration': args.calibration, 'stereo_calibration': args.stereo_calibration,
                 'fps': args.fps, 'wall_s': time.perf_counter() - t0}

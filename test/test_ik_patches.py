@@ -1,0 +1,100 @@
+"""The patch constraint model of the IK: visible-patch centroids predicted from the mesh faces."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.ik import (
+    Correspondences,
+    FastKinematics,
+    HandTracker,
+    IKConfig,
+    IKConfigError,
+    IKError,
+    PatchSurface,
+    VertexTable,
+    constraint_points,
+    project_correspondences,
+)
+from colorglove_ros.core.synth import Synthesizer, generate_sequence, render_frame
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope='module')
+def scene():
+    synth = Synthesizer()
+    cam = load_calibration(ROOT / 'config' / 'calibration.yaml').cameras[0]
+    kin = FastKinematics(synth.model)
+    yield synth, cam, kin, PatchSurface(kin, synth.mesh, synth.glove.face_patch)
+    synth.release()
+
+
+def _patch_rows(surface: PatchSurface, kin: FastKinematics, cam, q: np.ndarray,
+                patch_ids: np.ndarray) -> Correspondences:
+    """Rows for the patches facing the camera (the others are dropped)."""
+    link, local, weight, seen = surface.points(q, cam, patch_ids)
+    n = int(seen.sum())
+    z = np.zeros(n, np.int64)
+    return Correspondences(z, link[seen], local[seen], np.zeros((n, 2)), patch_ids[seen], z,
+                           weight[seen])
+
+
+def test_predicted_centroids_match_the_rendered_patches(scene):
+    synth, cam, kin, surface = scene
+    errors, all_faces = [], []
+    for q in generate_sequence(7, 6, camera=cam, model=synth.model):
+        frame = render_frame(q, cam, np.random.default_rng(0), synthesizer=synth)
+        ids = frame.patch_ids.astype(np.int64) - 1
+        counts = np.bincount(ids[ids >= 0], minlength=20)
+        visible = np.flatnonzero(counts >= 40)
+        truth = np.array([np.argwhere(ids == p)[:, ::-1].mean(axis=0) for p in visible])
+        corr = _patch_rows(surface, kin, cam, q, visible)
+        assert len(corr) == len(visible)
+        pix, _, _ = project_correspondences(kin, [cam], corr, q)
+        errors.extend(np.linalg.norm(pix - truth, axis=1))
+        # reference: the mean of all the patch's faces, seen or not
+        verts = synth.mesh.skin(synth.model, q)
+        face_c = verts[synth.mesh.faces].mean(axis=1)
+        for p, t in zip(visible, truth, strict=True):
+            c = face_c[synth.glove.face_patch == p].mean(axis=0)
+            all_faces.append(np.linalg.norm(cam.project(c[None])[0] - t))
+    assert np.median(errors) < 2.5
+    assert np.mean(errors) < 0.6 * np.mean(all_faces)
+
+
+def test_mixed_rows_have_the_weighted_point_jacobian(scene):
+    synth, cam, kin, surface = scene
+    q = generate_sequence(3, 1, camera=cam, model=synth.model)[0]
+    corr = _patch_rows(surface, kin, cam, q, np.arange(20))
+    assert len(corr) >= 10 and corr.link.shape[1] > 1 and np.allclose(corr.weight.sum(axis=1), 1.0)
+    p, J = constraint_points(kin, corr, q, jacobian=True)
+    num = np.zeros_like(J)
+    for i in range(26):
+        dq = np.zeros(26)
+        dq[i] = 1e-6
+        num[:, :, i] = (constraint_points(kin, corr, q + dq)[0]
+                        - constraint_points(kin, corr, q - dq)[0]) / 2e-6
+    np.testing.assert_allclose(J, num, atol=1e-7)
+    # rows of several points padded to a common width keep their values when joined
+    single = Correspondences(np.zeros(1, np.int64), np.array([3]), np.zeros((1, 3)),
+                             np.zeros((1, 2)), np.zeros(1, np.int64), np.zeros(1, np.int64))
+    joined = Correspondences.concat([single, corr])
+    np.testing.assert_allclose(constraint_points(kin, joined, q)[0][1:], p, atol=1e-12)
+
+
+def test_constraint_model_is_checked():
+    with pytest.raises(IKConfigError):
+        IKConfig(constraint_model='blob')
+
+
+def test_patch_model_needs_the_glove_of_its_mesh(scene):
+    synth, cam, kin, _ = scene
+    table = VertexTable(synth.mesh.vertex_link, synth.mesh.local_vertices)
+    with pytest.raises(IKError, match='glove'):
+        HandTracker(synth.model, table, [cam], IKConfig())
+    HandTracker(synth.model, table, [cam], IKConfig(constraint_model='vertex'))
+    HandTracker(synth.model, synth.mesh, [cam], IKConfig())     # the standard glove
