@@ -10,6 +10,7 @@ import pytest
 from colorglove_ros.core.colorspace import (
     CALIBRATION_FORMAT_VERSION,
     CGZ_A,
+    LIGHT_TEMPERATURES_K,
     ColorCalibrationError,
     cgz_chroma,
     cgz_intensity_axis,
@@ -17,6 +18,7 @@ from colorglove_ros.core.colorspace import (
     linear_rgb_to_xyz,
     load_calibration,
     lut_index,
+    planckian_illuminants,
     rgb_to_cgz,
     save_calibration,
     srgb_to_linear,
@@ -118,12 +120,25 @@ def _interior_accuracy_and_fp(calibration, frames) -> tuple[float, float]:
     return correct / total, fp / bg
 
 
-def test_warm_cool_augmentation_covers_tinted_light(frames) -> None:
-    """Fitted on neutral-light frames only, the warm/cool re-lighting must carry the colours
-    to a strongly warm light without claiming more background under neutral light."""
+def test_planckian_illuminants_follow_the_black_body_locus() -> None:
+    gains = planckian_illuminants(2856.0, 20000.0, count=9)
+    assert gains.shape == (9, 3) and np.all(gains > 0)
+    red_blue = np.log(gains[:, 0] / gains[:, 2])
+    # from incandescent (much more red than blue) through neutral to blue-sky shade
+    assert red_blue[0] > 1.8 and red_blue[-1] < -0.8
+    assert np.all(np.diff(red_blue) < 0)
+    np.testing.assert_allclose(planckian_illuminants(6500.0, 6500.0, count=2), 1.0, atol=1e-6)
+    with pytest.raises(ColorCalibrationError):
+        planckian_illuminants(5000.0, 3000.0)
+
+
+def test_relighting_under_black_bodies_covers_tinted_light(frames) -> None:
+    """Fitted on neutral-light frames only, re-lighting under black-body lights must carry
+    the colours to a strongly warm light without claiming more background under neutral
+    light."""
     plain, tinted = (fit_color_calibration(frames['train'], seed=0, bits=5, max_per_class=1000,
-                                           background_components=6, augment_warm_cool=w)
-                     for w in (0.0, 1.1))
+                                           background_components=6, augment_temperatures_k=t)
+                     for t in (None, LIGHT_TEMPERATURES_K))
     rng = np.random.default_rng(9)
     warm = [render_blob_frame(rng, BlobConditions(1.0, (1.2, 1.0, 0.8), 2.0, 6, True, 1.4),
                               320, 240) for _ in range(3)]
@@ -133,6 +148,8 @@ def test_warm_cool_augmentation_covers_tinted_light(frames) -> None:
     _, fp_plain = _interior_accuracy_and_fp(plain, frames['held'])
     _, fp_tinted = _interior_accuracy_and_fp(tinted, frames['held'])
     assert fp_tinted < fp_plain + 0.005
+    with pytest.raises(ColorCalibrationError, match='colour temperature'):
+        fit_color_calibration(frames['train'], augment_temperatures_k=(6500.0, 3000.0), **FAST)
 
 
 def test_unseen_colours_fall_to_background(calibration) -> None:

@@ -8,7 +8,11 @@ import cv2
 import numpy as np
 import pytest
 
-from colorglove_ros.core.colorspace import fit_color_calibration, srgb_to_linear
+from colorglove_ros.core.colorspace import (
+    fit_color_calibration,
+    read_calibration_config,
+    srgb_to_linear,
+)
 from colorglove_ros.core.crop import TINY_SIZE, crop_to_tiny
 from colorglove_ros.core.glove import GLOVE_PALETTE_RGB
 from colorglove_ros.core.segmentation import (
@@ -173,6 +177,14 @@ def test_relabel_borders_gives_mixed_pixels_their_majority_colour() -> None:
     labels = np.where((share > 0) & (share < 1), np.uint8(0), truth)
     assert np.mean(relabel_borders(image, labels, passes=1) == truth) < 1.0
     np.testing.assert_array_equal(relabel_borders(image, labels, passes=2), truth)
+    # A 6-pixel band (strong blur) needs three passes, as the defaults and shipped settings do.
+    image, truth, share = _mixed_edge(blur=6.0)
+    labels = np.where((share > 0) & (share < 1), np.uint8(0), truth)
+    assert np.mean(relabel_borders(image, labels, passes=2) == truth) < 1.0
+    np.testing.assert_array_equal(relabel_borders(image, labels), truth)
+    shipped = read_calibration_config('config/color_calibration.yaml')['segmenter']
+    np.testing.assert_array_equal(relabel_borders(
+        image, labels, shipped['border_passes'], tuple(shipped['border_distances'])), truth)
 
 
 def test_relabel_borders_leaves_clean_regions_and_unknown_colours() -> None:

@@ -15,7 +15,8 @@ __all__ = [
     'CALIBRATION_FORMAT', 'CALIBRATION_FORMAT_VERSION', 'CGZ_A', 'CGZ_B', 'SRGB_TO_XYZ',
     'ColorCalibrationError', 'ColorCalibration', 'GaussianMixtureParams',
     'srgb_to_linear', 'linear_rgb_to_xyz', 'xyz_to_cgz', 'rgb_to_cgz', 'cgz_intensity_axis',
-    'cgz_chroma', 'rgb_features', 'fit_color_calibration', 'lut_index',
+    'cgz_chroma', 'rgb_features', 'LIGHT_TEMPERATURES_K', 'planckian_illuminants',
+    'fit_color_calibration', 'lut_index',
     'save_calibration', 'load_calibration', 'read_calibration_config',
     'load_calibration_from_config',
 ]
@@ -233,18 +234,36 @@ def _sample_pixels(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_colors: 
     return out
 
 
-#: Log-gain direction of a warmer light (more red, less blue), as along the Planckian locus.
-_WARM_AXIS = np.array([0.5, 0.0, -0.5])
+#: Colour temperatures the calibration is re-lit under, as seen through the camera's fixed
+#: white balance: from 3300 K (the warm end of the 'intermediate' lamp class of EN 12464-1;
+#: warm-white lamps, down to CIE illuminant A at 2856 K, made glove-coloured clutter pass as
+#: glove) to 20000 K (shade under a clear blue sky, the bluest common daylight). Bounds of
+#: everyday light, not the evaluation's test conditions.
+LIGHT_TEMPERATURES_K = (3300.0, 20000.0)
+
+
+def planckian_illuminants(low_k: float, high_k: float, count: int = 32) -> np.ndarray:
+    """Linear RGB gains (count, 3) of black-body lights from ``low_k`` to ``high_k`` kelvin
+    (evenly spaced in mired, 1e6 / T, the scale on which equal steps look alike) as a camera
+    white-balanced like the synthetic one sees them (``synth.illuminant_rgb``)."""
+    from .synth import illuminant_rgb
+
+    if not 1000.0 <= low_k <= high_k:
+        raise ColorCalibrationError(
+            f'need 1000 K <= low <= high colour temperature, got {low_k}, {high_k}')
+    mired = np.linspace(1e6 / low_k, 1e6 / high_k, count)
+    return np.array([illuminant_rgb(1e6 / m) for m in mired])
 
 
 def _augment(pix: np.ndarray, rng: np.random.Generator, light: tuple[float, float],
-             white_balance: float, warm_cool: float, noise: float) -> np.ndarray:
-    """Re-light sRGB pixels: random level, warm/cool cast and per-channel gains in linear RGB,
-    plus noise."""
+             white_balance: float, illuminants: np.ndarray | None, noise: float) -> np.ndarray:
+    """Re-light sRGB pixels: random level, light colour (a random row of ``illuminants``,
+    linear RGB gains) and per-channel gains in linear RGB, plus noise."""
     lin = srgb_to_linear(pix)
     k = np.exp(rng.uniform(np.log(light[0]), np.log(light[1]), (len(pix), 1)))
-    cast = rng.uniform(-warm_cool, warm_cool, (len(pix), 1)) * _WARM_AXIS
-    gains = k * np.exp(cast + rng.uniform(-white_balance, white_balance, (len(pix), 3)))
+    gains = k * np.exp(rng.uniform(-white_balance, white_balance, (len(pix), 3)))
+    if illuminants is not None:
+        gains *= illuminants[rng.integers(len(illuminants), size=len(pix))]
     lin = np.clip(lin * gains, 0.0, 1.0)
     srgb = np.where(lin <= 0.0031308, lin * 12.92, 1.055 * lin ** (1 / 2.4) - 0.055) * 255.0
     srgb += rng.normal(0.0, noise, srgb.shape)
@@ -258,7 +277,8 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_c
                           reject_quantile: float = 1e-4, max_per_class: int = 5000,
                           erode: int = 1, glove_covariance_floor: float = 1.0,
                           augment_copies: int = 2, augment_light: tuple[float, float] = (0.4, 1.8),
-                          augment_white_balance: float = 0.3, augment_warm_cool: float = 1.1,
+                          augment_white_balance: float = 0.15,
+                          augment_temperatures_k: tuple[float, float] | None = LIGHT_TEMPERATURES_K,
                           augment_noise: float = 3.0,
                           seed: int = 0, min_frames: int = 8,
                           metadata: Mapping[str, Any] | None = None) -> ColorCalibration:
@@ -266,9 +286,9 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_c
 
     ``frames`` are (image (H, W, 3) uint8 RGB, label mask (H, W), 0 = background). The
     training pixels of every class are augmented with ``augment_copies`` re-lit copies (light
-    level in ``augment_light``; a warm/cool cast with red/blue gain ratio up to
-    ``exp(+-augment_warm_cool)``, 1.1 being 3800 K light under a 6500 K white balance;
-    per-channel gains ``exp(+-augment_white_balance)``; noise)
+    level in ``augment_light``; light colour a black body in ``augment_temperatures_k``, see
+    :func:`planckian_illuminants`, None for none; residual per-channel gains
+    ``exp(+-augment_white_balance)``, camera white-balance error; noise)
     so a few labelled frames cover other light levels and colour temperatures; the
     background is re-lit too, or the widened glove classes would claim re-lit background.
     Glove covariances get ``glove_covariance_floor`` added to their diagonal. A glove class
@@ -284,6 +304,8 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_c
             f'need at least {min_frames} labelled frames, got {len(frames)}')
     if not 1 <= bits <= 8:
         raise ColorCalibrationError(f'bits must be in 1..8, got {bits}')
+    illuminants = (None if augment_temperatures_k is None
+                   else planckian_illuminants(*augment_temperatures_k))
     rng = np.random.default_rng(seed)
     samples = _sample_pixels(frames, num_colors, max_per_class, erode, rng)
     mixtures: list[GaussianMixtureParams] = []
@@ -293,7 +315,7 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_c
         counts.append(len(pix))
         if augment_copies > 0:
             pix = np.concatenate([pix] + [
-                _augment(pix, rng, augment_light, augment_white_balance, augment_warm_cool,
+                _augment(pix, rng, augment_light, augment_white_balance, illuminants,
                          augment_noise)
                 for _ in range(augment_copies)])
         feats = rgb_features(pix, feature_kind, intensity_weight)
@@ -313,7 +335,8 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_c
             'background_components': background_components, 'reject_quantile': reject_quantile,
             'background_prior': background_prior, 'augment_copies': augment_copies,
             'augment_light': list(augment_light), 'augment_white_balance': augment_white_balance,
-            'augment_warm_cool': augment_warm_cool,
+            'augment_temperatures_k': None if augment_temperatures_k is None
+            else list(augment_temperatures_k),
             'glove_covariance_floor': glove_covariance_floor, 'seed': seed,
             **dict(metadata or {})}
     cal = ColorCalibration(lut=np.zeros(0, np.uint8), bits=bits, num_colors=num_colors,

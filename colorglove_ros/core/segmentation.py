@@ -99,7 +99,7 @@ def _reference_steps(distances: tuple[int, ...], row_stride: int) -> np.ndarray:
                      for sy in (-1, 0, 1) for sx in (-1, 0, 1) if sy or sx])
 
 
-def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 2,
+def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
                     distances: tuple[int, ...] = (2, 4), mix_tolerance: float = 0.25,
                     min_residual: float = 10.0) -> np.ndarray:
     """Re-decide the labels of pixels on a label border, i.e. with a 4-neighbour of another
@@ -230,7 +230,7 @@ class GloveSegmenter:
                  roi_margin: float = 1.5, max_roi_cells: int = 160,
                  bilateral_diameter: int = 3, bilateral_sigma_color: float = 45.0,
                  bilateral_sigma_space: float = 3.0, median_size: int = 3,
-                 border_passes: int = 2, border_distances: tuple[int, ...] = (2, 4),
+                 border_passes: int = 3, border_distances: tuple[int, ...] = (2, 4),
                  min_glove_pixels: int = 300, min_inside_fraction: float = 0.5,
                  min_blob_pixels: int = 12, min_component_colors: int = 3) -> None:
         if coarse_factor < 1 or max_roi_cells < TINY_SIZE or roi_margin < 1.0:

@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from colorglove_ros.core.colorspace import (
+    LIGHT_TEMPERATURES_K,
     ColorCalibrationError,
     fit_color_calibration,
     read_calibration_config,
@@ -94,6 +95,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--bits', type=int, default=6, help='LUT bits per RGB channel')
     parser.add_argument('--max-pixels', type=int, default=5000,
                         help='training pixels sampled per class')
+    parser.add_argument('--light-temperatures', type=float, nargs=2, metavar=('LOW_K', 'HIGH_K'),
+                        default=LIGHT_TEMPERATURES_K,
+                        help='re-light the training pixels under black bodies of these colour '
+                             'temperatures (default: colorspace.LIGHT_TEMPERATURES_K)')
     parser.add_argument('--json', type=Path, help='also write the figures as JSON')
     args = parser.parse_args(argv)
     try:
@@ -110,6 +115,7 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         cal = fit_color_calibration(frames, num_colors=NUM_COLORS, bits=args.bits,
                                     max_per_class=args.max_pixels, seed=args.seed,
+                                    augment_temperatures_k=tuple(args.light_temperatures),
                                     metadata={'source': source})
         fit_s = time.perf_counter() - t0
         save_calibration(cal, output)
