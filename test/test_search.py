@@ -14,7 +14,7 @@ from colorglove_ros.core.search import (
     SearchError,
     blend_poses,
     blend_weights,
-    estimate_translation,
+    estimate_global_pose,
     top_k_with_ties,
 )
 
@@ -106,20 +106,44 @@ def test_blend_poses_rotation_and_fingers() -> None:
     assert abs(abs(q[5]) - np.pi) < 1e-6
 
 
-def test_translation_from_crop() -> None:
-    t_e = np.array([[0.02, -0.03, 0.5]])
+def test_global_pose_from_crop() -> None:
+    g_e = np.array([[0.02, -0.03, 0.5, 0.3, -0.2, 1.0]])
     crop_e = np.array([[1.1, 40.0, 35.0]])
     cam = PinholeCamera(128, 128, 150.0, 150.0, 63.5, 63.5)
     np.testing.assert_allclose(
-        estimate_translation(t_e, crop_e, RENDER_CAM, (1.1, 40.0, 35.0), cam), t_e)
+        estimate_global_pose(g_e, crop_e, RENDER_CAM, (1.1, 40.0, 35.0), cam), g_e, atol=1e-12)
     # the hand twice as far away looks half as big: same tiny image, half the crop scale
     big = PinholeCamera(640, 480, 600.0, 600.0, 320.0, 240.0)
-    t = estimate_translation(t_e, crop_e, RENDER_CAM, (0.55 * 4.0, 100.0, 80.0), big)[0]
-    assert t[2] == pytest.approx(0.5 * (600 / 150) * (1.1 / 2.2))
+    g = estimate_global_pose(g_e, crop_e, RENDER_CAM, (0.55 * 4.0, 100.0, 80.0), big)[0]
+    assert np.linalg.norm(g[:3]) == pytest.approx(np.linalg.norm(g_e[0, :3]) * 2.0)
     # the wrist projects to the same tiny-image position in both crops
-    u_e = 150.0 * t_e[0, 0] / t_e[0, 2] + 63.5
+    u_e = 150.0 * g_e[0, 0] / g_e[0, 2] + 63.5
     tiny_x = (u_e - 40.0) / 1.1
-    assert 600.0 * t[0] / t[2] + 320.0 == pytest.approx(100.0 + 2.2 * tiny_x)
+    assert 600.0 * g[0] / g[2] + 320.0 == pytest.approx(100.0 + 2.2 * tiny_x)
+
+
+@pytest.mark.parametrize('anchor', [None, np.array([0.01, -0.09, 0.004])])
+def test_global_pose_anchor_keeps_pixel_and_range(anchor) -> None:
+    """An entry rendered on the optical axis, placed off-axis: the anchor lies on the ray
+    through its mapped tiny-image pixel at the range (not the depth) scaled by apparent
+    size, and the rotation and the anchor's offset from the wrist are the entry's."""
+    rng = np.random.default_rng(3)
+    rv = Rotation.from_rotvec(rng.normal(0.0, 1.0, (6, 3)))
+    local = np.zeros(3) if anchor is None else anchor
+    g_e = np.zeros((6, 6))
+    g_e[:, 3:6] = rv.as_rotvec()
+    g_e[:, 0:3] = np.array([0.0, 0.0, 0.5]) - rv.apply(local)        # anchor on the axis
+    crop_e = np.tile([0.6, 44.0, 52.0], (6, 1))
+    cam = PinholeCamera(640, 480, 600.0, 600.0, 319.5, 239.5)
+    tiny = (np.array([63.5, 63.5]) - [44.0, 52.0]) / 0.6              # the anchor's pixel
+    for crop in [(2.0, 30.0, 20.0), (3.0, 500.0, 380.0), (2.5, 300.0, 200.0)]:
+        g = estimate_global_pose(g_e, crop_e, RENDER_CAM, crop, cam, anchor)
+        np.testing.assert_allclose(g[:, 3:6], g_e[:, 3:6])
+        a_q = g[:, 0:3] + rv.apply(local)
+        np.testing.assert_allclose(np.linalg.norm(a_q, axis=1),
+                                   0.5 * (600.0 / 150.0) * 0.6 / crop[0], rtol=1e-12)
+        np.testing.assert_allclose(a_q[:, :2] / a_q[:, 2:] * 600.0 + [319.5, 239.5],
+                                   np.tile(np.array(crop[1:]) + crop[0] * tiny, (6, 1)))
 
 
 def test_lookup_finds_exact_entry(blob_db) -> None:
@@ -161,23 +185,22 @@ def test_lookup_rejects_empty_query(blob_db) -> None:
         lookup.lookup(blob_db.tiny[0], (0.0, 0.0, 0.0), cam)
 
 
-def test_lookup_translation_matches_estimate_translation(blob_db) -> None:
-    """The precomputed per-entry terms give the same wrist positions as the public function,
+def test_lookup_poses_match_estimate_global_pose(blob_db) -> None:
+    """The precomputed per-entry terms give the same global poses as the public function,
     with and without lens distortion and with the hand-centre anchor."""
     lookup = PoseLookup(blob_db, num_candidates=60, num_blend=10)
-    from colorglove_ros.core.search import _rotate
+    from colorglove_ros.core.search import _entry_place_terms
 
     lookup._anchor = np.array([0.01, -0.09, 0.004])
-    lookup._offsets = _rotate(lookup._a['poses'][:, 3:6].astype(np.float64), lookup._anchor)
-    lookup._anchor_table = lookup._anchor_terms()
-    idx = np.array([0, 7, 123, 599])
+    lookup._place_table = _entry_place_terms(lookup._a['poses'][:, 0:6], lookup._a['crop'],
+                                             blob_db.render_camera, lookup._anchor)
     for dist in (np.zeros(5), np.array([0.1, -0.05, 0.001, 0.002, 0.0])):
         cam = PinholeCamera(640, 480, 520.0, 515.0, 320.0, 240.0, distortion=dist)
         crop = (2.5, 100.0, 60.0)
-        want = estimate_translation(lookup._a['poses'][idx, 0:3], lookup._a['crop'][idx],
-                                    blob_db.render_camera, crop, cam,
-                                    entry_rotvec=lookup._a['poses'][idx, 3:6],
-                                    anchor_local=lookup._anchor)
-        np.testing.assert_allclose(lookup._translation(idx, crop, cam), want, rtol=1e-9,
-                                   atol=1e-12)
+        res = lookup.lookup(blob_db.tiny[7], crop, cam)
+        idx = res.indices
+        want = estimate_global_pose(lookup._a['poses'][idx, 0:6], lookup._a['crop'][idx],
+                                    blob_db.render_camera, crop, cam, lookup._anchor)
+        np.testing.assert_allclose(res.poses[:, 0:6], want, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(res.poses[:, 6:], lookup._a['poses'][idx, 6:])
         assert np.ptp(want[:, 0]) > 1e-3                   # the rotated anchors differ

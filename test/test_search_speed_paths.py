@@ -1,4 +1,4 @@
-"""Tests for the fast lookup paths: query encoder, grouped re-rank, vectorised translation."""
+"""Tests for the fast lookup paths: query encoder, grouped re-rank, quaternion helpers."""
 from __future__ import annotations
 
 import numpy as np
@@ -14,7 +14,7 @@ from colorglove_ros.core.codes import (
 )
 from colorglove_ros.core.database import assemble_database
 from colorglove_ros.core.distance import QueryDistance, distance_transforms_batch
-from colorglove_ros.core.search import PoseLookup, SearchError, _rotate, top_k_with_ties
+from colorglove_ros.core.search import PoseLookup, SearchError, top_k_with_ties
 
 RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5, 'cy': 63.5}
 
@@ -75,14 +75,6 @@ def test_grouped_rerank_matches_reference_distance() -> None:
     assert lookup.rerank(QueryDistance(db.tiny[5]), np.array([5]))[0] == 0.0
 
 
-def test_vectorised_rotation_matches_scipy() -> None:
-    rv = np.random.default_rng(2).normal(0.0, 1.5, (20, 3))
-    rv[3] = 0.0
-    point = np.array([0.01, -0.08, 0.03])
-    np.testing.assert_allclose(_rotate(rv, point), Rotation.from_rotvec(rv).apply(point),
-                               atol=1e-12)
-
-
 def test_top_k_uint8_binary_search_matches_sort() -> None:
     rng = np.random.default_rng(4)
     for k in (1, 7, 50, 299, 300):
@@ -94,22 +86,20 @@ def test_top_k_uint8_binary_search_matches_sort() -> None:
         np.testing.assert_array_equal(got, top_k_with_ties(vals.astype(np.int64), k))
 
 
-def test_precomputed_anchor_offset_gives_same_translation() -> None:
-    from colorglove_ros.core.camera import PinholeCamera
-    from colorglove_ros.core.search import estimate_translation
+def test_quaternion_helpers_match_scipy() -> None:
+    from colorglove_ros.core.search import _quat_to_rotvec, _rotvec_to_quat
 
-    rng = np.random.default_rng(6)
-    t = rng.normal([0.0, 0.0, 0.5], 0.02, (5, 3))
-    rv = rng.normal(0.0, 1.0, (5, 3))
-    crop = np.tile([1.1, 30.0, 35.0], (5, 1))
-    anchor = np.array([0.0, -0.07, 0.01])
-    cam = PinholeCamera(640, 480, 600.0, 600.0, 320.0, 240.0)
-    a = estimate_translation(t, crop, RENDER_CAM, (2.0, 100.0, 90.0), cam, rv, anchor)
-    b = estimate_translation(t, crop, RENDER_CAM, (2.0, 100.0, 90.0), cam,
-                             anchor_offset=Rotation.from_rotvec(rv).apply(anchor))
-    np.testing.assert_allclose(a, b, atol=1e-12)
-    c = estimate_translation(t, crop, RENDER_CAM, (2.0, 100.0, 90.0), cam)
-    assert np.abs(a - c).max() > 1e-4                # the anchor matters
+    rv = np.random.default_rng(6).normal(0.0, 1.2, (20, 3))
+    rv[0] = 0.0
+    rv[1] = [0.0, 0.0, np.pi - 1e-9]
+    q = _rotvec_to_quat(rv)
+    np.testing.assert_allclose(Rotation.from_quat(q).as_matrix(),
+                               Rotation.from_rotvec(rv).as_matrix(), atol=1e-12)
+    for scale in (1.0, -3.0):                         # any sign and norm
+        back = np.array([_quat_to_rotvec(scale * row) for row in q])
+        assert np.all(np.linalg.norm(back, axis=1) <= np.pi + 1e-12)
+        assert np.all((Rotation.from_rotvec(back) * Rotation.from_rotvec(rv).inv()).magnitude()
+                      < 1e-9)
 
 
 def test_threaded_lookup_equals_single_thread(monkeypatch) -> None:
@@ -140,7 +130,7 @@ def test_buffer_bytes_counts_tables() -> None:
     db = _db()
     lookup = PoseLookup(db, num_candidates=40)
     before = lookup.buffer_bytes
-    assert before >= len(db) * (1 + 6 * 8)                 # Hamming output + anchor table
+    assert before >= len(db) * (1 + 10 * 8)                # Hamming output + place table
     lookup.lookup(np.asarray(db.tiny[9]), (1.0, 0.0, 0.0),
                   PinholeCamera(128, 128, 150.0, 150.0, 63.5, 63.5))
     assert lookup.buffer_bytes > before                    # re-rank buffers now allocated

@@ -14,7 +14,7 @@ from colorglove_ros.core.database import PoseDatabase
 from colorglove_ros.core.distance import ABSENT_PENALTY, DT_SCALE, QueryDistance
 
 __all__ = ['SearchError', 'ProjectionConstraints', 'LookupResult', 'PoseLookup',
-           'top_k_with_ties', 'blend_weights', 'blend_poses', 'estimate_translation']
+           'top_k_with_ties', 'blend_weights', 'blend_poses', 'estimate_global_pose']
 
 
 _BUFFER_CAP = 1 << 20
@@ -47,7 +47,8 @@ class LookupResult:
     indices: np.ndarray         # (k,) database entries blended
     distances: np.ndarray       # (k,) image distances (px)
     weights: np.ndarray         # (k,) normalised blend weights
-    poses: np.ndarray           # (k, 26) neighbour poses, translation moved to the query
+    poses: np.ndarray           # (k, 26) neighbour poses, wrist moved to the query
+    #                             (estimate_global_pose)
     blended: np.ndarray         # (26,) blended pose q_b
     constraints: ProjectionConstraints
     num_candidates: int         # entries re-ranked (top by Hamming, ties kept)
@@ -97,9 +98,13 @@ def blend_poses(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """Weighted blend of (k, 26) poses: translation and finger DOFs linearly, the global
     rotation as the weighted quaternion mean (Markley), returned as a rotation vector."""
     poses = np.asarray(poses, np.float64)
-    w = np.asarray(weights, np.float64)
-    out = w @ poses
-    out[3:6] = _quat_to_rotvec(_quat_mean(_rotvec_to_quat(poses[:, 3:6]), w))
+    return _blend(poses, _rotvec_to_quat(poses[:, 3:6]), np.asarray(weights, np.float64))
+
+
+def _blend(poses: np.ndarray, quats: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """:func:`blend_poses` with the rotations also given as quaternions (k, 4)."""
+    out = weights @ poses
+    out[3:6] = _quat_to_rotvec(_quat_mean(quats, weights))
     return out
 
 
@@ -125,6 +130,7 @@ def _quat_mean(quats: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 
 def _quat_to_rotvec(q: np.ndarray) -> np.ndarray:
+    """One quaternion (x, y, z, w), any sign and norm -> rotation vector, angle in [0, pi]."""
     x, y, z, w = (float(v) for v in q)
     if w < 0.0:
         x, y, z, w = -x, -y, -z, -w
@@ -136,57 +142,66 @@ def _quat_to_rotvec(q: np.ndarray) -> np.ndarray:
     return np.array([x * f, y * f, z * f])
 
 
-def estimate_translation(entry_translation: np.ndarray, entry_crop: np.ndarray,
-                         render_camera: dict, query_crop: tuple[float, float, float],
-                         camera: PinholeCamera, entry_rotvec: np.ndarray | None = None,
-                         anchor_local: np.ndarray | None = None,
-                         anchor_offset: np.ndarray | None = None) -> np.ndarray:
-    """Wrist position (k, 3) in the query camera for entries rendered at
-    ``entry_translation`` (k, 3) with crops ``entry_crop`` (k, 3) (scale, offset_x, offset_y).
-
-    The anchor point (the hand frame point ``anchor_local`` with rotations ``entry_rotvec``,
-    e.g. the hand's centre; the wrist if None) keeps its depth ratio and its tiny-image
-    position: depth from the ratio of crop scales (apparent size ~ f / z),
-    z_q = z_e (f_q / f_r) (s_e / s_q); x, y by mapping the anchor's tiny-image position into
-    the query image with the query crop, undistorting and back-projecting at z_q. The wrist
-    keeps its 3-D offset from the anchor. ``anchor_offset`` (k, 3), the anchor already
-    rotated by each entry's rotation, replaces ``entry_rotvec`` and ``anchor_local``."""
-    t = np.asarray(entry_translation, np.float64).reshape(-1, 3)
+def _entry_place_terms(entry_global: np.ndarray, entry_crop: np.ndarray,
+                       render_camera: dict, anchor_local: np.ndarray | None) -> np.ndarray:
+    """The query-independent part of :func:`estimate_global_pose`, (k, 10) per entry: the
+    anchor's tiny-image x, y; its range (distance from the camera) times the crop scale; the
+    hand rotation as a quaternion (x, y, z, w); and the anchor's offset from the wrist in the
+    camera frame, R_e anchor_local (zero without an anchor)."""
+    g = np.asarray(entry_global, np.float64).reshape(-1, 6)
     crop = np.asarray(entry_crop, np.float64).reshape(-1, 3)
-    offset = np.zeros_like(t)
-    if anchor_offset is not None:
-        offset = np.asarray(anchor_offset, np.float64).reshape(-1, 3)
-    elif anchor_local is not None and entry_rotvec is not None:
-        rv = np.asarray(entry_rotvec, np.float64).reshape(-1, 3)
-        offset = _rotate(rv, np.asarray(anchor_local, np.float64))
-    anchor = t + offset
-    fr = 0.5 * (render_camera['fx'] + render_camera['fy'])
-    fq = 0.5 * (camera.fx + camera.fy)
-    sq, oqx, oqy = (float(v) for v in query_crop)
-    z_q = anchor[:, 2] * (fq / fr) * (crop[:, 0] / sq)
-    u = render_camera['fx'] * anchor[:, 0] / anchor[:, 2] + render_camera['cx']
-    v = render_camera['fy'] * anchor[:, 1] / anchor[:, 2] + render_camera['cy']
-    tiny_x = (u - crop[:, 1]) / crop[:, 0]
-    tiny_y = (v - crop[:, 2]) / crop[:, 0]
-    full = np.stack([oqx + sq * tiny_x, oqy + sq * tiny_y], axis=1)
-    full = camera.undistort_pixels(full)
-    x = (full[:, 0] - camera.cx) / camera.fx * z_q
-    y = (full[:, 1] - camera.cy) / camera.fy * z_q
-    return np.stack([x, y, z_q], axis=1) - offset
+    quats = _rotvec_to_quat(g[:, 3:6])
+    offset = np.zeros((len(g), 3))
+    if anchor_local is not None:
+        local = np.asarray(anchor_local, np.float64)
+        qv, qw = quats[:, :3], quats[:, 3:4]            # q a q*: a + 2 w (v x a) + 2 v x (v x a)
+        t = 2.0 * np.cross(qv, local)
+        offset = local + qw * t + np.cross(qv, t)
+    anchor = g[:, 0:3] + offset
+    rc = render_camera
+    u = rc['fx'] * anchor[:, 0] / anchor[:, 2] + rc['cx']
+    v = rc['fy'] * anchor[:, 1] / anchor[:, 2] + rc['cy']
+    return np.column_stack([(u - crop[:, 1]) / crop[:, 0], (v - crop[:, 2]) / crop[:, 0],
+                            np.linalg.norm(anchor, axis=1) * crop[:, 0], quats, offset])
 
 
-def _rotate(rotvecs: np.ndarray, point: np.ndarray) -> np.ndarray:
-    """Rotate one point (3,) by each rotation vector (k, 3) (Rodrigues), vectorised."""
-    angle = np.linalg.norm(rotvecs, axis=1)
-    safe = np.where(angle < 1e-12, 1.0, angle)
-    axis = rotvecs / safe[:, None]
-    cos, sin = np.cos(angle)[:, None], np.sin(angle)[:, None]
-    px, py, pz = (float(v) for v in point)
-    ax, ay, az = axis[:, 0], axis[:, 1], axis[:, 2]
-    cross = np.stack([ay * pz - az * py, az * px - ax * pz, ax * py - ay * px], axis=1)
-    dot = axis @ point
-    out = point * cos + cross * sin + axis * (dot[:, None] * (1.0 - cos))
-    out[angle < 1e-12] = point
+def _place_wrists(terms: np.ndarray, render_camera: dict,
+                  query_crop: tuple[float, float, float], camera: PinholeCamera) -> np.ndarray:
+    """Wrist positions (k, 3) in the query camera from :func:`_entry_place_terms` rows."""
+    rc = render_camera
+    sq, oqx, oqy = query_crop
+    full = terms[:, 0:2] * sq
+    full += (oqx, oqy)
+    if np.any(camera.distortion):
+        full = camera.undistort_pixels(full)
+    out = np.empty((len(terms), 3))
+    out[:, 0] = (full[:, 0] - camera.cx) / camera.fx
+    out[:, 1] = (full[:, 1] - camera.cy) / camera.fy
+    out[:, 2] = 1.0
+    # range along the unit ray through the anchor's pixel
+    r = terms[:, 2] * ((camera.fx + camera.fy) / (rc['fx'] + rc['fy']) / sq)
+    out *= (r / np.sqrt(out[:, 0] ** 2 + out[:, 1] ** 2 + 1.0))[:, None]
+    out -= terms[:, 7:10]
+    return out
+
+
+def estimate_global_pose(entry_global: np.ndarray, entry_crop: np.ndarray,
+                         render_camera: dict, query_crop: tuple[float, float, float],
+                         camera: PinholeCamera, anchor_local: np.ndarray | None = None
+                         ) -> np.ndarray:
+    """Global poses (k, 6) (wrist position, rotation vector) in the query camera of entries
+    rendered with global poses ``entry_global`` (k, 6) and crops ``entry_crop`` (k, 3)
+    (scale, offset_x, offset_y).
+
+    The anchor (the hand-frame point ``anchor_local``, e.g. the hand's centre; the wrist if
+    None) keeps its tiny-image position, mapped into the query image with the query crop,
+    undistorted and back-projected to a ray; its distance along the ray (range, not depth:
+    apparent size goes with range off the optical axis too) scales with apparent size,
+    r_q = r_e (f_q / f_r) (s_e / s_q). The rotation is the entry's, and the wrist keeps its
+    offset from the anchor."""
+    terms = _entry_place_terms(entry_global, entry_crop, render_camera, anchor_local)
+    out = np.asarray(entry_global, np.float64).reshape(-1, 6).copy()
+    out[:, 0:3] = _place_wrists(terms, render_camera, _crop_tuple(query_crop), camera)
     return out
 
 
@@ -241,19 +256,16 @@ class PoseLookup:
         self._buffers: dict[str, np.ndarray] = {}
         anchor = database.meta.get('hand_centre_local')
         self._anchor = None if anchor is None else np.asarray(anchor, np.float64)
-        # the anchor (hand centre) rotated by every entry's global rotation, once
-        self._offsets = (None if self._anchor is None else
-                         _rotate(self._a['poses'][:, 3:6].astype(np.float64), self._anchor))
-        self._anchor_table = self._anchor_terms()
+        # the query-independent part of placing every entry in a query's view, once
+        self._place_table = _entry_place_terms(self._a['poses'][:, 0:6], self._a['crop'],
+                                               database.render_camera, self._anchor)
 
     @property
     def buffer_bytes(self) -> int:
         """Memory held by this lookup besides the database: scan and re-rank buffers and
         the per-entry tables computed at construction."""
         arrays = [self._ham, self._xor, self._cnt, self._xor2, self._cnt2, self._table,
-                  self._anchor_table, *self._buffers.values()]
-        if self._offsets is not None:
-            arrays.append(self._offsets)
+                  self._place_table, *self._buffers.values()]
         return int(sum(a.nbytes for a in arrays))
 
     def _buffer(self, name: str, size: int, dtype: type) -> np.ndarray:
@@ -360,8 +372,9 @@ class PoseLookup:
         t3 = time.perf_counter()
         weights = blend_weights(d)
         poses = self._a['poses'][idx].astype(np.float64)
-        poses[:, 0:3] = self._translation(idx, crop, camera)
-        blended = blend_poses(poses, weights)
+        terms = self._place_table[idx]
+        poses[:, 0:3] = _place_wrists(terms, self.db.render_camera, crop, camera)
+        blended = _blend(poses, terms[:, 3:7], weights)
         constraints = self._constraints(int(idx[0]), crop)
         t4 = time.perf_counter()
         timings = {'encode_ms': 1e3 * (t1 - t0), 'hamming_ms': 1e3 * (t2 - t1),
@@ -369,36 +382,20 @@ class PoseLookup:
                    'total_ms': 1e3 * (t4 - t0)}
         return LookupResult(idx, d, weights, poses, blended, constraints, len(cand), timings)
 
-    def _anchor_terms(self) -> np.ndarray:
-        """Per entry, the query-independent part of :func:`estimate_translation`: (N, 6)
-        anchor tiny-image x, y, anchor depth times crop scale, and the anchor offset."""
-        t = self._a['poses'][:, 0:3].astype(np.float64)
-        crop = np.asarray(self._a['crop'], np.float64)
-        offset = np.zeros_like(t) if self._offsets is None else self._offsets
-        anchor = t + offset
-        rc = self.db.render_camera
-        u = rc['fx'] * anchor[:, 0] / anchor[:, 2] + rc['cx']
-        v = rc['fy'] * anchor[:, 1] / anchor[:, 2] + rc['cy']
-        return np.column_stack([(u - crop[:, 1]) / crop[:, 0], (v - crop[:, 2]) / crop[:, 0],
-                                anchor[:, 2] * crop[:, 0], offset])
+    @property
+    def anchor_local(self) -> np.ndarray | None:
+        """The hand-frame point the lookup places entries by (the hand centre; None: the
+        wrist)."""
+        return None if self._anchor is None else self._anchor.copy()
 
-    def _translation(self, idx: np.ndarray, crop: tuple[float, float, float],
-                     camera: PinholeCamera) -> np.ndarray:
-        """:func:`estimate_translation` of entries ``idx`` (with the hand-centre anchor)
-        from the precomputed per-entry terms: a handful of operations on k rows."""
-        a = self._anchor_table[idx]
-        rc = self.db.render_camera
-        sq, oqx, oqy = crop
-        z_q = a[:, 2] * ((0.5 * (camera.fx + camera.fy)) / (0.5 * (rc['fx'] + rc['fy'])) / sq)
-        full = a[:, 0:2] * sq
-        full += (oqx, oqy)
-        if np.any(camera.distortion):
-            full = camera.undistort_pixels(full)
-        out = np.empty((len(idx), 3))
-        out[:, 0] = (full[:, 0] - camera.cx) * (z_q / camera.fx)
-        out[:, 1] = (full[:, 1] - camera.cy) * (z_q / camera.fy)
-        out[:, 2] = z_q
-        out -= a[:, 3:6]
+    def place(self, indices: np.ndarray | None, crop_transform: object,
+              camera: PinholeCamera) -> np.ndarray:
+        """Global poses (k, 6) of entries ``indices`` (None: all) placed in the view of a
+        query cropped with ``crop_transform`` (:func:`estimate_global_pose`)."""
+        sel = slice(None) if indices is None else indices
+        out = self._a['poses'][sel, 0:6].astype(np.float64)
+        out[:, 0:3] = _place_wrists(self._place_table[sel], self.db.render_camera,
+                                    _crop_tuple(crop_transform), camera)
         return out
 
     def _constraints(self, entry: int, crop: tuple[float, float, float]

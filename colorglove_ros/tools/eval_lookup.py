@@ -1,4 +1,9 @@
-"""Evaluate the pose lookup: code quality vs length, recall@300, NN distance vs size, timing."""
+"""Evaluate the pose lookup: code quality vs length, recall@300, NN distance vs size, timing.
+
+With ``--diagnose`` it instead measures where the pose prior loses accuracy on frames of
+synthetic test sequences (as colorglove_eval_ik renders them): the pose-nearest entry
+(oracle), the exact image NN, the pipeline's top-1 and the blended pose, plus how well the
+database's samples cover the queries' view rotations and finger configurations."""
 from __future__ import annotations
 
 import argparse
@@ -234,6 +239,63 @@ def _plots(curves: dict, size_rows: list[dict], out_dir: Path, k: int) -> list[s
     return files
 
 
+def _diagnose(args: argparse.Namespace, db: PoseDatabase, lookup: PoseLookup, path: Path
+              ) -> int:
+    """The (a)-(d) table and the coverage table on synthetic test-sequence frames."""
+    from colorglove_ros.core.camera import CalibrationError, load_calibration
+    from colorglove_ros.core.colorspace import ColorCalibrationError
+    from colorglove_ros.core.evaluation import make_observer
+    from colorglove_ros.core.lookup_diagnosis import (
+        FullPoseIndex,
+        coverage,
+        diagnose,
+        render_query_frames,
+    )
+    from colorglove_ros.core.synth import Synthesizer
+    from colorglove_ros.paths import share_dir
+
+    cfg = _build_config(db)
+    try:
+        camera = load_calibration(args.calibration or share_dir() / 'config' /
+                                  'calibration.yaml').cameras[0]
+        observer = make_observer(args.labels)
+    except (CalibrationError, ColorCalibrationError) as exc:
+        print(f'eval_lookup: {exc}')
+        return 1
+    synth = Synthesizer(cfg.hand_length_m, cfg.glove_seed)
+    try:
+        t0 = time.perf_counter()
+        frames = render_query_frames(args.seeds, args.frames, args.step, camera, observer,
+                                     synth)
+    finally:
+        synth.release()
+    print(f'[eval] {len(frames.tiny)} query frames (seeds {args.seeds}, every {args.step}th '
+          f'of {args.frames}, labels={args.labels}) in {time.perf_counter() - t0:.1f} s',
+          flush=True)
+    index = FullPoseIndex(synth.model, synth.mesh, np.asarray(db.poses)[:, 6:],
+                          np.asarray(db.config_index))
+    t1 = time.perf_counter()
+    rows = diagnose(lookup, frames, camera, index)
+    print(f'[eval] diagnosis in {time.perf_counter() - t1:.1f} s', flush=True)
+    shown = ['estimate', 'joint_mae_deg', 'rotation_deg', 'rotation_median_deg',
+             'fingertip_rel_wrist_mm', 'fingertip_mm', 'wrist_depth_mm', 'wrist_plane_mm',
+             'image_distance_px', 'pose_distance_mm', 'is_image_nn']
+    print_table([{k: r[k] for k in shown} for r in rows],
+                f'where the prior loses accuracy ({len(frames.tiny)} frames, {len(db)} entries, '
+                f'{lookup.num_blend} blended)')
+    for r in rows:
+        print(f'  {r["estimate"]}: {r["description"]}')
+    cov = coverage(lookup, frames, camera, index)
+    print_table([cov], 'coverage of the queries by the database samples')
+    if args.json:
+        write_json(args.json, {'database': str(path), 'seeds': list(args.seeds),
+                               'frames': args.frames, 'step': args.step, 'labels': args.labels,
+                               'num_candidates': lookup.num_candidates,
+                               'num_blend': lookup.num_blend, 'diagnosis': rows,
+                               'coverage': cov})
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point."""
     parser = argparse.ArgumentParser(description=__doc__)
@@ -247,6 +309,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--timing-repeats', type=int, default=3)
     parser.add_argument('--plots', default='data/eval_lookup', help='directory for PNG plots')
     parser.add_argument('--json', help='write all figures to this JSON file')
+    diag = parser.add_argument_group('diagnosis (--diagnose)')
+    diag.add_argument('--diagnose', action='store_true', help='only the oracle / image NN / '
+                      'top-1 / blend table and the coverage table')
+    diag.add_argument('--seeds', type=int, nargs='+', default=[0, 1],
+                      help='synthetic test sequences (colorglove_eval_ik uses 0..S-1)')
+    diag.add_argument('--frames', type=int, default=150, help='frames per sequence')
+    diag.add_argument('--step', type=int, default=3, help='use every step-th frame')
+    diag.add_argument('--labels', choices=('truth', 'segmented'), default='segmented')
+    diag.add_argument('--calibration', help='camera calibration YAML (default '
+                      'config/calibration.yaml)')
     args = parser.parse_args(argv)
     _, default_path, lookup_cfg = load_build_config(args.config)
     path = Path(args.database) if args.database else default_path
@@ -259,6 +331,8 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     k = int(lookup_cfg.get('num_candidates', 300))
     lookup = PoseLookup(db, num_candidates=k, num_blend=int(lookup_cfg.get('num_blend', 10)))
+    if args.diagnose:
+        return _diagnose(args, db, lookup, path)
     print(f'[eval] {len(db)} entries loaded in {load_s:.1f} s; rendering {args.queries} '
           'held-out queries', flush=True)
     q_true, q_tiny, q_crop, q_fingers = _held_out_queries(db, args.queries, args.seed)
