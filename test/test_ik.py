@@ -32,6 +32,7 @@ from colorglove_ros.core.ik import (
     match_extra_camera,
     match_primary,
     project_correspondences,
+    reprojection_errors,
     save_covariances,
     solve_ik,
 )
@@ -485,3 +486,76 @@ def test_covariance_file_round_trip_and_errors(tmp_path):
     (tmp_path / 'ik_typo.yaml').write_text('version: 1\nmax_iteration: 4\n')
     with pytest.raises(IKConfigError, match='unknown keys'):
         load_ik_config(tmp_path / 'ik_typo.yaml')
+
+
+def _dense_shift_reference(pred, kcol, bxy, bcol, shift_max_px, inlier_px):
+    """The common image shift of match_extra_camera, scored on the dense (hypothesis,
+    constraint, blob) array (the formulation the pair-list version must reproduce)."""
+    same = kcol[:, None] == bcol[None, :]
+    diff = bxy[None, :, :] - pred[:, None, :]
+    hyp = diff[same]
+    hyp = hyp[np.linalg.norm(hyp, axis=1) <= shift_max_px]
+    res = diff[None] - hyp[:, None, None, :]
+    dist = np.where(same[None], np.linalg.norm(res, axis=3), np.inf).min(axis=2)
+    inl = dist <= inlier_px
+    score = inl.sum(axis=1) - 1e-3 * np.where(inl, dist, 0.0).sum(axis=1) / inlier_px
+    best = int(np.argmax(score))
+    r = res[best]
+    nearest = np.argmin(np.where(same, np.linalg.norm(r, axis=2), np.inf), axis=1)
+    rows = np.flatnonzero(inl[best])
+    return hyp[best] + r[rows, nearest[rows]].mean(axis=0)
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_extra_camera_shift_matches_dense_reference(rig, seed):
+    """Shifted, noisy blobs with same-colour decoys and missing ones: the matched targets are
+    those of the dense-array shift (a 30 px gate keeps the decoys out only with that shift)."""
+    model, mesh, kin, mono, stereo, verts = rig
+    rng = np.random.default_rng(seed)
+    cam = stereo[1]
+    q = true_pose(model, rng)
+    colors = rng.integers(1, 6, 20)                         # 5 colours: 4 patches each
+    cons = EntryConstraints(np.arange(20), colors, verts, np.zeros((20, 2)), np.full(20, 30))
+    pw, _ = kin.points(q, mesh.vertex_link[verts], mesh.local_vertices[verts])
+    pred = cam.project(cam.world_to_camera(pw))
+    shift_true = rng.uniform(-60.0, 60.0, 2)
+    seen = np.flatnonzero(rng.random(20) < 0.8)
+    decoys = rng.uniform([0, 0], [cam.width, cam.height], (6, 2))
+    bxy = np.concatenate([pred[seen] + shift_true + rng.normal(0.0, 1.5, (len(seen), 2)),
+                          decoys])
+    bcol = np.concatenate([colors[seen], rng.integers(1, 6, 6)])
+    blobs = Blobs(bcol, bxy, np.full(len(bcol), 50))
+    corr = match_extra_camera(1, cam, cons, pw, blobs, mesh)
+    inside = np.flatnonzero((pred[:, 0] > -30) & (pred[:, 0] < cam.width + 30)
+                            & (pred[:, 1] > -30) & (pred[:, 1] < cam.height + 30))
+    shift = _dense_shift_reference(pred[inside], colors[inside], bxy, bcol, 150.0, 15.0)
+    k, m = match_by_color(pred[inside] + shift, colors[inside], bxy, bcol, 30.0)
+    np.testing.assert_array_equal(corr.patch_id, inside[k])
+    np.testing.assert_allclose(corr.target_px, bxy[m])
+    assert np.linalg.norm(shift - shift_true) < 2.0
+
+
+def test_solution_residual_is_the_reprojection_error(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    rng = np.random.default_rng(12)
+    q = true_pose(model, rng)
+    corr = synthetic_corr(rig, q, stereo, rng, 2.0)
+    q0 = q.copy()
+    q0[6:] += rng.normal(0.0, 0.1, 20)
+    for iterations in (0, 1, 3):
+        sol = solve_ik(kin, stereo, corr, q0, q0, default_covariances(), q0, iterations)
+        np.testing.assert_allclose(sol.errors_px, reprojection_errors(kin, stereo, corr, sol.q),
+                                   atol=1e-9)
+
+
+def test_frames_cached_by_rotation_and_fingers_follow_the_translation(rig):
+    model, mesh, kin, *_ = rig
+    rng = np.random.default_rng(13)
+    q = model.clamp(model.rest_pose() + rng.normal(0.0, 0.5, 26))
+    idx = rng.integers(0, mesh.num_vertices, 30)
+    kin.points(q, mesh.vertex_link[idx], mesh.local_vertices[idx])
+    moved = q.copy()
+    moved[0:3] += [0.05, -0.02, 0.1]                 # same rotation and fingers: cached frames
+    p, J = kin.points(moved, mesh.vertex_link[idx], mesh.local_vertices[idx], jacobian=True)
+    np.testing.assert_allclose(p, mesh.skin(model, moved)[idx], atol=1e-12)
+    np.testing.assert_allclose(J, mesh.vertex_jacobian(model, moved, idx), atol=1e-12)

@@ -98,3 +98,19 @@ def test_patch_model_needs_the_glove_of_its_mesh(scene):
         HandTracker(synth.model, table, [cam], IKConfig())
     HandTracker(synth.model, table, [cam], IKConfig(constraint_model='vertex'))
     HandTracker(synth.model, synth.mesh, [cam], IKConfig())     # the standard glove
+
+
+def test_cameras_sharing_a_pose_get_the_same_points_as_alone(scene):
+    """The posed glove is reused by the next camera at the same pose, and the primary
+    camera skips its identity transform: neither may change the points of any camera."""
+    synth, cam, kin, surface = scene
+    stereo = load_calibration(ROOT / 'config' / 'calibration_stereo.yaml').cameras
+    q = generate_sequence(5, 1, camera=cam, model=synth.model)[0]
+    ids = np.arange(20)
+    shared = [surface.points(q, c, ids) for c in stereo]         # second call reuses the pose
+    for c, got in zip(stereo, shared, strict=True):
+        alone = PatchSurface(kin, synth.mesh, synth.glove.face_patch).points(q, c, ids)
+        for a, b in zip(got, alone, strict=True):
+            np.testing.assert_allclose(a, b, atol=1e-12)
+    # the second camera sees a different set of patch parts (the test is not vacuous)
+    assert not np.allclose(shared[0][2], shared[1][2])

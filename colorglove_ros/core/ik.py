@@ -140,18 +140,25 @@ class FastKinematics:
 
     def frames(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rotations (F, 3, 3) and origins (F, 3) of all kinematic frames (0 = palm), and the
-        SO(3) left Jacobian of the wrist rotation vector (read-only arrays; the last few poses
-        are remembered, as a frame's matching, IK and error checks revisit the same poses)."""
+        SO(3) left Jacobian of the wrist rotation vector (read-only arrays). The frames
+        relative to the wrist position of the last few poses are remembered, as a frame's
+        matching, translation fit, IK and error checks revisit the same rotation and fingers."""
         q = np.asarray(q, dtype=float)
-        key = q.tobytes()
+        Rs, ts_wrist, jl = self._wrist_frames(q)
+        ts = ts_wrist + q[0:3]
+        ts.setflags(write=False)
+        return Rs, ts, jl
+
+    def _wrist_frames(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`frames` with the wrist at the origin (cached by ``q[3:]``)."""
+        key = q[3:].tobytes()
         hit = self._cache.get(key)
         if hit is not None:
             return hit
         n = len(self._dof)
         Rs = np.empty((n + 1, 3, 3))
-        ts = np.empty((n + 1, 3))
+        ts = np.zeros((n + 1, 3))
         Rs[0], jl = _rotvec_matrix_and_jl(q[3:6])
-        ts[0] = q[0:3]
         ang = q[self._dof]
         Rj = self._eye + np.sin(ang)[:, None, None] * self._K
         Rj += (1.0 - np.cos(ang))[:, None, None] * self._KK
@@ -468,6 +475,8 @@ class PatchSurface:
         self.depth_tol_m = float(depth_tol_m)
         self.min_visible_fraction = float(min_visible_fraction)
         self.min_link_weight = float(min_link_weight)
+        self._posed_cache: tuple[bytes, tuple[np.ndarray, np.ndarray]] | None = None
+        self._eye = np.eye(3)
 
     def _visible(self, pc: np.ndarray, front: np.ndarray, camera: PinholeCamera) -> np.ndarray:
         """Front elements not hidden behind another front element (coarse depth buffer)."""
@@ -487,6 +496,25 @@ class PatchSurface:
         out[idx] = z <= zbuf[cell] + self.depth_tol_m
         return out
 
+    def _posed(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Element centres and area normals (E, 3) in the primary camera frame at pose ``q``
+        (read-only; the last pose is remembered, as every camera of a frame asks for it)."""
+        q = np.asarray(q, dtype=float)
+        key = q.tobytes()
+        if self._posed_cache is not None and self._posed_cache[0] == key:
+            return self._posed_cache[1]
+        Rs, ts, _ = self._kin.frames(q)
+        R, t = Rs[self._block_frame], ts[self._block_frame]
+        centre = np.empty_like(self._centre)
+        normal = np.empty_like(self._centre)
+        for b, sl in enumerate(self._blocks):
+            centre[sl] = self._centre[sl] @ R[b].T + t[b]
+            normal[sl] = self._area_normal[sl] @ R[b].T
+        centre.setflags(write=False)
+        normal.setflags(write=False)
+        self._posed_cache = (key, (centre, normal))
+        return centre, normal
+
     def points(self, q: np.ndarray, camera: PinholeCamera, patch_id: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """For each patch id: links (K, S), link-frame points (K, S, 3) and weights (K, S)
@@ -495,14 +523,10 @@ class PatchSurface:
         patch_id = np.asarray(patch_id, np.int64)
         if len(patch_id) and (patch_id.min() < 0 or patch_id.max() >= self.num_patches):
             raise IKError(f'patch id outside [0, {self.num_patches})')
-        Rs, ts, _ = self._kin.frames(q)
-        M = camera.rotation @ Rs[self._block_frame]                          # link -> camera
-        T = ts[self._block_frame] @ camera.rotation.T + camera.translation
-        pc = np.empty_like(self._centre)
-        normal = np.empty_like(self._centre)
-        for b, sl in enumerate(self._blocks):
-            pc[sl] = self._centre[sl] @ M[b].T + T[b]
-            normal[sl] = self._area_normal[sl] @ M[b].T
+        pc, normal = self._posed(q)
+        if not (np.array_equal(camera.rotation, self._eye) and not camera.translation.any()):
+            pc = pc @ camera.rotation.T + camera.translation
+            normal = normal @ camera.rotation.T
         dist = np.sqrt(np.einsum('fi,fi->f', pc, pc))
         depth = np.maximum(pc[:, 2], 1e-3)
         w = np.maximum(-np.einsum('fi,fi->f', normal, pc), 0.0) / (dist * depth**2)
@@ -628,6 +652,7 @@ class IKConfig:
     enable_ik: bool = True
     enable_smoothing: bool = True
     max_iterations: int = 3
+    multi_camera_iterations: int = 2
     refine_iterations: int = 2
     lambda_init: float = 1e-3
     step_tol: float = 1e-5
@@ -662,7 +687,8 @@ class IKConfig:
 
 _CONFIG_FIELDS = {
     'enable_ik': bool, 'enable_smoothing': bool, 'max_iterations': int,
-    'refine_iterations': int, 'lambda_init': float, 'step_tol': float, 'cost_tol': float,
+    'multi_camera_iterations': int, 'refine_iterations': int, 'lambda_init': float,
+    'step_tol': float, 'cost_tol': float,
     'init_translation': bool, 'min_constraints': int, 'min_blob_pixels': int,
     'gate_tiny_px': float, 'gate_min_px': float, 'extra_gate_px': float,
     'extra_shift_max_px': float, 'extra_inlier_px': float, 'extra_rematch': bool,
@@ -823,25 +849,25 @@ def match_extra_camera(cam_index: int, camera: PinholeCamera, constraints: Entry
     bxy = camera.undistort_pixels(blobs.centroid_px[keep])
     bcol = blobs.color[keep]
     kcol = constraints.color[ks]
-    same = kcol[:, None] == bcol[None, :]
-    diff = bxy[None, :, :] - pred[ks][:, None, :]          # (K, M, 2)
+    # same-colour (constraint, blob) pairs, grouped by constraint (row-major order)
+    pair_k, pair_m = np.nonzero(kcol[:, None] == bcol[None, :])
+    diff = bxy[pair_m] - pred[ks[pair_k]]                  # (P, 2)
     shift = np.zeros(2)
-    hyp = diff[same]
-    hyp = hyp[np.linalg.norm(hyp, axis=1) <= shift_max_px]
+    hyp = diff[np.linalg.norm(diff, axis=1) <= shift_max_px]
     if len(hyp):
-        # distance of every (pred + shift) to every same-colour blob, per hypothesis
-        res = diff[None] - hyp[:, None, None, :]
-        dist = np.where(same[None], np.linalg.norm(res, axis=3), np.inf).min(axis=2)
+        # per hypothesis, distance of every shifted prediction to its nearest same-colour
+        # blob (constraints without one never count)
+        pair_dist = np.linalg.norm(diff[None] - hyp[:, None, :], axis=2)     # (H, P)
+        first = np.flatnonzero(np.diff(pair_k, prepend=-1))
+        dist = np.minimum.reduceat(pair_dist, first, axis=1)                 # (H, K with pairs)
         inl = dist <= inlier_px
         score = inl.sum(axis=1) - 1e-3 * np.where(inl, dist, 0.0).sum(axis=1) / inlier_px
         best = int(np.argmax(score))
         if inl[best].sum() >= 2:
-            # refine: mean residual of the inliers
-            r = res[best]
-            dsel = np.where(same, np.linalg.norm(r, axis=2), np.inf)
-            nearest = np.argmin(dsel, axis=1)
+            # refine: mean residual of the inliers to their nearest same-colour blob
+            nearest = np.lexsort((pair_dist[best], pair_k))[first]
             rows = np.flatnonzero(inl[best])
-            shift = hyp[best] + r[rows, nearest[rows]].mean(axis=0)
+            shift = hyp[best] + (diff[nearest[rows]] - hyp[best]).mean(axis=0)
     k, m = match_by_color(pred[ks] + shift, kcol, bxy, bcol, gate_px)
     return _make_corr(cam_index, constraints, ks[k], bxy[m], mesh)
 
@@ -992,13 +1018,21 @@ def estimate_translation(kin: FastKinematics, cameras: Sequence[PinholeCamera],
 
 @dataclass(frozen=True)
 class IKSolution:
-    """Result of :func:`solve_ik`."""
+    """Result of :func:`solve_ik`; ``residual_px`` (K, 2) is target minus projection of each
+    correspondence at ``q``."""
 
     q: np.ndarray
     iterations: int
     cost: float
     initial_cost: float
     converged: bool
+    residual_px: np.ndarray
+
+    @property
+    def errors_px(self) -> np.ndarray:
+        """Pixel distance of each correspondence from its target at ``q`` (as
+        :func:`reprojection_errors`)."""
+        return np.linalg.norm(self.residual_px, axis=1)
 
 
 def _cost(r: np.ndarray, w: np.ndarray, q: np.ndarray, q_blend: np.ndarray, q_inv: np.ndarray,
@@ -1029,21 +1063,21 @@ def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Corres
     target = corr.target_px.reshape(-1)
     per_point = _per_point(cameras, corr)
 
-    def evaluate(qq: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-        pix, J, depth = project_correspondences(kin, cameras, corr, qq, True, per_point)
+    def evaluate(qq: np.ndarray, jacobian: bool) -> tuple[float, np.ndarray, np.ndarray | None]:
+        pix, J, depth = project_correspondences(kin, cameras, corr, qq, jacobian, per_point)
         if len(depth) and depth.min() <= min_depth_m:
             return math.inf, np.zeros(0), np.zeros((0, NUM_DOFS))
         r = target - pix.reshape(-1)
         return _cost(r, w, qq, q_blend, q_inv, q_prev, p_inv), r, J
 
-    cost, r, J = evaluate(q)
+    cost, r, J = evaluate(q, max_iterations > 0)
     if not math.isfinite(cost):
         raise IKError('initial pose puts constraint points behind a camera')
     initial = cost
     lam = lambda_init
     it = 0
     converged = False
-    while it < max_iterations:
+    while it < max_iterations and J is not None:
         JW = J.T * w
         H = JW @ J + np.diag(q_inv)
         g = JW @ r + q_inv * (q_blend - q)
@@ -1067,7 +1101,8 @@ def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Corres
             dq = np.zeros(NUM_DOFS)
             dq[free] = dqf
             q_new = kin.clamp(q + dq)
-            cost_new, r_new, J_new = evaluate(q_new)
+            # the last linear solve's pose needs no Jacobian
+            cost_new, r_new, J_new = evaluate(q_new, it < max_iterations)
             if cost_new < cost:
                 step = float(np.abs(q_new - q).max())
                 rel = (cost - cost_new) / max(cost, 1e-12)
@@ -1081,7 +1116,7 @@ def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Corres
         if not accepted or converged:
             converged = converged or not accepted and lam > 1e6
             break
-    return IKSolution(q, it, cost, initial, converged)
+    return IKSolution(q, it, cost, initial, converged, r.reshape(-1, 2))
 
 
 # ---------------------------------------------------------------------------- tracker
@@ -1266,7 +1301,12 @@ class HandTracker:
         corr0 = match_primary(prior.constraints, primary.blobs, primary.crop, self.cameras[0],
                               self.mesh, cfg.gate_tiny_px, cfg.gate_min_px,
                               cfg.min_blob_pixels)
-        corr0 = self._with_patch_points(corr0, q_blend)
+        multi = len(self.cameras) > 1
+        # IK on several cameras, tracking: every camera's visible patches are predicted at the
+        # last pose (one posing of the glove for all cameras; the blend is the coarser guess)
+        q_patch = (self._q_prev if multi and cfg.enable_ik and self._q_prev is not None
+                   else q_blend)
+        corr0 = self._with_patch_points(corr0, q_patch)
         q_b = q_blend
         if cfg.init_translation and len(corr0) >= 3:
             try:
@@ -1282,11 +1322,10 @@ class HandTracker:
         corr = corr0
         rejected = 0
         err: np.ndarray | None = None
-        multi = len(self.cameras) > 1
         if cfg.enable_ik and (len(corr0) >= cfg.min_constraints or multi):
             if not multi:
                 sol = self._solve(corr0, q_b, q_b, q_prev, cfg.max_iterations)
-                q, iterations = sol.q, sol.iterations
+                q, iterations, err = sol.q, sol.iterations, sol.errors_px
             else:
                 # predict the other cameras' patches from the last pose while tracking, else
                 # from a short primary-camera solve; then solve on all cameras together
@@ -1301,8 +1340,8 @@ class HandTracker:
                 corr = Correspondences.concat(
                     [corr0, *self._match_extras(prior, observations, q_match)])
                 if len(corr) >= cfg.min_constraints:
-                    sol = self._solve(corr, q_start, q_b, q_prev, cfg.max_iterations)
-                    q = sol.q
+                    sol = self._solve(corr, q_start, q_b, q_prev, cfg.multi_camera_iterations)
+                    q, err = sol.q, sol.errors_px
                     iterations += sol.iterations
                     if cfg.extra_rematch and len(corr) > len(corr0):
                         again = Correspondences.concat(
@@ -1310,18 +1349,16 @@ class HandTracker:
                         if not again.same_as(corr) and len(again) >= cfg.min_constraints:
                             corr = again
                             sol = self._solve(corr, q, q_b, q_prev, cfg.refine_iterations)
-                            q = sol.q
+                            q, err = sol.q, sol.errors_px
                             iterations += sol.iterations
-            if cfg.outlier_px > 0 and iterations > 0:
-                err = reprojection_errors(self.kin, self.cameras, corr, q)
+            if cfg.outlier_px > 0 and err is not None:
                 bad = err > cfg.outlier_px
                 if bad.any() and int((~bad).sum()) >= cfg.min_constraints:
                     rejected = int(bad.sum())
                     corr = corr.select(~bad)
                     sol = self._solve(corr, q, q_b, q_prev, cfg.refine_iterations)
-                    q = sol.q
+                    q, err = sol.q, sol.errors_px
                     iterations += sol.iterations
-                    err = None
         elif multi:
             corr = Correspondences.concat([corr0, *self._match_extras(prior, observations, q)])
         if err is None:
