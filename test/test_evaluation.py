@@ -16,6 +16,7 @@ from colorglove_ros.core.evaluation import (
     EvaluationError,
     LookupStage,
     SequenceEvaluator,
+    TemporalPrior,
     contiguous_runs,
     eval_seeds,
     find_database,
@@ -29,6 +30,7 @@ from colorglove_ros.core.ik import HandTracker, IKConfig, load_covariances
 from colorglove_ros.core.metrics import fingertip_errors_mm, jitter_mm
 from colorglove_ros.core.search import PoseLookup
 from colorglove_ros.core.synth import Synthesizer, generate_sequence, render_frame
+from colorglove_ros.core.temporal_prior import reweight_by_previous
 from colorglove_ros.tools import eval_ik, learn_ik_covariances
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]
@@ -132,6 +134,49 @@ def test_pipeline_end_to_end_finite(tiny_db_path, rigs, synth):
     assert np.allclose(qb1[:, 6:], qb2[:, 6:])
     seqs = training_sequences(out[('1', 'ik')])
     assert sum(len(s) for s in seqs) == int(out[('1', 'ik')].found.sum())
+
+
+def test_temporal_prior_reweights_by_each_trackers_previous_output(tiny_db_path, rigs, synth,
+                                                                    monkeypatch):
+    from colorglove_ros.core import evaluation
+    from colorglove_ros.core.database import load_database
+
+    calls = []
+
+    def spy(result, q_prev, tau_rad, rotation_weight):
+        out = reweight_by_previous(result, q_prev, tau_rad, rotation_weight)
+        calls.append((None if q_prev is None else q_prev.copy(), tau_rad, rotation_weight,
+                      out.blended))
+        return out
+
+    monkeypatch.setattr(evaluation, 'reweight_by_previous', spy)
+    mono, _ = rigs
+    ev = SequenceEvaluator(PoseLookup(load_database(tiny_db_path), num_blend=5),
+                           {'1': mono.cameras}, modes=('blend',), synthesizer=synth,
+                           keep_results=True, temporal=TemporalPrior(0.3, 0.5))
+    run = ev.run(eval_seeds(1)[0], 6)[('1', 'blend')]
+    assert run.found.all() and len(calls) == 6
+    assert calls[0][0] is None                      # first frame: no previous output
+    for i in range(1, 6):
+        q_prev, tau, weight, blended = calls[i]
+        np.testing.assert_allclose(q_prev, run.q_est[i - 1])
+        assert (tau, weight) == (0.3, 0.5)
+        # the tracker's prior is the reweighted blend
+        np.testing.assert_allclose(run.results[i].q_blend[6:], blended[6:], atol=1e-9)
+
+
+def test_eval_ik_cli_temporal_option(tiny_db_path, tmp_path, capsys):
+    out = tmp_path / 'eval.json'
+    args = ['--database', str(tiny_db_path), '--frames', '4', '--sequences', '1', '--modes',
+            'blend', '--plot', '']
+    assert eval_ik.main([*args, '--temporal-tau', '30', '--num-blend', '12',
+                         '--temporal-rotation-weight', '0', '--json', str(out)]) == 0
+    settings = json.loads(out.read_text())['settings']
+    assert (settings['temporal_tau_deg'], settings['temporal_rotation_weight'],
+            settings['num_blend']) == (30.0, 0.0, 12)
+    assert 'temporal tau: 30 deg' in capsys.readouterr().out
+    assert eval_ik.main([*args, '--temporal-tau', '0']) == 1
+    assert '--temporal-tau must be > 0' in capsys.readouterr().out
 
 
 class _OracleLookup:

@@ -30,13 +30,14 @@ from .metrics import (
     latency_summary_ms,
     pose_accuracy,
 )
+from .temporal_prior import reweight_by_previous
 
 __all__ = [
     'LABEL_SOURCES', 'EVAL_SEED_BASE', 'TRAIN_SEED_BASE', 'SEED_SPAN', 'EvaluationError',
     'eval_seeds', 'train_seeds', 'Observer', 'observe_camera', 'truth_observer',
     'segmenter_observer', 'make_observer', 'FramePrior', 'LookupStage', 'TrackedSequence',
     'SequenceEvaluator', 'same_camera', 'jitter_runs_mm', 'contiguous_runs', 'summarize',
-    'training_sequences', 'find_database', 'open_database',
+    'training_sequences', 'find_database', 'open_database', 'TemporalPrior',
 ]
 
 LABEL_SOURCES = ('truth', 'segmented')
@@ -158,6 +159,15 @@ class LookupStage:
         return FramePrior(res, tiny, 1e3 * (time.perf_counter() - t0))
 
 
+@dataclass(frozen=True)
+class TemporalPrior:
+    """Settings of the temporal reweighting of the lookup's neighbours
+    (``core.temporal_prior.reweight_by_previous``) by each tracker's previous output."""
+
+    tau_rad: float
+    rotation_weight: float = 1.0
+
+
 @dataclass
 class TrackedSequence:
     """One tracker's outputs over one sequence, with the ground truth (primary frame)."""
@@ -188,13 +198,15 @@ def same_camera(a: PinholeCamera, b: PinholeCamera) -> bool:
 class SequenceEvaluator:
     """Renders seeded synthetic sequences once with every camera of the largest rig, runs
     the labels -> crop -> lookup stage once per frame on the primary camera, and feeds one
-    :class:`HandTracker` per (rig, mode). Every rig must be a prefix of the largest one
+    :class:`HandTracker` per (rig, mode), optionally with the lookup's neighbours reweighted
+    by that tracker's previous output (``temporal``). Every rig must be a prefix of the largest one
     (same primary camera), so all rows of a table see identical frames and lookups."""
 
     def __init__(self, lookup: Any, rigs: Mapping[str, Sequence[PinholeCamera]],
                  modes: Sequence[str] = TRACKER_MODES, ik_config: IKConfig | None = None,
                  observer: Observer | None = None, synthesizer: Any = None,
-                 fps: float = 30.0, keep_results: bool = False) -> None:
+                 fps: float = 30.0, keep_results: bool = False,
+                 temporal: TemporalPrior | None = None) -> None:
         from .synth import Synthesizer
 
         if not rigs:
@@ -215,6 +227,7 @@ class SequenceEvaluator:
         self.synth = synthesizer or Synthesizer()
         self.fps = float(fps)
         self.keep_results = keep_results
+        self.temporal = temporal
         self.stage = LookupStage(lookup, self.cameras[0])
         self.trackers = {(r, m): HandTracker(self.synth.model, self.synth.mesh, cams,
                                              self.config.with_mode(m), glove=self.synth.glove)
@@ -257,7 +270,12 @@ class SequenceEvaluator:
             prior = self.stage(tiny if obs[0].hand_found else None)
             for (rig, mode), tracker in self.trackers.items():
                 c0 = time.thread_time()
-                res = tracker.update(prior.result, obs[:len(self.rigs[rig])], i / self.fps)
+                lookup = prior.result
+                if self.temporal is not None and lookup is not None:
+                    lookup = reweight_by_previous(lookup, tracker.previous_pose,
+                                                  self.temporal.tau_rad,
+                                                  self.temporal.rotation_weight)
+                res = tracker.update(lookup, obs[:len(self.rigs[rig])], i / self.fps)
                 cpu_ms = 1e3 * (time.thread_time() - c0)
                 ts = out[(rig, mode)]
                 ts.lookup_ms[i] = prior.time_ms

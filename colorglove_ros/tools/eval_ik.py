@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ from colorglove_ros.core.evaluation import (
     LABEL_SOURCES,
     EvaluationError,
     SequenceEvaluator,
+    TemporalPrior,
     eval_seeds,
     make_observer,
     open_database,
@@ -163,13 +165,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--modes', nargs='+', default=list(TRACKER_MODES),
                         choices=TRACKER_MODES)
     parser.add_argument('--fps', type=float, default=30.0)
+    parser.add_argument('--num-blend', type=int, default=10, help='neighbours the lookup '
+                        'returns and blends (PoseLookup num_blend; paper: 10)')
+    parser.add_argument('--temporal-tau', type=float, metavar='DEG', help='reweight the '
+                        "neighbours by exp(-d^2 / tau^2), d their distance (deg) to each "
+                        "tracker's previous output (core.temporal_prior; default: off)")
+    parser.add_argument('--temporal-rotation-weight', type=float, default=1.0,
+                        help='weight of the squared wrist rotation angle in that distance '
+                        '(0: finger joints only)')
     parser.add_argument('--plot', default=str(PACKAGE_ROOT / 'data' / 'eval_ik' /
                                               'eval_ik.png'), help="PNG path ('' = none)")
     parser.add_argument('--json', help='write the figures to this JSON file')
     args = parser.parse_args(argv)
     from colorglove_ros.core.colorspace import ColorCalibrationError
     from colorglove_ros.core.database import DatabaseError
-    from colorglove_ros.core.search import PoseLookup
+    from colorglove_ros.core.search import PoseLookup, SearchError
 
     try:
         db_path, db = open_database(args.database, PACKAGE_ROOT / 'data')
@@ -191,12 +201,20 @@ def main(argv: list[str] | None = None) -> int:
                                   f'{build["glove_seed"]}, the IK config says '
                                   f'{config.glove_seed}')
         observer = make_observer(args.labels, args.color_config, config.min_blob_pixels)
+        temporal = None
+        if args.temporal_tau is not None:
+            if not args.temporal_tau > 0.0 or not args.temporal_rotation_weight >= 0.0:
+                raise EvaluationError('--temporal-tau must be > 0 and '
+                                      '--temporal-rotation-weight >= 0')
+            temporal = TemporalPrior(math.radians(args.temporal_tau),
+                                     args.temporal_rotation_weight)
         evaluator = SequenceEvaluator(
-            PoseLookup(db), {'1 camera': mono.cameras, '2 cameras': stereo.cameras},
-            args.modes, config, observer, fps=args.fps)
+            PoseLookup(db, num_blend=args.num_blend),
+            {'1 camera': mono.cameras, '2 cameras': stereo.cameras},
+            args.modes, config, observer, fps=args.fps, temporal=temporal)
         seeds = eval_seeds(args.sequences, args.seed_offset)
     except (EvaluationError, DatabaseError, IKConfigError, CalibrationError,
-            ColorCalibrationError) as exc:
+            ColorCalibrationError, SearchError) as exc:
         print(f'eval_ik: {exc}')
         return 1
     t0 = time.perf_counter()
@@ -215,7 +233,9 @@ def main(argv: list[str] | None = None) -> int:
              'ik_ms_p95', 'ik_cpu_ms_mean', 'tracked']
     title = (f'IK against ground truth: {len(seeds)} sequences x {args.frames} frames '
              f'(seeds {seeds[0]}..{seeds[-1]}), labels={args.labels}, database {db_path} '
-             f'({len(db)} entries), covariances: {config.covariances.source}')
+             f'({len(db)} entries), covariances: {config.covariances.source}, '
+             f'{args.num_blend} neighbours, temporal tau: '
+             f'{"off" if temporal is None else f"{args.temporal_tau:g} deg"}')
     print_table([{k: r[k] for k in shown} for r in rows], title)
     print(f'(true motion jitter {rows[0]["jitter_truth_mm"]:.3g} mm; fingertip_rel_wrist_mm: '
           'relative to the wrist position, i.e. wrist translation error removed, rotation kept)')
@@ -236,7 +256,11 @@ def main(argv: list[str] | None = None) -> int:
                 'labels': args.labels,
                 'ik_config': args.ik_config, 'covariances': config.covariances.source,
                 'calibration': args.calibration, 'stereo_calibration': args.stereo_calibration,
-                'fps': args.fps, 'wall_s': time.perf_counter() - t0}
+                'fps': args.fps, 'num_blend': args.num_blend,
+                'temporal_tau_deg': args.temporal_tau,
+                'temporal_rotation_weight': (args.temporal_rotation_weight
+                                             if temporal is not None else None),
+                'wall_s': time.perf_counter() - t0}
     if args.json:
         write_json(args.json, {'settings': settings, 'rows': rows, 'targets': targets,
                                'plot': plot})
