@@ -14,8 +14,11 @@ from colorglove_ros.core.colorspace import (
     ColorCalibrationError,
     cgz_chroma,
     cgz_intensity_axis,
+    estimate_light_gains,
     fit_color_calibration,
+    gain_table,
     linear_rgb_to_xyz,
+    linear_to_srgb,
     load_calibration,
     lut_index,
     planckian_illuminants,
@@ -138,7 +141,7 @@ def test_relighting_under_black_bodies_covers_tinted_light(frames) -> None:
     light."""
     plain, tinted = (fit_color_calibration(frames['train'], seed=0, bits=5, max_per_class=1000,
                                            background_components=6, augment_temperatures_k=t)
-                     for t in (None, LIGHT_TEMPERATURES_K))
+                     for t in (None, LIGHT_TEMPERATURES_K))   # everyday lights, no correction
     rng = np.random.default_rng(9)
     warm = [render_blob_frame(rng, BlobConditions(1.0, (1.2, 1.0, 0.8), 2.0, 6, True, 1.4),
                               320, 240) for _ in range(3)]
@@ -180,6 +183,56 @@ def test_save_load_roundtrip(calibration, tmp_path: Path) -> None:
     np.testing.assert_array_equal(loaded.classify(img), calibration.classify(img))
     np.testing.assert_allclose(loaded.log_likelihoods(img[0]),
                                calibration.log_likelihoods(img[0]))
+    np.testing.assert_array_equal(loaded.reference_linear_rgb, calibration.reference_linear_rgb)
+
+
+def test_reference_colours_are_the_training_colours(calibration) -> None:
+    ref = calibration.reference_linear_rgb
+    assert ref.shape == (10, 3)
+    # blob frames: palette colours, shaded 0.7..1 and lit at 0.75..1.15 -> same hue, dimmer
+    palette = srgb_to_linear(GLOVE_PALETTE_RGB)
+    dominant = np.argmax(palette, axis=1)
+    assert np.mean(np.argmax(ref, axis=1) == dominant) >= 0.9
+    ratio = ref.sum(axis=1) / palette.sum(axis=1)
+    assert np.all((ratio > 0.3) & (ratio < 1.2))
+
+
+def test_linear_to_srgb_inverts_srgb_to_linear() -> None:
+    levels = np.arange(256, dtype=np.uint8)
+    np.testing.assert_allclose(linear_to_srgb(srgb_to_linear(levels)), levels, atol=1e-6)
+
+
+@pytest.mark.parametrize('light', [(1.6, 1.0, 0.55), (0.7, 1.0, 1.5), (1.0, 1.0, 1.0)])
+def test_light_gains_undo_a_tinted_light(light) -> None:
+    """Glove pixels = own shading * light * reference colour (+ noise, + a few pixels of a
+    wrong label): the gains must bring them back to the reference colours' hue."""
+    rng = np.random.default_rng(2)
+    ref = srgb_to_linear(GLOVE_PALETTE_RGB)
+    labels = rng.integers(1, 11, 3000)
+    # per-pixel and per-colour shading, low enough that no channel clips at white
+    shading = rng.uniform(0.2, 0.6, (3000, 1)) * rng.uniform(0.5, 1.0, 11)[labels, None]
+    pix = shading * np.asarray(light) * ref[labels - 1] + rng.normal(0.0, 0.004, (3000, 3))
+    wrong = rng.choice(3000, 60, replace=False)
+    labels_seen = labels.copy()
+    labels_seen[wrong] = rng.integers(1, 11, 60)
+    gains = estimate_light_gains(np.clip(pix, 0.0, 1.0), labels_seen, ref)
+    expected = 1.0 / np.asarray(light)
+    expected /= np.exp(np.log(expected) @ [0.2126, 0.7152, 0.0722])   # luminance-neutral
+    np.testing.assert_allclose(gains, expected, rtol=0.05)
+    # too few colours to tell a light from the glove's own colours: no correction
+    few = np.isin(labels_seen, (1, 2))
+    np.testing.assert_array_equal(estimate_light_gains(pix[few], labels_seen[few], ref), 1.0)
+
+
+def test_gain_table_scales_linear_rgb() -> None:
+    levels = np.arange(256, dtype=np.uint8)
+    np.testing.assert_array_equal(gain_table(np.ones(3))[0], np.repeat(levels[:, None], 3, 1))
+    table = gain_table(np.array([2.0, 1.0, 0.5]))
+    assert table.shape == (1, 256, 3) and table.dtype == np.uint8
+    lin = srgb_to_linear(table[0].astype(np.uint8))
+    mid = srgb_to_linear(np.uint8(100))
+    np.testing.assert_allclose(lin[100], [2.0 * mid, mid, 0.5 * mid], rtol=0.02)
+    assert table[0, 255, 0] == 255   # clipped at white
 
 
 def test_load_errors(calibration, tmp_path: Path) -> None:
@@ -200,6 +253,12 @@ def test_load_errors(calibration, tmp_path: Path) -> None:
     np.savez(tmp_path / 'v2.npz', **data)
     with pytest.raises(ColorCalibrationError, match='version'):
         load_calibration(tmp_path / 'v2.npz')
+    # a version-1 file (before the reference colours): a clear error, not a KeyError
+    old = {k: v for k, v in data.items() if k != 'reference_linear_rgb'}
+    old['version'] = np.array(1)
+    np.savez(tmp_path / 'v1.npz', **old)
+    with pytest.raises(ColorCalibrationError, match='version 1, expected 2; re-run'):
+        load_calibration(tmp_path / 'v1.npz')
     del data['lut']
     data['version'] = np.array(CALIBRATION_FORMAT_VERSION)
     np.savez(tmp_path / 'nolut.npz', **data)

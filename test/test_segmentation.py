@@ -232,6 +232,29 @@ def test_border_relabel_raises_pixel_accuracy_on_blurred_frames(calibration) -> 
     assert np.mean(gain) > 0.01
 
 
+def test_light_correction_beats_uncorrected_under_tinted_light(calibration) -> None:
+    """Frames under strongly warm and cool lights (far outside the light colours the
+    calibration was re-lit under): dividing out the estimated light colour must classify
+    the glove clearly better, and change little under the calibration's own light."""
+    rng = np.random.default_rng(23)
+    corrected, plain = GloveSegmenter(calibration), GloveSegmenter(calibration, light_passes=0)
+    for white_balance, min_gain in (((1.25, 1.0, 0.8), 0.05), ((0.8, 1.0, 1.25), 0.03),
+                                    ((1.0, 1.0, 1.0), -0.002)):
+        acc = []
+        for _ in range(3):
+            img, lab = render_blob_frame(rng, BlobConditions(1.0, white_balance, 3.0, 6, True,
+                                                             1.4))
+            g = lab > 0
+            acc.append([np.mean(seg.classify_full(img)[g] == lab[g])
+                        for seg in (corrected, plain)])
+            assert corrected.process(img).hand_found
+        with_light, without = np.mean(acc, axis=0)
+        assert with_light > without + min_gain, white_balance
+        assert with_light > 0.95
+    with pytest.raises(SegmentationConfigError, match='light_passes'):
+        GloveSegmenter(calibration, light_passes=-1)
+
+
 def test_roi_reduction_keeps_crop_consistent(calibration) -> None:
     """A big glove is processed at reduced resolution; the crop must still match."""
     rng = np.random.default_rng(21)

@@ -9,6 +9,8 @@ import numpy as np
 
 from .colorspace import (
     ColorCalibration,
+    estimate_light_gains,
+    gain_table,
     load_calibration,
     read_calibration_config,
     srgb_to_linear,
@@ -26,7 +28,8 @@ STATUS_OK = 'ok'
 STATUS_NO_GLOVE = 'no_glove'          # (almost) no glove-coloured pixels in the frame
 STATUS_TOO_SMALL = 'too_small'        # glove found but too few pixels for a tiny image
 STATUS_OUT_OF_FRAME = 'out_of_frame'  # the crop window lies mostly outside the image
-#: Timed stages, in pipeline order (``Observation.timings_ms`` also has ``'total'``).
+#: Timed stages, in pipeline order (``Observation.timings_ms`` also has ``'total'``);
+#: 'coarse' includes estimating the light colour.
 STAGES = ('coarse', 'filter', 'classify', 'cleanup', 'borders', 'crop', 'blobs')
 
 
@@ -82,7 +85,7 @@ def keep_multicolor_components(labels: np.ndarray, min_colors: int = 3,
     keep[0] = True
     if keep.all():
         return labels
-    return np.where(keep[comp], labels, 0).astype(np.uint8)
+    return labels * keep.view(np.uint8).take(comp)   # 5x faster than np.where
 
 
 #: sRGB byte -> linear RGB in 0..255 (float32): mixed pixels are linear mixes there.
@@ -219,10 +222,14 @@ class GloveSegmenter:
     """Turns RGB camera frames into :class:`Observation` s (paper section 4.3).
 
     Pipeline: a coarse pass (area-downsampled frame, table lookup, median, mean-shift) finds
-    the glove; only a region around it (``roi_margin`` times the coarse window, reduced so
-    the crop spans at most ``max_roi_cells`` pixels) is bilateral-filtered, classified at
-    (near) full resolution and cleaned (median filter, :func:`keep_multicolor_components`,
-    then :func:`relabel_borders`); :func:`crop_to_tiny` there gives the tiny image and crop;
+    the glove, and its glove pixels against the calibration's reference colours give the
+    light colour (:func:`estimate_light_gains`, refined ``light_passes`` - 1 times on the
+    corrected coarse frame; 0 for no correction). Only a region around the glove
+    (``roi_margin`` times the coarse window, reduced so the crop spans at most
+    ``max_roi_cells`` pixels) is bilateral-filtered, classified at (near) full resolution
+    with the light colour divided out (von Kries in linear RGB, fused into the table
+    lookup) and cleaned (median filter, :func:`keep_multicolor_components`, then
+    :func:`relabel_borders`); :func:`crop_to_tiny` there gives the tiny image and crop;
     connected components per colour give the blobs.
     """
 
@@ -232,11 +239,14 @@ class GloveSegmenter:
                  bilateral_sigma_space: float = 3.0, median_size: int = 3,
                  border_passes: int = 3, border_distances: tuple[int, ...] = (2, 4),
                  min_glove_pixels: int = 300, min_inside_fraction: float = 0.5,
-                 min_blob_pixels: int = 12, min_component_colors: int = 3) -> None:
+                 min_blob_pixels: int = 12, min_component_colors: int = 3,
+                 light_passes: int = 1) -> None:
         if coarse_factor < 1 or max_roi_cells < TINY_SIZE or roi_margin < 1.0:
             raise SegmentationConfigError(
                 f'need coarse_factor >= 1, max_roi_cells >= {TINY_SIZE}, roi_margin >= 1; got '
                 f'{coarse_factor}, {max_roi_cells}, {roi_margin}')
+        if light_passes < 0:
+            raise SegmentationConfigError(f'need light_passes >= 0; got {light_passes}')
         if border_passes < 0 or not all(int(d) >= 1 for d in border_distances):
             raise SegmentationConfigError(
                 f'need border_passes >= 0 and border_distances >= 1; got {border_passes}, '
@@ -255,9 +265,19 @@ class GloveSegmenter:
         self.min_inside_fraction = float(min_inside_fraction)
         self.min_blob_pixels = int(min_blob_pixels)
         self.min_component_colors = int(min_component_colors)
+        self.light_passes = int(light_passes)
 
     # ------------------------------------------------------------------ helpers
-    def _coarse(self, image: np.ndarray) -> tuple[tuple[float, float], float] | None:
+    def _coarse_labels(self, small: np.ndarray, table: np.ndarray | None = None) -> np.ndarray:
+        labels = self._median(self.calibration.classify(small, table))
+        if self.min_component_colors > 1:
+            labels = keep_multicolor_components(labels, self.min_component_colors, min_pixels=2)
+        return labels
+
+    def _coarse(self, image: np.ndarray
+                ) -> tuple[tuple[tuple[float, float], float] | None, np.ndarray | None]:
+        """Find the glove on the downsampled frame: (centre (x, y), half window) in full
+        pixels or None, and the light-colour correction table (None for no correction)."""
         f = self.coarse_factor
         h, w = image.shape[:2]
         if f > 1 and h >= 2 * f and w >= 2 * f:
@@ -265,16 +285,24 @@ class GloveSegmenter:
             sx, sy = w / (w // f), h / (h // f)
         else:
             small, sx, sy = image, 1.0, 1.0
-        labels = self._median(self.calibration.classify(small))
-        if self.min_component_colors > 1:
-            labels = keep_multicolor_components(labels, self.min_component_colors, min_pixels=2)
+        labels = self._coarse_labels(small)
+        table = None
+        gains = np.ones(3)
+        seen = small
+        for k in range(self.light_passes):
+            if k:   # refine: classify the corrected coarse frame, estimate what is left
+                seen = cv2.LUT(small, table)
+                labels = self._coarse_labels(small, table)
+            gains = gains * estimate_light_gains(cv2.LUT(seen, _LINEAR_RGB), labels,
+                                                 self.calibration.reference_linear_rgb)
+            table = gain_table(gains)
         min_px = max(int(self.min_glove_pixels / (sx * sy)), 1)
         found = mean_shift_crop(labels, min_pixels=min_px)
         if found is None:
-            return None
+            return None, table
         (cx, cy), half = found
         # small pixel u covers full pixels [u * s, (u + 1) * s): centre (u + 0.5) s - 0.5
-        return ((cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5), half * max(sx, sy)
+        return (((cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5), half * max(sx, sy)), table
 
     def _blobs(self, labels: np.ndarray, r: int, x0: int, y0: int,
                window: tuple[int, int, int, int]) -> list[Blob]:
@@ -312,9 +340,10 @@ class GloveSegmenter:
     def classify_full(self, image_rgb: np.ndarray) -> np.ndarray:
         """Filter, classify, median-filter and relabel borders on a whole frame at full
         resolution (as :meth:`process` does inside its region of interest, less the clutter
-        filter); for evaluation and debug images."""
-        filtered = self._filter(_check_image(image_rgb))
-        labels = self._median(self.calibration.classify(filtered))
+        filter), with the same light-colour correction; for evaluation and debug images."""
+        image = _check_image(image_rgb)
+        filtered = self._filter(image)
+        labels = self._median(self.calibration.classify(filtered, self._coarse(image)[1]))
         return relabel_borders(filtered, labels, self.border_passes,
                                self.border_distances)
 
@@ -333,7 +362,7 @@ class GloveSegmenter:
             timings[stage] = (now - t) * 1e3
             return now
 
-        coarse = self._coarse(image)
+        coarse, table = self._coarse(image)
         t = tick('coarse', t0)
         if coarse is None:
             timings['total'] = (time.perf_counter() - t0) * 1e3
@@ -352,7 +381,7 @@ class GloveSegmenter:
                              interpolation=cv2.INTER_AREA)
         roi = self._filter(roi)
         t = tick('filter', t)
-        labels = self.calibration.classify(roi)
+        labels = self.calibration.classify(roi, table)
         t = tick('classify', t)
         labels = self._median(labels)
         if self.min_component_colors > 1:

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from colorglove_ros.core.colorspace import (
-    LIGHT_TEMPERATURES_K,
+    RESIDUAL_TEMPERATURES_K,
     ColorCalibrationError,
     fit_color_calibration,
     read_calibration_config,
@@ -96,9 +96,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--max-pixels', type=int, default=5000,
                         help='training pixels sampled per class')
     parser.add_argument('--light-temperatures', type=float, nargs=2, metavar=('LOW_K', 'HIGH_K'),
-                        default=LIGHT_TEMPERATURES_K,
+                        default=RESIDUAL_TEMPERATURES_K,
                         help='re-light the training pixels under black bodies of these colour '
-                             'temperatures (default: colorspace.LIGHT_TEMPERATURES_K)')
+                             'temperatures (default: colorspace.RESIDUAL_TEMPERATURES_K, what the '
+                             "segmenter's per-frame light-colour correction leaves)")
     parser.add_argument('--json', type=Path, help='also write the figures as JSON')
     args = parser.parse_args(argv)
     try:
