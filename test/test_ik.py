@@ -198,6 +198,31 @@ def test_translation_estimate_from_constraints(rig):
     np.testing.assert_allclose(trimmed[0:3], q_true[0:3], atol=1e-6)
 
 
+def test_translation_estimate_with_two_cameras_trims_per_camera_rows(rig):
+    """The vectorised fit (rows of all cameras stacked per correspondence) recovers the
+    translation from both cameras, and trims a wild target of the second camera only."""
+    model, mesh, kin, mono, stereo, verts = rig
+    rng = np.random.default_rng(9)
+    q_true = true_pose(model, rng)
+    corr = synthetic_corr(rig, q_true, stereo, rng, 0.0)
+    assert set(corr.camera.tolist()) == {0, 1}
+    q_bad = q_true.copy()
+    q_bad[0:3] += [0.03, -0.02, 0.06]
+    np.testing.assert_allclose(estimate_translation(kin, stereo, corr, q_bad)[0:3],
+                               q_true[0:3], atol=1e-6)
+    target = corr.target_px.copy()
+    target[np.flatnonzero(corr.camera == 1)[0]] += [70.0, -50.0]
+    wild = replace(corr, target_px=target)
+    assert np.abs(estimate_translation(kin, stereo, wild, q_bad)[0:3] - q_true[0:3]).max() > 1e-4
+    np.testing.assert_allclose(
+        estimate_translation(kin, stereo, wild, q_bad, outlier_px=20.0)[0:3], q_true[0:3],
+        atol=1e-6)
+    far_behind = q_true.copy()
+    far_behind[2] = -1.0
+    with pytest.raises(IKError, match='behind'):
+        estimate_translation(kin, stereo, corr, far_behind, prior_var=np.full(3, 1e-12))
+
+
 def test_match_by_color_picks_right_blob():
     pred = np.array([[10.0, 10.0], [100.0, 10.0], [50.0, 50.0]])
     pred_col = np.array([3, 3, 5])

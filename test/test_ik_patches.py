@@ -114,3 +114,24 @@ def test_cameras_sharing_a_pose_get_the_same_points_as_alone(scene):
             np.testing.assert_allclose(a, b, atol=1e-12)
     # the second camera sees a different set of patch parts (the test is not vacuous)
     assert not np.allclose(shared[0][2], shared[1][2])
+
+
+def test_points_by_camera_match_each_camera_alone(scene):
+    """Rows of several cameras in one pass (interleaved, repeated patches) get exactly the
+    points, weights and visibility each camera gets on its own."""
+    synth, cam, kin, surface = scene
+    stereo = load_calibration(ROOT / 'config' / 'calibration_stereo.yaml').cameras
+    q = generate_sequence(7, 1, camera=cam, model=synth.model)[0]
+    rng = np.random.default_rng(2)
+    ids = rng.integers(0, surface.num_patches, 40)
+    which = rng.integers(0, len(stereo), 40)
+    got = surface.points_by_camera(q, stereo, which, ids)
+    for c in range(len(stereo)):
+        rows = which == c
+        alone = PatchSurface(kin, synth.mesh, synth.glove.face_patch).points(q, stereo[c],
+                                                                             ids[rows])
+        for a, b in zip(got, alone, strict=True):
+            np.testing.assert_allclose(a[rows], b, atol=1e-12)
+    assert got[3].any() and not got[3].all()     # some rows seen, some not: not vacuous
+    with pytest.raises(IKError, match='camera index'):
+        surface.points_by_camera(q, stereo, np.full(40, 2), ids)

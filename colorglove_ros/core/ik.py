@@ -118,9 +118,18 @@ class FastKinematics:
             ancestors[f, f - 1] = 1.0
         self._levels = [np.flatnonzero(depth == d) for d in range(1, int(depth.max()) + 1)]
         self._ancestors = ancestors
-        self._level_data = [(lvl, lvl - 1, self._parent[lvl - 1],
-                             self._fixed_t[lvl - 1][:, :, None]) for lvl in self._levels]
+        # joints in level order, each level's joint transforms a slice of the stacked
+        # homogeneous link transforms (fixed translation, rotation filled per pose)
+        self._level_order = np.concatenate(self._levels) - 1
+        bounds = np.cumsum([0, *(len(lvl) for lvl in self._levels)])
+        self._level_data = [(lvl, self._parent[lvl - 1], slice(int(a), int(b)))
+                            for lvl, a, b in zip(self._levels, bounds[:-1], bounds[1:],
+                                                 strict=True)]
+        self._local_T = np.zeros((n, 4, 4))
+        self._local_T[:, :3, 3] = self._fixed_t[self._level_order]
+        self._local_T[:, 3, 3] = 1.0
         self._eye = np.eye(3)
+        self._basis_skew = _skew(self._eye)
         self._cache: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         rng = np.random.default_rng(0)
         lo = np.where(np.isfinite(self.lower), self.lower, -1.0)
@@ -156,17 +165,19 @@ class FastKinematics:
         if hit is not None:
             return hit
         n = len(self._dof)
-        Rs = np.empty((n + 1, 3, 3))
-        ts = np.zeros((n + 1, 3))
-        Rs[0], jl = _rotvec_matrix_and_jl(q[3:6])
+        T = np.zeros((n + 1, 4, 4))
+        T[0, :3, :3], jl = _rotvec_matrix_and_jl(q[3:6])
+        T[0, 3, 3] = 1.0
         ang = q[self._dof]
         Rj = self._eye + np.sin(ang)[:, None, None] * self._K
         Rj += (1.0 - np.cos(ang))[:, None, None] * self._KK
-        local_R = self._fixed_R @ Rj
-        for lvl, jidx, p, fixed_t in self._level_data:
-            Rp = Rs[p]
-            ts[lvl] = ts[p] + (Rp @ fixed_t)[:, :, 0]
-            Rs[lvl] = Rp @ local_R[jidx]
+        local_T = self._local_T.copy()
+        local_T[:, :3, :3] = (self._fixed_R @ Rj)[self._level_order]
+        # one homogeneous product per level: a frame's rotation and origin together
+        for lvl, p, rows in self._level_data:
+            T[lvl] = T[p] @ local_T[rows]
+        Rs = np.ascontiguousarray(T[:, :3, :3])
+        ts = np.ascontiguousarray(T[:, :3, 3])
         for a in (Rs, ts, jl):
             a.setflags(write=False)
         if len(self._cache) >= 8:
@@ -184,14 +195,16 @@ class FastKinematics:
             return p, None
         J = np.empty((len(p), 3, NUM_DOFS))
         J[:, :, 0:3] = self._eye
-        J[:, :, 3:6] = -_skew(p - ts[0]) @ jl
-        # revolute joint j: w_j x (p - o_j), zero unless joint j moves p
-        w = (Rs[1:] @ self._axis[:, :, None])[:, :, 0]                     # (nj, 3)
-        d = p[:, None, :] - ts[None, 1:]                                   # (N, nj, 3)
-        cross = np.empty((len(p), 3, len(w)))
-        cross[:, 0] = w[None, :, 1] * d[:, :, 2] - w[None, :, 2] * d[:, :, 1]
-        cross[:, 1] = w[None, :, 2] * d[:, :, 0] - w[None, :, 0] * d[:, :, 2]
-        cross[:, 2] = w[None, :, 0] * d[:, :, 1] - w[None, :, 1] * d[:, :, 0]
+        # -[p - o]_x jl, with [d]_x = sum_k d_k [e_k]_x: one (N, 3) @ (3, 9) product
+        d = p - ts[0]                                                      # wrist-relative
+        J[:, :, 3:6] = (-d @ (self._basis_skew @ jl).reshape(3, 9)).reshape(-1, 3, 3)
+        # revolute joint j: w_j x (p - o_j) = [w_j]_x d - w_j x (o_j - o_0), zero unless
+        # joint j moves p; all joints in one (N, 3) @ (3, 3 nj) product
+        w_skew = _skew((Rs[1:] @ self._axis[:, :, None])[:, :, 0])          # (nj, 3, 3)
+        nj = len(w_skew)
+        offset = (w_skew @ (ts[1:] - ts[0])[:, :, None])[:, :, 0].T        # (3, nj)
+        cross = (d @ w_skew.transpose(2, 1, 0).reshape(3, 3 * nj)).reshape(-1, 3, nj)
+        cross -= offset
         cross *= self._ancestors[fr][:, None, :]
         J[:, :, self._joint_dofs] = cross
         return p, J
@@ -461,7 +474,6 @@ class PatchSurface:
         pairs, self._group = np.unique(np.stack([elem_patch, elem_link], axis=1), axis=0,
                                        return_inverse=True)
         self._group = self._group.reshape(-1)
-        self._group_xyz = (3 * self._group[:, None] + np.arange(3)).reshape(-1)
         num_patches = int(elem_patch.max()) + 1
         slots = np.bincount(pairs[:, 0], minlength=num_patches)
         self.max_links = int(slots.max())
@@ -476,6 +488,7 @@ class PatchSurface:
         self.min_visible_fraction = float(min_visible_fraction)
         self.min_link_weight = float(min_link_weight)
         self._posed_cache: tuple[bytes, tuple[np.ndarray, np.ndarray]] | None = None
+        self._bins: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
         self._eye = np.eye(3)
 
     def _visible(self, pc: np.ndarray, front: np.ndarray, camera: PinholeCamera) -> np.ndarray:
@@ -508,8 +521,10 @@ class PatchSurface:
         centre = np.empty_like(self._centre)
         normal = np.empty_like(self._centre)
         for b, sl in enumerate(self._blocks):
-            centre[sl] = self._centre[sl] @ R[b].T + t[b]
-            normal[sl] = self._area_normal[sl] @ R[b].T
+            Rt = np.ascontiguousarray(R[b].T)             # the fast matmul path
+            np.dot(self._centre[sl], Rt, out=centre[sl])
+            centre[sl] += t[b]
+            np.dot(self._area_normal[sl], Rt, out=normal[sl])
         centre.setflags(write=False)
         normal.setflags(write=False)
         self._posed_cache = (key, (centre, normal))
@@ -521,36 +536,75 @@ class PatchSurface:
         of its visible part seen by ``camera`` at pose ``q``, and whether any of it faces the
         camera (K,) (rows that do not keep weight 0)."""
         patch_id = np.asarray(patch_id, np.int64)
-        if len(patch_id) and (patch_id.min() < 0 or patch_id.max() >= self.num_patches):
-            raise IKError(f'patch id outside [0, {self.num_patches})')
-        pc, normal = self._posed(q)
+        return self.points_by_camera(q, [camera], np.zeros(len(patch_id), np.int64), patch_id)
+
+    def _element_weights(self, pc: np.ndarray, normal: np.ndarray, camera: PinholeCamera
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """Projected-area weight (E,) of every element facing ``camera``, and the same with
+        the elements hidden in the depth buffer set to 0."""
         if not (np.array_equal(camera.rotation, self._eye) and not camera.translation.any()):
-            pc = pc @ camera.rotation.T + camera.translation
-            normal = normal @ camera.rotation.T
+            Rt = np.ascontiguousarray(camera.rotation.T)     # the fast matmul path
+            pc = pc @ Rt + camera.translation
+            normal = normal @ Rt
         dist = np.sqrt(np.einsum('fi,fi->f', pc, pc))
         depth = np.maximum(pc[:, 2], 1e-3)
         w = np.maximum(-np.einsum('fi,fi->f', normal, pc), 0.0) / (dist * depth**2)
-        ng = len(self._group_link)
-        w_vis = np.where(self._visible(pc, (w > 0) & (pc[:, 2] > 0), camera), w, 0.0)
+        return w, np.where(self._visible(pc, (w > 0) & (pc[:, 2] > 0), camera), w, 0.0)
+
+    def _camera_bins(self, num_cameras: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                      np.ndarray]:
+        """Per element of every camera: patch bin, group bin, group xyz bins and centre,
+        the bins of camera c offset past those of cameras 0..c-1 (kept per camera count)."""
+        hit = self._bins.get(num_cameras)
+        if hit is None:
+            nc, ne, ng = num_cameras, len(self._centre), len(self._group_link)
+            cam = np.repeat(np.arange(nc), ne)
+            group = cam * ng + np.tile(self._group, nc)
+            hit = (cam * self.num_patches + np.tile(self._elem_patch, nc), group,
+                   (3 * group[:, None] + np.arange(3)).reshape(-1),
+                   np.tile(self._centre, (nc, 1)))
+            self._bins[num_cameras] = hit
+        return hit
+
+    def points_by_camera(self, q: np.ndarray, cameras: Sequence[PinholeCamera],
+                         camera_index: np.ndarray, patch_id: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`points` for rows seen by different cameras (row k by
+        ``cameras[camera_index[k]]``) in one pass over the posed glove."""
+        patch_id = np.asarray(patch_id, np.int64)
+        camera_index = np.asarray(camera_index, np.int64)
+        if len(patch_id) and (patch_id.min() < 0 or patch_id.max() >= self.num_patches):
+            raise IKError(f'patch id outside [0, {self.num_patches})')
+        if len(camera_index) != len(patch_id) or (
+                len(camera_index) and (camera_index.min() < 0
+                                       or camera_index.max() >= len(cameras))):
+            raise IKError(f'camera index outside [0, {len(cameras)}) or not one per patch id')
+        pc, normal = self._posed(q)
+        nc, ng, np_ = len(cameras), len(self._group_link), self.num_patches
+        # per camera: all front weights and the visible ones, all cameras summed in one call
+        weights = [self._element_weights(pc, normal, cam) for cam in cameras]
+        w = np.concatenate([front for front, _ in weights])
+        w_vis = np.concatenate([vis for _, vis in weights])
+        elem_patch, group, group_xyz, centre = self._camera_bins(nc)
         # patches mostly hidden in the depth buffer fall back to all their front faces
-        np_ = self.num_patches
-        vis_frac = (np.bincount(self._elem_patch, w_vis, np_)
-                    / np.maximum(np.bincount(self._elem_patch, w, np_), 1e-300))
-        w = np.where(vis_frac[self._elem_patch] < self.min_visible_fraction, w, w_vis)
-        wg = np.bincount(self._group, w, ng)
-        mean = (np.bincount(self._group_xyz, (w[:, None] * self._centre).reshape(-1), 3 * ng)
-                .reshape(ng, 3) / np.maximum(wg, 1e-300)[:, None])
+        vis_frac = (np.bincount(elem_patch, w_vis, nc * np_)
+                    / np.maximum(np.bincount(elem_patch, w, nc * np_), 1e-300))
+        w = np.where(vis_frac[elem_patch] < self.min_visible_fraction, w, w_vis)
+        wg = np.bincount(group, w, nc * ng)
+        mean = (np.bincount(group_xyz, (w[:, None] * centre).reshape(-1), 3 * nc * ng)
+                .reshape(nc * ng, 3) / np.maximum(wg, 1e-300)[:, None])
         groups = self._table[patch_id]                                       # (K, S)
         valid = groups >= 0
         g = np.where(valid, groups, 0)
-        weight = np.where(valid, wg[g], 0.0)
+        gc = g + (camera_index * ng)[:, None]
+        weight = np.where(valid, wg[gc], 0.0)
         total = weight.sum(axis=1)
         seen = total > 0
         weight = weight / np.where(seen, total, 1.0)[:, None]
         # links holding a sliver of the visible patch are dropped (fewer points to move)
         weight[weight < self.min_link_weight] = 0.0
         weight /= np.where(seen, weight.sum(axis=1), 1.0)[:, None]
-        return self._group_link[g], mean[g], weight, seen
+        return self._group_link[g], mean[gc], weight, seen
 
 
 # ---------------------------------------------------------------------------- covariances
@@ -972,22 +1026,15 @@ def estimate_translation(kin: FastKinematics, cameras: Sequence[PinholeCamera],
     if len(corr) < 2:
         raise IKError('translation needs at least 2 correspondences')
     p, _ = constraint_points(kin, corr, q)
-    rows, rhs, wts = [], [], []
-    for c in np.unique(corr.camera):
-        cam = cameras[int(c)]
-        sel = corr.camera == c
-        a = (corr.target_px[sel, 0] - cam.cx) / cam.fx
-        b = (corr.target_px[sel, 1] - cam.cy) / cam.fy
-        R, t = cam.rotation, cam.translation
-        z = np.maximum(cam.world_to_camera(p[sel])[:, 2], min_depth_m)
-        for coef, row, f in ((a, 0, cam.fx), (b, 1, cam.fy)):
-            G = R[row][None, :] - coef[:, None] * R[2][None, :]       # (n, 3)
-            rows.append(G)
-            rhs.append(-(G * p[sel]).sum(axis=1) - (t[row] - coef * t[2]))
-            wts.append((f / z) ** 2 / r_var_px2)      # row residual * f / z ~ pixels
-    A = np.concatenate(rows)
-    y = np.concatenate(rhs)
-    w = np.concatenate(wts)
+    pp = _per_point(cameras, corr)
+    # per correspondence and pixel axis i: (R_i - a_i R_2) (p + dt) + t_i - a_i t_2 = 0 with
+    # a the target's normalised image coordinates
+    coef = (corr.target_px - pp.c) / pp.f                                  # (K, 2)
+    G = pp.R[:, :2, :] - coef[:, :, None] * pp.R[:, 2:3, :]                 # (K, 2, 3)
+    y = -np.einsum('kij,kj->ki', G, p) - (pp.t[:, :2] - coef * pp.t[:, 2:3])
+    _, _, depth = _project_points(pp, p, None)
+    w = (pp.f / np.maximum(depth, min_depth_m)[:, None]) ** 2 / r_var_px2  # residual * f / z
+    A, y, w = G.reshape(-1, 3), y.reshape(-1), w.reshape(-1)
     reg = np.zeros((3, 3)) if prior_var is None else np.diag(1.0 / np.asarray(prior_var, float))
     keep = np.ones(len(A), dtype=bool)
     dt = np.zeros(3)
@@ -1000,19 +1047,16 @@ def estimate_translation(kin: FastKinematics, cameras: Sequence[PinholeCamera],
             raise IKError('translation is not determined by the correspondences') from exc
         if outlier_px <= 0:
             break
-        pix, _, _ = _project_points(_per_point(cameras, corr), p + dt, None)
+        pix, _, _ = _project_points(pp, p + dt, None)
         good = np.linalg.norm(pix - corr.target_px, axis=1) <= outlier_px
         if good.all() or good.sum() < 3:
             break
-        # rows are ordered camera by camera, x rows then y rows: rebuild the row mask
-        keep = np.concatenate([np.tile(good[corr.camera == c], 2)
-                               for c in np.unique(corr.camera)])
+        keep = np.repeat(good, 2)                    # rows x0, y0, x1, y1, ...
     out = np.array(q, dtype=float)
     out[0:3] = q[0:3] + dt
-    pw = p + dt
-    for c in np.unique(corr.camera):
-        if np.any(cameras[int(c)].world_to_camera(pw[corr.camera == c])[:, 2] <= min_depth_m):
-            raise IKError('translation estimate puts the hand behind a camera')
+    _, _, depth = _project_points(pp, p + dt, None)
+    if np.any(depth <= min_depth_m):
+        raise IKError('translation estimate puts the hand behind a camera')
     return kin.clamp(out)
 
 
@@ -1214,11 +1258,10 @@ class HandTracker:
         local = np.zeros((len(corr), s, 3))
         weight = np.zeros((len(corr), s))
         link[:, 0], local[:, 0], weight[:, 0] = corr.link[:, 0], corr.local[:, 0], 1.0
-        for c in np.unique(corr.camera):
-            rows = np.flatnonzero(corr.camera == c)
-            lk, lc, wt, seen = self._patches.points(q, self.cameras[int(c)], corr.patch_id[rows])
-            rows = rows[seen]
-            link[rows], local[rows], weight[rows] = lk[seen], lc[seen], wt[seen]
+        used, cam_index = np.unique(corr.camera, return_inverse=True)
+        lk, lc, wt, seen = self._patches.points_by_camera(
+            q, [self.cameras[int(c)] for c in used], cam_index.reshape(-1), corr.patch_id)
+        link[seen], local[seen], weight[seen] = lk[seen], lc[seen], wt[seen]
         return replace(corr, link=link, local=local, weight=weight)
 
     @classmethod
@@ -1246,7 +1289,9 @@ class HandTracker:
         return None if self._q_prev is None else self._q_prev.copy()
 
     def _match_extras(self, prior: PosePrior, observations: Sequence[CameraObservation],
-                      q: np.ndarray) -> list[Correspondences]:
+                      q: np.ndarray, patch_points: bool = True) -> Correspondences:
+        """The other cameras' correspondences matched at pose ``q`` (constraints moved to
+        the patch points at ``q`` unless ``patch_points`` is false)."""
         cfg = self.config
         cons = prior.constraints
         v = cons.vertex
@@ -1267,7 +1312,8 @@ class HandTracker:
                 ci, self.cameras[ci], cons, pw, obs.blobs, self.mesh, cfg.extra_gate_px,
                 cfg.extra_shift_max_px, cfg.extra_inlier_px, cfg.min_blob_pixels,
                 cfg.min_depth_m, normals))
-        return [self._with_patch_points(c, q) for c in out]
+        out = Correspondences.concat(out)
+        return self._with_patch_points(out, q) if patch_points else out
 
     def _solve(self, corr: Correspondences, q_init: np.ndarray, q_b: np.ndarray,
                q_prev: np.ndarray | None, iterations: int) -> IKSolution:
@@ -1302,11 +1348,17 @@ class HandTracker:
                               self.mesh, cfg.gate_tiny_px, cfg.gate_min_px,
                               cfg.min_blob_pixels)
         multi = len(self.cameras) > 1
-        # IK on several cameras, tracking: every camera's visible patches are predicted at the
-        # last pose (one posing of the glove for all cameras; the blend is the coarser guess)
-        q_patch = (self._q_prev if multi and cfg.enable_ik and self._q_prev is not None
-                   else q_blend)
-        corr0 = self._with_patch_points(corr0, q_patch)
+        # IK on several cameras, tracking: the other cameras are matched at the last pose and
+        # every camera's visible patches predicted there, in one pass (the blend is the
+        # coarser guess)
+        tracked: Correspondences | None = None
+        if multi and cfg.enable_ik and self._q_prev is not None:
+            tracked = self._with_patch_points(Correspondences.concat(
+                [corr0, self._match_extras(prior, observations, self._q_prev, False)]),
+                self._q_prev)
+            corr0 = tracked.select(tracked.camera == 0)
+        else:
+            corr0 = self._with_patch_points(corr0, q_blend)
         q_b = q_blend
         if cfg.init_translation and len(corr0) >= 3:
             try:
@@ -1330,22 +1382,23 @@ class HandTracker:
                 # predict the other cameras' patches from the last pose while tracking, else
                 # from a short primary-camera solve; then solve on all cameras together
                 # (a patch seen by one camera only still counts)
-                q_start = q_match = q_b
-                if self._q_prev is not None:
-                    q_match = self._q_prev
-                elif len(corr0) >= cfg.min_constraints:
-                    sol = self._solve(corr0, q_b, q_b, q_prev, cfg.refine_iterations)
-                    q_match = q_start = q = sol.q
-                    iterations = sol.iterations
-                corr = Correspondences.concat(
-                    [corr0, *self._match_extras(prior, observations, q_match)])
+                q_start = q_b
+                if tracked is not None:
+                    corr = tracked
+                else:
+                    if len(corr0) >= cfg.min_constraints:
+                        sol = self._solve(corr0, q_b, q_b, q_prev, cfg.refine_iterations)
+                        q_start = q = sol.q
+                        iterations = sol.iterations
+                    corr = Correspondences.concat(
+                        [corr0, self._match_extras(prior, observations, q_start)])
                 if len(corr) >= cfg.min_constraints:
                     sol = self._solve(corr, q_start, q_b, q_prev, cfg.multi_camera_iterations)
                     q, err = sol.q, sol.errors_px
                     iterations += sol.iterations
                     if cfg.extra_rematch and len(corr) > len(corr0):
                         again = Correspondences.concat(
-                            [corr0, *self._match_extras(prior, observations, q)])
+                            [corr0, self._match_extras(prior, observations, q)])
                         if not again.same_as(corr) and len(again) >= cfg.min_constraints:
                             corr = again
                             sol = self._solve(corr, q, q_b, q_prev, cfg.refine_iterations)
@@ -1360,7 +1413,7 @@ class HandTracker:
                     q, err = sol.q, sol.errors_px
                     iterations += sol.iterations
         elif multi:
-            corr = Correspondences.concat([corr0, *self._match_extras(prior, observations, q)])
+            corr = Correspondences.concat([corr0, self._match_extras(prior, observations, q)])
         if err is None:
             err = reprojection_errors(self.kin, self.cameras, corr, q)
         q = q.copy()
