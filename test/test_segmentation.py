@@ -147,6 +147,18 @@ def test_keep_multicolor_components() -> None:
     assert not out[20:].any()
 
 
+def test_keep_multicolor_components_counts_only_glove_pixels() -> None:
+    lab = np.zeros((30, 30), np.uint8)
+    lab[2:12, 2:12] = 1                 # a big one-colour component
+    lab[20:22, 20] = 2                  # a 2-pixel speck
+    out = keep_multicolor_components(lab, min_colors=1, min_pixels=4)
+    np.testing.assert_array_equal(out[:15], lab[:15])
+    assert not out[15:].any()
+    # a boolean mask works the same way (one colour: True)
+    mask_out = keep_multicolor_components(lab > 0, min_colors=1, min_pixels=4)
+    np.testing.assert_array_equal(mask_out, out > 0)
+
+
 def _mixed_edge(width: int = 40, height: int = 12, edge: float = 19.5, blur: float = 4.0
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A red | yellow edge at x = ``edge`` blurred over ``blur`` pixels (mixed in linear

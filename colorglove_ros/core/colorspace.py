@@ -128,16 +128,23 @@ def lut_index(rgb: np.ndarray, bits: int, channel_table: np.ndarray | None = Non
     ``channel_table`` (1, 256, 3) uint8 (e.g. :func:`gain_table`) maps each channel first,
     in the same pass as the quantisation (only for (H, W, 3) images)."""
     shift = 8 - bits
-    if channel_table is None:
-        q = np.asarray(rgb, dtype=np.uint8) >> shift
-        red, green, blue = q[..., 0], q[..., 1], q[..., 2]
-    else:   # one single-channel table per plane: 4x faster than a 3-channel cv2.LUT
-        red, green, blue = (cv2.LUT(plane, np.ascontiguousarray(channel_table[0, :, k] >> shift))
-                            for k, plane in enumerate(cv2.split(rgb)))
-    idx = red.astype(np.int32) << (2 * bits)
-    idx |= green.astype(np.int32) << bits
-    idx |= blue
+    if channel_table is not None:   # per plane, a table straight to its shifted index bits
+        planes = cv2.split(rgb)
+        idx = cv2.LUT(planes[0], _index_bits(channel_table, 0, bits))
+        idx |= cv2.LUT(planes[1], _index_bits(channel_table, 1, bits))
+        idx |= cv2.LUT(planes[2], _index_bits(channel_table, 2, bits))
+        return idx
+    q = np.asarray(rgb, dtype=np.uint8) >> shift
+    idx = q[..., 0].astype(np.int32) << (2 * bits)
+    idx |= q[..., 1].astype(np.int32) << bits
+    idx |= q[..., 2]
     return idx
+
+
+def _index_bits(channel_table: np.ndarray, channel: int, bits: int) -> np.ndarray:
+    """int32 table: byte -> its mapped, quantised value at ``channel``'s place in the index."""
+    quantised = channel_table[0, :, channel] >> (8 - bits)
+    return quantised.astype(np.int32) << ((2 - channel) * bits)
 
 
 #: Luminance weights of linear sRGB: the light-colour gains keep this mix of log gains at 0.
@@ -164,7 +171,7 @@ def estimate_light_gains(linear_rgb: np.ndarray, labels: np.ndarray,
     ``1/max_gain .. max_gain``; ones with fewer than ``min_colors`` colours.
     """
     labels = np.asarray(labels).ravel()
-    glove = np.flatnonzero(labels)
+    glove = np.flatnonzero(labels != 0)   # a bool array: 4x faster than on the labels
     labels = labels[glove]
     ref = np.asarray(reference_linear_rgb, dtype=np.float64)
     num = len(ref) + 1

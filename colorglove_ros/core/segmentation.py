@@ -1,6 +1,7 @@
 """Glove segmentation of camera frames: colour lookup, bilateral filter, crop, tiny image, blobs."""
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, field
 
@@ -72,13 +73,14 @@ def keep_multicolor_components(labels: np.ndarray, min_colors: int = 3,
     """Zero every 8-connected glove component with fewer than ``min_colors`` colours each
     holding at least ``min_share`` of its pixels (and ``min_pixels``). The printed glove shows
     many colours side by side; glove-coloured clutter and noise specks show one or two."""
-    mask = (labels > 0).view(np.uint8) if labels.dtype == np.bool_ else (labels > 0).astype(
-        np.uint8)
-    n, comp = cv2.connectedComponents(mask, connectivity=8, ltype=cv2.CV_32S)
+    glove = labels > 0
+    n, comp = cv2.connectedComponents(glove.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
     if n <= 1:
         return labels
     nl = int(labels.max()) + 1
-    hist = np.bincount((comp * nl + labels).ravel(), minlength=n * nl).reshape(n, nl)[:, 1:]
+    glove = np.flatnonzero(glove)   # only glove pixels count: comp is 0 just where labels are
+    hist = np.bincount(comp.ravel().take(glove) * nl + labels.ravel().take(glove),
+                       minlength=n * nl).reshape(n, nl)[:, 1:]
     size = hist.sum(axis=1, keepdims=True)
     big = (hist >= np.maximum(min_share * size, min_pixels)).sum(axis=1)
     keep = big >= min_colors
@@ -92,14 +94,24 @@ def keep_multicolor_components(labels: np.ndarray, min_colors: int = 3,
 _LINEAR_RGB = (255.0 * srgb_to_linear(np.arange(256, dtype=np.uint8))).astype(np.float32)
 _CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
 _UNSURE = 255
-_FAR = 1e4   # a colour value far outside 0..255
 _NO_KEY = np.int32(np.iinfo(np.int32).max)   # larger than every sort key; label bits 255
+#: label -> its bits in a sort key; _UNSURE -> _NO_KEY (OR-ing it in gives _NO_KEY)
+_KEY_LABEL = np.append(np.arange(_UNSURE, dtype=np.int32), _NO_KEY)
 
 
+@functools.lru_cache(maxsize=64)
 def _reference_steps(distances: tuple[int, ...], row_stride: int) -> np.ndarray:
-    """Flat index steps to the pixels ``distances`` away along the 8 compass directions."""
-    return np.array([d * (sy * row_stride + sx) for d in distances
-                     for sy in (-1, 0, 1) for sx in (-1, 0, 1) if sy or sx])
+    """Flat index steps (references, 1) to the pixels ``distances`` away along the 8 compass
+    directions (cached: read only)."""
+    steps = np.array([d * (sy * row_stride + sx) for d in distances
+                      for sy in (-1, 0, 1) for sx in (-1, 0, 1) if sy or sx])[:, None]
+    steps.flags.writeable = False
+    return steps
+
+
+def _gather(colours: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Colours (at.shape + (4,)) float32 of the pixels ``at`` (flat indices) of ``colours``."""
+    return colours.take(at).view(np.float32).reshape(*at.shape, 4)
 
 
 def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
@@ -136,42 +148,52 @@ def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
     # Work on the bounding box padded by the reach, as flat arrays: a step is an offset.
     box = cv2.copyMakeBorder(labels[y0:y1, x0:x1], pad, pad, pad, pad, cv2.BORDER_CONSTANT,
                              value=_UNSURE)
-    colour = cv2.LUT(cv2.copyMakeBorder(np.ascontiguousarray(image[y0:y1, x0:x1]), pad, pad,
-                                        pad, pad, cv2.BORDER_CONSTANT), _LINEAR_RGB)
-    planes = [p.ravel() for p in cv2.split(colour)]
-    steps = _reference_steps(distances, box.shape[1])[:, None]
-    red = planes[0].reshape(box.shape)
+    # Linear RGB plus an unused 4th channel: one 16-byte item per pixel, so one take gathers
+    # a pixel's whole colour.
+    rgba = cv2.cvtColor(cv2.copyMakeBorder(np.ascontiguousarray(image[y0:y1, x0:x1]), pad, pad,
+                                           pad, pad, cv2.BORDER_CONSTANT), cv2.COLOR_RGB2RGBA)
+    colours = cv2.LUT(rgba, _LINEAR_RGB).view(np.dtype((np.void, 16))).ravel()
+    steps = _reference_steps(tuple(distances), box.shape[1])
     inner = box[pad:-pad, pad:-pad]   # a view of the box without the padding
     flat = box.ravel()
+    border_box = np.zeros(box.shape, bool)
+    border_inner = border_box[pad:-pad, pad:-pad]
+    border_inner[...] = border[y0:y1, x0:x1]
+    changed = np.zeros(0, np.intp)   # flat indices of the pixels the last pass relabelled
     for k in range(passes):
         if k:
-            border = cv2.erode(inner, _CROSS) != cv2.dilate(inner, _CROSS)
-        else:
-            border = border[y0:y1, x0:x1]
-        border_box = cv2.copyMakeBorder(border.view(np.uint8), pad, pad, pad, pad,
-                                        cv2.BORDER_CONSTANT).view(bool)
+            was_border = border_box.copy()
+            np.not_equal(cv2.erode(inner, _CROSS), cv2.dilate(inner, _CROSS), out=border_inner)
+            moved = border_box != was_border   # pixels whose label or sureness changed
+            moved.ravel()[changed] = True
         at = np.flatnonzero(border_box)
         if not len(at):
             break
-        sure = np.where(border_box, np.uint8(_UNSURE), box)
+        sure = flat.copy()
+        sure[at] = _UNSURE
         ref = at + steps                      # (references, border pixels)
-        ref_labels = sure.ravel().take(ref)
-        # A reference that is not sure (or is padding) gets a red channel far out of range,
-        # so any sure reference is nearer.
-        far_red = np.where(sure == _UNSURE, np.float32(_FAR), red).ravel()
-        own = [plane.take(at) for plane in planes]
-        dist = np.zeros(ref.shape, np.float32)
-        for ref_plane, own_plane in zip((far_red, *planes[1:]), own, strict=True):
-            diff = ref_plane.take(ref)
-            diff -= own_plane
-            diff *= diff
-            dist += diff
+        if k:
+            # A pixel decided in the last pass whose references kept their labels and
+            # sureness would be decided the same again: it keeps its label.
+            redo = moved.ravel().take(ref).any(axis=0)
+            redo |= ~was_border.ravel().take(at)
+            at, ref = at[redo], ref.compress(redo, axis=1)
+            if not len(at):   # then no later pass changes anything either
+                break
+        ref_labels = sure.take(ref)
+        own = _gather(colours, at)
+        diff = _gather(colours, ref)
+        diff -= own
+        diff *= diff
+        dist = diff[..., 0] + diff[..., 1]
+        dist += diff[..., 2]
         # Non-negative float32 values order like their int32 bit patterns: put the label in
         # the lowest 8 mantissa bits, and one min over the references gives the nearest
-        # reference's label (255 = no sure reference).
+        # reference's label; a reference that is not sure (or is padding) gets the largest
+        # key, label 255.
         key = dist.view(np.int32)
         key &= ~0xFF
-        key |= ref_labels
+        key |= cv2.LUT(ref_labels, _KEY_LABEL)
         label_a = (key.min(axis=0) & 0xFF).astype(np.uint8)
         current = flat[at]
         new = np.where(label_a == _UNSURE, current, label_a)
@@ -185,21 +207,21 @@ def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
             columns = np.arange(len(check))
             has_b = (others[second, columns] & 0xFF) != _UNSURE
             second = np.where(has_b, second, nearest)   # no other label: b = a
-            ref_a = ref[nearest, check]
-            ref_b = ref[second, check]
+            a = _gather(colours, ref[nearest, check])
+            span = _gather(colours, ref[second, check]) - a
+            rel = own[check] - a
             # squared distance of c from the segment a-b, and the segment's squared length
             length2, along, off2 = (np.zeros(len(check), np.float32) for _ in range(3))
-            for plane, own_plane in zip(planes, own, strict=True):
-                a = plane.take(ref_a)
-                span = plane.take(ref_b) - a
-                rel = own_plane[check] - a
-                length2 += span * span
-                along += rel * span
-                off2 += rel * rel
+            for channel in range(3):
+                span_c, rel_c = span[:, channel], rel[:, channel]
+                length2 += span_c * span_c
+                along += rel_c * span_c
+                off2 += rel_c * rel_c
             t = np.clip(along / np.maximum(length2, 1e-6), 0.0, 1.0)
             off2 -= t * (2.0 * along - t * length2)   # |rel - t span|^2
             not_a_mix = off2 > np.maximum(mix_tolerance ** 2 * length2, min_residual ** 2)
             new[check[not_a_mix]] = current[check[not_a_mix]]
+        changed = at[new != current]
         flat[at] = new
     out = labels.copy()
     out[y0:y1, x0:x1] = inner
@@ -315,8 +337,10 @@ class GloveSegmenter:
         for c in np.flatnonzero(counts[1:] >= min_px) + 1:
             m = cv2.compare(sub, int(c), cv2.CMP_EQ)
             bx, by, bw, bh = cv2.boundingRect(m)
+            # 16-bit component labels (faster) whenever they cannot overflow
+            ltype = cv2.CV_16U if bw * bh < np.iinfo(np.uint16).max else cv2.CV_32S
             n, _, stats, cents = cv2.connectedComponentsWithStats(m[by:by + bh, bx:bx + bw],
-                                                                  connectivity=8)
+                                                                  connectivity=8, ltype=ltype)
             for k in range(1, n):
                 area = int(stats[k, cv2.CC_STAT_AREA])
                 if area < min_px:
