@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from colorglove_ros.launcher import FASTDDS_PROFILE_VARIABLE
+
 TEST_DIR = Path(__file__).resolve().parent
 REPO_DIR = TEST_DIR.parent
 sys.path.insert(0, str(TEST_DIR))
@@ -14,8 +16,11 @@ sys.path.insert(0, str(TEST_DIR))
 
 @pytest.fixture
 def isolated_ros_domain(monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
-    """A ROS domain of this test run's own, on loopback only; returns the environment to pass on."""
+    """A ROS domain of this test run's own, on loopback only, with the Fast DDS profile the
+    launcher uses (shared-memory segments large enough for 640x480 images, without which
+    best-effort images are lost between processes); returns the environment to pass on."""
     domain = str(100 + os.getpid() % 100)
     monkeypatch.setenv('ROS_DOMAIN_ID', domain)
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    monkeypatch.setenv(FASTDDS_PROFILE_VARIABLE, str(REPO_DIR / 'config' / 'fastdds_profile.xml'))
     return dict(os.environ)
