@@ -38,6 +38,7 @@ __all__ = [
     'segmenter_observer', 'make_observer', 'FramePrior', 'LookupStage', 'TrackedSequence',
     'SequenceEvaluator', 'same_camera', 'jitter_runs_mm', 'contiguous_runs', 'summarize',
     'training_sequences', 'find_database', 'open_database', 'TemporalPrior',
+    'EvaluationSequence',
 ]
 
 LABEL_SOURCES = ('truth', 'segmented')
@@ -68,6 +69,36 @@ def train_seeds(count: int) -> list[int]:
     if not 0 < count <= SEED_SPAN:
         raise EvaluationError(f'need 1..{SEED_SPAN} sequences, got {count}')
     return [TRAIN_SEED_BASE + k for k in range(count)]
+
+
+@dataclass(frozen=True)
+class EvaluationSequence:
+    """One synthetic evaluation sequence: its true poses and imaging conditions (fixed per
+    sequence, from its seed). Frame ``i`` renders with its own noise seed, so any subset of
+    frames renders exactly as in the full run."""
+
+    seed: int
+    poses: np.ndarray           # (N, 26) true poses in the primary camera's frame
+    conditions: Any             # core.synth imaging conditions
+    synthesizer: Any
+
+    @classmethod
+    def make(cls, seed: int, num_frames: int, camera: PinholeCamera, synthesizer: Any,
+             split: str = 'test', fps: float = 30.0) -> EvaluationSequence:
+        """Sequence ``seed`` (``core.synth.generate_sequence``) with ``split`` conditions."""
+        from .synth import generate_sequence, sample_conditions
+
+        poses = generate_sequence(seed, num_frames, fps, camera=camera, model=synthesizer.model)
+        return cls(seed, poses, sample_conditions(np.random.default_rng([seed, 7]), split),
+                   synthesizer)
+
+    def render(self, index: int, cameras: Sequence[PinholeCamera]) -> list[Any]:
+        """Frame ``index`` as every camera sees it (primary first)."""
+        from .synth import render_frames_multi
+
+        rng = np.random.default_rng([self.seed, index, 11])
+        return render_frames_multi(self.poses[index], cameras, rng, self.conditions,
+                                   synthesizer=self.synthesizer)
 
 
 # ---------------------------------------------------------------------------- observations
@@ -243,13 +274,11 @@ class SequenceEvaluator:
             ) -> dict[tuple[str, str], TrackedSequence]:
         """Track sequence ``seed`` (``generate_sequence``; conditions from ``split``, fixed per
         sequence; noise per frame) with every (rig, mode)."""
-        from .synth import generate_sequence, render_frames_multi, sample_conditions
-
         if num_frames < 1:
             raise EvaluationError(f'need at least one frame, got {num_frames}')
-        Q = generate_sequence(seed, num_frames, self.fps, camera=self.cameras[0],
-                              model=self.synth.model)
-        cond = sample_conditions(np.random.default_rng([seed, 7]), split)
+        sequence = EvaluationSequence.make(seed, num_frames, self.cameras[0], self.synth,
+                                           split, self.fps)
+        Q = sequence.poses
         n = len(Q)
         out = {key: TrackedSequence(seed, key[0], key[1], Q.copy(),
                                     np.full((n, NUM_DOFS), np.nan), np.zeros(n, bool),
@@ -260,8 +289,7 @@ class SequenceEvaluator:
         for tr in self.trackers.values():
             tr.reset()
         for i in range(n):
-            rng = np.random.default_rng([seed, i, 11])
-            frames = render_frames_multi(Q[i], self.cameras, rng, cond, synthesizer=self.synth)
+            frames = sequence.render(i, self.cameras)
             obs, tiny = [], None
             for k, fr in enumerate(frames):
                 o, t = self.observer(fr, k == 0)

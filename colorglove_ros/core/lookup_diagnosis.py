@@ -9,6 +9,7 @@ import numpy as np
 
 from .camera import PinholeCamera
 from .distance import QueryDistance
+from .evaluation import EvaluationSequence
 from .hand_model import HandModel
 from .metrics import fingertip_errors_mm, joint_angle_error_deg, translation_errors_mm
 from .search import PoseLookup
@@ -49,17 +50,12 @@ def render_query_frames(seeds: Sequence[int], num_frames: int, step: int,
     """Every ``step``-th frame of sequences ``seeds`` rendered as ``SequenceEvaluator.run``
     renders them (same poses, conditions and per-frame noise seeds), cropped by ``observer``
     (``evaluation.make_observer``); frames where no hand is found are left out."""
-    from .synth import generate_sequence, render_frames_multi, sample_conditions
-
     tiny, crop, q_true, source = [], [], [], []
     for seed in seeds:
-        poses = generate_sequence(seed, num_frames, camera=camera, model=synthesizer.model)
-        cond = sample_conditions(np.random.default_rng([seed, 7]), split)
+        sequence = EvaluationSequence.make(seed, num_frames, camera, synthesizer, split)
+        poses = sequence.poses
         for i in range(0, num_frames, step):
-            rng = np.random.default_rng([seed, i, 11])
-            frame = render_frames_multi(poses[i], (camera,), rng, cond,
-                                        synthesizer=synthesizer)[0]
-            obs, tc = observer(frame, True)
+            obs, tc = observer(sequence.render(i, (camera,))[0], True)
             if not obs.hand_found or tc is None or not np.any(tc.labels):
                 continue
             t = tc.transform
