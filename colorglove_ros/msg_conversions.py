@@ -121,6 +121,8 @@ def candidates_msg(observation: HandObservation, result: LookupResult | None,
         for index, pose, distance, weight in zip(result.indices, result.poses, result.distances,
                                                  result.weights, strict=True)]
     msg.blended_pose = [float(v) for v in result.blended]
+    if result.finger_std is not None:
+        msg.finger_std = [float(v) for v in result.finger_std]
     c = result.constraints
     msg.constraints = [
         PatchConstraint(patch_id=int(p), color_label=int(col), vertex_index=int(v),
@@ -140,7 +142,13 @@ def pose_prior_from_candidates(msg: HandPoseCandidates) -> PosePrior:
     constraints = msg.constraints
     if not all(np.isfinite([c.tiny_x, c.tiny_y]).all() for c in constraints):
         raise ValueError('constraint centroids must be finite')
+    finger_std = None
+    if len(msg.finger_std):
+        finger_std = np.asarray(msg.finger_std, dtype=float)
+        if finger_std.shape != (len(DOF_NAMES) - 6,) or not np.all(np.isfinite(finger_std)):
+            raise ValueError('finger_std must be empty or hold 20 finite values')
     return PosePrior(
+        finger_std=finger_std,
         q_blend=np.asarray(msg.blended_pose, dtype=float),
         constraints=EntryConstraints(
             patch_id=np.array([c.patch_id for c in constraints], dtype=np.int64),

@@ -176,15 +176,16 @@ class LookupStage:
         self.lookup = lookup
         self.camera = camera
 
-    def __call__(self, tiny: TinyCrop | None) -> FramePrior:
-        """Look up a tiny crop (None = no hand)."""
+    def __call__(self, tiny: TinyCrop | None, blobs: Any = None) -> FramePrior:
+        """Look up a tiny crop (None = no hand); with the same image's ``blobs`` the
+        fingers are blended per finger (``PoseLookup.lookup``)."""
         if tiny is None:
             return FramePrior(None, None, 0.0, 'no crop')
         from .search import SearchError
 
         t0 = time.perf_counter()
         try:
-            res = self.lookup.lookup(tiny.labels, tiny.transform, self.camera)
+            res = self.lookup.lookup(tiny.labels, tiny.transform, self.camera, blobs)
         except SearchError as exc:
             return FramePrior(None, tiny, 1e3 * (time.perf_counter() - t0), str(exc))
         return FramePrior(res, tiny, 1e3 * (time.perf_counter() - t0))
@@ -230,14 +231,16 @@ class SequenceEvaluator:
     """Renders seeded synthetic sequences once with every camera of the largest rig, runs
     the labels -> crop -> lookup stage once per frame on the primary camera, and feeds one
     :class:`HandTracker` per (rig, mode), optionally with the lookup's neighbours reweighted
-    by that tracker's previous output (``temporal``). Every rig must be a prefix of the largest one
+    by that tracker's previous output (``temporal``). With ``finger_evidence`` (default) the
+    lookup also gets the primary camera's blobs and blends each finger by its own patch
+    evidence (``core.finger_evidence``). Every rig must be a prefix of the largest one
     (same primary camera), so all rows of a table see identical frames and lookups."""
 
     def __init__(self, lookup: Any, rigs: Mapping[str, Sequence[PinholeCamera]],
                  modes: Sequence[str] = TRACKER_MODES, ik_config: IKConfig | None = None,
                  observer: Observer | None = None, synthesizer: Any = None,
                  fps: float = 30.0, keep_results: bool = False,
-                 temporal: TemporalPrior | None = None) -> None:
+                 temporal: TemporalPrior | None = None, finger_evidence: bool = True) -> None:
         from .synth import Synthesizer
 
         if not rigs:
@@ -259,6 +262,7 @@ class SequenceEvaluator:
         self.fps = float(fps)
         self.keep_results = keep_results
         self.temporal = temporal
+        self.finger_evidence = bool(finger_evidence)
         self.stage = LookupStage(lookup, self.cameras[0])
         self.trackers = {(r, m): HandTracker(self.synth.model, self.synth.mesh, cams,
                                              self.config.with_mode(m), glove=self.synth.glove)
@@ -295,7 +299,8 @@ class SequenceEvaluator:
                 o, t = self.observer(fr, k == 0)
                 obs.append(o)
                 tiny = t if k == 0 else tiny
-            prior = self.stage(tiny if obs[0].hand_found else None)
+            prior = self.stage(tiny if obs[0].hand_found else None,
+                               obs[0].blobs if self.finger_evidence else None)
             for (rig, mode), tracker in self.trackers.items():
                 c0 = time.thread_time()
                 lookup = prior.result

@@ -295,11 +295,12 @@ class PosePrior:
 
     q_blend: np.ndarray
     constraints: EntryConstraints
+    finger_std: np.ndarray | None = None    # (20,) spread of the neighbours' fingers (rad)
 
     @classmethod
     def from_lookup(cls, result: Any) -> PosePrior:
         """From a ``core.search.LookupResult`` (``blended`` and ``constraints`` with
-        ``patch_ids, colors, vertices, tiny_xy, pixel_counts``)."""
+        ``patch_ids, colors, vertices, tiny_xy, pixel_counts``; ``finger_std`` if any)."""
         try:
             c = result.constraints
             cons = EntryConstraints(c.patch_ids, c.colors, c.vertices, c.tiny_xy,
@@ -309,7 +310,8 @@ class PosePrior:
             raise IKError(f'not a lookup result: {exc}') from exc
         if q_blend.shape != (NUM_DOFS,):
             raise IKError(f'blended pose must have shape (26,), got {q_blend.shape}')
-        return cls(q_blend, cons)
+        spread = getattr(result, 'finger_std', None)
+        return cls(q_blend, cons, None if spread is None else np.asarray(spread, float))
 
 
 @dataclass(frozen=True)
@@ -725,6 +727,8 @@ class IKConfig:
     min_depth_m: float = 0.05
     constraint_model: str = 'patch'
     glove_seed: int = 0
+    finger_spread_gain: float = 0.0
+    finger_spread_floor_rad: float = 0.13
     covariances: IKCovariances = field(default_factory=default_covariances)
 
     def with_mode(self, mode: str) -> IKConfig:
@@ -737,6 +741,23 @@ class IKConfig:
         if self.constraint_model not in CONSTRAINT_MODELS:
             raise IKConfigError(f'constraint_model must be one of {CONSTRAINT_MODELS}, got '
                                 f'{self.constraint_model!r}')
+        if not (self.finger_spread_gain >= 0 and self.finger_spread_floor_rad > 0):
+            raise IKConfigError('finger_spread_gain must be >= 0 and finger_spread_floor_rad > 0')
+
+    def prior_covariances(self, finger_std: np.ndarray | None) -> IKCovariances:
+        """The covariances for one frame: with ``finger_spread_gain`` > 0 and the lookup's
+        per-finger spread (20,), each finger DOF's Q variance is max(floor^2, gain *
+        spread^2), so the prior holds a finger the neighbours agree on and lets the image
+        move one they disagree on; otherwise the configured Q."""
+        if finger_std is None or self.finger_spread_gain <= 0:
+            return self.covariances
+        spread = np.asarray(finger_std, float).reshape(-1)
+        if spread.shape != (NUM_DOFS - 6,) or not np.all(np.isfinite(spread)):
+            raise IKError(f'finger spread must be 20 finite values, got shape {spread.shape}')
+        q_var = self.covariances.q_var.copy()
+        q_var[6:] = np.maximum(self.finger_spread_floor_rad ** 2,
+                               self.finger_spread_gain * spread ** 2)
+        return replace(self.covariances, q_var=q_var)
 
 
 _CONFIG_FIELDS = {
@@ -748,6 +769,7 @@ _CONFIG_FIELDS = {
     'extra_shift_max_px': float, 'extra_inlier_px': float, 'extra_rematch': bool,
     'outlier_px': float,
     'max_gap_s': float, 'min_depth_m': float, 'constraint_model': str, 'glove_seed': int,
+    'finger_spread_gain': float, 'finger_spread_floor_rad': float,
 }
 
 
@@ -1316,9 +1338,10 @@ class HandTracker:
         return self._with_patch_points(out, q) if patch_points else out
 
     def _solve(self, corr: Correspondences, q_init: np.ndarray, q_b: np.ndarray,
-               q_prev: np.ndarray | None, iterations: int) -> IKSolution:
+               q_prev: np.ndarray | None, iterations: int,
+               covariances: IKCovariances) -> IKSolution:
         cfg = self.config
-        return solve_ik(self.kin, self.cameras, corr, q_init, q_b, cfg.covariances, q_prev,
+        return solve_ik(self.kin, self.cameras, corr, q_init, q_b, covariances, q_prev,
                         iterations, cfg.lambda_init, cfg.step_tol, cfg.min_depth_m,
                         cfg.cost_tol)
 
@@ -1369,6 +1392,7 @@ class HandTracker:
             except IKError:
                 q_b = q_blend
         q_prev = self._q_prev if (cfg.enable_smoothing and self._q_prev is not None) else None
+        cov = cfg.prior_covariances(prior.finger_std)
         iterations = 0
         q = q_b
         corr = corr0
@@ -1376,7 +1400,7 @@ class HandTracker:
         err: np.ndarray | None = None
         if cfg.enable_ik and (len(corr0) >= cfg.min_constraints or multi):
             if not multi:
-                sol = self._solve(corr0, q_b, q_b, q_prev, cfg.max_iterations)
+                sol = self._solve(corr0, q_b, q_b, q_prev, cfg.max_iterations, cov)
                 q, iterations, err = sol.q, sol.iterations, sol.errors_px
             else:
                 # predict the other cameras' patches from the last pose while tracking, else
@@ -1387,13 +1411,13 @@ class HandTracker:
                     corr = tracked
                 else:
                     if len(corr0) >= cfg.min_constraints:
-                        sol = self._solve(corr0, q_b, q_b, q_prev, cfg.refine_iterations)
+                        sol = self._solve(corr0, q_b, q_b, q_prev, cfg.refine_iterations, cov)
                         q_start = q = sol.q
                         iterations = sol.iterations
                     corr = Correspondences.concat(
                         [corr0, self._match_extras(prior, observations, q_start)])
                 if len(corr) >= cfg.min_constraints:
-                    sol = self._solve(corr, q_start, q_b, q_prev, cfg.multi_camera_iterations)
+                    sol = self._solve(corr, q_start, q_b, q_prev, cfg.multi_camera_iterations, cov)
                     q, err = sol.q, sol.errors_px
                     iterations += sol.iterations
                     if cfg.extra_rematch and len(corr) > len(corr0):
@@ -1401,7 +1425,7 @@ class HandTracker:
                             [corr0, self._match_extras(prior, observations, q)])
                         if not again.same_as(corr) and len(again) >= cfg.min_constraints:
                             corr = again
-                            sol = self._solve(corr, q, q_b, q_prev, cfg.refine_iterations)
+                            sol = self._solve(corr, q, q_b, q_prev, cfg.refine_iterations, cov)
                             q, err = sol.q, sol.errors_px
                             iterations += sol.iterations
             if cfg.outlier_px > 0 and err is not None:
@@ -1409,7 +1433,7 @@ class HandTracker:
                 if bad.any() and int((~bad).sum()) >= cfg.min_constraints:
                     rejected = int(bad.sum())
                     corr = corr.select(~bad)
-                    sol = self._solve(corr, q, q_b, q_prev, cfg.refine_iterations)
+                    sol = self._solve(corr, q, q_b, q_prev, cfg.refine_iterations, cov)
                     q, err = sol.q, sol.errors_px
                     iterations += sol.iterations
         elif multi:

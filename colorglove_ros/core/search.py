@@ -12,6 +12,12 @@ from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.codes import HAMMING_BLOCK, QueryEncoder, hamming_distances
 from colorglove_ros.core.database import PoseDatabase
 from colorglove_ros.core.distance import ABSENT_PENALTY, DT_SCALE, QueryDistance
+from colorglove_ros.core.finger_evidence import (
+    FingerEvidenceConfig,
+    finger_blend,
+    finger_scores,
+    patch_digits,
+)
 
 __all__ = ['SearchError', 'ProjectionConstraints', 'LookupResult', 'PoseLookup',
            'top_k_with_ties', 'blend_weights', 'blend_poses', 'estimate_global_pose']
@@ -53,6 +59,9 @@ class LookupResult:
     constraints: ProjectionConstraints
     num_candidates: int         # entries re-ranked (top by Hamming, ties kept)
     timings_ms: dict[str, float] = field(default_factory=dict)
+    # (20,) weighted spread (rad) of each finger DOF over the neighbours when the fingers
+    # were blended per finger from the observed blobs (core.finger_evidence); else None
+    finger_std: np.ndarray | None = None
 
 
 def top_k_with_ties(values: np.ndarray, k: int) -> np.ndarray:
@@ -224,7 +233,9 @@ class PoseLookup:
     caller (same results)."""
 
     def __init__(self, database: PoseDatabase, num_candidates: int = 300,
-                 num_blend: int = 10, threads: int = 2) -> None:
+                 num_blend: int = 10, threads: int = 2,
+                 finger_evidence: FingerEvidenceConfig | None = None,
+                 vertex_link: np.ndarray | None = None) -> None:
         if num_candidates < 1 or num_blend < 1:
             raise SearchError('num_candidates and num_blend must be positive')
         if threads not in (1, 2):
@@ -234,6 +245,9 @@ class PoseLookup:
         self.db = database
         self.num_candidates = int(num_candidates)
         self.num_blend = int(num_blend)
+        self.finger_evidence = finger_evidence or FingerEvidenceConfig()
+        self._vertex_link = None if vertex_link is None else np.asarray(vertex_link)
+        self._patch_digit: np.ndarray | None = None      # built on first use (needs the mesh)
         n = len(database)
         self._columns = np.ascontiguousarray(database.codes)
         # Hamming distances fit a byte up to 255 bits: uint8 accumulation halves the traffic.
@@ -349,9 +363,16 @@ class PoseLookup:
         return 0.5 * (d_qc + d_cq)
 
     def lookup(self, tiny_labels: np.ndarray, crop_transform: object,
-               camera: PinholeCamera) -> LookupResult:
+               camera: PinholeCamera, blobs: object = None) -> LookupResult:
         """Look up a (40, 40) label image cropped from ``camera``'s image with
-        ``crop_transform`` (``CropTransform`` or (scale, offset_x, offset_y))."""
+        ``crop_transform`` (``CropTransform`` or (scale, offset_x, offset_y)).
+
+        With ``blobs`` (the same image's patch blobs: ``color``, ``centroid_px`` in full-image
+        pixels, ``pixel_count``, as ``core.ik.Blobs``) each finger of the blend is weighted by
+        how well the nearest ``finger_evidence.num_neighbours`` entries' patches on that finger
+        match the blobs (:mod:`core.finger_evidence`) and the result carries the fingers'
+        spread (``finger_std``); without, every DOF is blended with the image weights (the
+        paper)."""
         t0 = time.perf_counter()
         crop = _crop_tuple(crop_transform)
         try:
@@ -365,22 +386,62 @@ class PoseLookup:
         cand = top_k_with_ties(ham, self.num_candidates)
         t2 = time.perf_counter()
         dist = self.rerank(query, cand)
-        k = min(self.num_blend, len(cand))
-        near = np.argpartition(dist, k - 1)[:k] if k < len(cand) else np.arange(len(cand))
+        wide = min(max(self.num_blend, self.finger_evidence.num_neighbours
+                       if blobs is not None else 0), len(cand))
+        near = np.argpartition(dist, wide - 1)[:wide] if wide < len(cand) else np.arange(len(cand))
         near = near[np.lexsort((cand[near], dist[near]))]
-        idx, d = cand[near], dist[near]
+        k = min(self.num_blend, len(cand))
+        idx, d = cand[near[:k]], dist[near[:k]]
         t3 = time.perf_counter()
         weights = blend_weights(d)
         poses = self._a['poses'][idx].astype(np.float64)
         terms = self._place_table[idx]
         poses[:, 0:3] = _place_wrists(terms, self.db.render_camera, crop, camera)
         blended = _blend(poses, terms[:, 3:7], weights)
+        finger_std = None
+        if blobs is not None:
+            blended[6:], finger_std = self._finger_blend(cand[near], crop, blobs)
         constraints = self._constraints(int(idx[0]), crop)
         t4 = time.perf_counter()
         timings = {'encode_ms': 1e3 * (t1 - t0), 'hamming_ms': 1e3 * (t2 - t1),
                    'rerank_ms': 1e3 * (t3 - t2), 'blend_ms': 1e3 * (t4 - t3),
                    'total_ms': 1e3 * (t4 - t0)}
-        return LookupResult(idx, d, weights, poses, blended, constraints, len(cand), timings)
+        return LookupResult(idx, d, weights, poses, blended, constraints, len(cand), timings,
+                            finger_std)
+
+    def _finger_blend(self, entries: np.ndarray, crop: tuple[float, float, float],
+                      blobs: object) -> tuple[np.ndarray, np.ndarray]:
+        """Per-finger blend (20,) and spread (20,) of ``entries`` against full-image
+        ``blobs`` (:mod:`core.finger_evidence`)."""
+        try:
+            color = np.asarray(blobs.color).reshape(-1)
+            xy = np.asarray(blobs.centroid_px, np.float64).reshape(-1, 2)
+            pixels = np.asarray(blobs.pixel_count, np.float64).reshape(-1)
+        except (AttributeError, ValueError) as exc:
+            raise SearchError(f'blobs need color, centroid_px (B, 2) and pixel_count: {exc}'
+                              ) from exc
+        if not len(color) == len(xy) == len(pixels):
+            raise SearchError('blob colour, centroid and pixel-count arrays differ in length')
+        scale, ox, oy = crop
+        scores = finger_scores(self._a['patch_xy'][entries], self._a['patch_pixels'][entries],
+                               self.patch_digit_table()[entries], self._a['patch_color'], color,
+                               (xy - (ox, oy)) / scale, pixels / scale ** 2,
+                               self.finger_evidence)
+        return finger_blend(self._a['poses'][entries], scores, self.finger_evidence)
+
+    def patch_digit_table(self) -> np.ndarray:
+        """(N, P) digit of each entry's visible patches (built once, from the standard mesh
+        of the database's hand length unless a vertex -> link table was given)."""
+        if self._patch_digit is None:
+            link = self._vertex_link
+            if link is None:
+                from colorglove_ros.core.hand_mesh import build_hand_mesh
+                from colorglove_ros.core.hand_model import HandModel
+
+                length = float(self.db.meta.get('build', {}).get('hand_length_m', 0.19))
+                link = build_hand_mesh(HandModel(length)).vertex_link
+            self._patch_digit = patch_digits(self._a['patch_vertex'], link)
+        return self._patch_digit
 
     @property
     def anchor_local(self) -> np.ndarray | None:

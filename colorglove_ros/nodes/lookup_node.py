@@ -12,6 +12,7 @@ from colorglove_ros.core.camera import CalibrationError, load_calibration
 from colorglove_ros.core.database import DatabaseError, load_database, read_database_config
 from colorglove_ros.core.search import PoseLookup, SearchError
 from colorglove_ros.msg_conversions import (
+    blobs_from_observation,
     candidates_msg,
     crop_from_observation,
     tiny_labels_from_observation,
@@ -40,14 +41,19 @@ class LookupNode(Node):
         num_candidates = declare(self, 'num_candidates', 300,
                                  'entries re-ranked with the exact distance', 1, 100000)
         num_neighbors = declare(self, 'num_neighbors', 10, 'nearest entries blended', 1, 300)
+        self.finger_evidence = declare(
+            self, 'finger_evidence', True, 'blend each finger from the neighbours whose '
+            'patches on it match the observed blobs (false: one weight per entry, the paper)')
         reject_parameter_changes(self, {'database_config', 'database_path', 'calibration_file',
-                                        'num_candidates', 'num_neighbors'})
+                                        'num_candidates', 'num_neighbors', 'finger_evidence'})
         try:
             path = str(resolve_path(database_path) if database_path
                        else read_database_config(database_config)[1])
             self.camera = load_calibration(resolve_path(calibration_file)).primary
             started = time.perf_counter()
             self.lookup = PoseLookup(load_database(path), num_candidates, num_neighbors)
+            if self.finger_evidence:
+                self.lookup.patch_digit_table()      # built now, not on the first frame
         except (DatabaseError, CalibrationError) as exc:
             raise StartupError(f'lookup_node cannot start: {exc}') from exc
         self.get_logger().info(f'loaded {len(self.lookup.db)} database entries from {path} '
@@ -63,8 +69,9 @@ class LookupNode(Node):
             self.publisher.publish(candidates_msg(observation, None))
             return
         try:
+            blobs = blobs_from_observation(observation) if self.finger_evidence else None
             result = self.lookup.lookup(tiny_labels_from_observation(observation),
-                                        crop_from_observation(observation), self.camera)
+                                        crop_from_observation(observation), self.camera, blobs)
         except (SearchError, ValueError) as exc:
             self.get_logger().warn(f'lookup failed: {exc}', throttle_duration_sec=1.0)
             self.publisher.publish(candidates_msg(observation, None, status=f'lookup: {exc}'))

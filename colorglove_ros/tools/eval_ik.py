@@ -173,6 +173,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--temporal-rotation-weight', type=float, default=1.0,
                         help='weight of the squared wrist rotation angle in that distance '
                         '(0: finger joints only)')
+    parser.add_argument('--no-finger-evidence', action='store_true', help='blend every DOF '
+                        "with the neighbours' image weights (the paper) instead of each "
+                        'finger by its patch evidence (core.finger_evidence)')
     parser.add_argument('--plot', default=str(PACKAGE_ROOT / 'data' / 'eval_ik' /
                                               'eval_ik.png'), help="PNG path ('' = none)")
     parser.add_argument('--json', help='write the figures to this JSON file')
@@ -211,7 +214,8 @@ def main(argv: list[str] | None = None) -> int:
         evaluator = SequenceEvaluator(
             PoseLookup(db, num_blend=args.num_blend),
             {'1 camera': mono.cameras, '2 cameras': stereo.cameras},
-            args.modes, config, observer, fps=args.fps, temporal=temporal)
+            args.modes, config, observer, fps=args.fps, temporal=temporal,
+            finger_evidence=not args.no_finger_evidence)
         seeds = eval_seeds(args.sequences, args.seed_offset)
     except (EvaluationError, DatabaseError, IKConfigError, CalibrationError,
             ColorCalibrationError, SearchError) as exc:
@@ -234,7 +238,8 @@ def main(argv: list[str] | None = None) -> int:
     title = (f'IK against ground truth: {len(seeds)} sequences x {args.frames} frames '
              f'(seeds {seeds[0]}..{seeds[-1]}), labels={args.labels}, database {db_path} '
              f'({len(db)} entries), covariances: {config.covariances.source}, '
-             f'{args.num_blend} neighbours, temporal tau: '
+             f'{args.num_blend} neighbours, finger evidence: '
+             f'{"off" if args.no_finger_evidence else "on"}, temporal tau: '
              f'{"off" if temporal is None else f"{args.temporal_tau:g} deg"}')
     print_table([{k: r[k] for k in shown} for r in rows], title)
     print(f'(true motion jitter {rows[0]["jitter_truth_mm"]:.3g} mm; fingertip_rel_wrist_mm: '
@@ -257,6 +262,8 @@ def main(argv: list[str] | None = None) -> int:
                 'ik_config': args.ik_config, 'covariances': config.covariances.source,
                 'calibration': args.calibration, 'stereo_calibration': args.stereo_calibration,
                 'fps': args.fps, 'num_blend': args.num_blend,
+                'finger_evidence': not args.no_finger_evidence,
+                'finger_spread_gain': config.finger_spread_gain,
                 'temporal_tau_deg': args.temporal_tau,
                 'temporal_rotation_weight': (args.temporal_rotation_weight
                                              if temporal is not None else None),

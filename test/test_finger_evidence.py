@@ -1,0 +1,176 @@
+"""Tests for the per-finger blend of the lookup's neighbours (core.finger_evidence) and its
+use by the lookup, the IK covariances and the candidates message."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.database import assemble_database
+from colorglove_ros.core.finger_evidence import (
+    PALM_DIGIT,
+    FingerEvidenceConfig,
+    FingerEvidenceError,
+    finger_blend,
+    finger_scores,
+    patch_digits,
+)
+from colorglove_ros.core.ik import IKConfig, IKError, PosePrior
+from colorglove_ros.core.search import PoseLookup
+
+CONFIG = FingerEvidenceConfig()
+
+
+def test_patch_digits_from_vertex_links() -> None:
+    vertex_link = np.array([0, 1, 3, 4, 13, 15])      # palm, thumb x2, index, little x2
+    patch_vertex = np.array([[0, 1, 2, -1], [3, 4, 5, 0]])
+    np.testing.assert_array_equal(patch_digits(patch_vertex, vertex_link),
+                                  [[PALM_DIGIT, 0, 0, -1], [1, 4, 4, PALM_DIGIT]])
+    with pytest.raises(FingerEvidenceError):
+        patch_digits(np.array([[6]]), vertex_link)
+
+
+def _two_entries():
+    """Two entries with four patches: patch 0 on the thumb, 1 on the index, 2 and 3 on the
+    palm. Entry 0 places the thumb patch on its blob, entry 1 the index patch."""
+    digit = np.array([[0, 1, PALM_DIGIT, PALM_DIGIT]] * 2)
+    color = np.array([1, 2, 3, 4])
+    blob_xy = np.array([[5.0, 5.0], [20.0, 10.0], [30.0, 30.0]])
+    xy = np.array([[[5.0, 5.0], [23.0, 10.0], [30.0, 30.0], [0.0, 0.0]],
+                   [[8.0, 5.0], [20.0, 10.0], [30.0, 30.0], [0.0, 0.0]]])
+    pixels = np.full((2, 4), 10.0)
+    return xy, pixels, digit, color, np.array([1, 2, 3]), blob_xy, np.full(3, 10.0)
+
+
+def test_scores_measure_each_finger_on_its_own_patches() -> None:
+    s = finger_scores(*_two_entries(), CONFIG)
+    assert s.shape == (2, 5)
+    assert s[0, 0] == pytest.approx(0.0) and s[0, 1] == pytest.approx(3.0)
+    assert s[1, 0] == pytest.approx(3.0) and s[1, 1] == pytest.approx(0.0)
+    # middle, ring, little: no visible patch -> the cap
+    np.testing.assert_allclose(s[:, 2:], CONFIG.cap_tiny_px)
+
+
+def test_area_mismatch_and_missing_colour_cost() -> None:
+    xy, pixels, digit, color, bcol, bxy, bpix = _two_entries()
+    s0 = finger_scores(xy, pixels, digit, color, bcol, bxy, bpix, CONFIG)
+    bigger = bpix.copy()
+    bigger[0] = 30.0                                   # thumb blob three times the area
+    s1 = finger_scores(xy, pixels, digit, color, bcol, bxy, bigger, CONFIG)
+    assert s1[0, 0] == pytest.approx(min(CONFIG.cap_tiny_px,
+                                         CONFIG.area_weight * abs(np.log(11 / 31))))
+    assert s1[0, 1] == pytest.approx(s0[0, 1])
+    # no blob of the thumb patch's colour: the thumb's residual is the cap
+    s2 = finger_scores(xy, pixels, digit, color, bcol[1:], bxy[1:], bpix[1:], CONFIG)
+    np.testing.assert_allclose(s2[:, 0], CONFIG.cap_tiny_px)
+    # no blobs at all: every finger at the cap
+    empty = finger_scores(xy, pixels, digit, color, np.zeros(0, int), np.zeros((0, 2)),
+                          np.zeros(0), CONFIG)
+    np.testing.assert_allclose(empty, CONFIG.cap_tiny_px)
+
+
+def test_blend_takes_each_finger_from_the_entry_that_explains_it() -> None:
+    poses = np.zeros((2, 26))
+    poses[0, 6:10], poses[1, 6:10] = 0.2, 1.0         # thumb
+    poses[0, 10:14], poses[1, 10:14] = 0.9, 0.1       # index
+    poses[:, 14:] = 0.5
+    fingers, spread = finger_blend(poses, finger_scores(*_two_entries(), CONFIG), CONFIG)
+    assert fingers.shape == spread.shape == (20,)
+    np.testing.assert_allclose(fingers[0:4], 0.2, atol=1e-3)      # thumb from entry 0
+    np.testing.assert_allclose(fingers[4:8], 0.1, atol=1e-3)      # index from entry 1
+    np.testing.assert_allclose(fingers[8:], 0.5)
+    assert np.all(spread[:8] < 0.01) and np.allclose(spread[8:], 0.0)
+    # equal evidence: plain mean and the full spread
+    f, sd = finger_blend(poses, np.zeros((2, 5)), CONFIG)
+    np.testing.assert_allclose(f[0:4], 0.6)
+    np.testing.assert_allclose(sd[0:4], 0.4)
+    with pytest.raises(FingerEvidenceError):
+        finger_blend(poses, np.zeros((3, 5)), CONFIG)
+
+
+def test_prior_covariances_follow_the_spread() -> None:
+    cfg = IKConfig(finger_spread_gain=1.0, finger_spread_floor_rad=0.1)
+    spread = np.full(20, 0.05)
+    spread[3] = 0.4
+    cov = cfg.prior_covariances(spread)
+    np.testing.assert_allclose(cov.q_var[6:9], 0.01)
+    assert cov.q_var[9] == pytest.approx(0.16)
+    np.testing.assert_array_equal(cov.q_var[:6], cfg.covariances.q_var[:6])
+    off = IKConfig(finger_spread_gain=0.0)
+    np.testing.assert_array_equal(off.prior_covariances(spread).q_var, off.covariances.q_var)
+    np.testing.assert_array_equal(cfg.prior_covariances(None).q_var, cfg.covariances.q_var)
+    with pytest.raises(IKError):
+        cfg.prior_covariances(np.full(19, 0.1))
+
+
+class _Blobs:
+    def __init__(self, color, xy, pixels):
+        self.color, self.centroid_px, self.pixel_count = color, xy, pixels
+
+
+def test_lookup_blends_fingers_from_blobs() -> None:
+    """Two entries with the same image but different fingers and patch centroids: the
+    per-finger blend follows the entry whose thumb patch lies on the observed blob."""
+    rng = np.random.default_rng(3)
+    n = 40
+    tiny = np.zeros((n, 40, 40), np.uint8)
+    for i in range(n):
+        y, x = rng.integers(5, 30, 2)
+        tiny[i, y:y + 8, x:x + 8] = 1 + i % 10
+    tiny[1] = tiny[0]
+    poses = np.zeros((n, 26))
+    poses[:, 2] = 0.5
+    poses[:, 6:] = rng.uniform(0.0, 1.0, (n, 20))
+    patch_vertex = np.full((n, 20), -1, np.int32)
+    patch_vertex[:, 0] = 1                            # vertex 1: on the thumb
+    patch_xy = np.full((n, 20, 2), np.nan, np.float32)
+    patch_xy[:, 0] = [30.0, 30.0]
+    patch_xy[0, 0] = [10.0, 10.0]                     # entry 0: thumb patch at (10, 10)
+    patch_xy[1, 0] = [13.0, 10.0]
+    color = np.arange(20) % 10 + 1
+    db = assemble_database(tiny, poses, np.tile([1.0, 0.0, 0.0], (n, 1)),
+                           {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0,
+                            'cx': 63.5, 'cy': 63.5}, num_bits=32, num_pairs=200,
+                           patch_vertex=patch_vertex, patch_xy=patch_xy,
+                           patch_pixels=np.full((n, 20), 5.0), patch_color=color)
+    lookup = PoseLookup(db, num_candidates=n, num_blend=2, threads=1,
+                        finger_evidence=FingerEvidenceConfig(num_neighbours=2),
+                        vertex_link=np.array([0, 1, 2]))
+    cam = PinholeCamera(640, 480, 600.0, 600.0, 320.0, 240.0)
+    crop = (2.0, 100.0, 50.0)
+    plain = lookup.lookup(tiny[0], crop, cam)
+    assert plain.finger_std is None
+    assert set(plain.indices.tolist()) == {0, 1}
+    blobs = _Blobs(np.array([color[0]]), np.array([[100.0 + 2.0 * 10.0, 50.0 + 2.0 * 10.0]]),
+                   np.array([5.0 * 4.0]))
+    res = lookup.lookup(tiny[0], crop, cam, blobs)
+    np.testing.assert_allclose(res.blended[6:10], poses[0, 6:10], atol=1e-3)
+    # the other fingers have no evidence: the plain mean of both entries
+    np.testing.assert_allclose(res.blended[10:], poses[:2, 10:].mean(axis=0))
+    assert res.finger_std.shape == (20,)
+    np.testing.assert_array_equal(res.blended[:6], plain.blended[:6])
+    prior = PosePrior.from_lookup(res)
+    np.testing.assert_array_equal(prior.finger_std, res.finger_std)
+
+
+def test_candidates_message_carries_the_spread() -> None:
+    from colorglove_msgs.msg import HandObservation
+
+    from colorglove_ros.core.search import LookupResult, ProjectionConstraints
+    from colorglove_ros.msg_conversions import candidates_msg, pose_prior_from_candidates
+
+    cons = ProjectionConstraints(np.array([0]), np.array([1]), np.array([5]),
+                                 np.array([[3.0, 4.0]]), np.array([[10.0, 12.0]]),
+                                 np.array([6.0]))
+    spread = np.linspace(0.01, 0.2, 20)
+    result = LookupResult(np.array([7]), np.array([0.5]), np.array([1.0]), np.zeros((1, 26)),
+                          np.zeros(26), cons, 1, finger_std=spread)
+    msg = candidates_msg(HandObservation(hand_found=True), result)
+    np.testing.assert_allclose(pose_prior_from_candidates(msg).finger_std, spread)
+    plain = candidates_msg(HandObservation(hand_found=True),
+                           LookupResult(np.array([7]), np.array([0.5]), np.array([1.0]),
+                                        np.zeros((1, 26)), np.zeros(26), cons, 1))
+    assert pose_prior_from_candidates(plain).finger_std is None
+    msg.finger_std = [0.1] * 19
+    with pytest.raises(ValueError):
+        pose_prior_from_candidates(msg)
