@@ -191,7 +191,7 @@ class _OracleLookup:
         self.patch_vertices = [np.unique(faces[synth.glove.face_patch == p])
                                for p in range(len(synth.glove.patch_color))]
 
-    def lookup(self, tiny, crop, camera):
+    def lookup(self, tiny, crop, camera, blobs=None):
         q = self.truth
         verts = self.synth.mesh.skin(self.synth.model, q)
         ids = self.frame.patch_ids

@@ -35,6 +35,7 @@ from colorglove_ros.core.hand_model import DOF_NAMES, FINGER_DOF_NAMES
 from colorglove_ros.core.search import PoseLookup
 from colorglove_ros.core.segmentation import load_segmenter
 from colorglove_ros.msg_conversions import (
+    blobs_from_observation,
     crop_from_observation,
     observation_msg,
     tiny_labels_from_observation,
@@ -205,8 +206,10 @@ def test_segmentation_node_no_hand_and_hand_out_of_frame(assets: NodeAssets,
 def test_lookup_node_candidates(assets: NodeAssets, good_observation: HandObservation) -> None:
     lookup = PoseLookup(load_database(assets.database), 40, 10)
     camera = load_calibration(REPO_DIR / 'config' / 'calibration.yaml').primary
+    # the node blends each finger from the observation's blobs (finger_evidence: true)
     expected = lookup.lookup(tiny_labels_from_observation(good_observation),
-                             crop_from_observation(good_observation), camera)
+                             crop_from_observation(good_observation), camera,
+                             blobs_from_observation(good_observation))
     with running(_lookup(assets)) as h:
         out = h.collect(HandPoseCandidates, 'hand/pose_candidates')
         pub = h.publisher(HandObservation, 'hand/observation')
@@ -223,6 +226,8 @@ def test_lookup_node_candidates(assets: NodeAssets, good_observation: HandObserv
     assert [c.database_index for c in msg.candidates] == [int(i) for i in expected.indices]
     np.testing.assert_allclose(msg.blended_pose, expected.blended, atol=1e-9)
     assert len(msg.blended_pose) == 26
+    np.testing.assert_allclose(msg.finger_std, expected.finger_std, atol=1e-12)
+    assert len(msg.finger_std) == 20
     assert len(msg.constraints) > 0
     assert all(1 <= c.color_label <= 10 and 0 <= c.patch_id < 20 for c in msg.constraints)
     assert list(msg.observation.tiny_labels) == list(good_observation.tiny_labels)
