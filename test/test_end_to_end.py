@@ -1,8 +1,10 @@
 """End to end: a synthetic bag replayed through segmentation_node, lookup_node and ik_node as
 separate processes over DDS; at least 95% of the frames give a JointState, the wrist depth error
 against the bag's ground truth is within the IK target (< 25 mm on average) and the fingertip
-error within FINGERTIP_BOUND_MM. The IK issue's fingertip target (15 mm) is not met yet with one
-camera (about 20 mm here): the bound below guards against regressions, it is not the target.
+error within FINGERTIP_BOUND_MM (absolute) and FINGERTIP_REL_WRIST_BOUND_MM (wrist position
+removed). The IK issue's fingertip target (15 mm) is not met yet with one camera on the
+evaluation seeds (colorglove_eval_ik: 22.6 mm absolute, 16.4 mm relative to the wrist): these
+bounds guard against regressions, they are not the target.
 
 The assets are real and built here: the colour calibration from 12 rendered training frames,
 a pose database of E2E_DATABASE_ENTRIES entries (default 20,000; a few minutes on 2 cores) with
@@ -27,7 +29,8 @@ pytestmark = pytest.mark.dds
 E2E_FRAMES = 60
 E2E_SEED = 5          # a held-out sequence seed (the database and calibration use others)
 DATABASE_ENTRIES = int(os.environ.get('E2E_DATABASE_ENTRIES', '20000'))
-FINGERTIP_BOUND_MM = 30.0   # measured 20.1 mm with 20,000 entries; the target is 15 mm
+FINGERTIP_BOUND_MM = 30.0            # measured 24.5 mm with 20,000 entries
+FINGERTIP_REL_WRIST_BOUND_MM = 20.0  # measured 13.4 mm
 DEPTH_TARGET_MM = 25.0
 
 
@@ -68,6 +71,7 @@ def test_bag_through_the_pipeline(assets: dict[str, Path], isolated_ros_domain: 
     assert figures['tracked_fraction'] >= 0.95, figures
     assert figures['frames_with_truth'] >= 0.95 * E2E_FRAMES
     assert figures['fingertip_mm'] < FINGERTIP_BOUND_MM, figures
+    assert figures['fingertip_rel_wrist_mm'] < FINGERTIP_REL_WRIST_BOUND_MM, figures
     assert figures['wrist_depth_mm'] < DEPTH_TARGET_MM, figures
     assert figures['jitter_mm'] < 10.0, figures
     assert 0 < figures['latency_p50_ms'] < 2000.0
