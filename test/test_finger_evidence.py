@@ -109,8 +109,9 @@ class _Blobs:
 
 
 def test_lookup_blends_fingers_from_blobs() -> None:
-    """Two entries with the same image but different fingers and patch centroids: the
-    per-finger blend follows the entry whose thumb patch lies on the observed blob."""
+    """Two entries with the same image but different fingers and patch centroids: entry 0 is
+    the nearest by image (ties go to the lower index), entry 1's thumb patch lies on the
+    observed blob, so the thumb is blended from entry 1 and constrained by its patch."""
     rng = np.random.default_rng(3)
     n = 40
     tiny = np.zeros((n, 40, 40), np.uint8)
@@ -123,10 +124,12 @@ def test_lookup_blends_fingers_from_blobs() -> None:
     poses[:, 6:] = rng.uniform(0.0, 1.0, (n, 20))
     patch_vertex = np.full((n, 20), -1, np.int32)
     patch_vertex[:, 0] = 1                            # vertex 1: on the thumb
+    patch_vertex[:, 1] = 0                            # vertex 0: on the palm
     patch_xy = np.full((n, 20, 2), np.nan, np.float32)
     patch_xy[:, 0] = [30.0, 30.0]
-    patch_xy[0, 0] = [10.0, 10.0]                     # entry 0: thumb patch at (10, 10)
-    patch_xy[1, 0] = [13.0, 10.0]
+    patch_xy[:, 1] = [20.0, 20.0]
+    patch_xy[0, 0] = [10.0, 10.0]
+    patch_xy[1, 0] = [13.0, 10.0]                     # entry 1: thumb patch at (13, 10)
     color = np.arange(20) % 10 + 1
     db = assemble_database(tiny, poses, np.tile([1.0, 0.0, 0.0], (n, 1)),
                            {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0,
@@ -140,15 +143,20 @@ def test_lookup_blends_fingers_from_blobs() -> None:
     crop = (2.0, 100.0, 50.0)
     plain = lookup.lookup(tiny[0], crop, cam)
     assert plain.finger_std is None
-    assert set(plain.indices.tolist()) == {0, 1}
-    blobs = _Blobs(np.array([color[0]]), np.array([[100.0 + 2.0 * 10.0, 50.0 + 2.0 * 10.0]]),
+    assert plain.indices.tolist() == [0, 1]
+    np.testing.assert_allclose(plain.constraints.tiny_xy, [[10.0, 10.0], [20.0, 20.0]])
+    blobs = _Blobs(np.array([color[0]]), np.array([[100.0 + 2.0 * 13.0, 50.0 + 2.0 * 10.0]]),
                    np.array([5.0 * 4.0]))
     res = lookup.lookup(tiny[0], crop, cam, blobs)
-    np.testing.assert_allclose(res.blended[6:10], poses[0, 6:10], atol=1e-3)
+    np.testing.assert_allclose(res.blended[6:10], poses[1, 6:10], atol=1e-3)
     # the other fingers have no evidence: the plain mean of both entries
     np.testing.assert_allclose(res.blended[10:], poses[:2, 10:].mean(axis=0))
     assert res.finger_std.shape == (20,)
     np.testing.assert_array_equal(res.blended[:6], plain.blended[:6])
+    # the thumb patch's constraint comes from entry 1, the palm patch from the nearest entry
+    np.testing.assert_array_equal(res.constraints.patch_ids, [0, 1])
+    np.testing.assert_allclose(res.constraints.tiny_xy, [[13.0, 10.0], [20.0, 20.0]])
+    np.testing.assert_allclose(res.constraints.full_xy[0], [126.0, 70.0])
     prior = PosePrior.from_lookup(res)
     np.testing.assert_array_equal(prior.finger_std, res.finger_std)
 

@@ -398,10 +398,10 @@ class PoseLookup:
         terms = self._place_table[idx]
         poses[:, 0:3] = _place_wrists(terms, self.db.render_camera, crop, camera)
         blended = _blend(poses, terms[:, 3:7], weights)
-        finger_std = None
+        finger_std = finger_entries = None
         if blobs is not None:
-            blended[6:], finger_std = self._finger_blend(cand[near], crop, blobs)
-        constraints = self._constraints(int(idx[0]), crop)
+            blended[6:], finger_std, finger_entries = self._finger_blend(cand[near], crop, blobs)
+        constraints = self._constraints(int(idx[0]), crop, finger_entries)
         t4 = time.perf_counter()
         timings = {'encode_ms': 1e3 * (t1 - t0), 'hamming_ms': 1e3 * (t2 - t1),
                    'rerank_ms': 1e3 * (t3 - t2), 'blend_ms': 1e3 * (t4 - t3),
@@ -410,9 +410,10 @@ class PoseLookup:
                             finger_std)
 
     def _finger_blend(self, entries: np.ndarray, crop: tuple[float, float, float],
-                      blobs: object) -> tuple[np.ndarray, np.ndarray]:
+                      blobs: object) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per-finger blend (20,) and spread (20,) of ``entries`` against full-image
-        ``blobs`` (:mod:`core.finger_evidence`)."""
+        ``blobs`` (:mod:`core.finger_evidence`), and the best-scoring entry of each digit
+        (5,), whose patches on that digit become its projection constraints."""
         try:
             color = np.asarray(blobs.color).reshape(-1)
             xy = np.asarray(blobs.centroid_px, np.float64).reshape(-1, 2)
@@ -427,7 +428,8 @@ class PoseLookup:
                                self.patch_digit_table()[entries], self._a['patch_color'], color,
                                (xy - (ox, oy)) / scale, pixels / scale ** 2,
                                self.finger_evidence)
-        return finger_blend(self._a['poses'][entries], scores, self.finger_evidence)
+        fingers, spread = finger_blend(self._a['poses'][entries], scores, self.finger_evidence)
+        return fingers, spread, entries[np.argmin(scores, axis=0)]
 
     def patch_digit_table(self) -> np.ndarray:
         """(N, P) digit of each entry's visible patches (built once, from the standard mesh
@@ -459,12 +461,21 @@ class PoseLookup:
                                     _crop_tuple(crop_transform), camera)
         return out
 
-    def _constraints(self, entry: int, crop: tuple[float, float, float]
-                     ) -> ProjectionConstraints:
-        vis = np.flatnonzero(self._a['patch_vertex'][entry] >= 0)
-        tiny_xy = self._a['patch_xy'][entry, vis].astype(np.float64)
+    def _constraints(self, entry: int, crop: tuple[float, float, float],
+                     finger_entries: np.ndarray | None = None) -> ProjectionConstraints:
+        """Projection constraints of ``entry``'s visible patches; with ``finger_entries``
+        (5,), the patches on digit g are taken from entry ``finger_entries[g]`` (the entry
+        that best explains that finger) instead."""
+        source = np.where(self._a['patch_vertex'][entry] >= 0, entry, -1)
+        if finger_entries is not None:
+            digits = self.patch_digit_table()
+            for g, e in enumerate(np.asarray(finger_entries, np.int64)):
+                source[digits[e] == g] = e
+        vis = np.flatnonzero(source >= 0)
+        src = source[vis]
+        tiny_xy = self._a['patch_xy'][src, vis].astype(np.float64)
         full_xy = tiny_xy * crop[0] + np.array([crop[1], crop[2]])
         return ProjectionConstraints(vis, self._a['patch_color'][vis],
-                                     self._a['patch_vertex'][entry, vis].astype(np.int64),
+                                     self._a['patch_vertex'][src, vis].astype(np.int64),
                                      tiny_xy, full_xy,
-                                     self._a['patch_pixels'][entry, vis].astype(np.float64))
+                                     self._a['patch_pixels'][src, vis].astype(np.float64))
