@@ -10,6 +10,7 @@ import argparse
 import dataclasses
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -174,23 +175,41 @@ def _pose_errors(q_true: np.ndarray, q_est: np.ndarray) -> dict[str, float]:
         'fingers_rms_deg': float(np.rad2deg(fing).mean())}
 
 
+def _tiny_blobs(tiny: np.ndarray, crop: np.ndarray) -> Any:
+    """Blobs of a tiny label image in full-image pixels of the crop (scale, x0, y0), as the
+    segmentation reports them for the per-finger blend."""
+    from colorglove_ros.core.ik import Blobs, extract_blobs
+
+    b = extract_blobs(tiny, min_pixels=1)
+    scale, x0, y0 = (float(v) for v in crop)
+    return Blobs(b.color, b.centroid_px * scale + (x0, y0), b.pixel_count * scale ** 2)
+
+
 def _timing(lookup: PoseLookup, tiny: np.ndarray, crop: np.ndarray, nn: np.ndarray,
             camera: PinholeCamera, repeats: int, q_true: np.ndarray
             ) -> tuple[dict, float, list[dict]]:
     times: dict[str, list[float]] = {}
     found = 0
-    nearest, blended = [], []
+    nearest, blended, finger_blended = [], [], []
+    blobs = [_tiny_blobs(tiny[i], crop[i]) for i in range(len(tiny))]
     for rep in range(repeats):
         for i in range(len(tiny)):
             res = lookup.lookup(tiny[i], crop[i], camera)
             for key, val in res.timings_ms.items():
                 times.setdefault(key, []).append(val)
             found += int(res.indices[0] == nn[i])
+            # the nodes' lookup: fingers blended from the blobs (core.finger_evidence)
+            res_f = lookup.lookup(tiny[i], crop[i], camera, blobs[i])
+            times.setdefault('total_with_finger_blend_ms', []).append(
+                res_f.timings_ms['total_ms'])
             if rep == 0:
                 nearest.append(res.poses[0])
                 blended.append(res.blended)
+                finger_blended.append(res_f.blended)
     errors = [{'estimate': 'nearest', **_pose_errors(q_true, np.asarray(nearest))},
-              {'estimate': 'blended', **_pose_errors(q_true, np.asarray(blended))}]
+              {'estimate': 'blended', **_pose_errors(q_true, np.asarray(blended))},
+              {'estimate': 'per-finger blend', **_pose_errors(q_true,
+                                                                np.asarray(finger_blended))}]
     row = {}
     for key, vals in times.items():
         v = np.asarray(vals)
