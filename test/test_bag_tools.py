@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from message_samples import sample_observation
 from rclpy.serialization import serialize_message
 from rosbag2_compat import check_jazzy_bag
@@ -16,9 +17,16 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from sensor_msgs.msg import JointState
 
+from colorglove_ros.core.bags import camera_topics, read_sequence_bag
+from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.image_codec import image_to_rgb8
+from colorglove_ros.core.synth import SyntheticSequenceRenderer
+from colorglove_ros.tools import make_bag
 from colorglove_ros.typestore import colorglove_typestore, deserialize_cdr
 
 pytestmark = pytest.mark.dds
+
+STEREO_CALIBRATION = Path(__file__).resolve().parent.parent / 'config' / 'calibration_stereo.yaml'
 
 
 def _write_bag(path: Path) -> dict[str, list[bytes]]:
@@ -82,3 +90,46 @@ def test_missing_bag_is_a_clear_error(tmp_path: Path) -> None:
     result = subprocess.run([sys.executable, '-m', 'colorglove_ros.tools.play_bag',
                              str(tmp_path / 'nope')], capture_output=True, text=True, timeout=30)
     assert result.returncode == 2 and 'no bag at' in result.stderr
+
+
+def _small_calibration(path: Path, num_cameras: int) -> Path:
+    """The first ``num_cameras`` cameras of the stereo rig at 160 x 120 (a quarter scale)."""
+    cameras = []
+    for camera in load_calibration(STEREO_CALIBRATION).cameras[:num_cameras]:
+        entry = camera.to_dict()
+        entry.update(width=160, height=120, fx=camera.fx / 4, fy=camera.fy / 4,
+                     cx=(camera.cx + 0.5) / 4 - 0.5, cy=(camera.cy + 0.5) / 4 - 0.5)
+        cameras.append(entry)
+    path.write_text(yaml.safe_dump({'version': 1, 'hand_length_m': 0.19, 'cameras': cameras}))
+    return path
+
+
+def test_stereo_make_bag_primary_view_is_the_mono_bag(tmp_path: Path) -> None:
+    """A two-camera make_bag writes the same primary images as a one-camera one of the same
+    seed, and the second camera's images at the same stamps as ``render_views`` gives them."""
+    frames, seed = 3, 10
+    mono_calibration = _small_calibration(tmp_path / 'mono.yaml', 1)
+    stereo_calibration = _small_calibration(tmp_path / 'stereo.yaml', 2)
+    for name, calibration in (('mono', mono_calibration), ('stereo', stereo_calibration)):
+        assert make_bag.main(['--seed', str(seed), '--frames', str(frames), '--output',
+                              str(tmp_path / name), '--calibration', str(calibration)]) == 0
+    mono = list(read_sequence_bag(tmp_path / 'mono'))
+    stereo = list(read_sequence_bag(tmp_path / 'stereo'))
+    assert len(mono) == len(stereo) == frames
+    for one, two in zip(mono, stereo, strict=True):
+        assert one.stamp_ns == two.stamp_ns and one.image_rgb.shape == (120, 160, 3)
+        np.testing.assert_array_equal(one.image_rgb, two.image_rgb)
+        np.testing.assert_array_equal(one.pose, two.pose)
+    rig = load_calibration(stereo_calibration).cameras
+    image_topic = camera_topics(rig[1], 1)[0]
+    with AnyReader([tmp_path / 'stereo'], default_typestore=colorglove_typestore()) as reader:
+        second = [(reader.deserialize(raw, conn.msgtype), log_ns) for conn, log_ns, raw
+                  in reader.messages([c for c in reader.connections if c.topic == image_topic])]
+    assert [log_ns for _, log_ns in second] == [frame.stamp_ns for frame in stereo]
+    sequence = SyntheticSequenceRenderer(rig[0], seed=seed, num_frames=frames)
+    for index, (msg, _) in enumerate(second):
+        views = sequence.render_views(index, rig)
+        np.testing.assert_array_equal(image_to_rgb8(msg), views[1].image_rgb)
+        np.testing.assert_array_equal(views[0].image_rgb, stereo[index].image_rgb)
+        assert not np.array_equal(views[1].image_rgb, views[0].image_rgb)
+    sequence.close()

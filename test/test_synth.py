@@ -4,6 +4,7 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -209,6 +210,87 @@ def test_sequence_renderer_is_order_independent() -> None:
     with pytest.raises(SynthError):
         seq.render(6)
     seq.close()
+
+
+STEREO_SEED = 10          # its hand moves fast: > 5 px of blur in both views at frame 1
+
+
+@pytest.fixture(scope='module')
+def stereo_sequence() -> SyntheticSequenceRenderer:
+    cams = load_calibration(CONFIG / 'calibration_stereo.yaml').cameras
+    seq = SyntheticSequenceRenderer(cams[0], seed=STEREO_SEED, num_frames=6, split='test')
+    yield seq
+    seq.close()
+
+
+def _speed_blur(seq: SyntheticSequenceRenderer, camera, index: int) -> tuple[float, float]:
+    """Blur length and angle of frame ``index`` in ``camera`` (extrinsics relative to the
+    primary, whose frame is the world): the hand centre's image velocity x the shutter."""
+    prv, nxt = max(index - 1, 0), min(index + 1, len(seq) - 1)
+    centres = seq.synth.model.keypoints_batch(seq.poses[[prv, nxt]]).mean(axis=1)
+    px = camera.project(camera.world_to_camera(centres))
+    vel = (px[1] - px[0]) / (nxt - prv)
+    return float(np.hypot(*vel) * seq.shutter), float(np.arctan2(vel[1], vel[0]))
+
+
+def test_sequence_views_primary_is_the_one_camera_frame(stereo_sequence) -> None:
+    """View 0 of ``render_views`` is bit for bit the one-camera frame (same conditions,
+    noise seed and motion blur), whatever order the frames are asked in."""
+    seq = stereo_sequence
+    cams = load_calibration(CONFIG / 'calibration_stereo.yaml').cameras
+    mono = SyntheticSequenceRenderer(cams[0], seed=STEREO_SEED, num_frames=6, split='test')
+    first = {}
+    for i in (4, 0, 1, 4):
+        views = seq.render_views(i, cams)
+        single = mono.render(i)
+        assert len(views) == 2
+        np.testing.assert_array_equal(views[0].image_rgb, single.image_rgb)
+        np.testing.assert_array_equal(views[0].labels, single.labels)
+        np.testing.assert_array_equal(views[0].pose, seq.poses[i])
+        assert views[0].conditions == single.conditions
+        assert (views[0].conditions.blur_px, views[0].conditions.blur_angle) == \
+            pytest.approx(_speed_blur(seq, cams[0], i))
+        if i in first:       # the second view too is reproducible by index
+            np.testing.assert_array_equal(views[1].image_rgb, first[i].image_rgb)
+        first[i] = views[1]
+    mono.close()
+    assert not np.array_equal(first[0].image_rgb, first[4].image_rgb)
+    with pytest.raises(SynthError, match='outside'):
+        seq.render_views(6, cams)
+    with pytest.raises(SynthError, match='at least one camera'):
+        seq.render_views(0, [])
+
+
+def _gradient_along(image: np.ndarray, angle: float, mask: np.ndarray) -> float:
+    grey = image.astype(np.float64).mean(axis=2)
+    gx = cv2.Sobel(grey, cv2.CV_64F, 1, 0)
+    gy = cv2.Sobel(grey, cv2.CV_64F, 0, 1)
+    return float(np.abs(np.cos(angle) * gx + np.sin(angle) * gy)[mask].mean())
+
+
+def test_second_view_is_blurred_by_its_own_image_velocity(stereo_sequence) -> None:
+    """The second camera's blur follows the hand's velocity in that camera's image; against
+    the same frame rendered without blur (same labels, noise and background) the hand is
+    smeared along the motion, and only near the moving hand and arm do pixels change."""
+    seq = stereo_sequence
+    cams = load_calibration(CONFIG / 'calibration_stereo.yaml').cameras
+    index = 1
+    views = seq.render_views(index, cams)
+    blur, angle = _speed_blur(seq, cams[1], index)
+    assert (views[1].conditions.blur_px, views[1].conditions.blur_angle) == \
+        pytest.approx((blur, angle))
+    assert blur > 5.0 and abs(blur - views[0].conditions.blur_px) > 1.0
+    still = render_frames_multi(seq.poses[index], cams,
+                                np.random.default_rng([STEREO_SEED, index, 11]),
+                                replace(seq.conditions, blur_px=0.0), synthesizer=seq.synth)
+    for view, sharp in zip(views, still, strict=True):
+        np.testing.assert_array_equal(view.labels, sharp.labels)
+        np.testing.assert_allclose(view.pose, sharp.pose, atol=1e-12)
+        hand = view.labels > 0
+        changed = np.any(view.image_rgb != sharp.image_rgb, axis=2)
+        assert changed[hand].mean() > 0.5 and changed.mean() < 0.25
+        assert _gradient_along(view.image_rgb, view.conditions.blur_angle, hand) < \
+            0.95 * _gradient_along(sharp.image_rgb, view.conditions.blur_angle, hand)
 
 
 def test_multi_camera_views_agree(synth: Synthesizer) -> None:

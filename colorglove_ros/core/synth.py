@@ -21,6 +21,7 @@ frames are evaluated on unseen conditions.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
@@ -579,25 +580,45 @@ def render_frame(q: np.ndarray, camera: PinholeCamera, rng: np.random.Generator,
     return synth.render_frame(q, camera, rng, conditions)
 
 
-def render_frames_multi(q: np.ndarray, cameras: tuple[PinholeCamera, ...] | list,
+def _primary_to(cameras: Sequence[PinholeCamera], k: int
+                ) -> tuple[np.ndarray, np.ndarray] | None:
+    """(R, t) taking the first camera's optical frame to camera ``k``'s (``p_k = R p + t``);
+    None for the first camera itself, whose poses and points are used unchanged."""
+    if k == 0:
+        return None
+    R = cameras[k].rotation @ cameras[0].rotation.T
+    return R, cameras[k].translation - R @ cameras[0].translation
+
+
+def _view(q: np.ndarray, conditions: FrameConditions, cameras: Sequence[PinholeCamera],
+          k: int) -> tuple[np.ndarray, FrameConditions]:
+    """Camera ``k``'s pose and conditions of a scene given in the first camera's terms: the
+    pose and light direction in camera ``k``'s frame, the background seed offset by the
+    camera index (the first camera's are ``q`` and ``conditions`` unchanged)."""
+    extrinsics = _primary_to(cameras, k)
+    if extrinsics is None:
+        return np.asarray(q, dtype=float), conditions
+    R, t = extrinsics
+    light = R @ np.asarray(conditions.light_dir, float)
+    return transform_pose(q, R, t), replace(
+        conditions, light_dir=tuple(float(v) for v in light),
+        background_seed=(conditions.background_seed + 7919 * k) % (1 << 31))
+
+
+def render_frames_multi(q: np.ndarray, cameras: Sequence[PinholeCamera],
                         rng: np.random.Generator, conditions: FrameConditions | None = None,
                         *, synthesizer: Synthesizer | None = None) -> list[SyntheticFrame]:
     """One scene seen by several calibrated cameras. ``q`` is in the first camera's optical
     frame; each frame's ``pose`` and keypoints are in its own camera's frame. Lighting is
     shared (the light direction rotates with each view); each view sees its own background
-    (seed offset by the camera index) and noise."""
+    (seed offset by the camera index) and noise (drawn from ``rng`` camera by camera, so the
+    first view is ``render_frame(q, cameras[0], rng, conditions)``)."""
     if not cameras:
         raise SynthError('need at least one camera')
     conditions = sample_conditions(rng, 'train') if conditions is None else conditions
-    c0 = cameras[0]
     frames = []
     for k, cam in enumerate(cameras):
-        R = cam.rotation @ c0.rotation.T            # primary -> camera k
-        t = cam.translation - R @ c0.translation
-        qk = transform_pose(q, R, t)
-        light = R @ np.asarray(conditions.light_dir, float)
-        cond = replace(conditions, light_dir=tuple(float(v) for v in light),
-                       background_seed=(conditions.background_seed + 7919 * k) % (1 << 31))
+        qk, cond = _view(q, conditions, cameras, k)
         frames.append(render_frame(qk, cam, rng, cond, synthesizer=synthesizer))
     return frames
 
@@ -708,23 +729,41 @@ class SyntheticSequenceRenderer:
         self.conditions = replace(cond, distractors_avoid_hand=False)
         self.shutter = float(shutter)
         self.fps = float(fps)
-        centres = self.synth.model.keypoints_batch(self.poses).mean(axis=1)
-        self._centre_px = camera.project(centres)
+        # hand centres (primary camera frame), whose image velocity sets each view's blur
+        self._centres = self.synth.model.keypoints_batch(self.poses).mean(axis=1)
 
     def __len__(self) -> int:
         return len(self.poses)
 
     def render(self, index: int) -> SyntheticFrame:
         """Frame ``index`` (0-based) of the sequence."""
+        return self.render_views(index, (self.camera,))[0]
+
+    def render_views(self, index: int, cameras: Sequence[PinholeCamera]) -> list[SyntheticFrame]:
+        """Frame ``index`` as each of ``cameras`` sees it, primary (the sequence's camera, in
+        whose frame the poses are) first; the others as in :func:`render_frames_multi`. Each
+        view's motion blur follows the hand's velocity in that view's image; the noise of all
+        views comes from the frame's seed, primary first, so view 0 is ``render(index)``."""
         if not 0 <= index < len(self.poses):
             raise SynthError(f'frame {index} outside 0..{len(self.poses) - 1}')
+        if not cameras:
+            raise SynthError('need at least one camera')
         nxt = min(index + 1, len(self.poses) - 1)
         prv = max(index - 1, 0)
-        vel = (self._centre_px[nxt] - self._centre_px[prv]) / max(nxt - prv, 1)
-        cond = replace(self.conditions, blur_px=float(np.hypot(*vel) * self.shutter),
-                       blur_angle=float(np.arctan2(vel[1], vel[0])))
         rng = np.random.default_rng([self.seed, index, 11])
-        return self.synth.render_frame(self.poses[index], self.camera, rng, cond)
+        frames = []
+        for k, cam in enumerate(cameras):
+            q, cond = _view(self.poses[index], self.conditions, cameras, k)
+            centres = self._centres[[prv, nxt]]
+            extrinsics = _primary_to(cameras, k)
+            if extrinsics is not None:
+                centres = centres @ extrinsics[0].T + extrinsics[1]
+            px = cam.project(centres)
+            vel = (px[1] - px[0]) / max(nxt - prv, 1)
+            cond = replace(cond, blur_px=float(np.hypot(*vel) * self.shutter),
+                           blur_angle=float(np.arctan2(vel[1], vel[0])))
+            frames.append(self.synth.render_frame(q, cam, rng, cond))
+        return frames
 
     def close(self) -> None:
         """Free the GL contexts."""

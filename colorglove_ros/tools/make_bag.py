@@ -6,19 +6,12 @@ import argparse
 import time
 from pathlib import Path
 
-import numpy as np
 from tqdm import tqdm
 
 from ..core.bags import SequenceBagWriter, bag_size_bytes
 from ..core.camera import CalibrationError, load_calibration
 from ..core.report import print_table, write_json
-from ..core.synth import (
-    SPLITS,
-    SynthError,
-    SyntheticSequenceRenderer,
-    default_camera,
-    render_frames_multi,
-)
+from ..core.synth import SPLITS, SynthError, SyntheticSequenceRenderer, default_camera
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -63,13 +56,8 @@ def main(argv: list[str] | None = None) -> int:
         with SequenceBagWriter(output, cameras[0], fps=args.fps,
                                extra_cameras=cameras[1:]) as writer:
             for i in tqdm(range(args.frames), desc='frames', unit='frame'):
-                if len(cameras) == 1:
-                    writer.write(seq.render(i))
-                    continue
-                # one instant seen by every camera (as colorglove_eval_ik renders it)
-                views = render_frames_multi(seq.poses[i], cameras,
-                                            np.random.default_rng([args.seed, i, 11]),
-                                            seq.conditions, synthesizer=seq.synth)
+                # one instant seen by every camera, primary first
+                views = seq.render_views(i, cameras)
                 writer.write(views[0], extra_images=[v.image_rgb for v in views[1:]])
         written = writer.count
     finally:
