@@ -8,6 +8,7 @@ machines. The YAML (see ``config/pipeline.launch.yaml``)::
         name: camera                     # optional node name (__node remap)
         parameters: [config/camera.yaml] # optional parameter files (relative to the YAML)
         remappings: {image_raw: /camera/image_raw}
+        overrides: {rate_hz: 15.0}       # optional parameters set after the files (win)
         arguments: []                    # optional extra command-line arguments
 
 On Ctrl-C or SIGTERM every node gets SIGINT, then SIGTERM, then SIGKILL after grace
@@ -16,6 +17,7 @@ periods. If one node exits, the others are stopped too (unless ``respawn: true``
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
 import signal
@@ -59,6 +61,7 @@ class NodeSpec:
     remappings: dict[str, str] = field(default_factory=dict)
     arguments: list[str] = field(default_factory=list)
     respawn: bool = False
+    overrides: dict[str, object] = field(default_factory=dict)
 
 
 def load_launch_file(path: str | Path) -> list[NodeSpec]:
@@ -73,6 +76,9 @@ def load_launch_file(path: str | Path) -> list[NodeSpec]:
             raise LaunchError(f'{path}: node {index} has no "executable"')
         params = entry.get('parameters', [])
         params = [params] if isinstance(params, str) else params
+        overrides = entry.get('overrides') or {}
+        if not isinstance(overrides, dict):
+            raise LaunchError(f'{path}: node {index}: "overrides" must be a mapping')
         specs.append(NodeSpec(
             executable=str(entry['executable']),
             name=str(entry.get('name', '')),
@@ -80,6 +86,7 @@ def load_launch_file(path: str | Path) -> list[NodeSpec]:
             remappings={str(k): str(v) for k, v in (entry.get('remappings') or {}).items()},
             arguments=[str(a) for a in entry.get('arguments', [])],
             respawn=bool(entry.get('respawn', False)),
+            overrides={str(k): v for k, v in overrides.items()},
         ))
     return specs
 
@@ -97,6 +104,9 @@ def node_command(spec: NodeSpec) -> list[str]:
         if not param_file.is_file():
             raise LaunchError(f'parameter file not found: {param_file}')
         command += ['--params-file', str(param_file)]
+    for name, value in spec.overrides.items():
+        # after the files, so they win; JSON is valid YAML, which is how -p values are read
+        command += ['-p', f'{name}:={json.dumps(value)}']
     for source, target in spec.remappings.items():
         command += ['-r', f'{source}:={target}']
     return command

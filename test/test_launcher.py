@@ -1,15 +1,42 @@
 """The YAML launcher: parsing, command lines, and starting/stopping real processes."""
 from __future__ import annotations
 
+import contextlib
 import sys
 import threading
 import time
+from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from conftest import TEST_DIR
+import rclpy
+from colorglove_msgs.msg import HandObservation
+from conftest import REPO_DIR, TEST_DIR
+from rclpy.node import Node
+from rclpy.parameter import Parameter
 
-from colorglove_ros.launcher import Launcher, LaunchError, load_launch_file, node_command
+from colorglove_ros.core.bags import camera_topics
+from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.launcher import (
+    Launcher,
+    LaunchError,
+    NodeSpec,
+    load_launch_file,
+    node_command,
+)
+from colorglove_ros.nodes import lookup_node, segmentation_node
+from colorglove_ros.nodes.camera_node import CameraNode
+from colorglove_ros.nodes.common import StartupError
+from colorglove_ros.nodes.ik_node import IKNode
+
+MONO_LAUNCH = REPO_DIR / 'config' / 'pipeline.launch.yaml'
+STEREO_LAUNCH = REPO_DIR / 'config' / 'pipeline_stereo.launch.yaml'
+STEREO_CALIBRATION = REPO_DIR / 'config' / 'calibration_stereo.yaml'
+NODE_CLASSES = {'camera_node': CameraNode, 'segmentation_node': segmentation_node.SegmentationNode,
+                'lookup_node': lookup_node.LookupNode, 'ik_node': IKNode}
+#: the parameters in which a node of the two-camera graph may differ from the one-camera one
+STEREO_PARAMETERS = {'calibration_file', 'extra_observation_topics'}
 
 
 def _write(tmp_path: Path, text: str) -> Path:
@@ -81,3 +108,119 @@ nodes:
     launcher.start()
     assert launcher.watch(threading.Event()) == 3
     launcher.stop()
+
+
+class _NoLookup:
+    """Stands in for ``PoseLookup``: the launch test needs no pose database."""
+
+    db = ()
+
+    def __init__(self, *args) -> None:
+        pass
+
+    def patch_digit_table(self) -> None:
+        pass
+
+
+@contextlib.contextmanager
+def _launched(spec: NodeSpec) -> Iterator[Node]:
+    """The node of ``spec``, built in this process with the command-line arguments (name,
+    namespace, parameter files, ``-p``, remappings) the launcher would start it with."""
+    context = rclpy.Context()
+    rclpy.init(args=node_command(replace(spec, executable=sys.executable)), context=context)
+    node = None
+    try:
+        node = NODE_CLASSES[spec.executable](context=context)
+        yield node
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def _graph(path: Path, stack: contextlib.ExitStack) -> dict[str, Node]:
+    """The nodes of a launch file (no camera_node) by fully qualified name."""
+    nodes = [stack.enter_context(_launched(spec)) for spec in load_launch_file(path)
+             if spec.executable != 'camera_node']
+    return {node.get_fully_qualified_name(): node for node in nodes}
+
+
+def _parameters(node: Node) -> dict[str, object]:
+    return {name: p.value for name, p in node.get_parameters_by_prefix('').items()}
+
+
+def _topics(endpoints, msg_type) -> list[str]:
+    return [e.topic_name for e in endpoints if e.msg_type is msg_type]
+
+
+def test_stereo_launch_file_runs_the_two_camera_graph(monkeypatch: pytest.MonkeyPatch,
+                                                      isolated_ros_domain) -> None:
+    """config/pipeline_stereo.launch.yaml: one segmentation_node per camera of the stereo
+    calibration, the second reading the topics its bag view is played on and publishing where
+    ik_node listens for camera 2; lookup and IK on the stereo calibration; otherwise every
+    node's parameters are those of the one-camera pipeline.launch.yaml (nodes.yaml)."""
+    monkeypatch.setattr(segmentation_node, 'load_segmenter', lambda config: None)
+    monkeypatch.setattr(lookup_node, 'load_database', lambda path: None)
+    monkeypatch.setattr(lookup_node, 'PoseLookup', _NoLookup)
+    rig = load_calibration(STEREO_CALIBRATION).cameras
+    assert len(rig) == 2
+    with contextlib.ExitStack() as stack:
+        mono, stereo = _graph(MONO_LAUNCH, stack), _graph(STEREO_LAUNCH, stack)
+        extra = f'/{rig[1].name}{mono["/segmentation"].get_fully_qualified_name()}'
+        assert set(stereo) == set(mono) | {extra}
+        assert 'camera_node' not in {s.executable for s in load_launch_file(STEREO_LAUNCH)}
+        for name, node in stereo.items():
+            expected = _parameters(mono[name if name != extra else '/segmentation'])
+            got = _parameters(node)
+            assert {k for k in got if got[k] != expected[k]} <= STEREO_PARAMETERS, name
+        for name in ('/lookup', '/ik'):
+            calibration = Path(stereo[name].get_parameter('calibration_file').value)
+            assert (REPO_DIR / calibration).resolve() == STEREO_CALIBRATION, name
+        ik = stereo['/ik']
+        extra_topics = ik.get_parameter('extra_observation_topics').value.split(',')
+        ik_inputs = _topics(ik.subscriptions, HandObservation)
+        assert ik_inputs == extra_topics                # one per extra camera, in rig order
+        for index, seg in enumerate((stereo['/segmentation'], stereo[extra])):
+            # input: the image topic colorglove_make_bag writes for this camera
+            assert [s.topic_name for s in seg.subscriptions] == [
+                camera_topics(rig[index], index)[0]]
+            output = _topics(seg.publishers, HandObservation)
+            assert len(output) == 1
+            if index == 0:
+                assert output == _topics(stereo['/lookup'].subscriptions, HandObservation)
+            else:
+                assert output == [ik_inputs[index - 1]]
+
+
+def test_synthetic_camera_renders_camera_zero_only(isolated_ros_domain) -> None:
+    """Why pipeline_stereo.launch.yaml starts no camera_node (its input is a bag)."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        with pytest.raises(StartupError, match='camera 0 only'):
+            CameraNode(context=context, parameter_overrides=[
+                Parameter('calibration_file', value=str(STEREO_CALIBRATION)),
+                Parameter('camera_index', value=1)])
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+def test_overrides_follow_the_parameter_files(tmp_path: Path) -> None:
+    """``overrides`` are passed as -p after --params-file, so they win over the files; values
+    are written as YAML (JSON) so a string stays a string."""
+    params = tmp_path / 'p.yaml'
+    params.write_text('x:\n  ros__parameters:\n    rate_hz: 30.0\n')
+    launch = _write(tmp_path, f"""
+nodes:
+  - executable: {sys.executable}
+    name: x
+    parameters: {params}
+    overrides: {{rate_hz: 15.0, frame: 'true', topics: /a}}
+""")
+    command = node_command(load_launch_file(launch)[0])
+    assert command.index('--params-file') < command.index('-p')
+    pairs = [command[i + 1] for i, arg in enumerate(command) if arg == '-p']
+    assert pairs == ['rate_hz:=15.0', 'frame:="true"', 'topics:="/a"']
+    with pytest.raises(LaunchError, match='overrides'):
+        load_launch_file(_write(tmp_path, f'nodes:\n  - executable: {sys.executable}\n'
+                                          '    overrides: [a]\n'))
