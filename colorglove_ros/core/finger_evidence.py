@@ -10,8 +10,12 @@ query's crop) and the two areas are compared (foreshortening); each patch counts
 digit its constraint vertex sits on. The weighted spread of each finger's DOFs is returned
 too, so the IK can trust the prior less where the neighbours disagree.
 
-Measured (``colorglove_eval_ik``, segmented labels, one camera): fingertip error with the
-wrist position removed 21.0 -> 16.9 mm on the tuning seeds 1000-1001.
+The lookup also takes each finger's projection constraints from the entry that explains
+that finger best (``PoseLookup.lookup`` with blobs).
+
+Measured (``colorglove_eval_ik``, segmented labels, one camera, IK + smoothing): fingertip
+error with the wrist position removed 21.0 -> 16.2 mm on the tuning seeds 1000-1001 and
+20.0 -> 16.0 mm on the reported seeds 0-1 (absolute 26.1 -> 21.8 mm).
 """
 from __future__ import annotations
 
