@@ -159,6 +159,11 @@ def test_lookup_blends_fingers_from_blobs() -> None:
     np.testing.assert_allclose(res.constraints.full_xy[0], [126.0, 70.0])
     prior = PosePrior.from_lookup(res)
     np.testing.assert_array_equal(prior.finger_std, res.finger_std)
+    # no blobs at all: no evidence, the paper's blend
+    none = lookup.lookup(tiny[0], crop, cam, _Blobs(np.zeros(0, int), np.zeros((0, 2)),
+                                                      np.zeros(0)))
+    assert none.finger_std is None
+    np.testing.assert_array_equal(none.blended, plain.blended)
 
 
 def test_candidates_message_carries_the_spread() -> None:

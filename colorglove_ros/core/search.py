@@ -399,8 +399,9 @@ class PoseLookup:
         poses[:, 0:3] = _place_wrists(terms, self.db.render_camera, crop, camera)
         blended = _blend(poses, terms[:, 3:7], weights)
         finger_std = finger_entries = None
-        if blobs is not None:
-            blended[6:], finger_std, finger_entries = self._finger_blend(cand[near], crop, blobs)
+        evidence = None if blobs is None else self._finger_blend(cand[near], crop, blobs)
+        if evidence is not None:
+            blended[6:], finger_std, finger_entries = evidence
         constraints = self._constraints(int(idx[0]), crop, finger_entries)
         t4 = time.perf_counter()
         timings = {'encode_ms': 1e3 * (t1 - t0), 'hamming_ms': 1e3 * (t2 - t1),
@@ -410,10 +411,11 @@ class PoseLookup:
                             finger_std)
 
     def _finger_blend(self, entries: np.ndarray, crop: tuple[float, float, float],
-                      blobs: object) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                      blobs: object) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """Per-finger blend (20,) and spread (20,) of ``entries`` against full-image
         ``blobs`` (:mod:`core.finger_evidence`), and the best-scoring entry of each digit
-        (5,), whose patches on that digit become its projection constraints."""
+        (5,), whose patches on that digit become its projection constraints; None when there
+        are no blobs (no evidence: the paper's blend stands)."""
         try:
             color = np.asarray(blobs.color).reshape(-1)
             xy = np.asarray(blobs.centroid_px, np.float64).reshape(-1, 2)
@@ -423,6 +425,8 @@ class PoseLookup:
                               ) from exc
         if not len(color) == len(xy) == len(pixels):
             raise SearchError('blob colour, centroid and pixel-count arrays differ in length')
+        if not len(color):
+            return None
         scale, ox, oy = crop
         scores = finger_scores(self._a['patch_xy'][entries], self._a['patch_pixels'][entries],
                                self.patch_digit_table()[entries], self._a['patch_color'], color,
