@@ -64,6 +64,17 @@ class NodeSpec:
     overrides: dict[str, object] = field(default_factory=dict)
 
 
+def _parameter_value(value: object) -> bool:
+    """Whether ``value`` is a ROS parameter value: a bool, finite number, string, or a
+    flat list of one of those."""
+    if isinstance(value, list):
+        return all(isinstance(v, (bool, int, float, str)) and _parameter_value(v)
+                   for v in value)
+    if isinstance(value, float):
+        return value == value and abs(value) != float('inf')
+    return isinstance(value, (bool, int, str))
+
+
 def load_launch_file(path: str | Path) -> list[NodeSpec]:
     """Parse a launch YAML into node specs; parameter paths resolve relative to it."""
     path = Path(path)
@@ -77,8 +88,10 @@ def load_launch_file(path: str | Path) -> list[NodeSpec]:
         params = entry.get('parameters', [])
         params = [params] if isinstance(params, str) else params
         overrides = entry.get('overrides') or {}
-        if not isinstance(overrides, dict):
-            raise LaunchError(f'{path}: node {index}: "overrides" must be a mapping')
+        if not isinstance(overrides, dict) or not all(
+                _parameter_value(v) for v in overrides.values()):
+            raise LaunchError(f'{path}: node {index}: "overrides" must map parameter names '
+                              'to numbers, booleans, strings or flat lists of them')
         specs.append(NodeSpec(
             executable=str(entry['executable']),
             name=str(entry.get('name', '')),

@@ -145,8 +145,9 @@ def pose_prior_from_candidates(msg: HandPoseCandidates) -> PosePrior:
     finger_std = None
     if len(msg.finger_std):
         finger_std = np.asarray(msg.finger_std, dtype=float)
-        if finger_std.shape != (len(DOF_NAMES) - 6,) or not np.all(np.isfinite(finger_std)):
-            raise ValueError('finger_std must be empty or hold 20 finite values')
+        if finger_std.shape != (len(DOF_NAMES) - 6,) or not np.all(np.isfinite(finger_std)) \
+                or np.any(finger_std < 0):
+            raise ValueError('finger_std must be empty or hold 20 finite values >= 0')
     return PosePrior(
         finger_std=finger_std,
         q_blend=np.asarray(msg.blended_pose, dtype=float),

@@ -153,7 +153,8 @@ def test_temporal_prior_reweights_by_each_trackers_previous_output(tiny_db_path,
     mono, _ = rigs
     ev = SequenceEvaluator(PoseLookup(load_database(tiny_db_path), num_blend=5),
                            {'1': mono.cameras}, modes=('blend',), synthesizer=synth,
-                           keep_results=True, temporal=TemporalPrior(0.3, 0.5))
+                           keep_results=True, temporal=TemporalPrior(0.3, 0.5),
+                           finger_evidence=False)
     run = ev.run(eval_seeds(1)[0], 6)[('1', 'blend')]
     assert run.found.all() and len(calls) == 6
     assert calls[0][0] is None                      # first frame: no previous output
@@ -170,13 +171,17 @@ def test_eval_ik_cli_temporal_option(tiny_db_path, tmp_path, capsys):
     args = ['--database', str(tiny_db_path), '--frames', '4', '--sequences', '1', '--modes',
             'blend', '--plot', '']
     assert eval_ik.main([*args, '--temporal-tau', '30', '--num-blend', '12',
-                         '--temporal-rotation-weight', '0', '--json', str(out)]) == 0
+                         '--temporal-rotation-weight', '0', '--no-finger-evidence',
+                         '--json', str(out)]) == 0
     settings = json.loads(out.read_text())['settings']
     assert (settings['temporal_tau_deg'], settings['temporal_rotation_weight'],
             settings['num_blend']) == (30.0, 0.0, 12)
     assert 'temporal tau: 30 deg' in capsys.readouterr().out
     assert eval_ik.main([*args, '--temporal-tau', '0']) == 1
     assert '--temporal-tau must be > 0' in capsys.readouterr().out
+    # the temporal reweighting re-blends every DOF: refused with the per-finger blend
+    assert eval_ik.main([*args, '--temporal-tau', '30']) == 1
+    assert 'without the per-finger blend' in capsys.readouterr().out
 
 
 class _OracleLookup:

@@ -74,14 +74,15 @@ def test_blend_takes_each_finger_from_the_entry_that_explains_it() -> None:
     poses[0, 6:10], poses[1, 6:10] = 0.2, 1.0         # thumb
     poses[0, 10:14], poses[1, 10:14] = 0.9, 0.1       # index
     poses[:, 14:] = 0.5
-    fingers, spread = finger_blend(poses, finger_scores(*_two_entries(), CONFIG), CONFIG)
+    fingers, spread, seen = finger_blend(poses, finger_scores(*_two_entries(), CONFIG), CONFIG)
     assert fingers.shape == spread.shape == (20,)
+    np.testing.assert_array_equal(seen, [True, True, False, False, False])
     np.testing.assert_allclose(fingers[0:4], 0.2, atol=1e-3)      # thumb from entry 0
     np.testing.assert_allclose(fingers[4:8], 0.1, atol=1e-3)      # index from entry 1
     np.testing.assert_allclose(fingers[8:], 0.5)
     assert np.all(spread[:8] < 0.01) and np.allclose(spread[8:], 0.0)
     # equal evidence: plain mean and the full spread
-    f, sd = finger_blend(poses, np.zeros((2, 5)), CONFIG)
+    f, sd, _ = finger_blend(poses, np.zeros((2, 5)), CONFIG)
     np.testing.assert_allclose(f[0:4], 0.6)
     np.testing.assert_allclose(sd[0:4], 0.4)
     with pytest.raises(FingerEvidenceError):
@@ -109,9 +110,11 @@ class _Blobs:
 
 
 def test_lookup_blends_fingers_from_blobs() -> None:
-    """Two entries with the same image but different fingers and patch centroids: entry 0 is
-    the nearest by image (ties go to the lower index), entry 1's thumb patch lies on the
-    observed blob, so the thumb is blended from entry 1 and constrained by its patch."""
+    """Two entries with the same image: entry 0 is the nearest (ties go to the lower index)
+    and the only one blended (num_blend 1); entry 1, among the 2 the fingers are chosen from,
+    has its thumb patch on the observed blob. The thumb comes from entry 1, with entry 1's
+    thumb patches as constraints (none of entry 0's); fingers without evidence keep the
+    image-weighted blend."""
     rng = np.random.default_rng(3)
     n = 40
     tiny = np.zeros((n, 40, 40), np.uint8)
@@ -125,10 +128,12 @@ def test_lookup_blends_fingers_from_blobs() -> None:
     patch_vertex = np.full((n, 20), -1, np.int32)
     patch_vertex[:, 0] = 1                            # vertex 1: on the thumb
     patch_vertex[:, 1] = 0                            # vertex 0: on the palm
+    patch_vertex[0, 2] = 1                            # entry 0 also shows thumb patch 2
     patch_xy = np.full((n, 20, 2), np.nan, np.float32)
     patch_xy[:, 0] = [30.0, 30.0]
     patch_xy[:, 1] = [20.0, 20.0]
     patch_xy[0, 0] = [10.0, 10.0]
+    patch_xy[0, 2] = [25.0, 25.0]
     patch_xy[1, 0] = [13.0, 10.0]                     # entry 1: thumb patch at (13, 10)
     color = np.arange(20) % 10 + 1
     db = assemble_database(tiny, poses, np.tile([1.0, 0.0, 0.0], (n, 1)),
@@ -136,34 +141,39 @@ def test_lookup_blends_fingers_from_blobs() -> None:
                             'cx': 63.5, 'cy': 63.5}, num_bits=32, num_pairs=200,
                            patch_vertex=patch_vertex, patch_xy=patch_xy,
                            patch_pixels=np.full((n, 20), 5.0), patch_color=color)
-    lookup = PoseLookup(db, num_candidates=n, num_blend=2, threads=1,
+    lookup = PoseLookup(db, num_candidates=n, num_blend=1, threads=1,
                         finger_evidence=FingerEvidenceConfig(num_neighbours=2),
                         vertex_link=np.array([0, 1, 2]))
     cam = PinholeCamera(640, 480, 600.0, 600.0, 320.0, 240.0)
     crop = (2.0, 100.0, 50.0)
     plain = lookup.lookup(tiny[0], crop, cam)
     assert plain.finger_std is None
-    assert plain.indices.tolist() == [0, 1]
-    np.testing.assert_allclose(plain.constraints.tiny_xy, [[10.0, 10.0], [20.0, 20.0]])
+    assert plain.indices.tolist() == [0]
+    np.testing.assert_allclose(plain.constraints.tiny_xy,
+                               [[10.0, 10.0], [20.0, 20.0], [25.0, 25.0]])
     blobs = _Blobs(np.array([color[0]]), np.array([[100.0 + 2.0 * 13.0, 50.0 + 2.0 * 10.0]]),
                    np.array([5.0 * 4.0]))
     res = lookup.lookup(tiny[0], crop, cam, blobs)
+    np.testing.assert_array_equal(res.indices, plain.indices)
     np.testing.assert_allclose(res.blended[6:10], poses[1, 6:10], atol=1e-3)
-    # the other fingers have no evidence: the plain mean of both entries
-    np.testing.assert_allclose(res.blended[10:], poses[:2, 10:].mean(axis=0))
+    # no evidence for the other fingers: the image-weighted blend (here entry 0 alone)
+    np.testing.assert_allclose(res.blended[10:], plain.blended[10:])
+    np.testing.assert_allclose(res.finger_std[4:], 0.0)
     assert res.finger_std.shape == (20,)
     np.testing.assert_array_equal(res.blended[:6], plain.blended[:6])
-    # the thumb patch's constraint comes from entry 1, the palm patch from the nearest entry
+    # the thumb's constraints are entry 1's (its patch 0; entry 0's thumb patch 2 dropped),
+    # the palm patch the nearest entry's
     np.testing.assert_array_equal(res.constraints.patch_ids, [0, 1])
     np.testing.assert_allclose(res.constraints.tiny_xy, [[13.0, 10.0], [20.0, 20.0]])
     np.testing.assert_allclose(res.constraints.full_xy[0], [126.0, 70.0])
     prior = PosePrior.from_lookup(res)
     np.testing.assert_array_equal(prior.finger_std, res.finger_std)
-    # no blobs at all: no evidence, the paper's blend
-    none = lookup.lookup(tiny[0], crop, cam, _Blobs(np.zeros(0, int), np.zeros((0, 2)),
-                                                      np.zeros(0)))
-    assert none.finger_std is None
-    np.testing.assert_array_equal(none.blended, plain.blended)
+    # no blobs at all, or only unusable ones: no evidence, the paper's blend
+    for empty in (_Blobs(np.zeros(0, int), np.zeros((0, 2)), np.zeros(0)),
+                  _Blobs(np.array([1]), np.array([[np.nan, 1.0]]), np.array([5.0]))):
+        none = lookup.lookup(tiny[0], crop, cam, empty)
+        assert none.finger_std is None
+        np.testing.assert_array_equal(none.blended, plain.blended)
 
 
 def test_candidates_message_carries_the_spread() -> None:

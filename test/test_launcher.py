@@ -221,6 +221,7 @@ nodes:
     assert command.index('--params-file') < command.index('-p')
     pairs = [command[i + 1] for i, arg in enumerate(command) if arg == '-p']
     assert pairs == ['rate_hz:=15.0', 'frame:="true"', 'topics:="/a"']
-    with pytest.raises(LaunchError, match='overrides'):
-        load_launch_file(_write(tmp_path, f'nodes:\n  - executable: {sys.executable}\n'
-                                          '    overrides: [a]\n'))
+    for bad in ('[a]', '{x: null}', '{x: {y: 1}}', '{x: .inf}', '{x: [[1]]}'):
+        with pytest.raises(LaunchError, match='overrides'):
+            load_launch_file(_write(tmp_path, f'nodes:\n  - executable: {sys.executable}\n'
+                                              f'    overrides: {bad}\n'))

@@ -263,6 +263,10 @@ class SequenceEvaluator:
         self.keep_results = keep_results
         self.temporal = temporal
         self.finger_evidence = bool(finger_evidence)
+        if temporal is not None and self.finger_evidence:
+            # reweight_by_previous re-blends every DOF with one weight per neighbour
+            raise EvaluationError('temporal reweighting re-blends the fingers with one weight '
+                                  'per neighbour: use it without the per-finger blend')
         self.stage = LookupStage(lookup, self.cameras[0])
         self.trackers = {(r, m): HandTracker(self.synth.model, self.synth.mesh, cams,
                                              self.config.with_mode(m), glove=self.synth.glove)

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ['FingerEvidenceConfig', 'FingerEvidenceError', 'PALM_DIGIT', 'NUM_DIGITS',
-           'patch_digits', 'finger_scores', 'finger_blend']
+           'patch_digits', 'finger_scores', 'finger_blend', 'weighted_fingers']
 
 NUM_DIGITS = 5
 PALM_DIGIT = NUM_DIGITS          # patch_digits value of a patch whose vertex is on the palm
@@ -116,22 +116,37 @@ def finger_scores(patch_xy: np.ndarray, patch_pixels: np.ndarray, patch_digit: n
     return scores
 
 
-def finger_blend(poses: np.ndarray, scores: np.ndarray, config: FingerEvidenceConfig
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per-finger weighted means (20,) of the finger DOFs of ``poses`` (K, 26) with weights
-    exp(-(score / sigma)^2) from ``scores`` (K, 5), and the weighted standard deviation (20,)
-    of each DOF about that mean."""
+def weighted_fingers(poses: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted means (20,) and standard deviations (20,) of the finger DOFs of ``poses``
+    (K, 26), with one normalised weight column per digit (K, 5) or one weight per pose (K,)."""
     poses = np.asarray(poses, np.float64)
-    scores = np.asarray(scores, np.float64)
     if poses.ndim != 2 or poses.shape[1] != FIRST_FINGER_DOF + NUM_DIGITS * FINGER_DOFS_PER_DIGIT \
-            or scores.shape != (len(poses), NUM_DIGITS) or not len(poses):
-        raise FingerEvidenceError(f'need poses (K, 26) and scores (K, 5), got {poses.shape} '
-                                  f'and {scores.shape}')
-    s = scores / config.sigma_tiny_px
-    w = np.exp(-s * s)
-    total = w.sum(axis=0)
-    w = np.where(total > 0, w / np.where(total > 0, total, 1.0), 1.0 / len(poses))
+            or not len(poses):
+        raise FingerEvidenceError(f'need poses (K, 26), got {poses.shape}')
+    w = np.asarray(weights, np.float64)
+    w = np.repeat(w[:, None], NUM_DIGITS, axis=1) if w.ndim == 1 else w
+    if w.shape != (len(poses), NUM_DIGITS):
+        raise FingerEvidenceError(f'need weights (K,) or (K, 5), got {w.shape}')
     fingers = poses[:, FIRST_FINGER_DOF:].reshape(len(poses), NUM_DIGITS, FINGER_DOFS_PER_DIGIT)
     mean = np.einsum('kg,kgd->gd', w, fingers)
     var = np.einsum('kg,kgd->gd', w, (fingers - mean) ** 2)
     return mean.reshape(-1), np.sqrt(var).reshape(-1)
+
+
+def finger_blend(poses: np.ndarray, scores: np.ndarray, config: FingerEvidenceConfig
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-finger weighted means (20,) of the finger DOFs of ``poses`` (K, 26) with weights
+    exp(-(score / sigma)^2) from ``scores`` (K, 5), the weighted standard deviation (20,) of
+    each DOF about that mean, and which digits had any evidence (5,): a digit every entry
+    scores at the cap (no visible patch matched) gets equal weights here, and callers should
+    keep their own blend for it."""
+    scores = np.asarray(scores, np.float64)
+    if scores.shape != (len(poses), NUM_DIGITS):
+        raise FingerEvidenceError(f'need scores (K, 5) for {len(poses)} poses, got '
+                                  f'{scores.shape}')
+    s = scores / config.sigma_tiny_px
+    w = np.exp(-s * s)
+    total = w.sum(axis=0)
+    w = np.where(total > 0, w / np.where(total > 0, total, 1.0), 1.0 / max(len(scores), 1))
+    mean, spread = weighted_fingers(poses, w)
+    return mean, spread, scores.min(axis=0) < config.cap_tiny_px

@@ -727,7 +727,7 @@ class IKConfig:
     min_depth_m: float = 0.05
     constraint_model: str = 'patch'
     glove_seed: int = 0
-    finger_spread_gain: float = 0.0
+    finger_spread_gain: float = 1.0
     finger_spread_floor_rad: float = 0.13
     covariances: IKCovariances = field(default_factory=default_covariances)
 
@@ -741,14 +741,17 @@ class IKConfig:
         if self.constraint_model not in CONSTRAINT_MODELS:
             raise IKConfigError(f'constraint_model must be one of {CONSTRAINT_MODELS}, got '
                                 f'{self.constraint_model!r}')
-        if not (self.finger_spread_gain >= 0 and self.finger_spread_floor_rad > 0):
-            raise IKConfigError('finger_spread_gain must be >= 0 and finger_spread_floor_rad > 0')
+        if not (0 <= self.finger_spread_gain < math.inf
+                and 0 < self.finger_spread_floor_rad < math.inf):
+            raise IKConfigError('finger_spread_gain must be finite and >= 0, '
+                                'finger_spread_floor_rad finite and > 0')
 
     def prior_covariances(self, finger_std: np.ndarray | None) -> IKCovariances:
         """The covariances for one frame: with ``finger_spread_gain`` > 0 and the lookup's
         per-finger spread (20,), each finger DOF's Q variance is max(floor^2, gain *
         spread^2), so the prior holds a finger the neighbours agree on and lets the image
-        move one they disagree on; otherwise the configured Q."""
+        move one they disagree on (this replaces the configured or learned finger Q);
+        otherwise the configured Q."""
         if finger_std is None or self.finger_spread_gain <= 0:
             return self.covariances
         spread = np.asarray(finger_std, float).reshape(-1)

@@ -14,9 +14,11 @@ from colorglove_ros.core.database import PoseDatabase
 from colorglove_ros.core.distance import ABSENT_PENALTY, DT_SCALE, QueryDistance
 from colorglove_ros.core.finger_evidence import (
     FingerEvidenceConfig,
+    FingerEvidenceError,
     finger_blend,
     finger_scores,
     patch_digits,
+    weighted_fingers,
 )
 
 __all__ = ['SearchError', 'ProjectionConstraints', 'LookupResult', 'PoseLookup',
@@ -401,7 +403,13 @@ class PoseLookup:
         finger_std = finger_entries = None
         evidence = None if blobs is None else self._finger_blend(cand[near], crop, blobs)
         if evidence is not None:
-            blended[6:], finger_std, finger_entries = evidence
+            fingers, finger_std, finger_entries, seen = evidence
+            # a finger no entry shows a matching patch of keeps the image-weighted blend
+            paper_fingers, paper_std = weighted_fingers(poses, weights)
+            dofs = np.repeat(seen, 4)
+            blended[6:] = np.where(dofs, fingers, paper_fingers)
+            finger_std = np.where(dofs, finger_std, paper_std)
+            finger_entries = np.where(seen, finger_entries, idx[0])
         constraints = self._constraints(int(idx[0]), crop, finger_entries)
         t4 = time.perf_counter()
         timings = {'encode_ms': 1e3 * (t1 - t0), 'hamming_ms': 1e3 * (t2 - t1),
@@ -411,11 +419,12 @@ class PoseLookup:
                             finger_std)
 
     def _finger_blend(self, entries: np.ndarray, crop: tuple[float, float, float],
-                      blobs: object) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+                      blobs: object
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """Per-finger blend (20,) and spread (20,) of ``entries`` against full-image
-        ``blobs`` (:mod:`core.finger_evidence`), and the best-scoring entry of each digit
-        (5,), whose patches on that digit become its projection constraints; None when there
-        are no blobs (no evidence: the paper's blend stands)."""
+        ``blobs`` (:mod:`core.finger_evidence`), the best-scoring entry of each digit (5,),
+        whose patches on that digit become its projection constraints, and which digits had
+        evidence (5,); None when there are no usable blobs (the paper's blend stands)."""
         try:
             color = np.asarray(blobs.color).reshape(-1)
             xy = np.asarray(blobs.centroid_px, np.float64).reshape(-1, 2)
@@ -425,15 +434,21 @@ class PoseLookup:
                               ) from exc
         if not len(color) == len(xy) == len(pixels):
             raise SearchError('blob colour, centroid and pixel-count arrays differ in length')
-        if not len(color):
+        usable = np.isfinite(xy).all(axis=1) & np.isfinite(pixels) & (pixels > 0)
+        if not usable.any():
             return None
         scale, ox, oy = crop
-        scores = finger_scores(self._a['patch_xy'][entries], self._a['patch_pixels'][entries],
-                               self.patch_digit_table()[entries], self._a['patch_color'], color,
-                               (xy - (ox, oy)) / scale, pixels / scale ** 2,
-                               self.finger_evidence)
-        fingers, spread = finger_blend(self._a['poses'][entries], scores, self.finger_evidence)
-        return fingers, spread, entries[np.argmin(scores, axis=0)]
+        try:
+            scores = finger_scores(self._a['patch_xy'][entries],
+                                   self._a['patch_pixels'][entries],
+                                   self.patch_digit_table()[entries], self._a['patch_color'],
+                                   color[usable], (xy[usable] - (ox, oy)) / scale,
+                                   pixels[usable] / scale ** 2, self.finger_evidence)
+            fingers, spread, seen = finger_blend(self._a['poses'][entries], scores,
+                                                 self.finger_evidence)
+        except FingerEvidenceError as exc:
+            raise SearchError(f'per-finger blend: {exc}') from exc
+        return fingers, spread, entries[np.argmin(scores, axis=0)], seen
 
     def patch_digit_table(self) -> np.ndarray:
         """(N, P) digit of each entry's visible patches (built once, from the standard mesh
@@ -474,7 +489,10 @@ class PoseLookup:
         if finger_entries is not None:
             digits = self.patch_digit_table()
             for g, e in enumerate(np.asarray(finger_entries, np.int64)):
-                source[digits[e] == g] = e
+                if e != entry:
+                    # the finger's patches all come from entry e, none from the nearest
+                    source[(digits[entry] == g) & (source == entry)] = -1
+                    source[digits[e] == g] = e
         vis = np.flatnonzero(source >= 0)
         src = source[vis]
         tiny_xy = self._a['patch_xy'][src, vis].astype(np.float64)

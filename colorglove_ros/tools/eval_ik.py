@@ -169,7 +169,8 @@ def main(argv: list[str] | None = None) -> int:
                         'returns and blends (PoseLookup num_blend; paper: 10)')
     parser.add_argument('--temporal-tau', type=float, metavar='DEG', help='reweight the '
                         "neighbours by exp(-d^2 / tau^2), d their distance (deg) to each "
-                        "tracker's previous output (core.temporal_prior; default: off)")
+                        "tracker's previous output (core.temporal_prior; default: off; "
+                        'needs --no-finger-evidence)')
     parser.add_argument('--temporal-rotation-weight', type=float, default=1.0,
                         help='weight of the squared wrist rotation angle in that distance '
                         '(0: finger joints only)')

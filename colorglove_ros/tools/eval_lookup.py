@@ -192,13 +192,15 @@ def _timing(lookup: PoseLookup, tiny: np.ndarray, crop: np.ndarray, nn: np.ndarr
     found = 0
     nearest, blended, finger_blended = [], [], []
     blobs = [_tiny_blobs(tiny[i], crop[i]) for i in range(len(tiny))]
+    lookup.patch_digit_table()          # built once, outside the timed lookups
     for rep in range(repeats):
         for i in range(len(tiny)):
             res = lookup.lookup(tiny[i], crop[i], camera)
             for key, val in res.timings_ms.items():
                 times.setdefault(key, []).append(val)
             found += int(res.indices[0] == nn[i])
-            # the nodes' lookup: fingers blended from the blobs (core.finger_evidence)
+            # fingers blended from blobs (core.finger_evidence), as lookup_node does; the
+            # blobs here come from the tiny labels, the node's from the full image
             res_f = lookup.lookup(tiny[i], crop[i], camera, blobs[i])
             times.setdefault('total_with_finger_blend_ms', []).append(
                 res_f.timings_ms['total_ms'])
