@@ -15,7 +15,7 @@ that finger best (``PoseLookup.lookup`` with blobs).
 
 Measured (``colorglove_eval_ik``, segmented labels, one camera, IK + smoothing): fingertip
 error with the wrist position removed 21.0 -> 16.2 mm on the tuning seeds 1000-1001 and
-20.0 -> 16.0 mm on the reported seeds 0-1 (absolute 26.1 -> 21.8 mm).
+20.0 -> 15.9 mm on the reported seeds 0-1 (absolute 26.1 -> 21.9 mm).
 """
 from __future__ import annotations
 
