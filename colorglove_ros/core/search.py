@@ -405,10 +405,11 @@ class PoseLookup:
         if evidence is not None:
             fingers, finger_std, finger_entries, seen = evidence
             # a finger no entry shows a matching patch of keeps the image-weighted blend
-            paper_fingers, paper_std = weighted_fingers(poses, weights)
+            # (already in blended) and that blend's spread
             dofs = np.repeat(seen, 4)
-            blended[6:] = np.where(dofs, fingers, paper_fingers)
-            finger_std = np.where(dofs, finger_std, paper_std)
+            blended[6:] = np.where(dofs, fingers, blended[6:])
+            if not seen.all():
+                finger_std = np.where(dofs, finger_std, weighted_fingers(poses, weights)[1])
             finger_entries = np.where(seen, finger_entries, idx[0])
         constraints = self._constraints(int(idx[0]), crop, finger_entries)
         t4 = time.perf_counter()
