@@ -159,6 +159,49 @@ def test_keep_multicolor_components_counts_only_glove_pixels() -> None:
     np.testing.assert_array_equal(mask_out, out > 0)
 
 
+def test_keep_multicolor_components_reattaches_cut_off_pieces() -> None:
+    """A one-colour piece a few pixels from the kept glove (a fingertip cut off by a thin line
+    of unclassified pixels) is kept with ``reattach_radius``; one far away is still dropped."""
+    lab = np.zeros((40, 80), np.uint8)
+    lab[5:15, 5:10], lab[5:15, 10:15], lab[5:15, 15:20] = 1, 2, 3   # the glove
+    lab[5:15, 22:26] = 4                                              # 2 px gap: a fingertip
+    lab[25:35, 60:70] = 4                                             # far away: clutter
+    plain = keep_multicolor_components(lab, min_colors=3)
+    assert not plain[5:15, 22:26].any()
+    out = keep_multicolor_components(lab, min_colors=3, reattach_radius=3)
+    np.testing.assert_array_equal(out[:20], lab[:20])
+    assert not out[20:].any()
+    # the gap is wider than a radius of 2 reaches
+    assert not keep_multicolor_components(lab, min_colors=3, reattach_radius=2)[5:15, 22:].any()
+
+
+def test_segmenter_keeps_cut_off_fingertip_drops_far_clutter(calibration) -> None:
+    """In a frame, a glove-coloured square 1 px from the glove is kept as part of the hand
+    (with the default ``reattach_radius``) and the same square far away is not."""
+    rng = np.random.default_rng(8)
+    img, lab = render_blob_frame(rng, BlobConditions(1.0, (1.0, 1.0, 1.0), 0.0, 2, False, 1.0))
+    ys, xs = np.nonzero(lab)
+    right = int(xs.max())
+    row = int(np.median(ys[xs >= right - 2]))
+    color = np.asarray(GLOVE_PALETTE_RGB[3], np.uint8)
+    near = (slice(row - 4, row + 5), slice(right + 2, right + 11))   # a 1 px gap
+    far_col = right + 120 if right + 140 < img.shape[1] else int(xs.min()) - 130
+    far = (slice(row - 4, row + 5), slice(far_col, far_col + 9))
+    img = img.copy()
+    img[near] = color
+    img[far] = color
+    results = {radius: GloveSegmenter(calibration, max_roi_cells=400,
+                                      reattach_radius=radius).process(img, keep_labels=True)
+               for radius in (0, 3)}
+    for obs in results.values():
+        assert obs.hand_found
+        assert not obs.label_image[far].any()
+    assert not results[0].label_image[near].any()
+    assert np.count_nonzero(results[3].label_image[near] == 4) > 0.8 * 81
+    with pytest.raises(SegmentationConfigError, match='reattach_radius'):
+        GloveSegmenter(calibration, reattach_radius=-1)
+
+
 def _mixed_edge(width: int = 40, height: int = 12, edge: float = 19.5, blur: float = 4.0
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A red | yellow edge at x = ``edge`` blurred over ``blur`` pixels (mixed in linear

@@ -69,10 +69,15 @@ class Observation:
 
 
 def keep_multicolor_components(labels: np.ndarray, min_colors: int = 3,
-                               min_share: float = 0.03, min_pixels: int = 4) -> np.ndarray:
+                               min_share: float = 0.03, min_pixels: int = 4,
+                               reattach_radius: int = 0) -> np.ndarray:
     """Zero every 8-connected glove component with fewer than ``min_colors`` colours each
     holding at least ``min_share`` of its pixels (and ``min_pixels``). The printed glove shows
-    many colours side by side; glove-coloured clutter and noise specks show one or two."""
+    many colours side by side; glove-coloured clutter and noise specks show one or two.
+
+    With ``reattach_radius`` > 0, a component with too few colours is kept after all when it
+    lies within that many pixels of a kept one: a fingertip or finger that a thin line of
+    unclassified pixels has cut off from the hand shows only one or two colours by itself."""
     glove = labels > 0
     n, comp = cv2.connectedComponents(glove.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
     if n <= 1:
@@ -87,6 +92,12 @@ def keep_multicolor_components(labels: np.ndarray, min_colors: int = 3,
     keep[0] = True
     if keep.all():
         return labels
+    if reattach_radius > 0 and keep[1:].any():
+        kept = keep.view(np.uint8).take(comp)
+        kept[comp == 0] = 0
+        width = 2 * int(reattach_radius) + 1
+        near = cv2.dilate(kept, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (width, width)))
+        keep[comp[near > 0]] = True
     return labels * keep.view(np.uint8).take(comp)   # 5x faster than np.where
 
 
@@ -250,7 +261,8 @@ class GloveSegmenter:
     (``roi_margin`` times the coarse window, reduced so the crop spans at most
     ``max_roi_cells`` pixels) is bilateral-filtered, classified at (near) full resolution
     with the light colour divided out (von Kries in linear RGB, fused into the table
-    lookup) and cleaned (median filter, :func:`keep_multicolor_components`, then
+    lookup) and cleaned (median filter, :func:`keep_multicolor_components` with cut-off
+    fingertips within ``reattach_radius`` region pixels re-attached, then
     :func:`relabel_borders`); :func:`crop_to_tiny` there gives the tiny image and crop;
     connected components per colour give the blobs.
     """
@@ -262,13 +274,15 @@ class GloveSegmenter:
                  border_passes: int = 3, border_distances: tuple[int, ...] = (2, 4),
                  min_glove_pixels: int = 300, min_inside_fraction: float = 0.5,
                  min_blob_pixels: int = 12, min_component_colors: int = 3,
-                 light_passes: int = 1) -> None:
+                 reattach_radius: int = 3, light_passes: int = 1) -> None:
         if coarse_factor < 1 or max_roi_cells < TINY_SIZE or roi_margin < 1.0:
             raise SegmentationConfigError(
                 f'need coarse_factor >= 1, max_roi_cells >= {TINY_SIZE}, roi_margin >= 1; got '
                 f'{coarse_factor}, {max_roi_cells}, {roi_margin}')
-        if light_passes < 0:
-            raise SegmentationConfigError(f'need light_passes >= 0; got {light_passes}')
+        if light_passes < 0 or reattach_radius < 0:
+            raise SegmentationConfigError(
+                f'need light_passes >= 0 and reattach_radius >= 0; got {light_passes}, '
+                f'{reattach_radius}')
         if border_passes < 0 or not all(int(d) >= 1 for d in border_distances):
             raise SegmentationConfigError(
                 f'need border_passes >= 0 and border_distances >= 1; got {border_passes}, '
@@ -287,6 +301,7 @@ class GloveSegmenter:
         self.min_inside_fraction = float(min_inside_fraction)
         self.min_blob_pixels = int(min_blob_pixels)
         self.min_component_colors = int(min_component_colors)
+        self.reattach_radius = int(reattach_radius)
         self.light_passes = int(light_passes)
 
     # ------------------------------------------------------------------ helpers
@@ -410,7 +425,8 @@ class GloveSegmenter:
         labels = self._median(labels)
         if self.min_component_colors > 1:
             labels = keep_multicolor_components(labels, self.min_component_colors,
-                                                min_pixels=max(self.min_blob_pixels // (r * r), 2))
+                                                min_pixels=max(self.min_blob_pixels // (r * r), 2),
+                                                reattach_radius=self.reattach_radius)
         t = tick('cleanup', t)
         labels = relabel_borders(roi, labels, self.border_passes, self.border_distances)
         t = tick('borders', t)
