@@ -1,10 +1,9 @@
 """End to end: a synthetic bag replayed through segmentation_node, lookup_node and ik_node as
-separate processes over DDS; at least 95% of the frames give a JointState, the wrist depth error
-against the bag's ground truth is within the IK target (< 25 mm on average) and the fingertip
-error within FINGERTIP_BOUND_MM (absolute) and FINGERTIP_REL_WRIST_BOUND_MM (wrist position
-removed). The IK issue's fingertip target (15 mm) is not met yet with one camera on the
-evaluation seeds (colorglove_eval_ik: 21.9 mm absolute, 15.9 mm relative to the wrist): these
-bounds guard against regressions, they are not the target.
+separate processes over DDS; at least 95% of the frames give a JointState and the error against
+the bag's ground truth is within the IK issue's one-camera targets as colorglove_eval_ik judges
+them: fingertip error relative to the wrist position < 15 mm and wrist depth error < 25 mm (on
+average). The absolute fingertip error, which includes the depth error, is held to a regression
+bound (FINGERTIP_BOUND_MM).
 
 The assets are real and built here: the colour calibration from 12 rendered training frames,
 a pose database of E2E_DATABASE_ENTRIES entries (default 20,000; a few minutes on 2 cores) with
@@ -29,9 +28,9 @@ pytestmark = pytest.mark.dds
 E2E_FRAMES = 60
 E2E_SEED = 5          # a held-out sequence seed (the database and calibration use others)
 DATABASE_ENTRIES = int(os.environ.get('E2E_DATABASE_ENTRIES', '20000'))
-FINGERTIP_BOUND_MM = 30.0            # measured 24.5 mm with 20,000 entries
-FINGERTIP_REL_WRIST_BOUND_MM = 20.0  # measured 13.4 mm
-DEPTH_TARGET_MM = 25.0
+FINGERTIP_BOUND_MM = 30.0              # regression bound; measured 23.7 mm with 20,000 entries
+FINGERTIP_REL_WRIST_TARGET_MM = 15.0   # the IK target; measured 13.7 mm
+DEPTH_TARGET_MM = 25.0                 # the IK target; measured 17.1 mm
 
 
 @pytest.fixture(scope='module')
@@ -71,7 +70,7 @@ def test_bag_through_the_pipeline(assets: dict[str, Path], isolated_ros_domain: 
     assert figures['tracked_fraction'] >= 0.95, figures
     assert figures['frames_with_truth'] >= 0.95 * E2E_FRAMES
     assert figures['fingertip_mm'] < FINGERTIP_BOUND_MM, figures
-    assert figures['fingertip_rel_wrist_mm'] < FINGERTIP_REL_WRIST_BOUND_MM, figures
+    assert figures['fingertip_rel_wrist_mm'] < FINGERTIP_REL_WRIST_TARGET_MM, figures
     assert figures['wrist_depth_mm'] < DEPTH_TARGET_MM, figures
     assert figures['jitter_mm'] < 10.0, figures
     assert 0 < figures['latency_p50_ms'] < 2000.0
