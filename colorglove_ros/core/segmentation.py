@@ -93,8 +93,9 @@ def keep_multicolor_components(labels: np.ndarray, min_colors: int = 3,
     if keep.all():
         return labels
     if reattach_radius > 0 and keep[1:].any():
-        kept = keep.view(np.uint8).take(comp)
-        kept[comp == 0] = 0
+        kept_table = keep.view(np.uint8).copy()
+        kept_table[0] = 0                       # background is not a kept component
+        kept = kept_table.take(comp)
         width = 2 * int(reattach_radius) + 1
         near = cv2.dilate(kept, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (width, width)))
         keep[comp[near > 0]] = True
