@@ -161,18 +161,29 @@ def test_keep_multicolor_components_counts_only_glove_pixels() -> None:
 
 def test_keep_multicolor_components_reattaches_cut_off_pieces() -> None:
     """A one-colour piece a few pixels from the kept glove (a fingertip cut off by a thin line
-    of unclassified pixels) is kept with ``reattach_radius``; one far away is still dropped."""
+    of unclassified pixels) is kept with ``reattach_radius``; one far away, or one larger than
+    ``reattach_max_share`` of the glove, is still dropped."""
     lab = np.zeros((40, 80), np.uint8)
-    lab[5:15, 5:10], lab[5:15, 10:15], lab[5:15, 15:20] = 1, 2, 3   # the glove
+    lab[5:35, 5:10], lab[5:35, 10:15], lab[5:35, 15:20] = 1, 2, 3   # the glove, 450 px
     lab[5:15, 22:26] = 4                                              # 2 px gap: a fingertip
     lab[25:35, 60:70] = 4                                             # far away: clutter
+    glove_and_tip = (slice(None), slice(0, 30))
     plain = keep_multicolor_components(lab, min_colors=3)
     assert not plain[5:15, 22:26].any()
     out = keep_multicolor_components(lab, min_colors=3, reattach_radius=3)
-    np.testing.assert_array_equal(out[:20], lab[:20])
-    assert not out[20:].any()
+    np.testing.assert_array_equal(out[glove_and_tip], lab[glove_and_tip])
+    assert not out[:, 30:].any()
     # the gap is wider than a radius of 2 reaches
-    assert not keep_multicolor_components(lab, min_colors=3, reattach_radius=2)[5:15, 22:].any()
+    assert not keep_multicolor_components(lab, min_colors=3, reattach_radius=2)[:, 22:].any()
+    # a piece holding more than reattach_max_share (0.2) of the glove's pixels stays dropped
+    lab[5:15, 22:26] = 0
+    lab[5:20, 22:40] = 4                                              # 270 px
+    assert not keep_multicolor_components(lab, min_colors=3, reattach_radius=3)[:, 22:].any()
+    grown = keep_multicolor_components(lab, min_colors=3, reattach_radius=3,
+                                       reattach_max_share=0.7)
+    np.testing.assert_array_equal(grown[5:20, 22:40], lab[5:20, 22:40])
+    with pytest.raises(SegmentationConfigError):
+        keep_multicolor_components(lab, reattach_radius=-1)
 
 
 def test_segmenter_keeps_cut_off_fingertip_drops_far_clutter(calibration) -> None:
