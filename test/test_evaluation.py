@@ -269,18 +269,18 @@ def test_eval_ik_cli_writes_documented_json(tiny_db_path, tmp_path, capsys):
             assert key in row
         assert math.isfinite(row['fingertip_mm'])
         assert math.isfinite(row['fingertip_hand_frame_mm'])
-    judged = [t for t in data['targets'] if t['result'] != 'info']
-    assert {t['result'] for t in judged} <= {'PASS', 'FAIL'}
-    assert any('depth error < 10 mm' in t['target'] for t in judged)
-    fingertip = [t['target'] for t in judged if 'fingertip 3-D error < 15 mm' in t['target']]
+    assert {t['result'] for t in data['targets']} <= {'PASS', 'FAIL'}
+    assert any('depth error < 10 mm' in t['target'] for t in data['targets'])
+    fingertip = [t['target'] for t in data['targets']
+                 if 'fingertip 3-D error < 15 mm' in t['target']]
     assert fingertip == ['1 camera: fingertip 3-D error < 15 mm (mean), relative to the wrist '
                          'position']
-    info = [t for t in data['targets'] if t['result'] == 'info']
-    assert [t['target'] for t in info] == [
-        '1 camera: fingertip 3-D error, absolute (includes the wrist translation error)']
     smooth_row = next(r for r in data['rows']
                       if r['cameras'] == '1 camera' and r['mode_key'] == 'ik_smooth')
-    assert info[0]['measured'] == smooth_row['fingertip_mm']
+    assert data['reference'] == [{
+        'figure': '1 camera: fingertip 3-D error (mean), absolute: includes the wrist '
+                  'translation error',
+        'measured': smooth_row['fingertip_mm']}]
     assert data['settings']['seeds'] == [0]
     assert png.stat().st_size > 1000
     assert 'Targets' in capsys.readouterr().out

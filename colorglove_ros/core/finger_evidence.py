@@ -13,9 +13,11 @@ too, so the IK can trust the prior less where the neighbours disagree.
 The lookup also takes each finger's projection constraints from the entry that explains
 that finger best (``PoseLookup.lookup`` with blobs).
 
-Measured (``colorglove_eval_ik``, segmented labels, one camera, IK + smoothing): fingertip
-error with the wrist position removed 21.0 -> 16.2 mm on the tuning seeds 1000-1001 and
-20.0 -> 15.9 mm on the reported seeds 0-1 (absolute 26.1 -> 21.9 mm).
+Measured (``colorglove_eval_ik``, segmented labels, one camera, IK + smoothing), paper blend
+-> per-finger blend: fingertip error with the wrist position removed 16.6 -> 13.9 mm on the
+reported seeds 0-1 (absolute 22.9 -> 19.7 mm); when it was introduced, before the segmentation
+re-attached cut-off fingertips, 21.0 -> 16.2 mm on the tuning seeds 1000-1001 and 20.0 ->
+15.9 mm on seeds 0-1.
 """
 from __future__ import annotations
 

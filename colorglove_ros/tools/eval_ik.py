@@ -31,29 +31,31 @@ from colorglove_ros.core.ik import TRACKER_MODES, IKConfigError, load_covariance
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.paths import share_dir
 
-__all__ = ['main', 'TARGETS', 'evaluate_targets', 'JSON_KEYS', 'PACKAGE_ROOT']
+__all__ = ['main', 'TARGETS', 'REFERENCE_FIGURES', 'evaluate_targets', 'reference_figures',
+           'JSON_KEYS', 'PACKAGE_ROOT']
 
 PACKAGE_ROOT = share_dir()   # source checkout, or the installed share folder
 MODE_LABELS = {'blend': 'blended NN only', 'ik': '+ IK', 'ik_smooth': '+ IK + smoothing'}
-JSON_KEYS = ('settings', 'rows', 'targets', 'plot')
+JSON_KEYS = ('settings', 'rows', 'targets', 'reference', 'plot')
 # (rig, mode, figure, threshold, description); 'ik_ms_mean' targets apply to both IK modes.
 # The issue's 15 mm fingertip target is read on the fingertip error relative to the wrist
 # position (wrist translation removed, rotation kept): the wrist translation has targets of its
 # own (image plane and depth, depth < 25 mm with one camera), and a depth error within that
 # allowance would by itself put an absolute fingertip error over 15 mm. The absolute error is
-# printed beside it as 'info' (REFERENCE_FIGURES).
+# printed in a table of its own (REFERENCE_FIGURES), not judged.
 TARGETS = (
     ('1 camera', 'ik_smooth', 'fingertip_rel_wrist_mm', 15.0,
      'fingertip 3-D error < 15 mm (mean), relative to the wrist position'),
     ('1 camera', 'ik_smooth', 'wrist_depth_mm', 25.0, 'depth error < 25 mm (mean)'),
     ('2 cameras', 'ik_smooth', 'wrist_depth_mm', 10.0, 'depth error < 10 mm (mean)'),
 )
-# (rig, mode, figure, threshold it is shown against, description): reported, not judged.
+# (rig, mode, figure, description): reported beside the targets, not judged.
 REFERENCE_FIGURES = (
-    ('1 camera', 'ik_smooth', 'fingertip_mm', 15.0,
-     'fingertip 3-D error, absolute (includes the wrist translation error)'),
+    ('1 camera', 'ik_smooth', 'fingertip_mm',
+     'fingertip 3-D error (mean), absolute: includes the wrist translation error'),
 )
-SMOOTH_ERROR_TOLERANCE = 1.02     # "without raising error": at most 2 % more fingertip error
+# "without raising error": at most 2 % more absolute fingertip error (the strictest reading)
+SMOOTH_ERROR_TOLERANCE = 1.02
 IK_MS_TARGET = 5.0
 
 
@@ -79,24 +81,32 @@ def _row(rig: str, mode: str, ncam: int, s: dict[str, float]) -> dict[str, Any]:
             'constraints_mean': s.get('constraints_mean', nan), 'frames': s.get('frames', 0)}
 
 
+def _measured(rows: list[dict[str, Any]], rig: str, mode: str, key: str) -> float | None:
+    """The figure ``key`` of the (rig, mode) row, or None when that row was not run."""
+    row = next((r for r in rows if r['cameras'] == rig and r['mode_key'] == mode), None)
+    return None if row is None else float(row[key])
+
+
+def reference_figures(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The REFERENCE_FIGURES measured on the rows (missing rows are skipped)."""
+    out = []
+    for rig, mode, key, text in REFERENCE_FIGURES:
+        v = _measured(rows, rig, mode, key)
+        if v is not None:
+            out.append({'figure': f'{rig}: {text}', 'measured': v})
+    return out
+
+
 def evaluate_targets(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """PASS/FAIL of each target on the measured rows (missing rows are skipped), and the
-    REFERENCE_FIGURES as 'info'."""
+    """PASS/FAIL of each target on the measured rows (missing rows are skipped)."""
     by = {(r['cameras'], r['mode_key']): r for r in rows}
     out = []
     for rig, mode, key, thr, text in TARGETS:
-        r = by.get((rig, mode))
-        if r is None:
+        v = _measured(rows, rig, mode, key)
+        if v is None:
             continue
-        v = float(r[key])
         out.append({'target': f'{rig}: {text}', 'measured': v, 'threshold': thr,
                     'margin': v - thr, 'result': 'PASS' if v < thr else 'FAIL'})
-    for rig, mode, key, thr, text in REFERENCE_FIGURES:
-        r = by.get((rig, mode))
-        if r is not None:
-            v = float(r[key])
-            out.append({'target': f'{rig}: {text}', 'measured': v, 'threshold': thr,
-                        'margin': v - thr, 'result': 'info'})
     for rig in ('1 camera', '2 cameras'):
         a, b = by.get((rig, 'ik')), by.get((rig, 'ik_smooth'))
         if a is None or b is None:
@@ -127,7 +137,9 @@ def _plot(rows: list[dict[str, Any]], path: Path) -> Path:
     import numpy as np
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    figs = [('fingertip_mm', 'fingertip error (mm)'), ('wrist_depth_mm', 'depth error (mm)'),
+    figs = [('fingertip_rel_wrist_mm', 'fingertip error, wrist removed (mm)'),
+            ('fingertip_mm', 'fingertip error, absolute (mm)'),
+            ('wrist_depth_mm', 'depth error (mm)'),
             ('wrist_plane_mm', 'image-plane error (mm)'), ('jitter_mm', 'jitter (mm)')]
     rigs = list(dict.fromkeys(r['cameras'] for r in rows))
     modes = list(dict.fromkeys(r['mode_key'] for r in rows))
@@ -265,6 +277,8 @@ def main(argv: list[str] | None = None) -> int:
                 'articulation only); true pose with the estimated wrist rotation (rotation only)')
     targets = evaluate_targets(rows)
     print_table(targets, 'Targets (measured, not asserted)')
+    reference = reference_figures(rows)
+    print_table(reference, 'Beside the targets (not judged)')
     plot = ''
     if args.plot:
         plot = str(_plot(rows, Path(args.plot)))
@@ -283,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
                 'wall_s': time.perf_counter() - t0}
     if args.json:
         write_json(args.json, {'settings': settings, 'rows': rows, 'targets': targets,
-                               'plot': plot})
+                               'reference': reference, 'plot': plot})
     return 0
 
 
