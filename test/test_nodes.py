@@ -281,7 +281,7 @@ def test_ik_node_outputs(good_candidates: HandPoseCandidates, good_rgb: np.ndarr
     no_hand = HandPoseCandidates(header=header(200, 600_000_000, 'camera_optical_frame'),
                                  hand_found=False, status='no_glove',
                                  dof_names=list(DOF_NAMES))
-    with running(_ik()) as h:
+    with running(_ik(publish_overlay=True)) as h:
         joints = h.collect(JointState, 'hand/joint_states')
         wrist = h.collect(PoseStamped, 'hand/wrist_pose')
         markers = h.collect(MarkerArray, 'hand/markers')
@@ -327,13 +327,17 @@ def test_ik_node_survives_malformed_candidates(good_candidates: HandPoseCandidat
     wrong_names.observation = good_candidates.observation
     wrong_names.dof_names = ['a', 'b']
     wrong_names.blended_pose = [0.0, 0.0]
-    with running(_ik(publish_overlay=False)) as h:
+    with running(_ik()) as h:     # defaults: no overlay, so no camera image subscription
         status = h.collect(String, 'hand/tracking_status')
+        overlay = h.collect(Image, 'hand/overlay')
         pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
         bad = h.exchange(pub, wrong_names, status)
         good = h.exchange(pub, good_candidates, status)
+        h.settle(0.2)
+        camera_subscribers = h.probe.count_subscribers('/camera/image_raw')
     assert bad.data.startswith('no hand')
     assert good.data.startswith('tracking:')
+    assert not overlay and camera_subscribers == 0
 
 
 def _short_pose(msg: HandPoseCandidates) -> None:

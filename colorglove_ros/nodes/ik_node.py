@@ -58,8 +58,10 @@ class IKNode(Node):
         enable_ik = declare(self, 'enable_ik', True, 'false: publish the blended lookup pose')
         enable_smoothing = declare(self, 'enable_smoothing', True,
                                    'use the previous frame as a prior (temporal smoothing)')
-        self.publish_overlay = declare(self, 'publish_overlay', True,
-                                       'draw the fitted skeleton on the camera image')
+        self.publish_overlay = declare(
+            self, 'publish_overlay', False,
+            'also draw the fitted skeleton on the camera image and publish it on hand/overlay '
+            '(subscribes to the camera images; a few ms of CPU per frame)')
         extra_topics = declare(self, 'extra_observation_topics', '',
                                'comma-separated HandObservation topics of cameras 1..N-1')
         wait_s = declare(self, 'extra_observation_wait_s', 0.05,

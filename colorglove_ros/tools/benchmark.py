@@ -57,6 +57,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--throughput-rate', type=float, default=2.0,
                         help='playback speed of the throughput pass (2.0 = offered at 60 Hz)')
     parser.add_argument('--database', type=Path, help='pose database (default: config)')
+    parser.add_argument('--overlay', action='store_true',
+                        help='ik_node also draws and publishes the overlay image (it then '
+                             'receives every camera image); off by default, as in '
+                             'config/nodes.yaml')
     parser.add_argument('--json', type=Path, help='write the figures as JSON')
     args = parser.parse_args(argv)
     _, default_db, _ = build_database.load_build_config(resolve_path(DATABASE_CONFIG))
@@ -65,6 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     bag = ensure_bag(args.seed, args.frames)
     parameters = pipeline_parameters(database, args.seed, args.frames, 30.0)
     del parameters['camera']
+    parameters['ik']['publish_overlay'] = args.overlay
     model = default_hand()[0]
     runs = {}
     for name, rate in (('latency', args.rate), ('throughput', args.throughput_rate)):
@@ -81,6 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     figures['throughput_offered_hz'] = 30.0 * args.throughput_rate
     figures['throughput_hz'] = throughput['output_rate_hz']
     figures['throughput_tracked_fraction'] = throughput['tracked_fraction']
+    figures['overlay'] = float(args.overlay)
     print_table([{'figure': k, 'value': v} for k, v in figures.items()],
                 title=f'pipeline benchmark: {bag.name}, {database.name}')
     targets = check_targets(figures)
