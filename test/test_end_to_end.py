@@ -3,8 +3,8 @@ separate processes over DDS; at least 95% of the frames give a JointState and th
 the bag's ground truth is within the IK issue's one-camera targets, on the figures
 colorglove_eval_ik judges (there on seeds 0-1 with the 100,000-entry database, here on one
 held-out bag with a 20,000-entry one): fingertip error relative to the wrist position < 15 mm
-and wrist depth error < 25 mm (on average). The absolute fingertip error, which includes the depth error, is held to a regression
-bound (FINGERTIP_BOUND_MM).
+and wrist depth error < 25 mm (on average). The absolute fingertip error, which includes the
+depth error, is held to a regression bound (FINGERTIP_BOUND_MM).
 
 The assets are real and built here: the colour calibration from 12 rendered training frames,
 a pose database of E2E_DATABASE_ENTRIES entries (default 20,000; a few minutes on 2 cores) with
