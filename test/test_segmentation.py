@@ -321,6 +321,15 @@ def test_light_correction_beats_uncorrected_under_tinted_light(calibration) -> N
         GloveSegmenter(calibration, light_passes=-1)
 
 
+def test_eval_frames_with_clutter_near_the_hand() -> None:
+    """--clutter-near-hand renders the same hands with the distractors placed anywhere."""
+    away = eval_segmentation.test_frames('synth', 8, seed=3)
+    near = eval_segmentation.test_frames('synth', 8, seed=3, clutter_near_hand=True)
+    for (_, labels_away, _), (_, labels_near, _) in zip(away, near, strict=True):
+        np.testing.assert_array_equal(labels_away, labels_near)
+    assert any(not np.array_equal(a[0], n[0]) for a, n in zip(away, near, strict=True))
+
+
 def test_roi_reduction_keeps_crop_consistent(calibration) -> None:
     """A big glove is processed at reduced resolution; the crop must still match."""
     rng = np.random.default_rng(21)
@@ -360,6 +369,7 @@ def test_tools_calibrate_and_evaluate(tmp_path: Path, capsys) -> None:
     assert s['frames'] == 4 and s['hand_detect_tn'] == 1
     assert 0.5 < s['interior_pixel_accuracy'] <= 1.0
     assert 'crop_iou_mean' in s and len(figures['timings']) == len(STAGES) + 1
+    assert 0.0 <= s['pipeline_background_fp_rate'] <= 1.0
     assert all(np.isfinite(row['glove_median_ms']) for row in figures['timings'])
     # every missed glove pixel is counted once by what it became and once by where it is
     missed = 1.0 - s['glove_pixel_accuracy']
@@ -371,6 +381,10 @@ def test_tools_calibrate_and_evaluate(tmp_path: Path, capsys) -> None:
     assert sum(row['frames'] for row in figures['conditions']
                if row['condition'] == 'light level') == 3     # the glove frames
     assert 'time per 640x480 frame' in capsys.readouterr().out
+    # glove-like clutter next to the hand exists only in the synthetic frames
+    assert eval_segmentation.main(['--config', str(config), '--source', 'blobs',
+                                   '--clutter-near-hand']) == 1
+    assert 'needs source' in capsys.readouterr().out
     config.write_text(f'calibration_file: {cal_path}\nsegmenter:\n  no_such_key: 1\n')
     with pytest.raises(SegmentationConfigError, match='no_such_key'):
         load_segmenter(str(config))
