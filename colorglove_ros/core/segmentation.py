@@ -84,8 +84,9 @@ def keep_multicolor_components(labels: np.ndarray, min_colors: int = 3,
     of the hand's pixels). Glove-coloured clutter within that reach is kept too, like clutter
     touching the glove."""
     if reattach_radius < 0 or not reattach_max_share >= 0.0:
-        raise SegmentationConfigError(f'need reattach_radius >= 0 and reattach_max_share >= 0; got '
-                         f'{reattach_radius}, {reattach_max_share}')
+        raise SegmentationConfigError(
+            f'need reattach_radius >= 0 and reattach_max_share >= 0; got {reattach_radius}, '
+            f'{reattach_max_share}')
     glove = labels > 0
     n, comp = cv2.connectedComponents(glove.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
     if n <= 1:
