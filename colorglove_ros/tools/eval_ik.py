@@ -81,30 +81,27 @@ def _row(rig: str, mode: str, ncam: int, s: dict[str, float]) -> dict[str, Any]:
             'constraints_mean': s.get('constraints_mean', nan), 'frames': s.get('frames', 0)}
 
 
-def _measured(rows: list[dict[str, Any]], rig: str, mode: str, key: str) -> float | None:
-    """The figure ``key`` of the (rig, mode) row, or None when that row was not run."""
-    row = next((r for r in rows if r['cameras'] == rig and r['mode_key'] == mode), None)
-    return None if row is None else float(row[key])
+def _by_rig_and_mode(rows: list[dict[str, Any]]) -> dict[tuple[str, str], dict[str, Any]]:
+    """The rows keyed by (cameras, mode key)."""
+    return {(r['cameras'], r['mode_key']): r for r in rows}
 
 
 def reference_figures(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """The REFERENCE_FIGURES measured on the rows (missing rows are skipped)."""
-    out = []
-    for rig, mode, key, text in REFERENCE_FIGURES:
-        v = _measured(rows, rig, mode, key)
-        if v is not None:
-            out.append({'figure': f'{rig}: {text}', 'measured': v})
-    return out
+    by = _by_rig_and_mode(rows)
+    return [{'figure': f'{rig}: {text}', 'measured': float(by[(rig, mode)][key])}
+            for rig, mode, key, text in REFERENCE_FIGURES if (rig, mode) in by]
 
 
 def evaluate_targets(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """PASS/FAIL of each target on the measured rows (missing rows are skipped)."""
-    by = {(r['cameras'], r['mode_key']): r for r in rows}
+    by = _by_rig_and_mode(rows)
     out = []
     for rig, mode, key, thr, text in TARGETS:
-        v = _measured(rows, rig, mode, key)
-        if v is None:
+        r = by.get((rig, mode))
+        if r is None:
             continue
+        v = float(r[key])
         out.append({'target': f'{rig}: {text}', 'measured': v, 'threshold': thr,
                     'margin': v - thr, 'result': 'PASS' if v < thr else 'FAIL'})
     for rig in ('1 camera', '2 cameras'):
