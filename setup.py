@@ -6,14 +6,13 @@ from setuptools import find_packages, setup
 
 PACKAGE_NAME = 'colorglove_ros'
 
+# Every node shell colorglove_ros/ros/nodes/<name>_node.py becomes the command <name>_node.
 NODE_SCRIPTS = {
-    'camera_node': 'colorglove_ros.nodes.camera_node:main',
-    'segmentation_node': 'colorglove_ros.nodes.segmentation_node:main',
-    'lookup_node': 'colorglove_ros.nodes.lookup_node:main',
-    'ik_node': 'colorglove_ros.nodes.ik_node:main',
+    Path(path).stem: f'colorglove_ros.ros.nodes.{Path(path).stem}:main'
+    for path in sorted(glob('colorglove_ros/ros/nodes/*_node.py'))
 }
 
-TOOL_SCRIPTS = {'colorglove_launch': 'colorglove_ros.launcher:main'}
+TOOL_SCRIPTS = {'colorglove_launch': 'colorglove_ros.ros.launcher:main'}
 # Every command-line tool colorglove_ros/tools/<name>.py becomes colorglove_<name>.
 TOOL_SCRIPTS.update({
     f'colorglove_{Path(path).stem}': f'colorglove_ros.tools.{Path(path).stem}:main'

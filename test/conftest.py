@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from colorglove_ros.launcher import FASTDDS_PROFILE_VARIABLE
+from colorglove_ros.ros.launcher import FASTDDS_PROFILE_VARIABLE
 
 TEST_DIR = Path(__file__).resolve().parent
 REPO_DIR = TEST_DIR.parent

@@ -40,7 +40,7 @@ _ASSETS: dict[str, NodeAssets] = {}
 
 
 def _build_assets(folder: Path) -> NodeAssets:
-    from colorglove_ros.core.database import BuildConfig, build_database, save_database
+    from colorglove_ros.core.lookup.database import BuildConfig, build_database, save_database
     from colorglove_ros.tools import calibrate_colors
 
     timings = {}
@@ -79,7 +79,7 @@ def node_assets(tmp_path_factory: pytest.TempPathFactory) -> NodeAssets:
 # ------------------------------------------------------------------------------ frames
 def glove_frame(seed: int, out_of_frame: bool = False):
     """A rendered 640x480 'test' frame of the gloved hand (``core.synth.SyntheticFrame``)."""
-    from colorglove_ros.core import synth
+    from colorglove_ros.core.synthetic import frames as synth
 
     rng = np.random.default_rng(seed)
     camera = synth.default_camera()
@@ -89,11 +89,11 @@ def glove_frame(seed: int, out_of_frame: bool = False):
 
 def hand_far_out_of_frame_rgb(seed: int) -> np.ndarray:
     """A frame whose hand centre projects 60 px left of the image (most of it outside)."""
-    from colorglove_ros.core import synth
+    from colorglove_ros.core.synthetic import frames as synth
 
     rng = np.random.default_rng(seed)
     camera = synth.default_camera()
-    from colorglove_ros.core.glove import default_hand
+    from colorglove_ros.core.hand.glove import default_hand
 
     q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0).copy()
     centre = default_hand()[0].keypoints(q).mean(axis=0)     # camera frame, metres
@@ -104,7 +104,7 @@ def hand_far_out_of_frame_rgb(seed: int) -> np.ndarray:
 
 def background_rgb(seed: int = 3) -> np.ndarray:
     """A 640x480 procedural desk background with no hand, as sRGB uint8."""
-    from colorglove_ros.core import synth
+    from colorglove_ros.core.synthetic import frames as synth
 
     linear = synth.make_background('desk', seed, 640, 480)
     return (np.clip(synth.linear_to_srgb(linear), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)

@@ -15,8 +15,8 @@ import pytest
 import yaml
 from rosbag2_compat import check_jazzy_bag
 
-from colorglove_ros.core.bags import TOPIC_CAMERA_INFO, TOPIC_IMAGE, TOPIC_JOINTS, read_sequence_bag
-from colorglove_ros.core.hand_model import FINGER_DOF_NAMES
+from colorglove_ros.core.hand.model import FINGER_DOF_NAMES
+from colorglove_ros.ros.bags import TOPIC_CAMERA_INFO, TOPIC_IMAGE, TOPIC_JOINTS, read_sequence_bag
 from colorglove_ros.tools import make_bag
 
 REPO_DIR = Path(__file__).resolve().parent.parent

@@ -8,7 +8,10 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from colorglove_ros.core.bags import (
+from colorglove_ros.core.camera import CalibrationError, PinholeCamera, load_calibration
+from colorglove_ros.core.hand.model import FINGER_DOF_NAMES
+from colorglove_ros.core.synthetic.frames import SyntheticSequenceRenderer
+from colorglove_ros.ros.bags import (
     FRAME_ID,
     TOPIC_CAMERA_INFO,
     TOPIC_IMAGE,
@@ -22,10 +25,7 @@ from colorglove_ros.core.bags import (
     read_sequence_bag,
     write_sequence_bag,
 )
-from colorglove_ros.core.camera import CalibrationError, PinholeCamera, load_calibration
-from colorglove_ros.core.hand_model import FINGER_DOF_NAMES
-from colorglove_ros.core.image_codec import ImageEncodingError, image_to_rgb8
-from colorglove_ros.core.synth import SyntheticSequenceRenderer
+from colorglove_ros.ros.image_codec import ImageEncodingError, image_to_rgb8
 from colorglove_ros.tools import make_bag
 
 CAM = PinholeCamera(160, 120, 150.0, 150.0, 79.5, 59.5)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from label_samples import random_blob_images
 
-from colorglove_ros.core.codes import (
+from colorglove_ros.core.lookup.codes import (
     CodeError,
     encoder_from_arrays,
     features_from_dts,
@@ -17,7 +17,7 @@ from colorglove_ros.core.codes import (
     train_ssc,
     unpack_codes,
 )
-from colorglove_ros.core.distance import distance_transforms_batch
+from colorglove_ros.core.lookup.distance import distance_transforms_batch
 
 
 @pytest.mark.parametrize('bits', [1, 64, 100, 192, 256])
@@ -53,7 +53,7 @@ def test_hamming_matches_naive() -> None:
 
 def test_hamming_blocks_match_whole_scan(monkeypatch) -> None:
     """Blocks of 7 entries (a partial last block) give the same distances as one pass."""
-    import colorglove_ros.core.codes as codes_mod
+    import colorglove_ros.core.lookup.codes as codes_mod
 
     rng = np.random.default_rng(4)
     bits = rng.random((53, 130)) < 0.5

@@ -7,7 +7,8 @@ import cv2
 import numpy as np
 import pytest
 
-from colorglove_ros.core.colorspace import (
+from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
+from colorglove_ros.core.segmentation.color_model import (
     CALIBRATION_FORMAT_VERSION,
     CGZ_A,
     LIGHT_TEMPERATURES_K,
@@ -27,7 +28,6 @@ from colorglove_ros.core.colorspace import (
     srgb_to_linear,
     xyz_to_cgz,
 )
-from colorglove_ros.core.glove import GLOVE_PALETTE_RGB
 from colorglove_ros.tools.eval_segmentation import (
     BlobConditions,
     render_blob_frame,

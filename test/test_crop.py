@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from colorglove_ros.core.crop import (
+from colorglove_ros.core.segmentation.crop import (
     TINY_SIZE,
     CropError,
     CropTransform,

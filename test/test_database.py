@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from label_samples import random_blob_images
 
-from colorglove_ros.core.database import (
+from colorglove_ros.core.lookup.database import (
     DATABASE_VERSION,
     BuildConfig,
     DatabaseError,
@@ -20,7 +20,7 @@ from colorglove_ros.core.database import (
     read_database_config,
     save_database,
 )
-from colorglove_ros.core.distance import TINY_SIZE
+from colorglove_ros.core.lookup.distance import TINY_SIZE
 
 RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5, 'cy': 63.5}
 
@@ -112,8 +112,8 @@ def test_refuses_missing_directory(tmp_path: Path) -> None:
 
 
 def test_build_small_database_with_renderer(tmp_path: Path) -> None:
-    from colorglove_ros.core.glove import default_hand
-    from colorglove_ros.core.search import PoseLookup
+    from colorglove_ros.core.hand.glove import default_hand
+    from colorglove_ros.core.lookup.search import PoseLookup
 
     cfg = BuildConfig(entries=96, orientations_per_config=16, collection_size=400,
                       num_bits=32, num_pairs=200, batch=64)
@@ -155,8 +155,8 @@ def test_build_small_database_with_renderer(tmp_path: Path) -> None:
 
 
 def test_retrain_codes_in_place(tmp_path: Path) -> None:
-    from colorglove_ros.core.database import retrain_codes
-    from colorglove_ros.core.distance import dequantize_dts
+    from colorglove_ros.core.lookup.database import retrain_codes
+    from colorglove_ros.core.lookup.distance import dequantize_dts
 
     save_database(_small_db(60), tmp_path / 'db')
     retrain_codes(tmp_path / 'db', num_bits=80, num_pairs=120, seed=4)

@@ -5,8 +5,12 @@ import numpy as np
 import pytest
 from label_samples import random_blob_images
 
-from colorglove_ros.core.database import DatabaseError, nearest_neighbour_pairs, train_encoder
-from colorglove_ros.core.distance import (
+from colorglove_ros.core.lookup.database import (
+    DatabaseError,
+    nearest_neighbour_pairs,
+    train_encoder,
+)
+from colorglove_ros.core.lookup.distance import (
     distance_transforms_batch,
     image_distance,
     quantize_dts,

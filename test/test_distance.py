@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from colorglove_ros.core.distance import (
+from colorglove_ros.core.lookup.distance import (
     ABSENT_PENALTY,
     DistanceError,
     QueryDistance,
@@ -77,7 +77,7 @@ def test_query_against_many_matches_pairwise() -> None:
     imgs = _blobs(2, 40)
     query = QueryDistance(imgs[0])
     exact = np.array([image_distance(imgs[0], b) for b in imgs])
-    from colorglove_ros.core.distance import distance_transforms_batch
+    from colorglove_ros.core.lookup.distance import distance_transforms_batch
     dts = distance_transforms_batch(imgs)
     np.testing.assert_allclose(query.to_many(imgs, dts), exact, rtol=1e-5, atol=1e-5)
     # uint8 storage rounds distances to 0.25 px: error at most 0.125 px

@@ -1,4 +1,4 @@
-"""Tests of the evaluation pipeline (core/evaluation.py) and the eval_ik / learn_ik_covariances
+"""Tests of the evaluation pipeline (core/evaluation/sequences.py) and the eval_ik / learn_ik_covariances
 commands, on a tiny database built in a temporary folder."""
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.database import BuildConfig, build_database, save_database
-from colorglove_ros.core.evaluation import (
+from colorglove_ros.core.evaluation.metrics import fingertip_errors_mm, jitter_mm
+from colorglove_ros.core.evaluation.sequences import (
     EvaluationError,
     LookupStage,
     SequenceEvaluator,
@@ -26,11 +26,11 @@ from colorglove_ros.core.evaluation import (
     train_seeds,
     training_sequences,
 )
-from colorglove_ros.core.ik import HandTracker, IKConfig, load_covariances
-from colorglove_ros.core.metrics import fingertip_errors_mm, jitter_mm
-from colorglove_ros.core.search import PoseLookup
-from colorglove_ros.core.synth import Synthesizer, generate_sequence, render_frame
-from colorglove_ros.core.temporal_prior import reweight_by_previous
+from colorglove_ros.core.lookup.database import BuildConfig, build_database, save_database
+from colorglove_ros.core.lookup.search import PoseLookup
+from colorglove_ros.core.lookup.temporal_prior import reweight_by_previous
+from colorglove_ros.core.synthetic.frames import Synthesizer, generate_sequence, render_frame
+from colorglove_ros.core.tracking.ik import HandTracker, IKConfig, load_covariances
 from colorglove_ros.tools import eval_ik, learn_ik_covariances
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]
@@ -98,7 +98,7 @@ def test_find_database_picks_the_largest(tmp_path):
 
 
 def test_rigs_must_share_the_primary_camera(tiny_db_path, rigs, synth):
-    from colorglove_ros.core.database import load_database
+    from colorglove_ros.core.lookup.database import load_database
 
     mono, stereo = rigs
     lookup = PoseLookup(load_database(tiny_db_path))
@@ -108,7 +108,7 @@ def test_rigs_must_share_the_primary_camera(tiny_db_path, rigs, synth):
 
 
 def test_pipeline_end_to_end_finite(tiny_db_path, rigs, synth):
-    from colorglove_ros.core.database import load_database
+    from colorglove_ros.core.lookup.database import load_database
 
     mono, stereo = rigs
     ev = SequenceEvaluator(PoseLookup(load_database(tiny_db_path)),
@@ -138,8 +138,8 @@ def test_pipeline_end_to_end_finite(tiny_db_path, rigs, synth):
 
 def test_temporal_prior_reweights_by_each_trackers_previous_output(tiny_db_path, rigs, synth,
                                                                     monkeypatch):
-    from colorglove_ros.core import evaluation
-    from colorglove_ros.core.database import load_database
+    from colorglove_ros.core.evaluation import sequences as evaluation
+    from colorglove_ros.core.lookup.database import load_database
 
     calls = []
 
@@ -314,9 +314,9 @@ def test_learn_covariances_cli_saves_a_loadable_file(tiny_db_path, tmp_path):
 
 
 def test_segmenter_observer_converts_blobs_and_crop():
-    from colorglove_ros.core.crop import CropTransform
-    from colorglove_ros.core.evaluation import segmenter_observer
-    from colorglove_ros.core.segmentation import Blob, Observation
+    from colorglove_ros.core.evaluation.sequences import segmenter_observer
+    from colorglove_ros.core.segmentation.crop import CropTransform
+    from colorglove_ros.core.segmentation.segmenter import Blob, Observation
 
     crop = CropTransform(2.0, 10.0, 20.0)
     seen = Observation(True, 'ok', 640, 480, np.ones((40, 40), np.uint8), crop,

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.database import assemble_database
-from colorglove_ros.core.finger_evidence import (
+from colorglove_ros.core.lookup.database import assemble_database
+from colorglove_ros.core.lookup.finger_evidence import (
     PALM_DIGIT,
     FingerEvidenceConfig,
     FingerEvidenceError,
@@ -15,8 +15,8 @@ from colorglove_ros.core.finger_evidence import (
     finger_scores,
     patch_digits,
 )
-from colorglove_ros.core.ik import IKConfig, IKError, PosePrior
-from colorglove_ros.core.search import PoseLookup
+from colorglove_ros.core.lookup.search import PoseLookup
+from colorglove_ros.core.tracking.ik import IKConfig, IKError, PosePrior
 
 CONFIG = FingerEvidenceConfig()
 
@@ -179,8 +179,8 @@ def test_lookup_blends_fingers_from_blobs() -> None:
 def test_candidates_message_carries_the_spread() -> None:
     from colorglove_msgs.msg import HandObservation
 
-    from colorglove_ros.core.search import LookupResult, ProjectionConstraints
-    from colorglove_ros.msg_conversions import candidates_msg, pose_prior_from_candidates
+    from colorglove_ros.core.lookup.search import LookupResult, ProjectionConstraints
+    from colorglove_ros.ros.conversions import candidates_msg, pose_prior_from_candidates
 
     cons = ProjectionConstraints(np.array([0]), np.array([1]), np.array([5]),
                                  np.array([[3.0, 4.0]]), np.array([[10.0, 12.0]]),

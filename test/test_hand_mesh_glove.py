@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from colorglove_ros.core.glove import (
+from colorglove_ros.core.hand.glove import (
     GLOVE_PALETTE_RGB,
     NUM_COLORS,
     NUM_PATCHES,
@@ -16,8 +16,8 @@ from colorglove_ros.core.glove import (
     glove_reference_pose,
     make_glove,
 )
-from colorglove_ros.core.hand_mesh import HandMeshError, build_hand_mesh, skin_batch
-from colorglove_ros.core.hand_model import NUM_DOFS, HandModel
+from colorglove_ros.core.hand.mesh import HandMeshError, build_hand_mesh, skin_batch
+from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
 
 
 @pytest.fixture(scope='module')

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from colorglove_ros.core.hand_model import (
+from colorglove_ros.core.hand.model import (
     DOF_NAMES,
     FINGER_DOF_NAMES,
     KEYPOINT_NAMES,

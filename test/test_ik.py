@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.crop import CropTransform
-from colorglove_ros.core.hand_mesh import build_hand_mesh
-from colorglove_ros.core.hand_model import KEYPOINT_NAMES, HandModel
-from colorglove_ros.core.ik import (
+from colorglove_ros.core.hand.mesh import build_hand_mesh
+from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
+from colorglove_ros.core.segmentation.crop import CropTransform
+from colorglove_ros.core.tracking.ik import (
     Blobs,
     CameraObservation,
     Correspondences,
@@ -420,7 +420,7 @@ def test_tracker_from_calibration_uses_hand_length():
 
 
 def test_tracker_accepts_lookup_result(rig):
-    from colorglove_ros.core.search import LookupResult, ProjectionConstraints
+    from colorglove_ros.core.lookup.search import LookupResult, ProjectionConstraints
     model, mesh, kin, mono, stereo, verts = rig
     rng = np.random.default_rng(12)
     q = true_pose(model, rng)

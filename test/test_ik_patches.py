@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.ik import (
+from colorglove_ros.core.synthetic.frames import Synthesizer, generate_sequence, render_frame
+from colorglove_ros.core.tracking.ik import (
     Correspondences,
     FastKinematics,
     HandTracker,
@@ -19,7 +20,6 @@ from colorglove_ros.core.ik import (
     constraint_points,
     project_correspondences,
 )
-from colorglove_ros.core.synth import Synthesizer, generate_sequence, render_frame
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -7,16 +7,9 @@ import numpy as np
 import pytest
 
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.hand_mesh import build_hand_mesh
-from colorglove_ros.core.hand_model import HandModel
-from colorglove_ros.core.ik import (
-    Correspondences,
-    FastKinematics,
-    align_rotation_vector,
-    load_ik_config,
-    save_covariances,
-)
-from colorglove_ros.core.ik_training import (
+from colorglove_ros.core.hand.mesh import build_hand_mesh
+from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.tracking.covariance_learning import (
     CovarianceFloors,
     IKTrainingError,
     TrainingFrame,
@@ -27,6 +20,13 @@ from colorglove_ros.core.ik_training import (
     jitter,
     learn_covariances,
     local_average,
+)
+from colorglove_ros.core.tracking.ik import (
+    Correspondences,
+    FastKinematics,
+    align_rotation_vector,
+    load_ik_config,
+    save_covariances,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -155,8 +155,9 @@ def test_learn_rejects_bad_input(training_sequence):
 
 def test_learn_from_tracker_run(training_sequence):
     """End to end: run the tracker on a synthetic sequence and learn from its outputs."""
-    from colorglove_ros.core.crop import CropTransform
-    from colorglove_ros.core.ik import (
+    from colorglove_ros.core.segmentation.crop import CropTransform
+    from colorglove_ros.core.tracking.covariance_learning import training_frame
+    from colorglove_ros.core.tracking.ik import (
         Blobs,
         CameraObservation,
         EntryConstraints,
@@ -164,7 +165,6 @@ def test_learn_from_tracker_run(training_sequence):
         IKConfig,
         PosePrior,
     )
-    from colorglove_ros.core.ik_training import training_frame
     model, cams, frames, q_sigma, vel = training_sequence
     mesh = build_hand_mesh(model)
     kin = FastKinematics(model)

@@ -16,19 +16,19 @@ from conftest import REPO_DIR, TEST_DIR
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from colorglove_ros.core.bags import camera_topics
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.launcher import (
+from colorglove_ros.ros.bags import camera_topics
+from colorglove_ros.ros.launcher import (
     Launcher,
     LaunchError,
     NodeSpec,
     load_launch_file,
     node_command,
 )
-from colorglove_ros.nodes import lookup_node, segmentation_node
-from colorglove_ros.nodes.camera_node import CameraNode
-from colorglove_ros.nodes.common import StartupError
-from colorglove_ros.nodes.ik_node import IKNode
+from colorglove_ros.ros.nodes import lookup_node, segmentation_node
+from colorglove_ros.ros.nodes.camera_node import CameraNode
+from colorglove_ros.ros.nodes.common import StartupError
+from colorglove_ros.ros.nodes.ik_node import IKNode
 
 MONO_LAUNCH = REPO_DIR / 'config' / 'pipeline.launch.yaml'
 STEREO_LAUNCH = REPO_DIR / 'config' / 'pipeline_stereo.launch.yaml'

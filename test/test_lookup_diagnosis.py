@@ -7,17 +7,17 @@ from label_samples import random_blob_images
 from scipy.spatial.transform import Rotation
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.database import assemble_database
-from colorglove_ros.core.glove import default_hand
-from colorglove_ros.core.lookup_diagnosis import (
+from colorglove_ros.core.evaluation.diagnosis import (
     ESTIMATES,
     FullPoseIndex,
     QueryFrames,
     coverage,
     diagnose,
 )
-from colorglove_ros.core.poses import pose_collection, sample_global_rotations
-from colorglove_ros.core.search import PoseLookup
+from colorglove_ros.core.hand.glove import default_hand
+from colorglove_ros.core.hand.poses import pose_collection, sample_global_rotations
+from colorglove_ros.core.lookup.database import assemble_database
+from colorglove_ros.core.lookup.search import PoseLookup
 
 RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5, 'cy': 63.5}
 

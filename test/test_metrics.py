@@ -4,8 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from colorglove_ros.core.hand_model import HandModel
-from colorglove_ros.core.metrics import (
+from colorglove_ros.core.evaluation.metrics import (
     FINGERTIP_INDICES,
     fingertip_error_split_mm,
     fingertip_errors_mm,
@@ -15,6 +14,7 @@ from colorglove_ros.core.metrics import (
     pose_accuracy,
     translation_errors_mm,
 )
+from colorglove_ros.core.hand.model import HandModel
 
 MODEL = HandModel()
 
@@ -27,7 +27,7 @@ def _poses(count: int) -> np.ndarray:
 
 
 def test_fingertips_are_the_last_keypoint_of_each_digit() -> None:
-    from colorglove_ros.core.hand_model import DIGITS, KEYPOINT_NAMES
+    from colorglove_ros.core.hand.model import DIGITS, KEYPOINT_NAMES
 
     last_of_digit = [max(i for i, name in enumerate(KEYPOINT_NAMES) if name.startswith(f'{d}_'))
                      for d in DIGITS]

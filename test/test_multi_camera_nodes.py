@@ -16,21 +16,21 @@ from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from node_fixtures import CONFIG_DIR, NodeAssets, header, node_assets, params, running
 from std_msgs.msg import String
 
-from colorglove_ros.core import synth
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.database import load_database
-from colorglove_ros.core.glove import default_hand
-from colorglove_ros.core.search import PoseLookup
-from colorglove_ros.core.segmentation import load_segmenter
-from colorglove_ros.launcher import NodeSpec
-from colorglove_ros.msg_conversions import (
+from colorglove_ros.core.hand.glove import default_hand
+from colorglove_ros.core.lookup.database import load_database
+from colorglove_ros.core.lookup.search import PoseLookup
+from colorglove_ros.core.segmentation.segmenter import load_segmenter
+from colorglove_ros.core.synthetic import frames as synth
+from colorglove_ros.ros.conversions import (
     candidates_msg,
     crop_from_observation,
     observation_msg,
     tiny_labels_from_observation,
 )
-from colorglove_ros.nodes.ik_node import IKNode
-from colorglove_ros.pipeline_run import PipelineRun, bag_feed, run_pipeline, summarize
+from colorglove_ros.ros.launcher import NodeSpec
+from colorglove_ros.ros.nodes.ik_node import IKNode
+from colorglove_ros.ros.pipeline_run import PipelineRun, bag_feed, run_pipeline, summarize
 from colorglove_ros.tools import make_bag
 
 pytestmark = [pytest.mark.dds, pytest.mark.usefixtures('isolated_ros_domain')]

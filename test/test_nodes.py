@@ -29,23 +29,23 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.crop import TINY_SIZE
-from colorglove_ros.core.database import load_database
-from colorglove_ros.core.hand_model import DOF_NAMES, FINGER_DOF_NAMES
-from colorglove_ros.core.search import PoseLookup
-from colorglove_ros.core.segmentation import load_segmenter
-from colorglove_ros.msg_conversions import (
+from colorglove_ros.core.hand.model import DOF_NAMES, FINGER_DOF_NAMES
+from colorglove_ros.core.lookup.database import load_database
+from colorglove_ros.core.lookup.search import PoseLookup
+from colorglove_ros.core.segmentation.crop import TINY_SIZE
+from colorglove_ros.core.segmentation.segmenter import load_segmenter
+from colorglove_ros.ros.conversions import (
     blobs_from_observation,
     crop_from_observation,
     observation_msg,
     tiny_labels_from_observation,
 )
-from colorglove_ros.nodes.camera_node import CameraNode
-from colorglove_ros.nodes.common import StartupError
-from colorglove_ros.nodes.ik_node import IKNode
-from colorglove_ros.nodes.lookup_node import LookupNode
-from colorglove_ros.nodes.segmentation_node import DEBUG_PALETTE, SegmentationNode
-from colorglove_ros.ros_image import array_to_image
+from colorglove_ros.ros.image import array_to_image
+from colorglove_ros.ros.nodes.camera_node import CameraNode
+from colorglove_ros.ros.nodes.common import StartupError
+from colorglove_ros.ros.nodes.ik_node import IKNode
+from colorglove_ros.ros.nodes.lookup_node import LookupNode
+from colorglove_ros.ros.nodes.segmentation_node import DEBUG_PALETTE, SegmentationNode
 
 # every test gets a ROS domain of its own on loopback (other runs on this machine share domain 0)
 pytestmark = [pytest.mark.dds, pytest.mark.usefixtures('isolated_ros_domain')]
@@ -268,7 +268,7 @@ def test_lookup_node_rejects_non_finite_crop(assets: NodeAssets,
 # ------------------------------------------------------------------------------ ik_node
 @pytest.fixture(scope='session')
 def good_candidates(assets: NodeAssets, good_observation: HandObservation) -> HandPoseCandidates:
-    from colorglove_ros.msg_conversions import candidates_msg
+    from colorglove_ros.ros.conversions import candidates_msg
 
     lookup = PoseLookup(load_database(assets.database), 40, 10)
     camera = load_calibration(REPO_DIR / 'config' / 'calibration.yaml').primary

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.glove import default_hand
-from colorglove_ros.core.render import (
+from colorglove_ros.core.hand.glove import default_hand
+from colorglove_ros.core.synthetic.render import (
     Renderer,
     RenderError,
     decimate_hand_mesh,

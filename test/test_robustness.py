@@ -23,8 +23,8 @@ from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import String
 
-from colorglove_ros.launcher import Launcher, NodeSpec
-from colorglove_ros.ros_image import array_to_image
+from colorglove_ros.ros.image import array_to_image
+from colorglove_ros.ros.launcher import Launcher, NodeSpec
 
 pytestmark = [pytest.mark.dds, pytest.mark.usefixtures('isolated_ros_domain')]
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from sensor_msgs.msg import Image
 
-from colorglove_ros.ros_image import (
+from colorglove_ros.ros.image import (
     ENCODINGS,
     ImageEncodingError,
     array_to_image,

@@ -7,9 +7,9 @@ from label_samples import random_blob_images
 from scipy.spatial.transform import Rotation
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.database import assemble_database
-from colorglove_ros.core.distance import image_distance
-from colorglove_ros.core.search import (
+from colorglove_ros.core.lookup.database import assemble_database
+from colorglove_ros.core.lookup.distance import image_distance
+from colorglove_ros.core.lookup.search import (
     PoseLookup,
     SearchError,
     blend_poses,
@@ -189,7 +189,7 @@ def test_lookup_poses_match_estimate_global_pose(blob_db) -> None:
     """The precomputed per-entry terms give the same global poses as the public function,
     with and without lens distortion and with the hand-centre anchor."""
     lookup = PoseLookup(blob_db, num_candidates=60, num_blend=10)
-    from colorglove_ros.core.search import _entry_place_terms
+    from colorglove_ros.core.lookup.search import _entry_place_terms
 
     lookup._anchor = np.array([0.01, -0.09, 0.004])
     lookup._place_table = _entry_place_terms(lookup._a['poses'][:, 0:6], lookup._a['crop'],

@@ -6,15 +6,15 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.codes import (
+from colorglove_ros.core.lookup.codes import (
     QueryEncoder,
     hamming_naive,
     pack_codes,
     train_random_projections,
 )
-from colorglove_ros.core.database import assemble_database
-from colorglove_ros.core.distance import QueryDistance, distance_transforms_batch
-from colorglove_ros.core.search import PoseLookup, SearchError, top_k_with_ties
+from colorglove_ros.core.lookup.database import assemble_database
+from colorglove_ros.core.lookup.distance import QueryDistance, distance_transforms_batch
+from colorglove_ros.core.lookup.search import PoseLookup, SearchError, top_k_with_ties
 
 RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5, 'cy': 63.5}
 
@@ -87,7 +87,7 @@ def test_top_k_uint8_binary_search_matches_sort() -> None:
 
 
 def test_quaternion_helpers_match_scipy() -> None:
-    from colorglove_ros.core.search import _quat_to_rotvec, _rotvec_to_quat
+    from colorglove_ros.core.lookup.search import _quat_to_rotvec, _rotvec_to_quat
 
     rv = np.random.default_rng(6).normal(0.0, 1.2, (20, 3))
     rv[0] = 0.0
@@ -104,8 +104,8 @@ def test_quaternion_helpers_match_scipy() -> None:
 
 def test_threaded_lookup_equals_single_thread(monkeypatch) -> None:
     """The worker-thread split (Hamming halves, re-rank gathers) changes no result."""
-    import colorglove_ros.core.codes as codes_mod
-    import colorglove_ros.core.search as search_mod
+    import colorglove_ros.core.lookup.codes as codes_mod
+    import colorglove_ros.core.lookup.search as search_mod
 
     db = _db()
     monkeypatch.setattr(search_mod, 'HAMMING_BLOCK', 16)     # small db: force the split
@@ -134,7 +134,7 @@ def test_buffer_bytes_counts_tables() -> None:
     lookup.lookup(np.asarray(db.tiny[9]), (1.0, 0.0, 0.0),
                   PinholeCamera(128, 128, 150.0, 150.0, 63.5, 63.5))
     assert lookup.buffer_bytes > before                    # re-rank buffers now allocated
-    import colorglove_ros.core.search as search_mod
+    import colorglove_ros.core.lookup.search as search_mod
 
     big = lookup._buffer('flat', search_mod._BUFFER_CAP + 1, np.intp)
     assert len(big) == search_mod._BUFFER_CAP + 1

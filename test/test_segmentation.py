@@ -8,14 +8,14 @@ import cv2
 import numpy as np
 import pytest
 
-from colorglove_ros.core.colorspace import (
+from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
+from colorglove_ros.core.segmentation.color_model import (
     fit_color_calibration,
     read_calibration_config,
     srgb_to_linear,
 )
-from colorglove_ros.core.crop import TINY_SIZE, crop_to_tiny
-from colorglove_ros.core.glove import GLOVE_PALETTE_RGB
-from colorglove_ros.core.segmentation import (
+from colorglove_ros.core.segmentation.crop import TINY_SIZE, crop_to_tiny
+from colorglove_ros.core.segmentation.segmenter import (
     STAGES,
     STATUS_NO_GLOVE,
     STATUS_OK,

@@ -10,9 +10,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.glove import GLOVE_PALETTE_RGB
-from colorglove_ros.core.render import patch_ids_to_labels
-from colorglove_ros.core.synth import (
+from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
+from colorglove_ros.core.synthetic.frames import (
     _BG_SEED_SPLIT,
     CAPTURE_VOLUME_CENTER,
     CAPTURE_VOLUME_SIZE,
@@ -29,6 +28,7 @@ from colorglove_ros.core.synth import (
     sample_conditions,
     sample_pose,
 )
+from colorglove_ros.core.synthetic.render import patch_ids_to_labels
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config'
 NEUTRAL = FrameConditions(gain=1.0, color_temperature_k=6500.0, noise_sigma=0.0, blur_px=0.0,
@@ -54,7 +54,7 @@ def test_sequences_are_deterministic_smooth_and_in_the_volume() -> None:
     c = generate_sequence(6, 150)
     np.testing.assert_array_equal(a, b)
     assert a.shape == (150, 26) and not np.allclose(a, c)
-    from colorglove_ros.core.glove import default_hand
+    from colorglove_ros.core.hand.glove import default_hand
     model = default_hand()[0]
     assert np.all(model.within_limits(a))
     # smooth at 30 fps: < 1.5 cm and < 6 deg of wrist motion per frame, < 9 deg per joint

@@ -1,4 +1,4 @@
-"""Tests of the temporal reweighting of lookup neighbours (core/temporal_prior.py)."""
+"""Tests of the temporal reweighting of lookup neighbours (core/lookup/temporal_prior.py)."""
 from __future__ import annotations
 
 import math
@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from colorglove_ros.core.search import LookupResult, ProjectionConstraints, blend_poses
-from colorglove_ros.core.temporal_prior import (
+from colorglove_ros.core.lookup.search import LookupResult, ProjectionConstraints, blend_poses
+from colorglove_ros.core.lookup.temporal_prior import (
     TemporalPriorError,
     pose_distances_rad,
     reweight_by_previous,

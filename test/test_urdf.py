@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import yourdfpy
 
-from colorglove_ros.core.hand_model import DIGITS, FINGER_DOF_NAMES, KEYPOINT_NAMES, HandModel
-from colorglove_ros.core.urdf import URDF_PATH, tip_link_name, urdf_string, write_urdf
+from colorglove_ros.core.hand.model import DIGITS, FINGER_DOF_NAMES, KEYPOINT_NAMES, HandModel
+from colorglove_ros.core.hand.urdf import URDF_PATH, tip_link_name, urdf_string, write_urdf
 
 ROOT = Path(__file__).resolve().parents[1]
 

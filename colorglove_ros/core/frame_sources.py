@@ -93,7 +93,7 @@ def _folder_source(folder: Path, loop: bool) -> FrameSource:
 
 def _synthetic_source(camera: PinholeCamera, seed: int, num_frames: int, loop: bool,
                       hand_length_m: float, prerender: bool) -> FrameSource:
-    from colorglove_ros.core.synth import SyntheticSequenceRenderer
+    from colorglove_ros.core.synthetic.frames import SyntheticSequenceRenderer
 
     renderer = SyntheticSequenceRenderer(camera, seed=seed, num_frames=num_frames,
                                          hand_length_m=hand_length_m, split='test')

@@ -9,10 +9,10 @@ import argparse
 import sys
 from pathlib import Path
 
-from colorglove_ros.core.glove import default_hand
+from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.paths import resolve_path
-from colorglove_ros.pipeline_run import bag_feed, run_pipeline, summarize
+from colorglove_ros.ros.pipeline_run import bag_feed, run_pipeline, summarize
 from colorglove_ros.tools import build_database, make_bag
 from colorglove_ros.tools.demo import DATABASE_CONFIG, pipeline_parameters, prepare_assets
 

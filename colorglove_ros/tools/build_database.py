@@ -8,7 +8,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from colorglove_ros.core.database import (
+from colorglove_ros.core.lookup.database import (
     BuildConfig,
     DatabaseError,
     build_database,

@@ -2,7 +2,7 @@
 
 Labelled frames are PNG pairs in one folder: ``NAME.png`` (the RGB camera image) and
 ``NAME_mask.png`` (single-channel 8-bit labels: 0 background, 1..10 glove colour as in
-``core/glove.py``). ``--synthetic N`` first renders N 'train' frames with ``core/synth.py``
+``core/hand/glove.py``). ``--synthetic N`` first renders N 'train' frames with ``core/synthetic/frames.py``
 and writes them as such pairs. The output file defaults to the ``calibration_file`` named in
 ``config/color_calibration.yaml``.
 """
@@ -15,15 +15,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from colorglove_ros.core.colorspace import (
+from colorglove_ros.core.hand.glove import GLOVE_COLOR_NAMES, NUM_COLORS
+from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.core.segmentation.color_model import (
     RESIDUAL_TEMPERATURES_K,
     ColorCalibrationError,
     fit_color_calibration,
     read_calibration_config,
     save_calibration,
 )
-from colorglove_ros.core.glove import GLOVE_COLOR_NAMES, NUM_COLORS
-from colorglove_ros.core.report import print_table, write_json
 
 __all__ = ['MASK_SUFFIX', 'read_labelled_frames', 'write_labelled_frames',
            'render_training_frames', 'main']
@@ -67,8 +67,8 @@ def write_labelled_frames(folder: str | Path,
 
 def render_training_frames(count: int, seed: int, split: str = 'train'
                            ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Render ``count`` synthetic frames (hand fully in view) with ``core/synth.py``."""
-    from colorglove_ros.core import synth
+    """Render ``count`` synthetic frames (hand fully in view) with ``core/synthetic/frames.py``."""
+    from colorglove_ros.core.synthetic import frames as synth
 
     rng = np.random.default_rng(seed)
     camera = synth.default_camera()

@@ -12,11 +12,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from colorglove_ros.core.colorspace import read_calibration_config
-from colorglove_ros.core.glove import default_hand
+from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.core.segmentation.color_model import read_calibration_config
 from colorglove_ros.paths import resolve_path
-from colorglove_ros.pipeline_run import run_pipeline, summarize
+from colorglove_ros.ros.pipeline_run import run_pipeline, summarize
 from colorglove_ros.tools import build_database, calibrate_colors
 
 __all__ = ['prepare_assets', 'pipeline_parameters', 'overlay_strip', 'main']

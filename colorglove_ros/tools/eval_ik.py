@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from colorglove_ros.core.camera import CalibrationError, load_calibration
-from colorglove_ros.core.evaluation import (
+from colorglove_ros.core.evaluation.sequences import (
     LABEL_SOURCES,
     EvaluationError,
     SequenceEvaluator,
@@ -27,8 +27,13 @@ from colorglove_ros.core.evaluation import (
     open_database,
     summarize,
 )
-from colorglove_ros.core.ik import TRACKER_MODES, IKConfigError, load_covariances, load_ik_config
 from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.core.tracking.ik import (
+    TRACKER_MODES,
+    IKConfigError,
+    load_covariances,
+    load_ik_config,
+)
 from colorglove_ros.paths import share_dir
 
 __all__ = ['main', 'TARGETS', 'REFERENCE_FIGURES', 'evaluate_targets', 'reference_figures',
@@ -202,9 +207,9 @@ def main(argv: list[str] | None = None) -> int:
                                               'eval_ik.png'), help="PNG path ('' = none)")
     parser.add_argument('--json', help='write the figures to this JSON file')
     args = parser.parse_args(argv)
-    from colorglove_ros.core.colorspace import ColorCalibrationError
-    from colorglove_ros.core.database import DatabaseError
-    from colorglove_ros.core.search import PoseLookup, SearchError
+    from colorglove_ros.core.lookup.database import DatabaseError
+    from colorglove_ros.core.lookup.search import PoseLookup, SearchError
+    from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
 
     try:
         db_path, db = open_database(args.database, PACKAGE_ROOT / 'data')

@@ -15,14 +15,14 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.codes import (
+from colorglove_ros.core.lookup.codes import (
     BinaryEncoder,
     features_from_dts,
     train_pca_itq,
     train_random_projections,
     train_ssc,
 )
-from colorglove_ros.core.database import (
+from colorglove_ros.core.lookup.database import (
     SSC_HARD_NEGATIVES,
     SSC_SHORTLIST,
     BuildConfig,
@@ -32,9 +32,9 @@ from colorglove_ros.core.database import (
     nearest_neighbour_pairs,
     render_views,
 )
-from colorglove_ros.core.distance import QueryDistance, dequantize_dts
+from colorglove_ros.core.lookup.distance import QueryDistance, dequantize_dts
+from colorglove_ros.core.lookup.search import PoseLookup, top_k_with_ties
 from colorglove_ros.core.report import print_table, write_json
-from colorglove_ros.core.search import PoseLookup, top_k_with_ties
 from colorglove_ros.tools.build_database import DEFAULT_CONFIG, load_build_config
 
 __all__ = ['main']
@@ -50,7 +50,7 @@ def _build_config(db: PoseDatabase) -> BuildConfig:
 def _held_out_queries(db: PoseDatabase, count: int, seed: int
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Render ``count`` views of collection configurations not in the database."""
-    from colorglove_ros.core.poses import pose_collection, sample_global_rotations
+    from colorglove_ros.core.hand.poses import pose_collection, sample_global_rotations
 
     cfg = _build_config(db)
     collection = pose_collection(cfg.collection_seed, cfg.collection_size)
@@ -137,8 +137,8 @@ def _code_study(db: PoseDatabase, q_dts: np.ndarray, nn: np.ndarray, k: int, see
 def _size_study(db: PoseDatabase, dist: np.ndarray, q_fingers: np.ndarray) -> list[dict]:
     """NN distance (pose and image metric) of held-out queries vs database size, using
     prefixes of the farthest-point order (entries are stored in that order)."""
-    from colorglove_ros.core.glove import default_hand
-    from colorglove_ros.core.poses import pose_collection, pose_features
+    from colorglove_ros.core.hand.glove import default_hand
+    from colorglove_ros.core.hand.poses import pose_collection, pose_features
 
     cfg = _build_config(db)
     model, mesh, _ = default_hand(cfg.hand_length_m, seed=cfg.glove_seed)
@@ -178,7 +178,7 @@ def _pose_errors(q_true: np.ndarray, q_est: np.ndarray) -> dict[str, float]:
 def _tiny_blobs(tiny: np.ndarray, crop: np.ndarray) -> Any:
     """Blobs of a tiny label image in full-image pixels of the crop (scale, x0, y0), as the
     segmentation reports them for the per-finger blend."""
-    from colorglove_ros.core.ik import Blobs, extract_blobs
+    from colorglove_ros.core.tracking.ik import Blobs, extract_blobs
 
     b = extract_blobs(tiny, min_pixels=1)
     scale, x0, y0 = (float(v) for v in crop)
@@ -264,15 +264,15 @@ def _diagnose(args: argparse.Namespace, db: PoseDatabase, lookup: PoseLookup, pa
               ) -> int:
     """The (a)-(d) table and the coverage table on synthetic test-sequence frames."""
     from colorglove_ros.core.camera import CalibrationError, load_calibration
-    from colorglove_ros.core.colorspace import ColorCalibrationError
-    from colorglove_ros.core.evaluation import make_observer
-    from colorglove_ros.core.lookup_diagnosis import (
+    from colorglove_ros.core.evaluation.diagnosis import (
         FullPoseIndex,
         coverage,
         diagnose,
         render_query_frames,
     )
-    from colorglove_ros.core.synth import Synthesizer
+    from colorglove_ros.core.evaluation.sequences import make_observer
+    from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
+    from colorglove_ros.core.synthetic.frames import Synthesizer
     from colorglove_ros.paths import share_dir
 
     cfg = _build_config(db)

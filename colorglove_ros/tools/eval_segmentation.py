@@ -1,6 +1,6 @@
 """Evaluate colour classification, crop and patch centroids on held-out synthetic frames.
 
-Frames come from ``core/synth.py`` (``sample_conditions(rng, 'test')``: other light levels,
+Frames come from ``core/synthetic/frames.py`` (``sample_conditions(rng, 'test')``: other light levels,
 colour temperatures, noise, blur, JPEG and unseen cluttered backgrounds than the 'train'
 frames the calibration was fitted on) or, with ``--source blobs``, from a simple 2-D stand-in
 glove (:func:`render_blob_frame`). Ground-truth crop = :func:`crop_to_tiny` on the true label
@@ -21,11 +21,19 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from colorglove_ros.core.colorspace import ColorCalibrationError, read_calibration_config
-from colorglove_ros.core.crop import CropTransform, crop_to_tiny
-from colorglove_ros.core.glove import GLOVE_PALETTE_RGB, NUM_COLORS
+from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB, NUM_COLORS
 from colorglove_ros.core.report import print_table, write_json
-from colorglove_ros.core.segmentation import STAGES, GloveSegmenter, Observation, load_segmenter
+from colorglove_ros.core.segmentation.color_model import (
+    ColorCalibrationError,
+    read_calibration_config,
+)
+from colorglove_ros.core.segmentation.crop import CropTransform, crop_to_tiny
+from colorglove_ros.core.segmentation.segmenter import (
+    STAGES,
+    GloveSegmenter,
+    Observation,
+    load_segmenter,
+)
 
 __all__ = ['BlobConditions', 'sample_blob_conditions', 'render_blob_frame', 'test_frames',
            'frame_metrics', 'evaluate', 'main']
@@ -156,7 +164,7 @@ def test_frames(source: str, count: int, seed: int, empty: int = 0,
         return frames
     if source != 'synth':
         raise ValueError(f"source must be 'synth' or 'blobs', got {source!r}")
-    from colorglove_ros.core import synth
+    from colorglove_ros.core.synthetic import frames as synth
 
     camera = synth.default_camera()
     for i in range(count + empty):

@@ -6,16 +6,16 @@ from pathlib import Path
 
 import numpy as np
 
-from colorglove_ros.core.glove import (
+from colorglove_ros.core.hand.glove import (
     GLOVE_COLOR_NAMES,
     NUM_PATCHES,
     Glove,
     default_hand,
     export_glove_mesh,
 )
-from colorglove_ros.core.hand_mesh import HandMesh
-from colorglove_ros.core.hand_model import HandModel, rotvec_to_matrix
-from colorglove_ros.core.poses import NAMED_SHAPES, full_pose
+from colorglove_ros.core.hand.mesh import HandMesh
+from colorglove_ros.core.hand.model import HandModel, rotvec_to_matrix
+from colorglove_ros.core.hand.poses import NAMED_SHAPES, full_pose
 from colorglove_ros.core.report import print_table, write_json
 
 __all__ = ['main', 'draw_glove']

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from colorglove_ros.core.camera import CalibrationError, load_calibration
-from colorglove_ros.core.evaluation import (
+from colorglove_ros.core.evaluation.sequences import (
     LABEL_SOURCES,
     EvaluationError,
     SequenceEvaluator,
@@ -28,15 +28,19 @@ from colorglove_ros.core.evaluation import (
     train_seeds,
     training_sequences,
 )
-from colorglove_ros.core.hand_model import DOF_NAMES
-from colorglove_ros.core.ik import (
+from colorglove_ros.core.hand.model import DOF_NAMES
+from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.core.tracking.covariance_learning import (
+    LOCAL_WINDOW,
+    IKTrainingError,
+    learn_covariances,
+)
+from colorglove_ros.core.tracking.ik import (
     IKConfigError,
     default_covariances,
     load_ik_config,
     save_covariances,
 )
-from colorglove_ros.core.ik_training import LOCAL_WINDOW, IKTrainingError, learn_covariances
-from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.paths import share_dir
 
 __all__ = ['main', 'covariance_rows', 'PACKAGE_ROOT', 'DEFAULT_OUTPUT']
@@ -97,9 +101,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--fps', type=float, default=30.0)
     parser.add_argument('--json', help='write the learned figures to this JSON file')
     args = parser.parse_args(argv)
-    from colorglove_ros.core.colorspace import ColorCalibrationError
-    from colorglove_ros.core.database import DatabaseError
-    from colorglove_ros.core.search import PoseLookup
+    from colorglove_ros.core.lookup.database import DatabaseError
+    from colorglove_ros.core.lookup.search import PoseLookup
+    from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
 
     t0 = time.perf_counter()
     try:

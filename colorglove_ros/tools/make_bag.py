@@ -8,10 +8,15 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from ..core.bags import SequenceBagWriter, bag_size_bytes
-from ..core.camera import CalibrationError, load_calibration
-from ..core.report import print_table, write_json
-from ..core.synth import SPLITS, SynthError, SyntheticSequenceRenderer, default_camera
+from colorglove_ros.core.camera import CalibrationError, load_calibration
+from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.core.synthetic.frames import (
+    SPLITS,
+    SynthError,
+    SyntheticSequenceRenderer,
+    default_camera,
+)
+from colorglove_ros.ros.bags import SequenceBagWriter, bag_size_bytes
 
 
 def main(argv: list[str] | None = None) -> int:

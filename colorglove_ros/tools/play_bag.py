@@ -13,7 +13,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 from rosbags.highlevel import AnyReader
 
-from colorglove_ros.typestore import colorglove_typestore, message_class
+from colorglove_ros.ros.typestore import colorglove_typestore, message_class
 
 __all__ = ['BagPlayer', 'main']
 

@@ -23,7 +23,7 @@ from rosbags.interfaces import (
 )
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from colorglove_ros.typestore import colorglove_typestore, message_class
+from colorglove_ros.ros.typestore import colorglove_typestore, message_class
 
 __all__ = ['DEFAULT_TOPICS', 'BagRecorder', 'main', 'offered_qos']
 

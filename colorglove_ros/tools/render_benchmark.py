@@ -7,11 +7,11 @@ import time
 
 import numpy as np
 
-from ..core.camera import PinholeCamera
-from ..core.glove import default_hand
-from ..core.poses import pose_collection, sample_global_rotations
-from ..core.render import Renderer, decimate_hand_mesh, vertex_normals
-from ..core.report import print_table, write_json
+from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.hand.glove import default_hand
+from colorglove_ros.core.hand.poses import pose_collection, sample_global_rotations
+from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.core.synthetic.render import Renderer, decimate_hand_mesh, vertex_normals
 
 
 def _poses(n: int, seed: int, depth: float) -> np.ndarray:

@@ -1,0 +1,436 @@
+"""Per-frame tracking pipeline on synthetic sequences (labels, crop, lookup, IK) and its figures."""
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.evaluation.metrics import (
+    contiguous_runs,
+    jitter_runs_mm,
+    latency_summary_ms,
+    pose_accuracy,
+)
+from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
+from colorglove_ros.core.lookup.temporal_prior import reweight_by_previous
+from colorglove_ros.core.segmentation.crop import TinyCrop, crop_to_tiny
+from colorglove_ros.core.tracking.covariance_learning import (
+    LOCAL_WINDOW,
+    TrainingFrame,
+    training_frame,
+)
+from colorglove_ros.core.tracking.ik import (
+    TRACKER_MODES,
+    Blobs,
+    CameraObservation,
+    HandTracker,
+    IKConfig,
+    IKResult,
+    extract_blobs,
+)
+
+__all__ = [
+    'LABEL_SOURCES', 'EVAL_SEED_BASE', 'TRAIN_SEED_BASE', 'SEED_SPAN', 'EvaluationError',
+    'eval_seeds', 'train_seeds', 'Observer', 'observe_camera', 'truth_observer',
+    'segmenter_observer', 'make_observer', 'FramePrior', 'LookupStage', 'TrackedSequence',
+    'SequenceEvaluator', 'same_camera', 'jitter_runs_mm', 'contiguous_runs', 'summarize',
+    'training_sequences', 'find_database', 'open_database', 'TemporalPrior',
+    'EvaluationSequence',
+]
+
+LABEL_SOURCES = ('truth', 'segmented')
+# Sequence seeds (core.synth.generate_sequence): evaluation uses EVAL_SEED_BASE + k, training
+# (learn_ik_covariances) TRAIN_SEED_BASE + k, k < SEED_SPAN: disjoint sets. Evaluation frames
+# use the synthesiser's 'test' imaging conditions, training frames the 'train' ones.
+EVAL_SEED_BASE = 0
+TRAIN_SEED_BASE = 100_000
+SEED_SPAN = 100_000
+
+
+class EvaluationError(Exception):
+    """Bad evaluation input: unknown label source, mismatched rigs, no database, no frames."""
+
+
+def eval_seeds(count: int, offset: int = 0) -> list[int]:
+    """``count`` evaluation sequence seeds from ``offset`` (0, 1, ... by default). The
+    reported figures use offset 0; IK settings are tuned on another offset (e.g. 1000), so
+    the reported seeds are never the ones tuned on."""
+    if not 0 < count <= SEED_SPAN or not 0 <= offset <= SEED_SPAN - count:
+        raise EvaluationError(f'need 1..{SEED_SPAN} sequences inside [0, {SEED_SPAN}), got '
+                              f'{count} from {offset}')
+    return [EVAL_SEED_BASE + offset + k for k in range(count)]
+
+
+def train_seeds(count: int) -> list[int]:
+    """The first ``count`` training sequence seeds (100000, 100001, ...)."""
+    if not 0 < count <= SEED_SPAN:
+        raise EvaluationError(f'need 1..{SEED_SPAN} sequences, got {count}')
+    return [TRAIN_SEED_BASE + k for k in range(count)]
+
+
+@dataclass(frozen=True)
+class EvaluationSequence:
+    """One synthetic evaluation sequence: its true poses and imaging conditions (fixed per
+    sequence, from its seed). Frame ``i`` renders with its own noise seed, so any subset of
+    frames renders exactly as in the full run."""
+
+    seed: int
+    poses: np.ndarray           # (N, 26) true poses in the primary camera's frame
+    conditions: Any             # core.synth imaging conditions
+    synthesizer: Any
+
+    @classmethod
+    def make(cls, seed: int, num_frames: int, camera: PinholeCamera, synthesizer: Any,
+             split: str = 'test', fps: float = 30.0) -> EvaluationSequence:
+        """Sequence ``seed`` (``core.synth.generate_sequence``) with ``split`` conditions."""
+        from colorglove_ros.core.synthetic.frames import generate_sequence, sample_conditions
+
+        poses = generate_sequence(seed, num_frames, fps, camera=camera, model=synthesizer.model)
+        return cls(seed, poses, sample_conditions(np.random.default_rng([seed, 7]), split),
+                   synthesizer)
+
+    def render(self, index: int, cameras: Sequence[PinholeCamera]) -> list[Any]:
+        """Frame ``index`` as every camera sees it (primary first)."""
+        from colorglove_ros.core.synthetic.frames import render_frames_multi
+
+        rng = np.random.default_rng([self.seed, index, 11])
+        return render_frames_multi(self.poses[index], cameras, rng, self.conditions,
+                                   synthesizer=self.synthesizer)
+
+
+# ---------------------------------------------------------------------------- observations
+Observer = Callable[[Any, bool], tuple[CameraObservation, TinyCrop | None]]
+"""Maps (``core.synth.SyntheticFrame``, is-primary-camera) to the camera's observation for the
+tracker and, for the primary camera, the tiny crop the lookup runs on (None = no hand)."""
+
+
+def observe_camera(labels: np.ndarray, primary: bool, min_blob_pixels: int = 4
+                   ) -> tuple[CameraObservation, TinyCrop | None]:
+    """A camera's observation from its label image: blobs, and for the primary camera the
+    mean-shift crop (``crop_to_tiny``) whose transform the IK needs. Not found when the
+    crop fails (primary) or no blob is large enough."""
+    blobs = extract_blobs(labels, min_blob_pixels)
+    tiny = crop_to_tiny(labels) if primary else None
+    found = len(blobs) > 0 and (tiny is not None or not primary)
+    return CameraObservation(found, blobs, tiny.transform if tiny is not None else None), tiny
+
+
+def truth_observer(min_blob_pixels: int = 4) -> Observer:
+    """Observations from the renderer's ground-truth labels (judges the IK and lookup
+    apart from the colour segmentation)."""
+    def observe(frame: Any, primary: bool) -> tuple[CameraObservation, TinyCrop | None]:
+        return observe_camera(np.asarray(frame.labels, np.uint8), primary, min_blob_pixels)
+    return observe
+
+
+def segmenter_observer(segmenter: Any) -> Observer:
+    """Observations from the colour segmentation of the rendered RGB image
+    (``core.segmentation.GloveSegmenter.process``: filter, classify, crop, blobs)."""
+    def observe(frame: Any, primary: bool) -> tuple[CameraObservation, TinyCrop | None]:
+        obs = segmenter.process(frame.image_rgb)
+        blobs = Blobs.empty()
+        if obs.blobs:
+            blobs = Blobs(np.array([b.color_label for b in obs.blobs]),
+                          np.array([[b.centroid_x, b.centroid_y] for b in obs.blobs]),
+                          np.array([b.pixel_count for b in obs.blobs], float))
+        found = bool(obs.hand_found) and len(blobs) > 0
+        tiny = TinyCrop(obs.tiny_labels, obs.crop) if found and primary else None
+        return CameraObservation(found, blobs, obs.crop), tiny
+    return observe
+
+
+def make_observer(labels: str, color_config: str | Path | None = None,
+                  min_blob_pixels: int = 4) -> Observer:
+    """'truth' (renderer labels) or 'segmented' (``core.segmentation.load_segmenter`` on
+    ``color_config``, default ``config/color_calibration.yaml``; raises the segmentation's
+    error when its calibration file is missing)."""
+    if labels == 'truth':
+        return truth_observer(min_blob_pixels)
+    if labels == 'segmented':
+        from colorglove_ros.core.segmentation.segmenter import load_segmenter
+        from colorglove_ros.paths import share_dir
+
+        path = Path(color_config) if color_config else (
+            share_dir() / 'config' / 'color_calibration.yaml')
+        return segmenter_observer(load_segmenter(str(path)))
+    raise EvaluationError(f'unknown label source {labels!r}, expected one of {LABEL_SOURCES}')
+
+
+# ---------------------------------------------------------------------------- one frame
+@dataclass(frozen=True)
+class FramePrior:
+    """The lookup outcome of one primary-camera label image."""
+
+    result: Any            # core.search.LookupResult, or None when no hand / no glove pixels
+    tiny: TinyCrop | None
+    time_ms: float
+    error: str = ''
+
+
+class LookupStage:
+    """Crop + database lookup on the primary camera's labels."""
+
+    def __init__(self, lookup: Any, camera: PinholeCamera) -> None:
+        self.lookup = lookup
+        self.camera = camera
+
+    def __call__(self, tiny: TinyCrop | None, blobs: Any = None) -> FramePrior:
+        """Look up a tiny crop (None = no hand); with the same image's ``blobs`` the
+        fingers are blended per finger (``PoseLookup.lookup``)."""
+        if tiny is None:
+            return FramePrior(None, None, 0.0, 'no crop')
+        from colorglove_ros.core.lookup.search import SearchError
+
+        t0 = time.perf_counter()
+        try:
+            res = self.lookup.lookup(tiny.labels, tiny.transform, self.camera, blobs)
+        except SearchError as exc:
+            return FramePrior(None, tiny, 1e3 * (time.perf_counter() - t0), str(exc))
+        return FramePrior(res, tiny, 1e3 * (time.perf_counter() - t0))
+
+
+@dataclass(frozen=True)
+class TemporalPrior:
+    """Settings of the temporal reweighting of the lookup's neighbours
+    (``core.temporal_prior.reweight_by_previous``) by each tracker's previous output."""
+
+    tau_rad: float
+    rotation_weight: float = 1.0
+
+
+@dataclass
+class TrackedSequence:
+    """One tracker's outputs over one sequence, with the ground truth (primary frame)."""
+
+    seed: int
+    rig: str
+    mode: str
+    q_true: np.ndarray                       # (N, 26)
+    q_est: np.ndarray                        # (N, 26), NaN rows where not found
+    found: np.ndarray                        # (N,) bool
+    reprojection_px: np.ndarray              # (N,) NaN when no constraint
+    ik_ms: np.ndarray                        # (N,) tracker wall time (matching + IK)
+    ik_cpu_ms: np.ndarray                    # (N,) the same as thread CPU time
+    lookup_ms: np.ndarray                    # (N,) shared lookup time
+    iterations: np.ndarray                   # (N,)
+    constraints: np.ndarray                  # (N,)
+    results: list[IKResult | None] = field(default_factory=list)
+
+
+def same_camera(a: PinholeCamera, b: PinholeCamera) -> bool:
+    """Same image size, intrinsics, distortion and extrinsics."""
+    return (a.width == b.width and a.height == b.height
+            and np.allclose([a.fx, a.fy, a.cx, a.cy], [b.fx, b.fy, b.cx, b.cy])
+            and np.allclose(a.distortion, b.distortion) and np.allclose(a.rotation, b.rotation)
+            and np.allclose(a.translation, b.translation))
+
+
+class SequenceEvaluator:
+    """Renders seeded synthetic sequences once with every camera of the largest rig, runs
+    the labels -> crop -> lookup stage once per frame on the primary camera, and feeds one
+    :class:`HandTracker` per (rig, mode), optionally with the lookup's neighbours reweighted
+    by that tracker's previous output (``temporal``). With ``finger_evidence`` (default) the
+    lookup also gets the primary camera's blobs and blends each finger by its own patch
+    evidence (``core.finger_evidence``). Every rig must be a prefix of the largest one
+    (same primary camera), so all rows of a table see identical frames and lookups."""
+
+    def __init__(self, lookup: Any, rigs: Mapping[str, Sequence[PinholeCamera]],
+                 modes: Sequence[str] = TRACKER_MODES, ik_config: IKConfig | None = None,
+                 observer: Observer | None = None, synthesizer: Any = None,
+                 fps: float = 30.0, keep_results: bool = False,
+                 temporal: TemporalPrior | None = None, finger_evidence: bool = True) -> None:
+        from colorglove_ros.core.synthetic.frames import Synthesizer
+
+        if not rigs:
+            raise EvaluationError('need at least one camera rig')
+        for m in modes:
+            if m not in TRACKER_MODES:
+                raise EvaluationError(f'unknown mode {m!r}, expected one of {TRACKER_MODES}')
+        self.rigs = {name: tuple(cams) for name, cams in rigs.items()}
+        self.cameras = max(self.rigs.values(), key=len)
+        for name, cams in self.rigs.items():
+            if not cams or not all(same_camera(a, b) for a, b in zip(cams, self.cameras,
+                                                                      strict=False)):
+                raise EvaluationError(f'rig {name!r} is not a prefix of the largest rig '
+                                      '(the lookup runs once on a shared primary camera)')
+        self.modes = tuple(modes)
+        self.config = ik_config or IKConfig()
+        self.observer = observer or truth_observer(self.config.min_blob_pixels)
+        self.synth = synthesizer or Synthesizer()
+        self.fps = float(fps)
+        self.keep_results = keep_results
+        self.temporal = temporal
+        self.finger_evidence = bool(finger_evidence)
+        if temporal is not None and self.finger_evidence:
+            # reweight_by_previous re-blends every DOF with one weight per neighbour
+            raise EvaluationError('temporal reweighting re-blends the fingers with one weight '
+                                  'per neighbour: use it without the per-finger blend')
+        self.stage = LookupStage(lookup, self.cameras[0])
+        self.trackers = {(r, m): HandTracker(self.synth.model, self.synth.mesh, cams,
+                                             self.config.with_mode(m), glove=self.synth.glove)
+                         for r, cams in self.rigs.items() for m in self.modes}
+
+    @property
+    def model(self) -> HandModel:
+        """The hand model of the synthesiser (and the trackers)."""
+        return self.synth.model
+
+    def run(self, seed: int, num_frames: int, split: str = 'test',
+            progress: Callable[[int], None] | None = None
+            ) -> dict[tuple[str, str], TrackedSequence]:
+        """Track sequence ``seed`` (``generate_sequence``; conditions from ``split``, fixed per
+        sequence; noise per frame) with every (rig, mode)."""
+        if num_frames < 1:
+            raise EvaluationError(f'need at least one frame, got {num_frames}')
+        sequence = EvaluationSequence.make(seed, num_frames, self.cameras[0], self.synth,
+                                           split, self.fps)
+        Q = sequence.poses
+        n = len(Q)
+        out = {key: TrackedSequence(seed, key[0], key[1], Q.copy(),
+                                    np.full((n, NUM_DOFS), np.nan), np.zeros(n, bool),
+                                    np.full(n, np.nan), np.full(n, np.nan),
+                                    np.full(n, np.nan), np.zeros(n),
+                                    np.zeros(n, np.int64), np.zeros(n, np.int64))
+               for key in self.trackers}
+        for tr in self.trackers.values():
+            tr.reset()
+        for i in range(n):
+            frames = sequence.render(i, self.cameras)
+            obs, tiny = [], None
+            for k, fr in enumerate(frames):
+                o, t = self.observer(fr, k == 0)
+                obs.append(o)
+                tiny = t if k == 0 else tiny
+            prior = self.stage(tiny if obs[0].hand_found else None,
+                               obs[0].blobs if self.finger_evidence else None)
+            for (rig, mode), tracker in self.trackers.items():
+                c0 = time.thread_time()
+                lookup = prior.result
+                if self.temporal is not None and lookup is not None:
+                    lookup = reweight_by_previous(lookup, tracker.previous_pose,
+                                                  self.temporal.tau_rad,
+                                                  self.temporal.rotation_weight)
+                res = tracker.update(lookup, obs[:len(self.rigs[rig])], i / self.fps)
+                cpu_ms = 1e3 * (time.thread_time() - c0)
+                ts = out[(rig, mode)]
+                ts.lookup_ms[i] = prior.time_ms
+                if self.keep_results:
+                    ts.results.append(res)
+                if res.found and res.q is not None:
+                    ts.found[i] = True
+                    ts.q_est[i] = res.q
+                    ts.reprojection_px[i] = res.reprojection_error_px
+                    ts.ik_ms[i] = res.time_ms
+                    ts.ik_cpu_ms[i] = cpu_ms
+                    ts.iterations[i] = res.iterations
+                    ts.constraints[i] = res.num_constraints
+            if progress is not None:
+                progress(i)
+        return out
+
+    def close(self) -> None:
+        """Free the renderer's GL contexts."""
+        self.synth.release()
+
+
+# ---------------------------------------------------------------------------- figures
+def summarize(model: HandModel, runs: Sequence[TrackedSequence]) -> dict[str, float]:
+    """Figures of one (rig, mode) over sequences: ``metrics.pose_accuracy`` on the tracked
+    frames (joint MAE deg, fingertip / wrist image-plane / depth error mm), jitter as the
+    fingertips' mean distance from their 5-frame local average over runs of tracked frames
+    (and the same for the true motion), mean reprojection error of the matched constraints
+    (px), the fingertip error split (``metrics.fingertip_error_split_mm``: in the hand frame,
+    and from the wrist rotation alone), tracker time per frame (wall and thread CPU, mean and
+    p95 ms) and the tracked fraction."""
+    if not runs:
+        raise EvaluationError('no sequence to summarise')
+    est = np.concatenate([r.q_est[r.found] for r in runs])
+    truth = np.concatenate([r.q_true[r.found] for r in runs])
+    frames = int(sum(len(r.found) for r in runs))
+    tracked = len(est)
+    out: dict[str, float] = {'frames': frames, 'tracked_fraction': tracked / max(frames, 1)}
+    if tracked == 0:
+        return out
+    acc = pose_accuracy(model, est, truth)
+    for key in ('joint_mae_deg', 'fingertip_mm', 'fingertip_rel_wrist_mm',
+                'fingertip_hand_frame_mm', 'fingertip_rotation_only_mm', 'wrist_plane_mm',
+                'wrist_depth_mm'):
+        out[key] = acc[key]
+    jit, jit_true, w = 0.0, 0.0, 0
+    for r in runs:
+        j = jitter_runs_mm(model, r.q_est, r.found)
+        if math.isfinite(j):
+            n = int(r.found.sum())
+            jit += j * n
+            jit_true += jitter_runs_mm(model, r.q_true, r.found) * n
+            w += n
+    out['jitter_mm'] = jit / w if w else math.nan
+    out['jitter_truth_mm'] = jit_true / w if w else math.nan
+    rep = np.concatenate([r.reprojection_px[r.found] for r in runs])
+    out['reprojection_px'] = float(np.nanmean(rep)) if np.isfinite(rep).any() else math.nan
+    ik = latency_summary_ms(1e-3 * np.concatenate([r.ik_ms[r.found] for r in runs]))
+    out['ik_ms_mean'] = ik['mean']
+    out['ik_ms_p95'] = ik['p95']
+    cpu = latency_summary_ms(1e-3 * np.concatenate([r.ik_cpu_ms[r.found] for r in runs]))
+    out['ik_cpu_ms_mean'] = cpu['mean']
+    out['ik_cpu_ms_p95'] = cpu['p95']
+    lk = np.concatenate([r.lookup_ms[r.found] for r in runs])
+    out['lookup_ms_mean'] = float(lk.mean())
+    out['iterations_mean'] = float(np.concatenate([r.iterations[r.found] for r in runs]).mean())
+    out['constraints_mean'] = float(
+        np.concatenate([r.constraints[r.found] for r in runs]).mean())
+    return out
+
+
+def training_sequences(run: TrackedSequence, with_truth: bool = False,
+                       window: int = LOCAL_WINDOW) -> list[list[TrainingFrame]]:
+    """Training frames (``ik_training.training_frame``) of a run made with
+    ``keep_results=True``, split into runs of consecutive tracked frames of at least
+    ``window`` frames; with ``with_truth`` each frame carries its ground-truth pose."""
+    if len(run.results) != len(run.found):
+        raise EvaluationError('the run kept no tracker results (use keep_results=True)')
+    out = []
+    for a, b in contiguous_runs(run.found):
+        if b - a >= window:
+            out.append([training_frame(run.results[i], run.q_true[i] if with_truth else None)
+                        for i in range(a, b)])
+    return out
+
+
+def find_database(root: str | Path) -> Path | None:
+    """The pose database directory with the most entries directly under ``root`` (or
+    ``root`` itself), by the ``num_entries`` of its manifest; None if there is none."""
+    root = Path(root)
+    best: tuple[int, Path] | None = None
+    for cand in [root, *sorted(p for p in root.glob('*') if p.is_dir())] if root.is_dir() else []:
+        manifest = cand / 'manifest.json'
+        if not manifest.is_file():
+            continue
+        try:
+            data = json.loads(manifest.read_text())
+        except (OSError, json.JSONDecodeError):
+            continue
+        if isinstance(data, dict) and data.get('format') == 'colorglove_pose_database':
+            n = int(data.get('num_entries', 0))
+            if best is None or n > best[0]:
+                best = (n, cand)
+    return None if best is None else best[1]
+
+
+def open_database(path: str | Path | None, root: str | Path) -> tuple[Path, Any]:
+    """The pose database at ``path``, or else the largest under ``root`` (see
+    :func:`find_database`), loaded; :class:`EvaluationError` if there is none."""
+    from colorglove_ros.core.lookup.database import load_database
+
+    db_path = Path(path) if path else find_database(root)
+    if db_path is None:
+        raise EvaluationError(f'no pose database under {root}: build one with '
+                              'colorglove_build_database')
+    return db_path, load_database(db_path)

@@ -1,0 +1,1 @@
+"""The hand: kinematic model, procedural mesh, colour glove, URDF, pose collections."""

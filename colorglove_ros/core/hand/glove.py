@@ -1,0 +1,181 @@
+"""The colour glove: 20 patches grown from far-apart seed triangles, 10 saturated colours.
+
+Construction (Wang & Popovic 2009): 20 seed triangles are chosen by greedy farthest-point
+sampling over triangle centroids, every other triangle joins the patch of its nearest
+seed, and each patch gets one of 10 colours at random. Distances are approximate
+**geodesic** distances: shortest paths over a graph joining every triangle centroid to its
+k nearest centroids (and to its edge-adjacent triangles), measured on a reference pose with
+the fingers spread (``glove_reference_pose``), so a patch does not jump through the palm
+or from a finger to its neighbour. Colours: a seeded random permutation of
+``[1..10] * 2`` (every colour on exactly two patches), redrawn until no two neighbouring
+patches share a colour.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.spatial import cKDTree
+
+from colorglove_ros.core.hand.mesh import HandMesh, build_hand_mesh
+from colorglove_ros.core.hand.model import DOF_NAMES, HandModel
+
+__all__ = [
+    'NUM_PATCHES', 'NUM_COLORS', 'GLOVE_PALETTE_RGB', 'GLOVE_COLOR_NAMES', 'GloveError',
+    'Glove', 'make_glove', 'glove_reference_pose', 'export_glove_mesh', 'default_hand',
+]
+
+NUM_PATCHES = 20
+NUM_COLORS = 10
+GLOVE_COLOR_NAMES: tuple[str, ...] = (
+    'red', 'green', 'blue', 'yellow', 'magenta', 'cyan', 'orange', 'purple', 'pink', 'lime')
+# label k (1..10) has colour GLOVE_PALETTE_RGB[k - 1]
+GLOVE_PALETTE_RGB = np.array([
+    [225, 20, 30],     # red
+    [0, 150, 60],      # green
+    [25, 55, 235],     # blue
+    [255, 230, 0],     # yellow
+    [220, 0, 210],     # magenta
+    [0, 215, 235],     # cyan
+    [255, 125, 0],     # orange
+    [105, 25, 160],    # purple
+    [255, 150, 195],   # pink
+    [150, 245, 40],    # lime
+], dtype=np.uint8)
+GLOVE_PALETTE_RGB.setflags(write=False)
+_KNN = 8
+
+
+class GloveError(Exception):
+    """The glove could not be built (disconnected surface graph, bad sizes)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Glove:
+    """Patch of every mesh triangle and colour label (1..10) of every patch."""
+
+    face_patch: np.ndarray    # (F,) int64 in 0..19
+    patch_color: np.ndarray   # (20,) uint8 in 1..10
+    seed_faces: np.ndarray = field(  # (20,) triangle index of each patch's seed, if known
+        default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+    @property
+    def face_labels(self) -> np.ndarray:
+        """(F,) uint8 colour label (1..10) of every triangle."""
+        return self.patch_color[self.face_patch]
+
+    @property
+    def face_rgb(self) -> np.ndarray:
+        """(F, 3) uint8 colour of every triangle."""
+        return GLOVE_PALETTE_RGB[self.face_labels.astype(np.int64) - 1]
+
+
+def glove_reference_pose(model: HandModel) -> np.ndarray:
+    """Rest pose with the fingers spread and the thumb abducted: where distances are measured."""
+    q = model.rest_pose()
+    spread = {'index_mcp_abd': 1.0, 'ring_mcp_abd': -0.7, 'little_mcp_abd': -1.0}
+    for name, frac in spread.items():
+        i = DOF_NAMES.index(name)
+        q[i] = frac * model.upper_limits[i] if frac > 0 else -frac * model.lower_limits[i]
+    q[DOF_NAMES.index('thumb_cmc_abd')] = 0.5 * model.upper_limits[DOF_NAMES.index('thumb_cmc_abd')]
+    return q
+
+
+def _surface_graph(centroids: np.ndarray, faces: np.ndarray) -> coo_matrix:
+    """Symmetric sparse graph over triangles: k nearest centroids + shared-edge neighbours."""
+    n = len(centroids)
+    tree = cKDTree(centroids)
+    dist, nbr = tree.query(centroids, k=_KNN + 1)
+    rows = [np.repeat(np.arange(n), _KNN)]
+    cols = [nbr[:, 1:].ravel()]
+    adj = trimesh.graph.face_adjacency(faces=faces)
+    rows.append(adj[:, 0])
+    cols.append(adj[:, 1])
+    r = np.concatenate(rows + cols)
+    c = np.concatenate(cols + rows)
+    w = np.linalg.norm(centroids[r] - centroids[c], axis=1) + 1e-12
+    return coo_matrix((w, (r, c)), shape=(n, n)).tocsr()
+
+
+def make_glove(mesh: HandMesh, seed: int = 0, model: HandModel | None = None) -> Glove:
+    """Build the glove pattern on ``mesh`` deterministically from ``seed``."""
+    model = HandModel(mesh.hand_length_m) if model is None else model
+    rng = np.random.default_rng(seed)
+    verts = mesh.skin(model, glove_reference_pose(model))
+    centroids = verts[mesh.faces].mean(axis=1)
+    graph = _surface_graph(centroids, mesh.faces)
+    ncomp, _ = connected_components(graph, directed=False)
+    if ncomp != 1:
+        raise GloveError(f'surface graph has {ncomp} components, expected 1')
+    # greedy farthest-point seeds; the random start is replaced by the face farthest from it
+    start = int(rng.integers(len(centroids)))
+    d0 = dijkstra(graph, directed=False, indices=start)
+    seeds = [int(np.argmax(d0))]
+    dist = np.empty((NUM_PATCHES, len(centroids)))
+    dist[0] = dijkstra(graph, directed=False, indices=seeds[0])
+    for k in range(1, NUM_PATCHES):
+        nxt = int(np.argmax(dist[:k].min(axis=0)))
+        seeds.append(nxt)
+        dist[k] = dijkstra(graph, directed=False, indices=nxt)
+    face_patch = np.argmin(dist, axis=0).astype(np.int64)
+    # neighbouring patches (joined by a graph edge)
+    g = graph.tocoo()
+    pa, pb = face_patch[g.row], face_patch[g.col]
+    touching = np.zeros((NUM_PATCHES, NUM_PATCHES), dtype=bool)
+    touching[pa, pb] = True
+    np.fill_diagonal(touching, False)
+    base = np.repeat(np.arange(1, NUM_COLORS + 1), NUM_PATCHES // NUM_COLORS)
+    best, best_conflicts = None, None
+    for _ in range(2000):
+        colors = rng.permutation(base)
+        conflicts = int(np.sum(touching & (colors[:, None] == colors[None, :])))
+        if best_conflicts is None or conflicts < best_conflicts:
+            best, best_conflicts = colors, conflicts
+        if conflicts == 0:
+            break
+    assert best is not None
+    glove = Glove(face_patch, best.astype(np.uint8), np.array(seeds, dtype=np.int64))
+    for arr in (glove.face_patch, glove.patch_color, glove.seed_faces):
+        arr.setflags(write=False)
+    return glove
+
+
+def export_glove_mesh(mesh: HandMesh, glove: Glove, model: HandModel, path: str | Path,
+                      q: np.ndarray | None = None) -> Path:
+    """Write the coloured glove mesh (pose q, rest pose by default).
+
+    ``.ply``: shared vertices, per-face RGBA colour plus face attributes ``patch`` and
+    ``label``. ``.glb``/``.obj``: faces unmerged so per-vertex colours reproduce the patches.
+    """
+    path = Path(path)
+    if len(glove.face_patch) != mesh.num_faces:
+        raise GloveError(f'glove has {len(glove.face_patch)} faces, mesh {mesh.num_faces}')
+    verts = mesh.skin(model, model.rest_pose() if q is None else q)
+    rgba = np.concatenate([glove.face_rgb, np.full((mesh.num_faces, 1), 255, np.uint8)], axis=1)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.suffix.lower() == '.ply':
+        tm = trimesh.Trimesh(verts, mesh.faces, face_colors=rgba, process=False)
+        tm.face_attributes['patch'] = glove.face_patch.astype(np.int32)
+        tm.face_attributes['label'] = glove.face_labels.astype(np.int32)
+        path.write_bytes(trimesh.exchange.ply.export_ply(tm, encoding='binary'))
+    else:
+        flat_v = verts[mesh.faces].reshape(-1, 3)
+        flat_f = np.arange(len(flat_v)).reshape(-1, 3)
+        tm = trimesh.Trimesh(flat_v, flat_f, vertex_colors=np.repeat(rgba, 3, axis=0),
+                             process=False)
+        tm.export(path)
+    return path
+
+
+@lru_cache(maxsize=4)
+def default_hand(hand_length_m: float = 0.19,
+                 seed: int = 0) -> tuple[HandModel, HandMesh, Glove]:
+    """The standard (model, mesh, glove) triple, cached."""
+    model = HandModel(hand_length_m)
+    mesh = build_hand_mesh(model)
+    return model, mesh, make_glove(mesh, seed=seed, model=model)

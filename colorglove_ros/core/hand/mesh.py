@@ -1,0 +1,183 @@
+"""Procedural hand mesh, rigidly skinned to the model: capsule phalanges, convex-hull palm."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import trimesh
+
+from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, digit_link_index
+
+__all__ = ['HandMeshError', 'HandMesh', 'build_hand_mesh', 'skin_batch', 'PALM_SUBDIVISIONS',
+           'RING_SPACING_FRACTION']
+
+# palm: icosphere subdivisions (1280 triangles at 3); phalanges: ring spacing / hand length
+PALM_SUBDIVISIONS = 3
+RING_SPACING_FRACTION = 0.03
+
+
+class HandMeshError(Exception):
+    """A mesh does not match the hand model or a pose batch has the wrong shape."""
+
+
+@dataclass(frozen=True, eq=False)
+class HandMesh:
+    """Vertices in their links' frames, each bound rigidly to one link of the ``HandModel``."""
+
+    local_vertices: np.ndarray   # (V, 3) float64, link frame
+    vertex_link: np.ndarray      # (V,) int64 link index
+    faces: np.ndarray            # (F, 3) int32, counter-clockwise seen from outside
+    hand_length_m: float = 0.19
+
+    @property
+    def num_vertices(self) -> int:
+        """Number of vertices V."""
+        return int(len(self.local_vertices))
+
+    @property
+    def num_faces(self) -> int:
+        """Number of triangles F."""
+        return int(len(self.faces))
+
+    @property
+    def face_link(self) -> np.ndarray:
+        """(F,) link of each triangle (all three vertices share it)."""
+        return self.vertex_link[self.faces[:, 0]]
+
+    def skin(self, model: HandModel, q: np.ndarray) -> np.ndarray:
+        """(V, 3) camera-frame vertex positions for pose q (26,)."""
+        return skin_batch(self, model, np.asarray(q, dtype=float)[None], dtype=np.float64)[0]
+
+    def skin_batch(self, model: HandModel, Q: np.ndarray,
+                   dtype: type = np.float32) -> np.ndarray:
+        """(B, V, 3) camera-frame vertex positions for poses Q (B, 26)."""
+        return skin_batch(self, model, Q, dtype=dtype)
+
+    def vertex_jacobian(self, model: HandModel, q: np.ndarray,
+                        vertex_indices: np.ndarray) -> np.ndarray:
+        """(N, 3, 26) analytic Jacobian of the camera-frame positions of some vertices."""
+        idx = np.asarray(vertex_indices, dtype=np.int64)
+        return model.point_jacobian(q, self.vertex_link[idx], self.local_vertices[idx])
+
+    def to_trimesh(self, model: HandModel, q: np.ndarray | None = None) -> trimesh.Trimesh:
+        """The skinned mesh (rest pose by default) as a ``trimesh.Trimesh``."""
+        q = model.rest_pose() if q is None else q
+        return trimesh.Trimesh(self.skin(model, q), self.faces, process=False)
+
+
+def skin_batch(mesh: HandMesh, model: HandModel, Q: np.ndarray,
+               dtype: type = np.float32) -> np.ndarray:
+    """(B, 26) poses -> (B, V, 3) vertex positions, vectorised per link."""
+    Q = np.asarray(Q, dtype=float)
+    if Q.ndim != 2 or Q.shape[1] != NUM_DOFS:
+        raise HandMeshError(f'poses must have shape (B, 26), got {Q.shape}')
+    if not np.isclose(mesh.hand_length_m, model.hand_length_m):
+        raise HandMeshError(
+            f'mesh built for {mesh.hand_length_m} m, model is {model.hand_length_m} m')
+    T = model.link_transforms_batch(Q).astype(dtype)
+    out = np.empty((len(Q), mesh.num_vertices, 3), dtype=dtype)
+    for link, idx in enumerate(_link_groups(mesh)):
+        if len(idx) == 0:
+            continue
+        local = mesh.local_vertices[idx].astype(dtype)
+        out[:, idx] = np.matmul(local[None], np.swapaxes(T[:, link, :3, :3], 1, 2)) \
+            + T[:, link, None, :3, 3]
+    return out
+
+
+def _link_groups(mesh: HandMesh) -> list[np.ndarray]:
+    return [np.flatnonzero(mesh.vertex_link == k) for k in range(16)]
+
+
+def _capsule(length: float, radius: float, is_tip: bool, max_segment: float) -> trimesh.Trimesh:
+    """Capsule along the link's -y axis from the joint (y=0), with rings at most
+    ``max_segment`` apart along the cylinder (even triangles for the glove patches);
+    a fingertip capsule ends exactly at -length."""
+    height = max(length - radius, 1e-4) if is_tip else length
+    n_theta, n_cap = 12, 4
+    prof = [(radius * np.sin(a), radius * np.cos(a))
+            for a in np.linspace(-np.pi / 2, 0.0, n_cap + 1)[1:]]
+    n_cyl = max(1, int(np.ceil(height / max_segment)))
+    prof += [(z, radius) for z in np.linspace(0.0, height, n_cyl + 1)[1:]]
+    prof += [(height + radius * np.sin(a), radius * np.cos(a))
+             for a in np.linspace(0.0, np.pi / 2, n_cap + 1)[1:-1]]
+    pr = np.array(prof)
+    th = np.linspace(0.0, 2 * np.pi, n_theta, endpoint=False)
+    rings = np.stack([np.outer(pr[:, 1], np.cos(th)), np.outer(pr[:, 1], np.sin(th)),
+                      np.repeat(pr[:, :1], n_theta, axis=1)], axis=-1).reshape(-1, 3)
+    verts = np.concatenate([[[0.0, 0.0, -radius]], rings, [[0.0, 0.0, height + radius]]])
+    j = np.arange(n_theta)
+    jn = (j + 1) % n_theta
+    faces = [np.stack([np.zeros(n_theta, np.int64), 1 + jn, 1 + j], axis=1)]
+    for r in range(len(pr) - 1):
+        a, b = 1 + r * n_theta, 1 + (r + 1) * n_theta
+        faces += [np.stack([a + j, a + jn, b + jn], axis=1),
+                  np.stack([a + j, b + jn, b + j], axis=1)]
+    a = 1 + (len(pr) - 1) * n_theta
+    faces.append(np.stack([np.full(n_theta, len(verts) - 1), a + j, a + jn], axis=1))
+    # z -> -y (rotation of +90 deg about x)
+    verts = np.stack([verts[:, 0], -verts[:, 2], verts[:, 1]], axis=1)
+    return trimesh.Trimesh(verts, np.concatenate(faces), process=False)
+
+
+def _palm(model: HandModel) -> trimesh.Trimesh:
+    """Convex hull of the wrist cross-section, the knuckles and the thumb base, triangulated
+    evenly by projecting a subdivided sphere (stretched to the hull's extents) onto it."""
+    s = model.scale
+    pts = []
+    ang = np.linspace(0.0, 2 * np.pi, 24, endpoint=False)
+    # wrist: ellipse 62 mm wide, 30 mm thick
+    for y in (0.008 * s, -0.012 * s):
+        pts.append(np.stack([0.031 * s * np.cos(ang), np.full_like(ang, y),
+                             0.015 * s * np.sin(ang) - 0.001 * s], axis=1))
+    # knuckles: circles at every finger base
+    for d in range(1, 5):
+        anchor = model.finger_anchors[d]
+        r = model.link_radii[digit_link_index(d, 0)] * 1.05
+        for dy in (0.0, 0.012 * s):
+            pts.append(anchor + np.stack([r * np.cos(ang), np.full_like(ang, dy),
+                                          r * np.sin(ang)], axis=1))
+    # thenar eminence at the thumb base
+    sphere = trimesh.creation.icosphere(subdivisions=1, radius=model.link_radii[1] * 1.1)
+    pts.append(sphere.vertices + model.finger_anchors[0])
+    hull = trimesh.convex.convex_hull(np.concatenate(pts))
+    centre = hull.bounds.mean(axis=0)
+    extent = (hull.bounds[1] - hull.bounds[0]) / 2.0
+    ico = trimesh.creation.icosphere(subdivisions=PALM_SUBDIVISIONS)
+    u = ico.vertices * extent
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    n = hull.face_normals
+    b = np.einsum('fj,fj->f', n, hull.vertices[hull.faces[:, 0]]) - n @ centre
+    nu = u @ n.T
+    with np.errstate(divide='ignore', invalid='ignore'):
+        t = np.where(nu > 1e-12, b[None] / nu, np.inf).min(axis=1)
+    return trimesh.Trimesh(centre + u * t[:, None], ico.faces, process=False)
+
+
+def build_hand_mesh(model: HandModel) -> HandMesh:
+    """Build (cached per hand length) the procedural mesh for ``model``."""
+    return _build_cached(round(float(model.hand_length_m), 9))
+
+
+@lru_cache(maxsize=8)
+def _build_cached(hand_length_m: float) -> HandMesh:
+    model = HandModel(hand_length_m)
+    parts = [(0, _palm(model))]
+    for d in range(5):
+        for k in range(3):
+            li = digit_link_index(d, k)
+            parts.append((li, _capsule(model.link_lengths[li], model.link_radii[li], k == 2,
+                                        RING_SPACING_FRACTION * hand_length_m)))
+    verts, links, faces = [], [], []
+    offset = 0
+    for li, m in parts:
+        verts.append(np.asarray(m.vertices, dtype=float))
+        links.append(np.full(len(m.vertices), li, dtype=np.int64))
+        faces.append(np.asarray(m.faces, dtype=np.int64) + offset)
+        offset += len(m.vertices)
+    mesh = HandMesh(np.concatenate(verts), np.concatenate(links),
+                    np.concatenate(faces).astype(np.int32), hand_length_m)
+    for arr in (mesh.local_vertices, mesh.vertex_link, mesh.faces):
+        arr.setflags(write=False)
+    return mesh

@@ -1,0 +1,504 @@
+"""Database lookup: Hamming scan of binary codes, exact re-rank, Gaussian-weighted pose blend."""
+from __future__ import annotations
+
+import math
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.lookup.codes import HAMMING_BLOCK, QueryEncoder, hamming_distances
+from colorglove_ros.core.lookup.database import PoseDatabase
+from colorglove_ros.core.lookup.distance import ABSENT_PENALTY, DT_SCALE, QueryDistance
+from colorglove_ros.core.lookup.finger_evidence import (
+    FingerEvidenceConfig,
+    FingerEvidenceError,
+    finger_blend,
+    finger_scores,
+    patch_digits,
+    weighted_fingers,
+)
+
+__all__ = ['SearchError', 'ProjectionConstraints', 'LookupResult', 'PoseLookup',
+           'top_k_with_ties', 'blend_weights', 'blend_poses', 'estimate_global_pose']
+
+
+_BUFFER_CAP = 1 << 20
+"""Largest reused re-rank buffer (entries): 8 MB of indices, 20x a 300-candidate lookup."""
+
+
+class SearchError(Exception):
+    """Bad lookup input (image shape, empty query, camera)."""
+
+
+@dataclass(frozen=True)
+class ProjectionConstraints:
+    """Visible patches of the nearest database entry, for inverse kinematics.
+
+    ``tiny_xy`` are patch centroids in tiny-image pixels and ``full_xy`` the same points
+    mapped into the query's full image with the query's crop transform."""
+
+    patch_ids: np.ndarray     # (M,) int
+    colors: np.ndarray        # (M,) uint8 glove colour label 1..10
+    vertices: np.ndarray      # (M,) int mesh vertex nearest the patch centroid
+    tiny_xy: np.ndarray       # (M, 2) float
+    full_xy: np.ndarray       # (M, 2) float
+    pixel_counts: np.ndarray  # (M,) float, patch area in tiny-image pixels
+
+
+@dataclass(frozen=True)
+class LookupResult:
+    """Outcome of one lookup. The neighbour arrays are sorted by image distance."""
+
+    indices: np.ndarray         # (k,) database entries blended
+    distances: np.ndarray       # (k,) image distances (px)
+    weights: np.ndarray         # (k,) normalised blend weights
+    poses: np.ndarray           # (k, 26) neighbour poses, wrist moved to the query
+    #                             (estimate_global_pose)
+    blended: np.ndarray         # (26,) blended pose q_b
+    constraints: ProjectionConstraints
+    num_candidates: int         # entries re-ranked (top by Hamming, ties kept)
+    timings_ms: dict[str, float] = field(default_factory=dict)
+    # (20,) weighted spread (rad) of each finger DOF over the neighbours when the fingers
+    # were blended per finger from the observed blobs (core.finger_evidence); else None
+    finger_std: np.ndarray | None = None
+
+
+def top_k_with_ties(values: np.ndarray, k: int) -> np.ndarray:
+    """Indices (ascending) of the k smallest ``values`` plus every index tied with the k-th.
+
+    Small unsigned integer values (Hamming distances) find the cut by counting instead of
+    ``argpartition`` (several times slower on 100k entries): a strided sample gives a value
+    that about 2k + 400 entries are expected to be at or below, one pass keeps those, and a
+    histogram of the kept entries gives the exact cut; if the guess keeps fewer than k
+    entries, the histogram is taken over all values."""
+    values = np.asarray(values)
+    n = len(values)
+    if k >= n:
+        return np.arange(n)
+    if values.dtype.kind == 'u' and values.dtype.itemsize <= 2:
+        step = max(1, n // 2048)
+        sample = values[::step]
+        j = min(len(sample) - 1, (2 * k) // step + 8)
+        guess = int(np.partition(sample, j)[j])
+        sel = np.flatnonzero(values <= guess)
+        if len(sel) < k:
+            sel = np.arange(n)
+        sub = values[sel]
+        cum = np.cumsum(np.bincount(sub))
+        cut = int(np.searchsorted(cum, k))      # smallest value with >= k entries at or below
+        return sel[sub <= cut]
+    cut = values[np.argpartition(values, k - 1)[:k]].max()
+    return np.flatnonzero(values <= cut)
+
+
+def blend_weights(distances: np.ndarray) -> np.ndarray:
+    """Normalised weights exp(-d^2 / sigma^2) with sigma = mean distance (paper eq. 1); if all
+    distances are zero the weights are equal."""
+    d = np.asarray(distances, np.float64)
+    sigma = float(d.mean())
+    if sigma <= 0.0:
+        return np.full(len(d), 1.0 / len(d))
+    w = np.exp(-(d / sigma) ** 2)
+    return w / w.sum()
+
+
+def blend_poses(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Weighted blend of (k, 26) poses: translation and finger DOFs linearly, the global
+    rotation as the weighted quaternion mean (Markley), returned as a rotation vector."""
+    poses = np.asarray(poses, np.float64)
+    return _blend(poses, _rotvec_to_quat(poses[:, 3:6]), np.asarray(weights, np.float64))
+
+
+def _blend(poses: np.ndarray, quats: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """:func:`blend_poses` with the rotations also given as quaternions (k, 4)."""
+    out = weights @ poses
+    out[3:6] = _quat_to_rotvec(_quat_mean(quats, weights))
+    return out
+
+
+def _rotvec_to_quat(rv: np.ndarray) -> np.ndarray:
+    """(k, 3) rotation vectors -> (k, 4) unit quaternions (x, y, z, w)."""
+    angle = np.sqrt(np.einsum('ij,ij->i', rv, rv))
+    half = 0.5 * angle
+    k = np.sin(half)
+    small = angle <= 1e-8
+    np.divide(k, angle, out=k, where=~small)
+    k[small] = 0.5            # sin(a/2)/a = 1/2 - a^2/48 + ...: exactly 1/2 in doubles here
+    out = np.empty((len(rv), 4))
+    np.multiply(rv, k[:, None], out=out[:, :3])
+    np.cos(half, out=out[:, 3])
+    return out
+
+
+def _quat_mean(quats: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Weighted quaternion mean (Markley et al. 2007): principal eigenvector of sum w q q^T."""
+    m = (quats * weights[:, None]).T @ quats
+    _, vecs = np.linalg.eigh(m)
+    return vecs[:, -1]
+
+
+def _quat_to_rotvec(q: np.ndarray) -> np.ndarray:
+    """One quaternion (x, y, z, w), any sign and norm -> rotation vector, angle in [0, pi]."""
+    x, y, z, w = (float(v) for v in q)
+    if w < 0.0:
+        x, y, z, w = -x, -y, -z, -w
+    s = math.sqrt(x * x + y * y + z * z)
+    if s < 1e-12 * math.hypot(s, w):
+        f = 2.0 / math.hypot(s, w)
+    else:
+        f = 2.0 * math.atan2(s, w) / s
+    return np.array([x * f, y * f, z * f])
+
+
+def _entry_place_terms(entry_global: np.ndarray, entry_crop: np.ndarray,
+                       render_camera: dict, anchor_local: np.ndarray | None) -> np.ndarray:
+    """The query-independent part of :func:`estimate_global_pose`, (k, 10) per entry: the
+    anchor's tiny-image x, y; its range (distance from the camera) times the crop scale; the
+    hand rotation as a quaternion (x, y, z, w); and the anchor's offset from the wrist in the
+    camera frame, R_e anchor_local (zero without an anchor)."""
+    g = np.asarray(entry_global, np.float64).reshape(-1, 6)
+    crop = np.asarray(entry_crop, np.float64).reshape(-1, 3)
+    quats = _rotvec_to_quat(g[:, 3:6])
+    offset = np.zeros((len(g), 3))
+    if anchor_local is not None:
+        local = np.asarray(anchor_local, np.float64)
+        qv, qw = quats[:, :3], quats[:, 3:4]            # q a q*: a + 2 w (v x a) + 2 v x (v x a)
+        t = 2.0 * np.cross(qv, local)
+        offset = local + qw * t + np.cross(qv, t)
+    anchor = g[:, 0:3] + offset
+    rc = render_camera
+    u = rc['fx'] * anchor[:, 0] / anchor[:, 2] + rc['cx']
+    v = rc['fy'] * anchor[:, 1] / anchor[:, 2] + rc['cy']
+    return np.column_stack([(u - crop[:, 1]) / crop[:, 0], (v - crop[:, 2]) / crop[:, 0],
+                            np.linalg.norm(anchor, axis=1) * crop[:, 0], quats, offset])
+
+
+def _place_wrists(terms: np.ndarray, render_camera: dict,
+                  query_crop: tuple[float, float, float], camera: PinholeCamera) -> np.ndarray:
+    """Wrist positions (k, 3) in the query camera from :func:`_entry_place_terms` rows."""
+    rc = render_camera
+    sq, oqx, oqy = query_crop
+    full = terms[:, 0:2] * sq
+    full += (oqx, oqy)
+    if np.any(camera.distortion):
+        full = camera.undistort_pixels(full)
+    out = np.empty((len(terms), 3))
+    out[:, 0] = (full[:, 0] - camera.cx) / camera.fx
+    out[:, 1] = (full[:, 1] - camera.cy) / camera.fy
+    out[:, 2] = 1.0
+    # range along the unit ray through the anchor's pixel
+    r = terms[:, 2] * ((camera.fx + camera.fy) / (rc['fx'] + rc['fy']) / sq)
+    out *= (r / np.sqrt(out[:, 0] ** 2 + out[:, 1] ** 2 + 1.0))[:, None]
+    out -= terms[:, 7:10]
+    return out
+
+
+def estimate_global_pose(entry_global: np.ndarray, entry_crop: np.ndarray,
+                         render_camera: dict, query_crop: tuple[float, float, float],
+                         camera: PinholeCamera, anchor_local: np.ndarray | None = None
+                         ) -> np.ndarray:
+    """Global poses (k, 6) (wrist position, rotation vector) in the query camera of entries
+    rendered with global poses ``entry_global`` (k, 6) and crops ``entry_crop`` (k, 3)
+    (scale, offset_x, offset_y).
+
+    The anchor (the hand-frame point ``anchor_local``, e.g. the hand's centre; the wrist if
+    None) keeps its tiny-image position, mapped into the query image with the query crop,
+    undistorted and back-projected to a ray; its distance along the ray (range, not depth:
+    apparent size goes with range off the optical axis too) scales with apparent size,
+    r_q = r_e (f_q / f_r) (s_e / s_q). The rotation is the entry's, and the wrist keeps its
+    offset from the anchor."""
+    terms = _entry_place_terms(entry_global, entry_crop, render_camera, anchor_local)
+    out = np.asarray(entry_global, np.float64).reshape(-1, 6).copy()
+    out[:, 0:3] = _place_wrists(terms, render_camera, _crop_tuple(query_crop), camera)
+    return out
+
+
+def _crop_tuple(crop_transform: object) -> tuple[float, float, float]:
+    if hasattr(crop_transform, 'scale'):
+        vals = (crop_transform.scale, crop_transform.offset_x, crop_transform.offset_y)
+    else:
+        vals = tuple(np.asarray(crop_transform, float).ravel())
+    if len(vals) != 3 or not np.all(np.isfinite(vals)) or not float(vals[0]) > 0.0:
+        raise SearchError(f'bad crop transform {crop_transform!r}')
+    return float(vals[0]), float(vals[1]), float(vals[2])
+
+
+class PoseLookup:
+    """Nearest-neighbour pose lookup in a :class:`PoseDatabase`.
+
+    Buffers for the Hamming scan and re-rank are reused; one instance is not thread-safe.
+    ``threads=2`` (default) splits the Hamming scan (two halves) and the re-rank (its two
+    gathers) between the caller and one worker thread; ``threads=1`` runs everything in the
+    caller (same results)."""
+
+    def __init__(self, database: PoseDatabase, num_candidates: int = 300,
+                 num_blend: int = 10, threads: int = 2,
+                 finger_evidence: FingerEvidenceConfig | None = None,
+                 vertex_link: np.ndarray | None = None) -> None:
+        if num_candidates < 1 or num_blend < 1:
+            raise SearchError('num_candidates and num_blend must be positive')
+        if threads not in (1, 2):
+            raise SearchError(f'threads must be 1 or 2, got {threads}')
+        # one worker thread for the re-rank's second gather (None: all in the caller)
+        self._pool = ThreadPoolExecutor(1, 'pose-lookup') if threads == 2 else None
+        self.db = database
+        self.num_candidates = int(num_candidates)
+        self.num_blend = int(num_blend)
+        self.finger_evidence = finger_evidence or FingerEvidenceConfig()
+        self._vertex_link = None if vertex_link is None else np.asarray(vertex_link)
+        self._patch_digit: np.ndarray | None = None      # built on first use (needs the mesh)
+        n = len(database)
+        self._columns = np.ascontiguousarray(database.codes)
+        # Hamming distances fit a byte up to 255 bits: uint8 accumulation halves the traffic.
+        self._ham = np.empty(n, np.uint8 if database.num_bits <= 255 else np.uint16)
+        self._xor = np.empty(min(n, HAMMING_BLOCK), np.uint64)
+        self._cnt = np.empty(min(n, HAMMING_BLOCK), np.uint8)
+        self._xor2, self._cnt2 = np.empty_like(self._xor), np.empty_like(self._cnt)
+        self._qenc = QueryEncoder(database.encoder)
+        # plain ndarray views of the (memory-mapped) arrays: no np.memmap indexing overhead
+        self._a = {name: np.asarray(getattr(database, name)) for name in (
+            'dts', 'pixel_keys', 'poses', 'crop', 'patch_vertex', 'patch_xy', 'patch_color',
+            'patch_pixels')}
+        self._dts_flat = self._a['dts'].reshape(n, -1)
+        self._row = self._dts_flat.shape[1]
+        self._dts_all = self._a['dts'].reshape(-1)
+        self._counts = np.asarray(database.pixel_counts, np.float64)
+        # query DT lookup table, last slot (the padding key 16000) reads zero
+        self._table = np.zeros(self._row + 1, np.float32)
+        self._rerank_groups = 4
+        self._buffers: dict[str, np.ndarray] = {}
+        anchor = database.meta.get('hand_centre_local')
+        self._anchor = None if anchor is None else np.asarray(anchor, np.float64)
+        # the query-independent part of placing every entry in a query's view, once
+        self._place_table = _entry_place_terms(self._a['poses'][:, 0:6], self._a['crop'],
+                                               database.render_camera, self._anchor)
+
+    @property
+    def buffer_bytes(self) -> int:
+        """Memory held by this lookup besides the database: scan and re-rank buffers and
+        the per-entry tables computed at construction."""
+        arrays = [self._ham, self._xor, self._cnt, self._xor2, self._cnt2, self._table,
+                  self._place_table, *self._buffers.values()]
+        return int(sum(a.nbytes for a in arrays))
+
+    def _buffer(self, name: str, size: int, dtype: type) -> np.ndarray:
+        """A reused flat scratch array of ``size`` entries (grown as needed up to
+        :data:`_BUFFER_CAP` entries; larger requests, e.g. a re-rank of a whole database in
+        chunks, get a fresh array so the lookup does not keep it)."""
+        if size > _BUFFER_CAP:
+            return np.empty(size, dtype)
+        buf = self._buffers.get(name)
+        if buf is None or len(buf) < size:
+            buf = np.empty(min(_BUFFER_CAP, max(size, 2 * (0 if buf is None else len(buf)))),
+                           dtype)
+            self._buffers[name] = buf
+        return buf[:size]
+
+    def hamming(self, tiny_labels: np.ndarray) -> np.ndarray:
+        """Hamming distances (N,) of a query to every entry (a copy)."""
+        qd = QueryDistance(tiny_labels)
+        return self._hamming_dts(qd.dts).copy()
+
+    def _hamming_dts(self, dts: np.ndarray) -> np.ndarray:
+        code = self._qenc.encode(dts)
+        n = self._columns.shape[1]
+        if self._pool is None or n < 2 * HAMMING_BLOCK:
+            return hamming_distances(self._columns, code, self._ham, self._xor, self._cnt)
+        # two halves, one in the worker thread (own scratch buffers), one here
+        half = n // 2
+        pending = self._pool.submit(hamming_distances, self._columns[:, :half], code,
+                                    self._ham[:half], self._xor2, self._cnt2)
+        hamming_distances(self._columns[:, half:], code, self._ham[half:], self._xor,
+                          self._cnt)
+        pending.result()
+        return self._ham
+
+    def _query_sums(self, query: QueryDistance, idx: np.ndarray) -> np.ndarray:
+        """Sum (k,) of each candidate's stored (quantised) distance transform at the query's
+        glove pixels: the query -> candidate term, one gather of k x num_pixels bytes."""
+        nq = query.num_pixels
+        flat_idx = self._buffer('flat', len(idx) * nq, np.intp).reshape(len(idx), nq)
+        np.add((idx * self._row)[:, None], query.glove_index, out=flat_idx)
+        got = self._buffer('dt', flat_idx.size, np.uint8).reshape(flat_idx.shape)
+        self._dts_all.take(flat_idx, out=got, mode='clip')
+        return got.sum(axis=1, dtype=np.uint32)
+
+    def rerank(self, query: QueryDistance, indices: np.ndarray) -> np.ndarray:
+        """Exact image distances (k,) from the query to database entries ``indices``.
+
+        With ``threads=2`` the query -> candidate gather runs in a worker thread while this
+        thread does the candidate -> query one (numpy releases the GIL in both)."""
+        idx = np.asarray(indices, np.intp)
+        nq = query.num_pixels
+        pending = (self._pool.submit(self._query_sums, query, idx)
+                   if nq and self._pool is not None else None)
+        counts = self._counts[idx]
+        table = self._table
+        table[:-1] = query.dts.reshape(-1)
+        cand_sum = np.empty(len(idx), np.float64)
+        # Candidates in groups of similar glove-pixel count, each gathered only up to its
+        # largest count: far fewer padding keys than one block as wide as the largest count.
+        # Gathers go through reused buffers (fresh megabyte temporaries cost page faults).
+        order = np.argsort(counts, kind='stable')
+        groups = min(self._rerank_groups, max(1, len(idx)))
+        bounds = (len(idx) * np.arange(groups + 1)) // groups
+        for g in range(groups):
+            grp = order[bounds[g]:bounds[g + 1]]
+            if len(grp) == 0:
+                continue
+            width = max(1, int(counts[grp[-1]]))
+            keys = self._buffer('keys', len(grp) * width, np.intp).reshape(len(grp), width)
+            np.copyto(keys, self._a['pixel_keys'][idx[grp], :width])   # padding reads zero
+            vals = self._buffer('vals', keys.size, np.float32).reshape(keys.shape)
+            table.take(keys, out=vals, mode='clip')
+            cand_sum[grp] = vals.sum(axis=1)
+        if nq:
+            q_sum = pending.result() if pending is not None else self._query_sums(query, idx)
+            d_qc = q_sum * (1.0 / (DT_SCALE * nq))
+            d_cq = np.where(counts > 0, cand_sum / np.maximum(counts, 1.0), ABSENT_PENALTY)
+        else:
+            d_qc = np.where(counts > 0, ABSENT_PENALTY, 0.0)
+            d_cq = d_qc
+        return 0.5 * (d_qc + d_cq)
+
+    def lookup(self, tiny_labels: np.ndarray, crop_transform: object,
+               camera: PinholeCamera, blobs: object = None) -> LookupResult:
+        """Look up a (40, 40) label image cropped from ``camera``'s image with
+        ``crop_transform`` (``CropTransform`` or (scale, offset_x, offset_y)).
+
+        With ``blobs`` (the same image's patch blobs: ``color``, ``centroid_px`` in full-image
+        pixels, ``pixel_count``, as ``core.ik.Blobs``) each finger of the blend is weighted by
+        how well the nearest ``finger_evidence.num_neighbours`` entries' patches on that finger
+        match the blobs (:mod:`core.finger_evidence`) and the result carries the fingers'
+        spread (``finger_std``); without, every DOF is blended with the image weights (the
+        paper)."""
+        t0 = time.perf_counter()
+        crop = _crop_tuple(crop_transform)
+        try:
+            query = QueryDistance(tiny_labels)
+        except Exception as exc:
+            raise SearchError(f'bad query image: {exc}') from exc
+        if query.num_pixels == 0:
+            raise SearchError('query tiny image has no glove pixels')
+        t1 = time.perf_counter()
+        ham = self._hamming_dts(query.dts)
+        cand = top_k_with_ties(ham, self.num_candidates)
+        t2 = time.perf_counter()
+        dist = self.rerank(query, cand)
+        wide = min(max(self.num_blend, self.finger_evidence.num_neighbours
+                       if blobs is not None else 0), len(cand))
+        near = np.argpartition(dist, wide - 1)[:wide] if wide < len(cand) else np.arange(len(cand))
+        near = near[np.lexsort((cand[near], dist[near]))]
+        k = min(self.num_blend, len(cand))
+        idx, d = cand[near[:k]], dist[near[:k]]
+        t3 = time.perf_counter()
+        weights = blend_weights(d)
+        poses = self._a['poses'][idx].astype(np.float64)
+        terms = self._place_table[idx]
+        poses[:, 0:3] = _place_wrists(terms, self.db.render_camera, crop, camera)
+        blended = _blend(poses, terms[:, 3:7], weights)
+        finger_std = finger_entries = None
+        evidence = None if blobs is None else self._finger_blend(cand[near], crop, blobs)
+        if evidence is not None:
+            fingers, finger_std, finger_entries, seen = evidence
+            # a finger no entry shows a matching patch of keeps the image-weighted blend
+            # (already in blended) and that blend's spread
+            dofs = np.repeat(seen, 4)
+            blended[6:] = np.where(dofs, fingers, blended[6:])
+            if not seen.all():
+                finger_std = np.where(dofs, finger_std, weighted_fingers(poses, weights)[1])
+            finger_entries = np.where(seen, finger_entries, idx[0])
+        constraints = self._constraints(int(idx[0]), crop, finger_entries)
+        t4 = time.perf_counter()
+        timings = {'encode_ms': 1e3 * (t1 - t0), 'hamming_ms': 1e3 * (t2 - t1),
+                   'rerank_ms': 1e3 * (t3 - t2), 'blend_ms': 1e3 * (t4 - t3),
+                   'total_ms': 1e3 * (t4 - t0)}
+        return LookupResult(idx, d, weights, poses, blended, constraints, len(cand), timings,
+                            finger_std)
+
+    def _finger_blend(self, entries: np.ndarray, crop: tuple[float, float, float],
+                      blobs: object
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """Per-finger blend (20,) and spread (20,) of ``entries`` against full-image
+        ``blobs`` (:mod:`core.finger_evidence`), the best-scoring entry of each digit (5,),
+        whose patches on that digit become its projection constraints, and which digits had
+        evidence (5,); None when there are no usable blobs (the paper's blend stands)."""
+        try:
+            color = np.asarray(blobs.color).reshape(-1)
+            xy = np.asarray(blobs.centroid_px, np.float64).reshape(-1, 2)
+            pixels = np.asarray(blobs.pixel_count, np.float64).reshape(-1)
+        except (AttributeError, ValueError) as exc:
+            raise SearchError(f'blobs need color, centroid_px (B, 2) and pixel_count: {exc}'
+                              ) from exc
+        if not len(color) == len(xy) == len(pixels):
+            raise SearchError('blob colour, centroid and pixel-count arrays differ in length')
+        usable = np.isfinite(xy).all(axis=1) & np.isfinite(pixels) & (pixels > 0)
+        if not usable.any():
+            return None
+        scale, ox, oy = crop
+        try:
+            scores = finger_scores(self._a['patch_xy'][entries],
+                                   self._a['patch_pixels'][entries],
+                                   self.patch_digit_table()[entries], self._a['patch_color'],
+                                   color[usable], (xy[usable] - (ox, oy)) / scale,
+                                   pixels[usable] / scale ** 2, self.finger_evidence)
+            fingers, spread, seen = finger_blend(self._a['poses'][entries], scores,
+                                                 self.finger_evidence)
+        except FingerEvidenceError as exc:
+            raise SearchError(f'per-finger blend: {exc}') from exc
+        return fingers, spread, entries[np.argmin(scores, axis=0)], seen
+
+    def patch_digit_table(self) -> np.ndarray:
+        """(N, P) digit of each entry's visible patches (built once, from the standard mesh
+        of the database's hand length unless a vertex -> link table was given)."""
+        if self._patch_digit is None:
+            link = self._vertex_link
+            if link is None:
+                from colorglove_ros.core.hand.mesh import build_hand_mesh
+                from colorglove_ros.core.hand.model import HandModel
+
+                length = float(self.db.meta.get('build', {}).get('hand_length_m', 0.19))
+                link = build_hand_mesh(HandModel(length)).vertex_link
+            self._patch_digit = patch_digits(self._a['patch_vertex'], link)
+        return self._patch_digit
+
+    @property
+    def anchor_local(self) -> np.ndarray | None:
+        """The hand-frame point the lookup places entries by (the hand centre; None: the
+        wrist)."""
+        return None if self._anchor is None else self._anchor.copy()
+
+    def place(self, indices: np.ndarray | None, crop_transform: object,
+              camera: PinholeCamera) -> np.ndarray:
+        """Global poses (k, 6) of entries ``indices`` (None: all) placed in the view of a
+        query cropped with ``crop_transform`` (:func:`estimate_global_pose`)."""
+        sel = slice(None) if indices is None else indices
+        out = self._a['poses'][sel, 0:6].astype(np.float64)
+        out[:, 0:3] = _place_wrists(self._place_table[sel], self.db.render_camera,
+                                    _crop_tuple(crop_transform), camera)
+        return out
+
+    def _constraints(self, entry: int, crop: tuple[float, float, float],
+                     finger_entries: np.ndarray | None = None) -> ProjectionConstraints:
+        """Projection constraints of ``entry``'s visible patches; with ``finger_entries``
+        (5,), the patches on digit g are taken from entry ``finger_entries[g]`` (the entry
+        that best explains that finger) instead."""
+        source = np.where(self._a['patch_vertex'][entry] >= 0, entry, -1)
+        if finger_entries is not None:
+            digits = self.patch_digit_table()
+            for g, e in enumerate(np.asarray(finger_entries, np.int64)):
+                if e != entry:
+                    # the finger's patches all come from entry e, none from the nearest
+                    source[(digits[entry] == g) & (source == entry)] = -1
+                    source[digits[e] == g] = e
+        vis = np.flatnonzero(source >= 0)
+        src = source[vis]
+        tiny_xy = self._a['patch_xy'][src, vis].astype(np.float64)
+        full_xy = tiny_xy * crop[0] + np.array([crop[1], crop[2]])
+        return ProjectionConstraints(vis, self._a['patch_color'][vis],
+                                     self._a['patch_vertex'][src, vis].astype(np.int64),
+                                     tiny_xy, full_xy,
+                                     self._a['patch_pixels'][src, vis].astype(np.float64))

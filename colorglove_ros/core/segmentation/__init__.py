@@ -1,0 +1,1 @@
+"""Glove segmentation (paper section 3): colour model and calibration, clean-up, crop, blobs."""

@@ -1,0 +1,505 @@
+"""Glove segmentation of camera frames: colour lookup, bilateral filter, crop, tiny image, blobs."""
+from __future__ import annotations
+
+import functools
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from colorglove_ros.core.segmentation.color_model import (
+    ColorCalibration,
+    estimate_light_gains,
+    gain_table,
+    load_calibration,
+    read_calibration_config,
+    srgb_to_linear,
+)
+from colorglove_ros.core.segmentation.crop import (
+    TINY_SIZE,
+    CropTransform,
+    crop_to_tiny,
+    mean_shift_crop,
+)
+
+__all__ = [
+    'SegmentationInputError', 'SegmentationConfigError', 'Blob', 'Observation', 'GloveSegmenter',
+    'STATUS_OK',
+    'STATUS_NO_GLOVE', 'STATUS_TOO_SMALL', 'STATUS_OUT_OF_FRAME', 'STAGES', 'load_segmenter',
+    'keep_multicolor_components', 'relabel_borders',
+]
+
+STATUS_OK = 'ok'
+STATUS_NO_GLOVE = 'no_glove'          # (almost) no glove-coloured pixels in the frame
+STATUS_TOO_SMALL = 'too_small'        # glove found but too few pixels for a tiny image
+STATUS_OUT_OF_FRAME = 'out_of_frame'  # the crop window lies mostly outside the image
+#: Timed stages, in pipeline order (``Observation.timings_ms`` also has ``'total'``);
+#: 'coarse' includes estimating the light colour.
+STAGES = ('coarse', 'filter', 'classify', 'cleanup', 'borders', 'crop', 'blobs')
+
+
+class SegmentationInputError(ValueError):
+    """The image given to the segmenter is not a non-empty (H, W, 3) uint8 array."""
+
+
+class SegmentationConfigError(ValueError):
+    """Bad segmenter settings (unknown key or out-of-range value)."""
+
+
+@dataclass(frozen=True)
+class Blob:
+    """One connected component of one glove colour, in full-image pixels."""
+
+    color_label: int
+    centroid_x: float
+    centroid_y: float
+    pixel_count: int
+
+
+@dataclass
+class Observation:
+    """What the segmenter saw in one frame."""
+
+    hand_found: bool
+    status: str
+    image_width: int
+    image_height: int
+    tiny_labels: np.ndarray | None = None   # (40, 40) uint8 whenever a crop was made
+    crop: CropTransform | None = None       # tiny -> full image pixels (or None)
+    blobs: list[Blob] = field(default_factory=list)
+    glove_pixel_count: int = 0              # glove pixels inside the crop (full-res units)
+    timings_ms: dict[str, float] = field(default_factory=dict)
+    label_image: np.ndarray | None = None   # (H, W) uint8, only with keep_labels=True
+
+
+def keep_multicolor_components(labels: np.ndarray, min_colors: int = 3,
+                               min_share: float = 0.03, min_pixels: int = 4,
+                               reattach_radius: int = 0,
+                               reattach_max_share: float = 0.2) -> np.ndarray:
+    """Zero every 8-connected glove component with fewer than ``min_colors`` colours each
+    holding at least ``min_share`` of its pixels (and ``min_pixels``). The printed glove shows
+    many colours side by side; glove-coloured clutter and noise specks show one or two.
+
+    With ``reattach_radius`` > 0, a component with too few colours is kept after all when it
+    lies within that many pixels of a kept one (a gap of at most ``reattach_radius`` - 1
+    pixels) and has at most ``reattach_max_share`` times the kept components' pixels: a
+    fingertip or finger that a thin line of unclassified pixels has cut off from the hand shows
+    only one or two colours by itself (on the evaluation sequences such pieces hold up to 12 %
+    of the hand's pixels). Glove-coloured clutter within that reach is kept too, like clutter
+    touching the glove."""
+    if reattach_radius < 0 or not reattach_max_share >= 0.0:
+        raise SegmentationConfigError(
+            f'need reattach_radius >= 0 and reattach_max_share >= 0; got {reattach_radius}, '
+            f'{reattach_max_share}')
+    glove = labels > 0
+    n, comp = cv2.connectedComponents(glove.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+    if n <= 1:
+        return labels
+    nl = int(labels.max()) + 1
+    glove = np.flatnonzero(glove)   # only glove pixels count: comp is 0 just where labels are
+    hist = np.bincount(comp.ravel().take(glove) * nl + labels.ravel().take(glove),
+                       minlength=n * nl).reshape(n, nl)[:, 1:]
+    size = hist.sum(axis=1, keepdims=True)
+    big = (hist >= np.maximum(min_share * size, min_pixels)).sum(axis=1)
+    keep = big >= min_colors
+    keep[0] = True
+    if keep.all():
+        return labels
+    if reattach_radius > 0 and keep[1:].any():
+        kept_table = keep.view(np.uint8).copy()
+        kept_table[0] = 0                       # background is not a kept component
+        kept = kept_table.take(comp)
+        width = 2 * int(reattach_radius) + 1
+        near = cv2.dilate(kept, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (width, width)))
+        reached = np.zeros(n, dtype=bool)
+        reached[comp[near > 0]] = True          # includes background (0), which stays kept
+        small = size[:, 0] <= reattach_max_share * size[kept_table.view(bool), 0].sum()
+        keep |= reached & small
+    return labels * keep.view(np.uint8).take(comp)   # 5x faster than np.where
+
+
+#: sRGB byte -> linear RGB in 0..255 (float32): mixed pixels are linear mixes there.
+_LINEAR_RGB = (255.0 * srgb_to_linear(np.arange(256, dtype=np.uint8))).astype(np.float32)
+_CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+_UNSURE = 255
+_NO_KEY = np.int32(np.iinfo(np.int32).max)   # larger than every sort key; label bits 255
+#: label -> its bits in a sort key; _UNSURE -> _NO_KEY (OR-ing it in gives _NO_KEY)
+_KEY_LABEL = np.append(np.arange(_UNSURE, dtype=np.int32), _NO_KEY)
+
+
+@functools.lru_cache(maxsize=64)
+def _reference_steps(distances: tuple[int, ...], row_stride: int) -> np.ndarray:
+    """Flat index steps (references, 1) to the pixels ``distances`` away along the 8 compass
+    directions (cached: read only)."""
+    steps = np.array([d * (sy * row_stride + sx) for d in distances
+                      for sy in (-1, 0, 1) for sx in (-1, 0, 1) if sy or sx])[:, None]
+    steps.flags.writeable = False
+    return steps
+
+
+def _gather(colours: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Colours (at.shape + (4,)) float32 of the pixels ``at`` (flat indices) of ``colours``."""
+    return colours.take(at).view(np.float32).reshape(*at.shape, 4)
+
+
+def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
+                    distances: tuple[int, ...] = (2, 4), mix_tolerance: float = 0.25,
+                    min_residual: float = 10.0) -> np.ndarray:
+    """Re-decide the labels of pixels on a label border, i.e. with a 4-neighbour of another
+    label (colour borders and the glove silhouette).
+
+    Such pixels often mix two colours (anti-aliasing, motion blur, JPEG chroma subsampling)
+    and so fall outside every colour model (background) or into a third colour between the
+    two (orange between red and yellow). Each takes the label of the *sure* pixel (not on a
+    border), among those ``distances`` pixels away in the 8 compass directions, whose
+    linear-RGB colour ``a`` is nearest its own ``c``: for a mix of two colours, the one it
+    holds more of. A pixel with a glove label keeps it, though, when ``c`` is no mix of
+    ``a`` and the nearest sure colour ``b`` of another label: farther from the segment
+    ``a``-``b`` than ``mix_tolerance`` times its length and than ``min_residual`` (linear
+    RGB, 0..255); so a thin patch of a real colour survives. With no sure pixel in reach a
+    label stays. ``passes`` repeats this: a band of wrong labels 3 or more pixels wide has a
+    sure core of its own, and each pass peels a pixel off each side. Only the bounding box
+    of the border pixels is read; ``image`` is the (H, W, 3) uint8 RGB image ``labels`` came
+    from.
+    """
+    labels = np.asarray(labels, dtype=np.uint8)
+    if passes < 1 or not distances or min(labels.shape) < 3:
+        return labels
+    border = cv2.erode(labels, _CROSS) != cv2.dilate(labels, _CROSS)
+    bx, by, bw, bh = cv2.boundingRect(border.view(np.uint8))
+    if not bw:
+        return labels
+    pad = max(distances)
+    h, w = labels.shape
+    y0, y1 = max(by - pad, 0), min(by + bh + pad, h)
+    x0, x1 = max(bx - pad, 0), min(bx + bw + pad, w)
+    # Work on the bounding box padded by the reach, as flat arrays: a step is an offset.
+    box = cv2.copyMakeBorder(labels[y0:y1, x0:x1], pad, pad, pad, pad, cv2.BORDER_CONSTANT,
+                             value=_UNSURE)
+    # Linear RGB plus an unused 4th channel: one 16-byte item per pixel, so one take gathers
+    # a pixel's whole colour.
+    rgba = cv2.cvtColor(cv2.copyMakeBorder(np.ascontiguousarray(image[y0:y1, x0:x1]), pad, pad,
+                                           pad, pad, cv2.BORDER_CONSTANT), cv2.COLOR_RGB2RGBA)
+    colours = cv2.LUT(rgba, _LINEAR_RGB).view(np.dtype((np.void, 16))).ravel()
+    steps = _reference_steps(tuple(distances), box.shape[1])
+    inner = box[pad:-pad, pad:-pad]   # a view of the box without the padding
+    flat = box.ravel()
+    border_box = np.zeros(box.shape, bool)
+    border_inner = border_box[pad:-pad, pad:-pad]
+    border_inner[...] = border[y0:y1, x0:x1]
+    changed = np.zeros(0, np.intp)   # flat indices of the pixels the last pass relabelled
+    for k in range(passes):
+        if k:
+            was_border = border_box.copy()
+            np.not_equal(cv2.erode(inner, _CROSS), cv2.dilate(inner, _CROSS), out=border_inner)
+            moved = border_box != was_border   # pixels whose label or sureness changed
+            moved.ravel()[changed] = True
+        at = np.flatnonzero(border_box)
+        if not len(at):
+            break
+        sure = flat.copy()
+        sure[at] = _UNSURE
+        ref = at + steps                      # (references, border pixels)
+        if k:
+            # A pixel decided in the last pass whose references kept their labels and
+            # sureness would be decided the same again: it keeps its label.
+            redo = moved.ravel().take(ref).any(axis=0)
+            redo |= ~was_border.ravel().take(at)
+            at, ref = at[redo], ref.compress(redo, axis=1)
+            if not len(at):   # then no later pass changes anything either
+                break
+        ref_labels = sure.take(ref)
+        own = _gather(colours, at)
+        diff = _gather(colours, ref)
+        diff -= own
+        diff *= diff
+        dist = diff[..., 0] + diff[..., 1]
+        dist += diff[..., 2]
+        # Non-negative float32 values order like their int32 bit patterns: put the label in
+        # the lowest 8 mantissa bits, and one min over the references gives the nearest
+        # reference's label; a reference that is not sure (or is padding) gets the largest
+        # key, label 255.
+        key = dist.view(np.int32)
+        key &= ~0xFF
+        key |= cv2.LUT(ref_labels, _KEY_LABEL)
+        label_a = (key.min(axis=0) & 0xFF).astype(np.uint8)
+        current = flat[at]
+        new = np.where(label_a == _UNSURE, current, label_a)
+        # Glove pixels about to change: keep their label if their colour is no mix of a and b.
+        check = np.flatnonzero((new != current) & (current != 0))
+        if len(check):
+            key = key[:, check]
+            nearest = key.argmin(axis=0)
+            others = np.where(ref_labels[:, check] == label_a[check], _NO_KEY, key)
+            second = others.argmin(axis=0)
+            columns = np.arange(len(check))
+            has_b = (others[second, columns] & 0xFF) != _UNSURE
+            second = np.where(has_b, second, nearest)   # no other label: b = a
+            a = _gather(colours, ref[nearest, check])
+            span = _gather(colours, ref[second, check]) - a
+            rel = own[check] - a
+            # squared distance of c from the segment a-b, and the segment's squared length
+            length2, along, off2 = (np.zeros(len(check), np.float32) for _ in range(3))
+            for channel in range(3):
+                span_c, rel_c = span[:, channel], rel[:, channel]
+                length2 += span_c * span_c
+                along += rel_c * span_c
+                off2 += rel_c * rel_c
+            t = np.clip(along / np.maximum(length2, 1e-6), 0.0, 1.0)
+            off2 -= t * (2.0 * along - t * length2)   # |rel - t span|^2
+            not_a_mix = off2 > np.maximum(mix_tolerance ** 2 * length2, min_residual ** 2)
+            new[check[not_a_mix]] = current[check[not_a_mix]]
+        changed = at[new != current]
+        flat[at] = new
+    out = labels.copy()
+    out[y0:y1, x0:x1] = inner
+    return out
+
+
+def _check_image(image: object) -> np.ndarray:
+    if not isinstance(image, np.ndarray):
+        raise SegmentationInputError(f'expected a numpy array, got {type(image).__name__}')
+    if image.dtype != np.uint8:
+        raise SegmentationInputError(f'expected dtype uint8, got {image.dtype}')
+    if image.ndim != 3 or image.shape[2] != 3:
+        raise SegmentationInputError(f'expected shape (H, W, 3), got {image.shape}')
+    if image.shape[0] == 0 or image.shape[1] == 0:
+        raise SegmentationInputError(f'empty image of shape {image.shape}')
+    return image
+
+
+class GloveSegmenter:
+    """Turns RGB camera frames into :class:`Observation` s (paper section 4.3).
+
+    Pipeline: a coarse pass (area-downsampled frame, table lookup, median, mean-shift) finds
+    the glove, and its glove pixels against the calibration's reference colours give the
+    light colour (:func:`estimate_light_gains`, refined ``light_passes`` - 1 times on the
+    corrected coarse frame; 0 for no correction). Only a region around the glove
+    (``roi_margin`` times the coarse window, reduced so the crop spans at most
+    ``max_roi_cells`` pixels) is bilateral-filtered, classified at (near) full resolution
+    with the light colour divided out (von Kries in linear RGB, fused into the table
+    lookup) and cleaned (median filter, :func:`keep_multicolor_components` with cut-off
+    fingertips within ``reattach_radius`` region pixels re-attached, then
+    :func:`relabel_borders`); :func:`crop_to_tiny` there gives the tiny image and crop;
+    connected components per colour give the blobs.
+    """
+
+    def __init__(self, calibration: ColorCalibration, *, coarse_factor: int = 4,
+                 roi_margin: float = 1.5, max_roi_cells: int = 160,
+                 bilateral_diameter: int = 3, bilateral_sigma_color: float = 45.0,
+                 bilateral_sigma_space: float = 3.0, median_size: int = 3,
+                 border_passes: int = 3, border_distances: tuple[int, ...] = (2, 4),
+                 min_glove_pixels: int = 300, min_inside_fraction: float = 0.5,
+                 min_blob_pixels: int = 12, min_component_colors: int = 3,
+                 reattach_radius: int = 3, reattach_max_share: float = 0.2,
+                 light_passes: int = 1) -> None:
+        if coarse_factor < 1 or max_roi_cells < TINY_SIZE or roi_margin < 1.0:
+            raise SegmentationConfigError(
+                f'need coarse_factor >= 1, max_roi_cells >= {TINY_SIZE}, roi_margin >= 1; got '
+                f'{coarse_factor}, {max_roi_cells}, {roi_margin}')
+        if light_passes < 0 or reattach_radius < 0 or not reattach_max_share >= 0.0:
+            raise SegmentationConfigError(
+                f'need light_passes, reattach_radius and reattach_max_share >= 0; got '
+                f'{light_passes}, {reattach_radius}, {reattach_max_share}')
+        if border_passes < 0 or not all(int(d) >= 1 for d in border_distances):
+            raise SegmentationConfigError(
+                f'need border_passes >= 0 and border_distances >= 1; got {border_passes}, '
+                f'{border_distances}')
+        self.calibration = calibration
+        self.coarse_factor = int(coarse_factor)
+        self.roi_margin = float(roi_margin)
+        self.max_roi_cells = int(max_roi_cells)
+        self.bilateral_diameter = int(bilateral_diameter)
+        self.bilateral_sigma_color = float(bilateral_sigma_color)
+        self.bilateral_sigma_space = float(bilateral_sigma_space)
+        self.median_size = int(median_size)
+        self.border_passes = int(border_passes)
+        self.border_distances = tuple(int(d) for d in border_distances)
+        self.min_glove_pixels = int(min_glove_pixels)
+        self.min_inside_fraction = float(min_inside_fraction)
+        self.min_blob_pixels = int(min_blob_pixels)
+        self.min_component_colors = int(min_component_colors)
+        self.reattach_radius = int(reattach_radius)
+        self.reattach_max_share = float(reattach_max_share)
+        self.light_passes = int(light_passes)
+
+    # ------------------------------------------------------------------ helpers
+    def _coarse_labels(self, small: np.ndarray, table: np.ndarray | None = None) -> np.ndarray:
+        labels = self._median(self.calibration.classify(small, table))
+        if self.min_component_colors > 1:
+            # no re-attaching here: it changes neither the coarse window nor the light estimate
+            labels = keep_multicolor_components(labels, self.min_component_colors, min_pixels=2)
+        return labels
+
+    def _coarse(self, image: np.ndarray
+                ) -> tuple[tuple[tuple[float, float], float] | None, np.ndarray | None]:
+        """Find the glove on the downsampled frame: (centre (x, y), half window) in full
+        pixels or None, and the light-colour correction table (None for no correction)."""
+        f = self.coarse_factor
+        h, w = image.shape[:2]
+        if f > 1 and h >= 2 * f and w >= 2 * f:
+            small = cv2.resize(image, (w // f, h // f), interpolation=cv2.INTER_LINEAR)
+            sx, sy = w / (w // f), h / (h // f)
+        else:
+            small, sx, sy = image, 1.0, 1.0
+        labels = self._coarse_labels(small)
+        table = None
+        gains = np.ones(3)
+        seen = small
+        for k in range(self.light_passes):
+            if k:   # refine: classify the corrected coarse frame, estimate what is left
+                seen = cv2.LUT(small, table)
+                labels = self._coarse_labels(small, table)
+            gains = gains * estimate_light_gains(cv2.LUT(seen, _LINEAR_RGB), labels,
+                                                 self.calibration.reference_linear_rgb)
+            table = gain_table(gains)
+        min_px = max(int(self.min_glove_pixels / (sx * sy)), 1)
+        found = mean_shift_crop(labels, min_pixels=min_px)
+        if found is None:
+            return None, table
+        (cx, cy), half = found
+        # small pixel u covers full pixels [u * s, (u + 1) * s): centre (u + 0.5) s - 0.5
+        return (((cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5), half * max(sx, sy)), table
+
+    def _blobs(self, labels: np.ndarray, r: int, x0: int, y0: int,
+               window: tuple[int, int, int, int]) -> list[Blob]:
+        """Connected components of each colour inside ``window`` (ROI pixel bounds)."""
+        wx0, wx1, wy0, wy1 = window
+        sub = labels[wy0:wy1, wx0:wx1]
+        blobs: list[Blob] = []
+        min_px = max(int(np.ceil(self.min_blob_pixels / (r * r))), 1)
+        counts = np.bincount(sub.ravel(), minlength=self.calibration.num_colors + 1)
+        for c in np.flatnonzero(counts[1:] >= min_px) + 1:
+            m = cv2.compare(sub, int(c), cv2.CMP_EQ)
+            bx, by, bw, bh = cv2.boundingRect(m)
+            # 16-bit component labels (faster) whenever they cannot overflow
+            ltype = cv2.CV_16U if bw * bh < np.iinfo(np.uint16).max else cv2.CV_32S
+            n, _, stats, cents = cv2.connectedComponentsWithStats(m[by:by + bh, bx:bx + bw],
+                                                                  connectivity=8, ltype=ltype)
+            for k in range(1, n):
+                area = int(stats[k, cv2.CC_STAT_AREA])
+                if area < min_px:
+                    continue
+                fx = x0 + r * (cents[k, 0] + bx + wx0) + 0.5 * (r - 1)
+                fy = y0 + r * (cents[k, 1] + by + wy0) + 0.5 * (r - 1)
+                blobs.append(Blob(int(c), float(fx), float(fy), area * r * r))
+        return blobs
+
+    def _filter(self, image: np.ndarray) -> np.ndarray:
+        if self.bilateral_diameter > 0 and min(image.shape[:2]) > self.bilateral_diameter:
+            return cv2.bilateralFilter(np.ascontiguousarray(image), self.bilateral_diameter,
+                                       self.bilateral_sigma_color, self.bilateral_sigma_space)
+        return image
+
+    def _median(self, labels: np.ndarray) -> np.ndarray:
+        if self.median_size > 1 and min(labels.shape) >= self.median_size:
+            return cv2.medianBlur(labels, self.median_size)
+        return labels
+
+    def classify_full(self, image_rgb: np.ndarray) -> np.ndarray:
+        """Filter, classify, median-filter and relabel borders on a whole frame at full
+        resolution (as :meth:`process` does inside its region of interest, less the clutter
+        filter), with the same light-colour correction; for evaluation and debug images."""
+        image = _check_image(image_rgb)
+        filtered = self._filter(image)
+        labels = self._median(self.calibration.classify(filtered, self._coarse(image)[1]))
+        return relabel_borders(filtered, labels, self.border_passes,
+                               self.border_distances)
+
+    # ------------------------------------------------------------------ main entry
+    def process(self, image_rgb: np.ndarray, keep_labels: bool = False) -> Observation:
+        """Segment one (H, W, 3) uint8 RGB frame. Never raises on such a frame; raises
+        :class:`SegmentationInputError` on anything else."""
+        image = _check_image(image_rgb)
+        t0 = time.perf_counter()
+        h, w = image.shape[:2]
+        timings: dict[str, float] = {}
+        obs = Observation(False, STATUS_NO_GLOVE, w, h, timings_ms=timings)
+
+        def tick(stage: str, t: float) -> float:
+            now = time.perf_counter()
+            timings[stage] = (now - t) * 1e3
+            return now
+
+        coarse, table = self._coarse(image)
+        t = tick('coarse', t0)
+        if coarse is None:
+            timings['total'] = (time.perf_counter() - t0) * 1e3
+            return obs
+        (ccx, ccy), chalf = coarse
+        # Region of interest around the coarse window, at an integer reduction r.
+        rhalf = chalf * self.roi_margin
+        x0, x1 = max(int(np.floor(ccx - rhalf)), 0), min(int(np.ceil(ccx + rhalf)) + 1, w)
+        y0, y1 = max(int(np.floor(ccy - rhalf)), 0), min(int(np.ceil(ccy + rhalf)) + 1, h)
+        r = max(1, int(np.floor(2.0 * chalf / self.max_roi_cells)))
+        x1 = x0 + max((x1 - x0) // r, 1) * r
+        y1 = y0 + max((y1 - y0) // r, 1) * r
+        roi = image[y0:y1, x0:x1]
+        if r > 1:
+            roi = cv2.resize(roi, ((x1 - x0) // r, (y1 - y0) // r),
+                             interpolation=cv2.INTER_AREA)
+        roi = self._filter(roi)
+        t = tick('filter', t)
+        labels = self.calibration.classify(roi, table)
+        t = tick('classify', t)
+        labels = self._median(labels)
+        if self.min_component_colors > 1:
+            labels = keep_multicolor_components(labels, self.min_component_colors,
+                                                min_pixels=max(self.min_blob_pixels // (r * r), 2),
+                                                reattach_radius=self.reattach_radius,
+                                                reattach_max_share=self.reattach_max_share)
+        t = tick('cleanup', t)
+        labels = relabel_borders(roi, labels, self.border_passes, self.border_distances)
+        t = tick('borders', t)
+        if keep_labels:
+            full = np.zeros((h, w), np.uint8)
+            up = labels if r == 1 else np.repeat(np.repeat(labels, r, 0), r, 1)
+            full[y0:y0 + up.shape[0], x0:x0 + up.shape[1]] = up
+            obs.label_image = full
+        min_px = max(int(self.min_glove_pixels / (r * r)), 1)
+        tiny = crop_to_tiny(labels, min_pixels=min_px)
+        t = tick('crop', t)
+        if tiny is None:
+            obs.status = STATUS_TOO_SMALL
+            timings['total'] = (time.perf_counter() - t0) * 1e3
+            return obs
+        tr = tiny.transform
+        crop = CropTransform(scale=tr.scale * r, offset_x=x0 + r * tr.offset_x + 0.5 * (r - 1),
+                             offset_y=y0 + r * tr.offset_y + 0.5 * (r - 1))
+        obs.crop = crop
+        obs.tiny_labels = tiny.labels
+        # Glove pixels inside the crop window, in full-resolution pixel units.
+        cx, cy = tr.center_xy
+        half = tr.half_size
+        wx0, wx1 = max(int(np.ceil(cx - half)), 0), int(np.floor(cx + half)) + 1
+        wy0, wy1 = max(int(np.ceil(cy - half)), 0), int(np.floor(cy + half)) + 1
+        obs.glove_pixel_count = int(np.count_nonzero(labels[wy0:wy1, wx0:wx1])) * r * r
+        obs.blobs = self._blobs(labels, r, x0, y0, (wx0, wx1, wy0, wy1))
+        tick('blobs', t)
+        # Reasons to reject: crop mostly outside the frame, or too little glove.
+        fcx, fcy = crop.center_xy
+        fh = crop.half_size
+        inside_w = max(0.0, min(fcx + fh, w - 0.5) - max(fcx - fh, -0.5))
+        inside_h = max(0.0, min(fcy + fh, h - 0.5) - max(fcy - fh, -0.5))
+        inside = inside_w * inside_h / max((2.0 * fh) ** 2, 1e-9)
+        if inside < self.min_inside_fraction:
+            obs.status = STATUS_OUT_OF_FRAME
+        elif obs.glove_pixel_count < self.min_glove_pixels:
+            obs.status = STATUS_TOO_SMALL
+        else:
+            obs.status = STATUS_OK
+            obs.hand_found = True
+        timings['total'] = (time.perf_counter() - t0) * 1e3
+        return obs
+
+
+def load_segmenter(config_path: str = 'config/color_calibration.yaml') -> GloveSegmenter:
+    """A segmenter with the calibration file and settings named in a colour config YAML."""
+    cfg = read_calibration_config(config_path)
+    calibration = load_calibration(cfg['calibration_file'])
+    try:
+        return GloveSegmenter(calibration, **cfg['segmenter'])
+    except TypeError as exc:
+        raise SegmentationConfigError(
+            f'{cfg["config_path"]}: bad segmenter setting: {exc}') from exc

@@ -1,0 +1,213 @@
+"""Convert between core results (numpy, dataclasses) and ROS messages. No rclpy import: the
+message classes work without ``rclpy.init`` so all of this is unit-testable in one process."""
+from __future__ import annotations
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from colorglove_msgs.msg import (
+    HandObservation,
+    HandPoseCandidates,
+    PatchBlob,
+    PatchConstraint,
+    PoseCandidate,
+)
+from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
+from sensor_msgs.msg import CameraInfo, JointState
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.hand.model import DOF_NAMES, FINGER_DOF_NAMES
+from colorglove_ros.core.hand.overlay import SKELETON_BONES
+from colorglove_ros.core.hand.pose_fields import pose_from_fields, wrist_quaternion
+from colorglove_ros.core.lookup.search import LookupResult
+from colorglove_ros.core.segmentation.crop import TINY_SIZE, CropTransform
+from colorglove_ros.core.segmentation.segmenter import Observation
+from colorglove_ros.core.tracking.ik import Blobs, CameraObservation, EntryConstraints, PosePrior
+
+__all__ = [
+    'stamp_to_seconds', 'camera_info_from_camera', 'joint_state_from_pose',
+    'pose_stamped_from_pose', 'pose_from_joint_state', 'pose_from_messages',
+    'crop_from_observation',
+    'tiny_labels_from_observation', 'blobs_from_observation', 'camera_observation_from_msg',
+    'candidates_msg', 'pose_prior_from_candidates', 'skeleton_markers',
+    'observation_msg', 'tf_message_from_pose',
+]
+
+
+def stamp_to_seconds(stamp: Time) -> float:
+    """A header stamp as float seconds."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def camera_info_from_camera(camera: PinholeCamera, header: Header) -> CameraInfo:
+    """``sensor_msgs/CameraInfo`` (plumb_bob or rational_polynomial) for a calibrated camera."""
+    return CameraInfo(header=header, **camera.camera_info_fields())
+
+
+def joint_state_from_pose(pose: np.ndarray, header: Header) -> JointState:
+    """The 20 finger joints of a 26-DOF pose as ``JointState`` (URDF joint names, radians)."""
+    return JointState(header=header, name=list(FINGER_DOF_NAMES),
+                      position=[float(v) for v in np.asarray(pose)[6:26]])
+
+
+def pose_from_joint_state(msg: JointState) -> np.ndarray:
+    """The 20 finger joint angles of a ``JointState``, in ``FINGER_DOF_NAMES`` order."""
+    positions = dict(zip(msg.name, msg.position, strict=False))
+    return np.array([positions[name] for name in FINGER_DOF_NAMES])
+
+
+def pose_from_messages(joints: JointState, wrist: PoseStamped) -> np.ndarray:
+    """The 26-DOF pose of a ``JointState`` (finger joints) and a wrist ``PoseStamped``."""
+    p, o = wrist.pose.position, wrist.pose.orientation
+    return pose_from_fields([p.x, p.y, p.z], [o.x, o.y, o.z, o.w], pose_from_joint_state(joints))
+
+
+def pose_stamped_from_pose(pose: np.ndarray, header: Header) -> PoseStamped:
+    """The wrist position and orientation of a 26-DOF pose as ``PoseStamped`` (camera frame)."""
+    pose = np.asarray(pose, dtype=float)
+    x, y, z, w = wrist_quaternion(pose)
+    return PoseStamped(header=header, pose=Pose(
+        position=Point(x=float(pose[0]), y=float(pose[1]), z=float(pose[2])),
+        orientation=Quaternion(x=float(x), y=float(y), z=float(z), w=float(w))))
+
+
+# --------------------------------------------------------------- observation and candidates
+def crop_from_observation(msg: HandObservation) -> CropTransform:
+    """The tiny -> full-image crop transform carried by an observation."""
+    return CropTransform(scale=msg.crop_scale, offset_x=msg.crop_offset_x,
+                         offset_y=msg.crop_offset_y)
+
+
+def tiny_labels_from_observation(msg: HandObservation) -> np.ndarray:
+    """The observation's 40x40 label image; raises ValueError if its size is wrong."""
+    labels = np.asarray(msg.tiny_labels, dtype=np.uint8)
+    if labels.size != TINY_SIZE * TINY_SIZE:
+        raise ValueError(f'tiny_labels holds {labels.size} values, expected {TINY_SIZE ** 2}')
+    return labels.reshape(TINY_SIZE, TINY_SIZE)
+
+
+def blobs_from_observation(msg: HandObservation) -> Blobs:
+    """The observation's glove blobs (colour, full-image centroid, pixel count)."""
+    if not msg.blobs:
+        return Blobs.empty()
+    return Blobs(color=np.array([b.color_label for b in msg.blobs]),
+                 centroid_px=np.array([[b.x, b.y] for b in msg.blobs]),
+                 pixel_count=np.array([b.pixel_count for b in msg.blobs], dtype=float))
+
+
+def camera_observation_from_msg(msg: HandObservation) -> CameraObservation:
+    """An observation message as the IK's per-camera input."""
+    if not msg.hand_found:
+        return CameraObservation(hand_found=False)
+    return CameraObservation(hand_found=True, blobs=blobs_from_observation(msg),
+                             crop=crop_from_observation(msg))
+
+
+def candidates_msg(observation: HandObservation, result: LookupResult | None,
+                   status: str = '', lookup_time_ms: float = 0.0) -> HandPoseCandidates:
+    """The lookup node's output: neighbours, blend and the nearest entry's constraints, with
+    the observation it came from. ``result`` None means no hand (``status`` says why)."""
+    msg = HandPoseCandidates(header=observation.header, observation=observation,
+                             dof_names=list(DOF_NAMES), lookup_time_ms=float(lookup_time_ms))
+    if result is None:
+        msg.hand_found = False
+        msg.status = status or observation.status or 'no hand'
+        return msg
+    msg.hand_found = True
+    msg.candidates = [
+        PoseCandidate(database_index=int(index), pose=[float(v) for v in pose],
+                      image_distance=float(distance), weight=float(weight))
+        for index, pose, distance, weight in zip(result.indices, result.poses, result.distances,
+                                                 result.weights, strict=True)]
+    msg.blended_pose = [float(v) for v in result.blended]
+    if result.finger_std is not None:
+        msg.finger_std = [float(v) for v in result.finger_std]
+    c = result.constraints
+    msg.constraints = [
+        PatchConstraint(patch_id=int(p), color_label=int(col), vertex_index=int(v),
+                        tiny_x=float(xy[0]), tiny_y=float(xy[1]), pixel_count=int(round(n)))
+        for p, col, v, xy, n in zip(c.patch_ids, c.colors, c.vertices, c.tiny_xy,
+                                    c.pixel_counts, strict=True)]
+    return msg
+
+
+def pose_prior_from_candidates(msg: HandPoseCandidates) -> PosePrior:
+    """The IK's starting point from a candidates message (blended pose + constraints)."""
+    if list(msg.dof_names) != list(DOF_NAMES):
+        raise ValueError(f'candidates carry DOFs {list(msg.dof_names)[:3]}..., '
+                         f'expected {list(DOF_NAMES)[:3]}...')
+    if len(msg.blended_pose) != len(DOF_NAMES) or not np.all(np.isfinite(msg.blended_pose)):
+        raise ValueError('blended_pose must hold 26 finite values')
+    constraints = msg.constraints
+    if not all(np.isfinite([c.tiny_x, c.tiny_y]).all() for c in constraints):
+        raise ValueError('constraint centroids must be finite')
+    finger_std = None
+    if len(msg.finger_std):
+        finger_std = np.asarray(msg.finger_std, dtype=float)
+        if finger_std.shape != (len(DOF_NAMES) - 6,) or not np.all(np.isfinite(finger_std)) \
+                or np.any(finger_std < 0):
+            raise ValueError('finger_std must be empty or hold 20 finite values >= 0')
+    return PosePrior(
+        finger_std=finger_std,
+        q_blend=np.asarray(msg.blended_pose, dtype=float),
+        constraints=EntryConstraints(
+            patch_id=np.array([c.patch_id for c in constraints], dtype=np.int64),
+            color=np.array([c.color_label for c in constraints], dtype=np.int64),
+            vertex=np.array([c.vertex_index for c in constraints], dtype=np.int64),
+            tiny_xy=np.array([[c.tiny_x, c.tiny_y] for c in constraints], dtype=float),
+            pixel_count=np.array([c.pixel_count for c in constraints], dtype=float)))
+
+
+def skeleton_markers(keypoints_camera: np.ndarray | None, header: Header,
+                     namespace: str = 'hand') -> MarkerArray:
+    """The hand skeleton as a LINE_LIST (bones) and a SPHERE_LIST (joints) in the camera frame;
+    ``None`` (no hand) clears the markers."""
+    if keypoints_camera is None:
+        return MarkerArray(markers=[Marker(header=header, ns=namespace, action=Marker.DELETEALL)])
+    points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in keypoints_camera]
+    bones = Marker(header=header, ns=namespace, id=0, type=Marker.LINE_LIST, action=Marker.ADD)
+    bones.scale.x = 0.004
+    bones.color = ColorRGBA(r=1.0, g=0.8, b=0.1, a=1.0)
+    bones.points = [points[i] for bone in SKELETON_BONES for i in bone]
+    bones.pose.orientation.w = 1.0
+    joints = Marker(header=header, ns=namespace, id=1, type=Marker.SPHERE_LIST,
+                    action=Marker.ADD, points=points)
+    joints.scale.x = joints.scale.y = joints.scale.z = 0.008
+    joints.color = ColorRGBA(r=1.0, g=1.0, b=1.0, a=1.0)
+    joints.pose.orientation.w = 1.0
+    return MarkerArray(markers=[bones, joints])
+
+
+def observation_msg(observation: Observation, header: Header) -> HandObservation:
+    """The segmentation result as a ``HandObservation`` (stamp and frame from the camera)."""
+    msg = HandObservation(header=header, hand_found=bool(observation.hand_found),
+                          image_width=int(observation.image_width),
+                          image_height=int(observation.image_height),
+                          glove_pixel_count=int(observation.glove_pixel_count),
+                          processing_time_ms=float(observation.timings_ms.get('total', 0.0)))
+    msg.status = '' if observation.hand_found else observation.status
+    if observation.crop is not None:
+        msg.crop_scale = float(observation.crop.scale)
+        msg.crop_offset_x = float(observation.crop.offset_x)
+        msg.crop_offset_y = float(observation.crop.offset_y)
+    if observation.hand_found and observation.tiny_labels is not None:
+        msg.tiny_labels = np.ascontiguousarray(observation.tiny_labels, np.uint8).ravel().tolist()
+    blobs = sorted(observation.blobs, key=lambda b: -b.pixel_count)
+    msg.blobs = [PatchBlob(color_label=int(b.color_label), x=float(b.centroid_x),
+                           y=float(b.centroid_y), pixel_count=int(b.pixel_count)) for b in blobs]
+    return msg
+
+
+def tf_message_from_pose(pose: PoseStamped, child_frame_id: str):
+    """A ``tf2_msgs/TFMessage`` carrying ``pose`` as the transform header.frame_id -> child
+    (tf2_msgs is imported here because it exists only on native ROS 2 installs)."""
+    from geometry_msgs.msg import Transform, TransformStamped, Vector3
+    from tf2_msgs.msg import TFMessage
+
+    p = pose.pose.position
+    transform = Transform(translation=Vector3(x=p.x, y=p.y, z=p.z),
+                          rotation=pose.pose.orientation)
+    return TFMessage(transforms=[TransformStamped(header=pose.header,
+                                                  child_frame_id=child_frame_id,
+                                                  transform=transform)])

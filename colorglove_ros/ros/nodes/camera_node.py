@@ -1,0 +1,123 @@
+"""camera_node: publish camera frames (V4L2, video file, image folder or the synthetic renderer)
+as ``sensor_msgs/Image`` + ``CameraInfo``; synthetic frames also publish their ground truth."""
+from __future__ import annotations
+
+import sys
+
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import Header
+
+from colorglove_ros.core.camera import CalibrationError, load_calibration
+from colorglove_ros.core.frame_sources import FrameSourceError, open_frame_source
+from colorglove_ros.paths import resolve_path
+from colorglove_ros.ros.conversions import (
+    camera_info_from_camera,
+    joint_state_from_pose,
+    pose_stamped_from_pose,
+)
+from colorglove_ros.ros.image import array_to_image
+from colorglove_ros.ros.nodes.common import (
+    StartupError,
+    declare,
+    reject_parameter_changes,
+    run_node,
+)
+
+CAMERA_QOS = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=2,
+                        reliability=QoSReliabilityPolicy.RELIABLE)
+
+
+class CameraNode(Node):
+    """Publishes frames at a fixed rate from the configured source."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('camera', **kwargs)
+        source = declare(self, 'source', 'synthetic',
+                         'synthetic | V4L2 index or /dev/videoN | video file | image folder')
+        calibration_file = declare(self, 'calibration_file', 'config/calibration.yaml',
+                                   'camera calibration YAML')
+        camera_index = declare(self, 'camera_index', 0,
+                               'which camera of the calibration this is (intrinsics, frame_id)',
+                               0, 63)
+        rate_hz = declare(self, 'rate_hz', 30.0, 'publish rate, frames per second', 0.1, 240.0)
+        seed = declare(self, 'synthetic_seed', 1, 'seed of the synthetic sequence', 0, 2**31 - 1)
+        num_frames = declare(self, 'synthetic_frames', 300, 'synthetic sequence length', 1, 10**6)
+        loop = declare(self, 'loop', True, 'restart finite sources at their end')
+        prerender = declare(self, 'synthetic_prerender', False,
+                            'render the whole synthetic sequence at start-up (steady frame rate)')
+        self.max_frames = declare(self, 'max_frames', 0,
+                                  'stop publishing after this many frames (0 = never)', 0, 10**9)
+        reject_parameter_changes(self, {'source', 'calibration_file', 'camera_index', 'rate_hz',
+                                        'synthetic_seed',
+                                        'synthetic_frames', 'loop', 'max_frames',
+                                        'synthetic_prerender'})
+        try:
+            calibration = load_calibration(resolve_path(calibration_file))
+            if camera_index >= len(calibration.cameras):
+                raise CalibrationError(f'camera_index {camera_index}, but {calibration_file} '
+                                       f'lists {len(calibration.cameras)} camera(s)')
+            if camera_index > 0 and source == 'synthetic':
+                raise FrameSourceError(
+                    'the synthetic source renders camera 0 only; for synchronised views of '
+                    'several cameras play a bag from colorglove_make_bag --calibration')
+            self.camera = calibration.cameras[camera_index]
+            self.source = open_frame_source(source, self.camera, seed=seed, num_frames=num_frames,
+                                            loop=loop, hand_length_m=calibration.hand_length_m,
+                                            prerender=prerender)
+        except (CalibrationError, FrameSourceError) as exc:
+            raise StartupError(f'camera_node cannot start: {exc}') from exc
+        # Reliable publishers match both reliable and best-effort (sensor-data) subscribers.
+        self.image_pub = self.create_publisher(Image, 'camera/image_raw', CAMERA_QOS)
+        self.info_pub = self.create_publisher(CameraInfo, 'camera/camera_info', CAMERA_QOS)
+        self.gt_joint_pub = self.create_publisher(JointState, 'hand/ground_truth/joint_states', 10)
+        self.gt_wrist_pub = self.create_publisher(PoseStamped, 'hand/ground_truth/wrist_pose', 10)
+        self.published = 0
+        self.timer = self.create_timer(1.0 / rate_hz, self.publish_frame)
+        self.get_logger().info(f'publishing {self.source.description} at {rate_hz:g} Hz')
+
+    def publish_frame(self) -> None:
+        """Read one frame and publish it with the current time as stamp."""
+        if self.max_frames and self.published >= self.max_frames:
+            return
+        try:
+            frame = self.source.read()
+        except FrameSourceError as exc:
+            self.get_logger().error(f'frame read failed: {exc}', throttle_duration_sec=1.0)
+            return
+        if frame is None:
+            self.get_logger().info('source exhausted; no more frames')
+            self.timer.cancel()
+            return
+        size = frame.image_rgb.shape[1::-1]
+        if size != (self.camera.width, self.camera.height):
+            self.get_logger().error(
+                f'frame of {size[0]}x{size[1]} does not match the calibrated '
+                f'{self.camera.width}x{self.camera.height} of camera {self.camera.name!r}: '
+                'not published (fix calibration_file or the source)',
+                throttle_duration_sec=1.0)
+            return
+        header = Header(stamp=self.get_clock().now().to_msg(), frame_id=self.camera.frame_id)
+        self.image_pub.publish(array_to_image(frame.image_rgb, 'rgb8', header))
+        self.info_pub.publish(camera_info_from_camera(self.camera, header))
+        if frame.ground_truth_pose is not None:
+            self.gt_joint_pub.publish(joint_state_from_pose(frame.ground_truth_pose, header))
+            self.gt_wrist_pub.publish(pose_stamped_from_pose(frame.ground_truth_pose, header))
+        self.published += 1
+
+    def destroy_node(self) -> None:
+        """Release the device or file."""
+        if hasattr(self, 'source'):
+            self.source.close()
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``camera_node``."""
+    return run_node(CameraNode, args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

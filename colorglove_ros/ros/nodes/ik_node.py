@@ -1,0 +1,239 @@
+"""ik_node: ``HandPoseCandidates`` -> ``JointState`` (URDF joint names), the wrist pose, a
+skeleton ``MarkerArray`` and an overlay image, by Gauss-Newton IK with temporal smoothing over
+one or several calibrated cameras."""
+from __future__ import annotations
+
+import sys
+from collections import deque
+from dataclasses import replace
+
+import numpy as np
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+from sensor_msgs.msg import Image, JointState
+from std_msgs.msg import String
+from visualization_msgs.msg import MarkerArray
+
+from colorglove_ros.core.camera import CalibrationError, load_calibration
+from colorglove_ros.core.hand.glove import default_hand
+from colorglove_ros.core.hand.overlay import draw_skeleton
+from colorglove_ros.core.tracking.ik import (
+    CameraObservation,
+    HandTracker,
+    IKError,
+    load_ik_config,
+)
+from colorglove_ros.paths import resolve_path
+from colorglove_ros.ros.conversions import (
+    camera_observation_from_msg,
+    joint_state_from_pose,
+    pose_prior_from_candidates,
+    pose_stamped_from_pose,
+    skeleton_markers,
+    stamp_to_seconds,
+    tf_message_from_pose,
+)
+from colorglove_ros.ros.image import ImageEncodingError, array_to_image, image_to_rgb8
+from colorglove_ros.ros.nodes.common import (
+    LATEST_IMAGE,
+    LATEST_ONLY,
+    StartupError,
+    declare,
+    reject_parameter_changes,
+    run_node,
+)
+
+STAMP_MATCH_TOLERANCE_S = 0.02   # an extra camera's frame within this of the primary's counts
+
+
+class IKNode(Node):
+    """Refines the looked-up pose and publishes the tracker's outputs."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('ik', **kwargs)
+        calibration_file = declare(self, 'calibration_file', 'config/calibration.yaml',
+                                   'camera calibration YAML; camera 0 is the lookup camera')
+        ik_config = declare(self, 'ik_config', 'config/ik.yaml', 'IK settings and covariances')
+        enable_ik = declare(self, 'enable_ik', True, 'false: publish the blended lookup pose')
+        enable_smoothing = declare(self, 'enable_smoothing', True,
+                                   'use the previous frame as a prior (temporal smoothing)')
+        self.publish_overlay = declare(
+            self, 'publish_overlay', False,
+            'also draw the fitted skeleton on the camera image and publish it on hand/overlay '
+            '(subscribes to the camera images; a few ms of CPU per frame)')
+        extra_topics = declare(self, 'extra_observation_topics', '',
+                               'comma-separated HandObservation topics of cameras 1..N-1')
+        wait_s = declare(self, 'extra_observation_wait_s', 0.05,
+                         'longest wait for the extra cameras\' observations of a frame, seconds',
+                         0.0, 1.0)
+        reject_parameter_changes(self, {'calibration_file', 'ik_config', 'enable_ik',
+                                        'enable_smoothing', 'extra_observation_topics',
+                                        'publish_overlay', 'extra_observation_wait_s'})
+        try:
+            calibration = load_calibration(resolve_path(calibration_file))
+            config = load_ik_config(resolve_path(ik_config))
+            model, mesh, _ = default_hand(calibration.hand_length_m)
+            config = replace(config, enable_ik=enable_ik, enable_smoothing=enable_smoothing)
+            self.tracker = HandTracker(model, mesh, calibration.cameras, config)
+        except (CalibrationError, IKError, ValueError) as exc:
+            raise StartupError(f'ik_node cannot start: {exc}') from exc
+        self.model = model
+        self.cameras = calibration.cameras
+        topics = [t.strip() for t in extra_topics.split(',') if t.strip()]
+        if len(topics) != len(self.cameras) - 1:
+            raise StartupError(
+                f'ik_node cannot start: {len(self.cameras)} cameras calibrated but '
+                f'{len(topics)} extra observation topic(s) given; set extra_observation_topics')
+        self.extra_observations: list[deque[HandObservation]] = [deque(maxlen=30)
+                                                                 for _ in topics]
+        for index, topic in enumerate(topics):
+            self.create_subscription(HandObservation, topic,
+                                     lambda msg, i=index: self.on_extra_observation(i, msg), 10)
+        # candidates waiting for the other cameras' observations of the same frame
+        self.pending: HandPoseCandidates | None = None
+        self.pending_timer = self.create_timer(wait_s, self._process_pending, autostart=False)
+        self.recent_images: deque[Image] = deque(maxlen=15)
+        self.joint_pub = self.create_publisher(JointState, 'hand/joint_states', 10)
+        self.wrist_pub = self.create_publisher(PoseStamped, 'hand/wrist_pose', 10)
+        self.marker_pub = self.create_publisher(MarkerArray, 'hand/markers', 10)
+        self.overlay_pub = self.create_publisher(Image, 'hand/overlay', 2)
+        self.status_pub = self.create_publisher(String, 'hand/tracking_status', 10)
+        self.create_subscription(HandPoseCandidates, 'hand/pose_candidates', self.on_candidates,
+                                 LATEST_ONLY)
+        if self.publish_overlay:
+            self.create_subscription(Image, 'camera/image_raw',
+                                     lambda image: self.recent_images.append(image), LATEST_IMAGE)
+        self.hand_was_found = False
+        self.tf_pub = self._tf_publisher()
+        self.get_logger().info(f'tracking with {len(self.cameras)} camera(s)')
+
+    def _tf_publisher(self):
+        """A /tf publisher for the camera -> palm transform (so robot_state_publisher's URDF
+        frames hang off the camera), when tf2_msgs is installed (native ROS 2; it is not on
+        PyPI, where the wrist pose is on /hand/wrist_pose only)."""
+        try:
+            from tf2_msgs.msg import TFMessage
+        except ImportError:
+            self.get_logger().info('tf2_msgs not installed: camera->palm TF not broadcast '
+                                   '(the wrist pose is on hand/wrist_pose)')
+            return None
+        return self.create_publisher(TFMessage, '/tf', 10)
+
+    def _matching_observation(self, index: int, stamp: float) -> HandObservation | None:
+        """Extra camera ``index``'s observation nearest to ``stamp``, if within tolerance."""
+        match = min(self.extra_observations[index],
+                    key=lambda m: abs(stamp_to_seconds(m.header.stamp) - stamp), default=None)
+        if match is None or abs(stamp_to_seconds(match.header.stamp) - stamp) > \
+                STAMP_MATCH_TOLERANCE_S:
+            return None
+        return match
+
+    def _extra_camera_observations(self, stamp: float) -> list[CameraObservation]:
+        """The extra cameras' observations of the frame at ``stamp``; a camera with none
+        matching in time, or whose frame_id is not its calibrated one, did not see the hand."""
+        observations = []
+        for index, camera in enumerate(self.cameras[1:]):
+            match = self._matching_observation(index, stamp)
+            if match is not None and match.header.frame_id != camera.frame_id:
+                self.get_logger().warn(
+                    f'observation of camera {index + 1} has frame_id '
+                    f'{match.header.frame_id!r}, calibrated {camera.frame_id!r}: ignored',
+                    throttle_duration_sec=1.0)
+                match = None
+            observations.append(CameraObservation(hand_found=False) if match is None
+                                else camera_observation_from_msg(match))
+        return observations
+
+    def _all_extras_arrived(self, msg: HandPoseCandidates) -> bool:
+        stamp = stamp_to_seconds(msg.header.stamp)
+        return all(self._matching_observation(i, stamp) is not None
+                   for i in range(len(self.extra_observations)))
+
+    def on_extra_observation(self, index: int, msg: HandObservation) -> None:
+        """Keep an extra camera's observation; release waiting candidates once complete."""
+        self.extra_observations[index].append(msg)
+        if self.pending is not None and self._all_extras_arrived(self.pending):
+            self._process_pending()
+
+    def _process_pending(self) -> None:
+        """Track the waiting frame with whatever the extra cameras delivered."""
+        self.pending_timer.cancel()
+        msg, self.pending = self.pending, None
+        if msg is not None:
+            self.track(msg)
+
+    def on_candidates(self, msg: HandPoseCandidates) -> None:
+        """Track a frame now, or once the extra cameras' observations of it have arrived
+        (at most ``extra_observation_wait_s`` later)."""
+        self._process_pending()
+        if not msg.hand_found or self._all_extras_arrived(msg):
+            self.track(msg)
+            return
+        self.pending = msg
+        self.pending_timer.reset()
+
+    def track(self, msg: HandPoseCandidates) -> None:
+        """Run the tracker on one frame's candidates and publish the results."""
+        stamp = stamp_to_seconds(msg.header.stamp)
+        observations = [camera_observation_from_msg(msg.observation),
+                        *self._extra_camera_observations(stamp)]
+        try:
+            prior = pose_prior_from_candidates(msg) if msg.hand_found else None
+            result = self.tracker.update(prior, observations, stamp)
+        except (IKError, ValueError) as exc:
+            self.get_logger().warn(f'bad candidates message: {exc}', throttle_duration_sec=1.0)
+            self.tracker.reset()
+            self._report_no_hand(msg, f'bad candidates: {exc}')
+            return
+        if not result.found:
+            self._report_no_hand(msg, msg.status or 'lost')
+            return
+        if not np.all(np.isfinite(result.q)):
+            self.get_logger().warn('IK gave a non-finite pose; dropped', throttle_duration_sec=1.0)
+            self.tracker.reset()
+            self._report_no_hand(msg, 'non-finite pose')
+            return
+        self.hand_was_found = True
+        self.joint_pub.publish(joint_state_from_pose(result.q, msg.header))
+        wrist = pose_stamped_from_pose(result.q, msg.header)
+        self.wrist_pub.publish(wrist)
+        if self.tf_pub is not None:
+            self.tf_pub.publish(tf_message_from_pose(wrist, child_frame_id='palm'))
+        keypoints = self.model.keypoints(result.q)
+        self.marker_pub.publish(skeleton_markers(keypoints, msg.header))
+        per_camera = ', '.join(f'{camera.name} {count}' for camera, count in
+                               zip(self.cameras, result.constraints_per_camera, strict=False))
+        self.status_pub.publish(String(
+            data=f'tracking: {result.num_constraints} constraints ({per_camera}), reprojection '
+                 f'{result.reprojection_error_px:.1f} px, IK {result.time_ms:.1f} ms'))
+        if self.publish_overlay:
+            self._publish_overlay(msg, keypoints, result.reprojection_error_px)
+
+    def _report_no_hand(self, msg: HandPoseCandidates, reason: str) -> None:
+        if self.hand_was_found:
+            self.marker_pub.publish(skeleton_markers(None, msg.header))
+        self.hand_was_found = False
+        self.status_pub.publish(String(data=f'no hand: {reason}'))
+
+    def _publish_overlay(self, msg: HandPoseCandidates, keypoints, error_px: float) -> None:
+        stamp = msg.header.stamp
+        image = next((m for m in reversed(self.recent_images) if m.header.stamp == stamp), None)
+        if image is None:
+            return
+        try:
+            rgb = image_to_rgb8(image)
+        except ImageEncodingError:
+            return
+        drawn = draw_skeleton(rgb, keypoints, self.cameras[0],
+                              label=f'reprojection {error_px:.1f} px')
+        self.overlay_pub.publish(array_to_image(drawn, 'rgb8', msg.header))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``ik_node``."""
+    return run_node(IKNode, args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,89 @@
+"""lookup_node: ``HandObservation`` -> ``HandPoseCandidates`` (Hamming search over learned
+binary codes, exact re-rank, Gaussian-weighted blend of the nearest database poses)."""
+from __future__ import annotations
+
+import sys
+import time
+
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates
+from rclpy.node import Node
+
+from colorglove_ros.core.camera import CalibrationError, load_calibration
+from colorglove_ros.core.lookup.database import DatabaseError, load_database, read_database_config
+from colorglove_ros.core.lookup.search import PoseLookup, SearchError
+from colorglove_ros.paths import resolve_path
+from colorglove_ros.ros.conversions import (
+    blobs_from_observation,
+    candidates_msg,
+    crop_from_observation,
+    tiny_labels_from_observation,
+)
+from colorglove_ros.ros.nodes.common import (
+    LATEST_ONLY,
+    StartupError,
+    declare,
+    reject_parameter_changes,
+    run_node,
+)
+
+
+class LookupNode(Node):
+    """Looks every observation up in the pose database."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('lookup', **kwargs)
+        database_config = declare(self, 'database_config', 'config/database.yaml',
+                                  'YAML naming the pose database folder (database.path)')
+        database_path = declare(self, 'database_path', '',
+                                'pose database folder; overrides database_config when set')
+        calibration_file = declare(self, 'calibration_file', 'config/calibration.yaml',
+                                   'camera calibration YAML (camera 0 is the lookup camera)')
+        num_candidates = declare(self, 'num_candidates', 300,
+                                 'entries re-ranked with the exact distance', 1, 100000)
+        num_neighbors = declare(self, 'num_neighbors', 10, 'nearest entries blended', 1, 300)
+        self.finger_evidence = declare(
+            self, 'finger_evidence', True, 'blend each finger from the neighbours whose '
+            'patches on it match the observed blobs (false: one weight per entry, the paper)')
+        reject_parameter_changes(self, {'database_config', 'database_path', 'calibration_file',
+                                        'num_candidates', 'num_neighbors', 'finger_evidence'})
+        try:
+            path = str(resolve_path(database_path) if database_path
+                       else read_database_config(database_config)[1])
+            self.camera = load_calibration(resolve_path(calibration_file)).primary
+            started = time.perf_counter()
+            self.lookup = PoseLookup(load_database(path), num_candidates, num_neighbors)
+            if self.finger_evidence:
+                self.lookup.patch_digit_table()      # built now, not on the first frame
+        except (DatabaseError, CalibrationError) as exc:
+            raise StartupError(f'lookup_node cannot start: {exc}') from exc
+        self.get_logger().info(f'loaded {len(self.lookup.db)} database entries from {path} '
+                               f'in {time.perf_counter() - started:.1f} s')
+        self.publisher = self.create_publisher(HandPoseCandidates, 'hand/pose_candidates', 10)
+        self.create_subscription(HandObservation, 'hand/observation', self.on_observation,
+                                 LATEST_ONLY)
+
+    def on_observation(self, observation: HandObservation) -> None:
+        """Look one observation up and publish the candidates (or a 'no hand' message)."""
+        started = time.perf_counter()
+        if not observation.hand_found:
+            self.publisher.publish(candidates_msg(observation, None))
+            return
+        try:
+            blobs = blobs_from_observation(observation) if self.finger_evidence else None
+            result = self.lookup.lookup(tiny_labels_from_observation(observation),
+                                        crop_from_observation(observation), self.camera, blobs)
+        except (SearchError, ValueError) as exc:
+            self.get_logger().warn(f'lookup failed: {exc}', throttle_duration_sec=1.0)
+            self.publisher.publish(candidates_msg(observation, None, status=f'lookup: {exc}'))
+            return
+        elapsed_ms = 1e3 * (time.perf_counter() - started)
+        self.publisher.publish(candidates_msg(observation, result, lookup_time_ms=elapsed_ms))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``lookup_node``."""
+    return run_node(LookupNode, args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,72 @@
+"""segmentation_node: camera ``Image`` -> ``HandObservation`` (per-pixel glove colour
+classification, mean-shift crop, 40x40 tiny label image, patch blobs)."""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+from colorglove_msgs.msg import HandObservation
+from rclpy.node import Node
+from sensor_msgs.msg import Image
+
+from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
+from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
+from colorglove_ros.core.segmentation.segmenter import SegmentationInputError, load_segmenter
+from colorglove_ros.ros.conversions import observation_msg
+from colorglove_ros.ros.image import ImageEncodingError, array_to_image, image_to_rgb8
+from colorglove_ros.ros.nodes.common import (
+    LATEST_IMAGE,
+    StartupError,
+    declare,
+    reject_parameter_changes,
+    run_node,
+)
+
+# Label image -> colours for the debug image: background black, glove colours as printed.
+DEBUG_PALETTE = np.vstack([[0, 0, 0], GLOVE_PALETTE_RGB]).astype(np.uint8)
+
+
+class SegmentationNode(Node):
+    """Segments every camera frame into a glove observation."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('segmentation', **kwargs)
+        config = declare(self, 'color_calibration_file', 'config/color_calibration.yaml',
+                         'colour calibration config YAML (calibration file + segmenter settings)')
+        self.publish_debug = declare(self, 'publish_debug_image', False,
+                                     'also publish the per-pixel classification as an image')
+        reject_parameter_changes(self, {'color_calibration_file', 'publish_debug_image'})
+        try:
+            self.segmenter = load_segmenter(config)
+        except (ColorCalibrationError, OSError, ValueError) as exc:
+            raise StartupError(f'segmentation_node cannot start: {exc}') from exc
+        self.publisher = self.create_publisher(HandObservation, 'hand/observation', 10)
+        self.debug_publisher = self.create_publisher(Image, 'hand/segmentation_debug', 2)
+        self.create_subscription(Image, 'camera/image_raw', self.on_image, LATEST_IMAGE)
+        self.get_logger().info(f'colour calibration from {config}')
+
+    def on_image(self, image: Image) -> None:
+        """Segment one frame; bad frames are reported as 'no hand' with the reason."""
+        try:
+            rgb = image_to_rgb8(image)
+            observation = self.segmenter.process(rgb, keep_labels=self.publish_debug)
+        except (ImageEncodingError, SegmentationInputError) as exc:
+            self.get_logger().warn(f'bad camera frame: {exc}', throttle_duration_sec=1.0)
+            msg = HandObservation(header=image.header, hand_found=False,
+                                  status=f'bad image: {exc}', image_width=image.width,
+                                  image_height=image.height)
+            self.publisher.publish(msg)
+            return
+        self.publisher.publish(observation_msg(observation, image.header))
+        if self.publish_debug and observation.label_image is not None:
+            self.debug_publisher.publish(array_to_image(DEBUG_PALETTE[observation.label_image],
+                                                        'rgb8', image.header))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``segmentation_node``."""
+    return run_node(SegmentationNode, args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

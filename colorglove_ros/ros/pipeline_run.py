@@ -1,0 +1,343 @@
+"""Run the four tracker nodes as separate processes over DDS and measure them: frames tracked,
+rate, latency from camera frame to JointState, and accuracy against ground truth. Shared by the
+demo, the benchmark and the end-to-end test."""
+from __future__ import annotations
+
+import struct
+import tempfile
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+import yaml
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import Image, JointState
+from std_msgs.msg import String
+
+from colorglove_ros.core.evaluation.metrics import jitter_runs_mm, latency_summary_ms, pose_accuracy
+from colorglove_ros.ros.conversions import pose_from_messages
+from colorglove_ros.ros.image import image_to_rgb8
+from colorglove_ros.ros.launcher import Launcher, NodeSpec, use_fastdds_profile
+
+__all__ = ['PipelineMonitor', 'PipelineRun', 'bag_feed', 'node_specs', 'run_pipeline', 'summarize']
+
+_RELIABLE = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=200,
+                       reliability=QoSReliabilityPolicy.RELIABLE)
+_BEST_EFFORT = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=200,
+                          reliability=QoSReliabilityPolicy.BEST_EFFORT)
+
+
+def _key(msg: Any) -> tuple[int, int]:
+    return (msg.header.stamp.sec, msg.header.stamp.nanosec)
+
+
+def _raw_stamp_key(data: bytes) -> tuple[int, int]:
+    """The header stamp of a serialized message that starts with a ``std_msgs/Header``
+    (CDR: 4 bytes of encapsulation, then sec int32 and nanosec uint32), without
+    deserializing the rest (a 640x480 image is ~1 MB)."""
+    order = '<' if data[1] == 1 else '>'
+    sec, nanosec = struct.unpack_from(f'{order}iI', data, 4)
+    return (sec, nanosec)
+
+
+class PipelineMonitor(Node):
+    """Records, with receive times, camera frames, ground truth and the tracker's outputs."""
+
+    def __init__(self, keep_overlays: int = 8, overlay_stride: int = 10, **kwargs) -> None:
+        super().__init__('pipeline_monitor', **kwargs)
+        self.lock = threading.Lock()
+        self.frame_times: dict[tuple[int, int], float] = {}
+        self.output_times: dict[tuple[int, int], float] = {}
+        self.joints: dict[tuple[int, int], JointState] = {}
+        self.wrists: dict[tuple[int, int], PoseStamped] = {}
+        self.truth_joints: dict[tuple[int, int], JointState] = {}
+        self.truth_wrists: dict[tuple[int, int], PoseStamped] = {}
+        self.lookup_ms: dict[tuple[int, int], float] = {}
+        self.segmentation_ms: dict[tuple[int, int], float] = {}
+        self.observation_times: dict[tuple[int, int], float] = {}
+        self.candidate_times: dict[tuple[int, int], float] = {}
+        self.overlays: list[np.ndarray] = []
+        self.statuses: list[str] = []
+        self.keep_overlays = keep_overlays
+        self.overlay_stride = overlay_stride
+        self.overlay_count = 0
+        # reliable: the camera_node and the bag player publish reliably, and the latency of
+        # every frame needs its arrival time (a best-effort reader loses large images)
+        self.create_subscription(Image, '/camera/image_raw', self._on_frame, _RELIABLE,
+                                 raw=True)
+        self.create_subscription(JointState, '/hand/joint_states', self._on_joints, _RELIABLE)
+        self.create_subscription(PoseStamped, '/hand/wrist_pose', self._store(self.wrists),
+                                 _RELIABLE)
+        self.create_subscription(JointState, '/hand/ground_truth/joint_states',
+                                 self._store(self.truth_joints), _RELIABLE)
+        self.create_subscription(PoseStamped, '/hand/ground_truth/wrist_pose',
+                                 self._store(self.truth_wrists), _RELIABLE)
+        self.create_subscription(HandPoseCandidates, '/hand/pose_candidates',
+                                 self._on_candidates, _RELIABLE)
+        self.create_subscription(HandObservation, '/hand/observation', self._on_observation,
+                                 _RELIABLE)
+        self.create_subscription(Image, '/hand/overlay', self._on_overlay, _BEST_EFFORT,
+                                 raw=True)
+        self.create_subscription(String, '/hand/tracking_status', self._on_status, _RELIABLE)
+
+    def _store(self, table: dict):
+        def callback(msg: Any) -> None:
+            with self.lock:
+                table[_key(msg)] = msg
+        return callback
+
+    def _on_frame(self, data: bytes) -> None:
+        received = time.monotonic()
+        with self.lock:
+            self.frame_times.setdefault(_raw_stamp_key(data), received)
+
+    def _on_joints(self, msg: JointState) -> None:
+        received = time.monotonic()
+        with self.lock:
+            self.output_times.setdefault(_key(msg), received)
+            self.joints[_key(msg)] = msg
+
+    def _on_observation(self, msg: HandObservation) -> None:
+        with self.lock:
+            self.observation_times.setdefault(_key(msg), time.monotonic())
+
+    def _on_candidates(self, msg: HandPoseCandidates) -> None:
+        with self.lock:
+            self.candidate_times.setdefault(_key(msg), time.monotonic())
+            self.lookup_ms[_key(msg)] = msg.lookup_time_ms
+            self.segmentation_ms[_key(msg)] = msg.observation.processing_time_ms
+
+    def _on_status(self, msg: String) -> None:
+        with self.lock:
+            self.statuses.append(msg.data)
+
+    def _on_overlay(self, data: bytes) -> None:
+        self.overlay_count += 1
+        wanted = self.overlay_count % self.overlay_stride == 0
+        if wanted and len(self.overlays) < self.keep_overlays:
+            self.overlays.append(image_to_rgb8(deserialize_message(data, Image)))
+
+    def active_duration(self) -> float:
+        """Seconds from the first to the last JointState received (0 if fewer than two)."""
+        with self.lock:
+            if len(self.output_times) < 2:
+                return 0.0
+            return max(self.output_times.values()) - min(self.output_times.values())
+
+    def wait_for_frames(self, count: int, timeout_s: float, settle_s: float = 2.0) -> bool:
+        """Wait until ``count`` frames were seen and outputs stopped arriving for ``settle_s``;
+        False if ``timeout_s`` passed first."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            with self.lock:
+                seen = len(self.frame_times)
+                last = max(self.output_times.values(), default=0.0)
+                last = max(last, max(self.frame_times.values(), default=0.0))
+            if seen >= count and time.monotonic() - last > settle_s:
+                return True
+            time.sleep(0.1)
+        return False
+
+
+@dataclass
+class PipelineRun:
+    """What a run measured (see :func:`summarize`)."""
+
+    frames_expected: int
+    frames: int
+    segmented: int
+    tracked: int
+    duration_s: float
+    latencies_s: list[float]
+    estimated: np.ndarray
+    truth: np.ndarray
+    segmentation_ms: list[float]
+    lookup_ms: list[float]
+    stage_latencies_s: dict[str, list[float]] = field(default_factory=dict)
+    frame_index: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    timed_out: bool = False
+    overlays: list[np.ndarray] = field(default_factory=list)
+    statuses: list[str] = field(default_factory=list)      # ik_node's tracking status lines
+
+
+def node_specs(params_file: Path, with_camera: bool) -> list[NodeSpec]:
+    """The tracker's node processes, all reading ``params_file``."""
+    names = [('segmentation_node', 'segmentation'), ('lookup_node', 'lookup'), ('ik_node', 'ik')]
+    if with_camera:
+        names.insert(0, ('camera_node', 'camera'))
+    return [NodeSpec(executable, name, [params_file]) for executable, name in names]
+
+
+def write_params(parameters: dict[str, dict[str, Any]], folder: Path) -> Path:
+    """A ROS 2 parameter file from {node name: {parameter: value}}."""
+    path = folder / 'params.yaml'
+    # copies: a dict shared by two nodes would become a YAML alias, which rcl refuses
+    path.write_text(yaml.safe_dump({name: {'ros__parameters': dict(values)}
+                                    for name, values in parameters.items()}))
+    return path
+
+
+def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
+                 feed: Any = None, timeout_s: float = 600.0, startup_s: float = 60.0,
+                 keep_overlays: int = 8, extra_nodes: Sequence[NodeSpec] = (),
+                 extra_inputs: dict[str, str] | None = None) -> PipelineRun:
+    """Start the nodes with ``parameters`` (camera_node too unless ``feed`` is given: a
+    callable started once the graph is up, e.g. a bag player), monitor until
+    ``expected_frames`` frames passed, stop everything, and return the measurements.
+    ``extra_nodes`` (e.g. a second camera's segmentation_node) also read the parameter file;
+    ``extra_inputs`` maps their input topics to their node names, awaited like the stages'."""
+    use_fastdds_profile()
+    with tempfile.TemporaryDirectory() as folder:
+        params_file = write_params(parameters, Path(folder))
+        context = rclpy.Context()
+        rclpy.init(context=context)
+        monitor = PipelineMonitor(keep_overlays=keep_overlays,
+                                  overlay_stride=max(1, expected_frames // (keep_overlays + 1)),
+                                  context=context)
+        executor = rclpy.executors.MultiThreadedExecutor(num_threads=2, context=context)
+        executor.add_node(monitor)
+        spinner = threading.Thread(target=executor.spin, daemon=True)
+        spinner.start()
+        launcher = Launcher(node_specs(params_file, with_camera=feed is None) + [
+            replace(spec, parameters=[params_file, *spec.parameters]) for spec in extra_nodes])
+        try:
+            if feed is not None:
+                launcher.start()
+                _wait_for_graph(monitor, startup_s, {**STAGE_INPUTS, **(extra_inputs or {})})
+                started = time.monotonic()
+                feeder = threading.Thread(target=feed, daemon=True)
+                feeder.start()
+                feeder.join(timeout_s)
+                # the feed has ended: wait for the last outputs (no frame count needed)
+                completed = not feeder.is_alive() and monitor.wait_for_frames(0, 60.0)
+            else:
+                started = time.monotonic()
+                launcher.start()
+                completed = monitor.wait_for_frames(expected_frames, timeout_s)
+            duration = monitor.active_duration() or time.monotonic() - started
+        finally:
+            launcher.stop()
+            executor.shutdown()
+            spinner.join(timeout=5.0)
+            monitor.destroy_node()
+            rclpy.try_shutdown(context=context)
+    run = _collect(monitor, duration, expected_frames)
+    run.timed_out = not completed
+    return run
+
+
+# Each stage's input topic and the node that must subscribe to it before frames flow.
+STAGE_INPUTS = {'/camera/image_raw': 'segmentation', '/hand/observation': 'lookup',
+                '/hand/pose_candidates': 'ik'}
+
+
+def _wait_for_graph(monitor: PipelineMonitor, timeout_s: float, inputs: dict[str, str]) -> None:
+    """Wait until every node of ``inputs`` (input topic -> node name) subscribes to its
+    input topic."""
+    deadline = time.monotonic() + timeout_s
+    missing = dict(inputs)
+    while time.monotonic() < deadline:
+        missing = {topic: node for topic, node in inputs.items()
+                   if node not in {info.node_name
+                                   for info in monitor.get_subscriptions_info_by_topic(topic)}}
+        if not missing:
+            return
+        time.sleep(0.2)
+    raise TimeoutError(f'the tracker nodes did not come up within {timeout_s:.0f} s: '
+                       f'no subscriber {missing}')
+
+
+def _collect(monitor: PipelineMonitor, duration: float, published: int) -> PipelineRun:
+    with monitor.lock:
+        latencies = [monitor.output_times[k] - monitor.frame_times[k]
+                     for k in monitor.output_times if k in monitor.frame_times]
+        stages = {
+            'segmentation': _delays(monitor.frame_times, monitor.observation_times),
+            'lookup': _delays(monitor.observation_times, monitor.candidate_times),
+            'ik': _delays(monitor.candidate_times, monitor.output_times),
+        }
+        matched = [k for k in sorted(monitor.joints) if k in monitor.wrists
+                   and k in monitor.truth_joints and k in monitor.truth_wrists]
+        estimated = np.array([pose_from_messages(monitor.joints[k], monitor.wrists[k])
+                              for k in matched])
+        # position of each matched frame among all camera frames seen, in stamp order
+        frame_order = {k: i for i, k in enumerate(sorted(monitor.frame_times))}
+        frame_index = np.array([frame_order.get(k, -1) for k in matched], dtype=int)
+        truth = np.array([pose_from_messages(monitor.truth_joints[k], monitor.truth_wrists[k])
+                          for k in matched])
+        return PipelineRun(
+            frames_expected=published, frames=len(monitor.frame_times),
+            segmented=len(monitor.observation_times), tracked=len(monitor.joints),
+            duration_s=duration,
+            latencies_s=latencies, estimated=estimated.reshape(-1, 26),
+            truth=truth.reshape(-1, 26),
+            segmentation_ms=list(monitor.segmentation_ms.values()),
+            lookup_ms=list(monitor.lookup_ms.values()), stage_latencies_s=stages,
+            frame_index=frame_index,
+            overlays=list(monitor.overlays), statuses=list(monitor.statuses))
+
+
+def _delays(earlier: dict, later: dict) -> list[float]:
+    return [later[k] - earlier[k] for k in later if k in earlier]
+
+
+def summarize(run: PipelineRun, model) -> dict[str, float]:
+    """The figures of a run: counts, rate, latency percentiles, stage times, accuracy."""
+    latency = latency_summary_ms(run.latencies_s)
+    figures = {
+        'frames_expected': run.frames_expected, 'frames_seen_by_monitor': run.frames,
+        'frames_segmented': run.segmented, 'frames_tracked': run.tracked,
+        'tracked_fraction': run.tracked / run.frames_expected if run.frames_expected else 0.0,
+        # JointStates per second between the first and the last one received
+        'output_rate_hz': (run.tracked - 1) / run.duration_s if run.duration_s > 0 else 0.0,
+        'latency_mean_ms': latency['mean'], 'latency_p50_ms': latency['p50'],
+        'latency_p95_ms': latency['p95'],
+        'segmentation_compute_ms': _mean(run.segmentation_ms),
+        'lookup_compute_ms': _mean(run.lookup_ms),
+        'frames_with_truth': len(run.truth),
+    }
+    for stage, delays in run.stage_latencies_s.items():
+        figures[f'{stage}_stage_p50_ms'] = latency_summary_ms(delays)['p50']
+    if len(run.truth):
+        figures.update(pose_accuracy(model, run.estimated, run.truth))
+        # frames missing from the output break the 5-frame windows: jitter over unbroken runs
+        valid = run.frame_index >= 0
+        tracked = np.zeros(run.frames, bool)
+        tracked[run.frame_index[valid]] = True
+        for key, poses in (('jitter_mm', run.estimated), ('jitter_truth_mm', run.truth)):
+            on_grid = np.zeros((run.frames, 26))
+            on_grid[run.frame_index[valid]] = poses[valid]
+            figures[key] = jitter_runs_mm(model, on_grid, tracked)
+    return figures
+
+
+def _mean(values: list[float]) -> float:
+    return float(np.mean(values)) if values else float('nan')
+
+
+def bag_feed(bag: Path, rate: float = 1.0, paced: bool = False) -> Any:
+    """A feed for :func:`run_pipeline`: play ``bag`` with ``colorglove_play_bag`` (a separate
+    process) at ``rate`` times its original timing, or paced by the tracker's output."""
+    import shutil
+    import subprocess
+
+    player = shutil.which('colorglove_play_bag')
+    if player is None:
+        raise FileNotFoundError('colorglove_play_bag not on PATH (is the venv active?)')
+    # two image subscribers before the first frame: segmentation_node and the monitor
+    command = [player, str(bag), '--rate', str(rate), '--min-subscribers', '2'] + \
+        (['--paced'] if paced else [])
+
+    def feed() -> None:
+        subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+
+    return feed
