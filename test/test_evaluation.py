@@ -1,4 +1,5 @@
-"""Tests of the evaluation pipeline (core/evaluation/sequences.py) and the eval_ik / learn_ik_covariances
+"""Tests of the evaluation pipeline (core/evaluation/sequences.py) and the eval_ik /
+learn_ik_covariances
 commands, on a tiny database built in a temporary folder."""
 from __future__ import annotations
 

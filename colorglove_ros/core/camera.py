@@ -7,6 +7,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.yaml_io import load_yaml_mapping
 
 __all__ = [
@@ -19,7 +20,7 @@ CALIBRATION_VERSION = 1
 DISTORTION_MODELS = {5: 'plumb_bob', 8: 'rational_polynomial'}
 
 
-class CalibrationError(Exception):
+class CalibrationError(ColorGloveError):
     """A calibration file is missing, malformed or of another version."""
 
 

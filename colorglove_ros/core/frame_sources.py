@@ -10,13 +10,14 @@ import cv2
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.errors import ColorGloveError
 
 __all__ = ['FrameSourceError', 'Frame', 'FrameSource', 'open_frame_source', 'IMAGE_SUFFIXES']
 
 IMAGE_SUFFIXES = ('.png', '.jpg', '.jpeg', '.bmp', '.ppm', '.tif', '.tiff')
 
 
-class FrameSourceError(Exception):
+class FrameSourceError(ColorGloveError):
     """A frame source cannot be opened or read."""
 
 

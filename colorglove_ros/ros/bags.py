@@ -32,6 +32,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from colorglove_ros.core.camera import CalibrationError, PinholeCamera
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import FINGER_DOF_NAMES, KEYPOINT_NAMES, NUM_DOFS
 from colorglove_ros.core.hand.overlay import SKELETON_BONES
 from colorglove_ros.core.hand.pose_fields import pose_from_fields, wrist_quaternion
@@ -61,7 +62,7 @@ _TYPES = {
     TOPIC_KEYPOINTS: 'visualization_msgs/msg/MarkerArray',
 }
 
-class BagError(Exception):
+class BagError(ColorGloveError):
     """A bag cannot be written or read, or holds an unsupported message."""
 
 

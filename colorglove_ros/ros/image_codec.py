@@ -8,11 +8,13 @@ from typing import Any
 import cv2
 import numpy as np
 
+from colorglove_ros.core.errors import ColorGloveError
+
 __all__ = ['ENCODINGS', 'ImageEncodingError', 'ImageFormat', 'image_format', 'image_to_array',
            'image_to_rgb8']
 
 
-class ImageEncodingError(ValueError):
+class ImageEncodingError(ColorGloveError, ValueError):
     """An image cannot be converted: unsupported encoding, or inconsistent size/step/data."""
 
 

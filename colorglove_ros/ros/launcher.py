@@ -28,6 +28,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.yaml_io import load_yaml_mapping
 
 __all__ = ['LaunchError', 'NodeSpec', 'load_launch_file', 'node_command', 'Launcher',
@@ -47,7 +48,7 @@ def use_fastdds_profile() -> str:
     return os.environ[FASTDDS_PROFILE_VARIABLE]
 
 
-class LaunchError(Exception):
+class LaunchError(ColorGloveError):
     """A launch file is missing or malformed, or an executable cannot be found."""
 
 

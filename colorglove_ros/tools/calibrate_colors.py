@@ -2,7 +2,8 @@
 
 Labelled frames are PNG pairs in one folder: ``NAME.png`` (the RGB camera image) and
 ``NAME_mask.png`` (single-channel 8-bit labels: 0 background, 1..10 glove colour as in
-``core/hand/glove.py``). ``--synthetic N`` first renders N 'train' frames with ``core/synthetic/frames.py``
+``core/hand/glove.py``). ``--synthetic N`` first renders N 'train' frames with
+``core/synthetic/frames.py``
 and writes them as such pairs. The output file defaults to the ``calibration_file`` named in
 ``config/color_calibration.yaml``.
 """

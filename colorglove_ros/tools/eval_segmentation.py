@@ -1,6 +1,7 @@
 """Evaluate colour classification, crop and patch centroids on held-out synthetic frames.
 
-Frames come from ``core/synthetic/frames.py`` (``sample_conditions(rng, 'test')``: other light levels,
+Frames come from ``core/synthetic/frames.py`` (``sample_conditions(rng, 'test')``: other light
+levels,
 colour temperatures, noise, blur, JPEG and unseen cluttered backgrounds than the 'train'
 frames the calibration was fitted on) or, with ``--source blobs``, from a simple 2-D stand-in
 glove (:func:`render_blob_frame`). Ground-truth crop = :func:`crop_to_tiny` on the true label

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.evaluation.metrics import (
     fingertip_errors_mm,
     joint_angle_error_deg,
@@ -34,7 +35,7 @@ ESTIMATES = {
 places its neighbours (``search.estimate_global_pose``)."""
 
 
-class DiagnosisError(Exception):
+class DiagnosisError(ColorGloveError):
     """No usable query frame, or a database without the metadata the oracle needs."""
 
 

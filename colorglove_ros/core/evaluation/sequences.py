@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.evaluation.metrics import (
     contiguous_runs,
     jitter_runs_mm,
@@ -54,7 +55,7 @@ TRAIN_SEED_BASE = 100_000
 SEED_SPAN = 100_000
 
 
-class EvaluationError(Exception):
+class EvaluationError(ColorGloveError):
     """Bad evaluation input: unknown label source, mismatched rigs, no database, no frames."""
 
 

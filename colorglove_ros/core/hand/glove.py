@@ -22,6 +22,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.mesh import HandMesh, build_hand_mesh
 from colorglove_ros.core.hand.model import DOF_NAMES, HandModel
 
@@ -51,7 +52,7 @@ GLOVE_PALETTE_RGB.setflags(write=False)
 _KNN = 8
 
 
-class GloveError(Exception):
+class GloveError(ColorGloveError):
     """The glove could not be built (disconnected surface graph, bad sizes)."""
 
 

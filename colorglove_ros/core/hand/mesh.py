@@ -7,6 +7,7 @@ from functools import lru_cache
 import numpy as np
 import trimesh
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, digit_link_index
 
 __all__ = ['HandMeshError', 'HandMesh', 'build_hand_mesh', 'skin_batch', 'PALM_SUBDIVISIONS',
@@ -17,7 +18,7 @@ PALM_SUBDIVISIONS = 3
 RING_SPACING_FRACTION = 0.03
 
 
-class HandMeshError(Exception):
+class HandMeshError(ColorGloveError):
     """A mesh does not match the hand model or a pose batch has the wrong shape."""
 
 

@@ -26,6 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from colorglove_ros.core.errors import ColorGloveError
+
 __all__ = [
     'DIGITS', 'DOF_NAMES', 'FINGER_DOF_NAMES', 'GLOBAL_DOF_NAMES', 'NUM_DOFS',
     'NUM_FINGER_DOFS', 'KEYPOINT_NAMES', 'LINK_NAMES', 'DIP_PIP_RATIO',
@@ -55,7 +57,7 @@ assert len(DOF_NAMES) == NUM_DOFS and len(FINGER_DOF_NAMES) == NUM_FINGER_DOFS
 assert len(LINK_NAMES) == 16 and len(KEYPOINT_NAMES) == 21
 
 
-class HandModelError(Exception):
+class HandModelError(ColorGloveError):
     """Invalid hand-model input (shape of a pose, unknown link, bad hand length)."""
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.mesh import HandMesh, skin_batch
 from colorglove_ros.core.hand.model import (
     DIP_PIP_RATIO,
@@ -39,7 +40,7 @@ YAW_RANGE = (-np.pi / 3, np.pi / 3)
 PITCH_RANGE = (-np.pi / 4, np.pi / 4)
 
 
-class PosesError(Exception):
+class PosesError(ColorGloveError):
     """Bad finger-configuration shapes or sizes."""
 
 

@@ -7,6 +7,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import DIGITS, FINGER_DOF_NAMES, HandModel, digit_link_index
 
 __all__ = ['URDF_NAME', 'URDF_PATH', 'UrdfError', 'tip_link_name', 'urdf_string', 'write_urdf']
@@ -16,7 +17,7 @@ URDF_NAME = 'colorglove_hand'
 URDF_PATH = Path('urdf') / 'colorglove_hand.urdf'
 
 
-class UrdfError(Exception):
+class UrdfError(ColorGloveError):
     """The URDF could not be written."""
 
 

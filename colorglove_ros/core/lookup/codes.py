@@ -7,6 +7,7 @@ import numpy as np
 from scipy import sparse
 from sklearn.utils.extmath import randomized_svd
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.lookup.distance import (
     NUM_COLORS,
     TINY_SIZE,
@@ -32,7 +33,7 @@ _THRESHOLD_PX = np.array([0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0,
 _THRESHOLDS = _THRESHOLD_PX ** 2
 
 
-class CodeError(Exception):
+class CodeError(ColorGloveError):
     """Bad code arrays, encoder parameters or training data."""
 
 

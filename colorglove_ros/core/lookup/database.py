@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from sklearn.utils.extmath import randomized_svd
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.lookup.codes import (
     BinaryEncoder,
     encoder_from_arrays,
@@ -84,7 +85,7 @@ def read_database_config(path: str | Path) -> tuple[BuildConfig, Path, dict[str,
     return config, resolve_path(str(data['path'])), dict(data.get('lookup') or {})
 
 
-class DatabaseError(Exception):
+class DatabaseError(ColorGloveError):
     """A database directory is missing, corrupt, truncated, inconsistent or of another version."""
 
 

@@ -6,6 +6,8 @@ import math
 import cv2
 import numpy as np
 
+from colorglove_ros.core.errors import ColorGloveError
+
 __all__ = [
     'NUM_COLORS', 'TINY_SIZE', 'ABSENT_PENALTY', 'DT_SCALE', 'DistanceError',
     'distance_transforms', 'distance_transforms_batch', 'quantize_dts', 'dequantize_dts',
@@ -28,7 +30,7 @@ DT_SCALE = 4.0
 _COLORS = np.arange(1, NUM_COLORS + 1, dtype=np.uint8)[:, None, None]
 
 
-class DistanceError(Exception):
+class DistanceError(ColorGloveError):
     """A label image has the wrong shape, type or colour values."""
 
 

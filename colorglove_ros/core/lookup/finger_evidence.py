@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from colorglove_ros.core.errors import ColorGloveError
+
 __all__ = ['FingerEvidenceConfig', 'FingerEvidenceError', 'PALM_DIGIT', 'NUM_DIGITS',
            'patch_digits', 'finger_scores', 'finger_blend', 'weighted_fingers']
 
@@ -35,7 +37,7 @@ FINGER_DOFS_PER_DIGIT = 4
 FIRST_FINGER_DOF = 6
 
 
-class FingerEvidenceError(Exception):
+class FingerEvidenceError(ColorGloveError):
     """Inconsistent shapes or settings of the per-finger blend."""
 
 

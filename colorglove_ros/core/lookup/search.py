@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.lookup.codes import HAMMING_BLOCK, QueryEncoder, hamming_distances
 from colorglove_ros.core.lookup.database import PoseDatabase
 from colorglove_ros.core.lookup.distance import ABSENT_PENALTY, DT_SCALE, QueryDistance
@@ -29,7 +30,7 @@ _BUFFER_CAP = 1 << 20
 """Largest reused re-rank buffer (entries): 8 MB of indices, 20x a 300-candidate lookup."""
 
 
-class SearchError(Exception):
+class SearchError(ColorGloveError):
     """Bad lookup input (image shape, empty query, camera)."""
 
 

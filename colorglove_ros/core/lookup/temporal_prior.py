@@ -6,13 +6,14 @@ import math
 
 import numpy as np
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import NUM_DOFS, rotvec_to_matrix
 from colorglove_ros.core.lookup.search import LookupResult, blend_poses
 
 __all__ = ['TemporalPriorError', 'pose_distances_rad', 'reweight_by_previous']
 
 
-class TemporalPriorError(Exception):
+class TemporalPriorError(ColorGloveError):
     """Bad temporal-prior input (pose shape, tau, rotation weight)."""
 
 

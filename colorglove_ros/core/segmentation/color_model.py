@@ -11,6 +11,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from colorglove_ros.core.errors import ColorGloveError
+
 __all__ = [
     'CALIBRATION_FORMAT', 'CALIBRATION_FORMAT_VERSION', 'CGZ_A', 'CGZ_B', 'SRGB_TO_XYZ',
     'ColorCalibrationError', 'ColorCalibration', 'GaussianMixtureParams',
@@ -43,7 +45,7 @@ CGZ_EPS = 1e-3
 FEATURE_KINDS = ('chroma', 'cgz')
 
 
-class ColorCalibrationError(Exception):
+class ColorCalibrationError(ColorGloveError):
     """A colour calibration cannot be fitted, or its file is missing, corrupt or of another
     version."""
 

@@ -6,6 +6,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from colorglove_ros.core.errors import ColorGloveError
+
 __all__ = [
     'TINY_SIZE', 'CROP_ALGORITHM_VERSION', 'crop_signature',
     'CropError', 'CropTransform', 'TinyCrop', 'mean_shift_crop', 'crop_to_tiny',
@@ -33,7 +35,7 @@ def crop_signature() -> dict[str, float]:
             'rescue_share': DEFAULT_RESCUE_SHARE}
 
 
-class CropError(ValueError):
+class CropError(ColorGloveError, ValueError):
     """The input of a crop function has the wrong type, shape or parameters."""
 
 

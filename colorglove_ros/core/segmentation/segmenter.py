@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.segmentation.color_model import (
     ColorCalibration,
     estimate_light_gains,
@@ -39,11 +40,11 @@ STATUS_OUT_OF_FRAME = 'out_of_frame'  # the crop window lies mostly outside the 
 STAGES = ('coarse', 'filter', 'classify', 'cleanup', 'borders', 'crop', 'blobs')
 
 
-class SegmentationInputError(ValueError):
+class SegmentationInputError(ColorGloveError, ValueError):
     """The image given to the segmenter is not a non-empty (H, W, 3) uint8 array."""
 
 
-class SegmentationConfigError(ValueError):
+class SegmentationConfigError(ColorGloveError, ValueError):
     """Bad segmenter settings (unknown key or out-of-range value)."""
 
 

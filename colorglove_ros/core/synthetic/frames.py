@@ -32,6 +32,7 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.spatial.transform import Rotation, RotationSpline
 
 from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB, Glove, default_hand
 from colorglove_ros.core.hand.mesh import HandMesh
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, matrix_to_rotvec, rotvec_to_matrix
@@ -60,7 +61,7 @@ CAPTURE_VOLUME_SIZE = np.array([0.60, 0.50, 0.30])    # x, y, z extent of the de
 _BG_SEED_SPLIT = 1 << 30      # train background seeds < this <= test seeds
 
 
-class SynthError(Exception):
+class SynthError(ColorGloveError):
     """Bad synthesis input: unknown split or background kind, pose or camera mismatch."""
 
 

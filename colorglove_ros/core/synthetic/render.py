@@ -7,6 +7,7 @@ import moderngl
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.mesh import HandMesh
 
 __all__ = [
@@ -19,7 +20,7 @@ _FACE_TEX_WIDTH = 1024     # per-face tables are stored as 1024-wide integer/flo
 _GL_CLIP_DISTANCE0 = 0x3000
 
 
-class RenderError(Exception):
+class RenderError(ColorGloveError):
     """Bad renderer input (shapes, sizes) or an OpenGL context that cannot be made."""
 
 

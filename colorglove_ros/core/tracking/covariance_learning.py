@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
 from colorglove_ros.core.tracking.ik import (
     Correspondences,
@@ -27,7 +28,7 @@ __all__ = [
 LOCAL_WINDOW = 5
 
 
-class IKTrainingError(Exception):
+class IKTrainingError(ColorGloveError):
     """Training data too short, of the wrong shape, or without usable constraints."""
 
 

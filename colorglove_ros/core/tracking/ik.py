@@ -15,6 +15,7 @@ import yaml
 from scipy.optimize import linear_sum_assignment
 
 from colorglove_ros.core.camera import Calibration, PinholeCamera
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.hand.mesh import build_hand_mesh
 from colorglove_ros.core.hand.model import DOF_NAMES, NUM_DOFS, HandModel
@@ -40,7 +41,7 @@ CONSTRAINT_MODELS = ('vertex', 'patch')
 _EPS_LIMIT = 1e-9
 
 
-class IKError(Exception):
+class IKError(ColorGloveError):
     """Invalid input to the inverse kinematics (shapes, cameras, model mismatch)."""
 
 

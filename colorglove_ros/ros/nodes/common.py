@@ -15,6 +15,8 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 
+from colorglove_ros.core.errors import ColorGloveError
+
 __all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'reject_parameter_changes', 'run_node']
 
 # Between pipeline stages keep only the newest message: a slow stage drops old frames instead
@@ -78,7 +80,7 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     return 0
 
 
-class StartupError(Exception):
+class StartupError(ColorGloveError):
     """A node cannot start: missing device, file, database or bad configuration."""
 
 
