@@ -493,3 +493,19 @@ def test_nodes_exit_with_code_1_on_bad_startup(tmp_path: Path, assets: NodeAsset
         elif '[FATAL]' not in output:
             problems.append(f'{name}: no [FATAL] line in {output!r}')
     assert not problems, '\n'.join(problems)
+
+
+# ------------------------------------------------------------------------ parameters
+def test_start_up_parameters_are_read_only(assets: NodeAssets) -> None:
+    """A parameter read only at start-up is declared read-only: ROS refuses a run-time change
+    with its standard reason instead of accepting a value the node would never use."""
+    from rclpy.parameter import Parameter
+
+    with running(_segmentation(assets)) as h:
+        node = h.nodes[0]
+        descriptor = node.describe_parameter('color_calibration_file')
+        assert descriptor.read_only
+        result = node.set_parameters([Parameter('color_calibration_file',
+                                                value='config/other.yaml')])[0]
+        assert not result.successful and 'read-only' in result.reason
+        assert node.get_parameter('color_calibration_file').value == str(assets.color_config)

@@ -1,7 +1,6 @@
 """Build the pose database: sample, render, crop, learn codes, save (see config/database.yaml)."""
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import time
 from pathlib import Path
@@ -18,6 +17,7 @@ from colorglove_ros.core.lookup.database import (
 )
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.paths import share_dir
+from colorglove_ros.tools._cli import tool_parser
 
 __all__ = ['main', 'load_build_config', 'DEFAULT_CONFIG']
 
@@ -31,7 +31,7 @@ def load_build_config(path: str | Path = DEFAULT_CONFIG) -> tuple[BuildConfig, P
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point."""
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = tool_parser(__doc__)
     parser.add_argument('--config', default=str(DEFAULT_CONFIG), help='database YAML')
     parser.add_argument('--entries', type=int, help='number of entries (default from config)')
     parser.add_argument('--output', help='database directory (default from config)')
@@ -43,7 +43,6 @@ def main(argv: list[str] | None = None) -> int:
                         help='only learn new codes for the existing database at --output')
     parser.add_argument('--training-images', type=int,
                         help='images the SSC training pairs are drawn from')
-    parser.add_argument('--json', help='write build figures to this JSON file')
     args = parser.parse_args(argv)
     config, db_path, _ = load_build_config(args.config)
     overrides = {'entries': args.entries, 'orientations_per_config': args.orientations,

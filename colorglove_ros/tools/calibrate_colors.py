@@ -9,7 +9,6 @@ and writes them as such pairs. The output file defaults to the ``calibration_fil
 """
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
@@ -25,6 +24,7 @@ from colorglove_ros.core.segmentation.color_model import (
     read_calibration_config,
     save_calibration,
 )
+from colorglove_ros.tools._cli import tool_parser
 
 __all__ = ['MASK_SUFFIX', 'read_labelled_frames', 'write_labelled_frames',
            'render_training_frames', 'main']
@@ -82,7 +82,7 @@ def render_training_frames(count: int, seed: int, split: str = 'train'
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = tool_parser(__doc__.split('\n\n')[0])
     src = parser.add_mutually_exclusive_group(required=True)
     src.add_argument('--frames', type=Path, help='folder of NAME.png + NAME_mask.png pairs')
     src.add_argument('--synthetic', type=int, metavar='N',
@@ -101,7 +101,6 @@ def main(argv: list[str] | None = None) -> int:
                         help='re-light the training pixels under black bodies of these colour '
                              'temperatures (default: colorspace.RESIDUAL_TEMPERATURES_K, what the '
                              "segmenter's per-frame light-colour correction leaves)")
-    parser.add_argument('--json', type=Path, help='also write the figures as JSON')
     args = parser.parse_args(argv)
     try:
         output = args.output or read_calibration_config(args.config)['calibration_file']

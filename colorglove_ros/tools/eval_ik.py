@@ -9,14 +9,14 @@ per frame the primary camera's labels are cropped and looked up once, then one t
 """
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import math
 import time
 from pathlib import Path
 from typing import Any
 
-from colorglove_ros.core.camera import CalibrationError, load_calibration
+from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.evaluation.sequences import (
     LABEL_SOURCES,
     EvaluationError,
@@ -30,11 +30,11 @@ from colorglove_ros.core.evaluation.sequences import (
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.tracking.ik import (
     TRACKER_MODES,
-    IKConfigError,
     load_covariances,
     load_ik_config,
 )
 from colorglove_ros.paths import share_dir
+from colorglove_ros.tools._cli import tool_parser
 
 __all__ = ['main', 'TARGETS', 'REFERENCE_FIGURES', 'evaluate_targets', 'reference_figures',
            'JSON_KEYS', 'PACKAGE_ROOT']
@@ -167,8 +167,7 @@ def _plot(rows: list[dict[str, Any]], path: Path) -> Path:
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point."""
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = tool_parser(__doc__, raw_description=True)
     parser.add_argument('--database', help='pose database directory (default: the largest '
                         'under data/)')
     parser.add_argument('--frames', type=int, default=150, help='frames per sequence')
@@ -205,11 +204,8 @@ def main(argv: list[str] | None = None) -> int:
                         'finger by its patch evidence (core.finger_evidence)')
     parser.add_argument('--plot', default=str(PACKAGE_ROOT / 'data' / 'eval_ik' /
                                               'eval_ik.png'), help="PNG path ('' = none)")
-    parser.add_argument('--json', help='write the figures to this JSON file')
     args = parser.parse_args(argv)
-    from colorglove_ros.core.lookup.database import DatabaseError
-    from colorglove_ros.core.lookup.search import PoseLookup, SearchError
-    from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
+    from colorglove_ros.core.lookup.search import PoseLookup
 
     try:
         db_path, db = open_database(args.database, PACKAGE_ROOT / 'data')
@@ -244,8 +240,7 @@ def main(argv: list[str] | None = None) -> int:
             args.modes, config, observer, fps=args.fps, temporal=temporal,
             finger_evidence=not args.no_finger_evidence)
         seeds = eval_seeds(args.sequences, args.seed_offset)
-    except (EvaluationError, DatabaseError, IKConfigError, CalibrationError,
-            ColorCalibrationError, SearchError) as exc:
+    except ColorGloveError as exc:
         print(f'eval_ik: {exc}')
         return 1
     t0 = time.perf_counter()

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.lookup.codes import (
     BinaryEncoder,
     features_from_dts,
@@ -35,6 +36,7 @@ from colorglove_ros.core.lookup.database import (
 from colorglove_ros.core.lookup.distance import QueryDistance, dequantize_dts
 from colorglove_ros.core.lookup.search import PoseLookup, top_k_with_ties
 from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.tools._cli import tool_parser
 from colorglove_ros.tools.build_database import DEFAULT_CONFIG, load_build_config
 
 __all__ = ['main']
@@ -263,7 +265,7 @@ def _plots(curves: dict, size_rows: list[dict], out_dir: Path, k: int) -> list[s
 def _diagnose(args: argparse.Namespace, db: PoseDatabase, lookup: PoseLookup, path: Path
               ) -> int:
     """The (a)-(d) table and the coverage table on synthetic test-sequence frames."""
-    from colorglove_ros.core.camera import CalibrationError, load_calibration
+    from colorglove_ros.core.camera import load_calibration
     from colorglove_ros.core.evaluation.diagnosis import (
         FullPoseIndex,
         coverage,
@@ -271,7 +273,6 @@ def _diagnose(args: argparse.Namespace, db: PoseDatabase, lookup: PoseLookup, pa
         render_query_frames,
     )
     from colorglove_ros.core.evaluation.sequences import make_observer
-    from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
     from colorglove_ros.core.synthetic.frames import Synthesizer
     from colorglove_ros.paths import share_dir
 
@@ -280,7 +281,7 @@ def _diagnose(args: argparse.Namespace, db: PoseDatabase, lookup: PoseLookup, pa
         camera = load_calibration(args.calibration or share_dir() / 'config' /
                                   'calibration.yaml').cameras[0]
         observer = make_observer(args.labels)
-    except (CalibrationError, ColorCalibrationError) as exc:
+    except ColorGloveError as exc:
         print(f'eval_lookup: {exc}')
         return 1
     synth = Synthesizer(cfg.hand_length_m, cfg.glove_seed)
@@ -319,7 +320,7 @@ def _diagnose(args: argparse.Namespace, db: PoseDatabase, lookup: PoseLookup, pa
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point."""
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = tool_parser(__doc__)
     parser.add_argument('--database', help='database directory (default from config)')
     parser.add_argument('--config', default=str(DEFAULT_CONFIG))
     parser.add_argument('--queries', type=int, default=200, help='held-out query renders')
@@ -329,7 +330,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--max-bits', type=int, default=256)
     parser.add_argument('--timing-repeats', type=int, default=3)
     parser.add_argument('--plots', default='data/eval_lookup', help='directory for PNG plots')
-    parser.add_argument('--json', help='write all figures to this JSON file')
     diag = parser.add_argument_group('diagnosis (--diagnose)')
     diag.add_argument('--diagnose', action='store_true', help='only the oracle / image NN / '
                       'top-1 / blend table and the coverage table')

@@ -1,7 +1,6 @@
 """Write the colour-glove mesh (PLY and GLB) and a picture of it from several views."""
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +16,7 @@ from colorglove_ros.core.hand.mesh import HandMesh
 from colorglove_ros.core.hand.model import HandModel, rotvec_to_matrix
 from colorglove_ros.core.hand.poses import NAMED_SHAPES, full_pose
 from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.tools._cli import tool_parser
 
 __all__ = ['main', 'draw_glove']
 
@@ -62,11 +62,10 @@ def draw_glove(ax, model: HandModel, mesh: HandMesh, glove: Glove, q: np.ndarray
 
 def main(argv: list[str] | None = None) -> int:
     """Export data/glove/glove.ply, glove.glb and glove.png."""
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = tool_parser(__doc__)
     parser.add_argument('--out', type=Path, default=Path('data/glove'), help='output folder')
     parser.add_argument('--hand-length', type=float, default=0.19, help='wrist to middle tip, m')
     parser.add_argument('--seed', type=int, default=0, help='glove pattern seed')
-    parser.add_argument('--json', type=Path, default=None, help='also write the summary as JSON')
     parser.add_argument('--shapes', action='store_true',
                         help='also draw every named hand shape into shapes.png')
     args = parser.parse_args(argv)

@@ -11,17 +11,16 @@ P = previous frame about the current local average (core.ik_training.learn_covar
 """
 from __future__ import annotations
 
-import argparse
 import math
 import time
 from pathlib import Path
 
 import numpy as np
 
-from colorglove_ros.core.camera import CalibrationError, load_calibration
+from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.evaluation.sequences import (
     LABEL_SOURCES,
-    EvaluationError,
     SequenceEvaluator,
     make_observer,
     open_database,
@@ -32,16 +31,15 @@ from colorglove_ros.core.hand.model import DOF_NAMES
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.tracking.covariance_learning import (
     LOCAL_WINDOW,
-    IKTrainingError,
     learn_covariances,
 )
 from colorglove_ros.core.tracking.ik import (
-    IKConfigError,
     default_covariances,
     load_ik_config,
     save_covariances,
 )
 from colorglove_ros.paths import share_dir
+from colorglove_ros.tools._cli import tool_parser
 
 __all__ = ['main', 'covariance_rows', 'PACKAGE_ROOT', 'DEFAULT_OUTPUT']
 
@@ -77,8 +75,7 @@ def covariance_rows(q_var: np.ndarray, p_var: np.ndarray, q_ref: np.ndarray | No
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point."""
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = tool_parser(__doc__, raw_description=True)
     parser.add_argument('--database', help='pose database directory (default: the largest '
                         'under data/)')
     parser.add_argument('--sequences', type=int, default=4, help='training sequences')
@@ -99,11 +96,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--ik-config', default=str(PACKAGE_ROOT / 'config' / 'ik.yaml'))
     parser.add_argument('--output', default=str(DEFAULT_OUTPUT), help='covariance YAML')
     parser.add_argument('--fps', type=float, default=30.0)
-    parser.add_argument('--json', help='write the learned figures to this JSON file')
     args = parser.parse_args(argv)
-    from colorglove_ros.core.lookup.database import DatabaseError
     from colorglove_ros.core.lookup.search import PoseLookup
-    from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
 
     t0 = time.perf_counter()
     try:
@@ -126,8 +120,7 @@ def main(argv: list[str] | None = None) -> int:
                   f'tracked, {len(seqs)} runs', flush=True)
         evaluator.close()
         cov, stats = learn_covariances(sequences, evaluator.model, cal.cameras, LOCAL_WINDOW)
-    except (EvaluationError, DatabaseError, IKConfigError, CalibrationError,
-            ColorCalibrationError, IKTrainingError) as exc:
+    except ColorGloveError as exc:
         print(f'learn_ik_covariances: {exc}')
         return 1
     provenance = {'tool': 'colorglove_ros.tools.learn_ik_covariances',

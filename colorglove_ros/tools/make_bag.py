@@ -2,7 +2,6 @@
 several-camera calibration, every camera's view of each frame."""
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
@@ -17,11 +16,12 @@ from colorglove_ros.core.synthetic.frames import (
     default_camera,
 )
 from colorglove_ros.ros.bags import SequenceBagWriter, bag_size_bytes
+from colorglove_ros.tools._cli import tool_parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Render ``--frames`` frames of sequence ``--seed`` and write them to ``--output``."""
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = tool_parser(__doc__)
     parser.add_argument('--seed', type=int, default=1, help='sequence seed (motion + conditions)')
     parser.add_argument('--frames', type=int, default=300, help='number of frames')
     parser.add_argument('--fps', type=float, default=30.0, help='frame rate of the stamps')
@@ -33,7 +33,6 @@ def main(argv: list[str] | None = None) -> int:
                         help="conditions range: 'test' (held out) or 'train'")
     parser.add_argument('--hand-length', type=float, default=None,
                         help='hand length in metres (default: from the calibration, or 0.19)')
-    parser.add_argument('--json', default=None, help='also write the summary here')
     args = parser.parse_args(argv)
     output = Path(args.output)
     if output.exists():

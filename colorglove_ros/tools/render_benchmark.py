@@ -1,7 +1,6 @@
 """Measure the headless renderer: batched label renders/s (tiny and 640x480), shaded frames/s."""
 from __future__ import annotations
 
-import argparse
 import os
 import time
 
@@ -12,6 +11,7 @@ from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.hand.poses import pose_collection, sample_global_rotations
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.synthetic.render import Renderer, decimate_hand_mesh, vertex_normals
+from colorglove_ros.tools._cli import tool_parser
 
 
 def _poses(n: int, seed: int, depth: float) -> np.ndarray:
@@ -81,13 +81,12 @@ def _shaded_rate(n: int, seed: int, smooth: bool, supersample: int = 1) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     """Print the render rates; ``--json PATH`` writes them too."""
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = tool_parser(__doc__)
     parser.add_argument('--images', type=int, default=1024, help='tiny label renders to time')
     parser.add_argument('--full-images', type=int, default=96,
                         help='640x480 label and shaded renders to time')
     parser.add_argument('--batch', type=int, default=256, help='poses per draw call')
     parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument('--json', type=str, default=None, help='write the figures here')
     args = parser.parse_args(argv)
     _, mesh, _ = default_hand()
     rows = [

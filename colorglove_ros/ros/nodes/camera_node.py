@@ -22,7 +22,6 @@ from colorglove_ros.ros.image import array_to_image
 from colorglove_ros.ros.nodes.common import (
     StartupError,
     declare,
-    reject_parameter_changes,
     run_node,
 )
 
@@ -50,10 +49,6 @@ class CameraNode(Node):
                             'render the whole synthetic sequence at start-up (steady frame rate)')
         self.max_frames = declare(self, 'max_frames', 0,
                                   'stop publishing after this many frames (0 = never)', 0, 10**9)
-        reject_parameter_changes(self, {'source', 'calibration_file', 'camera_index', 'rate_hz',
-                                        'synthetic_seed',
-                                        'synthetic_frames', 'loop', 'max_frames',
-                                        'synthetic_prerender'})
         try:
             calibration = load_calibration(resolve_path(calibration_file))
             if camera_index >= len(calibration.cameras):

@@ -9,7 +9,6 @@ from rcl_interfaces.msg import (
     FloatingPointRange,
     IntegerRange,
     ParameterDescriptor,
-    SetParametersResult,
 )
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -17,7 +16,7 @@ from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 
 from colorglove_ros.core.errors import ColorGloveError
 
-__all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'reject_parameter_changes', 'run_node']
+__all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'run_node']
 
 # Between pipeline stages keep only the newest message: a slow stage drops old frames instead
 # of queueing them without bound.
@@ -30,9 +29,14 @@ LATEST_IMAGE = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=3,
 
 
 def declare(node: Node, name: str, default: Any, description: str,
-            minimum: float | None = None, maximum: float | None = None) -> Any:
-    """Declare a parameter with a description (and a range for numbers); return its value."""
-    descriptor = ParameterDescriptor(description=description)
+            minimum: float | None = None, maximum: float | None = None, *,
+            read_only: bool = True) -> Any:
+    """Declare a parameter with a description (and a range for numbers); return its value.
+
+    Parameters are read at start-up unless ``read_only=False``: ROS then refuses a run-time
+    change of a read-only one with its standard reason, so nobody believes it took effect.
+    """
+    descriptor = ParameterDescriptor(description=description, read_only=read_only)
     if minimum is not None and maximum is not None:
         if isinstance(default, bool):
             pass
@@ -43,19 +47,6 @@ def declare(node: Node, name: str, default: Any, description: str,
             descriptor.floating_point_range = [FloatingPointRange(
                 from_value=float(minimum), to_value=float(maximum), step=0.0)]
     return node.declare_parameter(name, default, descriptor).value
-
-
-def reject_parameter_changes(node: Node, names: set[str]) -> None:
-    """Refuse run-time changes to parameters read only at start-up, with a clear reason."""
-    def callback(params) -> SetParametersResult:
-        for param in params:
-            if param.name in names:
-                return SetParametersResult(
-                    successful=False,
-                    reason=f'{param.name} is read at start-up; restart the node to change it')
-        return SetParametersResult(successful=True)
-
-    node.add_on_set_parameters_callback(callback)
 
 
 def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:

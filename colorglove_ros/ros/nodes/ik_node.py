@@ -40,7 +40,6 @@ from colorglove_ros.ros.nodes.common import (
     LATEST_ONLY,
     StartupError,
     declare,
-    reject_parameter_changes,
     run_node,
 )
 
@@ -67,9 +66,6 @@ class IKNode(Node):
         wait_s = declare(self, 'extra_observation_wait_s', 0.05,
                          'longest wait for the extra cameras\' observations of a frame, seconds',
                          0.0, 1.0)
-        reject_parameter_changes(self, {'calibration_file', 'ik_config', 'enable_ik',
-                                        'enable_smoothing', 'extra_observation_topics',
-                                        'publish_overlay', 'extra_observation_wait_s'})
         try:
             calibration = load_calibration(resolve_path(calibration_file))
             config = load_ik_config(resolve_path(ik_config))

@@ -22,7 +22,6 @@ from colorglove_ros.ros.nodes.common import (
     LATEST_ONLY,
     StartupError,
     declare,
-    reject_parameter_changes,
     run_node,
 )
 
@@ -44,8 +43,6 @@ class LookupNode(Node):
         self.finger_evidence = declare(
             self, 'finger_evidence', True, 'blend each finger from the neighbours whose '
             'patches on it match the observed blobs (false: one weight per entry, the paper)')
-        reject_parameter_changes(self, {'database_config', 'database_path', 'calibration_file',
-                                        'num_candidates', 'num_neighbors', 'finger_evidence'})
         try:
             path = str(resolve_path(database_path) if database_path
                        else read_database_config(database_config)[1])

@@ -18,7 +18,6 @@ from colorglove_ros.ros.nodes.common import (
     LATEST_IMAGE,
     StartupError,
     declare,
-    reject_parameter_changes,
     run_node,
 )
 
@@ -35,7 +34,6 @@ class SegmentationNode(Node):
                          'colour calibration config YAML (calibration file + segmenter settings)')
         self.publish_debug = declare(self, 'publish_debug_image', False,
                                      'also publish the per-pixel classification as an image')
-        reject_parameter_changes(self, {'color_calibration_file', 'publish_debug_image'})
         try:
             self.segmenter = load_segmenter(config)
         except (ColorCalibrationError, OSError, ValueError) as exc:
