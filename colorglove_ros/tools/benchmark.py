@@ -9,6 +9,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.paths import resolve_path
@@ -38,13 +39,9 @@ def ensure_bag(seed: int, frames: int) -> Path:
 
 
 def check_targets(figures: dict[str, float]) -> list[dict[str, object]]:
-    """One row per target: measured value and PASS/FAIL."""
-    rows = []
-    for name, (key, op, bound) in TARGETS.items():
-        value = figures[key]
-        ok = value >= bound if op == '>=' else value < bound
-        rows.append({'target': name, 'measured': value, 'result': 'PASS' if ok else 'FAIL'})
-    return rows
+    """One row per target: measured value, threshold, margin and PASS/FAIL."""
+    return [target_row(name, figures[key], bound, op)
+            for name, (key, op, bound) in TARGETS.items()]
 
 
 def main(argv: list[str] | None = None) -> int:

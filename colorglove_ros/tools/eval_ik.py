@@ -27,6 +27,7 @@ from colorglove_ros.core.evaluation.sequences import (
     open_database,
     summarize,
 )
+from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.tracking.ik import (
     TRACKER_MODES,
@@ -104,31 +105,21 @@ def evaluate_targets(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     out = []
     for rig, mode, key, thr, text in TARGETS:
         r = by.get((rig, mode))
-        if r is None:
-            continue
-        v = float(r[key])
-        out.append({'target': f'{rig}: {text}', 'measured': v, 'threshold': thr,
-                    'margin': v - thr, 'result': 'PASS' if v < thr else 'FAIL'})
+        if r is not None:
+            out.append(target_row(f'{rig}: {text}', r[key], thr))
     for rig in ('1 camera', '2 cameras'):
         a, b = by.get((rig, 'ik')), by.get((rig, 'ik_smooth'))
         if a is None or b is None:
             continue
-        ok_j = b['jitter_mm'] < a['jitter_mm']
-        ok_e = b['fingertip_mm'] <= SMOOTH_ERROR_TOLERANCE * a['fingertip_mm']
-        out.append({'target': f'{rig}: smoothing lowers jitter (mm)', 'measured': b['jitter_mm'],
-                    'threshold': a['jitter_mm'], 'margin': b['jitter_mm'] - a['jitter_mm'],
-                    'result': 'PASS' if ok_j else 'FAIL'})
-        out.append({'target': f'{rig}: ... without raising fingertip error (mm, +2 %)',
-                    'measured': b['fingertip_mm'],
-                    'threshold': SMOOTH_ERROR_TOLERANCE * a['fingertip_mm'],
-                    'margin': b['fingertip_mm'] - SMOOTH_ERROR_TOLERANCE * a['fingertip_mm'],
-                    'result': 'PASS' if ok_e else 'FAIL'})
+        out.append(target_row(f'{rig}: smoothing lowers jitter (mm)', b['jitter_mm'],
+                              a['jitter_mm']))
+        out.append(target_row(f'{rig}: ... without raising fingertip error (mm, +2 %)',
+                              b['fingertip_mm'], SMOOTH_ERROR_TOLERANCE * a['fingertip_mm'],
+                              '<='))
     for r in rows:
         if r['mode_key'] != 'blend':
-            v = float(r['ik_cpu_ms_mean'])
-            out.append({'target': f'{r["cameras"]}, {r["mode"]}: IK < 5 ms/frame (mean CPU)',
-                        'measured': v, 'threshold': IK_MS_TARGET, 'margin': v - IK_MS_TARGET,
-                        'result': 'PASS' if v < IK_MS_TARGET else 'FAIL'})
+            out.append(target_row(f'{r["cameras"]}, {r["mode"]}: IK < 5 ms/frame (mean CPU)',
+                                  r['ik_cpu_ms_mean'], IK_MS_TARGET))
     return out
 
 
