@@ -6,7 +6,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ['format_table', 'print_table', 'write_json']
+__all__ = ['format_table', 'format_markdown_table', 'print_table', 'write_json']
 
 
 def _cell(value: Any) -> str:
@@ -28,6 +28,19 @@ def format_table(rows: Sequence[Mapping[str, Any]], title: str = '') -> str:
     lines.append('  '.join(col.ljust(w) for col, w in zip(columns, widths, strict=True)))
     lines.append('  '.join('-' * w for w in widths))
     lines += ['  '.join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in cells]
+    return '\n'.join(lines)
+
+
+def format_markdown_table(rows: Sequence[Mapping[str, Any]]) -> str:
+    """Format rows (dicts sharing keys) as a Markdown table, numbers as :func:`format_table`."""
+    if not rows:
+        return '(no rows)'
+    columns = list(rows[0].keys())
+    for row in rows[1:]:
+        columns += [key for key in row if key not in columns]
+    lines = ['| ' + ' | '.join(columns) + ' |', '|' + '---|' * len(columns)]
+    lines += ['| ' + ' | '.join(_cell(row.get(col, '')) for col in columns) + ' |'
+              for row in rows]
     return '\n'.join(lines)
 
 

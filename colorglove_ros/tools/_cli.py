@@ -12,13 +12,15 @@ __all__ = ['tool_parser', 'run_tool']
 
 
 def tool_parser(description: str | None, *, raw_description: bool = False,
-                json_help: str = 'also write the figures to this JSON file'
+                json_help: str | None = 'also write the figures to this JSON file'
                 ) -> argparse.ArgumentParser:
-    """An argument parser with the ``--json PATH`` option every evaluation and benchmark has."""
+    """An argument parser with the ``--json PATH`` option every evaluation and benchmark has
+    (``json_help=None``: a tool that writes no figures)."""
     formatter = (argparse.RawDescriptionHelpFormatter if raw_description
                  else argparse.HelpFormatter)
     parser = argparse.ArgumentParser(description=description, formatter_class=formatter)
-    parser.add_argument('--json', type=Path, metavar='PATH', help=json_help)
+    if json_help is not None:
+        parser.add_argument('--json', type=Path, metavar='PATH', help=json_help)
     return parser
 
 
