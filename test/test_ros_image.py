@@ -74,8 +74,8 @@ def test_rgb8_view_reorders_channels(encoding: str, channel_order: list[int]) ->
 
 
 def test_unsupported_encoding_names_it() -> None:
-    msg = Image(height=2, width=2, encoding='yuv422', step=4, data=bytes(8))
-    with pytest.raises(ImageEncodingError, match='yuv422'):
+    msg = Image(height=2, width=2, encoding='yuv420p10', step=4, data=bytes(8))
+    with pytest.raises(ImageEncodingError, match='yuv420p10'):
         image_to_array(msg)
 
 

@@ -11,6 +11,7 @@ from colorglove_ros.ros.image_codec import (
     ENCODINGS,
     ImageEncodingError,
     ImageFormat,
+    compressed_image_to_rgb8,
     image_format,
     image_to_array,
     image_to_rgb8,
@@ -18,7 +19,7 @@ from colorglove_ros.ros.image_codec import (
 
 __all__ = [
     'ENCODINGS', 'ImageEncodingError', 'ImageFormat', 'image_to_array', 'array_to_image',
-    'image_to_rgb8',
+    'image_to_rgb8', 'compressed_image_to_rgb8',
 ]
 
 
@@ -40,7 +41,8 @@ def array_to_image(pixels: np.ndarray, encoding: str, header=None) -> Image:
     msg = Image()
     if header is not None:
         msg.header = header
-    msg.height, msg.width = int(pixels.shape[0]), int(pixels.shape[1])
+    numerator, denominator = fmt.rows_per_height
+    msg.height, msg.width = int(pixels.shape[0]) * denominator // numerator, int(pixels.shape[1])
     msg.encoding = encoding
     msg.is_bigendian = 0
     msg.step = msg.width * fmt.channels * fmt.dtype.itemsize

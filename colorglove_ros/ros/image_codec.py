@@ -1,5 +1,12 @@
-"""Pixels of ``sensor_msgs/Image``-like messages (rclpy or rosbags objects) as numpy arrays,
-honouring encoding, ``step`` padding and byte order; no message classes are imported."""
+"""Pixels of ``sensor_msgs/Image`` and ``sensor_msgs/CompressedImage``-like messages (rclpy or
+rosbags objects) as numpy arrays, honouring encoding, ``step`` padding and byte order; no
+message classes are imported.
+
+Encodings follow ``sensor_msgs/image_encodings.hpp`` and cv_bridge's conversions: packed RGB/BGR
+(8 and 16 bit, with or without alpha), ``8UC3``/``8UC4`` as BGR/BGRA, mono, YUV 4:2:2 in both
+byte orders (``yuv422`` = UYVY, ``yuv422_yuy2`` = YUYV, what usb_cam's yuyv mode publishes),
+``nv21``, and Bayer mosaics in all four patterns at 8 and 16 bit (demosaiced by OpenCV, whose
+pattern names count from the second row: ``bayer_rggb8`` is OpenCV's ``BayerBG``)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -10,8 +17,8 @@ import numpy as np
 
 from colorglove_ros.core.errors import ColorGloveError
 
-__all__ = ['ENCODINGS', 'ImageEncodingError', 'ImageFormat', 'image_format', 'image_to_array',
-           'image_to_rgb8']
+__all__ = ['COMPRESSED_FORMATS', 'ENCODINGS', 'ImageEncodingError', 'ImageFormat',
+           'compressed_image_to_rgb8', 'image_format', 'image_to_array', 'image_to_rgb8']
 
 
 class ImageEncodingError(ColorGloveError, ValueError):
@@ -20,12 +27,24 @@ class ImageEncodingError(ColorGloveError, ValueError):
 
 @dataclass(frozen=True)
 class ImageFormat:
-    """Pixel layout of one ``sensor_msgs/Image`` encoding; ``rgb`` gives the channel indices
-    that reach RGB order (None: not a colour encoding)."""
+    """Pixel layout of one ``sensor_msgs/Image`` encoding.
+
+    ``rgb``: channel indices that reach RGB order for packed colour encodings; ``cv_to_rgb``:
+    the OpenCV conversion of the stored array to RGB for YUV and Bayer encodings (both None: not
+    a colour encoding); ``rows_per_height``: stored rows per image row as (numerator,
+    denominator), 3/2 for the chroma plane under ``nv21``'s luma.
+    """
 
     dtype: np.dtype
     channels: int
     rgb: tuple[int, int, int] | None = None
+    cv_to_rgb: int | None = None
+    rows_per_height: tuple[int, int] = (1, 1)
+
+    @property
+    def is_colour(self) -> bool:
+        """Whether the encoding carries colour."""
+        return self.rgb is not None or self.cv_to_rgb is not None
 
 
 _U8, _U16 = np.dtype(np.uint8), np.dtype(np.uint16)
@@ -37,6 +56,7 @@ ENCODINGS: dict[str, ImageFormat] = {
     'rgba8': ImageFormat(_U8, 4, _RGB),
     'bgra8': ImageFormat(_U8, 4, _BGR),
     '8UC3': ImageFormat(_U8, 3, _BGR),
+    '8UC4': ImageFormat(_U8, 4, _BGR),
     'rgb16': ImageFormat(_U16, 3, _RGB),
     'bgr16': ImageFormat(_U16, 3, _BGR),
     'rgba16': ImageFormat(_U16, 4, _RGB),
@@ -46,7 +66,20 @@ ENCODINGS: dict[str, ImageFormat] = {
     '8UC1': ImageFormat(_U8, 1),
     '16UC1': ImageFormat(_U16, 1),
     '32FC1': ImageFormat(np.dtype(np.float32), 1),
+    'yuv422': ImageFormat(_U8, 2, cv_to_rgb=cv2.COLOR_YUV2RGB_UYVY),
+    'uyvy': ImageFormat(_U8, 2, cv_to_rgb=cv2.COLOR_YUV2RGB_UYVY),
+    'yuv422_yuy2': ImageFormat(_U8, 2, cv_to_rgb=cv2.COLOR_YUV2RGB_YUYV),
+    'yuyv': ImageFormat(_U8, 2, cv_to_rgb=cv2.COLOR_YUV2RGB_YUYV),
+    'nv21': ImageFormat(_U8, 1, cv_to_rgb=cv2.COLOR_YUV2RGB_NV21, rows_per_height=(3, 2)),
 }
+# Bayer mosaics: ROS names the 2x2 pattern from the first row, OpenCV from the second.
+_BAYER_TO_RGB = {'rggb': cv2.COLOR_BayerBG2RGB, 'bggr': cv2.COLOR_BayerRG2RGB,
+                 'gbrg': cv2.COLOR_BayerGR2RGB, 'grbg': cv2.COLOR_BayerGB2RGB}
+for _pattern, _conversion in _BAYER_TO_RGB.items():
+    ENCODINGS[f'bayer_{_pattern}8'] = ImageFormat(_U8, 1, cv_to_rgb=_conversion)
+    ENCODINGS[f'bayer_{_pattern}16'] = ImageFormat(_U16, 1, cv_to_rgb=_conversion)
+# sensor_msgs/CompressedImage ``format`` words image_transport's compressed transport writes
+COMPRESSED_FORMATS = ('jpeg', 'jpg', 'png')
 _MONO = ('mono8', 'mono16')
 # (channels, channel order) -> OpenCV conversion to RGB (None: already RGB); cv2 is ~40x faster
 # than numpy fancy indexing or a reversed-stride copy on a 640x480 frame
@@ -74,6 +107,11 @@ def image_to_array(msg: Any) -> np.ndarray:
     height, width, step = int(msg.height), int(msg.width), int(msg.step)
     if height == 0 or width == 0:
         raise ImageEncodingError(f'empty image ({width}x{height})')
+    numerator, denominator = fmt.rows_per_height
+    subsampled_chroma = fmt.channels == 2 or (numerator, denominator) != (1, 1)
+    if (height * numerator) % denominator or (subsampled_chroma and width % 2):
+        raise ImageEncodingError(f'{msg.encoding} needs an even image size, got {width}x{height}')
+    height = height * numerator // denominator
     row_bytes = width * fmt.channels * fmt.dtype.itemsize
     if step < row_bytes:
         raise ImageEncodingError(
@@ -99,15 +137,19 @@ def image_to_array(msg: Any) -> np.ndarray:
 def image_to_rgb8(msg: Any, *, allow_mono: bool = False) -> np.ndarray:
     """Return a colour image as contiguous (H, W, 3) uint8 RGB (alpha dropped; 16-bit
     channels keep their high byte). Mono images are refused (glove segmentation needs colour)
-    unless ``allow_mono``, which replicates the grey level into three channels."""
+    unless ``allow_mono``, which replicates the grey level into three channels. YUV, NV21 and
+    Bayer images are converted as cv_bridge does."""
     encoding = str(msg.encoding)
     fmt = image_format(encoding)
-    if fmt.rgb is None and not (allow_mono and encoding in _MONO):
-        colour = [name for name, f in ENCODINGS.items() if f.rgb is not None]
+    if not fmt.is_colour and not (allow_mono and encoding in _MONO):
+        colour = [name for name, f in ENCODINGS.items() if f.is_colour]
         raise ImageEncodingError(
             f'glove segmentation needs a colour image; got encoding {encoding!r} '
             f'(use one of {", ".join(colour)})')
     pixels = image_to_array(msg)
+    if fmt.cv_to_rgb is not None:
+        rgb = cv2.cvtColor(np.ascontiguousarray(pixels), fmt.cv_to_rgb)
+        return (rgb >> 8).astype(np.uint8) if rgb.dtype == _U16 else rgb
     if fmt.dtype == _U16:
         pixels = (pixels >> 8).astype(np.uint8)
     pixels = np.ascontiguousarray(pixels)
@@ -117,3 +159,22 @@ def image_to_rgb8(msg: Any, *, allow_mono: bool = False) -> np.ndarray:
     if conversion is None:
         return pixels if pixels.flags.writeable else pixels.copy()
     return cv2.cvtColor(pixels, conversion)
+
+
+def compressed_image_to_rgb8(msg: Any) -> np.ndarray:
+    """Decode a ``sensor_msgs/CompressedImage`` (JPEG or PNG, as image_transport's compressed
+    transport writes them; ``format`` such as ``jpeg`` or ``rgb8; jpeg compressed bgr8``) to
+    contiguous (H, W, 3) uint8 RGB. Anything else, or data that does not decode, is refused."""
+    declared = str(msg.format).lower()
+    if not any(word in declared.replace(';', ' ').split() for word in COMPRESSED_FORMATS):
+        raise ImageEncodingError(f'unsupported compressed image format {msg.format!r}; '
+                                 f'supported: {", ".join(COMPRESSED_FORMATS)}')
+    data = np.frombuffer(bytes(msg.data), dtype=np.uint8) if not isinstance(msg.data, np.ndarray) \
+        else msg.data.view(np.uint8).reshape(-1)
+    if data.size == 0:
+        raise ImageEncodingError('empty compressed image')
+    bgr = cv2.imdecode(data, cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise ImageEncodingError(f'compressed image ({msg.format!r}, {data.size} bytes) does not '
+                                 'decode')
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
