@@ -22,17 +22,27 @@ python -m pip install --quiet -r "$repo/requirements.txt"
 echo "==> fixing include paths in the ROS message wheels' CMake exports"
 python "$repo/scripts/fix_cmake_exports.py" "$venv"
 
-echo "==> building colorglove_msgs into the venv"
-build_dir=$repo/build/colorglove_msgs
-mkdir -p "$repo/build"
-cmake -S "$repo/colorglove_msgs" -B "$build_dir" \
-    -DCMAKE_INSTALL_PREFIX="$venv" -DCMAKE_PREFIX_PATH="$venv" \
-    -DPython3_EXECUTABLE="$venv/bin/python" -DBUILD_TESTING=OFF > "$build_dir.log" 2>&1 \
-    || { cat "$build_dir.log"; exit 1; }
-cmake --build "$build_dir" -j2 >> "$build_dir.log" 2>&1 || { tail -50 "$build_dir.log"; exit 1; }
-cmake --install "$build_dir" >> "$build_dir.log" 2>&1 || { tail -50 "$build_dir.log"; exit 1; }
+# Build an interface package from source into the venv (cmake + rosidl from the wheels).
+build_interfaces() {
+    local name=$1 source=$2
+    echo "==> building $name into the venv"
+    local build_dir=$repo/build/$name
+    mkdir -p "$repo/build"
+    cmake -S "$source" -B "$build_dir" \
+        -DCMAKE_INSTALL_PREFIX="$venv" -DCMAKE_PREFIX_PATH="$venv" \
+        -DPython3_EXECUTABLE="$venv/bin/python" -DBUILD_TESTING=OFF > "$build_dir.log" 2>&1 \
+        || { cat "$build_dir.log"; exit 1; }
+    cmake --build "$build_dir" -j2 >> "$build_dir.log" 2>&1 || { tail -50 "$build_dir.log"; exit 1; }
+    cmake --install "$build_dir" >> "$build_dir.log" 2>&1 || { tail -50 "$build_dir.log"; exit 1; }
+}
+
+# tf2_msgs is not among the PyPI wheels: build the standard TFMessage so /tf works everywhere.
+if ! python -c "import tf2_msgs.msg" 2>/dev/null; then
+    build_interfaces tf2_msgs "$repo/scripts/pip_only/tf2_msgs"
+fi
+build_interfaces colorglove_msgs "$repo/colorglove_msgs"
 
 echo "==> installing colorglove_ros"
 python -m pip install --quiet --no-deps --no-build-isolation -e "$repo"
 
-python -c "import rclpy, colorglove_msgs.msg, colorglove_ros; print('colorglove_ros ready in', '$venv')"
+python -c "import rclpy, colorglove_msgs.msg, tf2_msgs.msg, colorglove_ros; print('colorglove_ros ready in', '$venv')"
