@@ -17,7 +17,8 @@ ROSDEP_KEYS = {
     'rcl_interfaces': 'rcl_interfaces', 'std_msgs': 'std_msgs', 'sensor_msgs': 'sensor_msgs',
     'geometry_msgs': 'geometry_msgs', 'visualization_msgs': 'visualization_msgs',
     'builtin_interfaces': 'builtin_interfaces', 'colorglove_msgs': 'colorglove_msgs',
-    'tf2_msgs': 'tf2_msgs', 'diagnostic_msgs': 'diagnostic_msgs', 'launch': 'launch',
+    'tf2_msgs': 'tf2_msgs', 'diagnostic_msgs': 'diagnostic_msgs',
+    'rosgraph_msgs': 'rosgraph_msgs', 'launch': 'launch',
     'launch_ros': 'launch_ros', 'ament_index_python': 'ament_index_python',
 }
 

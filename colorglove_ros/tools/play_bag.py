@@ -1,5 +1,9 @@
 """Publish a rosbag2 (sqlite3 or MCAP) into the ROS graph, with its original timing or paced by
-the pipeline's output (next frame as soon as the previous one has produced a result)."""
+the pipeline's output (next frame as soon as the previous one has produced a result).
+
+Like ``ros2 bag play``: each topic is offered with the QoS its recorded publishers offered,
+``--clock`` publishes the bag's time on ``/clock`` (for nodes with ``use_sim_time``), and
+``--loop`` plays the bag again from the start until Ctrl-C."""
 from __future__ import annotations
 
 import argparse
@@ -9,10 +13,12 @@ import time
 from pathlib import Path
 
 import rclpy
+from builtin_interfaces.msg import Time
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 from rosbags.highlevel import AnyReader
+from rosgraph_msgs.msg import Clock
 
+from colorglove_ros.ros.bag_qos import publisher_qos_for_recorded
 from colorglove_ros.ros.typestore import colorglove_typestore, message_class
 
 __all__ = ['BagPlayer', 'main']
@@ -29,11 +35,18 @@ class BagPlayer(Node):
                             if not topics or c.topic in topics]
         if not self.connections:
             raise ValueError(f'bag {bag} has none of the topics {topics}')
-        qos = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE)
+        self.qos_by_topic = {c.topic: publisher_qos_for_recorded(
+            getattr(c.ext, 'offered_qos_profiles', None) or []) for c in self.connections}
         self.publishers_by_topic = {
-            c.topic: self.create_publisher(message_class(c.msgtype), c.topic, qos)
+            c.topic: self.create_publisher(message_class(c.msgtype), c.topic,
+                                           self.qos_by_topic[c.topic])
             for c in self.connections}
+        self.clock_publisher = None
         self.output_event = threading.Event()
+
+    def publish_clock(self, clock_topic: str = '/clock') -> None:
+        """Also publish each message's bag time on ``clock_topic`` (rosgraph_msgs/Clock)."""
+        self.clock_publisher = self.create_publisher(Clock, clock_topic, 10)
 
     def wait_for_subscribers(self, topic: str, timeout_s: float, count: int = 1) -> bool:
         """Wait until ``topic`` has ``count`` subscribers (so the first frames are not lost)."""
@@ -60,6 +73,9 @@ class BagPlayer(Node):
                     time.sleep(delay)
             if pace_on is not None and connection.topic == pace_on:
                 self.output_event.clear()
+            if self.clock_publisher is not None:
+                sec, nanosec = divmod(int(timestamp), 10**9)
+                self.clock_publisher.publish(Clock(clock=Time(sec=sec, nanosec=nanosec)))
             self.publishers_by_topic[connection.topic].publish(bytes(rawdata))
             count += 1
             if pace_on is not None and connection.topic == pace_on:
@@ -91,6 +107,10 @@ def main(argv: list[str] | None = None) -> int:
                         help='wait this long for a subscriber on --pace-on before starting')
     parser.add_argument('--min-subscribers', type=int, default=1,
                         help='subscribers on --pace-on to wait for before starting')
+    parser.add_argument('--loop', action='store_true', help='play again from the start until '
+                        'Ctrl-C')
+    parser.add_argument('--clock', action='store_true',
+                        help="publish the bag's time on /clock (rosgraph_msgs/Clock)")
     parser.add_argument('--linger', type=float, default=1.0,
                         help='seconds to stay up after the last message, for late deliveries')
     args, ros_args = parser.parse_known_args(argv)
@@ -112,11 +132,16 @@ def main(argv: list[str] | None = None) -> int:
         if args.pace_on in player.publishers_by_topic:
             player.wait_for_subscribers(args.pace_on, args.wait_subscribers,
                                         args.min_subscribers)
-        started = time.monotonic()
-        count = player.play(args.rate, args.pace_topic if args.paced else None,
-                            args.pace_on if args.paced else None, args.pace_timeout)
-        elapsed = time.monotonic() - started
-        print(f'published {count} messages in {elapsed:.1f} s', flush=True)
+        if args.clock:
+            player.publish_clock()
+        while True:
+            started = time.monotonic()
+            count = player.play(args.rate, args.pace_topic if args.paced else None,
+                                args.pace_on if args.paced else None, args.pace_timeout)
+            elapsed = time.monotonic() - started
+            print(f'published {count} messages in {elapsed:.1f} s', flush=True)
+            if not args.loop:
+                break
         time.sleep(args.linger)
     except KeyboardInterrupt:
         pass

@@ -12,7 +12,7 @@ from pathlib import Path
 import rclpy
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, QoSReliabilityPolicy
+from rclpy.qos import QoSProfile
 from rosbags.interfaces import (
     Qos,
     QosDurability,
@@ -23,6 +23,7 @@ from rosbags.interfaces import (
 )
 from rosbags.rosbag2 import StoragePlugin, Writer
 
+from colorglove_ros.ros.bag_qos import subscription_qos_for_offers
 from colorglove_ros.ros.typestore import colorglove_typestore, message_class
 
 __all__ = ['DEFAULT_TOPICS', 'BagRecorder', 'main', 'offered_qos']
@@ -68,16 +69,17 @@ class BagRecorder(Node):
                 continue
             msgtype = types[0]
             self.pending.discard(topic)
-            offered = [offered_qos(info.qos_profile)
-                       for info in self.get_publishers_info_by_topic(topic)]
+            publishers = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
+            offered = [offered_qos(profile) for profile in publishers]
             with self.lock:
                 self.connections[topic] = self.writer.add_connection(
                     topic, msgtype, typestore=self.typestore, offered_qos_profiles=offered)
             msg_class = message_class(msgtype)
-            qos = QoSProfile(depth=100, reliability=QoSReliabilityPolicy.BEST_EFFORT)
+            qos = subscription_qos_for_offers(publishers)
             self.create_subscription(msg_class, topic,
                                      lambda data, t=topic: self.write(t, data), qos, raw=True)
-            self.get_logger().info(f'recording {topic} [{msgtype}]')
+            self.get_logger().info(f'recording {topic} [{msgtype}] '
+                                   f'({qos.reliability.name.lower()})')
 
     def write(self, topic: str, data: bytes) -> None:
         """Write one serialized message with the receive time."""
