@@ -1,23 +1,30 @@
 """Pinhole cameras (intrinsics, distortion, extrinsics) and the calibration YAML."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.validation import MAX_IMAGE_SIDE, check_array, check_number
 from colorglove_ros.core.yaml_io import load_yaml_mapping
 
 __all__ = [
+    'camera_from_camera_info', 'load_camera_info_yaml',
     'CALIBRATION_VERSION', 'DISTORTION_MODELS', 'CalibrationError', 'PinholeCamera',
     'Calibration', 'load_calibration', 'look_at_extrinsics',
 ]
 
 CALIBRATION_VERSION = 1
-# number of distortion coefficients -> the sensor_msgs/CameraInfo distortion model (OpenCV order)
-DISTORTION_MODELS = {5: 'plumb_bob', 8: 'rational_polynomial'}
+# number of distortion coefficients -> the sensor_msgs/CameraInfo distortion model (OpenCV order;
+# equidistant is OpenCV's fisheye model, k1..k4)
+DISTORTION_MODELS = {5: 'plumb_bob', 8: 'rational_polynomial', 4: 'equidistant'}
+# the standard camera_info YAML of camera_calibration_parsers (camera_calibration's output)
+CAMERA_INFO_YAML_KEYS = ('image_width', 'image_height', 'camera_matrix')
 
 
 class CalibrationError(ColorGloveError):
@@ -45,13 +52,14 @@ class PinholeCamera:
         size = np.shape(self.distortion)
         if len(size) != 1 or size[0] not in DISTORTION_MODELS:
             raise CalibrationError(
-                f'camera {self.name!r}: distortion needs 5 (plumb_bob: k1 k2 p1 p2 k3) or 8 '
-                f'(rational_polynomial) coefficients, got shape {size}')
+                f'camera {self.name!r}: distortion needs 5 (plumb_bob: k1 k2 p1 p2 k3), 8 '
+                f'(rational_polynomial) or 4 (equidistant: k1..k4) coefficients, got shape '
+                f'{size}')
 
     @property
     def distortion_model(self) -> str:
-        """The CameraInfo distortion model of the coefficients (plumb_bob or
-        rational_polynomial)."""
+        """The CameraInfo distortion model of the coefficients (plumb_bob, rational_polynomial
+        or equidistant)."""
         return DISTORTION_MODELS[len(self.distortion)]
 
     def camera_info_fields(self) -> dict:
@@ -96,6 +104,9 @@ class PinholeCamera:
         if not np.any(self.distortion):
             return np.asarray(pixels, dtype=float)
         pts = np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
+        if self.distortion_model == 'equidistant':
+            return cv2.fisheye.undistortPoints(pts, self.K, self.distortion,
+                                               P=self.K).reshape(-1, 2)
         return cv2.undistortPoints(pts, self.K, self.distortion, P=self.K).reshape(-1, 2)
 
     def to_dict(self) -> dict:
@@ -116,7 +127,7 @@ class Calibration:
     """All cameras of a rig plus the user's hand length."""
 
     cameras: tuple[PinholeCamera, ...]
-    hand_length_m: float = 0.19
+    hand_length_m: float = DEFAULT_HAND_LENGTH_M
 
     @property
     def primary(self) -> PinholeCamera:
@@ -125,19 +136,33 @@ class Calibration:
 
 
 def _camera_from_dict(entry: dict, where: str) -> PinholeCamera:
-    try:
-        width, height = int(entry['width']), int(entry['height'])
-        fx, fy = float(entry['fx']), float(entry['fy'])
-        cx, cy = float(entry['cx']), float(entry['cy'])
-        distortion = np.asarray(entry.get('distortion', [0.0] * 5), dtype=float)
-        rvec = np.asarray(entry.get('rotation_vector', [0.0, 0.0, 0.0]), dtype=float)
-        translation = np.asarray(entry.get('translation', [0.0, 0.0, 0.0]), dtype=float)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise CalibrationError(f'{where}: bad or missing camera field: {exc}') from exc
-    if width <= 0 or height <= 0 or fx <= 0 or fy <= 0:
-        raise CalibrationError(f'{where}: image size and focal lengths must be positive')
-    if rvec.shape != (3,) or translation.shape != (3,):
-        raise CalibrationError(f'{where}: rotation_vector and translation need 3 values')
+    if not isinstance(entry, dict):
+        raise CalibrationError(f'{where}: a camera must be a mapping, got {entry!r}')
+    missing = [key for key in ('width', 'height', 'fx', 'fy', 'cx', 'cy') if key not in entry]
+    if missing:
+        raise CalibrationError(f'{where}: missing camera field(s) {missing}')
+
+    def number(key: str, **bounds) -> float:
+        return check_number(f'{where}: {key}', entry[key], error=CalibrationError, **bounds)
+
+    # finite, positive focal lengths; principal point within (a margin around) the image
+    width = int(number('width', low=1, high=MAX_IMAGE_SIDE, integer=True))
+    height = int(number('height', low=1, high=MAX_IMAGE_SIDE, integer=True))
+    fx = float(number('fx', low=0.0, low_open=True, high=100.0 * max(width, height)))
+    fy = float(number('fy', low=0.0, low_open=True, high=100.0 * max(width, height)))
+    cx = float(number('cx', low=-width, high=2.0 * width))
+    cy = float(number('cy', low=-height, high=2.0 * height))
+
+    def vector(key: str, default: list[float], shape: tuple[int | None, ...]) -> np.ndarray:
+        value = entry.get(key, default)
+        if not isinstance(value, (list, tuple)):
+            raise CalibrationError(f'{where}: {key} must be a list of numbers, got {value!r}')
+        return check_array(f'{where}: {key}', value, shape=shape, error=CalibrationError
+                           ).astype(float)
+
+    distortion = vector('distortion', [0.0] * 5, (None,))
+    rvec = vector('rotation_vector', [0.0, 0.0, 0.0], (3,))
+    translation = vector('translation', [0.0, 0.0, 0.0], (3,))
     rotation = cv2.Rodrigues(rvec)[0]
     try:
         return PinholeCamera(width, height, fx, fy, cx, cy, distortion, rotation, translation,
@@ -147,10 +172,106 @@ def _camera_from_dict(entry: dict, where: str) -> PinholeCamera:
         raise CalibrationError(f'{where}: {exc}') from exc
 
 
+def _camera_entry(entry: object, path: Path, where: str) -> PinholeCamera:
+    """One camera of the own format, its intrinsics inline or from a ``camera_info_file``."""
+    if not isinstance(entry, dict) or 'camera_info_file' not in entry:
+        return _camera_from_dict(entry, where)
+    info_path = Path(str(entry['camera_info_file'])).expanduser()
+    if not info_path.is_absolute():
+        info_path = path.parent / info_path
+    camera = load_camera_info_yaml(info_path, rectified=bool(entry.get('rectified', False)))
+    merged = {**camera.to_dict(), **{k: v for k, v in entry.items()
+                                     if k in ('name', 'frame_id', 'rotation_vector',
+                                              'translation')}}
+    return _camera_from_dict(merged, where)
+
+
+def camera_from_camera_info(width: int, height: int, k: Sequence[float], d: Sequence[float],
+                            distortion_model: str, p: Sequence[float] | None = None, *,
+                            rectified: bool = False, name: str = 'camera',
+                            frame_id: str = 'camera_optical_frame', where: str = 'CameraInfo'
+                            ) -> PinholeCamera:
+    """A camera from the fields of a ``sensor_msgs/CameraInfo`` (or its YAML file).
+
+    ``rectified``: the images are ``image_rect`` (image_proc's output), so the intrinsics are
+    the projection matrix P's and there is no distortion left, as image_geometry does.
+    """
+    k_matrix = check_array(f'{where}: K', k, shape=(9,), error=CalibrationError).reshape(3, 3)
+    if rectified:
+        if p is None:
+            raise CalibrationError(f'{where}: rectified images need the projection matrix P')
+        intrinsics = check_array(f'{where}: P', p, shape=(12,),
+                                 error=CalibrationError).reshape(3, 4)[:, :3]
+        coefficients = np.zeros(5)
+    else:
+        intrinsics = k_matrix
+        model = str(distortion_model)
+        expected = {m: n for n, m in DISTORTION_MODELS.items()}
+        if model not in expected:
+            raise CalibrationError(f'{where}: distortion model {model!r} is not supported '
+                                   f'(supported: {", ".join(expected)}; or rectified images)')
+        coefficients = check_array(f'{where}: D', d, error=CalibrationError).astype(float)
+        if coefficients.size == 0:
+            coefficients = np.zeros(expected[model])
+        if coefficients.shape != (expected[model],):
+            raise CalibrationError(f'{where}: {model} needs {expected[model]} distortion '
+                                   f'coefficients, got {coefficients.size}')
+    entry = {'width': width, 'height': height, 'fx': intrinsics[0, 0], 'fy': intrinsics[1, 1],
+             'cx': intrinsics[0, 2], 'cy': intrinsics[1, 2],
+             'distortion': [float(v) for v in coefficients], 'name': name,
+             'frame_id': frame_id}
+    return _camera_from_dict(entry, where)
+
+
+def _yaml_matrix(data: dict, key: str, shape: tuple[int, int], where: str) -> list[float]:
+    block = data.get(key)
+    if not isinstance(block, dict) or 'data' not in block:
+        raise CalibrationError(f'{where}: {key} must be a mapping with rows, cols and data')
+    if (block.get('rows'), block.get('cols')) != shape and key != 'distortion_coefficients':
+        raise CalibrationError(f'{where}: {key} must be {shape[0]}x{shape[1]}, got '
+                               f'{block.get("rows")}x{block.get("cols")}')
+    if not isinstance(block['data'], list):
+        raise CalibrationError(f'{where}: {key}.data must be a list of numbers')
+    return block['data']
+
+
+def load_camera_info_yaml(path: str | Path, *, rectified: bool = False,
+                          frame_id: str = 'camera_optical_frame') -> PinholeCamera:
+    """A camera from the standard camera_info YAML that ROS's ``camera_calibration`` writes
+    (camera_calibration_parsers: ``image_width``, ``camera_matrix {rows, cols, data}``,
+    ``distortion_model``, ``distortion_coefficients``, ``projection_matrix``, ...)."""
+    path = Path(path)
+    data = load_yaml_mapping(path, CalibrationError, 'camera_info file')
+    where = f'camera_info file {path}'
+    missing = [key for key in (*CAMERA_INFO_YAML_KEYS, 'distortion_model') if key not in data]
+    if missing:
+        raise CalibrationError(f'{where}: missing {missing}')
+    distortion = data.get('distortion_coefficients', {'rows': 1, 'cols': 0, 'data': []})
+    return camera_from_camera_info(
+        data['image_width'], data['image_height'],
+        _yaml_matrix(data, 'camera_matrix', (3, 3), where),
+        _yaml_matrix({'distortion_coefficients': distortion}, 'distortion_coefficients',
+                     (1, 0), where),
+        data['distortion_model'],
+        _yaml_matrix(data, 'projection_matrix', (3, 4), where)
+        if 'projection_matrix' in data else None,
+        rectified=rectified, name=str(data.get('camera_name', 'camera')), frame_id=frame_id,
+        where=where)
+
+
 def load_calibration(path: str | Path) -> Calibration:
-    """Read a calibration YAML; raise :class:`CalibrationError` naming what is wrong."""
+    """Read a calibration YAML; raise :class:`CalibrationError` naming what is wrong.
+
+    Besides this package's own format (``version: 1``, ``hand_length_m``, a list of cameras),
+    a standard camera_info YAML from ``camera_calibration`` is read as one camera at the origin
+    with the default hand length; a camera entry of the own format may also name one with
+    ``camera_info_file`` (and ``rectified: true`` for ``image_rect`` input), keeping its
+    extrinsics, name and frame_id in the own file.
+    """
     path = Path(path)
     data = load_yaml_mapping(path, CalibrationError, 'calibration file')
+    if all(key in data for key in CAMERA_INFO_YAML_KEYS):
+        return Calibration((load_camera_info_yaml(path),), DEFAULT_HAND_LENGTH_M)
     if data.get('version') != CALIBRATION_VERSION:
         raise CalibrationError(
             f'calibration file {path} has version {data.get("version")!r}, '
@@ -158,11 +279,13 @@ def load_calibration(path: str | Path) -> Calibration:
     entries = data.get('cameras')
     if not isinstance(entries, list) or not entries:
         raise CalibrationError(f'calibration file {path} lists no cameras')
-    cameras = tuple(_camera_from_dict(e, f'{path}: camera {i}') for i, e in enumerate(entries))
+    cameras = tuple(_camera_entry(e, path, f'{path}: camera {i}') for i, e in enumerate(entries))
     frame_ids = [camera.frame_id for camera in cameras]
     if len(set(frame_ids)) != len(frame_ids):
         raise CalibrationError(f'{path}: cameras need distinct frame_id values, got {frame_ids}')
-    hand_length = float(data.get('hand_length_m', 0.19))
+    hand_length = check_number(f'{path}: hand_length_m',
+                               data.get('hand_length_m', DEFAULT_HAND_LENGTH_M),
+                               error=CalibrationError)
     if not 0.08 < hand_length < 0.35:
         raise CalibrationError(f'{path}: hand_length_m {hand_length} is not a human hand')
     return Calibration(cameras, hand_length)
