@@ -18,8 +18,9 @@ def generate_launch_description() -> LaunchDescription:
     share = get_package_share_directory('colorglove_ros')
     params_file = LaunchConfiguration('params_file')
     nodes = [
+        # respawned after a crash or kill (start-up errors show in the log and repeat)
         Node(package='colorglove_ros', executable=executable, name=name,
-             parameters=[params_file], output='screen')
+             parameters=[params_file], output='screen', respawn=True, respawn_delay=0.5)
         for executable, name in (('camera_node', 'camera'), ('segmentation_node', 'segmentation'),
                                  ('lookup_node', 'lookup'), ('ik_node', 'ik'))
     ]

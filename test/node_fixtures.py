@@ -80,16 +80,18 @@ def node_assets(tmp_path_factory: pytest.TempPathFactory) -> NodeAssets:
 def glove_frame(seed: int, out_of_frame: bool = False):
     """A rendered 640x480 'test' frame of the gloved hand (``core.synth.SyntheticFrame``)."""
     from colorglove_ros.core.synthetic import frames as synth
+    from colorglove_ros.core.synthetic.conditions import sample_conditions
 
     rng = np.random.default_rng(seed)
     camera = synth.default_camera()
     q = synth.sample_pose(rng, camera, out_of_frame_prob=1.0 if out_of_frame else 0.0)
-    return synth.render_frame(q, camera, rng, synth.sample_conditions(rng, 'test'))
+    return synth.render_frame(q, camera, rng, sample_conditions(rng, 'test'))
 
 
 def hand_far_out_of_frame_rgb(seed: int) -> np.ndarray:
     """A frame whose hand centre projects 60 px left of the image (most of it outside)."""
     from colorglove_ros.core.synthetic import frames as synth
+    from colorglove_ros.core.synthetic.conditions import sample_conditions
 
     rng = np.random.default_rng(seed)
     camera = synth.default_camera()
@@ -99,15 +101,16 @@ def hand_far_out_of_frame_rgb(seed: int) -> np.ndarray:
     centre = default_hand()[0].keypoints(q).mean(axis=0)     # camera frame, metres
     u = camera.fx * centre[0] / centre[2] + camera.cx
     q[0] += (-60.0 - u) * centre[2] / camera.fx
-    return synth.render_frame(q, camera, rng, synth.sample_conditions(rng, 'test')).image_rgb
+    return synth.render_frame(q, camera, rng, sample_conditions(rng, 'test')).image_rgb
 
 
 def background_rgb(seed: int = 3) -> np.ndarray:
     """A 640x480 procedural desk background with no hand, as sRGB uint8."""
-    from colorglove_ros.core.synthetic import frames as synth
+    from colorglove_ros.core.colorimetry import linear_to_srgb
+    from colorglove_ros.core.synthetic.backgrounds import make_background
 
-    linear = synth.make_background('desk', seed, 640, 480)
-    return (np.clip(synth.linear_to_srgb(linear), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    linear = make_background('desk', seed, 640, 480)
+    return (np.clip(linear_to_srgb(linear, np.float32), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 
 def header(sec: int, nanosec: int = 0, frame_id: str = 'camera_optical_frame'):

@@ -18,7 +18,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from sensor_msgs.msg import JointState
 
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.synthetic.frames import SyntheticSequenceRenderer
+from colorglove_ros.core.synthetic.sequences import SyntheticSequenceRenderer
 from colorglove_ros.ros.bags import camera_topics, read_sequence_bag
 from colorglove_ros.ros.image_codec import image_to_rgb8
 from colorglove_ros.ros.typestore import colorglove_typestore, deserialize_cdr

@@ -7,28 +7,28 @@ import cv2
 import numpy as np
 import pytest
 
+from colorglove_ros.core.colorimetry import linear_rgb_to_xyz, linear_to_srgb, srgb_to_linear
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
+from colorglove_ros.core.segmentation.calibration_fit import fit_color_calibration
 from colorglove_ros.core.segmentation.color_model import (
     CALIBRATION_FORMAT_VERSION,
     CGZ_A,
-    LIGHT_TEMPERATURES_K,
     ColorCalibrationError,
     cgz_chroma,
     cgz_intensity_axis,
-    estimate_light_gains,
-    fit_color_calibration,
-    gain_table,
-    linear_rgb_to_xyz,
-    linear_to_srgb,
     load_calibration,
     lut_index,
-    planckian_illuminants,
     rgb_to_cgz,
     save_calibration,
-    srgb_to_linear,
     xyz_to_cgz,
 )
-from colorglove_ros.tools.eval_segmentation import (
+from colorglove_ros.core.segmentation.light import (
+    LIGHT_TEMPERATURES_K,
+    estimate_light_gains,
+    gain_table,
+    planckian_illuminants,
+)
+from colorglove_ros.core.synthetic.blob_glove import (
     BlobConditions,
     render_blob_frame,
     sample_blob_conditions,
@@ -53,7 +53,7 @@ def calibration(frames):
 
 
 def test_srgb_linear_xyz_reference_values() -> None:
-    np.testing.assert_allclose(srgb_to_linear(np.array([0, 255, 128], np.uint8)),
+    np.testing.assert_allclose(srgb_to_linear(np.array([0, 255, 128]) / 255.0),
                                [0.0, 1.0, 0.2158605], atol=1e-6)
     # D65 white point
     np.testing.assert_allclose(linear_rgb_to_xyz(np.ones(3)), [0.95047, 1.0, 1.08883],
@@ -190,7 +190,7 @@ def test_reference_colours_are_the_training_colours(calibration) -> None:
     ref = calibration.reference_linear_rgb
     assert ref.shape == (10, 3)
     # blob frames: palette colours, shaded 0.7..1 and lit at 0.75..1.15 -> same hue, dimmer
-    palette = srgb_to_linear(GLOVE_PALETTE_RGB)
+    palette = srgb_to_linear(GLOVE_PALETTE_RGB / 255.0)
     dominant = np.argmax(palette, axis=1)
     assert np.mean(np.argmax(ref, axis=1) == dominant) >= 0.9
     ratio = ref.sum(axis=1) / palette.sum(axis=1)
@@ -199,7 +199,8 @@ def test_reference_colours_are_the_training_colours(calibration) -> None:
 
 def test_linear_to_srgb_inverts_srgb_to_linear() -> None:
     levels = np.arange(256, dtype=np.uint8)
-    np.testing.assert_allclose(linear_to_srgb(srgb_to_linear(levels)), levels, atol=1e-6)
+    np.testing.assert_allclose(255.0 * linear_to_srgb(srgb_to_linear(levels / 255.0)), levels,
+                               atol=1e-6)
 
 
 @pytest.mark.parametrize('light', [(1.6, 1.0, 0.55), (0.7, 1.0, 1.5), (1.0, 1.0, 1.0)])
@@ -207,7 +208,7 @@ def test_light_gains_undo_a_tinted_light(light) -> None:
     """Glove pixels = own shading * light * reference colour (+ noise, + a few pixels of a
     wrong label): the gains must bring them back to the reference colours' hue."""
     rng = np.random.default_rng(2)
-    ref = srgb_to_linear(GLOVE_PALETTE_RGB)
+    ref = srgb_to_linear(GLOVE_PALETTE_RGB / 255.0)
     labels = rng.integers(1, 11, 3000)
     # per-pixel and per-colour shading, low enough that no channel clips at white
     shading = rng.uniform(0.2, 0.6, (3000, 1)) * rng.uniform(0.5, 1.0, 11)[labels, None]
@@ -229,8 +230,8 @@ def test_gain_table_scales_linear_rgb() -> None:
     np.testing.assert_array_equal(gain_table(np.ones(3))[0], np.repeat(levels[:, None], 3, 1))
     table = gain_table(np.array([2.0, 1.0, 0.5]))
     assert table.shape == (1, 256, 3) and table.dtype == np.uint8
-    lin = srgb_to_linear(table[0].astype(np.uint8))
-    mid = srgb_to_linear(np.uint8(100))
+    lin = srgb_to_linear(table[0] / 255.0)
+    mid = srgb_to_linear(100 / 255.0)
     np.testing.assert_allclose(lin[100], [2.0 * mid, mid, 0.5 * mid], rtol=0.02)
     assert table[0, 255, 0] == 255   # clipped at white
 

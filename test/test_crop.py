@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.segmentation.crop import (
-    TINY_SIZE,
     CropError,
     CropTransform,
     crop_to_tiny,

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from label_samples import random_blob_images
 
+from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.lookup.database import (
     DATABASE_VERSION,
     BuildConfig,
@@ -20,7 +21,6 @@ from colorglove_ros.core.lookup.database import (
     read_database_config,
     save_database,
 )
-from colorglove_ros.core.lookup.distance import TINY_SIZE
 
 RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5, 'cy': 63.5}
 

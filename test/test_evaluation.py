@@ -30,8 +30,10 @@ from colorglove_ros.core.evaluation.sequences import (
 from colorglove_ros.core.lookup.database import BuildConfig, build_database, save_database
 from colorglove_ros.core.lookup.search import PoseLookup
 from colorglove_ros.core.lookup.temporal_prior import reweight_by_previous
-from colorglove_ros.core.synthetic.frames import Synthesizer, generate_sequence, render_frame
-from colorglove_ros.core.tracking.ik import HandTracker, IKConfig, load_covariances
+from colorglove_ros.core.synthetic.frames import Synthesizer, render_frame
+from colorglove_ros.core.synthetic.sequences import generate_sequence
+from colorglove_ros.core.tracking.config import IKConfig, load_covariances
+from colorglove_ros.core.tracking.tracker import HandTracker
 from colorglove_ros.tools import eval_ik, learn_ik_covariances
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]
@@ -317,7 +319,7 @@ def test_learn_covariances_cli_saves_a_loadable_file(tiny_db_path, tmp_path):
 def test_segmenter_observer_converts_blobs_and_crop():
     from colorglove_ros.core.evaluation.sequences import segmenter_observer
     from colorglove_ros.core.segmentation.crop import CropTransform
-    from colorglove_ros.core.segmentation.segmenter import Blob, Observation
+    from colorglove_ros.core.segmentation.types import Blob, Observation
 
     crop = CropTransform(2.0, 10.0, 20.0)
     seen = Observation(True, 'ok', 640, 480, np.ones((40, 40), np.uint8), crop,

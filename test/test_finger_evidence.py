@@ -16,7 +16,8 @@ from colorglove_ros.core.lookup.finger_evidence import (
     patch_digits,
 )
 from colorglove_ros.core.lookup.search import PoseLookup
-from colorglove_ros.core.tracking.ik import IKConfig, IKError, PosePrior
+from colorglove_ros.core.tracking.config import IKConfig
+from colorglove_ros.core.tracking.types import IKError, PosePrior
 
 CONFIG = FingerEvidenceConfig()
 
@@ -179,7 +180,7 @@ def test_lookup_blends_fingers_from_blobs() -> None:
 def test_candidates_message_carries_the_spread() -> None:
     from colorglove_msgs.msg import HandObservation
 
-    from colorglove_ros.core.lookup.search import LookupResult, ProjectionConstraints
+    from colorglove_ros.core.lookup.types import LookupResult, ProjectionConstraints
     from colorglove_ros.ros.conversions import candidates_msg, pose_prior_from_candidates
 
     cons = ProjectionConstraints(np.array([0]), np.array([1]), np.array([5]),

@@ -7,10 +7,9 @@ import numpy as np
 import pytest
 import trimesh
 
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, NUM_COLORS, NUM_PATCHES
 from colorglove_ros.core.hand.glove import (
     GLOVE_PALETTE_RGB,
-    NUM_COLORS,
-    NUM_PATCHES,
     default_hand,
     export_glove_mesh,
     glove_reference_pose,
@@ -41,14 +40,15 @@ def test_mesh_size_and_binding(hand) -> None:
 
 
 def test_mesh_cached_per_length() -> None:
-    a = build_hand_mesh(HandModel(0.19))
-    b = build_hand_mesh(HandModel(0.19))
+    a = build_hand_mesh(HandModel(DEFAULT_HAND_LENGTH_M))
+    b = build_hand_mesh(HandModel(DEFAULT_HAND_LENGTH_M))
     c = build_hand_mesh(HandModel(0.17))
     assert a is b and c is not a
     assert np.isclose(np.ptp(c.local_vertices[c.vertex_link == 0][:, 1]) /
-                      np.ptp(a.local_vertices[a.vertex_link == 0][:, 1]), 0.17 / 0.19, rtol=1e-6)
+                      np.ptp(a.local_vertices[a.vertex_link == 0][:, 1]),
+                      0.17 / DEFAULT_HAND_LENGTH_M, rtol=1e-6)
     with pytest.raises(HandMeshError):
-        skin_batch(c, HandModel(0.19), np.zeros((1, NUM_DOFS)))
+        skin_batch(c, HandModel(DEFAULT_HAND_LENGTH_M), np.zeros((1, NUM_DOFS)))
 
 
 @pytest.mark.parametrize('seed', [0, 1, 2])

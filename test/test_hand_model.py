@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from colorglove_ros.core.geometry import matrix_to_rotvec, rotvec_to_matrix, so3_left_jacobian
 from colorglove_ros.core.hand.model import (
     DOF_NAMES,
     FINGER_DOF_NAMES,
@@ -11,9 +12,6 @@ from colorglove_ros.core.hand.model import (
     NUM_DOFS,
     HandModel,
     HandModelError,
-    matrix_to_rotvec,
-    rotvec_to_matrix,
-    so3_left_jacobian,
 )
 
 

@@ -1,4 +1,5 @@
-"""Tests of core.ik: Jacobian chain, Gauss-Newton recovery, cameras, matching, tracker state."""
+"""Tests of core.tracking (kinematics, projection, solver, matching, tracker): Jacobian chain,
+Gauss-Newton recovery, cameras, matching, tracker state."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -8,33 +9,36 @@ import numpy as np
 import pytest
 
 from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.hand.mesh import build_hand_mesh
 from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
+from colorglove_ros.core.segmentation.blobs import extract_blobs
 from colorglove_ros.core.segmentation.crop import CropTransform
-from colorglove_ros.core.tracking.ik import (
+from colorglove_ros.core.tracking.config import (
+    IKConfig,
+    IKConfigError,
+    IKCovariances,
+    default_covariances,
+    load_covariances,
+    load_ik_config,
+    save_covariances,
+)
+from colorglove_ros.core.tracking.kinematics import FastKinematics
+from colorglove_ros.core.tracking.matching import match_by_color, match_extra_camera, match_primary
+from colorglove_ros.core.tracking.projection import (
+    estimate_translation,
+    project_correspondences,
+    reprojection_errors,
+)
+from colorglove_ros.core.tracking.solver import solve_ik
+from colorglove_ros.core.tracking.tracker import HandTracker
+from colorglove_ros.core.tracking.types import (
     Blobs,
     CameraObservation,
     Correspondences,
     EntryConstraints,
-    FastKinematics,
-    HandTracker,
-    IKConfig,
-    IKConfigError,
-    IKCovariances,
     IKError,
     PosePrior,
-    default_covariances,
-    estimate_translation,
-    extract_blobs,
-    load_covariances,
-    load_ik_config,
-    match_by_color,
-    match_extra_camera,
-    match_primary,
-    project_correspondences,
-    reprojection_errors,
-    save_covariances,
-    solve_ik,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -46,7 +50,7 @@ TIPS = [KEYPOINT_NAMES.index(f'{d}_tip') for d in ('thumb', 'index', 'middle', '
 
 @pytest.fixture(scope='module')
 def rig():
-    model = HandModel(0.19)
+    model = HandModel(DEFAULT_HAND_LENGTH_M)
     mesh = build_hand_mesh(model)
     kin = FastKinematics(model)
     mono = load_calibration(ROOT / 'config' / 'calibration.yaml').cameras
@@ -420,7 +424,7 @@ def test_tracker_from_calibration_uses_hand_length():
 
 
 def test_tracker_accepts_lookup_result(rig):
-    from colorglove_ros.core.lookup.search import LookupResult, ProjectionConstraints
+    from colorglove_ros.core.lookup.types import LookupResult, ProjectionConstraints
     model, mesh, kin, mono, stereo, verts = rig
     rng = np.random.default_rng(12)
     q = true_pose(model, rng)

@@ -7,19 +7,14 @@ import numpy as np
 import pytest
 
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.synthetic.frames import Synthesizer, generate_sequence, render_frame
-from colorglove_ros.core.tracking.ik import (
-    Correspondences,
-    FastKinematics,
-    HandTracker,
-    IKConfig,
-    IKConfigError,
-    IKError,
-    PatchSurface,
-    VertexTable,
-    constraint_points,
-    project_correspondences,
-)
+from colorglove_ros.core.synthetic.frames import Synthesizer, render_frame
+from colorglove_ros.core.synthetic.sequences import generate_sequence
+from colorglove_ros.core.tracking.config import IKConfig, IKConfigError
+from colorglove_ros.core.tracking.kinematics import FastKinematics
+from colorglove_ros.core.tracking.patch_surface import PatchSurface
+from colorglove_ros.core.tracking.projection import constraint_points, project_correspondences
+from colorglove_ros.core.tracking.tracker import HandTracker
+from colorglove_ros.core.tracking.types import Correspondences, IKError, VertexTable
 
 ROOT = Path(__file__).resolve().parents[1]
 

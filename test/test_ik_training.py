@@ -7,27 +7,23 @@ import numpy as np
 import pytest
 
 from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
+from colorglove_ros.core.geometry import align_rotation_vector
 from colorglove_ros.core.hand.mesh import build_hand_mesh
 from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.tracking.config import load_ik_config, save_covariances
 from colorglove_ros.core.tracking.covariance_learning import (
     CovarianceFloors,
     IKTrainingError,
     TrainingFrame,
     deviation_from_local_average,
-    estimate_p,
-    estimate_q,
     estimate_r,
     jitter,
     learn_covariances,
     local_average,
 )
-from colorglove_ros.core.tracking.ik import (
-    Correspondences,
-    FastKinematics,
-    align_rotation_vector,
-    load_ik_config,
-    save_covariances,
-)
+from colorglove_ros.core.tracking.kinematics import FastKinematics
+from colorglove_ros.core.tracking.types import Correspondences
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -48,22 +44,13 @@ def test_local_average_and_jitter():
         local_average(lin, window=4)
 
 
-def test_estimates_match_known_noise():
+def test_r_estimate_matches_known_noise():
     rng = np.random.default_rng(0)
     n = 4000
-    sigma = np.linspace(0.01, 0.3, 26)
-    q_ref = np.zeros((n, 26))
-    q_ref[:, 2] = 0.5
-    q_blend = q_ref + rng.normal(0.0, sigma, (n, 26))
-    np.testing.assert_allclose(estimate_q(q_blend, q_ref), sigma**2, rtol=0.1)
     res = rng.normal(0.0, [2.0, 3.0], (n, 2))
     np.testing.assert_allclose(estimate_r(res), [4.0, 9.0], rtol=0.1)
-    # constant velocity v per frame: q_{i-1} - local_average_i = -v exactly
-    v = np.linspace(0.001, 0.02, 26)
-    traj = np.arange(50)[:, None] * v[None]
-    np.testing.assert_allclose(estimate_p(traj), v**2, rtol=1e-9)
     with pytest.raises(IKTrainingError):
-        estimate_q(q_blend[:, :20], q_ref[:, :20])
+        estimate_r(res[:, :1])
 
 
 def test_rotation_vectors_aligned_across_pi():
@@ -71,16 +58,11 @@ def test_rotation_vectors_aligned_across_pi():
     a = axis * (np.pi - 0.05)
     b = -axis * (np.pi - 0.05)                  # same rotation family, 0.1 rad apart
     np.testing.assert_allclose(align_rotation_vector(b, a), axis * (np.pi + 0.05), atol=1e-12)
-    q_ref = np.zeros((1, 26))
-    q_ref[0, 3:6] = a
-    q_b = np.zeros((1, 26))
-    q_b[0, 3:6] = b
-    np.testing.assert_allclose(estimate_q(q_b, q_ref)[5], 0.1**2, rtol=1e-9)
 
 
 @pytest.fixture(scope='module')
 def training_sequence():
-    model = HandModel(0.19)
+    model = HandModel(DEFAULT_HAND_LENGTH_M)
     mesh = build_hand_mesh(model)
     kin = FastKinematics(model)
     cams = load_calibration(ROOT / 'config' / 'calibration_stereo.yaml').cameras
@@ -156,13 +138,13 @@ def test_learn_rejects_bad_input(training_sequence):
 def test_learn_from_tracker_run(training_sequence):
     """End to end: run the tracker on a synthetic sequence and learn from its outputs."""
     from colorglove_ros.core.segmentation.crop import CropTransform
+    from colorglove_ros.core.tracking.config import IKConfig
     from colorglove_ros.core.tracking.covariance_learning import training_frame
-    from colorglove_ros.core.tracking.ik import (
+    from colorglove_ros.core.tracking.tracker import HandTracker
+    from colorglove_ros.core.tracking.types import (
         Blobs,
         CameraObservation,
         EntryConstraints,
-        HandTracker,
-        IKConfig,
         PosePrior,
     )
     model, cams, frames, q_sigma, vel = training_sequence

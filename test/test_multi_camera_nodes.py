@@ -22,6 +22,7 @@ from colorglove_ros.core.lookup.database import load_database
 from colorglove_ros.core.lookup.search import PoseLookup
 from colorglove_ros.core.segmentation.segmenter import load_segmenter
 from colorglove_ros.core.synthetic import frames as synth
+from colorglove_ros.core.synthetic.conditions import sample_conditions
 from colorglove_ros.ros.conversions import (
     candidates_msg,
     crop_from_observation,
@@ -65,7 +66,7 @@ def stereo_messages(assets: NodeAssets) -> tuple[HandPoseCandidates, HandObserva
     observation, as lookup_node and the second segmentation_node would send them."""
     rng = np.random.default_rng(SEED)
     q = synth.sample_pose(rng, RIG[0], out_of_frame_prob=0.0)
-    views = synth.render_frames_multi(q, RIG, rng, synth.sample_conditions(rng, 'test'))
+    views = synth.render_frames_multi(q, RIG, rng, sample_conditions(rng, 'test'))
     segmenter = load_segmenter(str(assets.color_config))
     first, second = (segmenter.process(view.image_rgb) for view in views)
     assert first.hand_found and second.hand_found, (first.status, second.status)

@@ -29,10 +29,10 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.hand.model import DOF_NAMES, FINGER_DOF_NAMES
 from colorglove_ros.core.lookup.database import load_database
 from colorglove_ros.core.lookup.search import PoseLookup
-from colorglove_ros.core.segmentation.crop import TINY_SIZE
 from colorglove_ros.core.segmentation.segmenter import load_segmenter
 from colorglove_ros.ros.conversions import (
     blobs_from_observation,

@@ -4,8 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from colorglove_ros.core.geometry import matrix_to_rotvec, rotvec_to_matrix
 from colorglove_ros.core.hand.glove import default_hand
-from colorglove_ros.core.hand.model import FINGER_DOF_NAMES, matrix_to_rotvec, rotvec_to_matrix
+from colorglove_ros.core.hand.model import FINGER_DOF_NAMES
 from colorglove_ros.core.hand.poses import (
     GESTURE_SHAPES,
     LETTER_SHAPES,

@@ -7,13 +7,12 @@ from label_samples import random_blob_images
 from scipy.spatial.transform import Rotation
 
 from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.lookup.blend import blend_poses, blend_weights
 from colorglove_ros.core.lookup.database import assemble_database
 from colorglove_ros.core.lookup.distance import image_distance
 from colorglove_ros.core.lookup.search import (
     PoseLookup,
     SearchError,
-    blend_poses,
-    blend_weights,
     estimate_global_pose,
     top_k_with_ties,
 )

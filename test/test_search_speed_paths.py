@@ -1,9 +1,8 @@
-"""Tests for the fast lookup paths: query encoder, grouped re-rank, quaternion helpers."""
+"""Tests for the fast lookup paths: query encoder, grouped re-rank, threads."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.lookup.codes import (
@@ -84,22 +83,6 @@ def test_top_k_uint8_binary_search_matches_sort() -> None:
         np.testing.assert_array_equal(got, np.flatnonzero(vals <= cut))
         np.testing.assert_array_equal(got, top_k_with_ties(vals.astype(np.uint16), k))
         np.testing.assert_array_equal(got, top_k_with_ties(vals.astype(np.int64), k))
-
-
-def test_quaternion_helpers_match_scipy() -> None:
-    from colorglove_ros.core.lookup.search import _quat_to_rotvec, _rotvec_to_quat
-
-    rv = np.random.default_rng(6).normal(0.0, 1.2, (20, 3))
-    rv[0] = 0.0
-    rv[1] = [0.0, 0.0, np.pi - 1e-9]
-    q = _rotvec_to_quat(rv)
-    np.testing.assert_allclose(Rotation.from_quat(q).as_matrix(),
-                               Rotation.from_rotvec(rv).as_matrix(), atol=1e-12)
-    for scale in (1.0, -3.0):                         # any sign and norm
-        back = np.array([_quat_to_rotvec(scale * row) for row in q])
-        assert np.all(np.linalg.norm(back, axis=1) <= np.pi + 1e-12)
-        assert np.all((Rotation.from_rotvec(back) * Rotation.from_rotvec(rv).inv()).magnitude()
-                      < 1e-9)
 
 
 def test_threaded_lookup_equals_single_thread(monkeypatch) -> None:

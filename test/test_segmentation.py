@@ -8,13 +8,12 @@ import cv2
 import numpy as np
 import pytest
 
+from colorglove_ros.core.colorimetry import srgb_to_linear
+from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
-from colorglove_ros.core.segmentation.color_model import (
-    fit_color_calibration,
-    read_calibration_config,
-    srgb_to_linear,
-)
-from colorglove_ros.core.segmentation.crop import TINY_SIZE, crop_to_tiny
+from colorglove_ros.core.segmentation.calibration_fit import fit_color_calibration
+from colorglove_ros.core.segmentation.color_model import read_calibration_config
+from colorglove_ros.core.segmentation.crop import crop_to_tiny
 from colorglove_ros.core.segmentation.segmenter import (
     STAGES,
     STATUS_NO_GLOVE,
@@ -28,13 +27,14 @@ from colorglove_ros.core.segmentation.segmenter import (
     load_segmenter,
     relabel_borders,
 )
-from colorglove_ros.tools import calibrate_colors, eval_segmentation
-from colorglove_ros.tools.eval_segmentation import (
+from colorglove_ros.core.synthetic.blob_glove import (
     BlobConditions,
-    frame_metrics,
     render_blob_frame,
     sample_blob_conditions,
 )
+from colorglove_ros.core.synthetic.held_out import held_out_frames
+from colorglove_ros.tools import calibrate_colors, eval_segmentation
+from colorglove_ros.tools.eval_segmentation import frame_metrics
 
 FAST = dict(max_per_class=1500, bits=5, augment_copies=1, background_components=6)
 VALID = {STATUS_OK, STATUS_NO_GLOVE, STATUS_TOO_SMALL, STATUS_OUT_OF_FRAME}
@@ -217,8 +217,8 @@ def _mixed_edge(width: int = 40, height: int = 12, edge: float = 19.5, blur: flo
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A red | yellow edge at x = ``edge`` blurred over ``blur`` pixels (mixed in linear
     light, like motion blur) -> (image, true labels, red share of each column)."""
-    red = srgb_to_linear(GLOVE_PALETTE_RGB[0])
-    yellow = srgb_to_linear(GLOVE_PALETTE_RGB[3])
+    red = srgb_to_linear(GLOVE_PALETTE_RGB[0] / 255.0)
+    yellow = srgb_to_linear(GLOVE_PALETTE_RGB[3] / 255.0)
     x = np.arange(width, dtype=float)
     share = np.clip((edge + 0.5 * blur - 0.5 - x) / blur + 0.5 / blur, 0.0, 1.0)
     lin = share[:, None] * red + (1.0 - share[:, None]) * yellow
@@ -323,8 +323,8 @@ def test_light_correction_beats_uncorrected_under_tinted_light(calibration) -> N
 
 def test_eval_frames_with_clutter_near_the_hand() -> None:
     """--clutter-near-hand renders the same hands with the distractors placed anywhere."""
-    away = eval_segmentation.test_frames('synth', 8, seed=3)
-    near = eval_segmentation.test_frames('synth', 8, seed=3, clutter_near_hand=True)
+    away = held_out_frames('synth', 8, seed=3)
+    near = held_out_frames('synth', 8, seed=3, clutter_near_hand=True)
     for (_, labels_away, _), (_, labels_near, _) in zip(away, near, strict=True):
         np.testing.assert_array_equal(labels_away, labels_near)
     assert any(not np.array_equal(a[0], n[0]) for a, n in zip(away, near, strict=True))

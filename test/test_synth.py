@@ -10,25 +10,28 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.colorimetry import illuminant_rgb
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
-from colorglove_ros.core.synthetic.frames import (
-    _BG_SEED_SPLIT,
-    CAPTURE_VOLUME_CENTER,
-    CAPTURE_VOLUME_SIZE,
+from colorglove_ros.core.synthetic.backgrounds import _background, make_background
+from colorglove_ros.core.synthetic.conditions import (
+    BACKGROUND_SEED_SPLIT,
     FrameConditions,
     SynthError,
-    Synthesizer,
-    SyntheticSequenceRenderer,
-    _background,
-    default_camera,
-    generate_sequence,
-    illuminant_rgb,
-    make_background,
-    render_frames_multi,
     sample_conditions,
+)
+from colorglove_ros.core.synthetic.frames import (
+    Synthesizer,
+    default_camera,
+    render_frames_multi,
     sample_pose,
 )
 from colorglove_ros.core.synthetic.render import patch_ids_to_labels
+from colorglove_ros.core.synthetic.sequences import (
+    CAPTURE_VOLUME_CENTER,
+    CAPTURE_VOLUME_SIZE,
+    SyntheticSequenceRenderer,
+    generate_sequence,
+)
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config'
 NEUTRAL = FrameConditions(gain=1.0, color_temperature_k=6500.0, noise_sigma=0.0, blur_px=0.0,
@@ -84,8 +87,8 @@ def test_train_and_test_conditions_differ() -> None:
     t_gain = np.array([c.gain for c in train])
     s_gain = np.array([c.gain for c in test])
     assert np.all((s_gain < t_gain.min()) | (s_gain > t_gain.max()))
-    assert max(c.background_seed for c in train) < _BG_SEED_SPLIT
-    assert min(c.background_seed for c in test) >= _BG_SEED_SPLIT
+    assert max(c.background_seed for c in train) < BACKGROUND_SEED_SPLIT
+    assert min(c.background_seed for c in test) >= BACKGROUND_SEED_SPLIT
     assert 'office' in {c.background_kind for c in test}
     assert 'office' not in {c.background_kind for c in train}
     assert np.mean([c.noise_sigma for c in test]) > np.mean([c.noise_sigma for c in train])
@@ -206,7 +209,7 @@ def test_sequence_renderer_is_order_independent() -> None:
     np.testing.assert_array_equal(later.image_rgb, again.image_rgb)
     assert not np.array_equal(first.image_rgb, later.image_rgb)
     np.testing.assert_array_equal(later.pose, generate_sequence(3, 6)[4])
-    assert later.conditions.background_seed < _BG_SEED_SPLIT
+    assert later.conditions.background_seed < BACKGROUND_SEED_SPLIT
     with pytest.raises(SynthError):
         seq.render(6)
     seq.close()

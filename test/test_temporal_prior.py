@@ -6,12 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from colorglove_ros.core.lookup.search import LookupResult, ProjectionConstraints, blend_poses
+from colorglove_ros.core.lookup.blend import blend_poses
 from colorglove_ros.core.lookup.temporal_prior import (
     TemporalPriorError,
     pose_distances_rad,
     reweight_by_previous,
 )
+from colorglove_ros.core.lookup.types import LookupResult, ProjectionConstraints
 
 
 def _result(poses: np.ndarray, weights: np.ndarray) -> LookupResult:

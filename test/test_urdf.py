@@ -7,13 +7,14 @@ import numpy as np
 import pytest
 import yourdfpy
 
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.hand.model import DIGITS, FINGER_DOF_NAMES, KEYPOINT_NAMES, HandModel
 from colorglove_ros.core.hand.urdf import URDF_PATH, tip_link_name, urdf_string, write_urdf
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture(scope='module', params=[0.19, 0.16])
+@pytest.fixture(scope='module', params=[DEFAULT_HAND_LENGTH_M, 0.16])
 def pair(request, tmp_path_factory) -> tuple[HandModel, yourdfpy.URDF]:
     model = HandModel(request.param)
     path = write_urdf(tmp_path_factory.mktemp('urdf') / 'hand.urdf', model)

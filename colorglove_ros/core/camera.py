@@ -140,7 +140,7 @@ def _camera_from_dict(entry: dict, where: str) -> PinholeCamera:
         raise CalibrationError(f'{where}: a camera must be a mapping, got {entry!r}')
     missing = [key for key in ('width', 'height', 'fx', 'fy', 'cx', 'cy') if key not in entry]
     if missing:
-        raise CalibrationError(f'{where}: missing camera field(s) {missing}')
+        raise CalibrationError(f'{where}: bad or missing camera field(s): {missing} missing')
 
     def number(key: str, **bounds) -> float:
         return check_number(f'{where}: {key}', entry[key], error=CalibrationError, **bounds)

@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.errors import ColorGloveError
 
 __all__ = ['FrameSourceError', 'Frame', 'FrameSource', 'open_frame_source', 'IMAGE_SUFFIXES']
@@ -94,7 +95,7 @@ def _folder_source(folder: Path, loop: bool) -> FrameSource:
 
 def _synthetic_source(camera: PinholeCamera, seed: int, num_frames: int, loop: bool,
                       hand_length_m: float, prerender: bool) -> FrameSource:
-    from colorglove_ros.core.synthetic.frames import SyntheticSequenceRenderer
+    from colorglove_ros.core.synthetic.sequences import SyntheticSequenceRenderer
 
     renderer = SyntheticSequenceRenderer(camera, seed=seed, num_frames=num_frames,
                                          hand_length_m=hand_length_m, split='test')
@@ -112,7 +113,7 @@ def _synthetic_source(camera: PinholeCamera, seed: int, num_frames: int, loop: b
 
 
 def open_frame_source(spec: str, camera: PinholeCamera, *, seed: int = 1, num_frames: int = 300,
-                      loop: bool = True, hand_length_m: float = 0.19,
+                      loop: bool = True, hand_length_m: float = DEFAULT_HAND_LENGTH_M,
                       prerender: bool = False) -> FrameSource:
     """Open ``spec``: 'synthetic', a V4L2 index ('0') or device path ('/dev/video0'), a video
     file, or a folder of images. Raise :class:`FrameSourceError` if it cannot be opened.

@@ -17,13 +17,14 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.hand.model import DOF_NAMES, FINGER_DOF_NAMES
 from colorglove_ros.core.hand.overlay import SKELETON_BONES
 from colorglove_ros.core.hand.pose_fields import pose_from_fields, wrist_quaternion
-from colorglove_ros.core.lookup.search import LookupResult
-from colorglove_ros.core.segmentation.crop import TINY_SIZE, CropTransform
-from colorglove_ros.core.segmentation.segmenter import Observation
-from colorglove_ros.core.tracking.ik import Blobs, CameraObservation, EntryConstraints, PosePrior
+from colorglove_ros.core.lookup.types import LookupResult
+from colorglove_ros.core.segmentation.crop import CropTransform
+from colorglove_ros.core.segmentation.types import Observation
+from colorglove_ros.core.tracking.types import Blobs, CameraObservation, EntryConstraints, PosePrior
 
 __all__ = [
     'stamp_to_seconds', 'camera_info_from_camera', 'joint_state_from_pose',

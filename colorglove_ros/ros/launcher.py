@@ -12,7 +12,8 @@ machines. The YAML (see ``config/pipeline.launch.yaml``)::
         arguments: []                    # optional extra command-line arguments
 
 On Ctrl-C or SIGTERM every node gets SIGINT, then SIGTERM, then SIGKILL after grace
-periods. If one node exits, the others are stopped too (unless ``respawn: true``).
+periods. If one node exits, the others are stopped too, unless it has ``respawn: true`` and did
+not fail at start-up (exit code 1): then it is started again.
 """
 from __future__ import annotations
 
@@ -35,6 +36,9 @@ __all__ = ['LaunchError', 'NodeSpec', 'load_launch_file', 'node_command', 'Launc
            'use_fastdds_profile', 'main']
 
 FASTDDS_PROFILE_VARIABLE = 'FASTRTPS_DEFAULT_PROFILES_FILE'
+# Exit code of a node that cannot start (nodes/common.py run_node): never respawned, as a bad
+# configuration does not fix itself.
+STARTUP_FAILURE_CODE = 1
 
 
 def use_fastdds_profile() -> str:
@@ -151,8 +155,10 @@ class Launcher:
         print(f'[launch] started {label} (pid {process.pid})', flush=True)
 
     def start(self) -> None:
-        """Start every node (with the Fast DDS profile of :func:`use_fastdds_profile`)."""
+        """Start every node (with the Fast DDS profile of :func:`use_fastdds_profile`), after
+        removing shared-memory segments left by killed participants."""
         use_fastdds_profile()
+        _clean_shared_memory()
         for index in range(len(self.specs)):
             self._start(index)
 
@@ -164,9 +170,14 @@ class Launcher:
                 if code is None:
                     continue
                 label = self._label(index)
+                if code == STARTUP_FAILURE_CODE:
+                    print(f'[launch] {label} cannot start (exit code {code}); stopping the rest',
+                          flush=True)
+                    return code
                 if self.specs[index].respawn:
                     print(f'[launch] {label} exited with {code}; respawning', flush=True)
                     self._start(index)
+                    _clean_shared_memory()     # the dead process's segments (once stale)
                 else:
                     print(f'[launch] {label} exited with {code}; stopping the rest', flush=True)
                     return code
@@ -187,6 +198,15 @@ class Launcher:
                     process.wait(timeout=max(0.0, deadline - time.monotonic()))
                 except subprocess.TimeoutExpired:
                     pass
+
+
+def _clean_shared_memory() -> None:
+    from colorglove_ros.ros.shm_cleanup import clean_stale_fastdds_segments
+
+    removed, freed = clean_stale_fastdds_segments()
+    if removed:
+        print(f'[launch] removed {removed} stale Fast DDS shared-memory file(s), '
+              f'{freed / 2**20:.0f} MiB', flush=True)
 
 
 def _relay(process: subprocess.Popen, label: str) -> None:

@@ -15,12 +15,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from colorglove_ros.core.hand.glove import GLOVE_COLOR_NAMES, NUM_COLORS
+from colorglove_ros.core.conventions import NUM_COLORS
+from colorglove_ros.core.hand.glove import GLOVE_COLOR_NAMES
 from colorglove_ros.core.report import print_table, write_json
-from colorglove_ros.core.segmentation.color_model import (
+from colorglove_ros.core.segmentation.calibration_fit import (
     RESIDUAL_TEMPERATURES_K,
-    ColorCalibrationError,
     fit_color_calibration,
+)
+from colorglove_ros.core.segmentation.color_model import (
+    ColorCalibrationError,
     read_calibration_config,
     save_calibration,
 )
@@ -70,13 +73,14 @@ def render_training_frames(count: int, seed: int, split: str = 'train'
                            ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Render ``count`` synthetic frames (hand fully in view) with ``core/synthetic/frames.py``."""
     from colorglove_ros.core.synthetic import frames as synth
+    from colorglove_ros.core.synthetic.conditions import sample_conditions
 
     rng = np.random.default_rng(seed)
     camera = synth.default_camera()
     frames = []
     for _ in range(count):
         q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
-        frame = synth.render_frame(q, camera, rng, synth.sample_conditions(rng, split))
+        frame = synth.render_frame(q, camera, rng, sample_conditions(rng, split))
         frames.append((frame.image_rgb, frame.labels))
     return frames
 

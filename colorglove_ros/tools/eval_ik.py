@@ -29,11 +29,7 @@ from colorglove_ros.core.evaluation.sequences import (
 )
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.report import print_table, write_json
-from colorglove_ros.core.tracking.ik import (
-    TRACKER_MODES,
-    load_covariances,
-    load_ik_config,
-)
+from colorglove_ros.core.tracking.config import TRACKER_MODES, load_covariances, load_ik_config
 from colorglove_ros.paths import share_dir
 from colorglove_ros.tools._cli import tool_parser
 

@@ -180,7 +180,8 @@ def _pose_errors(q_true: np.ndarray, q_est: np.ndarray) -> dict[str, float]:
 def _tiny_blobs(tiny: np.ndarray, crop: np.ndarray) -> Any:
     """Blobs of a tiny label image in full-image pixels of the crop (scale, x0, y0), as the
     segmentation reports them for the per-finger blend."""
-    from colorglove_ros.core.tracking.ik import Blobs, extract_blobs
+    from colorglove_ros.core.segmentation.blobs import extract_blobs
+    from colorglove_ros.core.tracking.types import Blobs
 
     b = extract_blobs(tiny, min_pixels=1)
     scale, x0, y0 = (float(v) for v in crop)

@@ -5,15 +5,11 @@ from pathlib import Path
 
 import numpy as np
 
-from colorglove_ros.core.hand.glove import (
-    GLOVE_COLOR_NAMES,
-    NUM_PATCHES,
-    Glove,
-    default_hand,
-    export_glove_mesh,
-)
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, NUM_PATCHES
+from colorglove_ros.core.geometry import rotvec_to_matrix
+from colorglove_ros.core.hand.glove import GLOVE_COLOR_NAMES, Glove, default_hand, export_glove_mesh
 from colorglove_ros.core.hand.mesh import HandMesh
-from colorglove_ros.core.hand.model import HandModel, rotvec_to_matrix
+from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.hand.poses import NAMED_SHAPES, full_pose
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.tools._cli import tool_parser
@@ -64,7 +60,8 @@ def main(argv: list[str] | None = None) -> int:
     """Export data/glove/glove.ply, glove.glb and glove.png."""
     parser = tool_parser(__doc__)
     parser.add_argument('--out', type=Path, default=Path('data/glove'), help='output folder')
-    parser.add_argument('--hand-length', type=float, default=0.19, help='wrist to middle tip, m')
+    parser.add_argument('--hand-length', type=float, default=DEFAULT_HAND_LENGTH_M,
+                        help='wrist to middle tip, m')
     parser.add_argument('--seed', type=int, default=0, help='glove pattern seed')
     parser.add_argument('--shapes', action='store_true',
                         help='also draw every named hand shape into shapes.png')

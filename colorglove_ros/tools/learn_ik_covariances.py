@@ -29,14 +29,14 @@ from colorglove_ros.core.evaluation.sequences import (
 )
 from colorglove_ros.core.hand.model import DOF_NAMES
 from colorglove_ros.core.report import print_table, write_json
-from colorglove_ros.core.tracking.covariance_learning import (
-    LOCAL_WINDOW,
-    learn_covariances,
-)
-from colorglove_ros.core.tracking.ik import (
+from colorglove_ros.core.tracking.config import (
     default_covariances,
     load_ik_config,
     save_covariances,
+)
+from colorglove_ros.core.tracking.covariance_learning import (
+    LOCAL_WINDOW,
+    learn_covariances,
 )
 from colorglove_ros.paths import share_dir
 from colorglove_ros.tools._cli import tool_parser

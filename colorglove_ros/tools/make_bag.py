@@ -8,13 +8,11 @@ from pathlib import Path
 from tqdm import tqdm
 
 from colorglove_ros.core.camera import CalibrationError, load_calibration
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.report import print_table, write_json
-from colorglove_ros.core.synthetic.frames import (
-    SPLITS,
-    SynthError,
-    SyntheticSequenceRenderer,
-    default_camera,
-)
+from colorglove_ros.core.synthetic.conditions import SPLITS, SynthError
+from colorglove_ros.core.synthetic.frames import default_camera
+from colorglove_ros.core.synthetic.sequences import SyntheticSequenceRenderer
 from colorglove_ros.ros.bags import SequenceBagWriter, bag_size_bytes
 from colorglove_ros.tools._cli import tool_parser
 
@@ -32,7 +30,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--split', choices=SPLITS, default='test',
                         help="conditions range: 'test' (held out) or 'train'")
     parser.add_argument('--hand-length', type=float, default=None,
-                        help='hand length in metres (default: from the calibration, or 0.19)')
+                        help='hand length in metres (default: from the calibration, or '
+                             f'{DEFAULT_HAND_LENGTH_M})')
     args = parser.parse_args(argv)
     output = Path(args.output)
     if output.exists():
@@ -42,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
             calib = load_calibration(args.calibration)
             cameras, hand_length = calib.cameras, calib.hand_length_m
         else:
-            cameras, hand_length = (default_camera(),), 0.19
+            cameras, hand_length = (default_camera(),), DEFAULT_HAND_LENGTH_M
     except CalibrationError as exc:
         parser.error(str(exc))
     if args.hand_length is not None:

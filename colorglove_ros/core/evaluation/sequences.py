@@ -21,21 +21,16 @@ from colorglove_ros.core.evaluation.metrics import (
 )
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
 from colorglove_ros.core.lookup.temporal_prior import reweight_by_previous
+from colorglove_ros.core.segmentation.blobs import extract_blobs
 from colorglove_ros.core.segmentation.crop import TinyCrop, crop_to_tiny
+from colorglove_ros.core.tracking.config import TRACKER_MODES, IKConfig
 from colorglove_ros.core.tracking.covariance_learning import (
     LOCAL_WINDOW,
     TrainingFrame,
     training_frame,
 )
-from colorglove_ros.core.tracking.ik import (
-    TRACKER_MODES,
-    Blobs,
-    CameraObservation,
-    HandTracker,
-    IKConfig,
-    IKResult,
-    extract_blobs,
-)
+from colorglove_ros.core.tracking.tracker import HandTracker, IKResult
+from colorglove_ros.core.tracking.types import Blobs, CameraObservation
 
 __all__ = [
     'LABEL_SOURCES', 'EVAL_SEED_BASE', 'TRAIN_SEED_BASE', 'SEED_SPAN', 'EvaluationError',
@@ -91,7 +86,8 @@ class EvaluationSequence:
     def make(cls, seed: int, num_frames: int, camera: PinholeCamera, synthesizer: Any,
              split: str = 'test', fps: float = 30.0) -> EvaluationSequence:
         """Sequence ``seed`` (``core.synth.generate_sequence``) with ``split`` conditions."""
-        from colorglove_ros.core.synthetic.frames import generate_sequence, sample_conditions
+        from colorglove_ros.core.synthetic.conditions import sample_conditions
+        from colorglove_ros.core.synthetic.sequences import generate_sequence
 
         poses = generate_sequence(seed, num_frames, fps, camera=camera, model=synthesizer.model)
         return cls(seed, poses, sample_conditions(np.random.default_rng([seed, 7]), split),

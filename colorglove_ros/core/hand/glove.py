@@ -22,17 +22,16 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, NUM_COLORS, NUM_PATCHES
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.mesh import HandMesh, build_hand_mesh
 from colorglove_ros.core.hand.model import DOF_NAMES, HandModel
 
 __all__ = [
-    'NUM_PATCHES', 'NUM_COLORS', 'GLOVE_PALETTE_RGB', 'GLOVE_COLOR_NAMES', 'GloveError',
+    'GLOVE_PALETTE_RGB', 'GLOVE_COLOR_NAMES', 'GloveError',
     'Glove', 'make_glove', 'glove_reference_pose', 'export_glove_mesh', 'default_hand',
 ]
 
-NUM_PATCHES = 20
-NUM_COLORS = 10
 GLOVE_COLOR_NAMES: tuple[str, ...] = (
     'red', 'green', 'blue', 'yellow', 'magenta', 'cyan', 'orange', 'purple', 'pink', 'lime')
 # label k (1..10) has colour GLOVE_PALETTE_RGB[k - 1]
@@ -174,7 +173,7 @@ def export_glove_mesh(mesh: HandMesh, glove: Glove, model: HandModel, path: str 
 
 
 @lru_cache(maxsize=4)
-def default_hand(hand_length_m: float = 0.19,
+def default_hand(hand_length_m: float = DEFAULT_HAND_LENGTH_M,
                  seed: int = 0) -> tuple[HandModel, HandMesh, Glove]:
     """The standard (model, mesh, glove) triple, cached."""
     model = HandModel(hand_length_m)

@@ -7,6 +7,7 @@ from functools import lru_cache
 import numpy as np
 import trimesh
 
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, digit_link_index
 
@@ -29,7 +30,7 @@ class HandMesh:
     local_vertices: np.ndarray   # (V, 3) float64, link frame
     vertex_link: np.ndarray      # (V,) int64 link index
     faces: np.ndarray            # (F, 3) int32, counter-clockwise seen from outside
-    hand_length_m: float = 0.19
+    hand_length_m: float = DEFAULT_HAND_LENGTH_M
 
     @property
     def num_vertices(self) -> int:

@@ -26,13 +26,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.geometry import rotvec_to_matrix, so3_left_jacobian, vector_to_skew
 
 __all__ = [
     'DIGITS', 'DOF_NAMES', 'FINGER_DOF_NAMES', 'GLOBAL_DOF_NAMES', 'NUM_DOFS',
     'NUM_FINGER_DOFS', 'KEYPOINT_NAMES', 'LINK_NAMES', 'DIP_PIP_RATIO',
-    'HandModelError', 'HandModel', 'rotvec_to_matrix', 'matrix_to_rotvec',
-    'so3_left_jacobian', 'digit_link_index', 'JointSpec',
+    'HandModelError', 'HandModel', 'digit_link_index', 'JointSpec',
 ]
 
 DIGITS: tuple[str, ...] = ('thumb', 'index', 'middle', 'ring', 'little')
@@ -66,57 +67,9 @@ def digit_link_index(digit: int, segment: int) -> int:
     return 1 + 3 * digit + segment
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
-    """(..., 3) -> (..., 3, 3) cross-product matrices."""
-    v = np.asarray(v, dtype=float)
-    K = np.zeros(v.shape[:-1] + (3, 3))
-    K[..., 0, 1] = -v[..., 2]
-    K[..., 0, 2] = v[..., 1]
-    K[..., 1, 0] = v[..., 2]
-    K[..., 1, 2] = -v[..., 0]
-    K[..., 2, 0] = -v[..., 1]
-    K[..., 2, 1] = v[..., 0]
-    return K
-
-
-def rotvec_to_matrix(r: np.ndarray) -> np.ndarray:
-    """Rodrigues: (..., 3) rotation vectors -> (..., 3, 3) rotation matrices."""
-    r = np.asarray(r, dtype=float)
-    theta = np.linalg.norm(r, axis=-1)[..., None, None]
-    K = _skew(r)
-    small = theta < 1e-6
-    safe = np.where(small, 1.0, theta)
-    a = np.where(small, 1.0 - theta**2 / 6.0, np.sin(safe) / safe)
-    b = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(safe)) / safe**2)
-    return np.eye(3) + a * K + b * (K @ K)
-
-
-def matrix_to_rotvec(R: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) rotation matrices -> (..., 3) rotation vectors with angle in [0, pi]."""
-    from scipy.spatial.transform import Rotation
-
-    R = np.asarray(R, dtype=float)
-    flat = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_rotvec()
-    return flat.reshape(R.shape[:-2] + (3,))
-
-
-def so3_left_jacobian(r: np.ndarray) -> np.ndarray:
-    """Left Jacobian of SO(3) at rotation vector r (3,): exp(r + d) ~ exp(J_l d) exp(r)."""
-    r = np.asarray(r, dtype=float)
-    theta = float(np.linalg.norm(r))
-    K = _skew(r)
-    if theta < 1e-5:
-        a = 0.5 - theta**2 / 24.0
-        b = 1.0 / 6.0 - theta**2 / 120.0
-    else:
-        a = (1.0 - np.cos(theta)) / theta**2
-        b = (theta - np.sin(theta)) / theta**3
-    return np.eye(3) + a * K + b * (K @ K)
-
-
 def _rot_axis(axis: np.ndarray, angles: np.ndarray) -> np.ndarray:
     """Rotations about one fixed unit axis by (B,) angles -> (B, 3, 3)."""
-    K = _skew(axis)
+    K = vector_to_skew(axis)
     s = np.sin(angles)[:, None, None]
     c = np.cos(angles)[:, None, None]
     return np.eye(3) + s * K + (1.0 - c) * (K @ K)
@@ -142,7 +95,8 @@ class JointSpec:
     dof: int                # index into q
 
 
-# Nominal proportions for a 0.19 m hand (metres), rescaled to the requested hand length.
+# Nominal proportions for a hand of DEFAULT_HAND_LENGTH_M (metres), rescaled to the requested
+# hand length.
 # anchor (x, y, z) of the base joint in the palm frame, rest splay about +z (rad),
 # phalanx lengths (proximal, middle, distal incl. the fingertip) and radii.
 _FINGER_GEOMETRY = {
@@ -158,7 +112,7 @@ _THUMB_LENGTHS = (0.0440, 0.0320, 0.0290)
 _THUMB_RADII = (0.0125, 0.0105, 0.0092)
 _THUMB_ABD_AXIS = (0.0, 0.25, 1.0)    # skewed: mostly the thumb's palm normal
 _THUMB_FLEX_AXIS = (1.0, 0.0, -0.15)  # skewed: mostly the thumb's flexion axis
-_NOMINAL_LENGTH = 0.19
+_NOMINAL_LENGTH = DEFAULT_HAND_LENGTH_M
 
 _DEG = np.pi / 180.0
 _FINGER_LIMITS = ((-15 * _DEG, 15 * _DEG), (0.0, 90 * _DEG), (0.0, 110 * _DEG), (0.0, 90 * _DEG))
@@ -173,7 +127,7 @@ class HandModel:
     ``hand_length_m`` is the wrist-to-middle-fingertip distance of the flat rest pose.
     """
 
-    def __init__(self, hand_length_m: float = 0.19) -> None:
+    def __init__(self, hand_length_m: float = DEFAULT_HAND_LENGTH_M) -> None:
         if not (0.05 <= hand_length_m <= 0.4):
             raise HandModelError(f'hand_length_m {hand_length_m!r} outside [0.05, 0.4]')
         self.hand_length_m = float(hand_length_m)
@@ -236,7 +190,8 @@ class HandModel:
                 radii[li] = seg_rad[k] * s
         self._joints = joints
         self._joint_consts = [
-            (j.fixed_rot, j.fixed_rot @ _skew(j.axis), j.fixed_rot @ np.outer(j.axis, j.axis))
+            (j.fixed_rot, j.fixed_rot @ vector_to_skew(j.axis),
+             j.fixed_rot @ np.outer(j.axis, j.axis))
             for j in joints]
         self._num_frames = len(joints) + 1
         self._link_frame = np.array(link_frame, dtype=np.int64)
@@ -269,13 +224,6 @@ class HandModel:
     def joints(self) -> tuple[JointSpec, ...]:
         """The 20 revolute joints (fixed transform from parent frame, local axis, dof)."""
         return tuple(self._joints)
-
-    def joint_parent_link(self, joint_index: int) -> str | None:
-        """Name of the link that is the parent frame of a joint, or None for an intermediate
-        frame (the abduction frame between the two base joints of a digit)."""
-        pf = self._joints[joint_index].parent_frame
-        hits = np.flatnonzero(self._link_frame == pf)
-        return LINK_NAMES[int(hits[0])] if len(hits) else None
 
     # ------------------------------------------------------------------ poses
     def rest_pose(self, centered: bool = True) -> np.ndarray:
@@ -387,7 +335,7 @@ class HandModel:
         p = np.einsum('nij,nj->ni', Rs[fr], P) + ts[fr]
         J = np.zeros((len(P), 3, NUM_DOFS))
         J[:, 0, 0] = J[:, 1, 1] = J[:, 2, 2] = 1.0
-        J[:, :, 3:6] = -_skew(p - ts[0]) @ so3_left_jacobian(q[3:6])
+        J[:, :, 3:6] = -vector_to_skew(p - ts[0]) @ so3_left_jacobian(q[3:6])
         mask = self._link_dof_mask[link_index]
         for f, j in enumerate(self._joints, start=1):
             w = Rs[f] @ j.axis

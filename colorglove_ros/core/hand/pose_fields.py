@@ -1,10 +1,11 @@
 """The 26-DOF pose vector as the fields of ROS messages (wrist position, quaternion, finger
-joints) and back, in plain numpy: shared by the rclpy and the rosbags message builders."""
+joints) and back, in plain numpy (``core.geometry``): shared by the rclpy and the rosbags message
+builders, and light to import."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
+from colorglove_ros.core.geometry import quaternion_to_rotvec, rotvec_to_quaternion
 from colorglove_ros.core.hand.model import NUM_DOFS
 
 __all__ = ['pose_from_fields', 'wrist_quaternion']
@@ -16,11 +17,11 @@ def pose_from_fields(position: np.ndarray, quaternion_xyzw: np.ndarray,
     20 finger joint angles in ``FINGER_DOF_NAMES`` order."""
     q = np.empty(NUM_DOFS)
     q[0:3] = position
-    q[3:6] = Rotation.from_quat(np.asarray(quaternion_xyzw, dtype=float)).as_rotvec()
+    q[3:6] = quaternion_to_rotvec(np.asarray(quaternion_xyzw, dtype=float))
     q[6:] = finger_joints
     return q
 
 
 def wrist_quaternion(q: np.ndarray) -> np.ndarray:
     """The wrist orientation of pose ``q`` as a unit quaternion (x, y, z, w)."""
-    return Rotation.from_rotvec(np.asarray(q, dtype=float)[3:6]).as_quat()
+    return rotvec_to_quaternion(np.asarray(q, dtype=float)[3:6])

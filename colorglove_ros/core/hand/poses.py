@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.geometry import matrix_to_rotvec
 from colorglove_ros.core.hand.mesh import HandMesh, skin_batch
 from colorglove_ros.core.hand.model import (
     DIP_PIP_RATIO,
@@ -26,7 +27,6 @@ from colorglove_ros.core.hand.model import (
     NUM_DOFS,
     NUM_FINGER_DOFS,
     HandModel,
-    matrix_to_rotvec,
 )
 
 __all__ = [

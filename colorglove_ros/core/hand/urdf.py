@@ -56,7 +56,8 @@ def _cylinder_link(name: str, length: float, radius: float, tip: bool) -> list[s
 
 
 def urdf_string(model: HandModel | None = None, name: str = URDF_NAME) -> str:
-    """URDF XML of ``model`` (default 0.19 m hand). Joint limits equal the model's."""
+    """URDF XML of ``model`` (default: a hand of the default length). Joint limits equal the
+    model's."""
     model = HandModel() if model is None else model
     s = model.scale
     palm_size = np.array([0.075, 0.095, 0.028]) * s

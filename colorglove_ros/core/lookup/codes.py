@@ -7,12 +7,9 @@ import numpy as np
 from scipy import sparse
 from sklearn.utils.extmath import randomized_svd
 
+from colorglove_ros.core.conventions import NUM_COLORS, TINY_SIZE
 from colorglove_ros.core.errors import ColorGloveError
-from colorglove_ros.core.lookup.distance import (
-    NUM_COLORS,
-    TINY_SIZE,
-    distance_transforms_batch,
-)
+from colorglove_ros.core.lookup.distance import distance_transforms_batch
 
 __all__ = [
     'FEATURE_POOL', 'FEATURE_SIDE', 'FEATURE_DIM', 'HAMMING_BLOCK', 'CodeError', 'BinaryEncoder',

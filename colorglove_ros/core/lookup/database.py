@@ -12,7 +12,14 @@ from typing import Any
 import numpy as np
 from sklearn.utils.extmath import randomized_svd
 
+from colorglove_ros.core.conventions import (
+    DEFAULT_HAND_LENGTH_M,
+    NUM_COLORS,
+    NUM_PATCHES,
+    TINY_SIZE,
+)
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.file_checksums import crc32_matches
 from colorglove_ros.core.lookup.codes import (
     BinaryEncoder,
     encoder_from_arrays,
@@ -21,31 +28,31 @@ from colorglove_ros.core.lookup.codes import (
 )
 from colorglove_ros.core.lookup.distance import (
     DT_SCALE,
-    NUM_COLORS,
-    TINY_SIZE,
     QueryDistance,
     dequantize_dts,
     distance_transforms_batch,
     quantize_dts,
 )
 from colorglove_ros.core.segmentation.crop import crop_signature
+from colorglove_ros.core.validation import validate_database_arrays
 
 __all__ = [
     'read_database_config',
-    'DATABASE_VERSION', 'NUM_PATCHES', 'DatabaseError', 'PoseDatabase', 'pixel_keys',
+    'DATABASE_VERSION', 'DatabaseError', 'PoseDatabase', 'pixel_keys',
     'save_database', 'load_database', 'farthest_point_sampling', 'nearest_neighbour_pairs',
     'train_encoder', 'assemble_database', 'BuildConfig', 'build_database', 'render_views',
-    'retrain_codes', 'SSC_SHORTLIST', 'SSC_HARD_NEGATIVES',
+    'retrain_codes', 'SSC_SHORTLIST', 'SSC_HARD_NEGATIVES', 'DEFAULT_TRAINING_IMAGES',
 ]
 
 DATABASE_VERSION = 1
-NUM_PATCHES = 20
 SSC_SHORTLIST = 64
 """Images (nearest in PCA features) searched exactly for each anchor's nearest neighbour."""
+DEFAULT_TRAINING_IMAGES = 50_000
+"""Images the SSC nearest-neighbour training pairs are drawn from (``BuildConfig``)."""
 SSC_HARD_NEGATIVES = 0.5
 """Fraction of the SSC negatives drawn from the far half of an anchor's shortlist (images
-that look alike but are not close) instead of random pairs; lowered the mean rank of the
-true neighbour at 192 bits from 10.0 to 7.2 on a 10k database (held-out configurations)."""
+that look alike but are not close) instead of random pairs (its effect: docs/RESULTS.md,
+Tuning notes)."""
 _PAD_KEY = NUM_COLORS * TINY_SIZE * TINY_SIZE   # pixel_keys padding: reads a zero
 _MANIFEST = 'manifest.json'
 
@@ -227,7 +234,7 @@ def load_database(path: str | Path, verify: bool = True) -> PoseDatabase:
         if size != info.get('bytes'):
             raise DatabaseError(f'{file}: {size} bytes, manifest says {info.get("bytes")} '
                                 '(truncated or modified)')
-        if verify and _crc32(file) != info.get('crc32'):
+        if verify and not crc32_matches(file, info.get('crc32')):   # cached when unchanged
             raise DatabaseError(f'{file}: checksum mismatch (corrupt)')
         try:
             arr = np.load(file, mmap_mode='r', allow_pickle=False)
@@ -254,6 +261,13 @@ def load_database(path: str | Path, verify: bool = True) -> PoseDatabase:
         raise DatabaseError(f'{path}: built with crop {built_crop}, this code crops with '
                             f'{crop_signature()}; rebuild the database')
     db.check()
+    # patch vertices must be vertices of the standard hand mesh the lookup and the IK use
+    from colorglove_ros.core.hand.mesh import build_hand_mesh
+    from colorglove_ros.core.hand.model import HandModel
+
+    length = float(db.meta.get('build', {}).get('hand_length_m', DEFAULT_HAND_LENGTH_M))
+    validate_database_arrays(db, str(path), build_hand_mesh(HandModel(length)).num_vertices,
+                             error=DatabaseError)
     return db
 
 
@@ -345,7 +359,8 @@ def nearest_neighbour_pairs(tiny: np.ndarray, dts: np.ndarray, num_pairs: int, s
 
 
 def train_encoder(tiny: np.ndarray, dts: np.ndarray, num_bits: int = 192,
-                  num_pairs: int = 10_000, seed: int = 0, max_images: int = 20_000,
+                  num_pairs: int = 10_000, seed: int = 0,
+                  max_images: int = DEFAULT_TRAINING_IMAGES,
                   exclude: np.ndarray | None = None, shortlist: int = SSC_SHORTLIST,
                   hard_negatives: float = SSC_HARD_NEGATIVES) -> BinaryEncoder:
     """Learn SSC codes on (a seeded subset of at most ``max_images`` of) the images
@@ -375,7 +390,7 @@ def assemble_database(tiny: np.ndarray, poses: np.ndarray, crop: np.ndarray,
                       num_pairs: int = 10_000, seed: int = 0,
                       meta: dict[str, Any] | None = None,
                       progress: Callable[[str], None] | None = None,
-                      max_training_images: int = 20_000) -> PoseDatabase:
+                      max_training_images: int = DEFAULT_TRAINING_IMAGES) -> PoseDatabase:
     """Make a :class:`PoseDatabase` from rendered entries: distance transforms, pixel keys,
     codes (training an SSC encoder on the entries when ``encoder`` is None). Missing patch
     arrays are filled with 'not visible'."""
@@ -429,8 +444,8 @@ class BuildConfig:
     distance_m: float = 0.5
     num_bits: int = 192
     num_pairs: int = 10_000
-    training_images: int = 20_000
-    hand_length_m: float = 0.19
+    training_images: int = DEFAULT_TRAINING_IMAGES
+    hand_length_m: float = DEFAULT_HAND_LENGTH_M
     glove_seed: int = 0
     fps_vertices: int = 300
     batch: int = 256
@@ -445,21 +460,6 @@ class BuildConfig:
 
 def _patch_vertices(faces: np.ndarray, face_patch: np.ndarray) -> list[np.ndarray]:
     return [np.unique(faces[face_patch == p]) for p in range(NUM_PATCHES)]
-
-
-def _patch_centroids(ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Centroid (B, 20, 2) (x, y; NaN if absent) and pixel count (B, 20) of each patch in
-    (B, H, W) patch-id images (0 background, p + 1 for patch p); sparse over glove pixels."""
-    b, h, w = ids.shape
-    bi, ys, xs = np.nonzero(ids)
-    key = bi * (NUM_PATCHES + 1) + ids[bi, ys, xs]
-    size = b * (NUM_PATCHES + 1)
-    cnt = np.bincount(key, minlength=size).reshape(b, -1)[:, 1:]
-    sx = np.bincount(key, xs, minlength=size).reshape(b, -1)[:, 1:]
-    sy = np.bincount(key, ys, minlength=size).reshape(b, -1)[:, 1:]
-    with np.errstate(invalid='ignore', divide='ignore'):
-        cen = np.stack([sx / cnt, sy / cnt], axis=-1)
-    return cen, cnt
 
 
 def _nearest_visible_vertices(verts: np.ndarray, depth: np.ndarray, centroids: np.ndarray,
@@ -497,15 +497,15 @@ def build_database(config: BuildConfig,
 
     ``bar`` wraps an iterable with a progress bar (e.g. ``tqdm``)."""
     from colorglove_ros.core.camera import PinholeCamera
+    from colorglove_ros.core.geometry import rotvec_to_matrix
     from colorglove_ros.core.hand.glove import default_hand
-    from colorglove_ros.core.hand.model import rotvec_to_matrix
     from colorglove_ros.core.hand.poses import (
         pose_collection,
         sample_global_rotations,
         skin_fingers,
     )
     from colorglove_ros.core.segmentation.crop import crop_to_tiny
-    from colorglove_ros.core.synthetic.render import Renderer, patch_ids_to_labels
+    from colorglove_ros.core.synthetic.render import Renderer, patch_centroids, patch_ids_to_labels
 
     say = progress or (lambda _msg: None)
     wrap = bar or (lambda it, **_kw: it)
@@ -564,7 +564,7 @@ def build_database(config: BuildConfig,
             ids, depth = renderer.render_patch_ids_depth(verts, mesh.faces, glove.face_patch,
                                                          camera)
             labels = patch_ids_to_labels(ids, glove.patch_color)
-            cen, cnt = _patch_centroids(ids)
+            cen, cnt = patch_centroids(ids, NUM_PATCHES)
             vert_idx = _nearest_visible_vertices(verts, depth, cen, patch_verts, cam,
                                                  config.visibility_tolerance_m)
             for j in range(len(rv)):
@@ -614,8 +614,8 @@ def render_views(config: BuildConfig, fingers: np.ndarray, rotvecs: np.ndarray
     entries (same camera, distance, crop). Returns poses (M, 26), tiny images (M, 40, 40),
     crops (M, 3) and a (M,) bool ``ok`` (False where crop_to_tiny rejected the render)."""
     from colorglove_ros.core.camera import PinholeCamera
+    from colorglove_ros.core.geometry import rotvec_to_matrix
     from colorglove_ros.core.hand.glove import default_hand
-    from colorglove_ros.core.hand.model import rotvec_to_matrix
     from colorglove_ros.core.segmentation.crop import crop_to_tiny
     from colorglove_ros.core.synthetic.render import Renderer, patch_ids_to_labels
 
@@ -653,7 +653,8 @@ def render_views(config: BuildConfig, fingers: np.ndarray, rotvecs: np.ndarray
 
 
 def retrain_codes(path: str | Path, num_bits: int = 192, num_pairs: int = 10_000,
-                  seed: int = 0, max_images: int = 20_000) -> BinaryEncoder:
+                  seed: int = 0, max_images: int = DEFAULT_TRAINING_IMAGES
+                  ) -> BinaryEncoder:
     """Learn a new SSC encoder on an existing database's images and rewrite its codes,
     encoder arrays and manifest in place (the rendered entries are kept)."""
     path = Path(path)

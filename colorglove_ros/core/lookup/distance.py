@@ -6,18 +6,15 @@ import math
 import cv2
 import numpy as np
 
+from colorglove_ros.core.conventions import NUM_COLORS, TINY_SIZE
 from colorglove_ros.core.errors import ColorGloveError
 
 __all__ = [
-    'NUM_COLORS', 'TINY_SIZE', 'ABSENT_PENALTY', 'DT_SCALE', 'DistanceError',
+    'ABSENT_PENALTY', 'DT_SCALE', 'DistanceError',
     'distance_transforms', 'distance_transforms_batch', 'quantize_dts', 'dequantize_dts',
     'directed_distance', 'image_distance', 'QueryDistance',
 ]
 
-NUM_COLORS = 10
-"""Glove colours 1..10 (``core/hand/glove.py`` NUM_COLORS); 0 is background."""
-TINY_SIZE = 40
-"""Side of a tiny image in pixels (``core/segmentation/crop.py`` TINY_SIZE)."""
 ABSENT_PENALTY = float(math.hypot(TINY_SIZE, TINY_SIZE))
 """Distance (px) charged to a pixel whose colour is absent from the other image: the image
 diagonal, 40*sqrt(2) = 56.57 px, just above the largest possible in-image distance

@@ -1,15 +1,16 @@
 """Database lookup: Hamming scan of binary codes, exact re-rank, Gaussian-weighted pose blend."""
 from __future__ import annotations
 
-import math
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.geometry import rotvec_to_quaternion
+from colorglove_ros.core.lookup.blend import blend_poses_with_quaternions, blend_weights
 from colorglove_ros.core.lookup.codes import HAMMING_BLOCK, QueryEncoder, hamming_distances
 from colorglove_ros.core.lookup.database import PoseDatabase
 from colorglove_ros.core.lookup.distance import ABSENT_PENALTY, DT_SCALE, QueryDistance
@@ -21,9 +22,11 @@ from colorglove_ros.core.lookup.finger_evidence import (
     patch_digits,
     weighted_fingers,
 )
+from colorglove_ros.core.lookup.types import LookupResult, ProjectionConstraints
+from colorglove_ros.core.segmentation.crop import tiny_to_full
 
-__all__ = ['SearchError', 'ProjectionConstraints', 'LookupResult', 'PoseLookup',
-           'top_k_with_ties', 'blend_weights', 'blend_poses', 'estimate_global_pose']
+__all__ = ['SearchError', 'PoseLookup',
+           'top_k_with_ties', 'estimate_global_pose']
 
 
 _BUFFER_CAP = 1 << 20
@@ -32,39 +35,6 @@ _BUFFER_CAP = 1 << 20
 
 class SearchError(ColorGloveError):
     """Bad lookup input (image shape, empty query, camera)."""
-
-
-@dataclass(frozen=True)
-class ProjectionConstraints:
-    """Visible patches of the nearest database entry, for inverse kinematics.
-
-    ``tiny_xy`` are patch centroids in tiny-image pixels and ``full_xy`` the same points
-    mapped into the query's full image with the query's crop transform."""
-
-    patch_ids: np.ndarray     # (M,) int
-    colors: np.ndarray        # (M,) uint8 glove colour label 1..10
-    vertices: np.ndarray      # (M,) int mesh vertex nearest the patch centroid
-    tiny_xy: np.ndarray       # (M, 2) float
-    full_xy: np.ndarray       # (M, 2) float
-    pixel_counts: np.ndarray  # (M,) float, patch area in tiny-image pixels
-
-
-@dataclass(frozen=True)
-class LookupResult:
-    """Outcome of one lookup. The neighbour arrays are sorted by image distance."""
-
-    indices: np.ndarray         # (k,) database entries blended
-    distances: np.ndarray       # (k,) image distances (px)
-    weights: np.ndarray         # (k,) normalised blend weights
-    poses: np.ndarray           # (k, 26) neighbour poses, wrist moved to the query
-    #                             (estimate_global_pose)
-    blended: np.ndarray         # (26,) blended pose q_b
-    constraints: ProjectionConstraints
-    num_candidates: int         # entries re-ranked (top by Hamming, ties kept)
-    timings_ms: dict[str, float] = field(default_factory=dict)
-    # (20,) weighted spread (rad) of each finger DOF over the neighbours when the fingers
-    # were blended per finger from the observed blobs (core.finger_evidence); else None
-    finger_std: np.ndarray | None = None
 
 
 def top_k_with_ties(values: np.ndarray, k: int) -> np.ndarray:
@@ -95,65 +65,6 @@ def top_k_with_ties(values: np.ndarray, k: int) -> np.ndarray:
     return np.flatnonzero(values <= cut)
 
 
-def blend_weights(distances: np.ndarray) -> np.ndarray:
-    """Normalised weights exp(-d^2 / sigma^2) with sigma = mean distance (paper eq. 1); if all
-    distances are zero the weights are equal."""
-    d = np.asarray(distances, np.float64)
-    sigma = float(d.mean())
-    if sigma <= 0.0:
-        return np.full(len(d), 1.0 / len(d))
-    w = np.exp(-(d / sigma) ** 2)
-    return w / w.sum()
-
-
-def blend_poses(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Weighted blend of (k, 26) poses: translation and finger DOFs linearly, the global
-    rotation as the weighted quaternion mean (Markley), returned as a rotation vector."""
-    poses = np.asarray(poses, np.float64)
-    return _blend(poses, _rotvec_to_quat(poses[:, 3:6]), np.asarray(weights, np.float64))
-
-
-def _blend(poses: np.ndarray, quats: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """:func:`blend_poses` with the rotations also given as quaternions (k, 4)."""
-    out = weights @ poses
-    out[3:6] = _quat_to_rotvec(_quat_mean(quats, weights))
-    return out
-
-
-def _rotvec_to_quat(rv: np.ndarray) -> np.ndarray:
-    """(k, 3) rotation vectors -> (k, 4) unit quaternions (x, y, z, w)."""
-    angle = np.sqrt(np.einsum('ij,ij->i', rv, rv))
-    half = 0.5 * angle
-    k = np.sin(half)
-    small = angle <= 1e-8
-    np.divide(k, angle, out=k, where=~small)
-    k[small] = 0.5            # sin(a/2)/a = 1/2 - a^2/48 + ...: exactly 1/2 in doubles here
-    out = np.empty((len(rv), 4))
-    np.multiply(rv, k[:, None], out=out[:, :3])
-    np.cos(half, out=out[:, 3])
-    return out
-
-
-def _quat_mean(quats: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Weighted quaternion mean (Markley et al. 2007): principal eigenvector of sum w q q^T."""
-    m = (quats * weights[:, None]).T @ quats
-    _, vecs = np.linalg.eigh(m)
-    return vecs[:, -1]
-
-
-def _quat_to_rotvec(q: np.ndarray) -> np.ndarray:
-    """One quaternion (x, y, z, w), any sign and norm -> rotation vector, angle in [0, pi]."""
-    x, y, z, w = (float(v) for v in q)
-    if w < 0.0:
-        x, y, z, w = -x, -y, -z, -w
-    s = math.sqrt(x * x + y * y + z * z)
-    if s < 1e-12 * math.hypot(s, w):
-        f = 2.0 / math.hypot(s, w)
-    else:
-        f = 2.0 * math.atan2(s, w) / s
-    return np.array([x * f, y * f, z * f])
-
-
 def _entry_place_terms(entry_global: np.ndarray, entry_crop: np.ndarray,
                        render_camera: dict, anchor_local: np.ndarray | None) -> np.ndarray:
     """The query-independent part of :func:`estimate_global_pose`, (k, 10) per entry: the
@@ -162,7 +73,7 @@ def _entry_place_terms(entry_global: np.ndarray, entry_crop: np.ndarray,
     camera frame, R_e anchor_local (zero without an anchor)."""
     g = np.asarray(entry_global, np.float64).reshape(-1, 6)
     crop = np.asarray(entry_crop, np.float64).reshape(-1, 3)
-    quats = _rotvec_to_quat(g[:, 3:6])
+    quats = rotvec_to_quaternion(g[:, 3:6])
     offset = np.zeros((len(g), 3))
     if anchor_local is not None:
         local = np.asarray(anchor_local, np.float64)
@@ -371,7 +282,7 @@ class PoseLookup:
         ``crop_transform`` (``CropTransform`` or (scale, offset_x, offset_y)).
 
         With ``blobs`` (the same image's patch blobs: ``color``, ``centroid_px`` in full-image
-        pixels, ``pixel_count``, as ``core.ik.Blobs``) each finger of the blend is weighted by
+        pixels, ``pixel_count``: ``tracking.types.Blobs``) each finger of the blend is weighted by
         how well the nearest ``finger_evidence.num_neighbours`` entries' patches on that finger
         match the blobs (:mod:`core.finger_evidence`) and the result carries the fingers'
         spread (``finger_std``); without, every DOF is blended with the image weights (the
@@ -400,7 +311,7 @@ class PoseLookup:
         poses = self._a['poses'][idx].astype(np.float64)
         terms = self._place_table[idx]
         poses[:, 0:3] = _place_wrists(terms, self.db.render_camera, crop, camera)
-        blended = _blend(poses, terms[:, 3:7], weights)
+        blended = blend_poses_with_quaternions(poses, terms[:, 3:7], weights)
         finger_std = finger_entries = None
         evidence = None if blobs is None else self._finger_blend(cand[near], crop, blobs)
         if evidence is not None:
@@ -461,7 +372,8 @@ class PoseLookup:
                 from colorglove_ros.core.hand.mesh import build_hand_mesh
                 from colorglove_ros.core.hand.model import HandModel
 
-                length = float(self.db.meta.get('build', {}).get('hand_length_m', 0.19))
+                length = float(self.db.meta.get('build', {}).get('hand_length_m',
+                                                                 DEFAULT_HAND_LENGTH_M))
                 link = build_hand_mesh(HandModel(length)).vertex_link
             self._patch_digit = patch_digits(self._a['patch_vertex'], link)
         return self._patch_digit
@@ -498,7 +410,7 @@ class PoseLookup:
         vis = np.flatnonzero(source >= 0)
         src = source[vis]
         tiny_xy = self._a['patch_xy'][src, vis].astype(np.float64)
-        full_xy = tiny_xy * crop[0] + np.array([crop[1], crop[2]])
+        full_xy = tiny_to_full(tiny_xy, *crop)
         return ProjectionConstraints(vis, self._a['patch_color'][vis],
                                      self._a['patch_vertex'][src, vis].astype(np.int64),
                                      tiny_xy, full_xy,

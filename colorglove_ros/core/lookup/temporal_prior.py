@@ -7,8 +7,10 @@ import math
 import numpy as np
 
 from colorglove_ros.core.errors import ColorGloveError
-from colorglove_ros.core.hand.model import NUM_DOFS, rotvec_to_matrix
-from colorglove_ros.core.lookup.search import LookupResult, blend_poses
+from colorglove_ros.core.geometry import rotvec_to_matrix
+from colorglove_ros.core.hand.model import NUM_DOFS
+from colorglove_ros.core.lookup.blend import blend_poses
+from colorglove_ros.core.lookup.types import LookupResult
 
 __all__ = ['TemporalPriorError', 'pose_distances_rad', 'reweight_by_previous']
 
@@ -40,7 +42,7 @@ def reweight_by_previous(result: LookupResult, q_prev: np.ndarray | None, tau_ra
                          rotation_weight: float = 1.0) -> LookupResult:
     """A copy of ``result`` whose blend weights are the image weights times
     exp(-d_i^2 / tau^2), d_i = :func:`pose_distances_rad` of neighbour i to the previous
-    output pose ``q_prev``, and whose blended pose is :func:`search.blend_poses` of the
+    output pose ``q_prev``, and whose blended pose is :func:`blend.blend_poses` of the
     neighbours with those weights. ``result`` itself when ``q_prev`` is None (no previous
     frame: first frame, or the tracker was reset). Neighbour order, distances and projection
     constraints (of the nearest image) are kept."""

@@ -6,16 +6,16 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.errors import ColorGloveError
 
 __all__ = [
-    'TINY_SIZE', 'CROP_ALGORITHM_VERSION', 'crop_signature',
-    'CropError', 'CropTransform', 'TinyCrop', 'mean_shift_crop', 'crop_to_tiny',
+    'CROP_ALGORITHM_VERSION', 'crop_signature',
+    'CropError', 'CropTransform', 'tiny_to_full', 'TinyCrop', 'mean_shift_crop', 'crop_to_tiny',
     'crop_window', 'DEFAULT_BANDWIDTH_FACTOR', 'DEFAULT_MIN_PIXELS', 'DEFAULT_GLOVE_FRACTION',
     'DEFAULT_RESCUE_SHARE', 'DEFAULT_INITIAL_BANDWIDTH_FACTOR',
 ]
 
-TINY_SIZE = 40
 DEFAULT_BANDWIDTH_FACTOR = 2.5
 DEFAULT_INITIAL_BANDWIDTH_FACTOR = 2.0
 DEFAULT_MIN_PIXELS = 20
@@ -39,6 +39,14 @@ class CropError(ColorGloveError, ValueError):
     """The input of a crop function has the wrong type, shape or parameters."""
 
 
+def tiny_to_full(tiny_xy: np.ndarray, scale: float, offset_x: float,
+                 offset_y: float) -> np.ndarray:
+    """Tiny-image points (..., 2) -> full-image points (..., 2), ``full = offset + scale *
+    tiny`` (pixel centres, (x, y)): the mapping of a :class:`CropTransform`."""
+    xy = np.asarray(tiny_xy, dtype=np.float64)
+    return xy * scale + np.array([offset_x, offset_y])
+
+
 @dataclass(frozen=True)
 class CropTransform:
     """Maps tiny-image pixel centres to full-image pixel centres: ``full = offset + scale * tiny``.
@@ -52,8 +60,7 @@ class CropTransform:
 
     def to_full(self, tiny_xy: np.ndarray) -> np.ndarray:
         """Tiny-image points (..., 2) -> full-image points (..., 2)."""
-        xy = np.asarray(tiny_xy, dtype=np.float64)
-        return xy * self.scale + np.array([self.offset_x, self.offset_y])
+        return tiny_to_full(tiny_xy, self.scale, self.offset_x, self.offset_y)
 
     def to_tiny(self, full_xy: np.ndarray) -> np.ndarray:
         """Full-image points (..., 2) -> tiny-image points (..., 2)."""

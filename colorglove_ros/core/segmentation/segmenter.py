@@ -3,29 +3,26 @@ from __future__ import annotations
 
 import functools
 import time
-from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
+from colorglove_ros.core.colorimetry import srgb_to_linear
+from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.segmentation.blobs import color_components
 from colorglove_ros.core.segmentation.color_model import (
     ColorCalibration,
-    estimate_light_gains,
-    gain_table,
     load_calibration,
     read_calibration_config,
-    srgb_to_linear,
 )
-from colorglove_ros.core.segmentation.crop import (
-    TINY_SIZE,
-    CropTransform,
-    crop_to_tiny,
-    mean_shift_crop,
-)
+from colorglove_ros.core.segmentation.crop import CropTransform, crop_to_tiny, mean_shift_crop
+from colorglove_ros.core.segmentation.light import estimate_light_gains, gain_table
+from colorglove_ros.core.segmentation.types import Blob, Observation
+from colorglove_ros.core.validation import validate_segmenter_settings
 
 __all__ = [
-    'SegmentationInputError', 'SegmentationConfigError', 'Blob', 'Observation', 'GloveSegmenter',
+    'SegmentationInputError', 'SegmentationConfigError', 'GloveSegmenter',
     'STATUS_OK',
     'STATUS_NO_GLOVE', 'STATUS_TOO_SMALL', 'STATUS_OUT_OF_FRAME', 'STAGES', 'load_segmenter',
     'keep_multicolor_components', 'relabel_borders',
@@ -48,32 +45,6 @@ class SegmentationConfigError(ColorGloveError, ValueError):
     """Bad segmenter settings (unknown key or out-of-range value)."""
 
 
-@dataclass(frozen=True)
-class Blob:
-    """One connected component of one glove colour, in full-image pixels."""
-
-    color_label: int
-    centroid_x: float
-    centroid_y: float
-    pixel_count: int
-
-
-@dataclass
-class Observation:
-    """What the segmenter saw in one frame."""
-
-    hand_found: bool
-    status: str
-    image_width: int
-    image_height: int
-    tiny_labels: np.ndarray | None = None   # (40, 40) uint8 whenever a crop was made
-    crop: CropTransform | None = None       # tiny -> full image pixels (or None)
-    blobs: list[Blob] = field(default_factory=list)
-    glove_pixel_count: int = 0              # glove pixels inside the crop (full-res units)
-    timings_ms: dict[str, float] = field(default_factory=dict)
-    label_image: np.ndarray | None = None   # (H, W) uint8, only with keep_labels=True
-
-
 def keep_multicolor_components(labels: np.ndarray, min_colors: int = 3,
                                min_share: float = 0.03, min_pixels: int = 4,
                                reattach_radius: int = 0,
@@ -86,8 +57,8 @@ def keep_multicolor_components(labels: np.ndarray, min_colors: int = 3,
     lies within that many pixels of a kept one (a gap of at most ``reattach_radius`` - 1
     pixels) and has at most ``reattach_max_share`` times the kept components' pixels: a
     fingertip or finger that a thin line of unclassified pixels has cut off from the hand shows
-    only one or two colours by itself (on the evaluation sequences such pieces hold up to 12 %
-    of the hand's pixels). Glove-coloured clutter within that reach is kept too, like clutter
+    only one or two colours by itself (how large such pieces get: docs/RESULTS.md, Tuning
+    notes). Glove-coloured clutter within that reach is kept too, like clutter
     touching the glove."""
     if reattach_radius < 0 or not reattach_max_share >= 0.0:
         raise SegmentationConfigError(
@@ -121,7 +92,7 @@ def keep_multicolor_components(labels: np.ndarray, min_colors: int = 3,
 
 
 #: sRGB byte -> linear RGB in 0..255 (float32): mixed pixels are linear mixes there.
-_LINEAR_RGB = (255.0 * srgb_to_linear(np.arange(256, dtype=np.uint8))).astype(np.float32)
+_LINEAR_RGB = (255.0 * srgb_to_linear(np.arange(256) / 255.0)).astype(np.float32)
 _CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
 _UNSURE = 255
 _NO_KEY = np.int32(np.iinfo(np.int32).max)   # larger than every sort key; label bits 255
@@ -367,24 +338,14 @@ class GloveSegmenter:
                window: tuple[int, int, int, int]) -> list[Blob]:
         """Connected components of each colour inside ``window`` (ROI pixel bounds)."""
         wx0, wx1, wy0, wy1 = window
-        sub = labels[wy0:wy1, wx0:wx1]
-        blobs: list[Blob] = []
         min_px = max(int(np.ceil(self.min_blob_pixels / (r * r))), 1)
-        counts = np.bincount(sub.ravel(), minlength=self.calibration.num_colors + 1)
-        for c in np.flatnonzero(counts[1:] >= min_px) + 1:
-            m = cv2.compare(sub, int(c), cv2.CMP_EQ)
-            bx, by, bw, bh = cv2.boundingRect(m)
-            # 16-bit component labels (faster) whenever they cannot overflow
-            ltype = cv2.CV_16U if bw * bh < np.iinfo(np.uint16).max else cv2.CV_32S
-            n, _, stats, cents = cv2.connectedComponentsWithStats(m[by:by + bh, bx:bx + bw],
-                                                                  connectivity=8, ltype=ltype)
-            for k in range(1, n):
-                area = int(stats[k, cv2.CC_STAT_AREA])
-                if area < min_px:
-                    continue
-                fx = x0 + r * (cents[k, 0] + bx + wx0) + 0.5 * (r - 1)
-                fy = y0 + r * (cents[k, 1] + by + wy0) + 0.5 * (r - 1)
-                blobs.append(Blob(int(c), float(fx), float(fy), area * r * r))
+        colors, cents, areas = color_components(labels[wy0:wy1, wx0:wx1], min_px,
+                                                self.calibration.num_colors)
+        blobs: list[Blob] = []
+        for c, (cx, cy), area in zip(colors, cents, areas, strict=True):
+            fx = x0 + r * (cx + wx0) + 0.5 * (r - 1)
+            fy = y0 + r * (cy + wy0) + 0.5 * (r - 1)
+            blobs.append(Blob(int(c), float(fx), float(fy), int(area) * r * r))
         return blobs
 
     def _filter(self, image: np.ndarray) -> np.ndarray:
@@ -498,9 +459,12 @@ class GloveSegmenter:
 def load_segmenter(config_path: str = 'config/color_calibration.yaml') -> GloveSegmenter:
     """A segmenter with the calibration file and settings named in a colour config YAML."""
     cfg = read_calibration_config(config_path)
+    # settings checked (odd kernels, finite numbers, ranges) before the calibration is read
+    settings = validate_segmenter_settings(cfg['segmenter'], str(cfg['config_path']),
+                                           SegmentationConfigError)
     calibration = load_calibration(cfg['calibration_file'])
     try:
-        return GloveSegmenter(calibration, **cfg['segmenter'])
+        return GloveSegmenter(calibration, **settings)
     except TypeError as exc:
         raise SegmentationConfigError(
             f'{cfg["config_path"]}: bad segmenter setting: {exc}') from exc

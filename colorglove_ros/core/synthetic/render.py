@@ -244,21 +244,21 @@ def patch_ids_to_labels(patch_ids: np.ndarray, patch_color: np.ndarray) -> np.nd
 
 def patch_centroids(patch_ids: np.ndarray, num_patches: int) -> tuple[np.ndarray, np.ndarray]:
     """Centroid (x, y) pixels and pixel count of every patch in (B, H, W) or (H, W)
-    patch-id images: ((B, P, 2) float64 with NaN for absent patches, (B, P) int64)."""
+    patch-id images (0 background, p + 1 for patch p): ((B, P, 2) float64 with NaN for
+    absent patches, (B, P) int64); sparse over the glove pixels."""
     ids = np.asarray(patch_ids)
     single = ids.ndim == 2
     if single:
         ids = ids[None]
-    b, h, w = ids.shape
-    nbin = num_patches + 1
-    flat = ids.reshape(b, -1).astype(np.int64) + (np.arange(b) * nbin)[:, None]
-    ys, xs = np.mgrid[0:h, 0:w]
-    cnt = np.bincount(flat.ravel(), minlength=b * nbin).reshape(b, nbin)
-    sx = np.bincount(flat.ravel(), np.tile(xs.ravel(), b), b * nbin).reshape(b, nbin)
-    sy = np.bincount(flat.ravel(), np.tile(ys.ravel(), b), b * nbin).reshape(b, nbin)
+    b = ids.shape[0]
+    bi, ys, xs = np.nonzero(ids)
+    key = bi * (num_patches + 1) + ids[bi, ys, xs]
+    size = b * (num_patches + 1)
+    cnt = np.bincount(key, minlength=size).reshape(b, -1)[:, 1:]
+    sx = np.bincount(key, xs, minlength=size).reshape(b, -1)[:, 1:]
+    sy = np.bincount(key, ys, minlength=size).reshape(b, -1)[:, 1:]
     with np.errstate(invalid='ignore', divide='ignore'):
-        cen = np.stack([sx / cnt, sy / cnt], axis=-1)[:, 1:]
-    cnt = cnt[:, 1:]
+        cen = np.stack([sx / cnt, sy / cnt], axis=-1)
     return (cen[0], cnt[0]) if single else (cen, cnt)
 
 

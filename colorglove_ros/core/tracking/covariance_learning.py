@@ -9,19 +9,17 @@ import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.geometry import align_rotation_vector
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
-from colorglove_ros.core.tracking.ik import (
-    Correspondences,
-    FastKinematics,
-    IKCovariances,
-    IKResult,
-    align_rotation_vector,
-    project_correspondences,
-)
+from colorglove_ros.core.tracking.config import IKCovariances
+from colorglove_ros.core.tracking.kinematics import FastKinematics
+from colorglove_ros.core.tracking.projection import project_correspondences
+from colorglove_ros.core.tracking.tracker import IKResult
+from colorglove_ros.core.tracking.types import Correspondences
 
 __all__ = [
     'LOCAL_WINDOW', 'IKTrainingError', 'TrainingFrame', 'CovarianceFloors', 'local_average',
-    'deviation_from_local_average', 'jitter', 'estimate_r', 'estimate_q', 'estimate_p',
+    'deviation_from_local_average', 'jitter', 'estimate_r',
     'learn_covariances', 'training_frame',
 ]
 
@@ -35,7 +33,7 @@ class IKTrainingError(ColorGloveError):
 @dataclass(frozen=True)
 class TrainingFrame:
     """One frame of a training sequence: the blended lookup pose, the matched constraints
-    (``core.ik`` correspondences over all cameras), and the ground-truth pose (synthetic
+    (``core.tracking.types.Correspondences`` over all cameras), and the ground-truth pose (synthetic
     data) or else the tracker's estimate (the paper's setting, no ground truth)."""
 
     q_blend: np.ndarray
@@ -122,33 +120,6 @@ def _rot_aligned(q: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return out
 
 
-def estimate_q(q_blend: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
-    """Mean square of blended minus reference pose per DOF (26,); rows with NaN skipped."""
-    b, r = _poses(q_blend, 'q_blend'), _poses(q_ref, 'q_ref')
-    if b.shape != r.shape or b.shape[1] != NUM_DOFS:
-        raise IKTrainingError(f'q_blend {b.shape} and q_ref {r.shape} must both be (N, 26)')
-    ok = ~(np.isnan(b).any(axis=1) | np.isnan(r).any(axis=1))
-    if not ok.any():
-        raise IKTrainingError('no frame with both a blended and a reference pose')
-    d = _rot_aligned(b[ok], r[ok]) - r[ok]
-    return (d**2).mean(axis=0)
-
-
-def estimate_p(q_ref: np.ndarray, window: int = LOCAL_WINDOW,
-               q_avg_source: np.ndarray | None = None) -> np.ndarray:
-    """Mean square of the previous frame's pose about the current local average,
-    ``q_{i-1} - mean_{j in S} q_{i+j}``, per DOF (26,). The local average is taken over
-    ``q_avg_source`` if given (else ``q_ref``)."""
-    q = _poses(q_ref, 'q_ref')
-    src = q if q_avg_source is None else _poses(q_avg_source, 'q_avg_source')
-    if src.shape != q.shape:
-        raise IKTrainingError(f'q_avg_source {src.shape} must match q_ref {q.shape}')
-    d = _p_deviations(q, window, src)
-    if not len(d):
-        raise IKTrainingError(f'estimate_p needs at least {window} consecutive frames')
-    return (d**2).mean(axis=0)
-
-
 def learn_covariances(sequences: Sequence[Sequence[TrainingFrame]], model: HandModel,
                       cameras: Sequence[PinholeCamera], window: int = LOCAL_WINDOW,
                       floors: CovarianceFloors | None = None
@@ -201,10 +172,9 @@ def learn_covariances(sequences: Sequence[Sequence[TrainingFrame]], model: HandM
     return IKCovariances(r_var, q_var, p_var, source='learned'), stats
 
 
-def _p_deviations(traj: np.ndarray, window: int,
-                  avg_source: np.ndarray | None = None) -> np.ndarray:
+def _p_deviations(traj: np.ndarray, window: int) -> np.ndarray:
     """Rows ``q_{i-1} - local_average_i`` of a trajectory (incomplete windows dropped)."""
-    avg = local_average(traj if avg_source is None else avg_source, window)
+    avg = local_average(traj, window)
     prev, cur = traj[:-1], avg[1:]
     ok = ~(np.isnan(prev).any(axis=1) | np.isnan(cur).any(axis=1))
     return _rot_aligned(prev[ok], cur[ok]) - cur[ok]

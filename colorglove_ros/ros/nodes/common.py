@@ -15,6 +15,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.ros.shm_cleanup import clean_stale_fastdds_segments
 
 __all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'run_node']
 
@@ -22,9 +23,10 @@ __all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'run_node']
 # of queueing them without bound.
 LATEST_ONLY = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=1,
                          reliability=QoSReliabilityPolicy.RELIABLE)
-# Camera images: sensor-data style (best effort matches reliable and best-effort publishers);
-# a queue of 3 absorbs a burst of frames without building up latency.
-LATEST_IMAGE = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=3,
+# Camera images: sensor-data style (best effort matches reliable and best-effort publishers),
+# newest frame only: whatever the offered rate, segmentation works on the latest frame and
+# drops older ones, so latency stays bounded by the processing time plus a frame period.
+LATEST_IMAGE = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=1,
                           reliability=QoSReliabilityPolicy.BEST_EFFORT)
 
 
@@ -53,7 +55,10 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Init rclpy, spin the node made by ``factory`` until shutdown, and clean up (Jazzy style).
 
     A node that cannot start (bad configuration) logs the reason and exits with code 1.
+    Shared-memory segments of killed Fast DDS participants are removed first (a respawned
+    node must not pile them up).
     """
+    clean_stale_fastdds_segments()
     rclpy.init(args=args)
     node = None
     try:

@@ -4,6 +4,7 @@ one or several calibrated cameras."""
 from __future__ import annotations
 
 import sys
+import traceback
 from collections import deque
 from dataclasses import replace
 
@@ -18,12 +19,10 @@ from visualization_msgs.msg import MarkerArray
 from colorglove_ros.core.camera import CalibrationError, load_calibration
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.hand.overlay import draw_skeleton
-from colorglove_ros.core.tracking.ik import (
-    CameraObservation,
-    HandTracker,
-    IKError,
-    load_ik_config,
-)
+from colorglove_ros.core.tracking.config import load_ik_config
+from colorglove_ros.core.tracking.tracker import HandTracker
+from colorglove_ros.core.tracking.types import CameraObservation, IKError
+from colorglove_ros.core.validation import InvalidInputError, validate_hand_depth
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
     camera_observation_from_msg,
@@ -35,6 +34,7 @@ from colorglove_ros.ros.conversions import (
     tf_message_from_pose,
 )
 from colorglove_ros.ros.image import ImageEncodingError, array_to_image, image_to_rgb8
+from colorglove_ros.ros.message_checks import check_candidates_msg, check_observation_msg
 from colorglove_ros.ros.nodes.common import (
     LATEST_IMAGE,
     LATEST_ONLY,
@@ -75,6 +75,7 @@ class IKNode(Node):
         except (CalibrationError, IKError, ValueError) as exc:
             raise StartupError(f'ik_node cannot start: {exc}') from exc
         self.model = model
+        self.num_vertices = mesh.num_vertices
         self.cameras = calibration.cameras
         topics = [t.strip() for t in extra_topics.split(',') if t.strip()]
         if len(topics) != len(self.cameras) - 1:
@@ -137,6 +138,13 @@ class IKNode(Node):
                     f'{match.header.frame_id!r}, calibrated {camera.frame_id!r}: ignored',
                     throttle_duration_sec=1.0)
                 match = None
+            if match is not None and match.hand_found:
+                try:
+                    check_observation_msg(match, (camera.width, camera.height))
+                except InvalidInputError as exc:
+                    self.get_logger().warn(f'observation of camera {index + 1} ignored: {exc}',
+                                           throttle_duration_sec=1.0)
+                    match = None
             observations.append(CameraObservation(hand_found=False) if match is None
                                 else camera_observation_from_msg(match))
         return observations
@@ -169,15 +177,39 @@ class IKNode(Node):
         self.pending = msg
         self.pending_timer.reset()
 
+    def _check_depth(self, q: np.ndarray) -> None:
+        """Refuse a pose with any hand keypoint at an implausible depth from any camera
+        (behind or just in front of its plane, or far away)."""
+        keypoints = self.model.keypoints(q)
+        for camera in self.cameras:
+            validate_hand_depth(camera.world_to_camera(keypoints), camera.name)
+
     def track(self, msg: HandPoseCandidates) -> None:
-        """Run the tracker on one frame's candidates and publish the results."""
-        stamp = stamp_to_seconds(msg.header.stamp)
-        observations = [camera_observation_from_msg(msg.observation),
-                        *self._extra_camera_observations(stamp)]
+        """Run the tracker on one frame's candidates and publish the results. Candidates
+        that fail validation, and results without a matched constraint or at an implausible
+        depth, give 'no hand' with the reason; no message stops the node."""
         try:
-            prior = pose_prior_from_candidates(msg) if msg.hand_found else None
+            self._track(msg)
+        except Exception as exc:   # last line of defence: a message must never stop the node
+            self.get_logger().error(f'tracking failed: {exc!r}\n{traceback.format_exc()}',
+                                    throttle_duration_sec=1.0)
+            self.tracker.reset()
+            self._report_no_hand(msg, f'tracking failed: {exc!r}')
+
+    def _track(self, msg: HandPoseCandidates) -> None:
+        stamp = stamp_to_seconds(msg.header.stamp)
+        try:
+            prior = None
+            if msg.hand_found:
+                camera = self.cameras[0]
+                blended = check_candidates_msg(msg, self.num_vertices,
+                                               (camera.width, camera.height))
+                self._check_depth(blended)
+                prior = pose_prior_from_candidates(msg)
+            observations = [camera_observation_from_msg(msg.observation),
+                            *self._extra_camera_observations(stamp)]
             result = self.tracker.update(prior, observations, stamp)
-        except (IKError, ValueError) as exc:
+        except (IKError, InvalidInputError, ValueError) as exc:
             self.get_logger().warn(f'bad candidates message: {exc}', throttle_duration_sec=1.0)
             self.tracker.reset()
             self._report_no_hand(msg, f'bad candidates: {exc}')
@@ -185,10 +217,20 @@ class IKNode(Node):
         if not result.found:
             self._report_no_hand(msg, msg.status or 'lost')
             return
-        if not np.all(np.isfinite(result.q)):
-            self.get_logger().warn('IK gave a non-finite pose; dropped', throttle_duration_sec=1.0)
+        reason = ''
+        if result.num_constraints == 0:
+            reason = 'no constraint matched an observed blob'
+        elif not np.all(np.isfinite(result.q)):
+            reason = 'non-finite pose'
+        else:
+            try:
+                self._check_depth(result.q)
+            except InvalidInputError as exc:
+                reason = f'fitted pose refused: {exc}'
+        if reason:
+            self.get_logger().warn(f'no pose published: {reason}', throttle_duration_sec=1.0)
             self.tracker.reset()
-            self._report_no_hand(msg, 'non-finite pose')
+            self._report_no_hand(msg, reason)
             return
         self.hand_was_found = True
         self.joint_pub.publish(joint_state_from_pose(result.q, msg.header))

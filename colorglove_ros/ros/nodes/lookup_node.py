@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 import time
+import traceback
 
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from rclpy.node import Node
@@ -11,13 +12,14 @@ from rclpy.node import Node
 from colorglove_ros.core.camera import CalibrationError, load_calibration
 from colorglove_ros.core.lookup.database import DatabaseError, load_database, read_database_config
 from colorglove_ros.core.lookup.search import PoseLookup, SearchError
+from colorglove_ros.core.validation import InvalidInputError
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
     blobs_from_observation,
     candidates_msg,
     crop_from_observation,
-    tiny_labels_from_observation,
 )
+from colorglove_ros.ros.message_checks import check_observation_msg
 from colorglove_ros.ros.nodes.common import (
     LATEST_ONLY,
     StartupError,
@@ -40,6 +42,10 @@ class LookupNode(Node):
         num_candidates = declare(self, 'num_candidates', 300,
                                  'entries re-ranked with the exact distance', 1, 100000)
         num_neighbors = declare(self, 'num_neighbors', 10, 'nearest entries blended', 1, 300)
+        self.max_image_distance = declare(
+            self, 'max_image_distance', 4.5,
+            'nearest database image farther than this (tiny pixels) from the observation: no '
+            'hand (glove-coloured clutter or noise resembles no hand pose)', 0.0, 1000.0)
         self.finger_evidence = declare(
             self, 'finger_evidence', True, 'blend each finger from the neighbours whose '
             'patches on it match the observed blobs (false: one weight per entry, the paper)')
@@ -53,11 +59,11 @@ class LookupNode(Node):
                 self.lookup.patch_digit_table()      # built now, not on the first frame
         except (DatabaseError, CalibrationError) as exc:
             raise StartupError(f'lookup_node cannot start: {exc}') from exc
-        self.get_logger().info(f'loaded {len(self.lookup.db)} database entries from {path} '
-                               f'in {time.perf_counter() - started:.1f} s')
         self.publisher = self.create_publisher(HandPoseCandidates, 'hand/pose_candidates', 10)
         self.create_subscription(HandObservation, 'hand/observation', self.on_observation,
                                  LATEST_ONLY)
+        self.get_logger().info(f'loaded {len(self.lookup.db)} database entries from {path} '
+                               f'in {time.perf_counter() - started:.1f} s; subscribed')
 
     def on_observation(self, observation: HandObservation) -> None:
         """Look one observation up and publish the candidates (or a 'no hand' message)."""
@@ -66,14 +72,33 @@ class LookupNode(Node):
             self.publisher.publish(candidates_msg(observation, None))
             return
         try:
+            tiny = check_observation_msg(observation, (self.camera.width, self.camera.height))
             blobs = blobs_from_observation(observation) if self.finger_evidence else None
-            result = self.lookup.lookup(tiny_labels_from_observation(observation),
-                                        crop_from_observation(observation), self.camera, blobs)
+            result = self.lookup.lookup(tiny, crop_from_observation(observation), self.camera,
+                                        blobs)
+        except InvalidInputError as exc:
+            self.get_logger().warn(f'invalid observation: {exc}', throttle_duration_sec=1.0)
+            self.publisher.publish(candidates_msg(observation, None,
+                                                  status=f'lookup: invalid observation: {exc}'))
+            return
         except (SearchError, ValueError) as exc:
             self.get_logger().warn(f'lookup failed: {exc}', throttle_duration_sec=1.0)
             self.publisher.publish(candidates_msg(observation, None, status=f'lookup: {exc}'))
             return
+        except Exception as exc:   # last line of defence: a message must never stop the node
+            self.get_logger().error(f'lookup failed: {exc!r}\n{traceback.format_exc()}',
+                                    throttle_duration_sec=1.0)
+            self.publisher.publish(candidates_msg(observation, None,
+                                                  status=f'lookup failed: {exc!r}'))
+            return
         elapsed_ms = 1e3 * (time.perf_counter() - started)
+        nearest = float(result.distances[0]) if len(result.distances) else float('inf')
+        if not nearest <= self.max_image_distance:
+            self.publisher.publish(candidates_msg(
+                observation, None, lookup_time_ms=elapsed_ms,
+                status=f'lookup: nearest database image {nearest:.2f} tiny px away (more '
+                       f'than max_image_distance {self.max_image_distance:g}): not a hand'))
+            return
         self.publisher.publish(candidates_msg(observation, result, lookup_time_ms=elapsed_ms))
 
 

@@ -3,6 +3,7 @@ classification, mean-shift crop, 40x40 tiny label image, patch blobs)."""
 from __future__ import annotations
 
 import sys
+import traceback
 
 import numpy as np
 from colorglove_msgs.msg import HandObservation
@@ -12,8 +13,10 @@ from sensor_msgs.msg import Image
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
 from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
 from colorglove_ros.core.segmentation.segmenter import SegmentationInputError, load_segmenter
+from colorglove_ros.core.validation import InvalidObservationError, validate_image_size
 from colorglove_ros.ros.conversions import observation_msg
 from colorglove_ros.ros.image import ImageEncodingError, array_to_image, image_to_rgb8
+from colorglove_ros.ros.message_checks import check_observation_msg
 from colorglove_ros.ros.nodes.common import (
     LATEST_IMAGE,
     StartupError,
@@ -43,19 +46,34 @@ class SegmentationNode(Node):
         self.create_subscription(Image, 'camera/image_raw', self.on_image, LATEST_IMAGE)
         self.get_logger().info(f'colour calibration from {config}')
 
+    def _no_hand(self, image: Image, reason: str) -> None:
+        self.publisher.publish(HandObservation(header=image.header, hand_found=False,
+                                               status=reason, image_width=image.width,
+                                               image_height=image.height))
+
     def on_image(self, image: Image) -> None:
-        """Segment one frame; bad frames are reported as 'no hand' with the reason."""
+        """Segment one frame; bad frames, and observations that fail their own checks, are
+        reported as 'no hand' with the reason. No message stops the node."""
         try:
+            validate_image_size(image.width, image.height, error=ImageEncodingError)
             rgb = image_to_rgb8(image)
             observation = self.segmenter.process(rgb, keep_labels=self.publish_debug)
+            msg = observation_msg(observation, image.header)
+            if msg.hand_found:
+                check_observation_msg(msg)
         except (ImageEncodingError, SegmentationInputError) as exc:
             self.get_logger().warn(f'bad camera frame: {exc}', throttle_duration_sec=1.0)
-            msg = HandObservation(header=image.header, hand_found=False,
-                                  status=f'bad image: {exc}', image_width=image.width,
-                                  image_height=image.height)
-            self.publisher.publish(msg)
+            self._no_hand(image, f'bad image: {exc}')
             return
-        self.publisher.publish(observation_msg(observation, image.header))
+        except InvalidObservationError as exc:
+            self._no_hand(image, f'implausible observation: {exc}')
+            return
+        except Exception as exc:   # last line of defence: a frame must never stop the node
+            self.get_logger().error(f'segmentation failed: {exc!r}\n{traceback.format_exc()}',
+                                    throttle_duration_sec=1.0)
+            self._no_hand(image, f'segmentation failed: {exc!r}')
+            return
+        self.publisher.publish(msg)
         if self.publish_debug and observation.label_image is not None:
             self.debug_publisher.publish(array_to_image(DEBUG_PALETTE[observation.label_image],
                                                         'rgb8', image.header))

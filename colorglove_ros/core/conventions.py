@@ -1,0 +1,13 @@
+"""Constants shared by every stage, defined once: glove layout, tiny-image size, default hand."""
+from __future__ import annotations
+
+__all__ = ['NUM_COLORS', 'NUM_PATCHES', 'TINY_SIZE', 'DEFAULT_HAND_LENGTH_M']
+
+NUM_COLORS = 10
+"""Glove colours, labels 1..10 in label images; 0 is background."""
+NUM_PATCHES = 20
+"""Printed patches on the glove (each one of the ``NUM_COLORS`` colours)."""
+TINY_SIZE = 40
+"""Side in pixels of the tiny label image the lookup compares (paper section 4)."""
+DEFAULT_HAND_LENGTH_M = 0.19
+"""Hand length (wrist crease to middle fingertip, metres) used when none is configured."""

@@ -1,0 +1,94 @@
+"""Light-colour correction (von Kries): estimate per-channel gains from glove pixels of known
+colour, apply them to a byte image through a table, and the black-body lights the colour
+calibration is re-lit under."""
+from __future__ import annotations
+
+import numpy as np
+
+from colorglove_ros.core.colorimetry import (
+    LUMINANCE_WEIGHTS,
+    illuminant_rgb,
+    linear_to_srgb,
+    srgb_to_linear,
+)
+from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
+
+__all__ = ['LIGHT_TEMPERATURES_K', 'estimate_light_gains', 'gain_table', 'planckian_illuminants']
+
+#: Bounds of everyday light colour, as seen through the camera's fixed white balance: from
+#: 3300 K (the warm end of the 'intermediate' lamp class of EN 12464-1) to 20000 K (shade
+#: under a clear blue sky, the bluest common daylight). Not the evaluation's test conditions.
+LIGHT_TEMPERATURES_K = (3300.0, 20000.0)
+
+def _log_floored(colours: np.ndarray, floor: float = 1e-3) -> np.ndarray:
+    """Log of colours (N, 3), each channel floored at ``floor`` times the colour's brightest."""
+    return np.log(np.maximum(colours, floor * colours.max(axis=1, keepdims=True) + 1e-12))
+
+
+def estimate_light_gains(linear_rgb: np.ndarray, labels: np.ndarray,
+                         reference_linear_rgb: np.ndarray, min_pixels: int = 20,
+                         min_colors: int = 3, max_gain: float = 2.0) -> np.ndarray:
+    """Von Kries correction gains (3,) for linear RGB from glove pixels of known colour.
+
+    ``linear_rgb`` (..., 3) are pixels (any common scale) labelled ``labels`` (...): 0 for
+    not glove (ignored), 1..C for glove colours whose colours under the calibration's light
+    are ``reference_linear_rgb`` (C, 3). Per colour c with at least ``min_pixels`` pixels the
+    mean ``m_c`` is modelled as ``s_c * light * reference_c`` (``s_c`` its own shading
+    level), solved by least squares in log space with each channel weighted by its share of
+    the reference colour (dark channels are noise). Returns ``1 / light`` normalised to
+    luminance 1 (a colour, not a level, correction) and clipped to
+    ``1/max_gain .. max_gain``; ones with fewer than ``min_colors`` colours.
+    """
+    labels = np.asarray(labels).ravel()
+    glove = np.flatnonzero(labels != 0)   # a bool array: 4x faster than on the labels
+    labels = labels[glove]
+    ref = np.asarray(reference_linear_rgb, dtype=np.float64)
+    num = len(ref) + 1
+    counts = np.bincount(labels, minlength=num)[1:num]
+    present = np.flatnonzero(counts >= min_pixels)
+    if len(present) < min_colors:
+        return np.ones(3)
+    lin = np.asarray(linear_rgb).reshape(-1, 3)[glove].T
+    sums = np.stack([np.bincount(labels, channel, minlength=num)[1:num] for channel in lin],
+                    axis=1)
+    r = ref[present]
+    # unknowns: log s_c (n), log light (3); rows: (c, k) residuals + the luminance constraint
+    n = len(present)
+    design = np.zeros((3 * n + 1, n + 3))
+    rows = np.arange(3 * n)
+    design[rows, rows // 3] = 1.0
+    design[rows, n + rows % 3] = 1.0
+    design[-1, n:] = LUMINANCE_WEIGHTS   # the gains keep this mix of log gains at 0
+    log_ratio = _log_floored(sums[present] / counts[present, None]) - _log_floored(r)
+    target = np.append(log_ratio.ravel(), 0.0)
+    weight = np.append((r / r.max(axis=1, keepdims=True)
+                        * np.sqrt(counts[present, None] / counts.max())).ravel(), 10.0) ** 2
+    wd = design * weight[:, None]
+    sol = np.linalg.solve(design.T @ wd, wd.T @ target)
+    return np.clip(np.exp(-sol[n:]), 1.0 / max_gain, max_gain)
+
+
+#: sRGB byte -> linear RGB (0..1), and a fine table of linear RGB -> sRGB byte.
+_SRGB_TO_LINEAR = srgb_to_linear(np.arange(256) / 255.0)
+_LINEAR_STEPS = 4096
+_LINEAR_TO_SRGB = np.round(255.0 * linear_to_srgb(np.arange(_LINEAR_STEPS + 1) / _LINEAR_STEPS)
+                           ).astype(np.uint8)
+
+
+def gain_table(gains: np.ndarray) -> np.ndarray:
+    """(1, 256, 3) uint8 table for ``cv2.LUT`` that multiplies the linear RGB of an sRGB image
+    by ``gains`` (3,) per channel (clipping at white)."""
+    lin = _SRGB_TO_LINEAR[:, None] * np.asarray(gains, dtype=np.float64)[None, :]
+    steps = np.minimum(np.rint(lin * _LINEAR_STEPS), _LINEAR_STEPS).astype(np.intp)
+    return _LINEAR_TO_SRGB[steps][None]
+
+
+def planckian_illuminants(low_k: float, high_k: float, count: int = 32) -> np.ndarray:
+    """Linear RGB gains (count, 3) of black-body lights from ``low_k`` to ``high_k`` kelvin
+    (evenly spaced in mired, 1e6 / T, the scale on which equal steps look alike) as a camera
+    white-balanced like the synthetic one sees them (:func:`illuminant_rgb`)."""
+    if not 1000.0 <= low_k <= high_k:
+        raise ColorCalibrationError(
+            f'need 1000 K <= low <= high colour temperature, got {low_k}, {high_k}')
+    mired = np.linspace(1e6 / low_k, 1e6 / high_k, count)
+    return np.array([illuminant_rgb(1e6 / m) for m in mired])

@@ -1,0 +1,183 @@
+"""Seeded hand-motion sequences (natural finger shapes joined by minimum-jerk moves, the wrist on
+splines through a desk capture volume) and their rendering as camera frames."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.ndimage import gaussian_filter1d
+from scipy.spatial.transform import Rotation, RotationSpline
+
+from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
+from colorglove_ros.core.geometry import rotvec_to_matrix
+from colorglove_ros.core.hand.glove import default_hand
+from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
+from colorglove_ros.core.hand.poses import NAMED_SHAPES, finger_limits, sample_global_rotations
+from colorglove_ros.core.synthetic.conditions import FrameConditions, SynthError, sample_conditions
+from colorglove_ros.core.synthetic.frames import (
+    Synthesizer,
+    SyntheticFrame,
+    default_camera,
+    natural_finger_shapes,
+    primary_to_camera,
+    view_of_scene,
+)
+
+__all__ = [
+    'CAPTURE_VOLUME_CENTER', 'CAPTURE_VOLUME_SIZE', 'min_jerk', 'generate_sequence',
+    'SyntheticSequenceRenderer',
+]
+
+CAPTURE_VOLUME_CENTER = np.array([0.0, 0.02, 0.55])   # metres, camera frame
+CAPTURE_VOLUME_SIZE = np.array([0.60, 0.50, 0.30])    # x, y, z extent of the desk volume
+
+
+def min_jerk(s: np.ndarray) -> np.ndarray:
+    """Minimum-jerk profile 0 -> 1 at normalised times ``s`` in 0..1."""
+    return s**3 * (10.0 - 15.0 * s + 6.0 * s**2)
+
+
+def generate_sequence(seed: int, num_frames: int, fps: float = 30.0, *,
+                      camera: PinholeCamera | None = None,
+                      model: HandModel | None = None) -> np.ndarray:
+    """(num_frames, 26) smooth hand motion, deterministic from ``seed``.
+
+    Fingers move between natural shapes (named letters/gestures and pose-collection
+    entries), holding each 0.15-0.6 s and moving with minimum-jerk profiles over 0.4-1.0 s
+    (longer for large changes, so no joint exceeds ~4 rad/s),
+    plus a small smooth jiggle (~1.5 deg). The wrist follows a C2 cubic spline through
+    waypoints 0.7-1.6 s apart inside the ``CAPTURE_VOLUME_*`` desk volume (60 x 50 x 30 cm,
+    depth 0.4-0.7 m), chosen so the hand centre projects inside ``camera``'s image
+    (default 640x480, f = 600); orientation follows a rotation spline through waypoints
+    from ``sample_global_rotations`` (each the nearest of 6 candidates to the previous,
+    so the hand turns at natural speeds)."""
+    if num_frames < 1 or fps <= 0:
+        raise SynthError(f'need num_frames >= 1 and fps > 0, got {num_frames}, {fps}')
+    rng = np.random.default_rng(seed)
+    camera = default_camera() if camera is None else camera
+    model = default_hand()[0] if model is None else model
+    lo, hi = finger_limits(model)
+    t = np.arange(num_frames) / fps
+    duration = t[-1] + 1e-9
+    # ---- fingers: holds and minimum-jerk transitions between natural shapes
+    named = np.clip(np.stack(list(NAMED_SHAPES.values())), lo, hi)
+    coll = natural_finger_shapes(0)
+
+    def shape() -> np.ndarray:
+        return named[rng.integers(len(named))] if rng.uniform() < 0.6 \
+            else coll[rng.integers(len(coll))]
+
+    fingers = np.empty((num_frames, 20))
+    cur, time = shape(), -rng.uniform(0.0, 0.5)
+    segments = []          # (start, end, from, to): holds and moves
+    while time <= duration:
+        hold, nxt = rng.uniform(0.15, 0.6), shape()
+        # minimum-jerk peak speed 1.875 * delta / move: keep it under ~4 rad/s per joint
+        move = max(rng.uniform(0.4, 1.0), 0.5 * float(np.abs(nxt - cur).max()))
+        segments.append((time, time + hold, cur, cur))
+        segments.append((time + hold, time + hold + move, cur, nxt))
+        cur, time = nxt, time + hold + move
+    for t0, t1, a, b in segments:
+        sel = (t >= t0) & (t < t1)
+        fingers[sel] = a + min_jerk((t[sel] - t0) / (t1 - t0))[:, None] * (b - a)
+    jiggle = gaussian_filter1d(rng.normal(0.0, 1.0, (num_frames + 20, 20)), 0.12 * fps,
+                               axis=0, mode='reflect')[10:10 + num_frames]
+    jiggle *= np.deg2rad(1.5) / max(float(jiggle.std()), 1e-9)
+    fingers = np.clip(fingers + jiggle, lo, hi)
+    # ---- global motion: waypoints in the capture volume, C2 splines
+    half = CAPTURE_VOLUME_SIZE / 2.0
+    centre_local = np.array([0.0, -0.45 * model.hand_length_m, 0.0])  # hand centre, hand frame
+    n_way = int(np.ceil(duration / 0.7)) + 3
+    times = np.concatenate([[-0.5], np.cumsum(rng.uniform(0.7, 1.6, n_way)) - 0.5])
+    rotations = [sample_global_rotations(rng, 1)[0]]
+    positions = []
+    for k in range(len(times)):
+        if k > 0:
+            cands = sample_global_rotations(rng, 6)
+            prev = Rotation.from_rotvec(rotations[-1])
+            ang = [(Rotation.from_rotvec(c) * prev.inv()).magnitude() for c in cands]
+            rotations.append(cands[int(np.argmin(ang))])
+        R = rotvec_to_matrix(rotations[-1])
+        for _attempt in range(200):
+            p = CAPTURE_VOLUME_CENTER + rng.uniform(-half, half)
+            if positions and np.linalg.norm(p - positions[-1]) > 0.22:
+                continue
+            c = p + R @ centre_local
+            u, v = camera.project(c)
+            if 0.15 * camera.width < u < 0.85 * camera.width \
+                    and 0.15 * camera.height < v < 0.85 * camera.height:
+                break
+        positions.append(p)
+    pos = CubicSpline(times, np.array(positions), axis=0, bc_type='natural')(t)
+    rot = RotationSpline(times, Rotation.from_rotvec(np.array(rotations)))(t).as_rotvec()
+    Q = np.zeros((num_frames, NUM_DOFS))
+    Q[:, 0:3] = pos
+    Q[:, 3:6] = rot
+    Q[:, 6:] = fingers
+    return Q
+
+
+class SyntheticSequenceRenderer:
+    """Frames of one seeded sequence (``generate_sequence``) under one set of conditions
+    (``sample_conditions`` for ``split``, drawn from the seed; the background's glove-like
+    objects stay in place while the hand passes in front), with motion blur following
+    the hand's image speed over a ``shutter`` fraction of the frame interval. ``render(i)``
+    is deterministic and independent of the order frames are asked for."""
+
+    def __init__(self, camera: PinholeCamera, *, seed: int = 1, num_frames: int = 300,
+                 fps: float = 30.0, hand_length_m: float = DEFAULT_HAND_LENGTH_M,
+                 split: str = 'test',
+                 shutter: float = 0.5, glove_seed: int = 0,
+                 conditions: FrameConditions | None = None) -> None:
+        self.camera = camera
+        self.seed = int(seed)
+        self.synth = Synthesizer(hand_length_m, glove_seed)
+        self.poses = generate_sequence(seed, num_frames, fps, camera=camera,
+                                       model=self.synth.model)
+        rng = np.random.default_rng([self.seed, 7])
+        cond = sample_conditions(rng, split) if conditions is None else conditions
+        self.conditions = replace(cond, distractors_avoid_hand=False)
+        self.shutter = float(shutter)
+        self.fps = float(fps)
+        # hand centres (primary camera frame), whose image velocity sets each view's blur
+        self._centres = self.synth.model.keypoints_batch(self.poses).mean(axis=1)
+
+    def __len__(self) -> int:
+        return len(self.poses)
+
+    def render(self, index: int) -> SyntheticFrame:
+        """Frame ``index`` (0-based) of the sequence."""
+        return self.render_views(index, (self.camera,))[0]
+
+    def render_views(self, index: int, cameras: Sequence[PinholeCamera]) -> list[SyntheticFrame]:
+        """Frame ``index`` as each of ``cameras`` sees it, primary (the sequence's camera, in
+        whose frame the poses are) first; the others as in :func:`render_frames_multi`. Each
+        view's motion blur follows the hand's velocity in that view's image; the noise of all
+        views comes from the frame's seed, primary first, so view 0 is ``render(index)``."""
+        if not 0 <= index < len(self.poses):
+            raise SynthError(f'frame {index} outside 0..{len(self.poses) - 1}')
+        if not cameras:
+            raise SynthError('need at least one camera')
+        nxt = min(index + 1, len(self.poses) - 1)
+        prv = max(index - 1, 0)
+        rng = np.random.default_rng([self.seed, index, 11])
+        frames = []
+        for k, cam in enumerate(cameras):
+            q, cond = view_of_scene(self.poses[index], self.conditions, cameras, k)
+            centres = self._centres[[prv, nxt]]
+            extrinsics = primary_to_camera(cameras, k)
+            if extrinsics is not None:
+                centres = centres @ extrinsics[0].T + extrinsics[1]
+            px = cam.project(centres)
+            vel = (px[1] - px[0]) / max(nxt - prv, 1)
+            cond = replace(cond, blur_px=float(np.hypot(*vel) * self.shutter),
+                           blur_angle=float(np.arctan2(vel[1], vel[0])))
+            frames.append(self.synth.render_frame(q, cam, rng, cond))
+        return frames
+
+    def close(self) -> None:
+        """Free the GL contexts."""
+        self.synth.release()

@@ -1,0 +1,289 @@
+"""DigitEyes image features of a bare hand: finger-link axes and fingertip centres from edges.
+
+Rehg & Kanade 1993, section 4: a local tracker is placed on each predicted finger link; the
+image is sampled in 1-D slices perpendicular to the predicted axis; on every slice the two
+silhouette edges are the derivative peaks of the right sign (entering, then leaving a link of
+uniform brightness); a line fitted through the midpoints of the edge pairs is the measured
+projected cylinder axis. A fingertip (a hemisphere) is measured by a slice along the measured
+distal axis: its end edge, moved back by the projected tip radius, is the tip centre.
+
+Everything here works on many links at once (one ``cv2.remap`` samples every slice of every
+link) and knows nothing of the hand model: the caller gives predicted segments in pixels.
+
+``polarity`` says which way the link's brightness differs from what surrounds it: +1 the link
+is brighter (a hand before a dark backdrop, as in DigitEyes), -1 darker, 0 either (each slice
+takes the better of the two, but both of its edges must agree).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from colorglove_ros.core.errors import ColorGloveError
+
+__all__ = [
+    'EdgeFeatureError', 'EdgeSearchConfig', 'LinkAxes', 'TipPoints', 'measure_link_axes',
+    'measure_tips', 'to_grey', 'segment_distances',
+]
+
+
+class EdgeFeatureError(ColorGloveError):
+    """Bad input to the edge measurements (shapes, image type, configuration)."""
+
+
+@dataclass(frozen=True)
+class EdgeSearchConfig:
+    """Geometry and thresholds of the local link and tip trackers (pixels, grey levels 0-255).
+
+    ``slice_range`` is the part of each link (0 = base, 1 = end) where the slices are placed,
+    avoiding the joints where neighbouring links overlap. A slice reaches ``search_px`` past the
+    predicted half-width on both sides; an edge pair is accepted when both derivative peaks
+    exceed ``min_gradient`` and the pair's width is within ``width_ratio`` of the predicted one.
+    """
+
+    slices_per_link: int = 6
+    slice_range: tuple[float, float] = (0.2, 0.85)
+    samples_per_slice: int = 33
+    search_px: float = 8.0
+    min_gradient: float = 3.0
+    width_ratio: tuple[float, float] = (0.5, 1.6)
+    min_slices: int = 3
+    fit_outlier_px: float = 2.0
+    tip_search_px: float = 10.0
+    tip_samples: int = 33
+
+    def __post_init__(self) -> None:
+        if self.slices_per_link < 2 or self.samples_per_slice < 5 or self.tip_samples < 5:
+            raise EdgeFeatureError('need >= 2 slices per link and >= 5 samples per slice')
+        lo, hi = self.slice_range
+        if not 0.0 <= lo < hi <= 1.0:
+            raise EdgeFeatureError(f'slice_range must satisfy 0 <= lo < hi <= 1, got '
+                                   f'{self.slice_range}')
+        if not 0.0 < self.width_ratio[0] < 1.0 < self.width_ratio[1]:
+            raise EdgeFeatureError(f'width_ratio must bracket 1, got {self.width_ratio}')
+        if not 2 <= self.min_slices <= self.slices_per_link:
+            raise EdgeFeatureError('min_slices must be in [2, slices_per_link]')
+        if self.search_px <= 0 or self.tip_search_px <= 0 or self.min_gradient <= 0:
+            raise EdgeFeatureError('search ranges and min_gradient must be positive')
+
+
+@dataclass(frozen=True)
+class LinkAxes:
+    """Measured link axes, one row per requested link: the line ``normal . x = offset``
+    (unit ``normal``, pixels), whether it was found, how many edge-pair midpoints carried it,
+    the measured polarity (+1 brighter than the surroundings, -1 darker, 0 unknown) and the
+    midpoints themselves ((L, S, 2), NaN where a slice found no pair)."""
+
+    normal: np.ndarray      # (L, 2)
+    offset: np.ndarray      # (L,)
+    found: np.ndarray       # (L,) bool
+    num_points: np.ndarray  # (L,) int
+    polarity: np.ndarray    # (L,) int
+    midpoints: np.ndarray   # (L, S, 2)
+
+
+@dataclass(frozen=True)
+class TipPoints:
+    """Measured fingertip centres (T, 2) pixels and whether each was found."""
+
+    centre: np.ndarray   # (T, 2)
+    found: np.ndarray    # (T,) bool
+
+
+def to_grey(image: np.ndarray) -> np.ndarray:
+    """(H, W) or (H, W, 3) uint8/float image -> (H, W) float32 grey levels (RGB order)."""
+    img = np.asarray(image)
+    if img.ndim == 3 and img.shape[2] == 3:
+        img = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_RGB2GRAY) \
+            if img.dtype == np.uint8 else img @ np.array([0.299, 0.587, 0.114])
+    elif img.ndim != 2:
+        raise EdgeFeatureError(f'image must be (H, W) or (H, W, 3), got {img.shape}')
+    return np.asarray(img, dtype=np.float32)
+
+
+def _sample(grey: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Bilinear samples of ``grey`` at (..., 2) pixel positions (NaN outside the image)."""
+    shape = xy.shape[:-1]
+    flat = xy.reshape(-1, 2).astype(np.float32)
+    mx = np.ascontiguousarray(flat[:, 0]).reshape(-1, 1)
+    my = np.ascontiguousarray(flat[:, 1]).reshape(-1, 1)
+    out = cv2.remap(grey, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                    borderValue=np.nan)
+    return out.reshape(shape)
+
+
+def _derivative(profile: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """Smoothed ([1 2 1] / 4) central-difference derivative along the last axis, per pixel
+    (``step`` broadcast against the leading axes); the end samples get 0."""
+    p = profile.copy()
+    p[..., 1:-1] = 0.25 * profile[..., :-2] + 0.5 * profile[..., 1:-1] + 0.25 * profile[..., 2:]
+    d = np.zeros_like(p)
+    d[..., 1:-1] = (p[..., 2:] - p[..., :-2]) / (2.0 * step[..., None])
+    return np.nan_to_num(d, nan=0.0)
+
+
+def _subpixel(score: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """Parabolic refinement of the peak ``index`` of ``score`` along the last axis."""
+    n = score.shape[-1]
+    i = np.clip(index, 1, n - 2)
+    a = np.take_along_axis(score, (i - 1)[..., None], -1)[..., 0]
+    b = np.take_along_axis(score, i[..., None], -1)[..., 0]
+    c = np.take_along_axis(score, (i + 1)[..., None], -1)[..., 0]
+    den = a - 2.0 * b + c
+    shift = np.where(np.abs(den) > 1e-9, 0.5 * (a - c) / np.where(den == 0, 1.0, den), 0.0)
+    return i + np.clip(shift, -0.5, 0.5)
+
+
+def _check_segments(base: np.ndarray, end: np.ndarray, half_width: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    base = np.asarray(base, dtype=float)
+    end = np.asarray(end, dtype=float)
+    half_width = np.asarray(half_width, dtype=float)
+    if base.ndim != 2 or base.shape[1] != 2 or end.shape != base.shape \
+            or half_width.shape != (len(base),):
+        raise EdgeFeatureError('base_px and end_px must be (L, 2) and half_width_px (L,)')
+    return base, end, half_width
+
+
+def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
+                      half_width_px: np.ndarray, config: EdgeSearchConfig | None = None,
+                      polarity: np.ndarray | int = 0,
+                      slice_valid: np.ndarray | None = None) -> LinkAxes:
+    """Measure the projected axes of L links predicted as segments ``base_px -> end_px`` with
+    projected radii ``half_width_px`` in the grey image. ``slice_valid`` (L, S) switches off
+    slices known to be occluded or outside the image. Returns :class:`LinkAxes`."""
+    cfg = config or EdgeSearchConfig()
+    base, end, hw = _check_segments(base_px, end_px, half_width_px)
+    L, S, W = len(base), cfg.slices_per_link, cfg.samples_per_slice
+    axis = end - base
+    length = np.linalg.norm(axis, axis=1)
+    u = axis / np.maximum(length, 1e-9)[:, None]
+    n = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    frac = np.linspace(cfg.slice_range[0], cfg.slice_range[1], S)
+    centres = base[:, None, :] + frac[None, :, None] * axis[:, None, :]        # (L, S, 2)
+    reach = hw + cfg.search_px                                                 # (L,)
+    t = np.linspace(-1.0, 1.0, W)
+    offsets = reach[:, None] * t[None, :]                                      # (L, W)
+    step = 2.0 * reach / (W - 1)                                               # (L,)
+    xy = centres[:, :, None, :] + offsets[:, None, :, None] * n[:, None, None, :]
+    profile = _sample(grey, xy)                                                # (L, S, W)
+    d = _derivative(profile, np.broadcast_to(step[:, None], (L, S)))
+    # pair (i, j), i < j: entering edge at i, leaving edge at j, width within the ratio
+    width = (offsets[:, None, :] - offsets[:, :, None])                        # (L, Wi, Wj)
+    lo, hi = cfg.width_ratio
+    ok_width = (width >= 2.0 * hw[:, None, None] * lo) & (width <= 2.0 * hw[:, None, None] * hi)
+    pol = np.broadcast_to(np.asarray(polarity, dtype=np.int64), (L,))
+    best_score = np.full((L, S), -np.inf)
+    best_i = np.zeros((L, S), np.int64)
+    best_j = np.zeros((L, S), np.int64)
+    best_sign = np.zeros((L, S), np.int64)
+    for sign in (1, -1):
+        allowed = (pol == 0) | (pol == sign)
+        if not allowed.any():
+            continue
+        enter = np.where(sign * d > cfg.min_gradient, sign * d, -np.inf)      # (L, S, W)
+        leave = np.where(-sign * d > cfg.min_gradient, -sign * d, -np.inf)
+        pair = enter[:, :, :, None] + leave[:, :, None, :]                     # (L, S, W, W)
+        pair = np.where(ok_width[:, None], pair, -np.inf)
+        flat = pair.reshape(L, S, W * W)
+        k = np.argmax(flat, axis=2)
+        score = np.take_along_axis(flat, k[..., None], 2)[..., 0]
+        score = np.where(allowed[:, None], score, -np.inf)
+        better = score > best_score
+        best_score = np.where(better, score, best_score)
+        best_i = np.where(better, k // W, best_i)
+        best_j = np.where(better, k % W, best_j)
+        best_sign = np.where(better, sign, best_sign)
+    valid = np.isfinite(best_score)
+    if slice_valid is not None:
+        valid &= np.asarray(slice_valid, dtype=bool).reshape(L, S)
+    sd = best_sign[..., None] * d
+    ei = _subpixel(sd, best_i)
+    ej = _subpixel(-sd, best_j)
+    mid_t = (ei + ej) / (W - 1) - 1.0            # mean of the two sample positions in [-1, 1]
+    mid_off = mid_t * reach[:, None]                                           # (L, S)
+    # line through the midpoints: offset along n as a linear function of the position
+    # along the predicted axis (least squares), refitted without outliers
+    s_along = (frac[None, :] - 0.5) * length[:, None]                          # (L, S)
+    w = valid.astype(float)
+    a = b = np.zeros(L)
+    for _ in range(2):
+        sw = w.sum(1)
+        safe = np.maximum(sw, 1e-9)
+        ms = (w * s_along).sum(1) / safe
+        mo = (w * mid_off).sum(1) / safe
+        var = (w * (s_along - ms[:, None]) ** 2).sum(1)
+        cov = (w * (s_along - ms[:, None]) * (mid_off - mo[:, None])).sum(1)
+        b = np.where(var > 1e-9, cov / np.maximum(var, 1e-9), 0.0)
+        a = mo - b * ms
+        resid = np.abs(mid_off - (a[:, None] + b[:, None] * s_along))
+        w = (valid & (resid <= cfg.fit_outlier_px)).astype(float)
+    count = w.sum(1).astype(np.int64)
+    found = count >= cfg.min_slices
+    # the fitted line: point centre + n * a, direction u + b n
+    direction = u + b[:, None] * n
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
+    mid_point = 0.5 * (base + end) + a[:, None] * n
+    offset = np.einsum('ij,ij->i', normal, mid_point)
+    midpoints = centres + mid_off[..., None] * n[:, None, :]
+    midpoints = np.where((w > 0)[..., None], midpoints, np.nan)
+    signs = np.where(w > 0, best_sign, 0).sum(1)
+    return LinkAxes(normal, offset, found, count, np.sign(signs).astype(np.int64), midpoints)
+
+
+def measure_tips(grey: np.ndarray, axis_point_px: np.ndarray, direction_px: np.ndarray,
+                 predicted_end_px: np.ndarray, radius_px: np.ndarray,
+                 config: EdgeSearchConfig | None = None,
+                 polarity: np.ndarray | int = 0) -> TipPoints:
+    """Measure T fingertip centres. Each distal axis is given by a point on it and its unit
+    direction toward the tip (the measured line, or the predicted one); the slice runs along
+    it from ``tip_search_px`` before to ``tip_search_px`` past the predicted extremity
+    ``predicted_end_px`` (its projection on the axis). The end edge is the strongest
+    derivative peak leaving the finger (sign from ``polarity``; 0 takes the stronger of the
+    two); the centre is that edge moved back by ``radius_px`` along the axis."""
+    cfg = config or EdgeSearchConfig()
+    p0 = np.asarray(axis_point_px, dtype=float)
+    u = np.asarray(direction_px, dtype=float)
+    end = np.asarray(predicted_end_px, dtype=float)
+    r = np.asarray(radius_px, dtype=float)
+    if p0.ndim != 2 or p0.shape[1] != 2 or u.shape != p0.shape or end.shape != p0.shape \
+            or r.shape != (len(p0),):
+        raise EdgeFeatureError('tip inputs must be (T, 2) points/directions and (T,) radii')
+    u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-9)
+    along_end = np.einsum('ij,ij->i', end - p0, u)
+    start = p0 + (along_end - cfg.tip_search_px - r)[:, None] * u              # (T, 2)
+    span = 2.0 * cfg.tip_search_px + r
+    t = np.linspace(0.0, 1.0, cfg.tip_samples)
+    pos = span[:, None] * t[None, :]                                           # (T, N)
+    xy = start[:, None, :] + pos[..., None] * u[:, None, :]
+    profile = _sample(grey, xy)
+    step = span / (cfg.tip_samples - 1)
+    d = _derivative(profile, step)
+    pol = np.broadcast_to(np.asarray(polarity, dtype=np.int64), (len(p0),))
+    leave_bright = np.where((pol >= 0)[:, None], -d, -np.inf)   # brighter finger: drops
+    leave_dark = np.where((pol <= 0)[:, None], d, -np.inf)
+    score = np.maximum(leave_bright, leave_dark)
+    sign = np.where(leave_bright >= leave_dark, -1.0, 1.0)
+    k = np.argmax(score, axis=1)
+    best = np.take_along_axis(score, k[:, None], 1)[:, 0]
+    row_sign = np.take_along_axis(sign, k[:, None], 1)
+    refined = _subpixel(row_sign * d, k)
+    edge = start + (refined * step)[:, None] * u
+    found = best > cfg.min_gradient
+    return TipPoints(edge - r[:, None] * u, found)
+
+
+def segment_distances(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Distance from each of (P, 2) points to each of (M, 2)->(M, 2) segments, (P, M), and
+    the position of the closest point along each segment in [0, 1], (P, M)."""
+    p = np.asarray(points, dtype=float)[:, None, :]
+    a = np.asarray(seg_a, dtype=float)[None]
+    ab = np.asarray(seg_b, dtype=float)[None] - a
+    den = np.maximum((ab * ab).sum(-1), 1e-12)
+    s = np.clip(((p - a) * ab).sum(-1) / den, 0.0, 1.0)
+    closest = a + s[..., None] * ab
+    return np.linalg.norm(p - closest, axis=-1), s

@@ -1,0 +1,202 @@
+"""The glove's patches as link-fixed mesh faces: the predicted centroid of the part of each patch
+a camera sees (the ``patch`` constraint model of the tracker)."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.tracking.kinematics import FastKinematics
+from colorglove_ros.core.tracking.types import IKError, MeshLike
+
+__all__ = ['PatchSurface']
+
+
+class PatchSurface:
+    """The glove's patches as link-fixed mesh faces, to predict the centroid of the part of
+    each patch a camera sees: the projected-area-weighted mean of the patch's visible faces
+    (weight = area x cosine toward the camera / depth^2), kept per link as one link-fixed
+    point so the weights stay fixed while the pose is solved.
+
+    A face is visible if it faces the camera and no front face projecting into the same
+    cell of a coarse depth buffer (cells ``cell_m`` wide at the hand's depth) is more than
+    ``depth_tol_m`` nearer. A patch whose visible faces carry less than
+    ``min_visible_fraction`` of its front-facing weight (hidden, or the pose is off) uses
+    all its front faces instead. Faces are merged into elements (same patch, link and facing,
+    one ``element_m`` voxel); links with less than ``min_link_weight`` of a patch's visible
+    weight are left out."""
+
+    def __init__(self, kin: FastKinematics, mesh: MeshLike, face_patch: np.ndarray,
+                 cell_m: float = 0.004, depth_tol_m: float = 0.004,
+                 element_m: float = 0.006, min_link_weight: float = 0.1,
+                 min_visible_fraction: float = 0.2) -> None:
+        faces = np.asarray(getattr(mesh, 'faces', np.zeros((0, 3))), np.int64)
+        face_patch = np.asarray(face_patch, np.int64)
+        links = np.asarray(mesh.vertex_link, np.int64)
+        if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0 \
+                or len(face_patch) != len(faces):
+            raise IKError(f'the patch model needs mesh faces (F, 3) and one patch per face; got '
+                          f'{faces.shape} faces and {face_patch.shape} patch ids')
+        face_link = links[faces[:, 0]]
+        if np.any(links[faces[:, 1]] != face_link) or np.any(links[faces[:, 2]] != face_link):
+            raise IKError('the patch model needs every mesh face on one link')
+        v = np.asarray(mesh.local_vertices, float)[faces]                  # (F, 3, 3)
+        centre = v.mean(axis=1)
+        area_normal = 0.5 * np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        area = np.linalg.norm(area_normal, axis=1)
+        # surface elements: the faces of one patch and link in one element_m voxel, facing the
+        # same way (dominant normal axis and sign); sorted by kinematic frame, so each
+        # frame's block of elements moves with one transform
+        dominant = np.argmax(np.abs(area_normal), axis=1)
+        facing = 2 * dominant + (area_normal[np.arange(len(faces)), dominant] > 0)
+        key = np.column_stack([kin.link_frame[face_link], face_patch, face_link, facing,
+                               np.floor(centre / element_m).astype(np.int64)])
+        keys, elem = np.unique(key, axis=0, return_inverse=True)
+        elem = elem.reshape(-1)
+        n = len(keys)
+        elem_area = np.bincount(elem, area, n)
+        self._centre = np.stack([np.bincount(elem, area * centre[:, i], n) for i in range(3)],
+                                axis=1) / elem_area[:, None]
+        self._area_normal = np.stack([np.bincount(elem, area_normal[:, i], n)
+                                      for i in range(3)], axis=1)
+        frame, elem_patch, elem_link = keys[:, 0], keys[:, 1], keys[:, 2]
+        self._block_frame, start = np.unique(frame, return_index=True)
+        self._blocks = [slice(int(a), int(b)) for a, b in
+                        zip(start, [*start[1:], len(frame)], strict=True)]
+        self._elem_patch = elem_patch
+        self._kin = kin
+        pairs, self._group = np.unique(np.stack([elem_patch, elem_link], axis=1), axis=0,
+                                       return_inverse=True)
+        self._group = self._group.reshape(-1)
+        num_patches = int(elem_patch.max()) + 1
+        slots = np.bincount(pairs[:, 0], minlength=num_patches)
+        self.max_links = int(slots.max())
+        self._table = np.full((num_patches, self.max_links), -1, np.int64)
+        first = np.concatenate([[0], np.cumsum(slots)[:-1]])
+        for g, (p, _) in enumerate(pairs):
+            self._table[p, g - first[p]] = g
+        self._group_link = pairs[:, 1]
+        self.num_patches = num_patches
+        self.cell_m = float(cell_m)
+        self.depth_tol_m = float(depth_tol_m)
+        self.min_visible_fraction = float(min_visible_fraction)
+        self.min_link_weight = float(min_link_weight)
+        self._posed_cache: tuple[bytes, tuple[np.ndarray, np.ndarray]] | None = None
+        self._bins: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._eye = np.eye(3)
+
+    def _visible(self, pc: np.ndarray, front: np.ndarray, camera: PinholeCamera) -> np.ndarray:
+        """Front elements not hidden behind another front element (coarse depth buffer)."""
+        idx = np.flatnonzero(front)
+        if len(idx) == 0:
+            return front
+        z = pc[idx, 2]
+        cell_px = self.cell_m / float(z.mean())
+        u = np.floor(pc[idx, 0] / z / cell_px * camera.fx / camera.fy).astype(np.int64)
+        v = np.floor(pc[idx, 1] / z / cell_px).astype(np.int64)
+        u -= u.min()
+        v -= v.min()
+        cell = v * (int(u.max()) + 1) + u
+        zbuf = np.full(int(cell.max()) + 1, np.inf)
+        np.minimum.at(zbuf, cell, z)
+        out = np.zeros(len(front), dtype=bool)
+        out[idx] = z <= zbuf[cell] + self.depth_tol_m
+        return out
+
+    def _posed(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Element centres and area normals (E, 3) in the primary camera frame at pose ``q``
+        (read-only; the last pose is remembered, as every camera of a frame asks for it)."""
+        q = np.asarray(q, dtype=float)
+        key = q.tobytes()
+        if self._posed_cache is not None and self._posed_cache[0] == key:
+            return self._posed_cache[1]
+        Rs, ts, _ = self._kin.frames(q)
+        R, t = Rs[self._block_frame], ts[self._block_frame]
+        centre = np.empty_like(self._centre)
+        normal = np.empty_like(self._centre)
+        for b, sl in enumerate(self._blocks):
+            Rt = np.ascontiguousarray(R[b].T)             # the fast matmul path
+            np.dot(self._centre[sl], Rt, out=centre[sl])
+            centre[sl] += t[b]
+            np.dot(self._area_normal[sl], Rt, out=normal[sl])
+        centre.setflags(write=False)
+        normal.setflags(write=False)
+        self._posed_cache = (key, (centre, normal))
+        return centre, normal
+
+    def points(self, q: np.ndarray, camera: PinholeCamera, patch_id: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """For each patch id: links (K, S), link-frame points (K, S, 3) and weights (K, S)
+        of its visible part seen by ``camera`` at pose ``q``, and whether any of it faces the
+        camera (K,) (rows that do not keep weight 0)."""
+        patch_id = np.asarray(patch_id, np.int64)
+        return self.points_by_camera(q, [camera], np.zeros(len(patch_id), np.int64), patch_id)
+
+    def _element_weights(self, pc: np.ndarray, normal: np.ndarray, camera: PinholeCamera
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """Projected-area weight (E,) of every element facing ``camera``, and the same with
+        the elements hidden in the depth buffer set to 0."""
+        if not (np.array_equal(camera.rotation, self._eye) and not camera.translation.any()):
+            Rt = np.ascontiguousarray(camera.rotation.T)     # the fast matmul path
+            pc = pc @ Rt + camera.translation
+            normal = normal @ Rt
+        dist = np.sqrt(np.einsum('fi,fi->f', pc, pc))
+        depth = np.maximum(pc[:, 2], 1e-3)
+        w = np.maximum(-np.einsum('fi,fi->f', normal, pc), 0.0) / (dist * depth**2)
+        return w, np.where(self._visible(pc, (w > 0) & (pc[:, 2] > 0), camera), w, 0.0)
+
+    def _camera_bins(self, num_cameras: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                      np.ndarray]:
+        """Per element of every camera: patch bin, group bin, group xyz bins and centre,
+        the bins of camera c offset past those of cameras 0..c-1 (kept per camera count)."""
+        hit = self._bins.get(num_cameras)
+        if hit is None:
+            nc, ne, ng = num_cameras, len(self._centre), len(self._group_link)
+            cam = np.repeat(np.arange(nc), ne)
+            group = cam * ng + np.tile(self._group, nc)
+            hit = (cam * self.num_patches + np.tile(self._elem_patch, nc), group,
+                   (3 * group[:, None] + np.arange(3)).reshape(-1),
+                   np.tile(self._centre, (nc, 1)))
+            self._bins[num_cameras] = hit
+        return hit
+
+    def points_by_camera(self, q: np.ndarray, cameras: Sequence[PinholeCamera],
+                         camera_index: np.ndarray, patch_id: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`points` for rows seen by different cameras (row k by
+        ``cameras[camera_index[k]]``) in one pass over the posed glove."""
+        patch_id = np.asarray(patch_id, np.int64)
+        camera_index = np.asarray(camera_index, np.int64)
+        if len(patch_id) and (patch_id.min() < 0 or patch_id.max() >= self.num_patches):
+            raise IKError(f'patch id outside [0, {self.num_patches})')
+        if len(camera_index) != len(patch_id) or (
+                len(camera_index) and (camera_index.min() < 0
+                                       or camera_index.max() >= len(cameras))):
+            raise IKError(f'camera index outside [0, {len(cameras)}) or not one per patch id')
+        pc, normal = self._posed(q)
+        nc, ng, np_ = len(cameras), len(self._group_link), self.num_patches
+        # per camera: all front weights and the visible ones, all cameras summed in one call
+        weights = [self._element_weights(pc, normal, cam) for cam in cameras]
+        w = np.concatenate([front for front, _ in weights])
+        w_vis = np.concatenate([vis for _, vis in weights])
+        elem_patch, group, group_xyz, centre = self._camera_bins(nc)
+        # patches mostly hidden in the depth buffer fall back to all their front faces
+        vis_frac = (np.bincount(elem_patch, w_vis, nc * np_)
+                    / np.maximum(np.bincount(elem_patch, w, nc * np_), 1e-300))
+        w = np.where(vis_frac[elem_patch] < self.min_visible_fraction, w, w_vis)
+        wg = np.bincount(group, w, nc * ng)
+        mean = (np.bincount(group_xyz, (w[:, None] * centre).reshape(-1), 3 * nc * ng)
+                .reshape(nc * ng, 3) / np.maximum(wg, 1e-300)[:, None])
+        groups = self._table[patch_id]                                       # (K, S)
+        valid = groups >= 0
+        g = np.where(valid, groups, 0)
+        gc = g + (camera_index * ng)[:, None]
+        weight = np.where(valid, wg[gc], 0.0)
+        total = weight.sum(axis=1)
+        seen = total > 0
+        weight = weight / np.where(seen, total, 1.0)[:, None]
+        # links holding a sliver of the visible patch are dropped (fewer points to move)
+        weight[weight < self.min_link_weight] = 0.0
+        weight /= np.where(seen, weight.sum(axis=1), 1.0)[:, None]
+        return self._group_link[g], mean[gc], weight, seen

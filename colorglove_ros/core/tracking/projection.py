@@ -1,0 +1,139 @@
+"""Projecting the constrained points into the cameras (pixels, pixel Jacobians, reprojection
+errors) and the linear fit of the wrist translation to the matched blobs."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.hand.model import NUM_DOFS
+from colorglove_ros.core.tracking.kinematics import FastKinematics
+from colorglove_ros.core.tracking.types import Correspondences, IKError
+
+__all__ = [
+    'PerPointCameras', 'per_point_cameras', 'constraint_points', 'project_correspondences',
+    'reprojection_errors', 'estimate_translation',
+]
+
+
+@dataclass(frozen=True)
+class PerPointCameras:
+    """Camera parameters repeated per correspondence, so all cameras project in one pass."""
+
+    R: np.ndarray       # (K, 3, 3)
+    t: np.ndarray       # (K, 3)
+    f: np.ndarray       # (K, 2)
+    c: np.ndarray       # (K, 2)
+
+
+def per_point_cameras(cameras: Sequence[PinholeCamera], corr: Correspondences) -> PerPointCameras:
+    if len(corr) and (corr.camera.min() < 0 or corr.camera.max() >= len(cameras)):
+        raise IKError(f'correspondence camera index outside [0, {len(cameras)})')
+    Rs = np.stack([c.rotation for c in cameras])
+    ts = np.stack([c.translation for c in cameras])
+    fs = np.array([[c.fx, c.fy] for c in cameras])
+    cs = np.array([[c.cx, c.cy] for c in cameras])
+    k = corr.camera
+    return PerPointCameras(Rs[k], ts[k], fs[k], cs[k])
+
+
+def constraint_points(kin: FastKinematics, corr: Correspondences, q: np.ndarray,
+                      jacobian: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """Primary-frame constrained points (K, 3) at pose ``q`` (each the weighted mean of its
+    link-fixed points) and optionally d/dq (K, 3, 26), the same weighted mean of the point
+    Jacobians."""
+    link, local, mix = corr.point_mix
+    p, Jp = kin.points(q, link, local, jacobian)
+    if mix is None:
+        return p, Jp
+    if Jp is not None:
+        Jp = (mix @ Jp.reshape(len(p), -1)).reshape(len(mix), 3, NUM_DOFS)
+    return mix @ p, Jp
+
+
+def project_correspondences(kin: FastKinematics, cameras: Sequence[PinholeCamera],
+                            corr: Correspondences, q: np.ndarray, jacobian: bool = False,
+                            per_point: PerPointCameras | None = None
+                            ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """Predicted pixels f(q) (K, 2), optionally df/dq (2K, 26) (rows x0, y0, x1, ...) and
+    the depth of every point in its camera (K,). Pinhole projection without distortion
+    (targets are undistorted); each camera's rotation is chained into the Jacobian."""
+    pp = per_point if per_point is not None else per_point_cameras(cameras, corr)
+    p, Jp = constraint_points(kin, corr, q, jacobian)
+    return _project_points(pp, p, Jp if jacobian else None)
+
+
+def _project_points(pp: PerPointCameras, p: np.ndarray, Jp: np.ndarray | None
+                    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """Pixels, pixel Jacobian (if ``Jp``, the points' d/dq, is given) and depths of
+    primary-frame points ``p``, each in its own camera."""
+    pc = np.einsum('nij,nj->ni', pp.R, p) + pp.t
+    depth = pc[:, 2].copy()
+    z = np.where(np.abs(depth) < 1e-9, 1e-9, depth)
+    xy = pc[:, :2] / z[:, None]
+    pix = xy * pp.f + pp.c
+    if Jp is None:
+        return pix, None, depth
+    # d pixel / d world point (K, 2, 3) = (f / z) (R[0:2] - xy R[2]), chained with Jp
+    A = (pp.f / z[:, None])[:, :, None] * (pp.R[:, :2, :] - xy[:, :, None] * pp.R[:, 2:3, :])
+    J = np.einsum('nik,nkd->nid', A, Jp)
+    return pix, J.reshape(-1, NUM_DOFS), depth
+
+
+def reprojection_errors(kin: FastKinematics, cameras: Sequence[PinholeCamera],
+                        corr: Correspondences, q: np.ndarray) -> np.ndarray:
+    """Euclidean pixel distance between each constraint's projection and its target."""
+    if len(corr) == 0:
+        return np.zeros(0)
+    pix, _, _ = project_correspondences(kin, cameras, corr, q)
+    return np.linalg.norm(pix - corr.target_px, axis=1)
+
+
+def estimate_translation(kin: FastKinematics, cameras: Sequence[PinholeCamera],
+                         corr: Correspondences, q: np.ndarray,
+                         min_depth_m: float = 0.05, prior_var: np.ndarray | None = None,
+                         r_var_px2: float = 9.0, outlier_px: float = 0.0) -> np.ndarray:
+    """Keep rotation and fingers of ``q`` and solve the wrist translation that best
+    projects the constraint points onto their targets: linear least squares on the
+    cross-multiplied projection equations of all cameras, each row weighted as a pixel
+    residual of variance ``r_var_px2``, optionally regularised toward ``q[0:3]`` with
+    per-axis variances ``prior_var`` (m^2), and refitted once without the constraints
+    farther than ``outlier_px`` (0 = no trimming). Returns the new pose; raises
+    :class:`IKError` if the points are too few or the solution is behind a camera."""
+    if len(corr) < 2:
+        raise IKError('translation needs at least 2 correspondences')
+    p, _ = constraint_points(kin, corr, q)
+    pp = per_point_cameras(cameras, corr)
+    # per correspondence and pixel axis i: (R_i - a_i R_2) (p + dt) + t_i - a_i t_2 = 0 with
+    # a the target's normalised image coordinates
+    coef = (corr.target_px - pp.c) / pp.f                                  # (K, 2)
+    G = pp.R[:, :2, :] - coef[:, :, None] * pp.R[:, 2:3, :]                 # (K, 2, 3)
+    y = -np.einsum('kij,kj->ki', G, p) - (pp.t[:, :2] - coef * pp.t[:, 2:3])
+    _, _, depth = _project_points(pp, p, None)
+    w = (pp.f / np.maximum(depth, min_depth_m)[:, None]) ** 2 / r_var_px2  # residual * f / z
+    A, y, w = G.reshape(-1, 3), y.reshape(-1), w.reshape(-1)
+    reg = np.zeros((3, 3)) if prior_var is None else np.diag(1.0 / np.asarray(prior_var, float))
+    keep = np.ones(len(A), dtype=bool)
+    dt = np.zeros(3)
+    for _ in range(2 if outlier_px > 0 else 1):
+        Ak, wk = A[keep], w[keep]
+        H = (Ak.T * wk) @ Ak + reg
+        try:
+            dt = np.linalg.solve(H, (Ak.T * wk) @ y[keep])
+        except np.linalg.LinAlgError as exc:
+            raise IKError('translation is not determined by the correspondences') from exc
+        if outlier_px <= 0:
+            break
+        pix, _, _ = _project_points(pp, p + dt, None)
+        good = np.linalg.norm(pix - corr.target_px, axis=1) <= outlier_px
+        if good.all() or good.sum() < 3:
+            break
+        keep = np.repeat(good, 2)                    # rows x0, y0, x1, y1, ...
+    out = np.array(q, dtype=float)
+    out[0:3] = q[0:3] + dt
+    _, _, depth = _project_points(pp, p + dt, None)
+    if np.any(depth <= min_depth_m):
+        raise IKError('translation estimate puts the hand behind a camera')
+    return kin.clamp(out)

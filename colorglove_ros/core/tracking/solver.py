@@ -1,0 +1,126 @@
+"""The IK solve: Levenberg-damped Gauss-Newton on the projection constraints with the blended
+pose (Q) and previous pose (P) priors, inside the joint limits (DigitEyes / Wang-Popovic)."""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.hand.model import NUM_DOFS
+from colorglove_ros.core.tracking.config import IKCovariances
+from colorglove_ros.core.tracking.kinematics import FastKinematics
+from colorglove_ros.core.tracking.projection import (
+    per_point_cameras,
+    project_correspondences,
+)
+from colorglove_ros.core.tracking.types import Correspondences, IKError
+
+__all__ = ['IKSolution', 'solve_ik']
+
+_EPS_LIMIT = 1e-9
+
+
+@dataclass(frozen=True)
+class IKSolution:
+    """Result of :func:`solve_ik`; ``residual_px`` (K, 2) is target minus projection of each
+    correspondence at ``q``."""
+
+    q: np.ndarray
+    iterations: int
+    cost: float
+    initial_cost: float
+    converged: bool
+    residual_px: np.ndarray
+
+    @property
+    def errors_px(self) -> np.ndarray:
+        """Pixel distance of each correspondence from its target at ``q`` (as
+        :func:`reprojection_errors`)."""
+        return np.linalg.norm(self.residual_px, axis=1)
+
+
+def _cost(r: np.ndarray, w: np.ndarray, q: np.ndarray, q_blend: np.ndarray, q_inv: np.ndarray,
+          q_prev: np.ndarray | None, p_inv: np.ndarray | None) -> float:
+    c = float(r @ (w * r)) + float(((q - q_blend) ** 2 * q_inv).sum())
+    if q_prev is not None and p_inv is not None:
+        c += float(((q - q_prev) ** 2 * p_inv).sum())
+    return c
+
+
+def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Correspondences,
+             q_init: np.ndarray, q_blend: np.ndarray, cov: IKCovariances,
+             q_prev: np.ndarray | None = None, max_iterations: int = 6,
+             lambda_init: float = 1e-3, step_tol: float = 1e-5,
+             min_depth_m: float = 0.05, cost_tol: float = 1e-4) -> IKSolution:
+    """Minimise |f(q) - c|^2_{R^-1} + |q - q_b|^2_{Q^-1} (+ |q - q_prev|^2_{P^-1}) by
+    Levenberg-damped Gauss-Newton steps
+    dq = (J^T R^-1 J + Q^-1 + P^-1 + lambda diag)^-1 (J^T R^-1 (c - f) + Q^-1 (q_b - q)
+    + P^-1 (q_prev - q)), projected onto the joint limits (DOFs at a bound whose step
+    points outward are frozen). ``max_iterations`` counts linear solves; it stops early when
+    the largest DOF change is below ``step_tol`` or the cost falls by less than the
+    fraction ``cost_tol``."""
+    q = kin.clamp(np.asarray(q_init, dtype=float))
+    q_blend = np.asarray(q_blend, dtype=float)
+    q_inv = 1.0 / cov.q_var
+    p_inv = 1.0 / cov.p_var if q_prev is not None else None
+    w = np.tile(1.0 / cov.r_var_px2, len(corr))
+    target = corr.target_px.reshape(-1)
+    per_point = per_point_cameras(cameras, corr)
+
+    def evaluate(qq: np.ndarray, jacobian: bool) -> tuple[float, np.ndarray, np.ndarray | None]:
+        pix, J, depth = project_correspondences(kin, cameras, corr, qq, jacobian, per_point)
+        if len(depth) and depth.min() <= min_depth_m:
+            return math.inf, np.zeros(0), np.zeros((0, NUM_DOFS))
+        r = target - pix.reshape(-1)
+        return _cost(r, w, qq, q_blend, q_inv, q_prev, p_inv), r, J
+
+    cost, r, J = evaluate(q, max_iterations > 0)
+    if not math.isfinite(cost):
+        raise IKError('initial pose puts constraint points behind a camera')
+    initial = cost
+    lam = lambda_init
+    it = 0
+    converged = False
+    while it < max_iterations and J is not None:
+        JW = J.T * w
+        H = JW @ J + np.diag(q_inv)
+        g = JW @ r + q_inv * (q_blend - q)
+        if p_inv is not None:
+            H += np.diag(p_inv)
+            g += p_inv * (q_prev - q)
+        at_lo = (q <= kin.lower + _EPS_LIMIT) & (g < 0)
+        at_hi = (q >= kin.upper - _EPS_LIMIT) & (g > 0)
+        free = ~(at_lo | at_hi)
+        Hf = H[np.ix_(free, free)]
+        gf = g[free]
+        accepted = False
+        while it < max_iterations:
+            it += 1
+            A = Hf + lam * np.diag(np.diag(Hf))
+            try:
+                dqf = np.linalg.solve(A, gf)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            dq = np.zeros(NUM_DOFS)
+            dq[free] = dqf
+            q_new = kin.clamp(q + dq)
+            # the last linear solve's pose needs no Jacobian
+            cost_new, r_new, J_new = evaluate(q_new, it < max_iterations)
+            if cost_new < cost:
+                step = float(np.abs(q_new - q).max())
+                rel = (cost - cost_new) / max(cost, 1e-12)
+                q, cost, r, J = q_new, cost_new, r_new, J_new
+                lam = max(lam / 10.0, 1e-9)
+                accepted = True
+                if step < step_tol or rel < cost_tol:
+                    converged = True
+                break
+            lam *= 10.0
+        if not accepted or converged:
+            converged = converged or not accepted and lam > 1e6
+            break
+    return IKSolution(q, it, cost, initial, converged, r.reshape(-1, 2))

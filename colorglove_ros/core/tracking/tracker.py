@@ -1,0 +1,368 @@
+"""The temporal IK tracker: one frame's lookup prior and blobs of N cameras -> a refined pose."""
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from colorglove_ros.core.camera import Calibration, PinholeCamera
+from colorglove_ros.core.geometry import align_rotation_vector
+from colorglove_ros.core.hand.glove import default_hand
+from colorglove_ros.core.hand.mesh import build_hand_mesh
+from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
+from colorglove_ros.core.tracking.config import IKConfig, IKCovariances
+from colorglove_ros.core.tracking.kinematics import FastKinematics
+from colorglove_ros.core.tracking.matching import match_extra_camera, match_primary
+from colorglove_ros.core.tracking.patch_surface import PatchSurface
+from colorglove_ros.core.tracking.projection import estimate_translation, reprojection_errors
+from colorglove_ros.core.tracking.solver import IKSolution, solve_ik
+from colorglove_ros.core.tracking.types import (
+    CameraObservation,
+    Correspondences,
+    IKError,
+    MeshLike,
+    PosePrior,
+)
+
+__all__ = ['IKResult', 'HandTracker']
+
+
+@dataclass(frozen=True)
+class IKResult:
+    """One tracker output. ``reprojection_error_px`` is the mean pixel distance of the
+    matched constraints at the output pose (NaN when none); ``q`` is None when no hand.
+    ``q_blend`` is the lookup's blended pose as given, ``q_prior`` the IK prior q_b (the
+    blend with its translation refitted to the constraints)."""
+
+    found: bool
+    stamp: float
+    q: np.ndarray | None = None
+    q_blend: np.ndarray | None = None
+    reprojection_error_px: float = math.nan
+    reprojection_error_per_camera: tuple[float, ...] = ()
+    iterations: int = 0
+    time_ms: float = 0.0
+    num_constraints: int = 0
+    constraints_per_camera: tuple[int, ...] = ()
+    smoothed: bool = False
+    reset: bool = False
+    correspondences: Correspondences | None = None
+    num_rejected: int = 0
+    q_prior: np.ndarray | None = None
+
+
+def _local_vertex_normals(mesh: MeshLike) -> np.ndarray | None:
+    """Area-weighted vertex normals in the link frames, or None if the mesh has no faces
+    (then no back-facing test is made for the other cameras)."""
+    faces = getattr(mesh, 'faces', None)
+    if faces is None:
+        return None
+    faces = np.asarray(faces, dtype=np.int64)
+    links = np.asarray(mesh.vertex_link)
+    if faces.ndim != 2 or faces.shape[1] != 3 or np.any(links[faces[:, 0]] != links[faces[:, 1]]) \
+            or np.any(links[faces[:, 0]] != links[faces[:, 2]]):
+        return None
+    v = np.asarray(mesh.local_vertices, float)
+    fn = np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]])
+    n = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(n, faces[:, k], fn)
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    return n / np.where(norm > 0, norm, 1.0)
+
+
+@dataclass(frozen=True)
+class _FramePriors:
+    """The priors of one frame's IK: the translation-refitted blend q_b, the previous pose
+    (None without smoothing) and the covariances."""
+
+    q_b: np.ndarray
+    q_prev: np.ndarray | None
+    covariances: IKCovariances
+
+
+@dataclass
+class _FrameFit:
+    """One frame's IK so far: pose, correspondences, their pixel errors at the pose (None
+    until a solve or the final check), linear solves made and correspondences dropped."""
+
+    q: np.ndarray
+    corr: Correspondences
+    err: np.ndarray | None = None
+    iterations: int = 0
+    rejected: int = 0
+
+
+class HandTracker:
+    """Temporal IK tracker: blended lookup pose -> refined pose, several cameras.
+
+    The world frame is the primary camera's optical frame (``cameras[0]`` must have
+    identity extrinsics); poses are expressed in it. With ``constraint_model: patch`` the
+    tracker needs the glove's patch of every mesh face: ``glove`` (a ``core.glove.Glove``),
+    or else the standard glove ``default_hand(hand length, config.glove_seed)``, which must
+    have been made on the same mesh.
+    """
+
+    def __init__(self, model: HandModel, mesh: MeshLike, cameras: Sequence[PinholeCamera],
+                 config: IKConfig | None = None, glove: Any = None) -> None:
+        if not cameras:
+            raise IKError('the tracker needs at least one camera')
+        c0 = cameras[0]
+        if not (np.allclose(c0.rotation, np.eye(3)) and np.allclose(c0.translation, 0.0)):
+            raise IKError('cameras[0] (primary) must have identity extrinsics')
+        if len(mesh.vertex_link) != len(mesh.local_vertices):
+            raise IKError('mesh vertex_link and local_vertices differ in length')
+        self.model = model
+        self.kin = FastKinematics(model)
+        self.mesh = mesh
+        self.cameras = tuple(cameras)
+        self.config = config or IKConfig()
+        self._q_prev: np.ndarray | None = None
+        self._stamp_prev: float | None = None
+        self._local_normals = _local_vertex_normals(mesh)
+        self._patches = (PatchSurface(self.kin, mesh, self._face_patch(glove))
+                         if self.config.constraint_model == 'patch' else None)
+
+    def _face_patch(self, glove: Any) -> np.ndarray:
+        if glove is None:
+            _, std_mesh, glove = default_hand(self.model.hand_length_m, self.config.glove_seed)
+            faces = getattr(self.mesh, 'faces', None)
+            if faces is None or not np.array_equal(np.asarray(faces), std_mesh.faces):
+                raise IKError('constraint_model patch: pass the glove of this mesh (the '
+                              'standard glove is made on another mesh)')
+        return np.asarray(glove.face_patch)
+
+    def _with_patch_points(self, corr: Correspondences, q: np.ndarray) -> Correspondences:
+        """``corr`` with each constraint moved from its vertex to the predicted centroid of
+        the patch's visible part at pose ``q`` (rows whose patch faces away keep the
+        vertex)."""
+        if self._patches is None or not len(corr):
+            return corr
+        s = self._patches.max_links
+        link = np.zeros((len(corr), s), np.int64)
+        local = np.zeros((len(corr), s, 3))
+        weight = np.zeros((len(corr), s))
+        link[:, 0], local[:, 0], weight[:, 0] = corr.link[:, 0], corr.local[:, 0], 1.0
+        used, cam_index = np.unique(corr.camera, return_inverse=True)
+        lk, lc, wt, seen = self._patches.points_by_camera(
+            q, [self.cameras[int(c)] for c in used], cam_index.reshape(-1), corr.patch_id)
+        link[seen], local[seen], weight[seen] = lk[seen], lc[seen], wt[seen]
+        return replace(corr, link=link, local=local, weight=weight)
+
+    @classmethod
+    def from_calibration(cls, calibration: Calibration, config: IKConfig | None = None,
+                         mesh: MeshLike | None = None) -> HandTracker:
+        """A tracker for a calibrated rig: the hand model (and, if not given, the mesh) is
+        scaled to the user's ``hand_length_m``."""
+        model = HandModel(calibration.hand_length_m)
+        if mesh is None:
+            mesh = build_hand_mesh(model)
+        mesh_length = getattr(mesh, 'hand_length_m', None)
+        if mesh_length is not None and abs(float(mesh_length) - model.hand_length_m) > 1e-9:
+            raise IKError(f'mesh is for a {mesh_length} m hand, calibration says '
+                          f'{model.hand_length_m} m')
+        return cls(model, mesh, calibration.cameras, config)
+
+    def reset(self) -> None:
+        """Forget the previous pose (hand lost, long gap, new sequence)."""
+        self._q_prev = None
+        self._stamp_prev = None
+
+    @property
+    def previous_pose(self) -> np.ndarray | None:
+        """The last output pose, or None after a reset."""
+        return None if self._q_prev is None else self._q_prev.copy()
+
+    def _match_extras(self, prior: PosePrior, observations: Sequence[CameraObservation],
+                      q: np.ndarray, patch_points: bool = True) -> Correspondences:
+        """The other cameras' correspondences matched at pose ``q`` (constraints moved to
+        the patch points at ``q`` unless ``patch_points`` is false)."""
+        cfg = self.config
+        cons = prior.constraints
+        v = cons.vertex
+        if np.any((v < 0) | (v >= len(self.mesh.vertex_link))):
+            raise IKError('constraint vertex index out of range of the mesh')
+        links = np.asarray(self.mesh.vertex_link)[v]
+        pw, _ = self.kin.points(q, links, np.asarray(self.mesh.local_vertices, float)[v])
+        normals = None
+        if self._local_normals is not None:
+            Rs, _, _ = self.kin.frames(q)
+            normals = (Rs[self.kin.link_frame[links]] @ self._local_normals[v][:, :, None])[..., 0]
+        out = []
+        for ci in range(1, len(self.cameras)):
+            obs = observations[ci] if ci < len(observations) else None
+            if obs is None or not obs.hand_found or len(obs.blobs) == 0:
+                continue
+            out.append(match_extra_camera(
+                ci, self.cameras[ci], cons, pw, obs.blobs, self.mesh, cfg.extra_gate_px,
+                cfg.extra_shift_max_px, cfg.extra_inlier_px, cfg.min_blob_pixels,
+                cfg.min_depth_m, normals))
+        out = Correspondences.concat(out)
+        return self._with_patch_points(out, q) if patch_points else out
+
+    def _solve(self, corr: Correspondences, q_init: np.ndarray, iterations: int,
+               priors: _FramePriors) -> IKSolution:
+        cfg = self.config
+        return solve_ik(self.kin, self.cameras, corr, q_init, priors.q_b, priors.covariances,
+                        priors.q_prev, iterations, cfg.lambda_init, cfg.step_tol,
+                        cfg.min_depth_m, cfg.cost_tol)
+
+    def _solve_into(self, fit: _FrameFit, corr: Correspondences, q_init: np.ndarray,
+                    iterations: int, priors: _FramePriors) -> None:
+        """Solve on ``corr`` from ``q_init`` and make it the frame's fit."""
+        sol = self._solve(corr, q_init, iterations, priors)
+        fit.corr, fit.q, fit.err = corr, sol.q, sol.errors_px
+        fit.iterations += sol.iterations
+
+    def update(self, prior: PosePrior | Any | None, observations: Sequence[CameraObservation],
+               stamp: float) -> IKResult:
+        """Track one frame: ``prior`` from the lookup on the primary camera (a
+        :class:`PosePrior` or a ``core.search.LookupResult``; None if the lookup found
+        nothing), one observation per camera (primary first), time in seconds."""
+        t0 = time.perf_counter()
+        cfg = self.config
+        if prior is not None and not isinstance(prior, PosePrior):
+            prior = PosePrior.from_lookup(prior)
+        primary = observations[0] if observations else None
+        if prior is None or primary is None or not primary.hand_found:
+            self.reset()
+            return IKResult(False, stamp, reset=True, time_ms=1e3 * (time.perf_counter() - t0))
+        was_reset = self._reset_after_gap(stamp)
+        q_blend = self._blend_start(prior)
+        corr0, tracked = self._match_start(prior, observations, q_blend)
+        q_b = self._fit_translation(corr0, q_blend)
+        q_prev = self._q_prev if (cfg.enable_smoothing and self._q_prev is not None) else None
+        priors = _FramePriors(q_b, q_prev, cfg.prior_covariances(prior.finger_std))
+        fit = self._fit_frame(prior, observations, corr0, tracked, priors)
+        return self._finish(fit, stamp, t0, q_blend, priors, was_reset)
+
+    def _reset_after_gap(self, stamp: float) -> bool:
+        """Reset when the time since the last frame is not in (0, ``max_gap_s``]."""
+        if self._stamp_prev is not None:
+            gap = stamp - self._stamp_prev
+            if not 0.0 < gap <= self.config.max_gap_s:
+                self.reset()
+                return True
+        return False
+
+    def _blend_start(self, prior: PosePrior) -> np.ndarray:
+        """The lookup's blended pose inside the joint limits, its rotation vector taken
+        closest to the last pose's."""
+        q_blend = self.kin.clamp(np.asarray(prior.q_blend, dtype=float).reshape(NUM_DOFS))
+        if self._q_prev is not None:
+            q_blend[3:6] = align_rotation_vector(q_blend[3:6], self._q_prev[3:6])
+        return q_blend
+
+    def _match_start(self, prior: PosePrior, observations: Sequence[CameraObservation],
+                     q_blend: np.ndarray) -> tuple[Correspondences, Correspondences | None]:
+        """The primary camera's correspondences, and while tracking with several cameras all
+        cameras' correspondences matched at the last pose (else None)."""
+        cfg = self.config
+        primary = observations[0]
+        corr0 = match_primary(prior.constraints, primary.blobs, primary.crop, self.cameras[0],
+                              self.mesh, cfg.gate_tiny_px, cfg.gate_min_px,
+                              cfg.min_blob_pixels)
+        # IK on several cameras, tracking: the other cameras are matched at the last pose and
+        # every camera's visible patches predicted there, in one pass (the blend is the
+        # coarser guess)
+        if len(self.cameras) > 1 and cfg.enable_ik and self._q_prev is not None:
+            tracked = self._with_patch_points(Correspondences.concat(
+                [corr0, self._match_extras(prior, observations, self._q_prev, False)]),
+                self._q_prev)
+            return tracked.select(tracked.camera == 0), tracked
+        return self._with_patch_points(corr0, q_blend), None
+
+    def _fit_translation(self, corr0: Correspondences, q_blend: np.ndarray) -> np.ndarray:
+        """The IK prior q_b: the blend with its wrist translation refitted to the primary
+        camera's correspondences (the blend itself if disabled, too few or the fit fails)."""
+        cfg = self.config
+        if cfg.init_translation and len(corr0) >= 3:
+            try:
+                return estimate_translation(
+                    self.kin, self.cameras, corr0, q_blend, cfg.min_depth_m,
+                    cfg.covariances.q_var[0:3], float(cfg.covariances.r_var_px2.mean()),
+                    cfg.outlier_px)
+            except IKError:
+                return q_blend
+        return q_blend
+
+    def _fit_frame(self, prior: PosePrior, observations: Sequence[CameraObservation],
+                   corr0: Correspondences, tracked: Correspondences | None,
+                   priors: _FramePriors) -> _FrameFit:
+        """The frame's pose: IK on the primary camera or on all cameras, then once more
+        without the outliers; without IK (or too few correspondences) the prior q_b."""
+        cfg = self.config
+        multi = len(self.cameras) > 1
+        fit = _FrameFit(priors.q_b, corr0)
+        if cfg.enable_ik and (len(corr0) >= cfg.min_constraints or multi):
+            if not multi:
+                self._solve_into(fit, corr0, priors.q_b, cfg.max_iterations, priors)
+            else:
+                self._solve_all_cameras(fit, prior, observations, corr0, tracked, priors)
+            self._drop_outliers(fit, priors)
+        elif multi:
+            fit.corr = Correspondences.concat(
+                [corr0, self._match_extras(prior, observations, fit.q)])
+        return fit
+
+    def _solve_all_cameras(self, fit: _FrameFit, prior: PosePrior,
+                           observations: Sequence[CameraObservation], corr0: Correspondences,
+                           tracked: Correspondences | None, priors: _FramePriors) -> None:
+        """Several cameras: predict the other cameras' patches from the last pose while
+        tracking, else from a short primary-camera solve; then solve on all cameras together
+        (a patch seen by one camera only still counts), optionally re-matching the other
+        cameras at the solved pose once."""
+        cfg = self.config
+        q_start = priors.q_b
+        if tracked is not None:
+            fit.corr = tracked
+        else:
+            if len(corr0) >= cfg.min_constraints:
+                sol = self._solve(corr0, priors.q_b, cfg.refine_iterations, priors)
+                q_start = fit.q = sol.q
+                fit.iterations += sol.iterations
+            fit.corr = Correspondences.concat(
+                [corr0, self._match_extras(prior, observations, q_start)])
+        if len(fit.corr) < cfg.min_constraints:
+            return
+        self._solve_into(fit, fit.corr, q_start, cfg.multi_camera_iterations, priors)
+        if cfg.extra_rematch and len(fit.corr) > len(corr0):
+            again = Correspondences.concat(
+                [corr0, self._match_extras(prior, observations, fit.q)])
+            if not again.same_as(fit.corr) and len(again) >= cfg.min_constraints:
+                self._solve_into(fit, again, fit.q, cfg.refine_iterations, priors)
+
+    def _drop_outliers(self, fit: _FrameFit, priors: _FramePriors) -> None:
+        """Solve once more without the correspondences farther than ``outlier_px``, if
+        enough remain."""
+        cfg = self.config
+        if cfg.outlier_px > 0 and fit.err is not None:
+            bad = fit.err > cfg.outlier_px
+            if bad.any() and int((~bad).sum()) >= cfg.min_constraints:
+                fit.rejected = int(bad.sum())
+                self._solve_into(fit, fit.corr.select(~bad), fit.q, cfg.refine_iterations,
+                                 priors)
+
+    def _finish(self, fit: _FrameFit, stamp: float, t0: float, q_blend: np.ndarray,
+                priors: _FramePriors, was_reset: bool) -> IKResult:
+        """Remember the pose (rotation angle in [0, pi]) and build the tracker output (the
+        errors of a fit that made no solve are measured here)."""
+        corr = fit.corr
+        err = (fit.err if fit.err is not None
+               else reprojection_errors(self.kin, self.cameras, corr, fit.q))
+        q = fit.q.copy()
+        q[3:6] = align_rotation_vector(q[3:6], np.zeros(3))      # angle in [0, pi]
+        n_cam = len(self.cameras)
+        per_cam = tuple(float(err[corr.camera == c].mean()) if np.any(corr.camera == c)
+                        else math.nan for c in range(n_cam))
+        self._q_prev = q.copy()
+        self._stamp_prev = stamp
+        return IKResult(
+            True, stamp, q.copy(), q_blend, float(err.mean()) if len(err) else math.nan,
+            per_cam, fit.iterations, 1e3 * (time.perf_counter() - t0), len(corr),
+            corr.counts(n_cam), priors.q_prev is not None and fit.iterations > 0, was_reset,
+            corr, fit.rejected, priors.q_b.copy())

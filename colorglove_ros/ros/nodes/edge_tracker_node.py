@@ -1,0 +1,221 @@
+"""edge_tracker_node: bare-hand DigitEyes tracking from grey-scale edges, one or two cameras.
+
+Subscribes to one ``sensor_msgs/Image`` per camera (mono8 or colour; ``image_topics``) and
+publishes what ``ik_node`` publishes: ``hand/joint_states`` (URDF joint names),
+``hand/wrist_pose``, ``hand/markers`` and ``hand/tracking_status``. Cameras come from
+``calibration_file`` (required for two cameras: the extrinsics); with ``calibration_file``
+empty, one camera is taken from the first ``CameraInfo`` on ``camera_info_topic``.
+
+Start: hold the flat hand still, palm to the (primary) camera, at the marked spot
+``init_wrist_position``; or publish a starting pose on ``edge_tracker/init_joint_states`` +
+``edge_tracker/init_wrist_pose`` (e.g. remapped from the glove tracker's outputs). Frames
+without a trustworthy fit publish no pose, only the reason on the status topic.
+"""
+from __future__ import annotations
+
+import sys
+from dataclasses import replace
+
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import String
+from visualization_msgs.msg import MarkerArray
+
+from colorglove_ros.core.camera import CalibrationError, PinholeCamera, load_calibration
+from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.tracking.edge_tracker import EdgeTracker, EdgeTrackerConfig
+from colorglove_ros.paths import resolve_path
+from colorglove_ros.ros.bags import camera_info_to_pinhole
+from colorglove_ros.ros.conversions import (
+    joint_state_from_pose,
+    pose_from_messages,
+    pose_stamped_from_pose,
+    skeleton_markers,
+    stamp_to_seconds,
+)
+from colorglove_ros.ros.image import ImageEncodingError, image_to_array
+from colorglove_ros.ros.nodes.common import (
+    LATEST_IMAGE,
+    StartupError,
+    declare,
+    run_node,
+)
+
+__all__ = ['EdgeTrackerNode', 'main']
+
+
+class EdgeTrackerNode(Node):
+    """Images in, hand pose out (see the module docstring)."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('edge_tracker', **kwargs)
+        calibration_file = declare(
+            self, 'calibration_file', '',
+            'camera calibration YAML (all its cameras are used; camera 0 is the primary); '
+            'empty: one camera from the first CameraInfo on camera_info_topic')
+        topics = declare(self, 'image_topics', 'camera/image_raw',
+                         'comma-separated image topics, one per calibrated camera')
+        self.info_topic = declare(self, 'camera_info_topic', 'camera/camera_info',
+                                  'CameraInfo topic read when calibration_file is empty')
+        hand_length = declare(self, 'hand_length_m', 0.19,
+                              'hand length when no calibration file gives it, m', 0.08, 0.35)
+        self.stamp_tolerance = declare(self, 'stamp_tolerance_s', 0.02,
+                                       'images within this of each other form one frame, s',
+                                       0.0, 1.0)
+        defaults = EdgeTrackerConfig()
+        init_wrist = declare(self, 'init_wrist_position', list(defaults.init_wrist_position),
+                             'marked spot: wrist position of the initialisation pose in the '
+                             'primary camera frame (x, y, z), m')
+        hold = declare(self, 'init_hold_frames', defaults.init_hold_frames,
+                       'frames the hand must hold still at the marked spot to start', 1, 300)
+        search = declare(self, 'search_px', defaults.search.search_px,
+                         'how far past a predicted link edge the 1-D searches reach, px',
+                         1.0, 50.0)
+        min_gradient = declare(self, 'min_gradient', defaults.search.min_gradient,
+                               'smallest grey-level derivative counted as an edge, per px',
+                               0.1, 100.0)
+        max_rms = declare(self, 'max_rms_px', defaults.max_rms_px,
+                          'largest edge residual (weighted RMS) of a published fit, px',
+                          0.1, 50.0)
+        min_found = declare(self, 'min_found_fraction', defaults.min_found_fraction,
+                            'fraction of the visible links each camera must find', 0.05, 1.0)
+        patience = declare(self, 'loss_patience', defaults.loss_patience,
+                           'bad frames in a row that declare the track lost', 1, 100)
+        polarity = declare(self, 'polarity', defaults.polarity,
+                           '+1 hand brighter than the background, -1 darker, 0 either', -1, 1)
+        try:
+            if len(init_wrist) != 3:
+                raise ColorGloveError(f'init_wrist_position needs 3 values, got {init_wrist}')
+            self.config = replace(
+                defaults, search=replace(defaults.search, search_px=float(search),
+                                         min_gradient=float(min_gradient)),
+                init_wrist_position=tuple(float(v) for v in init_wrist),
+                init_hold_frames=int(hold), max_rms_px=float(max_rms),
+                min_found_fraction=float(min_found), loss_patience=int(patience),
+                polarity=int(polarity))
+            cameras: tuple[PinholeCamera, ...] = ()
+            if calibration_file:
+                calibration = load_calibration(resolve_path(calibration_file))
+                cameras, hand_length = calibration.cameras, calibration.hand_length_m
+            self.model = HandModel(hand_length)
+        except (CalibrationError, ColorGloveError, ValueError) as exc:
+            raise StartupError(f'edge_tracker_node cannot start: {exc}') from exc
+        self.image_topics = [t.strip() for t in topics.split(',') if t.strip()]
+        if cameras and len(self.image_topics) != len(cameras):
+            raise StartupError(
+                f'edge_tracker_node cannot start: {len(cameras)} calibrated camera(s) but '
+                f'{len(self.image_topics)} image topic(s); set image_topics')
+        if not cameras and len(self.image_topics) != 1:
+            raise StartupError('edge_tracker_node cannot start: several image topics need a '
+                               'calibration_file with their extrinsics')
+        self.tracker: EdgeTracker | None = None
+        if cameras:
+            self._make_tracker(cameras)
+        else:
+            self.create_subscription(CameraInfo, self.info_topic, self.on_camera_info, 10)
+        self.pending: dict[int, list[Image | None]] = {}
+        for index, topic in enumerate(self.image_topics):
+            self.create_subscription(Image, topic, lambda m, i=index: self.on_image(i, m),
+                                     LATEST_IMAGE)
+        self.init_wrist: PoseStamped | None = None
+        self.create_subscription(PoseStamped, 'edge_tracker/init_wrist_pose',
+                                 self.on_init_wrist, 10)
+        self.create_subscription(JointState, 'edge_tracker/init_joint_states',
+                                 self.on_init_joints, 10)
+        self.joint_pub = self.create_publisher(JointState, 'hand/joint_states', 10)
+        self.wrist_pub = self.create_publisher(PoseStamped, 'hand/wrist_pose', 10)
+        self.marker_pub = self.create_publisher(MarkerArray, 'hand/markers', 10)
+        self.status_pub = self.create_publisher(String, 'hand/tracking_status', 10)
+        self.hand_was_found = False
+
+    def _make_tracker(self, cameras: tuple[PinholeCamera, ...]) -> None:
+        try:
+            self.tracker = EdgeTracker(self.model, cameras, self.config)
+        except ColorGloveError as exc:
+            raise StartupError(f'edge_tracker_node cannot start: {exc}') from exc
+        self.get_logger().info(f'edge tracking with {len(cameras)} camera(s)')
+
+    def on_camera_info(self, msg: CameraInfo) -> None:
+        """Take the single camera from its first CameraInfo."""
+        if self.tracker is not None:
+            return
+        try:
+            self._make_tracker((camera_info_to_pinhole(msg),))
+        except (ColorGloveError, StartupError) as exc:
+            self.get_logger().warn(f'unusable CameraInfo: {exc}', throttle_duration_sec=5.0)
+
+    def on_init_wrist(self, msg: PoseStamped) -> None:
+        """Keep the wrist half of a given starting pose."""
+        self.init_wrist = msg
+
+    def on_init_joints(self, msg: JointState) -> None:
+        """Start tracking from a given pose (joint state + the latest init wrist pose)."""
+        if self.tracker is None or self.init_wrist is None:
+            self.get_logger().warn('starting pose ignored: no camera yet or no '
+                                   'edge_tracker/init_wrist_pose received',
+                                   throttle_duration_sec=1.0)
+            return
+        try:
+            self.tracker.initialize(pose_from_messages(msg, self.init_wrist))
+        except (ColorGloveError, ValueError, KeyError) as exc:
+            self.get_logger().warn(f'bad starting pose: {exc}', throttle_duration_sec=1.0)
+            return
+        self.status_pub.publish(String(data='initialised from a given pose'))
+
+    def on_image(self, index: int, msg: Image) -> None:
+        """Collect one frame's images from all cameras, then track it."""
+        if self.tracker is None:
+            self.status_pub.publish(String(data='no hand: waiting for CameraInfo'))
+            return
+        stamp_ns = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
+        tol_ns = int(self.stamp_tolerance * 1e9)
+        key = next((k for k in self.pending if abs(k - stamp_ns) <= tol_ns), stamp_ns)
+        slot = self.pending.setdefault(key, [None] * len(self.image_topics))
+        slot[index] = msg
+        for old in [k for k in self.pending if k < key - 10 * max(tol_ns, 1)]:
+            del self.pending[old]
+        if all(m is not None for m in slot):
+            del self.pending[key]
+            self.track(slot)
+
+    def track(self, images: list[Image]) -> None:
+        """Run the tracker on one frame and publish its pose or the reason there is none."""
+        header = images[0].header
+        try:
+            arrays = [image_to_array(m) for m in images]
+            result = self.tracker.update(arrays)
+        except (ImageEncodingError, ColorGloveError, ValueError) as exc:
+            self.get_logger().warn(f'frame dropped: {exc}', throttle_duration_sec=1.0)
+            self._report_no_hand(header, f'bad frame: {exc}')
+            return
+        if result.q is None:
+            self._report_no_hand(header, result.reason)
+            return
+        header.frame_id = self.tracker.cameras[0].frame_id
+        self.hand_was_found = True
+        self.joint_pub.publish(joint_state_from_pose(result.q, header))
+        self.wrist_pub.publish(pose_stamped_from_pose(result.q, header))
+        self.marker_pub.publish(skeleton_markers(self.model.keypoints(result.q), header))
+        fit = result.fit
+        per_camera = ', '.join(f'{c.name} {n}' for c, n in
+                               zip(self.tracker.cameras, fit.links_found, strict=True))
+        self.status_pub.publish(String(
+            data=f'tracking: links found {per_camera}, edge residual {fit.rms_px:.1f} px, '
+                 f'{result.time_ms:.1f} ms, stamp {stamp_to_seconds(header.stamp):.3f}'))
+
+    def _report_no_hand(self, header, reason: str) -> None:
+        if self.hand_was_found:
+            self.marker_pub.publish(skeleton_markers(None, header))
+        self.hand_was_found = False
+        self.status_pub.publish(String(data=f'no hand: {reason}'))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``edge_tracker_node``."""
+    return run_node(EdgeTrackerNode, args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

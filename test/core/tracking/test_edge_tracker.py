@@ -1,0 +1,108 @@
+"""The DigitEyes edge tracker on rendered bare-hand frames with ground truth."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
+from colorglove_ros.core.synthetic.bare_hand import BareHandSequence
+from colorglove_ros.core.tracking.edge_tracker import (
+    EdgeTracker,
+    EdgeTrackerConfig,
+    EdgeTrackerError,
+    initialisation_pose,
+    link_axis_residuals,
+    tip_residuals,
+)
+from colorglove_ros.paths import resolve_path
+
+TIPS = [KEYPOINT_NAMES.index(f'{d}_tip') for d in ('thumb', 'index', 'middle', 'ring', 'little')]
+
+
+@pytest.fixture(scope='module')
+def rig():
+    cameras = load_calibration(resolve_path('config/calibration_stereo.yaml')).cameras
+    seq = BareHandSequence(cameras[0], seed=5, num_frames=40, hold_frames=10)
+    frames = {i: [f.image_rgb for f in seq.render_views(i, cameras)] for i in (0, 20, 21, 22)}
+    yield cameras, seq, frames
+    seq.close()
+
+
+def _tip_error_rel_wrist_mm(model: HandModel, q: np.ndarray, truth: np.ndarray) -> float:
+    a, b = model.keypoints(q), model.keypoints(truth)
+    return float(1e3 * np.linalg.norm((a[TIPS] - a[0]) - (b[TIPS] - b[0]), axis=1).mean())
+
+
+def test_residuals_are_signed_distances_and_differences() -> None:
+    normal = np.array([[0.0, 1.0]])
+    r, J = link_axis_residuals(normal, np.array([2.0]), np.array([[5.0, 3.0]]),
+                               np.array([[9.0, 0.5]]), np.ones((1, 2, 4)), 2 * np.ones((1, 2, 4)))
+    assert np.allclose(r, [1.0, -1.5]) and np.allclose(J, [[1, 1, 1, 1], [2, 2, 2, 2]])
+    r, J = tip_residuals(np.array([[3.0, 4.0]]), np.array([[1.0, 1.0]]), np.ones((1, 2, 3)))
+    assert np.allclose(r, [2.0, 3.0]) and J.shape == (2, 3)
+
+
+# one camera sees abduction (in the image plane) well but flexion toward it poorly; two
+# cameras see flexion too (an abduction error must stay below half the finger spacing, or a
+# finger locks onto its neighbour)
+@pytest.mark.parametrize('num_cameras, dofs, delta', [(1, [10], 0.1),
+                                                      (2, [8, 11, 15, 19], 0.15)])
+def test_fit_pulls_a_perturbed_pose_back_to_the_truth(rig, num_cameras: int, dofs: list[int],
+                                                      delta: float) -> None:
+    cameras, seq, frames = rig
+    tracker = EdgeTracker(seq.synth.model, cameras[:num_cameras])
+    truth = seq.poses[20]
+    start = truth.copy()
+    start[dofs] += delta
+    start[0:3] += [0.006, -0.004, 0.0]
+    before = _tip_error_rel_wrist_mm(seq.synth.model, start, truth)
+    fit = tracker.fit(frames[20][:num_cameras], start, rounds=3)
+    after = _tip_error_rel_wrist_mm(seq.synth.model, fit.q, truth)
+    assert abs(fit.q[0] - truth[0]) < 0.004
+    assert fit.rms_px < tracker.config.max_rms_px
+    if num_cameras == 1:
+        assert np.abs(fit.q[dofs] - truth[dofs]).mean() < 0.5 * delta
+    else:
+        assert before > 5.0 and after < 0.5 * before
+
+
+def test_tracker_initialises_on_the_held_pose_then_tracks(rig) -> None:
+    cameras, seq, frames = rig
+    tracker = EdgeTracker(seq.synth.model, cameras, EdgeTrackerConfig(init_hold_frames=3))
+    assert np.allclose(seq.poses[0], tracker.init_pose)
+    results = [tracker.update(frames[0]) for _ in range(3)]
+    assert [r.q is None for r in results] == [True, True, False]
+    assert results[-1].initialised and tracker.state == 'tracking'
+    tracker.initialize(seq.poses[20])
+    for i in (21, 22):
+        out = tracker.update(frames[i])
+        assert out.q is not None, out.reason
+        assert _tip_error_rel_wrist_mm(seq.synth.model, out.q, seq.poses[i]) < 10.0
+
+
+def test_tracker_reports_loss_instead_of_a_pose(rig) -> None:
+    cameras, seq, frames = rig
+    tracker = EdgeTracker(seq.synth.model, cameras[:1], EdgeTrackerConfig(loss_patience=2))
+    tracker.initialize(seq.poses[20])
+    blank = np.full_like(frames[20][0], 90)
+    first, second = tracker.update([blank]), tracker.update([blank])
+    assert first.q is None and not first.lost and 'poor fit' in first.reason
+    assert second.q is None and second.lost and tracker.state == 'waiting'
+    waiting = tracker.update([blank])
+    assert waiting.q is None and 'waiting for the initialisation pose' in waiting.reason
+
+
+def test_bad_inputs_are_refused(rig) -> None:
+    cameras, seq, frames = rig
+    tracker = EdgeTracker(seq.synth.model, cameras[:1])
+    with pytest.raises(EdgeTrackerError):
+        tracker.update(frames[0])                 # two images, one camera
+    with pytest.raises(EdgeTrackerError):
+        tracker.update([np.zeros((10, 10), np.uint8)])
+    with pytest.raises(EdgeTrackerError):
+        EdgeTracker(seq.synth.model, cameras[1:])  # primary must be the identity
+    with pytest.raises(EdgeTrackerError):
+        EdgeTrackerConfig(tracked_links=('palm',))
+    q = initialisation_pose(seq.synth.model, (0.0, 0.1, 0.5))
+    assert q[2] == 0.5 and q[seq.synth.model.dof_names.index('index_mcp_abd')] > 0

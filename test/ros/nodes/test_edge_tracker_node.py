@@ -1,0 +1,82 @@
+"""edge_tracker_node in one process: rendered bare-hand images in, pose or reason out."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseStamped
+from node_fixtures import header, params, running
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from colorglove_ros.core.hand.model import DOF_NAMES
+from colorglove_ros.core.synthetic.bare_hand import BareHandSequence
+from colorglove_ros.core.synthetic.frames import default_camera
+from colorglove_ros.ros.conversions import joint_state_from_pose, pose_stamped_from_pose
+from colorglove_ros.ros.image import array_to_image
+from colorglove_ros.ros.nodes.common import StartupError
+from colorglove_ros.ros.nodes.edge_tracker_node import EdgeTrackerNode
+
+pytestmark = [pytest.mark.dds, pytest.mark.usefixtures('isolated_ros_domain')]
+
+
+@pytest.fixture(scope='module')
+def sequence():
+    seq = BareHandSequence(default_camera(), seed=5, num_frames=30, hold_frames=10)
+    frames = {i: seq.render(i).image_rgb for i in (0, 20, 21)}
+    yield seq, frames
+    seq.close()
+
+
+def _node(**overrides):
+    values = {'calibration_file': 'config/calibration.yaml', 'init_hold_frames': 2, **overrides}
+    return lambda ctx: EdgeTrackerNode(context=ctx, parameter_overrides=params(**values))
+
+
+def test_holds_then_publishes_the_pose_with_urdf_names(sequence) -> None:
+    seq, frames = sequence
+    with running(_node()) as h:
+        node = h.nodes[0]
+        joints = h.collect(JointState, 'hand/joint_states')
+        wrists = h.collect(PoseStamped, 'hand/wrist_pose')
+        status = h.collect(String, 'hand/tracking_status')
+        for k in range(2):
+            msg = array_to_image(frames[0], 'rgb8', header(10 + k, 0, 'camera_optical_frame'))
+            node.on_image(0, msg)
+        assert h.spin_until(lambda: len(joints) >= 1 and len(status) >= 2, 10.0)
+        assert status[0].data.startswith('no hand: waiting for the initialisation pose')
+        assert status[1].data.startswith('tracking')
+        names = list(joints[0].name)
+        assert names == [n for n in names if n in set(names)] and len(names) >= 20
+        assert not any(n in DOF_NAMES[:6] for n in names)
+        wrist = np.array([wrists[0].pose.position.x, wrists[0].pose.position.y,
+                          wrists[0].pose.position.z])
+        assert np.linalg.norm(wrist - seq.poses[0][0:3]) < 0.01
+        # a given starting pose, then a moving frame
+        node.on_init_wrist(pose_stamped_from_pose(seq.poses[20], header(20)))
+        node.on_init_joints(joint_state_from_pose(seq.poses[20], header(20)))
+        node.on_image(0, array_to_image(frames[21], 'rgb8', header(21)))
+        assert h.spin_until(lambda: len(wrists) >= 2, 10.0)
+        wrist = np.array([wrists[-1].pose.position.x, wrists[-1].pose.position.y,
+                          wrists[-1].pose.position.z])
+        assert np.linalg.norm(wrist - seq.poses[21][0:3]) < 0.01
+
+
+def test_blank_frames_give_reasons_not_poses(sequence) -> None:
+    _, frames = sequence
+    with running(_node()) as h:
+        node = h.nodes[0]
+        joints = h.collect(JointState, 'hand/joint_states')
+        status = h.collect(String, 'hand/tracking_status')
+        node.on_image(0, array_to_image(np.full_like(frames[0], 80), 'rgb8', header(1)))
+        assert h.spin_until(lambda: len(status) >= 1, 10.0)
+        h.settle(0.2)
+        assert not joints and 'no hand' in status[0].data
+
+
+def test_two_topics_without_calibration_refuse_to_start() -> None:
+    with pytest.raises(StartupError):
+        with running(_node(calibration_file='', image_topics='a,b')):
+            pass
+    with pytest.raises(StartupError):
+        with running(_node(calibration_file='config/calibration_stereo.yaml')):
+            pass
