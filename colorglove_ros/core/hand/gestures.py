@@ -1,0 +1,204 @@
+"""Gesture events from the tracked pose: pinches, grab, point, open hand, with hysteresis.
+
+Every frame each gesture gets a score in [0, 1] from the pose's finger geometry (scale-free:
+distances are divided by the hand length), made of logistic ramps around thresholds:
+
+* ``pinch_<finger>`` (index, middle, ring, little): the thumb tip is near that fingertip,
+  that fingertip is the nearest one to the thumb tip, and the finger is not folded into the
+  palm (a fist brings the fingertips near the thumb without a pinch);
+* ``grab``: all four fingers curled;
+* ``point``: the index extended, the middle, ring and little fingers curled;
+* ``open_hand``: all four fingers extended and no pinch.
+
+A finger's curl is its MCP + PIP + DIP flexion over the sum of their upper limits (0 straight,
+1 fully bent). Scores are smoothed over time (exponential moving average, weight
+``score_smoothing`` on the newest frame). A gesture starts once its smoothed score has stayed
+at or above ``on_score`` for ``min_on_frames`` frames, and ends once it has stayed below
+``off_score`` for ``min_off_frames`` frames (hysteresis), or at once when the hand is lost. The
+confidence of an event is the gesture's score on the frame that decided it (for a loss: 0).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from colorglove_ros.core.hand.keypoints import FINGERTIP_INDICES, hand_keypoints
+from colorglove_ros.core.hand.model import DOF_NAMES, HandModel
+
+__all__ = [
+    'GESTURE_NAMES', 'PINCH_FINGERS', 'EVENT_STATES', 'GestureError', 'GestureConfig',
+    'GestureFeatures', 'GestureEvent', 'gesture_features', 'gesture_scores',
+    'GestureDetector', 'format_event', 'parse_event',
+]
+
+PINCH_FINGERS: tuple[str, ...] = ('index', 'middle', 'ring', 'little')
+GESTURE_NAMES: tuple[str, ...] = (
+    *(f'pinch_{f}' for f in PINCH_FINGERS), 'grab', 'point', 'open_hand')
+EVENT_STATES: tuple[str, ...] = ('start', 'end')
+_CURL_DOFS = np.array([[DOF_NAMES.index(f'{f}_{j}') for j in ('mcp_flex', 'pip_flex', 'dip_flex')]
+                       for f in PINCH_FINGERS])
+
+
+class GestureError(ValueError):
+    """Bad gesture settings, pose or event text."""
+
+
+@dataclass(frozen=True)
+class GestureConfig:
+    """Thresholds (pinch distances as a fraction of the hand length, curls in [0, 1]), the
+    width of each logistic ramp, the score smoothing and the hysteresis."""
+
+    pinch_distance: float = 0.21
+    pinch_width: float = 0.025
+    pinch_margin_width: float = 0.03
+    pinch_max_curl: float = 0.72
+    curled: float = 0.55
+    extended: float = 0.18
+    curl_width: float = 0.04
+    score_smoothing: float = 0.25
+    on_score: float = 0.7
+    off_score: float = 0.3
+    min_on_frames: int = 2
+    min_off_frames: int = 5
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not np.isfinite(value) or value <= 0:
+                raise GestureError(f'{f.name} must be finite and > 0, got {value!r}')
+        if self.score_smoothing > 1.0:
+            raise GestureError(f'score_smoothing must be in (0, 1], got {self.score_smoothing}')
+        if not 0.0 < self.off_score < self.on_score < 1.0:
+            raise GestureError(f'need 0 < off_score < on_score < 1, got {self.off_score}, '
+                               f'{self.on_score}')
+        if self.extended >= self.curled:
+            raise GestureError(f'extended ({self.extended}) must be below curled '
+                               f'({self.curled})')
+
+
+@dataclass(frozen=True)
+class GestureFeatures:
+    """``pinch_distance`` (4,): thumb tip to the index..little fingertips over the hand
+    length; ``curl`` (4,): index..little curl in [0, 1]."""
+
+    pinch_distance: np.ndarray
+    curl: np.ndarray
+
+
+@dataclass(frozen=True)
+class GestureEvent:
+    """A gesture started or ended at ``stamp`` (seconds) with ``confidence`` in [0, 1]."""
+
+    name: str
+    state: str
+    confidence: float
+    stamp: float = 0.0
+
+
+def _sigmoid(x: np.ndarray | float) -> np.ndarray:
+    return 1.0 / (1.0 + np.exp(-np.asarray(x, dtype=float)))
+
+
+def gesture_features(model: HandModel, q: np.ndarray) -> GestureFeatures:
+    """Pinch distances and finger curls of a 26-DOF pose (wrist frame, so the global pose does
+    not matter)."""
+    tips = hand_keypoints(model, q, 'wrist').positions[list(FINGERTIP_INDICES)]
+    distance = np.linalg.norm(tips[1:] - tips[0], axis=1) / model.hand_length_m
+    q = np.asarray(q, dtype=float)
+    curl = q[_CURL_DOFS].sum(axis=1) / model.upper_limits[_CURL_DOFS].sum(axis=1)
+    return GestureFeatures(pinch_distance=distance, curl=np.clip(curl, 0.0, 1.0))
+
+
+def gesture_scores(features: GestureFeatures, config: GestureConfig | None = None
+                   ) -> dict[str, float]:
+    """Score in [0, 1] of every gesture in ``GESTURE_NAMES`` (see the module docstring)."""
+    c = GestureConfig() if config is None else config
+    d, curl = features.pinch_distance, features.curl
+    near = _sigmoid((c.pinch_distance - d) / c.pinch_width)
+    others = np.array([np.min(np.delete(d, i)) for i in range(len(d))])
+    nearest = _sigmoid((others - d) / c.pinch_margin_width)
+    not_folded = _sigmoid((c.pinch_max_curl - curl) / c.curl_width)
+    pinch = near * nearest * not_folded
+    is_curled = _sigmoid((curl - c.curled) / c.curl_width)
+    is_extended = _sigmoid((c.extended - curl) / c.curl_width)
+    scores = {f'pinch_{f}': float(s) for f, s in zip(PINCH_FINGERS, pinch, strict=True)}
+    scores['grab'] = float(is_curled.min())
+    scores['point'] = float(min(is_extended[0], is_curled[1:].min()))
+    scores['open_hand'] = float(min(is_extended.min(), 1.0 - pinch.max()))
+    return scores
+
+
+@dataclass
+class _GestureState:
+    active: bool = False
+    run: int = 0          # consecutive frames on the other side of the active threshold
+
+
+@dataclass
+class GestureDetector:
+    """Turns per-frame scores into start / end events with hysteresis (one per hand)."""
+
+    model: HandModel
+    config: GestureConfig = field(default_factory=GestureConfig)
+
+    def __post_init__(self) -> None:
+        self._states: dict[str, _GestureState] = {}
+        self.scores: dict[str, float] = {}
+        self.reset()
+
+    @property
+    def active(self) -> tuple[str, ...]:
+        """The gestures currently on."""
+        return tuple(name for name, s in self._states.items() if s.active)
+
+    def reset(self) -> None:
+        """Forget the history without events (:meth:`update` with None ends the active ones)."""
+        self._states = {name: _GestureState() for name in GESTURE_NAMES}
+        self.scores = {}
+
+    def update(self, q: np.ndarray | None, stamp: float = 0.0) -> list[GestureEvent]:
+        """Feed one frame's pose (None: no hand); returns the events it decided."""
+        if q is None:
+            events = [GestureEvent(name, 'end', 0.0, stamp) for name in self.active]
+            self.reset()
+            return events
+        q = np.asarray(q, dtype=float)
+        if not np.all(np.isfinite(q)):
+            raise GestureError('pose must be finite')
+        c = self.config
+        raw = gesture_scores(gesture_features(self.model, q), c)
+        a = c.score_smoothing
+        self.scores = {name: s if name not in self.scores else a * s + (1 - a) * self.scores[name]
+                       for name, s in raw.items()}
+        events = []
+        for name, score in self.scores.items():
+            state = self._states[name]
+            crossing = score < c.off_score if state.active else score >= c.on_score
+            state.run = state.run + 1 if crossing else 0
+            needed = c.min_off_frames if state.active else c.min_on_frames
+            if state.run >= needed:
+                state.active, state.run = not state.active, 0
+                events.append(GestureEvent(name, 'start' if state.active else 'end',
+                                           float(score), stamp))
+        return events
+
+
+def format_event(event: GestureEvent) -> str:
+    """``name:state:confidence`` with the confidence to two decimals, e.g.
+    ``pinch_index:start:0.93``."""
+    return f'{event.name}:{event.state}:{event.confidence:.2f}'
+
+
+def parse_event(text: str, stamp: float = 0.0) -> GestureEvent:
+    """The inverse of :func:`format_event`."""
+    parts = text.split(':')
+    if len(parts) != 3 or parts[0] not in GESTURE_NAMES or parts[1] not in EVENT_STATES:
+        raise GestureError(f'not a gesture event: {text!r}')
+    try:
+        confidence = float(parts[2])
+    except ValueError as exc:
+        raise GestureError(f'bad confidence in {text!r}') from exc
+    if not 0.0 <= confidence <= 1.0:
+        raise GestureError(f'confidence out of [0, 1] in {text!r}')
+    return GestureEvent(parts[0], parts[1], confidence, stamp)

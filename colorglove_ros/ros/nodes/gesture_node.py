@@ -1,0 +1,70 @@
+"""gesture_node: gesture events (pinches, grab, point, open hand) from ``hand/joint_states`` as
+``std_msgs/String`` lines ``name:state:confidence`` on ``hand/gesture_events`` (e.g.
+``pinch_index:start:0.93``); a ``no hand`` on ``hand/tracking_status`` ends the active ones."""
+from __future__ import annotations
+
+import sys
+
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from colorglove_ros.core.camera import CalibrationError, load_calibration
+from colorglove_ros.core.hand.gestures import GestureDetector, GestureEvent, format_event
+from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.hand.poses import full_pose
+from colorglove_ros.paths import resolve_path
+from colorglove_ros.ros.conversions import pose_from_joint_state, stamp_to_seconds
+from colorglove_ros.ros.nodes.common import (
+    StartupError,
+    declare,
+    run_node,
+)
+from colorglove_ros.ros.pose_pairing import is_no_hand_status
+
+__all__ = ['GestureNode', 'main']
+
+
+class GestureNode(Node):
+    """Runs the gesture detector on every JointState."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('gestures', **kwargs)
+        calibration_file = declare(self, 'calibration_file', 'config/calibration.yaml',
+                                   'camera calibration YAML (for the hand length)')
+        try:
+            self.model = HandModel(load_calibration(resolve_path(calibration_file)).hand_length_m)
+        except (CalibrationError, ValueError) as exc:
+            raise StartupError(f'gesture_node cannot start: {exc}') from exc
+        self.detector = GestureDetector(self.model)
+        self.event_pub = self.create_publisher(String, 'hand/gesture_events', 10)
+        self.create_subscription(JointState, 'hand/joint_states', self.on_joints, 10)
+        self.create_subscription(String, 'hand/tracking_status', self.on_status, 10)
+
+    def _publish(self, events: list[GestureEvent]) -> None:
+        for event in events:
+            self.event_pub.publish(String(data=format_event(event)))
+
+    def on_joints(self, msg: JointState) -> None:
+        """Detect on one frame's finger joints (the wrist pose does not matter)."""
+        try:
+            q = full_pose(self.model, pose_from_joint_state(msg))
+            events = self.detector.update(q, stamp_to_seconds(msg.header.stamp))
+        except (KeyError, ValueError) as exc:
+            self.get_logger().warn(f'bad JointState: {exc}', throttle_duration_sec=1.0)
+            return
+        self._publish(events)
+
+    def on_status(self, msg: String) -> None:
+        """End the active gestures when the tracker loses the hand."""
+        if is_no_hand_status(msg.data):
+            self._publish(self.detector.update(None))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``gesture_node``."""
+    return run_node(GestureNode, args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

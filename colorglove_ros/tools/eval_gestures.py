@@ -1,0 +1,308 @@
+"""Evaluate gesture events (``core/hand/gestures.py``) on scripted synthetic pose sequences.
+
+Each sequence is a script of episodes (``core/evaluation/scripted_hands.py``): the hand moves
+(minimum jerk, 0.3-0.6 s) into a shape and holds it (0.6-1.5 s). A shape is one of the seven
+gestures or a neutral shape that is none of them (relaxed hand, half fist, claw, two or three
+fingers out, ...); the same gesture never follows itself. Gesture shapes come from the pose
+collection (``GESTURE_SHAPES`` and ``LETTER_SHAPES``: fist, A, S, E, M, N, T, thumbs-up for
+grab; point, L, G, Z for point; flat, spread, B, four, thumb tucked for the open hand) and,
+for pinches of each finger, from poses solved so the thumb tip comes 4-9 % of the hand length
+from that fingertip. Every episode adds 3 deg of Gaussian variation per finger DOF (how the
+same gesture differs from one time to the next). The detector sees the poses through
+``TrackingNoise`` (a model of the tracker's errors; the default mean absolute joint error is
+7 deg, see that module), so this measures the gesture logic under tracking-like noise, not
+the tracker on rendered images.
+
+Scores: a ``start`` event of gesture g is a true positive when it falls inside an episode of
+g (from the start of the move into it until 0.3 s after its hold ends) that no earlier event
+matched; every other start of g is a false positive (a start during another gesture's episode
+or a neutral shape, or a second start in one episode). Precision = true / all starts,
+recall = matched episodes / episodes, per gesture and over all. Frame figures: the share of
+hold frames (from 0.2 s into the hold) on which the held gesture is active, and on which any
+other gesture is.
+
+Thresholds were tuned on seeds 0-4; the default report seeds 100-109 were not used for tuning.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Sequence
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from colorglove_ros.core.evaluation.scripted_hands import (
+    ScriptedSequence,
+    Segment,
+    TrackingNoise,
+    script_poses,
+)
+from colorglove_ros.core.hand.gestures import (
+    GESTURE_NAMES,
+    PINCH_FINGERS,
+    GestureConfig,
+    GestureDetector,
+    GestureEvent,
+    gesture_features,
+)
+from colorglove_ros.core.hand.model import DIP_PIP_RATIO, HandModel
+from colorglove_ros.core.hand.poses import (
+    GESTURE_SHAPES,
+    LETTER_SHAPES,
+    finger_limits,
+    full_pose,
+    sample_global_rotations,
+)
+from colorglove_ros.core.report import print_table, write_json
+
+__all__ = ['GESTURE_EXEMPLARS', 'NEUTRAL_SHAPES', 'pinch_shape', 'gesture_script',
+           'score_events', 'evaluate', 'main']
+
+TARGET = 0.95
+TUNING_SEEDS = tuple(range(5))
+DEFAULT_SEEDS = tuple(range(100, 110))
+MATCH_GRACE_S = 0.3
+HOLD_SETTLE_S = 0.2
+VARIATION_DEG = 3.0
+NEUTRAL_SHARE = 0.3
+
+_SHAPES = {**GESTURE_SHAPES, **{f'letter_{k}': v for k, v in LETTER_SHAPES.items()}}
+GESTURE_EXEMPLARS: dict[str, tuple[str, ...]] = {
+    'grab': ('fist', 'letter_A', 'letter_S', 'letter_E', 'letter_M', 'letter_N', 'letter_T',
+             'thumbs_up'),
+    'point': ('point', 'letter_L', 'letter_G', 'letter_Z'),
+    'open_hand': ('flat', 'spread', 'letter_B', 'four', 'thumb_tuck'),
+}
+# Neutral shapes are none of the gestures by the definitions (no thumb tip near a fingertip,
+# no curl near a threshold). Shapes where the thumb rests on a fingertip (half fist, claw, the
+# victory sign's thumb on the ring finger) are pinches by definition and are left out.
+NEUTRAL_SHAPES: tuple[str, ...] = (
+    'relaxed', 'tabletop', 'middle_curl', 'ring_curl', 'three', 'rock', 'call_me', 'gun',
+    'letter_W', 'letter_K', 'letter_V', 'letter_H', 'letter_I', 'letter_R')
+# the fingers other than the pinching one take one of these shapes' values
+_PINCH_BACKGROUNDS = ('relaxed', 'flat', 'spread', 'tabletop')
+_PINCH_OTHERS_MIN = 0.25      # other fingertips at least this far from the thumb tip
+_PINCH_ATTEMPTS = 50
+
+
+def pinch_shape(model: HandModel, rng: np.random.Generator, finger: str) -> np.ndarray:
+    """Finger DOFs (20,) of a pinch of ``finger``: random curl of that finger, the others from
+    a background shape, the thumb solved (within its limits) so its tip is 4-9 % of the hand
+    length from that fingertip and at least 25 % from the other fingertips (redrawn until
+    the solution meets both)."""
+    for _ in range(_PINCH_ATTEMPTS):
+        fingers, target = _solve_pinch(model, rng, finger)
+        distance = gesture_features(model, full_pose(model, fingers)).pinch_distance
+        f = PINCH_FINGERS.index(finger)
+        if abs(distance[f] - target) < 0.01 and np.delete(distance, f).min() > _PINCH_OTHERS_MIN:
+            return fingers
+    raise RuntimeError(f'no pinch of the {finger} finger found in {_PINCH_ATTEMPTS} attempts')
+
+
+def _solve_pinch(model: HandModel, rng: np.random.Generator, finger: str
+                 ) -> tuple[np.ndarray, float]:
+    lo, hi = finger_limits(model)
+    f = PINCH_FINGERS.index(finger)
+    fingers = GESTURE_SHAPES[_PINCH_BACKGROUNDS[rng.integers(len(_PINCH_BACKGROUNDS))]].copy()
+    i = 4 + 4 * f
+    target = rng.uniform(0.04, 0.09)
+    start = np.concatenate([np.deg2rad([rng.uniform(10, 40), rng.uniform(25, 50),
+                                        rng.uniform(10, 35), rng.uniform(10, 35)]),
+                            np.deg2rad([rng.uniform(25, 55), rng.uniform(25, 60)])])
+
+    def pose(x: np.ndarray) -> np.ndarray:
+        out = fingers.copy()
+        out[0:4] = x[0:4]
+        out[i:i + 4] = [0.0, x[4], x[5], DIP_PIP_RATIO * x[5]]
+        return full_pose(model, out)
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        distance = gesture_features(model, pose(x)).pinch_distance[f]
+        return np.concatenate([[distance - target], 0.02 * (x - start)])
+
+    bounds = (np.concatenate([lo[0:4], [lo[i + 1], lo[i + 2]]]),
+              np.concatenate([hi[0:4], [hi[i + 1], 0.8 * hi[i + 2]]]))
+    solution = least_squares(residual, np.clip(start, *bounds), bounds=bounds, xtol=1e-6)
+    return np.clip(pose(solution.x)[6:], lo, hi), target
+
+
+def _shape_bank(model: HandModel, rng: np.random.Generator, per_finger: int
+                ) -> dict[str, list[np.ndarray]]:
+    bank = {name: [_SHAPES[s] for s in shapes] for name, shapes in GESTURE_EXEMPLARS.items()}
+    for finger in PINCH_FINGERS:
+        bank[f'pinch_{finger}'] = [pinch_shape(model, rng, finger) for _ in range(per_finger)]
+    bank[''] = [_SHAPES[s] for s in NEUTRAL_SHAPES]
+    return bank
+
+
+def gesture_script(model: HandModel, seed: int, episodes: int, pinch_exemplars: int = 6
+                   ) -> list[Segment]:
+    """A seeded script of ``episodes`` gesture or neutral episodes (module docstring)."""
+    rng = np.random.default_rng(seed)
+    lo, hi = finger_limits(model)
+    bank = _shape_bank(model, rng, pinch_exemplars)
+    segments, previous = [], None
+    for _ in range(episodes):
+        while True:
+            label = '' if rng.uniform() < NEUTRAL_SHARE else \
+                GESTURE_NAMES[rng.integers(len(GESTURE_NAMES))]
+            if label != previous or label == '':
+                break
+        shapes = bank[label]
+        fingers = shapes[rng.integers(len(shapes))] + \
+            rng.normal(0.0, np.deg2rad(VARIATION_DEG), 20)
+        position = np.array([rng.uniform(-0.15, 0.15), rng.uniform(-0.1, 0.15),
+                             rng.uniform(0.4, 0.7)])
+        segments.append(Segment(label=label, fingers=np.clip(fingers, lo, hi),
+                                rotvec=sample_global_rotations(rng, 1)[0], position=position,
+                                hold_s=float(rng.uniform(0.6, 1.5)),
+                                move_s=float(rng.uniform(0.3, 0.6))))
+        previous = label
+    return segments
+
+
+def _episode_windows(truth: ScriptedSequence) -> list[tuple[str, float, float]]:
+    """(gesture, start s, end s) of every gesture episode, grace included."""
+    t = truth.times
+    windows = []
+    for k in np.unique(truth.segment):
+        frames = np.flatnonzero(truth.segment == k)
+        label = truth.label[frames[0]]
+        if label:
+            windows.append((label, float(t[frames[0]]), float(t[frames[-1]]) + MATCH_GRACE_S))
+    return windows
+
+
+def score_events(truth: ScriptedSequence, events: Sequence[GestureEvent]
+                 ) -> dict[str, dict[str, int]]:
+    """Per gesture: episodes, matched episodes, start events, true starts (see module doc)."""
+    windows = _episode_windows(truth)
+    matched = [False] * len(windows)
+    counts = {g: {'episodes': 0, 'detected': 0, 'starts': 0, 'true_starts': 0}
+              for g in GESTURE_NAMES}
+    for label, _, _ in windows:
+        counts[label]['episodes'] += 1
+    for event in events:
+        if event.state != 'start':
+            continue
+        counts[event.name]['starts'] += 1
+        for w, (label, t0, t1) in enumerate(windows):
+            if label == event.name and t0 <= event.stamp <= t1 and not matched[w]:
+                matched[w] = True
+                counts[label]['detected'] += 1
+                counts[label]['true_starts'] += 1
+                break
+    return counts
+
+
+def _frame_counts(truth: ScriptedSequence, active: np.ndarray) -> dict[str, int]:
+    """Hold frames (settled): gesture frames, of them with the gesture active, and frames with
+    another gesture active."""
+    settled = truth.holding.copy()
+    for k in np.unique(truth.segment):
+        frames = np.flatnonzero((truth.segment == k) & truth.holding)
+        settled[frames[:int(round(HOLD_SETTLE_S * truth.fps))]] = False
+    labels = truth.label
+    gesture_frames = settled & (labels != '')
+    held_active = np.array([active[i, GESTURE_NAMES.index(labels[i])] if gesture_frames[i]
+                            else False for i in range(len(labels))])
+    other = np.array([active[i].sum() - (held_active[i] if gesture_frames[i] else 0) > 0
+                      for i in range(len(labels))]) & settled
+    return {'gesture_frames': int(gesture_frames.sum()), 'held_active': int(held_active.sum()),
+            'settled_frames': int(settled.sum()), 'other_active': int(other.sum())}
+
+
+def run_sequence(model: HandModel, seed: int, episodes: int, noise: TrackingNoise,
+                 config: GestureConfig, fps: float = 30.0
+                 ) -> tuple[dict[str, dict[str, int]], dict[str, int], float]:
+    """Script, add noise, detect: event counts, frame counts and the realised joint MAE."""
+    truth = script_poses(gesture_script(model, seed, episodes), fps)
+    noisy = noise.apply(np.random.default_rng(seed + 7919), truth.poses, fps, model)
+    detector = GestureDetector(model, config)
+    events: list[GestureEvent] = []
+    active = np.zeros((len(noisy), len(GESTURE_NAMES)), dtype=bool)
+    for i, (q, t) in enumerate(zip(noisy, truth.times, strict=True)):
+        events += detector.update(q, float(t))
+        for name in detector.active:
+            active[i, GESTURE_NAMES.index(name)] = True
+    mae = float(np.degrees(np.abs(noisy[:, 6:] - truth.poses[:, 6:])).mean())
+    return score_events(truth, events), _frame_counts(truth, active), mae
+
+
+def evaluate(seeds: Sequence[int], episodes: int = 60, noise: TrackingNoise | None = None,
+             config: GestureConfig | None = None) -> dict:
+    """Precision and recall per gesture over the sequences of ``seeds``."""
+    model = HandModel()
+    noise = TrackingNoise() if noise is None else noise
+    config = GestureConfig() if config is None else config
+    totals = {g: {'episodes': 0, 'detected': 0, 'starts': 0, 'true_starts': 0}
+              for g in GESTURE_NAMES}
+    frames = {'gesture_frames': 0, 'held_active': 0, 'settled_frames': 0, 'other_active': 0}
+    maes = []
+    for seed in seeds:
+        counts, frame_counts, mae = run_sequence(model, seed, episodes, noise, config)
+        for g in GESTURE_NAMES:
+            for key in totals[g]:
+                totals[g][key] += counts[g][key]
+        for key in frames:
+            frames[key] += frame_counts[key]
+        maes.append(mae)
+    rows = []
+    for g in (*GESTURE_NAMES, 'all'):
+        c = totals[g] if g != 'all' else {k: sum(totals[x][k] for x in GESTURE_NAMES)
+                                          for k in totals[GESTURE_NAMES[0]]}
+        rows.append({'gesture': g, 'episodes': c['episodes'], 'starts': c['starts'],
+                     'precision': c['true_starts'] / c['starts'] if c['starts'] else float('nan'),
+                     'recall': c['detected'] / c['episodes'] if c['episodes'] else float('nan')})
+    return {'rows': rows, 'frames': {
+        **frames,
+        'held_gesture_active_share': frames['held_active'] / max(frames['gesture_frames'], 1),
+        'other_gesture_active_share': frames['other_active'] / max(frames['settled_frames'], 1)},
+        'joint_mae_deg_realised': float(np.mean(maes))}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``colorglove_eval_gestures``."""
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--seeds', type=int, nargs='+', default=list(DEFAULT_SEEDS),
+                        help=f'sequence seeds (tuning used {TUNING_SEEDS[0]}-{TUNING_SEEDS[-1]})')
+    parser.add_argument('--episodes', type=int, default=60, help='episodes per sequence')
+    parser.add_argument('--noise-mae-deg', type=float, default=7.0,
+                        help='mean absolute finger-joint error of the noise model, degrees')
+    parser.add_argument('--json', help='write the figures to this JSON file')
+    args = parser.parse_args(argv)
+    started = time.perf_counter()
+    noise = TrackingNoise(joint_mae_deg=args.noise_mae_deg)
+    result = evaluate(args.seeds, args.episodes, noise)
+    seconds = time.perf_counter() - started
+    print_table(result['rows'], f'Gesture events, seeds {args.seeds[0]}..{args.seeds[-1]} '
+                f'({len(args.seeds)} sequences x {args.episodes} episodes), noise MAE '
+                f'{args.noise_mae_deg} deg (realised {result["joint_mae_deg_realised"]:.2f})')
+    frames = result['frames']
+    print_table([{'held gesture active (settled hold frames)':
+                  frames['held_gesture_active_share'],
+                  'another gesture active': frames['other_gesture_active_share']}],
+                'Frames')
+    overall = result['rows'][-1]
+    worst_p = min(r['precision'] for r in result['rows'])
+    worst_r = min(r['recall'] for r in result['rows'])
+    targets = [{'target': 'precision >= 95 % (every gesture)', 'measured': worst_p,
+                'result': 'PASS' if worst_p >= TARGET else 'FAIL'},
+               {'target': 'recall >= 95 % (every gesture)', 'measured': worst_r,
+                'result': 'PASS' if worst_r >= TARGET else 'FAIL'}]
+    print_table(targets, 'Targets (lowest gesture; overall precision '
+                f'{overall["precision"]:.3f}, recall {overall["recall"]:.3f})')
+    print(f'{seconds:.1f} s')
+    if args.json:
+        write_json(args.json, {'settings': {'seeds': args.seeds, 'episodes': args.episodes,
+                                            'noise': vars(noise) if hasattr(noise, '__dict__')
+                                            else str(noise),
+                                            'tuning_seeds': list(TUNING_SEEDS)},
+                               **result, 'targets': targets, 'seconds': seconds})
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,98 @@
+"""Gesture scores on the collection's shapes, the detector's hysteresis, the event text, and
+the evaluation on a noise-free scripted sequence."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from colorglove_ros.core.evaluation.scripted_hands import TrackingNoise
+from colorglove_ros.core.hand.gestures import (
+    GestureConfig,
+    GestureDetector,
+    GestureError,
+    GestureEvent,
+    format_event,
+    gesture_features,
+    gesture_scores,
+    parse_event,
+)
+from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.hand.poses import GESTURE_SHAPES, finger_limits, full_pose
+from colorglove_ros.tools import eval_gestures
+
+MODEL = HandModel()
+
+
+def _pose(shape: str) -> np.ndarray:
+    lo, hi = finger_limits(MODEL)
+    return full_pose(MODEL, np.clip(GESTURE_SHAPES[shape], lo, hi))
+
+
+@pytest.mark.parametrize('shape, gesture', [
+    ('fist', 'grab'), ('point', 'point'), ('flat', 'open_hand'), ('spread', 'open_hand'),
+    ('pinch', 'pinch_index'), ('ok', 'pinch_index')])
+def test_shape_scores(shape: str, gesture: str) -> None:
+    scores = gesture_scores(gesture_features(MODEL, _pose(shape)))
+    assert scores[gesture] > 0.85, scores
+    assert all(s < 0.3 for name, s in scores.items() if name != gesture), scores
+
+
+def test_neutral_shapes_score_no_gesture() -> None:
+    lo, hi = finger_limits(MODEL)
+    for name in eval_gestures.NEUTRAL_SHAPES:
+        scores = gesture_scores(gesture_features(
+            MODEL, full_pose(MODEL, np.clip(eval_gestures._SHAPES[name], lo, hi))))
+        assert max(scores.values()) < 0.3, (name, scores)
+
+
+def test_pinch_shapes_of_every_finger() -> None:
+    rng = np.random.default_rng(0)
+    for finger in ('index', 'middle', 'ring', 'little'):
+        scores = gesture_scores(gesture_features(
+            MODEL, full_pose(MODEL, eval_gestures.pinch_shape(MODEL, rng, finger))))
+        assert max(scores, key=scores.get) == f'pinch_{finger}', scores
+
+
+def test_hysteresis_and_loss() -> None:
+    config = GestureConfig(min_on_frames=3, min_off_frames=5)
+    detector = GestureDetector(MODEL, config)
+    flat, fist = _pose('flat'), _pose('fist')
+    events = [e for k in range(10) for e in detector.update(flat, k / 30)]
+    assert [(e.name, e.state) for e in events] == [('open_hand', 'start')]
+    start = events[0].stamp
+    # the smoothed score needs a frame or two to cross, then min_on_frames
+    assert 2 / 30 - 1e-9 <= start <= 5 / 30 + 1e-9
+    assert detector.active == ('open_hand',)
+    # a single odd frame changes nothing
+    assert detector.update(fist, 0.4) == []
+    assert detector.active == ('open_hand',)
+    events = [e for k in range(20) for e in detector.update(fist, 0.5 + k / 30)]
+    assert sorted((e.name, e.state) for e in events) == [('grab', 'start'), ('open_hand', 'end')]
+    assert detector.active == ('grab',)
+    lost = detector.update(None, 2.0)
+    assert [(e.name, e.state, e.confidence) for e in lost] == [('grab', 'end', 0.0)]
+    assert detector.active == ()
+
+
+def test_event_text_round_trip() -> None:
+    event = GestureEvent('pinch_ring', 'start', 0.876)
+    assert format_event(event) == 'pinch_ring:start:0.88'
+    back = parse_event(format_event(event), stamp=3.0)
+    assert (back.name, back.state, back.confidence, back.stamp) == ('pinch_ring', 'start',
+                                                                    0.88, 3.0)
+    for bad in ('wave:start:0.5', 'grab:begin:0.5', 'grab:start:x', 'grab:start:1.5', 'grab'):
+        with pytest.raises(GestureError):
+            parse_event(bad)
+    with pytest.raises(GestureError):
+        GestureConfig(on_score=0.2, off_score=0.4)
+
+
+def test_evaluation_without_noise_is_perfect_and_with_noise_is_not() -> None:
+    clean = eval_gestures.evaluate([7], episodes=16, noise=TrackingNoise(0.0, 0.0))
+    overall = clean['rows'][-1]
+    assert overall['episodes'] >= 8
+    assert overall['precision'] == 1.0 and overall['recall'] == 1.0
+    assert clean['joint_mae_deg_realised'] == pytest.approx(0.0, abs=1e-12)
+    noisy = eval_gestures.evaluate([7], episodes=16, noise=TrackingNoise(25.0, 5.0))
+    assert noisy['joint_mae_deg_realised'] == pytest.approx(25.0, rel=0.02)
+    assert min(noisy['rows'][-1]['precision'], noisy['rows'][-1]['recall']) < 0.95

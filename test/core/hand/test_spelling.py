@@ -1,0 +1,103 @@
+"""Finger-spelling: templates classify as themselves, hold-to-commit timing and double letters,
+and the evaluation's scoring."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from colorglove_ros.core.evaluation.scripted_hands import Segment, TrackingNoise, script_poses
+from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.hand.poses import LETTER_SHAPES, finger_limits
+from colorglove_ros.core.hand.spelling import (
+    LETTERS,
+    LetterClassifier,
+    Speller,
+    SpellingConfig,
+    SpellingError,
+    letter_rotation,
+    pointing_direction,
+)
+from colorglove_ros.tools import eval_spelling
+
+MODEL = HandModel()
+
+
+def _segment(letter: str, position=(0.0, 0.05, 0.5), hold_s: float = 0.8) -> Segment:
+    lo, hi = finger_limits(MODEL)
+    return Segment(letter, np.clip(LETTER_SHAPES[letter], lo, hi), letter_rotation(letter),
+                   np.asarray(position, dtype=float), hold_s=hold_s, move_s=0.3)
+
+
+def _spell(segments: list[Segment], speller: Speller | None = None) -> list[tuple[float, str]]:
+    truth = script_poses(segments, 30.0)
+    speller = Speller(model=MODEL) if speller is None else speller
+    out = []
+    for q, t in zip(truth.poses, truth.times, strict=True):
+        letter = speller.update(q, float(t))
+        if letter:
+            out.append((float(t), letter))
+    return out
+
+
+def test_every_template_is_its_own_letter() -> None:
+    classifier = LetterClassifier(model=MODEL)
+    q = MODEL.rest_pose()
+    lo, hi = finger_limits(MODEL)
+    for letter in LETTERS:
+        q[3:6] = letter_rotation(letter)
+        q[6:] = np.clip(LETTER_SHAPES[letter], lo, hi)
+        assert LETTERS[int(np.argmax(classifier.log_likelihoods(q)))] == letter
+
+
+def test_orientation_separates_h_from_u() -> None:
+    q = MODEL.rest_pose()
+    q[6:] = LETTER_SHAPES['H']
+    np.testing.assert_allclose(pointing_direction(q), [0.0, -1.0, 0.0], atol=1e-12)
+    classifier = LetterClassifier(model=MODEL)
+    assert LETTERS[int(np.argmax(classifier.log_likelihoods(q)))] == 'U'
+    q[3:6] = letter_rotation('H')
+    assert LETTERS[int(np.argmax(classifier.log_likelihoods(q)))] == 'H'
+
+
+def test_hold_to_commit_and_double_letters() -> None:
+    word = [_segment('H'), _segment('E'), _segment('L'),
+            _segment('L', position=(0.05, 0.05, 0.5)), _segment('O')]
+    commits = _spell(word)
+    assert ''.join(letter for _, letter in commits) == 'HELLO'
+    # each letter commits at least hold_s after its move began
+    starts = np.cumsum([0.0] + [s.move_s + s.hold_s for s in word[:-1]])
+    for (stamp, _), start in zip(commits, starts, strict=True):
+        assert stamp >= start + SpellingConfig().hold_s
+    # the same letter held in one place is committed once
+    assert ''.join(x for _, x in _spell([_segment('L', hold_s=3.0)])) == 'L'
+    # a hold shorter than hold_s commits nothing
+    assert _spell([_segment('A', hold_s=0.1)]) == []          # 0.4 s in all
+
+
+def test_lost_hand_resets() -> None:
+    speller = Speller(model=MODEL)
+    _spell([_segment('A')], speller)
+    assert speller.update(None, 5.0) is None
+    assert ''.join(x for _, x in _spell([_segment('A')], speller)) == 'A'
+    with pytest.raises(SpellingError):
+        speller.update(np.zeros(20), 6.0)
+    with pytest.raises(SpellingError):
+        SpellingConfig(vote_share=0.3)
+
+
+def test_edit_distance() -> None:
+    assert eval_spelling.edit_distance('MENTION', 'MENTION') == 0
+    assert eval_spelling.edit_distance('MENTION', 'MENSION') == 1
+    assert eval_spelling.edit_distance('NEST', 'NET') == 1
+    assert eval_spelling.edit_distance('', 'ABC') == 3
+
+
+def test_evaluation_clean_is_near_perfect_and_heavy_noise_is_not() -> None:
+    clean = eval_spelling.evaluate([11], words_per_sequence=4, noise=TrackingNoise(0.0, 0.0))
+    assert clean['letters'] >= 10
+    assert clean['letter_accuracy'] == 1.0 and clean['insertions'] == 0
+    assert clean['text_accuracy'] == 1.0
+    noisy = eval_spelling.evaluate([11], words_per_sequence=4, noise=TrackingNoise(25.0, 10.0))
+    assert noisy['letter_accuracy'] < 0.9
+    rows = {row['scripted']: row for row in noisy['thumb_confusion']}
+    assert set(rows) == {'E', 'M', 'N', 'S', 'T'}

@@ -1,0 +1,96 @@
+"""keypoints_node, gesture_node and spelling_node in one process over DDS on loopback: tracker
+outputs in, their outputs checked against the core modules run directly."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseArray, PoseStamped
+from node_fixtures import header, params, running
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from colorglove_ros.core.hand.keypoints import hand_keypoints
+from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.hand.poses import GESTURE_SHAPES, LETTER_SHAPES, finger_limits
+from colorglove_ros.core.hand.spelling import letter_rotation
+from colorglove_ros.ros.conversions import joint_state_from_pose, pose_stamped_from_pose
+from colorglove_ros.ros.nodes.gesture_node import GestureNode
+from colorglove_ros.ros.nodes.keypoints_node import KeypointsNode
+from colorglove_ros.ros.nodes.spelling_node import SpellingNode
+
+pytestmark = [pytest.mark.dds, pytest.mark.usefixtures('isolated_ros_domain')]
+
+MODEL = HandModel()
+
+
+def _pose(fingers: np.ndarray, rotvec=(0.3, -0.2, 0.4)) -> np.ndarray:
+    lo, hi = finger_limits(MODEL)
+    q = MODEL.rest_pose()
+    q[0:3] = [0.05, 0.02, 0.5]
+    q[3:6] = rotvec
+    q[6:] = np.clip(fingers, lo, hi)
+    return q
+
+
+def _frame(k: int, frame_id: str = 'cam_a'):
+    return header(100 + k // 30, int((k % 30) * 1e9 / 30), frame_id)
+
+
+def test_keypoints_node_publishes_both_frames() -> None:
+    q = _pose(GESTURE_SHAPES['relaxed'])
+    with running(lambda ctx: KeypointsNode(context=ctx, parameter_overrides=params(
+            hand_frame='right_palm'))) as h:
+        camera = h.collect(PoseArray, 'hand/keypoints')
+        wrist = h.collect(PoseArray, 'hand/keypoints_wrist')
+        joints_pub = h.publisher(JointState, 'hand/joint_states')
+        wrist_pub = h.publisher(PoseStamped, 'hand/wrist_pose')
+        joints_pub.publish(joint_state_from_pose(q, _frame(3)))
+        h.settle(0.3)
+        assert camera == []                       # half a frame: nothing yet
+        wrist_pub.publish(pose_stamped_from_pose(q, _frame(3)))
+        assert h.spin_until(lambda: camera and wrist, 10.0)
+    expected_camera = hand_keypoints(MODEL, q, 'camera').positions
+    expected_wrist = hand_keypoints(MODEL, q, 'wrist').positions
+    for msg, expected, frame in ((camera[0], expected_camera, 'cam_a'),
+                                 (wrist[0], expected_wrist, 'right_palm')):
+        assert msg.header.frame_id == frame
+        assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (100, int(3e9 / 30))
+        got = np.array([[p.position.x, p.position.y, p.position.z] for p in msg.poses])
+        np.testing.assert_allclose(got, expected, atol=1e-9)
+        norms = [np.linalg.norm([p.orientation.x, p.orientation.y, p.orientation.z,
+                                 p.orientation.w]) for p in msg.poses]
+        np.testing.assert_allclose(norms, 1.0, atol=1e-9)
+
+
+def test_gesture_node_events_and_loss() -> None:
+    with running(lambda ctx: GestureNode(context=ctx)) as h:
+        events = h.collect(String, 'hand/gesture_events')
+        joints_pub = h.publisher(JointState, 'hand/joint_states')
+        status_pub = h.publisher(String, 'hand/tracking_status')
+        for k in range(10):
+            joints_pub.publish(joint_state_from_pose(_pose(GESTURE_SHAPES['flat']), _frame(k)))
+        assert h.spin_until(lambda: len(events) >= 1, 10.0)
+        status_pub.publish(String(data='no hand: lost'))
+        assert h.spin_until(lambda: len(events) >= 2, 10.0)
+    name, state, confidence = events[0].data.split(':')
+    assert (name, state) == ('open_hand', 'start') and float(confidence) >= 0.7
+    assert events[1].data == 'open_hand:end:0.00'
+
+
+def test_spelling_node_commits_held_letters() -> None:
+    with running(lambda ctx: SpellingNode(context=ctx)) as h:
+        letters = h.collect(String, 'hand/spelled_letters')
+        text = h.collect(String, 'hand/spelled_text')
+        joints_pub = h.publisher(JointState, 'hand/joint_states')
+        wrist_pub = h.publisher(PoseStamped, 'hand/wrist_pose')
+        k = 0
+        for letter in 'GO':
+            q = _pose(LETTER_SHAPES[letter], letter_rotation(letter))
+            for _ in range(30):
+                joints_pub.publish(joint_state_from_pose(q, _frame(k)))
+                wrist_pub.publish(pose_stamped_from_pose(q, _frame(k)))
+                h.settle(0.005)
+                k += 1
+        assert h.spin_until(lambda: len(text) >= 2, 10.0)
+    assert [m.data for m in letters] == ['G', 'O']
+    assert text[-1].data == 'GO'
