@@ -225,3 +225,24 @@ nodes:
         with pytest.raises(LaunchError, match='overrides'):
             load_launch_file(_write(tmp_path, f'nodes:\n  - executable: {sys.executable}\n'
                                               f'    overrides: {bad}\n'))
+
+
+def test_node_parameter_file_applies_under_any_namespace(isolated_ros_domain) -> None:
+    """nodes.yaml is keyed /**/NAME, so a node pushed into a namespace (a second camera, a
+    second hand) still reads its section instead of silently running on defaults."""
+    import yaml
+
+    sections = yaml.safe_load((REPO_DIR / 'config' / 'nodes.yaml').read_text())
+    assert sections and all(key.startswith('/**/') for key in sections), list(sections)
+    context = rclpy.Context()
+    rclpy.init(context=context, args=['--ros-args', '-r', '__ns:=/camera2', '--params-file',
+                                      str(REPO_DIR / 'config' / 'nodes.yaml')])
+    try:
+        node = rclpy.create_node('lookup', context=context,
+                                 automatically_declare_parameters_from_overrides=True)
+        assert node.get_fully_qualified_name() == '/camera2/lookup'
+        assert node.get_parameter('num_candidates').value == sections['/**/lookup'][
+            'ros__parameters']['num_candidates']
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
