@@ -40,7 +40,8 @@ _ASSETS: dict[str, NodeAssets] = {}
 
 
 def _build_assets(folder: Path) -> NodeAssets:
-    from colorglove_ros.core.lookup.database import BuildConfig, build_database, save_database
+    from colorglove_ros.core.lookup.database import save_database
+    from colorglove_ros.core.lookup.database_build import BuildConfig, build_database
     from colorglove_ros.tools import calibrate_colors
 
     timings = {}
@@ -78,7 +79,8 @@ def node_assets(tmp_path_factory: pytest.TempPathFactory) -> NodeAssets:
 
 # ------------------------------------------------------------------------------ frames
 def glove_frame(seed: int, out_of_frame: bool = False):
-    """A rendered 640x480 'test' frame of the gloved hand (``core.synth.SyntheticFrame``)."""
+    """A rendered 640x480 'test' frame of the gloved hand
+    (``core.synthetic.frames.SyntheticFrame``)."""
     from colorglove_ros.core.synthetic import frames as synth
     from colorglove_ros.core.synthetic.conditions import sample_conditions
 

@@ -11,15 +11,17 @@ from label_samples import random_blob_images
 from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.lookup.database import (
     DATABASE_VERSION,
-    BuildConfig,
     DatabaseError,
+    load_database,
+    pixel_keys,
+    save_database,
+)
+from colorglove_ros.core.lookup.database_build import (
+    BuildConfig,
     assemble_database,
     build_database,
     farthest_point_sampling,
-    load_database,
-    pixel_keys,
     read_database_config,
-    save_database,
 )
 
 RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5, 'cy': 63.5}
@@ -155,7 +157,7 @@ def test_build_small_database_with_renderer(tmp_path: Path) -> None:
 
 
 def test_retrain_codes_in_place(tmp_path: Path) -> None:
-    from colorglove_ros.core.lookup.database import retrain_codes
+    from colorglove_ros.core.lookup.database_build import retrain_codes
     from colorglove_ros.core.lookup.distance import dequantize_dts
 
     save_database(_small_db(60), tmp_path / 'db')

@@ -5,11 +5,8 @@ import numpy as np
 import pytest
 from label_samples import random_blob_images
 
-from colorglove_ros.core.lookup.database import (
-    DatabaseError,
-    nearest_neighbour_pairs,
-    train_encoder,
-)
+from colorglove_ros.core.lookup.database import DatabaseError
+from colorglove_ros.core.lookup.database_build import nearest_neighbour_pairs, train_encoder
 from colorglove_ros.core.lookup.distance import (
     distance_transforms_batch,
     image_distance,

@@ -19,7 +19,8 @@ import pytest
 from conftest import REPO_DIR
 
 from colorglove_ros.core.hand.glove import default_hand
-from colorglove_ros.core.lookup.database import build_database, save_database
+from colorglove_ros.core.lookup.database import save_database
+from colorglove_ros.core.lookup.database_build import build_database
 from colorglove_ros.ros.pipeline_run import bag_feed, run_pipeline, summarize
 from colorglove_ros.tools import build_database as build_database_tool
 from colorglove_ros.tools import calibrate_colors, make_bag

@@ -27,7 +27,8 @@ from colorglove_ros.core.evaluation.sequences import (
     train_seeds,
     training_sequences,
 )
-from colorglove_ros.core.lookup.database import BuildConfig, build_database, save_database
+from colorglove_ros.core.lookup.database import save_database
+from colorglove_ros.core.lookup.database_build import BuildConfig, build_database
 from colorglove_ros.core.lookup.search import PoseLookup
 from colorglove_ros.core.lookup.temporal_prior import reweight_by_previous
 from colorglove_ros.core.synthetic.frames import Synthesizer, render_frame

@@ -1,4 +1,4 @@
-"""Tests for the per-finger blend of the lookup's neighbours (core.finger_evidence) and its
+"""Tests for the per-finger blend of the lookup's neighbours (core.lookup.finger_evidence) and its
 use by the lookup, the IK covariances and the candidates message."""
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.lookup.database import assemble_database
+from colorglove_ros.core.lookup.database_build import assemble_database
 from colorglove_ros.core.lookup.finger_evidence import (
     PALM_DIGIT,
     FingerEvidenceConfig,
@@ -184,8 +184,8 @@ def test_candidates_message_carries_the_spread() -> None:
     from colorglove_ros.ros.conversions import candidates_msg, pose_prior_from_candidates
 
     cons = ProjectionConstraints(np.array([0]), np.array([1]), np.array([5]),
-                                 np.array([[3.0, 4.0]]), np.array([[10.0, 12.0]]),
-                                 np.array([6.0]))
+                                 np.array([[3.0, 4.0]]), np.array([6.0]),
+                                 full_xy=np.array([[10.0, 12.0]]))
     spread = np.linspace(0.01, 0.2, 20)
     result = LookupResult(np.array([7]), np.array([0.5]), np.array([1.0]), np.zeros((1, 26)),
                           np.zeros(26), cons, 1, finger_std=spread)

@@ -12,6 +12,7 @@ from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.hand.mesh import build_hand_mesh
 from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
+from colorglove_ros.core.lookup.types import ProjectionConstraints
 from colorglove_ros.core.segmentation.blobs import extract_blobs
 from colorglove_ros.core.segmentation.crop import CropTransform
 from colorglove_ros.core.tracking.config import (
@@ -36,7 +37,6 @@ from colorglove_ros.core.tracking.types import (
     Blobs,
     CameraObservation,
     Correspondences,
-    EntryConstraints,
     IKError,
     PosePrior,
 )
@@ -239,10 +239,27 @@ def test_match_by_color_picks_right_blob():
     assert pairs == {0: 1, 1: 0}
 
 
+def test_projection_constraints_are_checked_and_converted():
+    from colorglove_ros.core.validation import InvalidPriorError
+
+    cons = ProjectionConstraints([4, 14], np.array([5, 5], np.uint8), [7, 9],
+                                 [[5.0, 5.0], [30.0, 20.0]], [30, 40])
+    assert len(cons) == 2 and cons.full_xy is None
+    assert cons.colors.dtype == np.int64 and cons.pixel_counts.dtype == float
+    empty = ProjectionConstraints([], [], [], [], [])
+    assert len(empty) == 0 and empty.tiny_xy.shape == (0, 2)
+    with pytest.raises(InvalidPriorError, match='same length'):
+        ProjectionConstraints([4, 14], [5, 5], [7, 9], [[5.0, 5.0]], [30, 40])
+    with pytest.raises(InvalidPriorError, match='same length'):
+        ProjectionConstraints([4], [5], [7], [[5.0, 5.0]], [30], full_xy=[[1.0, 2.0], [3, 4]])
+    with pytest.raises(InvalidPriorError, match='tiny_xy'):
+        ProjectionConstraints([4], [5], [7], [[5.0, 5.0, 1.0]], [30])
+
+
 def test_match_primary_uses_crop(rig):
     model, mesh, kin, mono, stereo, verts = rig
     crop = CropTransform(scale=4.0, offset_x=200.0, offset_y=100.0)
-    cons = EntryConstraints([4, 14], [5, 5], verts[:2], [[5.0, 5.0], [30.0, 20.0]], [30, 40])
+    cons = ProjectionConstraints([4, 14], [5, 5], verts[:2], [[5.0, 5.0], [30.0, 20.0]], [30, 40])
     # full-image positions 220,120 and 320,180; blobs listed the other way round plus noise
     blobs = Blobs([5, 5, 2], [[322.0, 181.0], [219.0, 118.0], [221.0, 120.0]], [100, 90, 80])
     corr = match_primary(cons, blobs, crop, mono[0], mesh)
@@ -257,7 +274,7 @@ def test_extra_camera_matching_survives_depth_error(rig):
     rng = np.random.default_rng(9)
     q_true = true_pose(model, rng)
     colors = np.arange(20) % 10 + 1
-    cons = EntryConstraints(np.arange(20), colors, verts, np.zeros((20, 2)), np.full(20, 30))
+    cons = ProjectionConstraints(np.arange(20), colors, verts, np.zeros((20, 2)), np.full(20, 30))
     cam = stereo[1]
     pw_true, _ = kin.points(q_true, mesh.vertex_link[verts], mesh.local_vertices[verts])
     blob_xy = cam.project(cam.world_to_camera(pw_true))
@@ -274,7 +291,7 @@ def test_extra_camera_matching_survives_depth_error(rig):
 def test_extra_camera_skips_back_facing(rig):
     model, mesh, kin, mono, stereo, verts = rig
     q = true_pose(model, np.random.default_rng(10))
-    cons = EntryConstraints(np.arange(20), COLORS, verts, np.zeros((20, 2)), np.full(20, 30))
+    cons = ProjectionConstraints(np.arange(20), COLORS, verts, np.zeros((20, 2)), np.full(20, 30))
     cam = stereo[1]
     pw, _ = kin.points(q, mesh.vertex_link[verts], mesh.local_vertices[verts])
     blobs = Blobs(COLORS, cam.project(cam.world_to_camera(pw)), np.full(20, 50))
@@ -313,7 +330,7 @@ def observe(rig, q_true, q_blend, cams, rng, noise_px=1.0, tiny_noise=0.3):
                                                  np.full(20, 60)), CROP))
     pix0 = cams[0].project(pw)
     tiny = CROP.to_tiny(pix0) + rng.normal(0.0, tiny_noise, pix0.shape)
-    prior = PosePrior(q_blend, EntryConstraints(np.arange(20), COLORS, verts, tiny,
+    prior = PosePrior(q_blend, ProjectionConstraints(np.arange(20), COLORS, verts, tiny,
                                                 np.full(20, 30)))
     return prior, obs
 
@@ -424,7 +441,7 @@ def test_tracker_from_calibration_uses_hand_length():
 
 
 def test_tracker_accepts_lookup_result(rig):
-    from colorglove_ros.core.lookup.types import LookupResult, ProjectionConstraints
+    from colorglove_ros.core.lookup.types import LookupResult
     model, mesh, kin, mono, stereo, verts = rig
     rng = np.random.default_rng(12)
     q = true_pose(model, rng)
@@ -432,8 +449,8 @@ def test_tracker_accepts_lookup_result(rig):
     c = prior.constraints
     lookup = LookupResult(
         np.arange(3), np.zeros(3), np.full(3, 1 / 3), np.tile(q, (3, 1)), q,
-        ProjectionConstraints(c.patch_id, c.color.astype(np.uint8), c.vertex, c.tiny_xy,
-                              CROP.to_full(c.tiny_xy), c.pixel_count), 3)
+        ProjectionConstraints(c.patch_ids, c.colors.astype(np.uint8), c.vertices, c.tiny_xy,
+                              c.pixel_counts, full_xy=CROP.to_full(c.tiny_xy)), 3)
     res = HandTracker(model, mesh, mono, VERTEX).update(lookup, obs, 0.0)
     assert res.found and res.num_constraints == 20
     assert tip_error(model, res.q, q) < 0.005
@@ -544,7 +561,7 @@ def test_extra_camera_shift_matches_dense_reference(rig, seed):
     cam = stereo[1]
     q = true_pose(model, rng)
     colors = rng.integers(1, 6, 20)                         # 5 colours: 4 patches each
-    cons = EntryConstraints(np.arange(20), colors, verts, np.zeros((20, 2)), np.full(20, 30))
+    cons = ProjectionConstraints(np.arange(20), colors, verts, np.zeros((20, 2)), np.full(20, 30))
     pw, _ = kin.points(q, mesh.vertex_link[verts], mesh.local_vertices[verts])
     pred = cam.project(cam.world_to_camera(pw))
     shift_true = rng.uniform(-60.0, 60.0, 2)
@@ -588,3 +605,16 @@ def test_frames_cached_by_rotation_and_fingers_follow_the_translation(rig):
     p, J = kin.points(moved, mesh.vertex_link[idx], mesh.local_vertices[idx], jacobian=True)
     np.testing.assert_allclose(p, mesh.skin(model, moved)[idx], atol=1e-12)
     np.testing.assert_allclose(J, mesh.vertex_jacobian(model, moved, idx), atol=1e-12)
+
+
+def test_ik_file_refuses_the_node_switches(tmp_path) -> None:
+    """enable_ik / enable_smoothing live in one place (ik_node's parameters, the tools'
+    --modes): an IK file that sets them is refused instead of being silently overridden."""
+    from colorglove_ros.core.tracking.config import IKConfigError, load_ik_config
+
+    text = (ROOT / 'config' / 'ik.yaml').read_text()
+    assert 'enable_ik:' not in text
+    path = tmp_path / 'ik.yaml'
+    path.write_text(text + '\nenable_ik: false\n')
+    with pytest.raises(IKConfigError, match='enable_ik'):
+        load_ik_config(path)

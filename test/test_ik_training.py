@@ -1,4 +1,5 @@
-"""Tests of core.ik_training: local averages, jitter, learning R, Q, P, covariance files."""
+"""Tests of core.tracking.covariance_learning: local averages, jitter, learning R, Q, P,
+covariance files."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -137,16 +138,12 @@ def test_learn_rejects_bad_input(training_sequence):
 
 def test_learn_from_tracker_run(training_sequence):
     """End to end: run the tracker on a synthetic sequence and learn from its outputs."""
+    from colorglove_ros.core.lookup.types import ProjectionConstraints
     from colorglove_ros.core.segmentation.crop import CropTransform
     from colorglove_ros.core.tracking.config import IKConfig
     from colorglove_ros.core.tracking.covariance_learning import training_frame
     from colorglove_ros.core.tracking.tracker import HandTracker
-    from colorglove_ros.core.tracking.types import (
-        Blobs,
-        CameraObservation,
-        EntryConstraints,
-        PosePrior,
-    )
+    from colorglove_ros.core.tracking.types import Blobs, CameraObservation, PosePrior
     model, cams, frames, q_sigma, vel = training_sequence
     mesh = build_hand_mesh(model)
     kin = FastKinematics(model)
@@ -163,7 +160,8 @@ def test_learn_from_tracker_run(training_sequence):
         pix = cam.project(pw)
         obs = [CameraObservation(True, Blobs(colors, pix + rng.normal(0, 2.0, pix.shape),
                                              np.full(20, 60)), crop)]
-        cons = EntryConstraints(np.arange(20), colors, verts, crop.to_tiny(pix), np.full(20, 30))
+        cons = ProjectionConstraints(np.arange(20), colors, verts, crop.to_tiny(pix),
+                                     np.full(20, 30))
         res = tracker.update(PosePrior(f.q_blend, cons), obs, len(out) / 30)
         out.append(training_frame(res, f.q_true))
     cov, stats = learn_covariances([out], model, [cam])

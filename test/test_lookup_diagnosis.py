@@ -16,7 +16,7 @@ from colorglove_ros.core.evaluation.diagnosis import (
 )
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.hand.poses import pose_collection, sample_global_rotations
-from colorglove_ros.core.lookup.database import assemble_database
+from colorglove_ros.core.lookup.database_build import assemble_database
 from colorglove_ros.core.lookup.search import PoseLookup
 
 RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5, 'cy': 63.5}

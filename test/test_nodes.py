@@ -156,9 +156,10 @@ def _bad_images(rgb: np.ndarray) -> dict[str, tuple[Image, str]]:
     empty = Image(encoding='rgb8', width=0, height=0, step=0)
     short = array_to_image(rgb, 'rgb8')
     short.data = bytes(short.data[:short.step * 100])          # 100 of 480 rows
-    yuv = Image(encoding='yuv422', width=640, height=480, step=1280, data=bytes(1280 * 480))
-    return {'mono8': (mono, 'mono8'), 'empty': (empty, 'empty image'),
-            'short': (short, 'image data holds'), 'yuv422': (yuv, 'yuv422')}
+    # a depth image sent to the colour input (yuv422 and Bayer images are decoded now)
+    depth = Image(encoding='32FC1', width=640, height=480, step=2560, data=bytes(2560 * 480))
+    return {'mono8': (mono, 'mono8'), 'empty': (empty, 'image_width must be >= 1'),
+            'short': (short, 'image data holds'), 'depth': (depth, '32FC1')}
 
 
 def test_segmentation_node_reports_bad_frames_and_keeps_going(assets: NodeAssets,
@@ -250,7 +251,7 @@ def test_lookup_node_passes_no_hand_through(assets: NodeAssets) -> None:
     assert msg.header.stamp.sec == 300 and msg.header.frame_id == 'cam'
     assert len(msg.candidates) == 0 and len(msg.blended_pose) == 0
     assert msg.observation.status == 'out_of_frame'
-    assert not bad.hand_found and 'tiny_labels holds 100 values' in bad.status
+    assert not bad.hand_found and 'tiny_labels must have shape (1600)' in bad.status, bad.status
 
 
 def test_lookup_node_rejects_non_finite_crop(assets: NodeAssets,

@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.lookup.blend import blend_poses, blend_weights
-from colorglove_ros.core.lookup.database import assemble_database
+from colorglove_ros.core.lookup.database_build import assemble_database
 from colorglove_ros.core.lookup.distance import image_distance
 from colorglove_ros.core.lookup.search import (
     PoseLookup,

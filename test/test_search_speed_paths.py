@@ -11,7 +11,7 @@ from colorglove_ros.core.lookup.codes import (
     pack_codes,
     train_random_projections,
 )
-from colorglove_ros.core.lookup.database import assemble_database
+from colorglove_ros.core.lookup.database_build import assemble_database
 from colorglove_ros.core.lookup.distance import QueryDistance, distance_transforms_batch
 from colorglove_ros.core.lookup.search import PoseLookup, SearchError, top_k_with_ties
 

@@ -16,6 +16,7 @@ from colorglove_ros.core.segmentation.color_model import read_calibration_config
 from colorglove_ros.core.segmentation.crop import crop_to_tiny
 from colorglove_ros.core.segmentation.segmenter import (
     STAGES,
+    STATUS_FRAGMENTED,
     STATUS_NO_GLOVE,
     STATUS_OK,
     STATUS_OUT_OF_FRAME,
@@ -37,7 +38,7 @@ from colorglove_ros.tools import calibrate_colors, eval_segmentation
 from colorglove_ros.tools.eval_segmentation import frame_metrics
 
 FAST = dict(max_per_class=1500, bits=5, augment_copies=1, background_components=6)
-VALID = {STATUS_OK, STATUS_NO_GLOVE, STATUS_TOO_SMALL, STATUS_OUT_OF_FRAME}
+VALID = {STATUS_OK, STATUS_NO_GLOVE, STATUS_TOO_SMALL, STATUS_OUT_OF_FRAME, STATUS_FRAGMENTED}
 
 
 @pytest.fixture(scope='module')
@@ -126,6 +127,39 @@ def test_hand_mostly_out_of_frame(segmenter) -> None:
     obs = segmenter.process(moved)
     assert not obs.hand_found
     assert obs.status in (STATUS_OUT_OF_FRAME, STATUS_TOO_SMALL, STATUS_NO_GLOVE)
+
+
+def _noise_patch_frames(seed: int, count: int) -> list[np.ndarray]:
+    """Black frames with a hand-sized square of uniform random colours (issue 16)."""
+    rng = np.random.default_rng(seed)
+    frames = []
+    for _ in range(count):
+        frame = np.zeros((480, 640, 3), np.uint8)
+        side = int(rng.integers(120, 220))
+        y, x = rng.integers(0, 480 - side), rng.integers(0, 640 - side)
+        frame[y:y + side, x:x + side] = rng.integers(0, 256, (side, side, 3))
+        frames.append(frame)
+    return frames
+
+
+@pytest.fixture(scope='module')
+def glove_calibration():
+    """A quick colour calibration on rendered frames of the printed glove."""
+    return fit_color_calibration(calibrate_colors.render_training_frames(8, 0), seed=0, **FAST)
+
+
+def test_noise_patches_are_fragmented_not_a_hand(glove_calibration) -> None:
+    """Random-colour patches give glove-coloured specks, not solid patches: no hand, status
+    'fragmented'; without the blob-share check they pass as a hand. Rendered glove frames
+    are never fragmented."""
+    frames = _noise_patch_frames(3, 6)
+    segmenter = GloveSegmenter(glove_calibration)
+    gated = [segmenter.process(f) for f in frames]
+    assert all(o.status == STATUS_FRAGMENTED for o in gated), [o.status for o in gated]
+    ungated = GloveSegmenter(glove_calibration, min_blob_share=0.0)
+    assert all(ungated.process(f).hand_found for f in frames)
+    for image, _ in calibrate_colors.render_training_frames(4, 5, 'test'):
+        assert segmenter.process(image).status == STATUS_OK
 
 
 @pytest.mark.parametrize('bad', [

@@ -19,7 +19,7 @@ def _result(poses: np.ndarray, weights: np.ndarray) -> LookupResult:
     k = len(poses)
     empty = np.zeros(0)
     cons = ProjectionConstraints(empty.astype(int), empty.astype(np.uint8), empty.astype(int),
-                                 np.zeros((0, 2)), np.zeros((0, 2)), empty)
+                                 np.zeros((0, 2)), empty, full_xy=np.zeros((0, 2)))
     return LookupResult(np.arange(k), np.linspace(1.0, 2.0, k), weights, poses,
                         blend_poses(poses, weights), cons, 300)
 

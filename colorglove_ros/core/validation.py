@@ -16,11 +16,12 @@ import numpy as np
 
 from colorglove_ros.core.conventions import NUM_COLORS, NUM_PATCHES, TINY_SIZE
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.model import NUM_DOFS, NUM_FINGER_DOFS
 
 __all__ = [
     'InvalidInputError', 'InvalidObservationError', 'InvalidPriorError', 'InvalidConfigError',
-    'MAX_BLOBS', 'MAX_IMAGE_SIDE', 'MIN_HAND_DEPTH_M', 'MAX_HAND_DEPTH_M', 'NUM_POSE_DOFS',
-    'check_number', 'check_array', 'check_settings', 'SettingRule',
+    'MAX_BLOBS', 'MAX_IMAGE_SIDE', 'MIN_HAND_DEPTH_M', 'MAX_HAND_DEPTH_M',
+    'check_number', 'check_array', 'as_rows', 'check_settings', 'SettingRule',
     'validate_image_size', 'validate_crop', 'validate_blobs', 'validate_tiny_labels',
     'validate_observation', 'validate_pose', 'validate_constraints', 'validate_prior',
     'validate_hand_depth', 'validate_segmenter_settings', 'SEGMENTER_RULES',
@@ -32,7 +33,6 @@ MAX_BLOBS = 256            # blobs per observation (10 colours; clutter gives a 
 MAX_IMAGE_SIDE = 16384     # pixels
 MIN_HAND_DEPTH_M = 0.1     # every hand keypoint at least this far in front of the camera
 MAX_HAND_DEPTH_M = 5.0     # ... and at most this far
-NUM_POSE_DOFS = 26         # 6 global + 20 finger DOFs
 # The crop window (TINY_SIZE * scale pixels a side) is at most this many image sides wide.
 MAX_CROP_WINDOW_IMAGE_SIDES = 4.0
 # ... and at least 4 pixels wide (the segmenter's smallest glove spans far more).
@@ -124,6 +124,19 @@ def check_array(name: str, value: Any, *, shape: Sequence[int | None] | None = N
     return array
 
 
+
+def as_rows(name: str, value: Any, dtype: Any, tail: tuple[int, ...],
+            error: ErrorType = InvalidInputError) -> np.ndarray:
+    """``value`` as an array of ``dtype`` with one row per item: (N,) when ``tail`` is (),
+    else (N, *tail); an empty input becomes (0, *tail). Raise ``error`` for other shapes."""
+    a = np.asarray(value, dtype=dtype)
+    if a.ndim == 1 and tail == () or a.ndim == 2 and a.shape[1:] == tail:
+        return a
+    if a.size == 0:
+        return a.reshape((0, *tail))
+    raise error(f'{name} must have shape (N, {", ".join(map(str, tail))}), got {a.shape}')
+
+
 # ---------------------------------------------------------------------------- configuration
 SettingRule = tuple[str, float | None, float | None, bool]
 """(type 'int' | 'float' | 'ints', low, high, odd) of one setting."""
@@ -143,6 +156,7 @@ SEGMENTER_RULES: dict[str, SettingRule] = {
     'min_glove_pixels': ('int', 1, MAX_IMAGE_SIDE ** 2, False),
     'min_inside_fraction': ('float', 0.0, 1.0, False),
     'min_blob_pixels': ('int', 1, MAX_IMAGE_SIDE ** 2, False),
+    'min_blob_share': ('float', 0.0, 1.0, False),
     'min_component_colors': ('int', 1, NUM_COLORS, False),
     'reattach_radius': ('int', 0, 64, False),
     'reattach_max_share': ('float', 0.0, 1.0, False),
@@ -252,7 +266,7 @@ def validate_observation(*, image_width: Any, image_height: Any, tiny_labels: An
 # ---------------------------------------------------------------------------- pose prior
 def validate_pose(name: str, pose: Any, error: ErrorType = InvalidPriorError) -> np.ndarray:
     """A 26-DOF pose of finite values (metres, radians) with a plausible rotation vector."""
-    q = check_array(name, pose, shape=(NUM_POSE_DOFS,), kind='fiu', error=error).astype(float)
+    q = check_array(name, pose, shape=(NUM_DOFS,), kind='fiu', error=error).astype(float)
     angle = float(np.linalg.norm(q[3:6]))
     if angle > 1e3:
         raise error(f'{name}: wrist rotation vector of norm {angle:g} rad is not a rotation')
@@ -301,7 +315,7 @@ def validate_prior(*, blended_pose: Any, candidate_poses: Sequence[Any],
         raise InvalidPriorError('hand_found with no projection constraints')
     validate_constraints(*constraints, num_vertices=num_vertices)
     if finger_std is not None and len(finger_std):
-        check_array('finger_std', finger_std, shape=(NUM_POSE_DOFS - 6,), low=0.0,
+        check_array('finger_std', finger_std, shape=(NUM_FINGER_DOFS,), low=0.0,
                     error=InvalidPriorError)
     return q
 
@@ -326,7 +340,7 @@ def validate_database_arrays(db: Any, where: str, num_vertices: int | None = Non
     indexes with: finite poses, crops with a positive scale, patch colours 0..10, patch
     vertices -1 (none) or of the mesh (``num_vertices`` when given), finite patch areas,
     glove pixel keys within the padded range and a finite, positive render camera."""
-    check_array(f'{where}: poses', db.poses, shape=(None, NUM_POSE_DOFS), error=error)
+    check_array(f'{where}: poses', db.poses, shape=(None, NUM_DOFS), error=error)
     crop = check_array(f'{where}: crop', db.crop, shape=(None, 3), error=error)
     if len(crop) and crop[:, 0].min() <= 0.0:
         raise error(f'{where}: crop scale must be > 0, got {crop[:, 0].min().item()!r}')

@@ -21,10 +21,10 @@ from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.hand.model import DOF_NAMES, FINGER_DOF_NAMES
 from colorglove_ros.core.hand.overlay import SKELETON_BONES
 from colorglove_ros.core.hand.pose_fields import pose_from_fields, wrist_quaternion
-from colorglove_ros.core.lookup.types import LookupResult
+from colorglove_ros.core.lookup.types import LookupResult, ProjectionConstraints
 from colorglove_ros.core.segmentation.crop import CropTransform
 from colorglove_ros.core.segmentation.types import Observation
-from colorglove_ros.core.tracking.types import Blobs, CameraObservation, EntryConstraints, PosePrior
+from colorglove_ros.core.tracking.types import Blobs, CameraObservation, PosePrior
 
 __all__ = [
     'stamp_to_seconds', 'camera_info_from_camera', 'joint_state_from_pose',
@@ -152,12 +152,12 @@ def pose_prior_from_candidates(msg: HandPoseCandidates) -> PosePrior:
     return PosePrior(
         finger_std=finger_std,
         q_blend=np.asarray(msg.blended_pose, dtype=float),
-        constraints=EntryConstraints(
-            patch_id=np.array([c.patch_id for c in constraints], dtype=np.int64),
-            color=np.array([c.color_label for c in constraints], dtype=np.int64),
-            vertex=np.array([c.vertex_index for c in constraints], dtype=np.int64),
+        constraints=ProjectionConstraints(
+            patch_ids=np.array([c.patch_id for c in constraints], dtype=np.int64),
+            colors=np.array([c.color_label for c in constraints], dtype=np.int64),
+            vertices=np.array([c.vertex_index for c in constraints], dtype=np.int64),
             tiny_xy=np.array([[c.tiny_x, c.tiny_y] for c in constraints], dtype=float),
-            pixel_count=np.array([c.pixel_count for c in constraints], dtype=float)))
+            pixel_counts=np.array([c.pixel_count for c in constraints], dtype=float)))
 
 
 def skeleton_markers(keypoints_camera: np.ndarray | None, header: Header,

@@ -1,6 +1,6 @@
 """Convert numpy arrays to and from ``sensor_msgs/Image``, honouring encoding, step, byte order.
 
-Decoding is ``core.image_codec`` (shared with the bag reader); this module adds the rclpy message
+Decoding is ``ros.image_codec`` (shared with the bag reader); this module adds the rclpy message
 builder."""
 from __future__ import annotations
 

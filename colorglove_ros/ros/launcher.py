@@ -36,7 +36,7 @@ __all__ = ['LaunchError', 'NodeSpec', 'load_launch_file', 'node_command', 'Launc
            'use_fastdds_profile', 'main']
 
 FASTDDS_PROFILE_VARIABLE = 'FASTRTPS_DEFAULT_PROFILES_FILE'
-# Exit code of a node that cannot start (nodes/common.py run_node): never respawned, as a bad
+# Exit code of a node that cannot start (ros/nodes/common.py run_node): never respawned, as a bad
 # configuration does not fix itself.
 STARTUP_FAILURE_CODE = 1
 

@@ -1,8 +1,15 @@
 """Run the four tracker nodes as separate processes over DDS and measure them: frames tracked,
 rate, latency from camera frame to JointState, and accuracy against ground truth. Shared by the
-demo, the benchmark and the end-to-end test."""
+demo, the benchmark, the soak test and the end-to-end test.
+
+Latency and rate come from a lean subscriber in its own process (``ros.latency_probe``:
+JointState arrival minus the camera frame's header stamp); the per-stage figures are the
+processing times the stages measure themselves and carry in their messages (segmentation and
+lookup times in ``HandPoseCandidates``, the IK time in the tracking status), never arrival
+times in the monitor, which also deserialises camera images and so delays what it receives."""
 from __future__ import annotations
 
+import re
 import struct
 import tempfile
 import threading
@@ -26,9 +33,14 @@ from std_msgs.msg import String
 from colorglove_ros.core.evaluation.metrics import jitter_runs_mm, latency_summary_ms, pose_accuracy
 from colorglove_ros.ros.conversions import pose_from_messages
 from colorglove_ros.ros.image import image_to_rgb8
+from colorglove_ros.ros.latency_probe import LatencyProbe, ProbeRecord
 from colorglove_ros.ros.launcher import Launcher, NodeSpec, use_fastdds_profile
 
-__all__ = ['PipelineMonitor', 'PipelineRun', 'bag_feed', 'node_specs', 'run_pipeline', 'summarize']
+__all__ = ['PipelineMonitor', 'PipelineRun', 'bag_feed', 'node_specs', 'run_pipeline', 'summarize',
+           'ik_times_ms']
+
+# ik_node's status line of a tracked frame ends with "IK <time> ms"
+_IK_TIME = re.compile(r'IK (\d+(?:\.\d+)?) ms')
 
 _RELIABLE = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=200,
                        reliability=QoSReliabilityPolicy.RELIABLE)
@@ -162,7 +174,7 @@ class PipelineRun:
     truth: np.ndarray
     segmentation_ms: list[float]
     lookup_ms: list[float]
-    stage_latencies_s: dict[str, list[float]] = field(default_factory=dict)
+    probe: ProbeRecord | None = None          # the lean subscriber's record (rate, latency)
     frame_index: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     timed_out: bool = False
     overlays: list[np.ndarray] = field(default_factory=list)
@@ -209,7 +221,10 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
         spinner.start()
         launcher = Launcher(node_specs(params_file, with_camera=feed is None) + [
             replace(spec, parameters=[params_file, *spec.parameters]) for spec in extra_nodes])
+        probe = LatencyProbe()
+        record = None
         try:
+            probe.start()
             if feed is not None:
                 launcher.start()
                 _wait_for_graph(monitor, startup_s, {**STAGE_INPUTS, **(extra_inputs or {})})
@@ -224,13 +239,16 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
                 launcher.start()
                 completed = monitor.wait_for_frames(expected_frames, timeout_s)
             duration = monitor.active_duration() or time.monotonic() - started
+            record = probe.stop()
         finally:
+            if record is None and probe.process is not None:
+                probe.process.kill()
             launcher.stop()
             executor.shutdown()
             spinner.join(timeout=5.0)
             monitor.destroy_node()
             rclpy.try_shutdown(context=context)
-    run = _collect(monitor, duration, expected_frames)
+    run = _collect(monitor, duration, expected_frames, record)
     run.timed_out = not completed
     return run
 
@@ -256,15 +274,9 @@ def _wait_for_graph(monitor: PipelineMonitor, timeout_s: float, inputs: dict[str
                        f'no subscriber {missing}')
 
 
-def _collect(monitor: PipelineMonitor, duration: float, published: int) -> PipelineRun:
+def _collect(monitor: PipelineMonitor, duration: float, published: int,
+             record: ProbeRecord) -> PipelineRun:
     with monitor.lock:
-        latencies = [monitor.output_times[k] - monitor.frame_times[k]
-                     for k in monitor.output_times if k in monitor.frame_times]
-        stages = {
-            'segmentation': _delays(monitor.frame_times, monitor.observation_times),
-            'lookup': _delays(monitor.observation_times, monitor.candidate_times),
-            'ik': _delays(monitor.candidate_times, monitor.output_times),
-        }
         matched = [k for k in sorted(monitor.joints) if k in monitor.wrists
                    and k in monitor.truth_joints and k in monitor.truth_wrists]
         estimated = np.array([pose_from_messages(monitor.joints[k], monitor.wrists[k])
@@ -278,16 +290,18 @@ def _collect(monitor: PipelineMonitor, duration: float, published: int) -> Pipel
             frames_expected=published, frames=len(monitor.frame_times),
             segmented=len(monitor.observation_times), tracked=len(monitor.joints),
             duration_s=duration,
-            latencies_s=latencies, estimated=estimated.reshape(-1, 26),
+            latencies_s=[float(v) for v in record.latencies_s],
+            estimated=estimated.reshape(-1, 26),
             truth=truth.reshape(-1, 26),
             segmentation_ms=list(monitor.segmentation_ms.values()),
-            lookup_ms=list(monitor.lookup_ms.values()), stage_latencies_s=stages,
+            lookup_ms=list(monitor.lookup_ms.values()), probe=record,
             frame_index=frame_index,
             overlays=list(monitor.overlays), statuses=list(monitor.statuses))
 
 
-def _delays(earlier: dict, later: dict) -> list[float]:
-    return [later[k] - earlier[k] for k in later if k in earlier]
+def ik_times_ms(statuses: Sequence[str]) -> list[float]:
+    """The IK times ik_node reports in its status lines of tracked frames."""
+    return [float(m.group(1)) for m in map(_IK_TIME.search, statuses) if m]
 
 
 def summarize(run: PipelineRun, model) -> dict[str, float]:
@@ -297,16 +311,19 @@ def summarize(run: PipelineRun, model) -> dict[str, float]:
         'frames_expected': run.frames_expected, 'frames_seen_by_monitor': run.frames,
         'frames_segmented': run.segmented, 'frames_tracked': run.tracked,
         'tracked_fraction': run.tracked / run.frames_expected if run.frames_expected else 0.0,
-        # JointStates per second between the first and the last one received
-        'output_rate_hz': (run.tracked - 1) / run.duration_s if run.duration_s > 0 else 0.0,
+        # JointStates per second between the first and the last one the probe received
+        'output_rate_hz': run.probe.rate_hz if run.probe is not None else 0.0,
+        # the lean probe: JointState arrival minus the camera frame's header stamp
         'latency_mean_ms': latency['mean'], 'latency_p50_ms': latency['p50'],
         'latency_p95_ms': latency['p95'],
-        'segmentation_compute_ms': _mean(run.segmentation_ms),
-        'lookup_compute_ms': _mean(run.lookup_ms),
         'frames_with_truth': len(run.truth),
     }
-    for stage, delays in run.stage_latencies_s.items():
-        figures[f'{stage}_stage_p50_ms'] = latency_summary_ms(delays)['p50']
+    # each stage's own processing time, carried in its messages
+    for stage, times in (('segmentation', run.segmentation_ms), ('lookup', run.lookup_ms),
+                         ('ik', ik_times_ms(run.statuses))):
+        figures[f'{stage}_compute_mean_ms'] = _mean(times)
+        figures[f'{stage}_compute_p95_ms'] = (float(np.percentile(times, 95)) if times
+                                             else float('nan'))
     if len(run.truth):
         figures.update(pose_accuracy(model, run.estimated, run.truth))
         # frames missing from the output break the 5-frame windows: jitter over unbroken runs

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from colorglove_ros.core.errors import ColorGloveError
 
-__all__ = ['tool_parser', 'run_tool']
+__all__ = ['tool_parser', 'add_sequence_arguments', 'run_tool']
 
 
 def tool_parser(description: str | None, *, raw_description: bool = False,
@@ -22,6 +22,27 @@ def tool_parser(description: str | None, *, raw_description: bool = False,
     if json_help is not None:
         parser.add_argument('--json', type=Path, metavar='PATH', help=json_help)
     return parser
+
+
+def add_sequence_arguments(parser: argparse.ArgumentParser, *, sequences_help: str,
+                           labels: tuple[str, ...], labels_help: str) -> None:
+    """The arguments of the tools that run the tracker over synthetic sequences (eval_ik,
+    learn_ik_covariances): database, sequences, frames, label source, colour, IK and camera
+    configuration, frame rate."""
+    from colorglove_ros.paths import share_dir
+
+    config = share_dir() / 'config'
+    parser.add_argument('--database', help='pose database directory (default: the largest '
+                        'under data/)')
+    parser.add_argument('--sequences', type=int, default=4, help=sequences_help)
+    parser.add_argument('--frames', type=int, default=150, help='frames per sequence')
+    parser.add_argument('--labels', choices=labels, default='truth', help=labels_help)
+    parser.add_argument('--color-config', help='colour calibration YAML for --labels '
+                        'segmented (default config/color_calibration.yaml)')
+    parser.add_argument('--ik-config', default=str(config / 'ik.yaml'))
+    parser.add_argument('--calibration', default=str(config / 'calibration.yaml'),
+                        help='camera rig the tracker runs with')
+    parser.add_argument('--fps', type=float, default=30.0)
 
 
 def run_tool(name: str, body: Callable[[], int]) -> int:

@@ -7,13 +7,12 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from colorglove_ros.core.lookup.database import (
+from colorglove_ros.core.lookup.database import DatabaseError, save_database
+from colorglove_ros.core.lookup.database_build import (
     BuildConfig,
-    DatabaseError,
     build_database,
     read_database_config,
     retrain_codes,
-    save_database,
 )
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.paths import share_dir

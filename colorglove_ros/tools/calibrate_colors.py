@@ -103,8 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--light-temperatures', type=float, nargs=2, metavar=('LOW_K', 'HIGH_K'),
                         default=RESIDUAL_TEMPERATURES_K,
                         help='re-light the training pixels under black bodies of these colour '
-                             'temperatures (default: colorspace.RESIDUAL_TEMPERATURES_K, what the '
-                             "segmenter's per-frame light-colour correction leaves)")
+                             'temperatures (default: calibration_fit.RESIDUAL_TEMPERATURES_K, '
+                             "what the segmenter's per-frame light-colour correction leaves)")
     args = parser.parse_args(argv)
     try:
         output = args.output or read_calibration_config(args.config)['calibration_file']

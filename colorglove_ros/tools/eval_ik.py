@@ -1,9 +1,9 @@
 """Figure 11 with ground truth: blend / + IK / + IK and smoothing, one and two cameras.
 
-Synthetic sequences (core.synth.generate_sequence) with seeds O..O+S-1 (evaluation seeds,
-core.evaluation.eval_seeds; O = --seed-offset, 0 for the reported figures, another offset such
-as 1000 to tune IK settings on; the covariances are learned on seeds 100000.. by
-learn_ik_covariances) are rendered with every camera of config/calibration_stereo.yaml;
+Synthetic sequences (core.synthetic.sequences.generate_sequence) with seeds O..O+S-1
+(evaluation seeds, core.evaluation.sequences.eval_seeds; O = --seed-offset, 0 for the reported
+figures, another offset such as 1000 to tune IK settings on; the covariances are learned on seeds
+100000.. by learn_ik_covariances) are rendered with every camera of config/calibration_stereo.yaml;
 per frame the primary camera's labels are cropped and looked up once, then one tracker per
 (cameras, mode) runs on the same lookup. Targets are measured, not asserted.
 """
@@ -31,7 +31,7 @@ from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.tracking.config import TRACKER_MODES, load_covariances, load_ik_config
 from colorglove_ros.paths import share_dir
-from colorglove_ros.tools._cli import tool_parser
+from colorglove_ros.tools._cli import add_sequence_arguments, tool_parser
 
 __all__ = ['main', 'TARGETS', 'REFERENCE_FIGURES', 'evaluate_targets', 'reference_figures',
            'JSON_KEYS', 'PACKAGE_ROOT']
@@ -155,40 +155,30 @@ def _plot(rows: list[dict[str, Any]], path: Path) -> Path:
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point."""
     parser = tool_parser(__doc__, raw_description=True)
-    parser.add_argument('--database', help='pose database directory (default: the largest '
-                        'under data/)')
-    parser.add_argument('--frames', type=int, default=150, help='frames per sequence')
-    parser.add_argument('--sequences', type=int, default=4, help='evaluation sequences '
-                        '(seeds O..O+S-1)')
+    add_sequence_arguments(
+        parser, sequences_help='evaluation sequences (seeds O..O+S-1)', labels=LABEL_SOURCES,
+        labels_help="'truth': renderer labels (IK alone); 'segmented': the colour "
+                    'segmentation (core.segmentation) of the rendered images')
     parser.add_argument('--seed-offset', type=int, default=0, help='first sequence seed O: '
                         '0 for the reported figures, another (e.g. 1000) to tune on')
-    parser.add_argument('--labels', choices=LABEL_SOURCES, default='truth',
-                        help="'truth': renderer labels (IK alone); 'segmented': the colour "
-                        'segmentation (core.segmentation) of the rendered images')
-    parser.add_argument('--color-config', help='colour calibration YAML for --labels '
-                        'segmented (default config/color_calibration.yaml)')
-    parser.add_argument('--ik-config', default=str(PACKAGE_ROOT / 'config' / 'ik.yaml'))
     parser.add_argument('--covariances', help='learned covariance file overriding the '
                         "IK config's (e.g. config/ik_covariances.yaml)")
-    parser.add_argument('--calibration', default=str(PACKAGE_ROOT / 'config' /
-                                                     'calibration.yaml'))
     parser.add_argument('--stereo-calibration', default=str(PACKAGE_ROOT / 'config' /
                                                             'calibration_stereo.yaml'))
     parser.add_argument('--modes', nargs='+', default=list(TRACKER_MODES),
                         choices=TRACKER_MODES)
-    parser.add_argument('--fps', type=float, default=30.0)
     parser.add_argument('--num-blend', type=int, default=10, help='neighbours the lookup '
                         'returns and blends (PoseLookup num_blend; paper: 10)')
     parser.add_argument('--temporal-tau', type=float, metavar='DEG', help='reweight the '
                         "neighbours by exp(-d^2 / tau^2), d their distance (deg) to each "
-                        "tracker's previous output (core.temporal_prior; default: off; "
+                        "tracker's previous output (core.lookup.temporal_prior; default: off; "
                         'needs --no-finger-evidence)')
     parser.add_argument('--temporal-rotation-weight', type=float, default=1.0,
                         help='weight of the squared wrist rotation angle in that distance '
                         '(0: finger joints only)')
     parser.add_argument('--no-finger-evidence', action='store_true', help='blend every DOF '
                         "with the neighbours' image weights (the paper) instead of each "
-                        'finger by its patch evidence (core.finger_evidence)')
+                        'finger by its patch evidence (core.lookup.finger_evidence)')
     parser.add_argument('--plot', default=str(PACKAGE_ROOT / 'data' / 'eval_ik' /
                                               'eval_ik.png'), help="PNG path ('' = none)")
     args = parser.parse_args(argv)

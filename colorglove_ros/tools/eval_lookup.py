@@ -23,13 +23,11 @@ from colorglove_ros.core.lookup.codes import (
     train_random_projections,
     train_ssc,
 )
-from colorglove_ros.core.lookup.database import (
+from colorglove_ros.core.lookup.database import DatabaseError, PoseDatabase, load_database
+from colorglove_ros.core.lookup.database_build import (
     SSC_HARD_NEGATIVES,
     SSC_SHORTLIST,
     BuildConfig,
-    DatabaseError,
-    PoseDatabase,
-    load_database,
     nearest_neighbour_pairs,
     render_views,
 )
@@ -202,7 +200,7 @@ def _timing(lookup: PoseLookup, tiny: np.ndarray, crop: np.ndarray, nn: np.ndarr
             for key, val in res.timings_ms.items():
                 times.setdefault(key, []).append(val)
             found += int(res.indices[0] == nn[i])
-            # fingers blended from blobs (core.finger_evidence), as lookup_node does; the
+            # fingers blended from blobs (core.lookup.finger_evidence), as lookup_node does; the
             # blobs here come from the tiny labels, the node's from the full image
             res_f = lookup.lookup(tiny[i], crop[i], camera, blobs[i])
             times.setdefault('total_with_finger_blend_ms', []).append(

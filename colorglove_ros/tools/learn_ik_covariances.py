@@ -1,13 +1,14 @@
 """Learn the IK covariances R, Q, P on training sequences and save them (Wang-Popovic 5.3-5.4).
 
 The tracker runs in 'ik' mode (IK, no temporal term) over synthetic TRAINING sequences,
-seeds 100000..100000+S-1 (core.evaluation.train_seeds; eval_ik evaluates on seeds 0..S-1,
+seeds 100000..100000+S-1 (core.evaluation.sequences.train_seeds; eval_ik evaluates on seeds 0..S-1,
 so the two sets are disjoint), with 'train' imaging conditions. The reference pose of each
 frame is the 5-frame local average of the tracker's estimates, as in the paper
 (--reference local_average), or the ground truth (--reference truth, a diagnostic: its P
 is too small for the smoothing term). R = constraint
 residuals at the reference, Q = IK prior (translation-fitted blend) minus reference,
-P = previous frame about the current local average (core.ik_training.learn_covariances).
+P = previous frame about the current local average
+(core.tracking.covariance_learning.learn_covariances).
 """
 from __future__ import annotations
 
@@ -39,7 +40,7 @@ from colorglove_ros.core.tracking.covariance_learning import (
     learn_covariances,
 )
 from colorglove_ros.paths import share_dir
-from colorglove_ros.tools._cli import tool_parser
+from colorglove_ros.tools._cli import add_sequence_arguments, tool_parser
 
 __all__ = ['main', 'covariance_rows', 'PACKAGE_ROOT', 'DEFAULT_OUTPUT']
 
@@ -76,26 +77,16 @@ def covariance_rows(q_var: np.ndarray, p_var: np.ndarray, q_ref: np.ndarray | No
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point."""
     parser = tool_parser(__doc__, raw_description=True)
-    parser.add_argument('--database', help='pose database directory (default: the largest '
-                        'under data/)')
-    parser.add_argument('--sequences', type=int, default=4, help='training sequences')
-    parser.add_argument('--frames', type=int, default=150, help='frames per sequence')
-    parser.add_argument('--labels', choices=LABEL_SOURCES, default='truth',
-                        help="'truth': renderer labels; 'segmented': colour segmentation")
-    parser.add_argument('--color-config', help='colour calibration YAML for --labels '
-                        'segmented (default config/color_calibration.yaml)')
+    add_sequence_arguments(
+        parser, sequences_help='training sequences', labels=LABEL_SOURCES,
+        labels_help="'truth': renderer labels; 'segmented': colour segmentation")
     parser.add_argument('--reference', choices=('local_average', 'truth'),
                         default='local_average',
                         help="reference pose of the covariances: 'local_average' of the "
                         "tracker's estimates (the paper's method, default) or 'truth' "
                         '(diagnostic: P then describes the smooth true motion, far smaller '
                         'than the estimates\' frame-to-frame change, and the smoothing sticks)')
-    parser.add_argument('--calibration', default=str(PACKAGE_ROOT / 'config' /
-                                                     'calibration.yaml'),
-                        help='camera rig the tracker runs with')
-    parser.add_argument('--ik-config', default=str(PACKAGE_ROOT / 'config' / 'ik.yaml'))
     parser.add_argument('--output', default=str(DEFAULT_OUTPUT), help='covariance YAML')
-    parser.add_argument('--fps', type=float, default=30.0)
     args = parser.parse_args(argv)
     from colorglove_ros.core.lookup.search import PoseLookup
 

@@ -42,8 +42,9 @@ __all__ = [
 ]
 
 LABEL_SOURCES = ('truth', 'segmented')
-# Sequence seeds (core.synth.generate_sequence): evaluation uses EVAL_SEED_BASE + k, training
-# (learn_ik_covariances) TRAIN_SEED_BASE + k, k < SEED_SPAN: disjoint sets. Evaluation frames
+# Sequence seeds (core.synthetic.sequences.generate_sequence): evaluation uses
+# EVAL_SEED_BASE + k, training (learn_ik_covariances) TRAIN_SEED_BASE + k, k < SEED_SPAN:
+# disjoint sets. Evaluation frames
 # use the synthesiser's 'test' imaging conditions, training frames the 'train' ones.
 EVAL_SEED_BASE = 0
 TRAIN_SEED_BASE = 100_000
@@ -79,13 +80,14 @@ class EvaluationSequence:
 
     seed: int
     poses: np.ndarray           # (N, 26) true poses in the primary camera's frame
-    conditions: Any             # core.synth imaging conditions
+    conditions: Any             # core.synthetic.conditions imaging conditions
     synthesizer: Any
 
     @classmethod
     def make(cls, seed: int, num_frames: int, camera: PinholeCamera, synthesizer: Any,
              split: str = 'test', fps: float = 30.0) -> EvaluationSequence:
-        """Sequence ``seed`` (``core.synth.generate_sequence``) with ``split`` conditions."""
+        """Sequence ``seed`` (``core.synthetic.sequences.generate_sequence``) with ``split``
+        conditions."""
         from colorglove_ros.core.synthetic.conditions import sample_conditions
         from colorglove_ros.core.synthetic.sequences import generate_sequence
 
@@ -104,8 +106,9 @@ class EvaluationSequence:
 
 # ---------------------------------------------------------------------------- observations
 Observer = Callable[[Any, bool], tuple[CameraObservation, TinyCrop | None]]
-"""Maps (``core.synth.SyntheticFrame``, is-primary-camera) to the camera's observation for the
-tracker and, for the primary camera, the tiny crop the lookup runs on (None = no hand)."""
+"""Maps (``core.synthetic.frames.SyntheticFrame``, is-primary-camera) to the camera's
+observation for the tracker and, for the primary camera, the tiny crop the lookup runs on (None =
+no hand)."""
 
 
 def observe_camera(labels: np.ndarray, primary: bool, min_blob_pixels: int = 4
@@ -129,7 +132,7 @@ def truth_observer(min_blob_pixels: int = 4) -> Observer:
 
 def segmenter_observer(segmenter: Any) -> Observer:
     """Observations from the colour segmentation of the rendered RGB image
-    (``core.segmentation.GloveSegmenter.process``: filter, classify, crop, blobs)."""
+    (``core.segmentation.segmenter.GloveSegmenter.process``: filter, classify, crop, blobs)."""
     def observe(frame: Any, primary: bool) -> tuple[CameraObservation, TinyCrop | None]:
         obs = segmenter.process(frame.image_rgb)
         blobs = Blobs.empty()
@@ -145,7 +148,7 @@ def segmenter_observer(segmenter: Any) -> Observer:
 
 def make_observer(labels: str, color_config: str | Path | None = None,
                   min_blob_pixels: int = 4) -> Observer:
-    """'truth' (renderer labels) or 'segmented' (``core.segmentation.load_segmenter`` on
+    """'truth' (renderer labels) or 'segmented' (``core.segmentation.segmenter.load_segmenter`` on
     ``color_config``, default ``config/color_calibration.yaml``; raises the segmentation's
     error when its calibration file is missing)."""
     if labels == 'truth':
@@ -165,7 +168,7 @@ def make_observer(labels: str, color_config: str | Path | None = None,
 class FramePrior:
     """The lookup outcome of one primary-camera label image."""
 
-    result: Any            # core.search.LookupResult, or None when no hand / no glove pixels
+    result: Any            # core.lookup.types.LookupResult, or None when no hand / no glove pixels
     tiny: TinyCrop | None
     time_ms: float
     error: str = ''
@@ -196,7 +199,7 @@ class LookupStage:
 @dataclass(frozen=True)
 class TemporalPrior:
     """Settings of the temporal reweighting of the lookup's neighbours
-    (``core.temporal_prior.reweight_by_previous``) by each tracker's previous output."""
+    (``core.lookup.temporal_prior.reweight_by_previous``) by each tracker's previous output."""
 
     tau_rad: float
     rotation_weight: float = 1.0
@@ -235,7 +238,7 @@ class SequenceEvaluator:
     :class:`HandTracker` per (rig, mode), optionally with the lookup's neighbours reweighted
     by that tracker's previous output (``temporal``). With ``finger_evidence`` (default) the
     lookup also gets the primary camera's blobs and blends each finger by its own patch
-    evidence (``core.finger_evidence``). Every rig must be a prefix of the largest one
+    evidence (``core.lookup.finger_evidence``). Every rig must be a prefix of the largest one
     (same primary camera), so all rows of a table see identical frames and lookups."""
 
     def __init__(self, lookup: Any, rigs: Mapping[str, Sequence[PinholeCamera]],
@@ -388,7 +391,7 @@ def summarize(model: HandModel, runs: Sequence[TrackedSequence]) -> dict[str, fl
 
 def training_sequences(run: TrackedSequence, with_truth: bool = False,
                        window: int = LOCAL_WINDOW) -> list[list[TrainingFrame]]:
-    """Training frames (``ik_training.training_frame``) of a run made with
+    """Training frames (``covariance_learning.training_frame``) of a run made with
     ``keep_results=True``, split into runs of consecutive tracked frames of at least
     ``window`` frames; with ``with_truth`` each frame carries its ground-truth pose."""
     if len(run.results) != len(run.found):

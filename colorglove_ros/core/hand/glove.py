@@ -15,17 +15,18 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components, dijkstra
-from scipy.spatial import cKDTree
 
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, NUM_COLORS, NUM_PATCHES
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.disk_cache import cached_arrays
 from colorglove_ros.core.hand.mesh import HandMesh, build_hand_mesh
 from colorglove_ros.core.hand.model import DOF_NAMES, HandModel
+
+if TYPE_CHECKING:   # scipy and trimesh are imported where a glove is built (slow to import)
+    from scipy.sparse import csr_matrix
 
 __all__ = [
     'GLOVE_PALETTE_RGB', 'GLOVE_COLOR_NAMES', 'GloveError',
@@ -86,8 +87,12 @@ def glove_reference_pose(model: HandModel) -> np.ndarray:
     return q
 
 
-def _surface_graph(centroids: np.ndarray, faces: np.ndarray) -> coo_matrix:
+def _surface_graph(centroids: np.ndarray, faces: np.ndarray) -> csr_matrix:
     """Symmetric sparse graph over triangles: k nearest centroids + shared-edge neighbours."""
+    import trimesh
+    from scipy.sparse import coo_matrix
+    from scipy.spatial import cKDTree
+
     n = len(centroids)
     tree = cKDTree(centroids)
     dist, nbr = tree.query(centroids, k=_KNN + 1)
@@ -104,6 +109,8 @@ def _surface_graph(centroids: np.ndarray, faces: np.ndarray) -> coo_matrix:
 
 def make_glove(mesh: HandMesh, seed: int = 0, model: HandModel | None = None) -> Glove:
     """Build the glove pattern on ``mesh`` deterministically from ``seed``."""
+    from scipy.sparse.csgraph import connected_components, dijkstra
+
     model = HandModel(mesh.hand_length_m) if model is None else model
     rng = np.random.default_rng(seed)
     verts = mesh.skin(model, glove_reference_pose(model))
@@ -152,6 +159,8 @@ def export_glove_mesh(mesh: HandMesh, glove: Glove, model: HandModel, path: str 
     ``.ply``: shared vertices, per-face RGBA colour plus face attributes ``patch`` and
     ``label``. ``.glb``/``.obj``: faces unmerged so per-vertex colours reproduce the patches.
     """
+    import trimesh
+
     path = Path(path)
     if len(glove.face_patch) != mesh.num_faces:
         raise GloveError(f'glove has {len(glove.face_patch)} faces, mesh {mesh.num_faces}')
@@ -175,7 +184,27 @@ def export_glove_mesh(mesh: HandMesh, glove: Glove, model: HandModel, path: str 
 @lru_cache(maxsize=4)
 def default_hand(hand_length_m: float = DEFAULT_HAND_LENGTH_M,
                  seed: int = 0) -> tuple[HandModel, HandMesh, Glove]:
-    """The standard (model, mesh, glove) triple, cached."""
+    """The standard (model, mesh, glove) triple, cached (in memory, and the glove on disk:
+    ``core.hand.disk_cache``)."""
     model = HandModel(hand_length_m)
     mesh = build_hand_mesh(model)
-    return model, mesh, make_glove(mesh, seed=seed, model=model)
+
+    def build() -> dict[str, np.ndarray]:
+        glove = make_glove(mesh, seed=seed, model=model)
+        return {'face_patch': glove.face_patch, 'patch_color': glove.patch_color,
+                'seed_faces': glove.seed_faces}
+
+    arrays = cached_arrays(f'glove-{float(hand_length_m)!r}-{int(seed)}',
+                           [Path(__file__), *_mesh_sources()], build)
+    glove = Glove(arrays['face_patch'], arrays['patch_color'], arrays['seed_faces'])
+    for arr in (glove.face_patch, glove.patch_color, glove.seed_faces):
+        arr.setflags(write=False)
+    return model, mesh, glove
+
+
+def _mesh_sources() -> list[Path]:
+    """The source files the standard mesh is built from (part of the glove's cache key)."""
+    from colorglove_ros.core.hand import mesh as mesh_module
+    from colorglove_ros.core.hand import model as model_module
+
+    return [Path(mesh_module.__file__), Path(model_module.__file__)]

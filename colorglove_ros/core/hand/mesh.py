@@ -3,13 +3,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand import model as _model_module
+from colorglove_ros.core.hand.disk_cache import cached_arrays
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, digit_link_index
+
+if TYPE_CHECKING:   # trimesh is imported where a mesh is built or exported (slow to import)
+    import trimesh
 
 __all__ = ['HandMeshError', 'HandMesh', 'build_hand_mesh', 'skin_batch', 'PALM_SUBDIVISIONS',
            'RING_SPACING_FRACTION']
@@ -64,6 +70,8 @@ class HandMesh:
 
     def to_trimesh(self, model: HandModel, q: np.ndarray | None = None) -> trimesh.Trimesh:
         """The skinned mesh (rest pose by default) as a ``trimesh.Trimesh``."""
+        import trimesh
+
         q = model.rest_pose() if q is None else q
         return trimesh.Trimesh(self.skin(model, q), self.faces, process=False)
 
@@ -96,6 +104,8 @@ def _capsule(length: float, radius: float, is_tip: bool, max_segment: float) -> 
     """Capsule along the link's -y axis from the joint (y=0), with rings at most
     ``max_segment`` apart along the cylinder (even triangles for the glove patches);
     a fingertip capsule ends exactly at -length."""
+    import trimesh
+
     height = max(length - radius, 1e-4) if is_tip else length
     n_theta, n_cap = 12, 4
     prof = [(radius * np.sin(a), radius * np.cos(a))
@@ -126,6 +136,8 @@ def _capsule(length: float, radius: float, is_tip: bool, max_segment: float) -> 
 def _palm(model: HandModel) -> trimesh.Trimesh:
     """Convex hull of the wrist cross-section, the knuckles and the thumb base, triangulated
     evenly by projecting a subdivided sphere (stretched to the hull's extents) onto it."""
+    import trimesh
+
     s = model.scale
     pts = []
     ang = np.linspace(0.0, 2 * np.pi, 24, endpoint=False)
@@ -164,6 +176,18 @@ def build_hand_mesh(model: HandModel) -> HandMesh:
 
 @lru_cache(maxsize=8)
 def _build_cached(hand_length_m: float) -> HandMesh:
+    arrays = cached_arrays(f'hand_mesh-{hand_length_m!r}',
+                           [Path(__file__), Path(_model_module.__file__)],
+                           lambda: _build_arrays(hand_length_m))
+    mesh = HandMesh(arrays['local_vertices'], arrays['vertex_link'], arrays['faces'],
+                    hand_length_m)
+    for arr in (mesh.local_vertices, mesh.vertex_link, mesh.faces):
+        arr.setflags(write=False)
+    return mesh
+
+
+def _build_arrays(hand_length_m: float) -> dict[str, np.ndarray]:
+    """The mesh arrays built with trimesh (palm hull, phalanx capsules)."""
     model = HandModel(hand_length_m)
     parts = [(0, _palm(model))]
     for d in range(5):
@@ -178,8 +202,5 @@ def _build_cached(hand_length_m: float) -> HandMesh:
         links.append(np.full(len(m.vertices), li, dtype=np.int64))
         faces.append(np.asarray(m.faces, dtype=np.int64) + offset)
         offset += len(m.vertices)
-    mesh = HandMesh(np.concatenate(verts), np.concatenate(links),
-                    np.concatenate(faces).astype(np.int32), hand_length_m)
-    for arr in (mesh.local_vertices, mesh.vertex_link, mesh.faces):
-        arr.setflags(write=False)
-    return mesh
+    return {'local_vertices': np.concatenate(verts), 'vertex_link': np.concatenate(links),
+            'faces': np.concatenate(faces).astype(np.int32)}

@@ -4,8 +4,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import sparse
-from sklearn.utils.extmath import randomized_svd
 
 from colorglove_ros.core.conventions import NUM_COLORS, TINY_SIZE
 from colorglove_ros.core.errors import ColorGloveError
@@ -247,6 +245,8 @@ def train_ssc(features: np.ndarray, pairs: np.ndarray, similar: np.ndarray, num_
     (seeded) into ``dim_groups`` disjoint groups searched in turn, one group a round, each
     exhaustively over (d, T): the pairs' disagreement intervals are held in one sparse
     matrix per group so a round is one sparse product."""
+    from scipy import sparse  # only when training codes (loading a database does not)
+
     features = np.asarray(features, np.float32)
     pairs = np.asarray(pairs, np.intp)
     y = np.where(np.asarray(similar, bool), 1.0, -1.0)
@@ -310,6 +310,8 @@ def train_random_projections(features: np.ndarray, num_bits: int = 192,
 def train_pca_itq(features: np.ndarray, num_bits: int = 192, seed: int = 0,
                   iterations: int = 50) -> BinaryEncoder:
     """PCA (randomised SVD) followed by iterative quantisation (Gong and Lazebnik 2011)."""
+    from sklearn.utils.extmath import randomized_svd  # heavy: only when training codes
+
     x = np.asarray(features, np.float64)
     if num_bits > min(x.shape):
         raise CodeError(f'ITQ needs at least {num_bits} samples and dimensions')

@@ -284,7 +284,7 @@ class PoseLookup:
         With ``blobs`` (the same image's patch blobs: ``color``, ``centroid_px`` in full-image
         pixels, ``pixel_count``: ``tracking.types.Blobs``) each finger of the blend is weighted by
         how well the nearest ``finger_evidence.num_neighbours`` entries' patches on that finger
-        match the blobs (:mod:`core.finger_evidence`) and the result carries the fingers'
+        match the blobs (:mod:`core.lookup.finger_evidence`) and the result carries the fingers'
         spread (``finger_std``); without, every DOF is blended with the image weights (the
         paper)."""
         t0 = time.perf_counter()
@@ -335,7 +335,7 @@ class PoseLookup:
                       blobs: object
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """Per-finger blend (20,) and spread (20,) of ``entries`` against full-image
-        ``blobs`` (:mod:`core.finger_evidence`), the best-scoring entry of each digit (5,),
+        ``blobs`` (:mod:`core.lookup.finger_evidence`), the best-scoring entry of each digit (5,),
         whose patches on that digit become its projection constraints, and which digits had
         evidence (5,); None when there are no usable blobs (the paper's blend stands)."""
         try:
@@ -411,7 +411,7 @@ class PoseLookup:
         src = source[vis]
         tiny_xy = self._a['patch_xy'][src, vis].astype(np.float64)
         full_xy = tiny_to_full(tiny_xy, *crop)
-        return ProjectionConstraints(vis, self._a['patch_color'][vis],
-                                     self._a['patch_vertex'][src, vis].astype(np.int64),
-                                     tiny_xy, full_xy,
-                                     self._a['patch_pixels'][src, vis].astype(np.float64))
+        return ProjectionConstraints(
+            patch_ids=vis, colors=self._a['patch_color'][vis],
+            vertices=self._a['patch_vertex'][src, vis], tiny_xy=tiny_xy,
+            pixel_counts=self._a['patch_pixels'][src, vis].astype(np.float64), full_xy=full_xy)

@@ -24,7 +24,8 @@ from colorglove_ros.core.validation import validate_segmenter_settings
 __all__ = [
     'SegmentationInputError', 'SegmentationConfigError', 'GloveSegmenter',
     'STATUS_OK',
-    'STATUS_NO_GLOVE', 'STATUS_TOO_SMALL', 'STATUS_OUT_OF_FRAME', 'STAGES', 'load_segmenter',
+    'STATUS_NO_GLOVE', 'STATUS_TOO_SMALL', 'STATUS_OUT_OF_FRAME', 'STATUS_FRAGMENTED',
+    'STAGES', 'load_segmenter',
     'keep_multicolor_components', 'relabel_borders',
 ]
 
@@ -32,6 +33,9 @@ STATUS_OK = 'ok'
 STATUS_NO_GLOVE = 'no_glove'          # (almost) no glove-coloured pixels in the frame
 STATUS_TOO_SMALL = 'too_small'        # glove found but too few pixels for a tiny image
 STATUS_OUT_OF_FRAME = 'out_of_frame'  # the crop window lies mostly outside the image
+# glove colours scattered in specks (noise, fine-grained clutter): too few of the window's
+# glove pixels lie in patch-sized blobs, where the printed glove's patches are solid
+STATUS_FRAGMENTED = 'fragmented'
 #: Timed stages, in pipeline order (``Observation.timings_ms`` also has ``'total'``);
 #: 'coarse' includes estimating the light colour.
 STAGES = ('coarse', 'filter', 'classify', 'cleanup', 'borders', 'crop', 'blobs')
@@ -265,11 +269,13 @@ class GloveSegmenter:
                  min_glove_pixels: int = 300, min_inside_fraction: float = 0.5,
                  min_blob_pixels: int = 12, min_component_colors: int = 3,
                  reattach_radius: int = 3, reattach_max_share: float = 0.2,
-                 light_passes: int = 1) -> None:
+                 light_passes: int = 1, min_blob_share: float = 0.85) -> None:
         if coarse_factor < 1 or max_roi_cells < TINY_SIZE or roi_margin < 1.0:
             raise SegmentationConfigError(
                 f'need coarse_factor >= 1, max_roi_cells >= {TINY_SIZE}, roi_margin >= 1; got '
                 f'{coarse_factor}, {max_roi_cells}, {roi_margin}')
+        if not 0.0 <= min_blob_share <= 1.0:
+            raise SegmentationConfigError(f'need 0 <= min_blob_share <= 1; got {min_blob_share}')
         if light_passes < 0 or reattach_radius < 0 or not reattach_max_share >= 0.0:
             raise SegmentationConfigError(
                 f'need light_passes, reattach_radius and reattach_max_share >= 0; got '
@@ -295,6 +301,7 @@ class GloveSegmenter:
         self.reattach_radius = int(reattach_radius)
         self.reattach_max_share = float(reattach_max_share)
         self.light_passes = int(light_passes)
+        self.min_blob_share = float(min_blob_share)
 
     # ------------------------------------------------------------------ helpers
     def _coarse_labels(self, small: np.ndarray, table: np.ndarray | None = None) -> np.ndarray:
@@ -449,6 +456,9 @@ class GloveSegmenter:
             obs.status = STATUS_OUT_OF_FRAME
         elif obs.glove_pixel_count < self.min_glove_pixels:
             obs.status = STATUS_TOO_SMALL
+        elif (sum(b.pixel_count for b in obs.blobs)
+              < self.min_blob_share * obs.glove_pixel_count):
+            obs.status = STATUS_FRAGMENTED
         else:
             obs.status = STATUS_OK
             obs.hand_found = True

@@ -183,8 +183,11 @@ class IKConfig:
         return replace(self.covariances, q_var=q_var)
 
 
+# Tracker switches set by the caller (ik_node parameters, the tools' --modes), never by the file:
+# two homes for one switch let one silently win.
+_CALLER_SWITCHES = ('enable_ik', 'enable_smoothing')
 _CONFIG_FIELDS = {
-    'enable_ik': bool, 'enable_smoothing': bool, 'max_iterations': int,
+    'max_iterations': int,
     'multi_camera_iterations': int, 'refine_iterations': int, 'lambda_init': float,
     'step_tol': float, 'cost_tol': float,
     'init_translation': bool, 'min_constraints': int, 'min_blob_pixels': int,
@@ -204,6 +207,10 @@ def load_ik_config(path: str | Path) -> IKConfig:
     if data.get('version') != IK_CONFIG_VERSION:
         raise IKConfigError(f'IK config {path} has version {data.get("version")!r}, '
                             f'expected {IK_CONFIG_VERSION}')
+    switches = sorted(set(data) & set(_CALLER_SWITCHES))
+    if switches:
+        raise IKConfigError(f'IK config {path}: {switches} are not IK file settings: set them as '
+                            'ik_node parameters (config/nodes.yaml) or with the tools\' --modes')
     unknown = set(data) - set(_CONFIG_FIELDS) - {'version', 'covariances', 'covariance_file'}
     if unknown:
         raise IKConfigError(f'IK config {path}: unknown keys {sorted(unknown)}')

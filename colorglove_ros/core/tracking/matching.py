@@ -9,14 +9,9 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.lookup.types import ProjectionConstraints
 from colorglove_ros.core.segmentation.crop import tiny_to_full
-from colorglove_ros.core.tracking.types import (
-    Blobs,
-    Correspondences,
-    EntryConstraints,
-    IKError,
-    MeshLike,
-)
+from colorglove_ros.core.tracking.types import Blobs, Correspondences, IKError, MeshLike
 
 __all__ = ['match_by_color', 'match_primary', 'match_extra_camera']
 
@@ -46,7 +41,7 @@ def _usable(blobs: Blobs, min_pixels: int) -> np.ndarray:
     return np.flatnonzero(blobs.pixel_count >= min_pixels)
 
 
-def match_primary(constraints: EntryConstraints, blobs: Blobs, crop: Any,
+def match_primary(constraints: ProjectionConstraints, blobs: Blobs, crop: Any,
                   camera: PinholeCamera, mesh: MeshLike, gate_tiny_px: float = 8.0,
                   gate_min_px: float = 10.0, min_blob_pixels: int = 4) -> Correspondences:
     """Match the entry's constraints (tiny-image centroids mapped to full-image pixels with
@@ -60,15 +55,15 @@ def match_primary(constraints: EntryConstraints, blobs: Blobs, crop: Any,
     pred = tiny_to_full(constraints.tiny_xy, scale, float(crop.offset_x), float(crop.offset_y))
     keep = _usable(blobs, min_blob_pixels)
     gate = max(gate_min_px, gate_tiny_px * scale)
-    k, m = match_by_color(pred, constraints.color, blobs.centroid_px[keep],
+    k, m = match_by_color(pred, constraints.colors, blobs.centroid_px[keep],
                           blobs.color[keep], gate)
     m = keep[m]
     return _make_corr(0, constraints, k, camera.undistort_pixels(blobs.centroid_px[m]), mesh)
 
 
-def _make_corr(cam: int, constraints: EntryConstraints, k: np.ndarray, target: np.ndarray,
+def _make_corr(cam: int, constraints: ProjectionConstraints, k: np.ndarray, target: np.ndarray,
                mesh: MeshLike) -> Correspondences:
-    v = constraints.vertex[k]
+    v = constraints.vertices[k]
     nv = len(mesh.vertex_link)
     if np.any((v < 0) | (v >= nv)):
         raise IKError(f'constraint vertex index out of range [0, {nv})')
@@ -76,10 +71,10 @@ def _make_corr(cam: int, constraints: EntryConstraints, k: np.ndarray, target: n
                            np.asarray(mesh.vertex_link, np.int64)[v],
                            np.asarray(mesh.local_vertices, float)[v],
                            np.asarray(target, float).reshape(-1, 2),
-                           constraints.patch_id[k].copy(), v.copy())
+                           constraints.patch_ids[k].copy(), v.copy())
 
 
-def match_extra_camera(cam_index: int, camera: PinholeCamera, constraints: EntryConstraints,
+def match_extra_camera(cam_index: int, camera: PinholeCamera, constraints: ProjectionConstraints,
                        predicted_world: np.ndarray, blobs: Blobs, mesh: MeshLike,
                        gate_px: float = 30.0, shift_max_px: float = 150.0,
                        inlier_px: float = 15.0, min_blob_pixels: int = 4,
@@ -108,7 +103,7 @@ def match_extra_camera(cam_index: int, camera: PinholeCamera, constraints: Entry
         return Correspondences.empty()
     bxy = camera.undistort_pixels(blobs.centroid_px[keep])
     bcol = blobs.color[keep]
-    kcol = constraints.color[ks]
+    kcol = constraints.colors[ks]
     # same-colour (constraint, blob) pairs, grouped by constraint (row-major order)
     pair_k, pair_m = np.nonzero(kcol[:, None] == bcol[None, :])
     diff = bxy[pair_m] - pred[ks[pair_k]]                  # (P, 2)

@@ -102,7 +102,7 @@ class HandTracker:
 
     The world frame is the primary camera's optical frame (``cameras[0]`` must have
     identity extrinsics); poses are expressed in it. With ``constraint_model: patch`` the
-    tracker needs the glove's patch of every mesh face: ``glove`` (a ``core.glove.Glove``),
+    tracker needs the glove's patch of every mesh face: ``glove`` (a ``core.hand.glove.Glove``),
     or else the standard glove ``default_hand(hand length, config.glove_seed)``, which must
     have been made on the same mesh.
     """
@@ -183,7 +183,7 @@ class HandTracker:
         the patch points at ``q`` unless ``patch_points`` is false)."""
         cfg = self.config
         cons = prior.constraints
-        v = cons.vertex
+        v = cons.vertices
         if np.any((v < 0) | (v >= len(self.mesh.vertex_link))):
             raise IKError('constraint vertex index out of range of the mesh')
         links = np.asarray(self.mesh.vertex_link)[v]
@@ -221,7 +221,7 @@ class HandTracker:
     def update(self, prior: PosePrior | Any | None, observations: Sequence[CameraObservation],
                stamp: float) -> IKResult:
         """Track one frame: ``prior`` from the lookup on the primary camera (a
-        :class:`PosePrior` or a ``core.search.LookupResult``; None if the lookup found
+        :class:`PosePrior` or a ``core.lookup.types.LookupResult``; None if the lookup found
         nothing), one observation per camera (primary first), time in seconds."""
         t0 = time.perf_counter()
         cfg = self.config

@@ -1,6 +1,6 @@
-"""Data types of the tracker: database-entry constraints, measured blobs, camera observations,
-the lookup prior and matched correspondences (numpy and dataclasses only, light to import: the
-ROS message adapters use them)."""
+"""Data types of the tracker: measured blobs, camera observations, the lookup prior (with the
+entry's ``core.lookup.types.ProjectionConstraints``) and matched correspondences (numpy and
+dataclasses only, light to import: the ROS message adapters use them)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -12,52 +12,17 @@ import numpy as np
 
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import NUM_DOFS
+from colorglove_ros.core.lookup.types import ProjectionConstraints
+from colorglove_ros.core.validation import as_rows
 
 __all__ = [
-    'IKError', 'EntryConstraints', 'Blobs', 'CameraObservation', 'PosePrior',
+    'IKError', 'Blobs', 'CameraObservation', 'PosePrior',
     'Correspondences', 'MeshLike', 'VertexTable',
 ]
 
 
 class IKError(ColorGloveError):
     """Invalid input to the inverse kinematics (shapes, cameras, model mismatch)."""
-
-
-def _arr(x: Any, dtype: Any, shape_tail: tuple[int, ...], name: str) -> np.ndarray:
-    a = np.asarray(x, dtype=dtype)
-    if a.ndim == 1 and shape_tail == () or a.ndim == 2 and a.shape[1:] == shape_tail:
-        return a
-    if a.size == 0:
-        return a.reshape((0, *shape_tail))
-    raise IKError(f'{name} must have shape (N, {", ".join(map(str, shape_tail))}), got {a.shape}')
-
-
-@dataclass(frozen=True)
-class EntryConstraints:
-    """Projection constraints of one database entry: per visible patch its id, colour
-    (1..10), the mesh vertex nearest its centroid, the centroid in the entry's 40x40 tiny
-    image (x, y) and its pixel count."""
-
-    patch_id: np.ndarray
-    color: np.ndarray
-    vertex: np.ndarray
-    tiny_xy: np.ndarray
-    pixel_count: np.ndarray
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, 'patch_id', _arr(self.patch_id, np.int64, (), 'patch_id'))
-        object.__setattr__(self, 'color', _arr(self.color, np.int64, (), 'color'))
-        object.__setattr__(self, 'vertex', _arr(self.vertex, np.int64, (), 'vertex'))
-        object.__setattr__(self, 'tiny_xy', _arr(self.tiny_xy, float, (2,), 'tiny_xy'))
-        object.__setattr__(self, 'pixel_count',
-                           _arr(self.pixel_count, float, (), 'pixel_count'))
-        n = len(self.patch_id)
-        if not all(len(a) == n for a in (self.color, self.vertex, self.tiny_xy,
-                                          self.pixel_count)):
-            raise IKError('EntryConstraints arrays must all have the same length')
-
-    def __len__(self) -> int:
-        return len(self.patch_id)
 
 
 @dataclass(frozen=True)
@@ -70,10 +35,11 @@ class Blobs:
     pixel_count: np.ndarray
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, 'color', _arr(self.color, np.int64, (), 'color'))
-        object.__setattr__(self, 'centroid_px', _arr(self.centroid_px, float, (2,), 'centroid'))
+        object.__setattr__(self, 'color', as_rows('color', self.color, np.int64, (), IKError))
+        object.__setattr__(self, 'centroid_px',
+                           as_rows('centroid', self.centroid_px, float, (2,), IKError))
         object.__setattr__(self, 'pixel_count',
-                           _arr(self.pixel_count, float, (), 'pixel_count'))
+                           as_rows('pixel_count', self.pixel_count, float, (), IKError))
         if not len(self.color) == len(self.centroid_px) == len(self.pixel_count):
             raise IKError('Blobs arrays must all have the same length')
 
@@ -93,7 +59,7 @@ class CameraObservation:
 
     hand_found: bool
     blobs: Blobs = field(default_factory=Blobs.empty)
-    crop: Any = None    # core.crop.CropTransform (scale, offset_x, offset_y)
+    crop: Any = None    # core.segmentation.crop.CropTransform (scale, offset_x, offset_y)
 
 
 @dataclass(frozen=True)
@@ -102,17 +68,17 @@ class PosePrior:
     projection constraints."""
 
     q_blend: np.ndarray
-    constraints: EntryConstraints
+    constraints: ProjectionConstraints
     finger_std: np.ndarray | None = None    # (20,) spread of the neighbours' fingers (rad)
 
     @classmethod
     def from_lookup(cls, result: Any) -> PosePrior:
-        """From a ``core.search.LookupResult`` (``blended`` and ``constraints`` with
+        """From a ``core.lookup.types.LookupResult`` (``blended`` and ``constraints`` with
         ``patch_ids, colors, vertices, tiny_xy, pixel_counts``; ``finger_std`` if any)."""
         try:
             c = result.constraints
-            cons = EntryConstraints(c.patch_ids, c.colors, c.vertices, c.tiny_xy,
-                                    c.pixel_counts)
+            cons = c if isinstance(c, ProjectionConstraints) else ProjectionConstraints(
+                c.patch_ids, c.colors, c.vertices, c.tiny_xy, c.pixel_counts)
             q_blend = np.asarray(result.blended, dtype=float)
         except AttributeError as exc:
             raise IKError(f'not a lookup result: {exc}') from exc
@@ -214,7 +180,7 @@ class Correspondences:
 
 
 class MeshLike(Protocol):
-    """What the tracker needs from ``core.hand_mesh.HandMesh``."""
+    """What the tracker needs from ``core.hand.mesh.HandMesh``."""
 
     vertex_link: np.ndarray
     local_vertices: np.ndarray

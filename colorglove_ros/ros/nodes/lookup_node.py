@@ -10,7 +10,8 @@ from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from rclpy.node import Node
 
 from colorglove_ros.core.camera import CalibrationError, load_calibration
-from colorglove_ros.core.lookup.database import DatabaseError, load_database, read_database_config
+from colorglove_ros.core.lookup.database import DatabaseError, load_database
+from colorglove_ros.core.lookup.database_build import read_database_config
 from colorglove_ros.core.lookup.search import PoseLookup, SearchError
 from colorglove_ros.core.validation import InvalidInputError
 from colorglove_ros.paths import resolve_path

@@ -1,0 +1,155 @@
+"""A lean latency subscriber: a process that only subscribes to ``/hand/joint_states`` and
+records, per JointState, its header stamp and its arrival time (system clock). The camera node
+and the bag player stamp frames at publish time with the system clock, so arrival minus stamp
+is the camera-frame-to-JointState latency, free of the queueing a busy monitor adds (one that
+also deserialises every camera image).
+
+``python -m colorglove_ros.ros.latency_probe --output FILE`` runs it until SIGINT/SIGTERM (or
+``--duration``) and writes ``{"stamp_ns": [...], "arrival_ns": [...]}``; :class:`LatencyProbe`
+starts and stops such a process and reads what it recorded."""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ['ProbeRecord', 'LatencyProbe', 'window_summaries', 'main']
+
+JOINT_STATES_TOPIC = '/hand/joint_states'
+
+
+@dataclass(frozen=True)
+class ProbeRecord:
+    """What the probe saw: header stamps and arrival times (ns, system clock), one per
+    JointState in arrival order."""
+
+    stamp_ns: np.ndarray
+    arrival_ns: np.ndarray
+
+    @property
+    def latencies_s(self) -> np.ndarray:
+        """Arrival minus header stamp, seconds."""
+        return (self.arrival_ns - self.stamp_ns) * 1e-9
+
+    @property
+    def rate_hz(self) -> float:
+        """JointStates per second between the first and the last arrival (0 if < 2)."""
+        if len(self.arrival_ns) < 2:
+            return 0.0
+        span = (self.arrival_ns[-1] - self.arrival_ns[0]) * 1e-9
+        return (len(self.arrival_ns) - 1) / span if span > 0 else 0.0
+
+
+def window_summaries(record: ProbeRecord, window_s: float) -> list[dict[str, float]]:
+    """Rate and latency p50/p95/max per consecutive ``window_s`` window of arrival time."""
+    if len(record.arrival_ns) == 0:
+        return []
+    t = (record.arrival_ns - record.arrival_ns[0]) * 1e-9
+    latency_ms = record.latencies_s * 1e3
+    rows = []
+    for k in range(int(t[-1] // window_s) + 1):
+        inside = (t >= k * window_s) & (t < (k + 1) * window_s)
+        if not inside.any():
+            continue
+        values = latency_ms[inside]
+        rows.append({'window_start_s': k * window_s, 'joint_states': int(inside.sum()),
+                     'rate_hz': float(inside.sum() / window_s),
+                     'latency_p50_ms': float(np.percentile(values, 50)),
+                     'latency_p95_ms': float(np.percentile(values, 95)),
+                     'latency_max_ms': float(values.max())})
+    return rows
+
+
+class LatencyProbe:
+    """The probe as a separate process: ``start()``, run the pipeline, ``stop()`` -> record."""
+
+    def __init__(self, env: dict[str, str] | None = None) -> None:
+        self.env = env
+        self.folder = tempfile.TemporaryDirectory(prefix='latency_probe_')
+        self.output = Path(self.folder.name) / 'record.json'
+        self.process: subprocess.Popen | None = None
+
+    def start(self, ready_timeout_s: float = 30.0) -> None:
+        """Start the process and wait until it has subscribed."""
+        ready = Path(self.folder.name) / 'ready'
+        self.process = subprocess.Popen(
+            [sys.executable, '-m', 'colorglove_ros.ros.latency_probe', '--output',
+             str(self.output), '--ready-file', str(ready)], env=self.env)
+        deadline = time.monotonic() + ready_timeout_s
+        while not ready.exists():
+            if self.process.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError('the latency probe did not start')
+            time.sleep(0.05)
+
+    def stop(self, timeout_s: float = 10.0) -> ProbeRecord:
+        """Stop the process (SIGINT) and return what it recorded."""
+        if self.process is not None and self.process.poll() is None:
+            self.process.send_signal(signal.SIGINT)
+            try:
+                self.process.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+        try:
+            data = json.loads(self.output.read_text())
+        except (OSError, ValueError) as exc:
+            raise RuntimeError(f'the latency probe wrote no record: {exc}') from exc
+        finally:
+            self.folder.cleanup()
+        return ProbeRecord(np.asarray(data['stamp_ns'], np.int64),
+                           np.asarray(data['arrival_ns'], np.int64))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Subscribe to /hand/joint_states and record stamp and arrival of each message."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--output', type=Path, required=True, help='JSON file written at exit')
+    parser.add_argument('--duration', type=float, default=0.0, help='seconds (0: until SIGINT)')
+    parser.add_argument('--ready-file', type=Path, help='touched once subscribed')
+    args = parser.parse_args(argv)
+
+    import rclpy
+    from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+    from sensor_msgs.msg import JointState
+
+    stamps: list[int] = []
+    arrivals: list[int] = []
+
+    def on_joints(msg: JointState) -> None:
+        arrivals.append(time.time_ns())
+        stamps.append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+
+    stop = []
+    signal.signal(signal.SIGTERM, lambda *_: stop.append(True))
+    signal.signal(signal.SIGINT, lambda *_: stop.append(True))
+    rclpy.init(args=None, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    node = rclpy.create_node('latency_probe')
+    node.create_subscription(JointState, JOINT_STATES_TOPIC, on_joints, QoSProfile(
+        history=QoSHistoryPolicy.KEEP_LAST, depth=100,
+        reliability=QoSReliabilityPolicy.RELIABLE))
+    if args.ready_file is not None:
+        args.ready_file.touch()
+    deadline = time.monotonic() + args.duration if args.duration > 0 else float('inf')
+    try:
+        while not stop and time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=0.1)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    tmp = args.output.with_suffix('.tmp')
+    tmp.write_text(json.dumps({'stamp_ns': stamps, 'arrival_ns': arrivals}))
+    os.replace(tmp, args.output)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
