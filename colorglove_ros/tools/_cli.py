@@ -8,7 +8,7 @@ from pathlib import Path
 
 from colorglove_ros.core.errors import ColorGloveError
 
-__all__ = ['tool_parser', 'add_sequence_arguments', 'run_tool']
+__all__ = ['tool_parser', 'add_sequence_arguments', 'add_scripted_noise_arguments', 'run_tool']
 
 
 def tool_parser(description: str | None, *, raw_description: bool = False,
@@ -43,6 +43,16 @@ def add_sequence_arguments(parser: argparse.ArgumentParser, *, sequences_help: s
     parser.add_argument('--calibration', default=str(config / 'calibration.yaml'),
                         help='camera rig the tracker runs with')
     parser.add_argument('--fps', type=float, default=30.0)
+
+
+def add_scripted_noise_arguments(parser: argparse.ArgumentParser, *, default_seeds: list[int],
+                                 tuning_seeds: list[int]) -> None:
+    """The arguments of the evaluations on scripted poses with a tracking-noise model
+    (eval_gestures, eval_spelling): held-out seeds and the noise level."""
+    parser.add_argument('--seeds', type=int, nargs='+', default=list(default_seeds),
+                        help=f'sequence seeds (tuning used {tuning_seeds[0]}-{tuning_seeds[-1]})')
+    parser.add_argument('--noise-mae-deg', type=float, default=7.0,
+                        help='mean absolute finger-joint error of the noise model, degrees')
 
 
 def run_tool(name: str, body: Callable[[], int]) -> int:

@@ -25,7 +25,6 @@ Thresholds were tuned on seeds 0-4; the default report seeds 100-109 were not us
 """
 from __future__ import annotations
 
-import argparse
 import time
 from collections.abc import Sequence
 
@@ -38,6 +37,7 @@ from colorglove_ros.core.evaluation.scripted_hands import (
     TrackingNoise,
     script_poses,
 )
+from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.gestures import (
     GESTURE_NAMES,
     PINCH_FINGERS,
@@ -55,6 +55,7 @@ from colorglove_ros.core.hand.poses import (
     sample_global_rotations,
 )
 from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.tools._cli import add_scripted_noise_arguments, tool_parser
 
 __all__ = ['GESTURE_EXEMPLARS', 'NEUTRAL_SHAPES', 'pinch_shape', 'gesture_script',
            'score_events', 'evaluate', 'main']
@@ -264,14 +265,10 @@ def evaluate(seeds: Sequence[int], episodes: int = 60, noise: TrackingNoise | No
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``colorglove_eval_gestures``."""
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--seeds', type=int, nargs='+', default=list(DEFAULT_SEEDS),
-                        help=f'sequence seeds (tuning used {TUNING_SEEDS[0]}-{TUNING_SEEDS[-1]})')
+    parser = tool_parser(__doc__, raw_description=True)
+    add_scripted_noise_arguments(parser, default_seeds=list(DEFAULT_SEEDS),
+                                 tuning_seeds=list(TUNING_SEEDS))
     parser.add_argument('--episodes', type=int, default=60, help='episodes per sequence')
-    parser.add_argument('--noise-mae-deg', type=float, default=7.0,
-                        help='mean absolute finger-joint error of the noise model, degrees')
-    parser.add_argument('--json', help='write the figures to this JSON file')
     args = parser.parse_args(argv)
     started = time.perf_counter()
     noise = TrackingNoise(joint_mae_deg=args.noise_mae_deg)
@@ -288,10 +285,8 @@ def main(argv: list[str] | None = None) -> int:
     overall = result['rows'][-1]
     worst_p = min(r['precision'] for r in result['rows'])
     worst_r = min(r['recall'] for r in result['rows'])
-    targets = [{'target': 'precision >= 95 % (every gesture)', 'measured': worst_p,
-                'result': 'PASS' if worst_p >= TARGET else 'FAIL'},
-               {'target': 'recall >= 95 % (every gesture)', 'measured': worst_r,
-                'result': 'PASS' if worst_r >= TARGET else 'FAIL'}]
+    targets = [target_row('precision >= 95 % (every gesture)', worst_p, TARGET, '>='),
+               target_row('recall >= 95 % (every gesture)', worst_r, TARGET, '>=')]
     print_table(targets, 'Targets (lowest gesture; overall precision '
                 f'{overall["precision"]:.3f}, recall {overall["recall"]:.3f})')
     print(f'{seconds:.1f} s')

@@ -19,7 +19,6 @@ Settings were tuned on seeds 0-4; the default report seeds 100-119 were not used
 """
 from __future__ import annotations
 
-import argparse
 import time
 from collections import Counter
 from collections.abc import Sequence
@@ -33,6 +32,7 @@ from colorglove_ros.core.evaluation.scripted_hands import (
     TrackingNoise,
     script_poses,
 )
+from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.hand.poses import LETTER_SHAPES, finger_limits
 from colorglove_ros.core.hand.spelling import (
@@ -43,6 +43,7 @@ from colorglove_ros.core.hand.spelling import (
     letter_rotation,
 )
 from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.tools._cli import add_scripted_noise_arguments, tool_parser
 
 __all__ = ['WORDS', 'spelling_script', 'score_letters', 'edit_distance', 'evaluate', 'main']
 
@@ -176,14 +177,10 @@ def evaluate(seeds: Sequence[int], words_per_sequence: int = 8,
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``colorglove_eval_spelling``."""
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--seeds', type=int, nargs='+', default=list(DEFAULT_SEEDS),
-                        help=f'sequence seeds (tuning used {TUNING_SEEDS[0]}-{TUNING_SEEDS[-1]})')
+    parser = tool_parser(__doc__, raw_description=True)
+    add_scripted_noise_arguments(parser, default_seeds=list(DEFAULT_SEEDS),
+                                 tuning_seeds=list(TUNING_SEEDS))
     parser.add_argument('--words', type=int, default=8, help='words per sequence')
-    parser.add_argument('--noise-mae-deg', type=float, default=7.0,
-                        help='mean absolute finger-joint error of the noise model, degrees')
-    parser.add_argument('--json', help='write the figures to this JSON file')
     args = parser.parse_args(argv)
     started = time.perf_counter()
     noise = TrackingNoise(joint_mae_deg=args.noise_mae_deg)
@@ -196,8 +193,7 @@ def main(argv: list[str] | None = None) -> int:
     summary = {k: result[k] for k in ('letters', 'letter_accuracy', 'thumb_letter_accuracy',
                                       'other_letter_accuracy', 'insertions', 'text_accuracy')}
     print_table([summary], 'Overall')
-    targets = [{'target': 'letter accuracy >= 90 %', 'measured': result['letter_accuracy'],
-                'result': 'PASS' if result['letter_accuracy'] >= TARGET else 'FAIL'},
+    targets = [target_row('letter accuracy >= 90 %', result['letter_accuracy'], TARGET, '>='),
                {'target': 'E M N S T (reported separately)',
                 'measured': result['thumb_letter_accuracy'], 'result': '-'}]
     print_table(targets, 'Targets')
