@@ -181,7 +181,7 @@ def test_candidates_message_carries_the_spread() -> None:
     from colorglove_msgs.msg import HandObservation
 
     from colorglove_ros.core.lookup.types import LookupResult, ProjectionConstraints
-    from colorglove_ros.ros.conversions import candidates_msg, pose_prior_from_candidates
+    from colorglove_ros.ros.conversions import candidates_to_msg, pose_prior_from_candidates_msg
 
     cons = ProjectionConstraints(np.array([0]), np.array([1]), np.array([5]),
                                  np.array([[3.0, 4.0]]), np.array([6.0]),
@@ -189,12 +189,12 @@ def test_candidates_message_carries_the_spread() -> None:
     spread = np.linspace(0.01, 0.2, 20)
     result = LookupResult(np.array([7]), np.array([0.5]), np.array([1.0]), np.zeros((1, 26)),
                           np.zeros(26), cons, 1, finger_std=spread)
-    msg = candidates_msg(HandObservation(hand_found=True), result)
-    np.testing.assert_allclose(pose_prior_from_candidates(msg).finger_std, spread)
-    plain = candidates_msg(HandObservation(hand_found=True),
+    msg = candidates_to_msg(HandObservation(hand_found=True), result)
+    np.testing.assert_allclose(pose_prior_from_candidates_msg(msg).finger_std, spread)
+    plain = candidates_to_msg(HandObservation(hand_found=True),
                            LookupResult(np.array([7]), np.array([0.5]), np.array([1.0]),
                                         np.zeros((1, 26)), np.zeros(26), cons, 1))
-    assert pose_prior_from_candidates(plain).finger_std is None
+    assert pose_prior_from_candidates_msg(plain).finger_std is None
     msg.finger_std = [0.1] * 19
     with pytest.raises(ValueError):
-        pose_prior_from_candidates(msg)
+        pose_prior_from_candidates_msg(msg)

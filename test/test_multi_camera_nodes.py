@@ -24,10 +24,10 @@ from colorglove_ros.core.segmentation.segmenter import load_segmenter
 from colorglove_ros.core.synthetic import frames as synth
 from colorglove_ros.core.synthetic.conditions import sample_conditions
 from colorglove_ros.ros.conversions import (
-    candidates_msg,
-    crop_from_observation,
-    observation_msg,
-    tiny_labels_from_observation,
+    candidates_to_msg,
+    crop_from_observation_msg,
+    observation_to_msg,
+    tiny_labels_from_observation_msg,
 )
 from colorglove_ros.ros.launcher import NodeSpec
 from colorglove_ros.ros.nodes.ik_node import IKNode
@@ -70,11 +70,11 @@ def stereo_messages(assets: NodeAssets) -> tuple[HandPoseCandidates, HandObserva
     segmenter = load_segmenter(str(assets.color_config))
     first, second = (segmenter.process(view.image_rgb) for view in views)
     assert first.hand_found and second.hand_found, (first.status, second.status)
-    primary = observation_msg(first, header(300, 0, RIG[0].frame_id))
+    primary = observation_to_msg(first, header(300, 0, RIG[0].frame_id))
     result = PoseLookup(load_database(assets.database), 40, 10).lookup(
-        tiny_labels_from_observation(primary), crop_from_observation(primary), RIG[0])
-    return (candidates_msg(primary, result, lookup_time_ms=1.0),
-            observation_msg(second, header(300, 0, SECOND.frame_id)))
+        tiny_labels_from_observation_msg(primary), crop_from_observation_msg(primary), RIG[0])
+    return (candidates_to_msg(primary, result, lookup_time_ms=1.0),
+            observation_to_msg(second, header(300, 0, SECOND.frame_id)))
 
 
 def _second_camera_constraints(status: str) -> int:

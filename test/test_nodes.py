@@ -35,10 +35,10 @@ from colorglove_ros.core.lookup.database import load_database
 from colorglove_ros.core.lookup.search import PoseLookup
 from colorglove_ros.core.segmentation.segmenter import load_segmenter
 from colorglove_ros.ros.conversions import (
-    blobs_from_observation,
-    crop_from_observation,
-    observation_msg,
-    tiny_labels_from_observation,
+    blobs_from_observation_msg,
+    crop_from_observation_msg,
+    observation_to_msg,
+    tiny_labels_from_observation_msg,
 )
 from colorglove_ros.ros.image import array_to_image
 from colorglove_ros.ros.nodes.camera_node import CameraNode
@@ -69,7 +69,7 @@ def good_observation(assets: NodeAssets, good_rgb: np.ndarray) -> HandObservatio
     """What the segmenter makes of the good frame, as the segmentation node would send it."""
     observation = load_segmenter(str(assets.color_config)).process(good_rgb)
     assert observation.hand_found, observation.status
-    return observation_msg(observation, header(200, 500, 'camera_optical_frame'))
+    return observation_to_msg(observation, header(200, 500, 'camera_optical_frame'))
 
 
 def _segmentation(assets: NodeAssets):
@@ -102,7 +102,7 @@ def test_segmentation_node_rgb8_and_bgr8(assets: NodeAssets, good_rgb: np.ndarra
         assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (sec, nanosec)
         assert msg.header.frame_id == frame
         assert (msg.image_width, msg.image_height) == (640, 480)
-        tiny = tiny_labels_from_observation(msg)
+        tiny = tiny_labels_from_observation_msg(msg)
         assert tiny.shape == (TINY_SIZE, TINY_SIZE) and len(msg.tiny_labels) == 1600
         np.testing.assert_array_equal(tiny, expected.tiny_labels)
         colors = [b.color_label for b in msg.blobs]
@@ -208,9 +208,9 @@ def test_lookup_node_candidates(assets: NodeAssets, good_observation: HandObserv
     lookup = PoseLookup(load_database(assets.database), 40, 10)
     camera = load_calibration(REPO_DIR / 'config' / 'calibration.yaml').primary
     # the node blends each finger from the observation's blobs (finger_evidence: true)
-    expected = lookup.lookup(tiny_labels_from_observation(good_observation),
-                             crop_from_observation(good_observation), camera,
-                             blobs_from_observation(good_observation))
+    expected = lookup.lookup(tiny_labels_from_observation_msg(good_observation),
+                             crop_from_observation_msg(good_observation), camera,
+                             blobs_from_observation_msg(good_observation))
     with running(_lookup(assets)) as h:
         out = h.collect(HandPoseCandidates, 'hand/pose_candidates')
         pub = h.publisher(HandObservation, 'hand/observation')
@@ -269,13 +269,13 @@ def test_lookup_node_rejects_non_finite_crop(assets: NodeAssets,
 # ------------------------------------------------------------------------------ ik_node
 @pytest.fixture(scope='session')
 def good_candidates(assets: NodeAssets, good_observation: HandObservation) -> HandPoseCandidates:
-    from colorglove_ros.ros.conversions import candidates_msg
+    from colorglove_ros.ros.conversions import candidates_to_msg
 
     lookup = PoseLookup(load_database(assets.database), 40, 10)
     camera = load_calibration(REPO_DIR / 'config' / 'calibration.yaml').primary
-    result = lookup.lookup(tiny_labels_from_observation(good_observation),
-                           crop_from_observation(good_observation), camera)
-    return candidates_msg(good_observation, result, lookup_time_ms=1.0)
+    result = lookup.lookup(tiny_labels_from_observation_msg(good_observation),
+                           crop_from_observation_msg(good_observation), camera)
+    return candidates_to_msg(good_observation, result, lookup_time_ms=1.0)
 
 
 def test_ik_node_outputs(good_candidates: HandPoseCandidates, good_rgb: np.ndarray) -> None:

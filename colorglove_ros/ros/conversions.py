@@ -16,7 +16,7 @@ from sensor_msgs.msg import CameraInfo, JointState
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.camera import PinholeCamera, camera_from_camera_info
 from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.hand.model import DOF_NAMES, FINGER_DOF_NAMES
 from colorglove_ros.core.hand.overlay import SKELETON_BONES
@@ -27,12 +27,13 @@ from colorglove_ros.core.segmentation.types import Observation
 from colorglove_ros.core.tracking.types import Blobs, CameraObservation, PosePrior
 
 __all__ = [
-    'stamp_to_seconds', 'camera_info_from_camera', 'joint_state_from_pose',
-    'pose_stamped_from_pose', 'pose_from_joint_state', 'pose_from_messages',
-    'crop_from_observation',
-    'tiny_labels_from_observation', 'blobs_from_observation', 'camera_observation_from_msg',
-    'candidates_msg', 'pose_prior_from_candidates', 'skeleton_markers',
-    'observation_msg', 'tf_message_from_pose',
+    'stamp_to_seconds', 'camera_to_camera_info_msg', 'camera_from_camera_info_msg',
+    'pose_to_joint_state_msg',
+    'pose_to_wrist_pose_msg', 'pose_from_joint_state_msg', 'pose_from_msgs',
+    'crop_from_observation_msg',
+    'tiny_labels_from_observation_msg', 'blobs_from_observation_msg', 'camera_observation_from_msg',
+    'candidates_to_msg', 'pose_prior_from_candidates_msg', 'skeleton_to_markers_msg',
+    'observation_to_msg', 'wrist_pose_to_tf_msg',
 ]
 
 
@@ -41,30 +42,40 @@ def stamp_to_seconds(stamp: Time) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 
-def camera_info_from_camera(camera: PinholeCamera, header: Header) -> CameraInfo:
+def camera_to_camera_info_msg(camera: PinholeCamera, header: Header) -> CameraInfo:
     """``sensor_msgs/CameraInfo`` (plumb_bob or rational_polynomial) for a calibrated camera."""
     return CameraInfo(header=header, **camera.camera_info_fields())
 
 
-def joint_state_from_pose(pose: np.ndarray, header: Header) -> JointState:
+def camera_from_camera_info_msg(msg: CameraInfo, *, rectified: bool = False) -> PinholeCamera:
+    """The camera a ``CameraInfo`` describes (its frame_id, size, K, D and model; with
+    ``rectified`` the projection matrix P and no distortion, for ``image_rect`` input)."""
+    return camera_from_camera_info(
+        int(msg.width), int(msg.height), list(msg.k), list(msg.d), str(msg.distortion_model),
+        list(msg.p), rectified=rectified, frame_id=str(msg.header.frame_id) or
+        'camera_optical_frame', where=f'CameraInfo of {msg.header.frame_id or "(no frame_id)"}')
+
+
+def pose_to_joint_state_msg(pose: np.ndarray, header: Header) -> JointState:
     """The 20 finger joints of a 26-DOF pose as ``JointState`` (URDF joint names, radians)."""
     return JointState(header=header, name=list(FINGER_DOF_NAMES),
                       position=[float(v) for v in np.asarray(pose)[6:26]])
 
 
-def pose_from_joint_state(msg: JointState) -> np.ndarray:
+def pose_from_joint_state_msg(msg: JointState) -> np.ndarray:
     """The 20 finger joint angles of a ``JointState``, in ``FINGER_DOF_NAMES`` order."""
     positions = dict(zip(msg.name, msg.position, strict=False))
     return np.array([positions[name] for name in FINGER_DOF_NAMES])
 
 
-def pose_from_messages(joints: JointState, wrist: PoseStamped) -> np.ndarray:
+def pose_from_msgs(joints: JointState, wrist: PoseStamped) -> np.ndarray:
     """The 26-DOF pose of a ``JointState`` (finger joints) and a wrist ``PoseStamped``."""
     p, o = wrist.pose.position, wrist.pose.orientation
-    return pose_from_fields([p.x, p.y, p.z], [o.x, o.y, o.z, o.w], pose_from_joint_state(joints))
+    return pose_from_fields([p.x, p.y, p.z], [o.x, o.y, o.z, o.w],
+                            pose_from_joint_state_msg(joints))
 
 
-def pose_stamped_from_pose(pose: np.ndarray, header: Header) -> PoseStamped:
+def pose_to_wrist_pose_msg(pose: np.ndarray, header: Header) -> PoseStamped:
     """The wrist position and orientation of a 26-DOF pose as ``PoseStamped`` (camera frame)."""
     pose = np.asarray(pose, dtype=float)
     x, y, z, w = wrist_quaternion(pose)
@@ -74,13 +85,13 @@ def pose_stamped_from_pose(pose: np.ndarray, header: Header) -> PoseStamped:
 
 
 # --------------------------------------------------------------- observation and candidates
-def crop_from_observation(msg: HandObservation) -> CropTransform:
+def crop_from_observation_msg(msg: HandObservation) -> CropTransform:
     """The tiny -> full-image crop transform carried by an observation."""
     return CropTransform(scale=msg.crop_scale, offset_x=msg.crop_offset_x,
                          offset_y=msg.crop_offset_y)
 
 
-def tiny_labels_from_observation(msg: HandObservation) -> np.ndarray:
+def tiny_labels_from_observation_msg(msg: HandObservation) -> np.ndarray:
     """The observation's 40x40 label image; raises ValueError if its size is wrong."""
     labels = np.asarray(msg.tiny_labels, dtype=np.uint8)
     if labels.size != TINY_SIZE * TINY_SIZE:
@@ -88,7 +99,7 @@ def tiny_labels_from_observation(msg: HandObservation) -> np.ndarray:
     return labels.reshape(TINY_SIZE, TINY_SIZE)
 
 
-def blobs_from_observation(msg: HandObservation) -> Blobs:
+def blobs_from_observation_msg(msg: HandObservation) -> Blobs:
     """The observation's glove blobs (colour, full-image centroid, pixel count)."""
     if not msg.blobs:
         return Blobs.empty()
@@ -101,11 +112,11 @@ def camera_observation_from_msg(msg: HandObservation) -> CameraObservation:
     """An observation message as the IK's per-camera input."""
     if not msg.hand_found:
         return CameraObservation(hand_found=False)
-    return CameraObservation(hand_found=True, blobs=blobs_from_observation(msg),
-                             crop=crop_from_observation(msg))
+    return CameraObservation(hand_found=True, blobs=blobs_from_observation_msg(msg),
+                             crop=crop_from_observation_msg(msg))
 
 
-def candidates_msg(observation: HandObservation, result: LookupResult | None,
+def candidates_to_msg(observation: HandObservation, result: LookupResult | None,
                    status: str = '', lookup_time_ms: float = 0.0) -> HandPoseCandidates:
     """The lookup node's output: neighbours, blend and the nearest entry's constraints, with
     the observation it came from. ``result`` None means no hand (``status`` says why)."""
@@ -133,7 +144,7 @@ def candidates_msg(observation: HandObservation, result: LookupResult | None,
     return msg
 
 
-def pose_prior_from_candidates(msg: HandPoseCandidates) -> PosePrior:
+def pose_prior_from_candidates_msg(msg: HandPoseCandidates) -> PosePrior:
     """The IK's starting point from a candidates message (blended pose + constraints)."""
     if list(msg.dof_names) != list(DOF_NAMES):
         raise ValueError(f'candidates carry DOFs {list(msg.dof_names)[:3]}..., '
@@ -160,8 +171,8 @@ def pose_prior_from_candidates(msg: HandPoseCandidates) -> PosePrior:
             pixel_counts=np.array([c.pixel_count for c in constraints], dtype=float)))
 
 
-def skeleton_markers(keypoints_camera: np.ndarray | None, header: Header,
-                     namespace: str = 'hand') -> MarkerArray:
+def skeleton_to_markers_msg(keypoints_camera: np.ndarray | None, header: Header,
+                            namespace: str = 'hand') -> MarkerArray:
     """The hand skeleton as a LINE_LIST (bones) and a SPHERE_LIST (joints) in the camera frame;
     ``None`` (no hand) clears the markers."""
     if keypoints_camera is None:
@@ -180,7 +191,7 @@ def skeleton_markers(keypoints_camera: np.ndarray | None, header: Header,
     return MarkerArray(markers=[bones, joints])
 
 
-def observation_msg(observation: Observation, header: Header) -> HandObservation:
+def observation_to_msg(observation: Observation, header: Header) -> HandObservation:
     """The segmentation result as a ``HandObservation`` (stamp and frame from the camera)."""
     msg = HandObservation(header=header, hand_found=bool(observation.hand_found),
                           image_width=int(observation.image_width),
@@ -200,7 +211,7 @@ def observation_msg(observation: Observation, header: Header) -> HandObservation
     return msg
 
 
-def tf_message_from_pose(pose: PoseStamped, child_frame_id: str):
+def wrist_pose_to_tf_msg(pose: PoseStamped, child_frame_id: str):
     """A ``tf2_msgs/TFMessage`` carrying ``pose`` as the transform header.frame_id -> child
     (tf2_msgs is imported here because it exists only on native ROS 2 installs)."""
     from geometry_msgs.msg import Transform, TransformStamped, Vector3

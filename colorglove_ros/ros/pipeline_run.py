@@ -31,7 +31,7 @@ from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import String
 
 from colorglove_ros.core.evaluation.metrics import jitter_runs_mm, latency_summary_ms, pose_accuracy
-from colorglove_ros.ros.conversions import pose_from_messages
+from colorglove_ros.ros.conversions import pose_from_msgs
 from colorglove_ros.ros.image import image_to_rgb8
 from colorglove_ros.ros.latency_probe import LatencyProbe, ProbeRecord
 from colorglove_ros.ros.launcher import Launcher, NodeSpec, use_fastdds_profile
@@ -279,12 +279,12 @@ def _collect(monitor: PipelineMonitor, duration: float, published: int,
     with monitor.lock:
         matched = [k for k in sorted(monitor.joints) if k in monitor.wrists
                    and k in monitor.truth_joints and k in monitor.truth_wrists]
-        estimated = np.array([pose_from_messages(monitor.joints[k], monitor.wrists[k])
+        estimated = np.array([pose_from_msgs(monitor.joints[k], monitor.wrists[k])
                               for k in matched])
         # position of each matched frame among all camera frames seen, in stamp order
         frame_order = {k: i for i, k in enumerate(sorted(monitor.frame_times))}
         frame_index = np.array([frame_order.get(k, -1) for k in matched], dtype=int)
-        truth = np.array([pose_from_messages(monitor.truth_joints[k], monitor.truth_wrists[k])
+        truth = np.array([pose_from_msgs(monitor.truth_joints[k], monitor.truth_wrists[k])
                           for k in matched])
         return PipelineRun(
             frames_expected=published, frames=len(monitor.frame_times),
@@ -351,7 +351,8 @@ def bag_feed(bag: Path, rate: float = 1.0, paced: bool = False) -> Any:
     if player is None:
         raise FileNotFoundError('colorglove_play_bag not on PATH (is the venv active?)')
     # two image subscribers before the first frame: segmentation_node and the monitor
-    command = [player, str(bag), '--rate', str(rate), '--min-subscribers', '2'] + \
+    # restamped at publish time: the latency probe takes arrival minus header stamp
+    command = [player, str(bag), '--rate', str(rate), '--min-subscribers', '2', '--restamp'] + \
         (['--paced'] if paced else [])
 
     def feed() -> None:

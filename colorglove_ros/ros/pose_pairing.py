@@ -6,7 +6,7 @@ import numpy as np
 from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 
-from colorglove_ros.ros.conversions import pose_from_messages
+from colorglove_ros.ros.conversions import pose_from_msgs
 
 __all__ = ['PosePairer', 'is_no_hand_status']
 
@@ -34,7 +34,7 @@ class PosePairer:
             return None
         joints, wrist = self._joints, self._wrist
         self._joints = self._wrist = None
-        return pose_from_messages(joints, wrist), wrist
+        return pose_from_msgs(joints, wrist), wrist
 
     def add_joints(self, msg: JointState) -> tuple[np.ndarray, PoseStamped] | None:
         """Keep a JointState; the frame's pose if its wrist pose has arrived."""

@@ -20,10 +20,10 @@ from colorglove_ros.core.lookup.search import PoseLookup
 from colorglove_ros.core.segmentation.segmenter import load_segmenter
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
-    candidates_msg,
-    crop_from_observation,
-    observation_msg,
-    tiny_labels_from_observation,
+    candidates_to_msg,
+    crop_from_observation_msg,
+    observation_to_msg,
+    tiny_labels_from_observation_msg,
 )
 from colorglove_ros.ros.image import array_to_image
 from colorglove_ros.ros.nodes.ik_node import IKNode
@@ -51,16 +51,16 @@ def good_rgb() -> np.ndarray:
 def good_observation(assets: NodeAssets, good_rgb: np.ndarray) -> HandObservation:
     observation = load_segmenter(str(assets.color_config)).process(good_rgb)
     assert observation.hand_found, observation.status
-    return observation_msg(observation, header(1, 0))
+    return observation_to_msg(observation, header(1, 0))
 
 
 @pytest.fixture(scope='module')
 def good_candidates(assets: NodeAssets, good_observation: HandObservation) -> HandPoseCandidates:
     lookup = PoseLookup(load_database(assets.database), 40, 10)
     camera = load_calibration(resolve_path('config/calibration.yaml')).primary
-    result = lookup.lookup(tiny_labels_from_observation(good_observation),
-                           crop_from_observation(good_observation), camera)
-    return candidates_msg(good_observation, result, lookup_time_ms=1.0)
+    result = lookup.lookup(tiny_labels_from_observation_msg(good_observation),
+                           crop_from_observation_msg(good_observation), camera)
+    return candidates_to_msg(good_observation, result, lookup_time_ms=1.0)
 
 
 # ------------------------------------------------------------------------ bad inputs

@@ -14,9 +14,9 @@ from colorglove_ros.core.camera import CalibrationError, load_calibration
 from colorglove_ros.core.frame_sources import FrameSourceError, open_frame_source
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
-    camera_info_from_camera,
-    joint_state_from_pose,
-    pose_stamped_from_pose,
+    camera_to_camera_info_msg,
+    pose_to_joint_state_msg,
+    pose_to_wrist_pose_msg,
 )
 from colorglove_ros.ros.image import array_to_image
 from colorglove_ros.ros.nodes.common import (
@@ -96,10 +96,10 @@ class CameraNode(Node):
             return
         header = Header(stamp=self.get_clock().now().to_msg(), frame_id=self.camera.frame_id)
         self.image_pub.publish(array_to_image(frame.image_rgb, 'rgb8', header))
-        self.info_pub.publish(camera_info_from_camera(self.camera, header))
+        self.info_pub.publish(camera_to_camera_info_msg(self.camera, header))
         if frame.ground_truth_pose is not None:
-            self.gt_joint_pub.publish(joint_state_from_pose(frame.ground_truth_pose, header))
-            self.gt_wrist_pub.publish(pose_stamped_from_pose(frame.ground_truth_pose, header))
+            self.gt_joint_pub.publish(pose_to_joint_state_msg(frame.ground_truth_pose, header))
+            self.gt_wrist_pub.publish(pose_to_wrist_pose_msg(frame.ground_truth_pose, header))
         self.published += 1
 
     def destroy_node(self) -> None:

@@ -29,10 +29,10 @@ from colorglove_ros.core.tracking.edge_tracker import EdgeTracker, EdgeTrackerCo
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.bags import camera_info_to_pinhole
 from colorglove_ros.ros.conversions import (
-    joint_state_from_pose,
-    pose_from_messages,
-    pose_stamped_from_pose,
-    skeleton_markers,
+    pose_from_msgs,
+    pose_to_joint_state_msg,
+    pose_to_wrist_pose_msg,
+    skeleton_to_markers_msg,
     stamp_to_seconds,
 )
 from colorglove_ros.ros.image import ImageEncodingError, image_to_array
@@ -158,7 +158,7 @@ class EdgeTrackerNode(Node):
                                    throttle_duration_sec=1.0)
             return
         try:
-            self.tracker.initialize(pose_from_messages(msg, self.init_wrist))
+            self.tracker.initialize(pose_from_msgs(msg, self.init_wrist))
         except (ColorGloveError, ValueError, KeyError) as exc:
             self.get_logger().warn(f'bad starting pose: {exc}', throttle_duration_sec=1.0)
             return
@@ -195,9 +195,9 @@ class EdgeTrackerNode(Node):
             return
         header.frame_id = self.tracker.cameras[0].frame_id
         self.hand_was_found = True
-        self.joint_pub.publish(joint_state_from_pose(result.q, header))
-        self.wrist_pub.publish(pose_stamped_from_pose(result.q, header))
-        self.marker_pub.publish(skeleton_markers(self.model.keypoints(result.q), header))
+        self.joint_pub.publish(pose_to_joint_state_msg(result.q, header))
+        self.wrist_pub.publish(pose_to_wrist_pose_msg(result.q, header))
+        self.marker_pub.publish(skeleton_to_markers_msg(self.model.keypoints(result.q), header))
         fit = result.fit
         per_camera = ', '.join(f'{c.name} {n}' for c, n in
                                zip(self.tracker.cameras, fit.links_found, strict=True))
@@ -207,7 +207,7 @@ class EdgeTrackerNode(Node):
 
     def _report_no_hand(self, header, reason: str) -> None:
         if self.hand_was_found:
-            self.marker_pub.publish(skeleton_markers(None, header))
+            self.marker_pub.publish(skeleton_to_markers_msg(None, header))
         self.hand_was_found = False
         self.status_pub.publish(String(data=f'no hand: {reason}'))
 

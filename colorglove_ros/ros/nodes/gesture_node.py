@@ -14,7 +14,7 @@ from colorglove_ros.core.hand.gestures import GestureDetector, GestureEvent, for
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.hand.poses import full_pose
 from colorglove_ros.paths import resolve_path
-from colorglove_ros.ros.conversions import pose_from_joint_state, stamp_to_seconds
+from colorglove_ros.ros.conversions import pose_from_joint_state_msg, stamp_to_seconds
 from colorglove_ros.ros.nodes.common import (
     StartupError,
     declare,
@@ -48,7 +48,7 @@ class GestureNode(Node):
     def on_joints(self, msg: JointState) -> None:
         """Detect on one frame's finger joints (the wrist pose does not matter)."""
         try:
-            q = full_pose(self.model, pose_from_joint_state(msg))
+            q = full_pose(self.model, pose_from_joint_state_msg(msg))
             events = self.detector.update(q, stamp_to_seconds(msg.header.stamp))
         except (KeyError, ValueError) as exc:
             self.get_logger().warn(f'bad JointState: {exc}', throttle_duration_sec=1.0)

@@ -26,12 +26,12 @@ from colorglove_ros.core.validation import InvalidInputError, validate_hand_dept
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
     camera_observation_from_msg,
-    joint_state_from_pose,
-    pose_prior_from_candidates,
-    pose_stamped_from_pose,
-    skeleton_markers,
+    pose_prior_from_candidates_msg,
+    pose_to_joint_state_msg,
+    pose_to_wrist_pose_msg,
+    skeleton_to_markers_msg,
     stamp_to_seconds,
-    tf_message_from_pose,
+    wrist_pose_to_tf_msg,
 )
 from colorglove_ros.ros.image import ImageEncodingError, array_to_image, image_to_rgb8
 from colorglove_ros.ros.message_checks import check_candidates_msg, check_observation_msg
@@ -205,7 +205,7 @@ class IKNode(Node):
                 blended = check_candidates_msg(msg, self.num_vertices,
                                                (camera.width, camera.height))
                 self._check_depth(blended)
-                prior = pose_prior_from_candidates(msg)
+                prior = pose_prior_from_candidates_msg(msg)
             observations = [camera_observation_from_msg(msg.observation),
                             *self._extra_camera_observations(stamp)]
             result = self.tracker.update(prior, observations, stamp)
@@ -233,13 +233,13 @@ class IKNode(Node):
             self._report_no_hand(msg, reason)
             return
         self.hand_was_found = True
-        self.joint_pub.publish(joint_state_from_pose(result.q, msg.header))
-        wrist = pose_stamped_from_pose(result.q, msg.header)
+        self.joint_pub.publish(pose_to_joint_state_msg(result.q, msg.header))
+        wrist = pose_to_wrist_pose_msg(result.q, msg.header)
         self.wrist_pub.publish(wrist)
         if self.tf_pub is not None:
-            self.tf_pub.publish(tf_message_from_pose(wrist, child_frame_id='palm'))
+            self.tf_pub.publish(wrist_pose_to_tf_msg(wrist, child_frame_id='palm'))
         keypoints = self.model.keypoints(result.q)
-        self.marker_pub.publish(skeleton_markers(keypoints, msg.header))
+        self.marker_pub.publish(skeleton_to_markers_msg(keypoints, msg.header))
         per_camera = ', '.join(f'{camera.name} {count}' for camera, count in
                                zip(self.cameras, result.constraints_per_camera, strict=False))
         self.status_pub.publish(String(
@@ -250,7 +250,7 @@ class IKNode(Node):
 
     def _report_no_hand(self, msg: HandPoseCandidates, reason: str) -> None:
         if self.hand_was_found:
-            self.marker_pub.publish(skeleton_markers(None, msg.header))
+            self.marker_pub.publish(skeleton_to_markers_msg(None, msg.header))
         self.hand_was_found = False
         self.status_pub.publish(String(data=f'no hand: {reason}'))
 

@@ -16,9 +16,9 @@ from colorglove_ros.core.lookup.search import PoseLookup, SearchError
 from colorglove_ros.core.validation import InvalidInputError
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
-    blobs_from_observation,
-    candidates_msg,
-    crop_from_observation,
+    blobs_from_observation_msg,
+    candidates_to_msg,
+    crop_from_observation_msg,
 )
 from colorglove_ros.ros.message_checks import check_observation_msg
 from colorglove_ros.ros.nodes.common import (
@@ -70,37 +70,37 @@ class LookupNode(Node):
         """Look one observation up and publish the candidates (or a 'no hand' message)."""
         started = time.perf_counter()
         if not observation.hand_found:
-            self.publisher.publish(candidates_msg(observation, None))
+            self.publisher.publish(candidates_to_msg(observation, None))
             return
         try:
             tiny = check_observation_msg(observation, (self.camera.width, self.camera.height))
-            blobs = blobs_from_observation(observation) if self.finger_evidence else None
-            result = self.lookup.lookup(tiny, crop_from_observation(observation), self.camera,
+            blobs = blobs_from_observation_msg(observation) if self.finger_evidence else None
+            result = self.lookup.lookup(tiny, crop_from_observation_msg(observation), self.camera,
                                         blobs)
         except InvalidInputError as exc:
             self.get_logger().warn(f'invalid observation: {exc}', throttle_duration_sec=1.0)
-            self.publisher.publish(candidates_msg(observation, None,
+            self.publisher.publish(candidates_to_msg(observation, None,
                                                   status=f'lookup: invalid observation: {exc}'))
             return
         except (SearchError, ValueError) as exc:
             self.get_logger().warn(f'lookup failed: {exc}', throttle_duration_sec=1.0)
-            self.publisher.publish(candidates_msg(observation, None, status=f'lookup: {exc}'))
+            self.publisher.publish(candidates_to_msg(observation, None, status=f'lookup: {exc}'))
             return
         except Exception as exc:   # last line of defence: a message must never stop the node
             self.get_logger().error(f'lookup failed: {exc!r}\n{traceback.format_exc()}',
                                     throttle_duration_sec=1.0)
-            self.publisher.publish(candidates_msg(observation, None,
+            self.publisher.publish(candidates_to_msg(observation, None,
                                                   status=f'lookup failed: {exc!r}'))
             return
         elapsed_ms = 1e3 * (time.perf_counter() - started)
         nearest = float(result.distances[0]) if len(result.distances) else float('inf')
         if not nearest <= self.max_image_distance:
-            self.publisher.publish(candidates_msg(
+            self.publisher.publish(candidates_to_msg(
                 observation, None, lookup_time_ms=elapsed_ms,
                 status=f'lookup: nearest database image {nearest:.2f} tiny px away (more '
                        f'than max_image_distance {self.max_image_distance:g}): not a hand'))
             return
-        self.publisher.publish(candidates_msg(observation, result, lookup_time_ms=elapsed_ms))
+        self.publisher.publish(candidates_to_msg(observation, result, lookup_time_ms=elapsed_ms))
 
 
 def main(args: list[str] | None = None) -> int:

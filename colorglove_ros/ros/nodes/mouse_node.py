@@ -19,7 +19,7 @@ from sensor_msgs.msg import JointState, Joy
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.tracking.mouse import Mouse3D, MouseConfig, TablePlane
-from colorglove_ros.ros.conversions import pose_from_messages, stamp_to_seconds
+from colorglove_ros.ros.conversions import pose_from_msgs, stamp_to_seconds
 from colorglove_ros.ros.nodes.common import StartupError, declare, run_node
 
 __all__ = ['MouseNode', 'main']
@@ -90,7 +90,7 @@ class MouseNode(Node):
                 > self.stamp_tolerance:
             return
         try:
-            state = self.mouse.update(pose_from_messages(msg, self.wrist), stamp)
+            state = self.mouse.update(pose_from_msgs(msg, self.wrist), stamp)
         except (ColorGloveError, ValueError, KeyError) as exc:
             self.get_logger().warn(f'pose dropped: {exc}', throttle_duration_sec=1.0)
             return

@@ -14,7 +14,7 @@ from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
 from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
 from colorglove_ros.core.segmentation.segmenter import SegmentationInputError, load_segmenter
 from colorglove_ros.core.validation import InvalidObservationError, validate_image_size
-from colorglove_ros.ros.conversions import observation_msg
+from colorglove_ros.ros.conversions import observation_to_msg
 from colorglove_ros.ros.image import ImageEncodingError, array_to_image, image_to_rgb8
 from colorglove_ros.ros.message_checks import check_observation_msg
 from colorglove_ros.ros.nodes.common import (
@@ -58,7 +58,7 @@ class SegmentationNode(Node):
             validate_image_size(image.width, image.height, error=ImageEncodingError)
             rgb = image_to_rgb8(image)
             observation = self.segmenter.process(rgb, keep_labels=self.publish_debug)
-            msg = observation_msg(observation, image.header)
+            msg = observation_to_msg(observation, image.header)
             if msg.hand_found:
                 check_observation_msg(msg)
         except (ImageEncodingError, SegmentationInputError) as exc:

@@ -11,7 +11,7 @@ from std_msgs.msg import String
 from colorglove_ros.core.hand.model import DOF_NAMES
 from colorglove_ros.core.synthetic.bare_hand import BareHandSequence
 from colorglove_ros.core.synthetic.frames import default_camera
-from colorglove_ros.ros.conversions import joint_state_from_pose, pose_stamped_from_pose
+from colorglove_ros.ros.conversions import pose_to_joint_state_msg, pose_to_wrist_pose_msg
 from colorglove_ros.ros.image import array_to_image
 from colorglove_ros.ros.nodes.common import StartupError
 from colorglove_ros.ros.nodes.edge_tracker_node import EdgeTrackerNode
@@ -52,8 +52,8 @@ def test_holds_then_publishes_the_pose_with_urdf_names(sequence) -> None:
                           wrists[0].pose.position.z])
         assert np.linalg.norm(wrist - seq.poses[0][0:3]) < 0.01
         # a given starting pose, then a moving frame
-        node.on_init_wrist(pose_stamped_from_pose(seq.poses[20], header(20)))
-        node.on_init_joints(joint_state_from_pose(seq.poses[20], header(20)))
+        node.on_init_wrist(pose_to_wrist_pose_msg(seq.poses[20], header(20)))
+        node.on_init_joints(pose_to_joint_state_msg(seq.poses[20], header(20)))
         node.on_image(0, array_to_image(frames[21], 'rgb8', header(21)))
         assert h.spin_until(lambda: len(wrists) >= 2, 10.0)
         wrist = np.array([wrists[-1].pose.position.x, wrists[-1].pose.position.y,

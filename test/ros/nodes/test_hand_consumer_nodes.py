@@ -13,7 +13,7 @@ from colorglove_ros.core.hand.keypoints import hand_keypoints
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.hand.poses import GESTURE_SHAPES, LETTER_SHAPES, finger_limits
 from colorglove_ros.core.hand.spelling import letter_rotation
-from colorglove_ros.ros.conversions import joint_state_from_pose, pose_stamped_from_pose
+from colorglove_ros.ros.conversions import pose_to_joint_state_msg, pose_to_wrist_pose_msg
 from colorglove_ros.ros.nodes.gesture_node import GestureNode
 from colorglove_ros.ros.nodes.keypoints_node import KeypointsNode
 from colorglove_ros.ros.nodes.spelling_node import SpellingNode
@@ -44,10 +44,10 @@ def test_keypoints_node_publishes_both_frames() -> None:
         wrist = h.collect(PoseArray, 'hand/keypoints_wrist')
         joints_pub = h.publisher(JointState, 'hand/joint_states')
         wrist_pub = h.publisher(PoseStamped, 'hand/wrist_pose')
-        joints_pub.publish(joint_state_from_pose(q, _frame(3)))
+        joints_pub.publish(pose_to_joint_state_msg(q, _frame(3)))
         h.settle(0.3)
         assert camera == []                       # half a frame: nothing yet
-        wrist_pub.publish(pose_stamped_from_pose(q, _frame(3)))
+        wrist_pub.publish(pose_to_wrist_pose_msg(q, _frame(3)))
         assert h.spin_until(lambda: camera and wrist, 10.0)
     expected_camera = hand_keypoints(MODEL, q, 'camera').positions
     expected_wrist = hand_keypoints(MODEL, q, 'wrist').positions
@@ -68,7 +68,7 @@ def test_gesture_node_events_and_loss() -> None:
         joints_pub = h.publisher(JointState, 'hand/joint_states')
         status_pub = h.publisher(String, 'hand/tracking_status')
         for k in range(10):
-            joints_pub.publish(joint_state_from_pose(_pose(GESTURE_SHAPES['flat']), _frame(k)))
+            joints_pub.publish(pose_to_joint_state_msg(_pose(GESTURE_SHAPES['flat']), _frame(k)))
         assert h.spin_until(lambda: len(events) >= 1, 10.0)
         status_pub.publish(String(data='no hand: lost'))
         assert h.spin_until(lambda: len(events) >= 2, 10.0)
@@ -87,8 +87,8 @@ def test_spelling_node_commits_held_letters() -> None:
         for letter in 'GO':
             q = _pose(LETTER_SHAPES[letter], letter_rotation(letter))
             for _ in range(30):
-                joints_pub.publish(joint_state_from_pose(q, _frame(k)))
-                wrist_pub.publish(pose_stamped_from_pose(q, _frame(k)))
+                joints_pub.publish(pose_to_joint_state_msg(q, _frame(k)))
+                wrist_pub.publish(pose_to_wrist_pose_msg(q, _frame(k)))
                 h.settle(0.005)
                 k += 1
         assert h.spin_until(lambda: len(text) >= 2, 10.0)

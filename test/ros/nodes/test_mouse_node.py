@@ -10,7 +10,7 @@ from sensor_msgs.msg import Joy
 
 from colorglove_ros.core.hand.model import DOF_NAMES, HandModel
 from colorglove_ros.core.tracking.mouse import MouseConfig, TablePlane, raw_mouse_values
-from colorglove_ros.ros.conversions import joint_state_from_pose, pose_stamped_from_pose
+from colorglove_ros.ros.conversions import pose_to_joint_state_msg, pose_to_wrist_pose_msg
 from colorglove_ros.ros.nodes.common import StartupError
 from colorglove_ros.ros.nodes.mouse_node import MouseNode
 
@@ -31,8 +31,8 @@ def test_cursor_and_thumb_button() -> None:
         joys = h.collect(Joy, 'mouse/buttons')
         for k, thumb_deg in enumerate([5.0, 40.0]):
             q[DOF_NAMES.index('thumb_cmc_abd')] = math.radians(thumb_deg)
-            node.on_wrist(pose_stamped_from_pose(q, header(5, k * 33_000_000)))
-            node.on_joints(joint_state_from_pose(q, header(5, k * 33_000_000)))
+            node.on_wrist(pose_to_wrist_pose_msg(q, header(5, k * 33_000_000)))
+            node.on_joints(pose_to_joint_state_msg(q, header(5, k * 33_000_000)))
         assert h.spin_until(lambda: len(joys) >= 2 and len(cursors) >= 2, 10.0)
         assert list(joys[0].buttons) == [0, 0] and list(joys[1].buttons) == [1, 0]
         expected = raw_mouse_values(model, q, MouseConfig(
@@ -47,8 +47,8 @@ def test_unmatched_stamps_publish_nothing_and_bad_thresholds_refuse() -> None:
     with running(_node()) as h:
         node = h.nodes[0]
         joys = h.collect(Joy, 'mouse/buttons')
-        node.on_wrist(pose_stamped_from_pose(q, header(1)))
-        node.on_joints(joint_state_from_pose(q, header(2)))
+        node.on_wrist(pose_to_wrist_pose_msg(q, header(1)))
+        node.on_joints(pose_to_joint_state_msg(q, header(2)))
         h.settle(0.3)
         assert not joys
     with pytest.raises(StartupError):

@@ -1,0 +1,104 @@
+"""Message adapters (ros/conversions.py) round-trip: what x_to_msg writes, x_from_msg reads back,
+built by hand with no rclpy.init; importing them stays light (no trimesh, sklearn)."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from std_msgs.msg import Header
+
+from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.hand.model import NUM_DOFS
+from colorglove_ros.core.lookup.types import LookupResult, ProjectionConstraints
+from colorglove_ros.core.segmentation.crop import CropTransform
+from colorglove_ros.core.segmentation.types import Blob, Observation
+from colorglove_ros.ros.conversions import (
+    blobs_from_observation_msg,
+    camera_from_camera_info_msg,
+    camera_observation_from_msg,
+    camera_to_camera_info_msg,
+    candidates_to_msg,
+    crop_from_observation_msg,
+    observation_to_msg,
+    pose_from_msgs,
+    pose_prior_from_candidates_msg,
+    pose_to_joint_state_msg,
+    pose_to_wrist_pose_msg,
+    tiny_labels_from_observation_msg,
+)
+
+HEADER = Header(frame_id='usb_cam_optical')
+
+
+def random_pose(seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    pose = rng.uniform(-0.4, 0.4, NUM_DOFS)
+    pose[:3] = [0.05, -0.02, 0.6]
+    return pose
+
+
+@pytest.mark.parametrize('seed', range(5))
+def test_pose_round_trips_through_joint_state_and_wrist_pose(seed: int) -> None:
+    pose = random_pose(seed)
+    back = pose_from_msgs(pose_to_joint_state_msg(pose, HEADER), pose_to_wrist_pose_msg(pose,
+                                                                                      HEADER))
+    np.testing.assert_allclose(back, pose, atol=1e-12)
+
+
+@pytest.mark.parametrize('distortion', [np.zeros(5), np.array([-0.1, 0.02, 0.001, 0.0, 0.0]),
+                                        np.arange(8) * 0.01, np.array([0.05, -0.01, 0.0, 0.0])])
+def test_camera_round_trips_through_camera_info(distortion: np.ndarray) -> None:
+    camera = PinholeCamera(1280, 720, 905.0, 903.0, 641.5, 362.5, distortion,
+                           frame_id='usb_cam_optical')
+    back = camera_from_camera_info_msg(camera_to_camera_info_msg(camera, HEADER))
+    assert (back.width, back.height, back.fx, back.fy, back.cx, back.cy) == \
+        (1280, 720, 905.0, 903.0, 641.5, 362.5)
+    assert back.distortion_model == camera.distortion_model and back.frame_id == 'usb_cam_optical'
+    np.testing.assert_array_equal(back.distortion, distortion)
+
+
+def test_observation_round_trips() -> None:
+    tiny = np.random.default_rng(1).integers(0, 11, (40, 40)).astype(np.uint8)
+    blobs = [Blob(3, 310.5, 200.25, 90), Blob(7, 330.0, 215.0, 250)]
+    observation = Observation(True, '', 640, 480, tiny, CropTransform(4.5, 220.0, 120.0), blobs,
+                              glove_pixel_count=1234, timings_ms={'total': 6.5})
+    msg = observation_to_msg(observation, HEADER)
+    np.testing.assert_array_equal(tiny_labels_from_observation_msg(msg), tiny)
+    crop = crop_from_observation_msg(msg)
+    assert (crop.scale, crop.offset_x, crop.offset_y) == (4.5, 220.0, 120.0)
+    back = blobs_from_observation_msg(msg)
+    order = [1, 0]                                    # the message sorts blobs by size
+    np.testing.assert_array_equal(back.color, [blobs[i].color_label for i in order])
+    np.testing.assert_allclose(back.centroid_px, [[blobs[i].centroid_x, blobs[i].centroid_y]
+                                         for i in order])
+    np.testing.assert_array_equal(back.pixel_count, [blobs[i].pixel_count for i in order])
+    assert camera_observation_from_msg(msg).blobs.centroid_px.shape == (2, 2)
+    assert msg.processing_time_ms == 6.5
+
+
+def test_candidates_round_trip_into_the_ik_prior() -> None:
+    rng = np.random.default_rng(2)
+    k, m = 3, 5
+    constraints = ProjectionConstraints(
+        patch_ids=np.arange(m), colors=np.arange(1, m + 1), vertices=np.arange(m) * 7,
+        tiny_xy=rng.uniform(0, 39, (m, 2)), pixel_counts=np.arange(m) + 3.0)
+    result = LookupResult(indices=np.arange(k), distances=np.linspace(1, 2, k),
+                          weights=np.full(k, 1 / k), poses=np.stack([random_pose(i)
+                                                                     for i in range(k)]),
+                          blended=random_pose(9), constraints=constraints, num_candidates=300,
+                          finger_std=np.full(20, 0.05))
+    observation = observation_to_msg(Observation(True, '', 640, 480), HEADER)
+    prior = pose_prior_from_candidates_msg(candidates_to_msg(observation, result))
+    np.testing.assert_allclose(prior.q_blend, result.blended)
+    np.testing.assert_allclose(prior.finger_std, result.finger_std)
+    for name in ('patch_ids', 'colors', 'vertices', 'tiny_xy', 'pixel_counts'):
+        np.testing.assert_allclose(getattr(prior.constraints, name), getattr(constraints, name))
+
+
+def test_importing_the_adapters_is_light() -> None:
+    code = ('import sys, colorglove_ros.ros.conversions; '
+            'print(sorted(m for m in ("trimesh", "sklearn", "moderngl") if m in sys.modules))')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == '[]'
