@@ -133,3 +133,32 @@ def test_stereo_make_bag_primary_view_is_the_mono_bag(tmp_path: Path) -> None:
         np.testing.assert_array_equal(views[0].image_rgb, stereo[index].image_rgb)
         assert not np.array_equal(views[1].image_rgb, views[0].image_rgb)
     sequence.close()
+
+
+def test_restamp_sets_publish_time_and_keeps_frames_together(tmp_path: Path) -> None:
+    """--restamp: stamped messages get the wall-clock time of their publication, messages
+    recorded with one stamp keep sharing one, and the rest of the bytes is unchanged."""
+    import rclpy
+
+    from colorglove_ros.tools.play_bag import BagPlayer
+
+    sent = _write_bag(tmp_path / 'input')
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        player = BagPlayer(tmp_path / 'input', context=context)
+        before = time.time_ns()
+        joints = [player.restamped('/test/joints', data) for data in sent['/test/joints']]
+        again = player.restamped('/test/joints', sent['/test/joints'][3])
+        after = time.time_ns()
+        player.close()
+        player.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    decoded = [deserialize_cdr(data, 'sensor_msgs/msg/JointState') for data in joints]
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in decoded]
+    assert all(before <= s <= after for s in stamps) and stamps == sorted(stamps)
+    assert again == joints[3]                      # the same recorded stamp, the same new one
+    assert [list(m.position) for m in decoded] == [[float(i), -float(i)] for i in range(20)]
+    assert all(new[12:] == old[12:] for new, old in zip(joints, sent['/test/joints'],
+                                                         strict=True))

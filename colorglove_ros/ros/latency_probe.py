@@ -77,18 +77,29 @@ class LatencyProbe:
         self.folder = tempfile.TemporaryDirectory(prefix='latency_probe_')
         self.output = Path(self.folder.name) / 'record.json'
         self.process: subprocess.Popen | None = None
+        self.first_file = Path(self.folder.name) / 'first'
 
     def start(self, ready_timeout_s: float = 30.0) -> None:
         """Start the process and wait until it has subscribed."""
         ready = Path(self.folder.name) / 'ready'
         self.process = subprocess.Popen(
             [sys.executable, '-m', 'colorglove_ros.ros.latency_probe', '--output',
-             str(self.output), '--ready-file', str(ready)], env=self.env)
+             str(self.output), '--ready-file', str(ready), '--first-file',
+             str(self.first_file)], env=self.env)
         deadline = time.monotonic() + ready_timeout_s
         while not ready.exists():
             if self.process.poll() is not None or time.monotonic() > deadline:
                 raise RuntimeError('the latency probe did not start')
             time.sleep(0.05)
+
+    def wait_for_first(self, timeout_s: float) -> bool:
+        """Wait until the first JointState has arrived; False after ``timeout_s``."""
+        deadline = time.monotonic() + timeout_s
+        while not self.first_file.exists():
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.05)
+        return True
 
     def stop(self, timeout_s: float = 10.0) -> ProbeRecord:
         """Stop the process (SIGINT) and return what it recorded."""
@@ -115,6 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--output', type=Path, required=True, help='JSON file written at exit')
     parser.add_argument('--duration', type=float, default=0.0, help='seconds (0: until SIGINT)')
     parser.add_argument('--ready-file', type=Path, help='touched once subscribed')
+    parser.add_argument('--first-file', type=Path, help='touched on the first JointState')
     args = parser.parse_args(argv)
 
     import rclpy
@@ -127,6 +139,8 @@ def main(argv: list[str] | None = None) -> int:
     def on_joints(msg: JointState) -> None:
         arrivals.append(time.time_ns())
         stamps.append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+        if len(arrivals) == 1 and args.first_file is not None:
+            args.first_file.touch()
 
     stop = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(True))

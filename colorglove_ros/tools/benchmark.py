@@ -1,8 +1,10 @@
 """Throughput and latency of the four-node pipeline: a 640x480 synthetic bag played into
 segmentation_node, lookup_node and ik_node (separate processes over DDS) with the configured
-(default 100,000-entry) database. Latency (camera frame to JointState, p50/p95, per-stage split)
-is measured at the 30 Hz camera rate; throughput in a second pass that offers frames faster
-(--throughput-rate times 30 Hz), as JointStates per second delivered."""
+(default 100,000-entry) database. Latency (JointState arrival minus the camera frame's header
+stamp, taken by a lean subscriber in its own process; the bag is restamped at publish time) is
+measured at the 30 Hz camera rate, with each stage's own processing time; throughput in a second
+pass that offers frames faster (--throughput-rate times 30 Hz), as JointStates per second
+delivered."""
 from __future__ import annotations
 
 import argparse

@@ -3,10 +3,14 @@ the pipeline's output (next frame as soon as the previous one has produced a res
 
 Like ``ros2 bag play``: each topic is offered with the QoS its recorded publishers offered,
 ``--clock`` publishes the bag's time on ``/clock`` (for nodes with ``use_sim_time``), and
-``--loop`` plays the bag again from the start until Ctrl-C."""
+``--loop`` plays the bag again from the start until Ctrl-C. ``--restamp`` sets the header stamp
+of every stamped message to the wall-clock time it is published at (all messages of one
+recorded stamp get the same new stamp), so arrival minus header stamp downstream is the latency
+of the replayed frame, as with a live camera."""
 from __future__ import annotations
 
 import argparse
+import struct
 import sys
 import threading
 import time
@@ -43,6 +47,27 @@ class BagPlayer(Node):
             for c in self.connections}
         self.clock_publisher = None
         self.output_event = threading.Event()
+        fielddefs = self.reader.typestore.fielddefs
+        # topics whose messages start with a std_msgs/Header (stamp right after the CDR prefix)
+        self.stamped_topics = {c.topic for c in self.connections
+                               if fielddefs[c.msgtype][1]
+                               and fielddefs[c.msgtype][1][0][0] == 'header'
+                               and fielddefs[c.msgtype][1][0][1][1] == 'std_msgs/msg/Header'}
+        self.new_stamps: dict[bytes, bytes] = {}
+
+    def restamped(self, topic: str, data: bytes) -> bytes:
+        """``data`` with its header stamp replaced by the publish time (the same new stamp for
+        every message recorded with the same stamp); unstamped messages unchanged."""
+        if topic not in self.stamped_topics or len(data) < 12:
+            return data
+        order = '<' if data[1] == 1 else '>'
+        old = data[4:12]
+        if old not in self.new_stamps:
+            if len(self.new_stamps) > 10_000:
+                self.new_stamps.clear()
+            sec, nanosec = divmod(time.time_ns(), 10**9)
+            self.new_stamps[old] = struct.pack(f'{order}iI', sec, nanosec)
+        return data[:4] + self.new_stamps[old] + data[12:]
 
     def publish_clock(self, clock_topic: str = '/clock') -> None:
         """Also publish each message's bag time on ``clock_topic`` (rosgraph_msgs/Clock)."""
@@ -58,7 +83,7 @@ class BagPlayer(Node):
         return False
 
     def play(self, rate: float, pace_topic: str | None, pace_on: str | None,
-             pace_timeout_s: float) -> int:
+             pace_timeout_s: float, restamp: bool = False) -> int:
         """Publish all messages; return how many were published."""
         start_wall = time.monotonic()
         first_stamp = None
@@ -76,7 +101,10 @@ class BagPlayer(Node):
             if self.clock_publisher is not None:
                 sec, nanosec = divmod(int(timestamp), 10**9)
                 self.clock_publisher.publish(Clock(clock=Time(sec=sec, nanosec=nanosec)))
-            self.publishers_by_topic[connection.topic].publish(bytes(rawdata))
+            data = bytes(rawdata)
+            if restamp:
+                data = self.restamped(connection.topic, data)
+            self.publishers_by_topic[connection.topic].publish(data)
             count += 1
             if pace_on is not None and connection.topic == pace_on:
                 self.output_event.wait(pace_timeout_s)
@@ -111,6 +139,9 @@ def main(argv: list[str] | None = None) -> int:
                         'Ctrl-C')
     parser.add_argument('--clock', action='store_true',
                         help="publish the bag's time on /clock (rosgraph_msgs/Clock)")
+    parser.add_argument('--restamp', action='store_true',
+                        help='stamp each message with its publish time (wall clock) instead '
+                             'of its recorded header stamp (for latency measurements)')
     parser.add_argument('--linger', type=float, default=1.0,
                         help='seconds to stay up after the last message, for late deliveries')
     args, ros_args = parser.parse_known_args(argv)
@@ -137,7 +168,8 @@ def main(argv: list[str] | None = None) -> int:
         while True:
             started = time.monotonic()
             count = player.play(args.rate, args.pace_topic if args.paced else None,
-                                args.pace_on if args.paced else None, args.pace_timeout)
+                                args.pace_on if args.paced else None, args.pace_timeout,
+                                args.restamp)
             elapsed = time.monotonic() - started
             print(f'published {count} messages in {elapsed:.1f} s', flush=True)
             if not args.loop:

@@ -1,0 +1,64 @@
+"""The lean latency subscriber: per-window figures, and the probe process recording stamp and
+arrival of every JointState over DDS."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from builtin_interfaces.msg import Time
+from rclpy.qos import QoSProfile, QoSReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+
+from colorglove_ros.ros.latency_probe import LatencyProbe, ProbeRecord, window_summaries
+from colorglove_ros.ros.pipeline_run import ik_times_ms
+
+
+def test_window_summaries_rate_and_percentiles() -> None:
+    arrival = np.arange(0, 20_000_000_000, 100_000_000, dtype=np.int64)   # 10 Hz for 20 s
+    latency = np.where(arrival < 10_000_000_000, 20_000_000, 50_000_000)  # 20 ms, then 50 ms
+    rows = window_summaries(ProbeRecord(arrival - latency, arrival), 10.0)
+    assert [r['joint_states'] for r in rows] == [100, 100]
+    assert [r['rate_hz'] for r in rows] == [10.0, 10.0]
+    assert rows[0]['latency_p95_ms'] == pytest.approx(20.0)
+    assert rows[1]['latency_p50_ms'] == pytest.approx(50.0)
+    assert ProbeRecord(arrival - latency, arrival).rate_hz == pytest.approx(10.0)
+
+
+def test_ik_times_from_status_lines() -> None:
+    statuses = ['tracking: 12 constraints (cam0 12), reprojection 2.1 px, IK 4.5 ms',
+                'no hand: lost', 'tracking: 9 constraints (cam0 9), reprojection nan px, IK 11 ms']
+    assert ik_times_ms(statuses) == [4.5, 11.0]
+
+
+@pytest.mark.dds
+@pytest.mark.usefixtures('isolated_ros_domain')
+def test_probe_process_records_stamp_and_arrival() -> None:
+    probe = LatencyProbe()
+    probe.start()
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = rclpy.create_node('probe_test', context=context)
+        pub = node.create_publisher(JointState, '/hand/joint_states',
+                                    QoSProfile(depth=10,
+                                               reliability=QoSReliabilityPolicy.RELIABLE))
+        deadline = time.monotonic() + 10.0
+        while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        sent = []
+        for _ in range(20):
+            stamp = time.time_ns() - 30_000_000                  # a frame taken 30 ms ago
+            sec, nanosec = divmod(stamp, 10**9)
+            pub.publish(JointState(header=Header(stamp=Time(sec=sec, nanosec=nanosec))))
+            sent.append(stamp)
+            time.sleep(0.02)
+        assert probe.wait_for_first(5.0)
+        time.sleep(0.5)
+    finally:
+        record = probe.stop()
+        rclpy.try_shutdown(context=context)
+    assert list(record.stamp_ns) == sent
+    assert np.all(record.latencies_s >= 0.030) and np.all(record.latencies_s < 1.0)
