@@ -45,3 +45,24 @@ def test_the_check_sees_a_ros_import(tmp_path: Path) -> None:
     module = tmp_path / 'bad.py'
     module.write_text('def f():\n    from rclpy.node import Node\n    return Node\n')
     assert 'rclpy.node' in imported_modules(module)
+
+
+def test_every_error_of_the_package_is_a_colorglove_error() -> None:
+    """One error family: tools and nodes catch ColorGloveError for every failure the package
+    raises on purpose, so no typed error may stand outside it."""
+    import importlib
+    import pkgutil
+
+    import colorglove_ros
+    from colorglove_ros.core.errors import ColorGloveError
+
+    strays = []
+    for info in pkgutil.walk_packages(colorglove_ros.__path__, 'colorglove_ros.'):
+        if '.ros' in info.name or '.tools' in info.name:
+            continue                      # these import rclpy/message packages
+        module = importlib.import_module(info.name)
+        for name, value in vars(module).items():
+            if (isinstance(value, type) and issubclass(value, Exception)
+                    and value.__module__ == info.name and not issubclass(value, ColorGloveError)):
+                strays.append(f'{info.name}.{name}')
+    assert not strays, strays

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import NUM_DOFS, NUM_FINGER_DOFS, HandModel
 from colorglove_ros.core.synthetic.sequences import min_jerk
 
@@ -29,7 +30,7 @@ __all__ = ['ScriptError', 'Segment', 'ScriptedSequence', 'TrackingNoise', 'scrip
            'ar1_noise']
 
 
-class ScriptError(ValueError):
+class ScriptError(ColorGloveError, ValueError):
     """A bad script or noise setting."""
 
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.keypoints import FINGERTIP_INDICES, hand_keypoints
 from colorglove_ros.core.hand.model import DOF_NAMES, HandModel
 
@@ -40,7 +41,7 @@ _CURL_DOFS = np.array([[DOF_NAMES.index(f'{f}_{j}') for j in ('mcp_flex', 'pip_f
                        for f in PINCH_FINGERS])
 
 
-class GestureError(ValueError):
+class GestureError(ColorGloveError, ValueError):
     """Bad gesture settings, pose or event text."""
 
 

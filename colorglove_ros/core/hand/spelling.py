@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, rotvec_to_matrix
 from colorglove_ros.core.hand.poses import LETTER_SHAPES
 
@@ -43,7 +44,7 @@ LETTER_ROLL_PITCH: dict[str, tuple[float, float]] = {
 assert len(LETTERS) == 26 and set(THUMB_LETTERS) <= set(LETTERS)
 
 
-class SpellingError(ValueError):
+class SpellingError(ColorGloveError, ValueError):
     """Bad spelling settings or input."""
 
 
