@@ -7,7 +7,6 @@ pass that offers frames faster (--throughput-rate times 30 Hz), as JointStates p
 delivered."""
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -17,6 +16,7 @@ from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.pipeline_run import bag_feed, run_pipeline, summarize
 from colorglove_ros.tools import build_database, make_bag
+from colorglove_ros.tools._cli import tool_parser
 from colorglove_ros.tools.demo import DATABASE_CONFIG, pipeline_parameters, prepare_assets
 
 __all__ = ['TARGETS', 'ensure_bag', 'main']
@@ -48,7 +48,7 @@ def check_targets(figures: dict[str, float]) -> list[dict[str, object]]:
 
 def main(argv: list[str] | None = None) -> int:
     """``colorglove_benchmark [--frames N] [--rate R] [--json PATH]``."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = tool_parser(__doc__.splitlines()[0])
     parser.add_argument('--frames', type=int, default=300, help='frames in the bag')
     parser.add_argument('--seed', type=int, default=2, help='seed of the synthetic bag')
     parser.add_argument('--rate', type=float, default=1.0,
@@ -60,7 +60,6 @@ def main(argv: list[str] | None = None) -> int:
                         help='ik_node also draws and publishes the overlay image (it then '
                              'receives every camera image); off by default, as in '
                              'config/nodes.yaml')
-    parser.add_argument('--json', type=Path, help='write the figures as JSON')
     args = parser.parse_args(argv)
     _, default_db, _ = build_database.load_build_config(resolve_path(DATABASE_CONFIG))
     database = args.database or default_db

@@ -5,7 +5,6 @@ ground truth, with an overlay strip (PNG) a person can look at. Missing assets (
 calibration, pose database) are made first, once."""
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -19,6 +18,7 @@ from colorglove_ros.core.segmentation.color_model import read_calibration_config
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.pipeline_run import run_pipeline, summarize
 from colorglove_ros.tools import build_database, calibrate_colors
+from colorglove_ros.tools._cli import tool_parser
 
 __all__ = ['prepare_assets', 'pipeline_parameters', 'overlay_strip', 'main']
 
@@ -67,14 +67,13 @@ def overlay_strip(images: list[np.ndarray], columns: int = 4, width: int = 320) 
 
 def main(argv: list[str] | None = None) -> int:
     """``colorglove_demo [--frames N] [--seed S] [--json PATH]``."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = tool_parser(__doc__.splitlines()[0])
     parser.add_argument('--frames', type=int, default=150, help='sequence length (frames)')
     parser.add_argument('--seed', type=int, default=1, help='seed of the synthetic sequence')
     parser.add_argument('--rate', type=float, default=30.0, help='camera rate, frames/s')
     parser.add_argument('--database', type=Path, help='pose database (default: config)')
     parser.add_argument('--output', type=Path, default=Path('out/demo'),
                         help='folder for the overlay strip')
-    parser.add_argument('--json', type=Path, help='write the figures as JSON')
     args = parser.parse_args(argv)
     _, default_db, _ = build_database.load_build_config(resolve_path(DATABASE_CONFIG))
     database = args.database or default_db

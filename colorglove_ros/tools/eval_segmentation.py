@@ -14,7 +14,6 @@ lets glove-like distractors touch the hand, as in the tracking sequences.
 """
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
@@ -35,6 +34,7 @@ from colorglove_ros.core.segmentation.segmenter import (
     load_segmenter,
 )
 from colorglove_ros.core.synthetic.held_out import held_out_frames
+from colorglove_ros.tools._cli import tool_parser
 
 __all__ = ['frame_metrics', 'evaluate', 'main']
 
@@ -221,7 +221,7 @@ def evaluate(seg: GloveSegmenter,
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = tool_parser(__doc__.split('\n\n')[0])
     parser.add_argument('--config', default='config/color_calibration.yaml',
                         help='colour config YAML (calibration file + segmenter settings)')
     parser.add_argument('--source', choices=('synth', 'blobs'), default='synth')
@@ -231,7 +231,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--repeats', type=int, default=3, help='timed runs per frame')
     parser.add_argument('--clutter-near-hand', action='store_true',
                         help="glove-like distractors may touch or sit behind the hand ('synth')")
-    parser.add_argument('--json', type=Path, help='also write the figures as JSON')
     args = parser.parse_args(argv)
     try:
         seg = load_segmenter(args.config)
