@@ -177,12 +177,13 @@ class IKNode(Node):
         self.pending = msg
         self.pending_timer.reset()
 
-    def _check_depth(self, q: np.ndarray) -> None:
+    def _check_depth(self, q: np.ndarray) -> np.ndarray:
         """Refuse a pose with any hand keypoint at an implausible depth from any camera
-        (behind or just in front of its plane, or far away)."""
+        (behind or just in front of its plane, or far away); return the keypoints."""
         keypoints = self.model.keypoints(q)
         for camera in self.cameras:
             validate_hand_depth(camera.world_to_camera(keypoints), camera.name)
+        return keypoints
 
     def track(self, msg: HandPoseCandidates) -> None:
         """Run the tracker on one frame's candidates and publish the results. Candidates
@@ -218,13 +219,14 @@ class IKNode(Node):
             self._report_no_hand(msg, msg.status or 'lost')
             return
         reason = ''
+        keypoints = None
         if result.num_constraints == 0:
             reason = 'no constraint matched an observed blob'
         elif not np.all(np.isfinite(result.q)):
             reason = 'non-finite pose'
         else:
             try:
-                self._check_depth(result.q)
+                keypoints = self._check_depth(result.q)
             except InvalidInputError as exc:
                 reason = f'fitted pose refused: {exc}'
         if reason:
@@ -238,7 +240,6 @@ class IKNode(Node):
         self.wrist_pub.publish(wrist)
         if self.tf_pub is not None:
             self.tf_pub.publish(wrist_pose_to_tf_msg(wrist, child_frame_id='palm'))
-        keypoints = self.model.keypoints(result.q)
         self.marker_pub.publish(skeleton_to_markers_msg(keypoints, msg.header))
         per_camera = ', '.join(f'{camera.name} {count}' for camera, count in
                                zip(self.cameras, result.constraints_per_camera, strict=False))
