@@ -9,9 +9,9 @@ import pytest
 
 from colorglove_ros.ros.launcher import FASTDDS_PROFILE_VARIABLE
 
-TEST_DIR = Path(__file__).resolve().parent
-REPO_DIR = TEST_DIR.parent
-sys.path.insert(0, str(TEST_DIR))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from repo_paths import REPO_DIR  # noqa: E402
 
 
 @pytest.fixture

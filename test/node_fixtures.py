@@ -17,9 +17,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
+from repo_paths import CONFIG_DIR, REPO_DIR
 
-REPO_DIR = Path(__file__).resolve().parent.parent
-CONFIG_DIR = REPO_DIR / 'config'
 BIN_DIR = Path(sys.executable).parent
 
 RELIABLE = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE)

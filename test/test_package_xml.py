@@ -4,9 +4,9 @@ from __future__ import annotations
 import ast
 import sys
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
-REPO_DIR = Path(__file__).resolve().parent.parent
+from repo_paths import REPO_DIR
+
 # import name -> the rosdep key (rosdistro rosdep/python.yaml, or a ROS package) declaring it;
 # None: no rosdep key exists, installed by pip (said in a package.xml comment)
 ROSDEP_KEYS = {

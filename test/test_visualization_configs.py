@@ -2,11 +2,11 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import yaml
+from repo_paths import CONFIG_DIR
 
-CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'visualization'
+CONFIG = CONFIG_DIR / 'visualization'
 SHOWN = ('/hand/markers', '/hand/wrist_pose', '/camera/image_raw', '/robot_description')
 
 

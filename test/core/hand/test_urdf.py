@@ -1,17 +1,14 @@
 """Tests for the generated URDF: parsed by yourdfpy, forward kinematics equal to the model's."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import yourdfpy
+from repo_paths import REPO_DIR
 
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.hand.model import DIGITS, FINGER_DOF_NAMES, KEYPOINT_NAMES, HandModel
 from colorglove_ros.core.hand.urdf import URDF_PATH, tip_link_name, urdf_string, write_urdf
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope='module', params=[DEFAULT_HAND_LENGTH_M, 0.16])
@@ -57,6 +54,6 @@ def test_forward_kinematics_agree(pair, seed: int) -> None:
 
 
 def test_committed_urdf_is_current() -> None:
-    committed = ROOT / URDF_PATH
+    committed = REPO_DIR / URDF_PATH
     assert committed.exists(), 'regenerate with write_urdf(URDF_PATH)'
     assert committed.read_text() == urdf_string()

@@ -8,9 +8,9 @@ import time
 import numpy as np
 import pytest
 import rclpy
-from conftest import TEST_DIR
 from message_samples import SAMPLES
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
+from repo_paths import TEST_DIR
 
 pytestmark = pytest.mark.dds
 

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from label_samples import random_blob_images
+from repo_paths import CONFIG_DIR
 
 from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.lookup.database import (
@@ -169,7 +170,7 @@ def test_retrain_codes_in_place(tmp_path: Path) -> None:
 
 
 def test_database_config_reads_and_refuses(tmp_path: Path) -> None:
-    config, path, lookup = read_database_config(Path(__file__).parents[1] / 'config'
+    config, path, lookup = read_database_config(CONFIG_DIR
                                                 / 'database.yaml')
     assert config.entries == 100_000 and path.name == 'database_100k'
     assert lookup['num_candidates'] == 300

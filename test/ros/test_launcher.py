@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 import rclpy
 from colorglove_msgs.msg import HandObservation
-from conftest import REPO_DIR, TEST_DIR
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from repo_paths import CONFIG_DIR, REPO_DIR, TEST_DIR
 
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.ros.bags import camera_topics
@@ -30,9 +30,9 @@ from colorglove_ros.ros.nodes.camera_node import CameraNode
 from colorglove_ros.ros.nodes.common import StartupError
 from colorglove_ros.ros.nodes.ik_node import IKNode
 
-MONO_LAUNCH = REPO_DIR / 'config' / 'pipeline.launch.yaml'
-STEREO_LAUNCH = REPO_DIR / 'config' / 'pipeline_stereo.launch.yaml'
-STEREO_CALIBRATION = REPO_DIR / 'config' / 'calibration_stereo.yaml'
+MONO_LAUNCH = CONFIG_DIR / 'pipeline.launch.yaml'
+STEREO_LAUNCH = CONFIG_DIR / 'pipeline_stereo.launch.yaml'
+STEREO_CALIBRATION = CONFIG_DIR / 'calibration_stereo.yaml'
 NODE_CLASSES = {'camera_node': CameraNode, 'segmentation_node': segmentation_node.SegmentationNode,
                 'lookup_node': lookup_node.LookupNode, 'ik_node': IKNode}
 #: the parameters in which a node of the two-camera graph may differ from the one-camera one
@@ -232,11 +232,11 @@ def test_node_parameter_file_applies_under_any_namespace(isolated_ros_domain) ->
     second hand) still reads its section instead of silently running on defaults."""
     import yaml
 
-    sections = yaml.safe_load((REPO_DIR / 'config' / 'nodes.yaml').read_text())
+    sections = yaml.safe_load((CONFIG_DIR / 'nodes.yaml').read_text())
     assert sections and all(key.startswith('/**/') for key in sections), list(sections)
     context = rclpy.Context()
     rclpy.init(context=context, args=['--ros-args', '-r', '__ns:=/camera2', '--params-file',
-                                      str(REPO_DIR / 'config' / 'nodes.yaml')])
+                                      str(CONFIG_DIR / 'nodes.yaml')])
     try:
         node = rclpy.create_node('lookup', context=context,
                                  automatically_declare_parameters_from_overrides=True)

@@ -6,16 +6,16 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from conftest import REPO_DIR
+from repo_paths import CONFIG_DIR
 
 from colorglove_ros.core.camera import CalibrationError, load_calibration, look_at_extrinsics
 from colorglove_ros.core.frame_sources import FrameSourceError, open_frame_source
 
-CAMERA = load_calibration(REPO_DIR / 'config' / 'calibration.yaml').primary
+CAMERA = load_calibration(CONFIG_DIR / 'calibration.yaml').primary
 
 
 def test_shipped_calibrations_load() -> None:
-    stereo = load_calibration(REPO_DIR / 'config' / 'calibration_stereo.yaml')
+    stereo = load_calibration(CONFIG_DIR / 'calibration_stereo.yaml')
     assert len(stereo.cameras) == 2
     np.testing.assert_allclose(stereo.primary.rotation, np.eye(3))
     # the second camera looks at the centre of the capture volume

@@ -12,6 +12,7 @@ import pytest
 import yaml
 from message_samples import sample_observation
 from rclpy.serialization import serialize_message
+from repo_paths import CONFIG_DIR
 from rosbag2_compat import check_jazzy_bag
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
@@ -26,7 +27,7 @@ from colorglove_ros.tools import make_bag
 
 pytestmark = pytest.mark.dds
 
-STEREO_CALIBRATION = Path(__file__).resolve().parent.parent / 'config' / 'calibration_stereo.yaml'
+STEREO_CALIBRATION = CONFIG_DIR / 'calibration_stereo.yaml'
 
 
 def _write_bag(path: Path) -> dict[str, list[bytes]]:

@@ -2,10 +2,9 @@
 covariance files."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from repo_paths import CONFIG_DIR
 
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
@@ -25,8 +24,6 @@ from colorglove_ros.core.tracking.covariance_learning import (
 )
 from colorglove_ros.core.tracking.kinematics import FastKinematics
 from colorglove_ros.core.tracking.types import Correspondences
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_local_average_and_jitter():
@@ -66,7 +63,7 @@ def training_sequence():
     model = HandModel(DEFAULT_HAND_LENGTH_M)
     mesh = build_hand_mesh(model)
     kin = FastKinematics(model)
-    cams = load_calibration(ROOT / 'config' / 'calibration_stereo.yaml').cameras
+    cams = load_calibration(CONFIG_DIR / 'calibration_stereo.yaml').cameras
     rng = np.random.default_rng(1)
     verts = rng.choice(mesh.num_vertices, 20, replace=False)
     n = 60

@@ -1,10 +1,9 @@
 """The patch constraint model of the IK: visible-patch centroids predicted from the mesh faces."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from repo_paths import CONFIG_DIR
 
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.synthetic.frames import Synthesizer, render_frame
@@ -16,13 +15,11 @@ from colorglove_ros.core.tracking.projection import constraint_points, project_c
 from colorglove_ros.core.tracking.tracker import HandTracker
 from colorglove_ros.core.tracking.types import Correspondences, IKError, VertexTable
 
-ROOT = Path(__file__).resolve().parents[1]
-
 
 @pytest.fixture(scope='module')
 def scene():
     synth = Synthesizer()
-    cam = load_calibration(ROOT / 'config' / 'calibration.yaml').cameras[0]
+    cam = load_calibration(CONFIG_DIR / 'calibration.yaml').cameras[0]
     kin = FastKinematics(synth.model)
     yield synth, cam, kin, PatchSurface(kin, synth.mesh, synth.glove.face_patch)
     synth.release()
@@ -99,7 +96,7 @@ def test_cameras_sharing_a_pose_get_the_same_points_as_alone(scene):
     """The posed glove is reused by the next camera at the same pose, and the primary
     camera skips its identity transform: neither may change the points of any camera."""
     synth, cam, kin, surface = scene
-    stereo = load_calibration(ROOT / 'config' / 'calibration_stereo.yaml').cameras
+    stereo = load_calibration(CONFIG_DIR / 'calibration_stereo.yaml').cameras
     q = generate_sequence(5, 1, camera=cam, model=synth.model)[0]
     ids = np.arange(20)
     shared = [surface.points(q, c, ids) for c in stereo]         # second call reuses the pose
@@ -115,7 +112,7 @@ def test_points_by_camera_match_each_camera_alone(scene):
     """Rows of several cameras in one pass (interleaved, repeated patches) get exactly the
     points, weights and visibility each camera gets on its own."""
     synth, cam, kin, surface = scene
-    stereo = load_calibration(ROOT / 'config' / 'calibration_stereo.yaml').cameras
+    stereo = load_calibration(CONFIG_DIR / 'calibration_stereo.yaml').cameras
     q = generate_sequence(7, 1, camera=cam, model=synth.model)[0]
     rng = np.random.default_rng(2)
     ids = rng.integers(0, surface.num_patches, 40)

@@ -6,6 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from repo_paths import CONFIG_DIR
 from rosbags.highlevel import AnyReader
 
 from colorglove_ros.core.camera import CalibrationError, PinholeCamera, load_calibration
@@ -132,7 +133,7 @@ def test_image_conversion_16bit_and_mono(bigendian: bool) -> None:
 
 
 def test_make_bag_tool(tmp_path: Path, capsys) -> None:
-    calib = Path(__file__).resolve().parent.parent / 'config' / 'calibration.yaml'
+    calib = CONFIG_DIR / 'calibration.yaml'
     out = tmp_path / 'tool_bag'
     assert make_bag.main(['--seed', '2', '--frames', '3', '--output', str(out),
                           '--calibration', str(calib), '--split', 'train']) == 0
@@ -147,7 +148,7 @@ def test_make_bag_tool(tmp_path: Path, capsys) -> None:
 def test_stereo_bag_from_make_bag(tmp_path: Path) -> None:
     """A two-camera calibration gives both views at the same stamps, each with its frame_id and
     intrinsics, the extra view written before the primary one within a frame."""
-    calib_path = Path(__file__).resolve().parent.parent / 'config' / 'calibration_stereo.yaml'
+    calib_path = CONFIG_DIR / 'calibration_stereo.yaml'
     calibration = load_calibration(calib_path)
     out = tmp_path / 'stereo'
     assert make_bag.main(['--seed', '4', '--frames', '2', '--output', str(out),

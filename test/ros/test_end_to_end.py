@@ -16,7 +16,7 @@ import os
 from pathlib import Path
 
 import pytest
-from conftest import REPO_DIR
+from repo_paths import CONFIG_DIR
 
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.lookup.database import save_database
@@ -41,7 +41,7 @@ def assets(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     calibration = folder / 'color_calibration.npz'
     assert calibrate_colors.main(['--synthetic', '12', '--output', str(calibration),
                                   '--frames-out', str(folder / 'frames')]) == 0
-    lines = (REPO_DIR / 'config' / 'color_calibration.yaml').read_text().splitlines()
+    lines = (CONFIG_DIR / 'color_calibration.yaml').read_text().splitlines()
     color_config = folder / 'color_calibration.yaml'
     color_config.write_text('\n'.join(
         f'calibration_file: {calibration}' if line.startswith('calibration_file:') else line

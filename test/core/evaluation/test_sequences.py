@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from repo_paths import CONFIG_DIR
 
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.evaluation.metrics import fingertip_errors_mm, jitter_mm
@@ -37,12 +37,10 @@ from colorglove_ros.core.tracking.config import IKConfig, load_covariances
 from colorglove_ros.core.tracking.tracker import HandTracker
 from colorglove_ros.tools import eval_ik, learn_ik_covariances
 
-PACKAGE_ROOT = Path(__file__).resolve().parents[1]
-
 
 @pytest.fixture(scope='module')
 def rigs():
-    root = PACKAGE_ROOT / 'config'
+    root = CONFIG_DIR
     return (load_calibration(root / 'calibration.yaml'),
             load_calibration(root / 'calibration_stereo.yaml'))
 

@@ -2,11 +2,11 @@
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
+from repo_paths import CONFIG_DIR
 from scipy.spatial.transform import Rotation
 
 from colorglove_ros.core.camera import load_calibration
@@ -33,7 +33,7 @@ from colorglove_ros.core.synthetic.sequences import (
     generate_sequence,
 )
 
-CONFIG = Path(__file__).resolve().parent.parent / 'config'
+CONFIG = CONFIG_DIR
 NEUTRAL = FrameConditions(gain=1.0, color_temperature_k=6500.0, noise_sigma=0.0, blur_px=0.0,
                           background_kind='desk', background_seed=3, ambient=0.5,
                           vignetting=0.0, jpeg_quality=0)

@@ -3,10 +3,10 @@ Gauss-Newton recovery, cameras, matching, tracker state."""
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
+from repo_paths import CONFIG_DIR
 
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
@@ -41,7 +41,6 @@ from colorglove_ros.core.tracking.types import (
     PosePrior,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
 # the synthetic observations below put each blob at the projection of its constraint vertex,
 # which is what the 'vertex' constraint model predicts (the 'patch' model is tested on renders)
 VERTEX = IKConfig(constraint_model='vertex')
@@ -53,8 +52,8 @@ def rig():
     model = HandModel(DEFAULT_HAND_LENGTH_M)
     mesh = build_hand_mesh(model)
     kin = FastKinematics(model)
-    mono = load_calibration(ROOT / 'config' / 'calibration.yaml').cameras
-    stereo = load_calibration(ROOT / 'config' / 'calibration_stereo.yaml').cameras
+    mono = load_calibration(CONFIG_DIR / 'calibration.yaml').cameras
+    stereo = load_calibration(CONFIG_DIR / 'calibration_stereo.yaml').cameras
     # 20 constraint vertices spread over the hand (farthest-point sampling), one per patch
     P = mesh.skin(model, model.rest_pose())
     idx = [0]
@@ -432,8 +431,8 @@ def test_tracker_resets_when_hand_lost(rig):
 
 
 def test_tracker_from_calibration_uses_hand_length():
-    cal = load_calibration(ROOT / 'config' / 'calibration_stereo.yaml')
-    tracker = HandTracker.from_calibration(cal, load_ik_config(ROOT / 'config' / 'ik.yaml'))
+    cal = load_calibration(CONFIG_DIR / 'calibration_stereo.yaml')
+    tracker = HandTracker.from_calibration(cal, load_ik_config(CONFIG_DIR / 'ik.yaml'))
     assert tracker.model.hand_length_m == pytest.approx(cal.hand_length_m)
     assert len(tracker.cameras) == 2
     with pytest.raises(IKError, match='mesh'):
@@ -494,7 +493,7 @@ def test_wrong_match_is_rejected(rig):
 
 # ---------------------------------------------------------------------------- configuration
 def test_config_file_loads():
-    cfg = load_ik_config(ROOT / 'config' / 'ik.yaml')
+    cfg = load_ik_config(CONFIG_DIR / 'ik.yaml')
     assert cfg.enable_ik and cfg.enable_smoothing
     np.testing.assert_allclose(cfg.covariances.r_var_px2, [9.0, 9.0])
     np.testing.assert_allclose(cfg.covariances.q_var[2], 0.08**2)
@@ -612,7 +611,7 @@ def test_ik_file_refuses_the_node_switches(tmp_path) -> None:
     --modes): an IK file that sets them is refused instead of being silently overridden."""
     from colorglove_ros.core.tracking.config import IKConfigError, load_ik_config
 
-    text = (ROOT / 'config' / 'ik.yaml').read_text()
+    text = (CONFIG_DIR / 'ik.yaml').read_text()
     assert 'enable_ik:' not in text
     path = tmp_path / 'ik.yaml'
     path.write_text(text + '\nenable_ik: false\n')

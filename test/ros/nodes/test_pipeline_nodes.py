@@ -24,6 +24,7 @@ from node_fixtures import (
     start_node_process,
 )
 from rclpy.qos import qos_profile_sensor_data
+from repo_paths import CONFIG_DIR
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
@@ -50,7 +51,6 @@ from colorglove_ros.ros.nodes.segmentation_node import DEBUG_PALETTE, Segmentati
 # every test gets a ROS domain of its own on loopback (other runs on this machine share domain 0)
 pytestmark = [pytest.mark.dds, pytest.mark.usefixtures('isolated_ros_domain')]
 
-REPO_DIR = Path(__file__).resolve().parent.parent
 GOOD_SEED = 1
 
 
@@ -206,7 +206,7 @@ def test_segmentation_node_no_hand_and_hand_out_of_frame(assets: NodeAssets,
 # ------------------------------------------------------------------------------ lookup_node
 def test_lookup_node_candidates(assets: NodeAssets, good_observation: HandObservation) -> None:
     lookup = PoseLookup(load_database(assets.database), 40, 10)
-    camera = load_calibration(REPO_DIR / 'config' / 'calibration.yaml').primary
+    camera = load_calibration(CONFIG_DIR / 'calibration.yaml').primary
     # the node blends each finger from the observation's blobs (finger_evidence: true)
     expected = lookup.lookup(tiny_labels_from_observation_msg(good_observation),
                              crop_from_observation_msg(good_observation), camera,
@@ -272,7 +272,7 @@ def good_candidates(assets: NodeAssets, good_observation: HandObservation) -> Ha
     from colorglove_ros.ros.conversions import candidates_to_msg
 
     lookup = PoseLookup(load_database(assets.database), 40, 10)
-    camera = load_calibration(REPO_DIR / 'config' / 'calibration.yaml').primary
+    camera = load_calibration(CONFIG_DIR / 'calibration.yaml').primary
     result = lookup.lookup(tiny_labels_from_observation_msg(good_observation),
                            crop_from_observation_msg(good_observation), camera)
     return candidates_to_msg(good_observation, result, lookup_time_ms=1.0)
@@ -430,7 +430,7 @@ def test_camera_node_publishes_the_calibrated_camera_it_is(tmp_path: Path) -> No
     """camera_index picks the camera of a several-camera calibration: its frame_id and
     intrinsics are published; an index outside the calibration, or the synthetic source
     for a camera other than 0, cannot start."""
-    stereo = REPO_DIR / 'config' / 'calibration_stereo.yaml'
+    stereo = CONFIG_DIR / 'calibration_stereo.yaml'
     second = load_calibration(stereo).cameras[1]
     cv2.imwrite(str(tmp_path / 'frame.png'), np.zeros((480, 640, 3), np.uint8))
     with running(lambda ctx: CameraNode(context=ctx, parameter_overrides=params(

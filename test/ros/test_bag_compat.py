@@ -13,13 +13,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from repo_paths import CONFIG_DIR
 from rosbag2_compat import check_jazzy_bag
 
 from colorglove_ros.core.hand.model import FINGER_DOF_NAMES
 from colorglove_ros.ros.bags import TOPIC_CAMERA_INFO, TOPIC_IMAGE, TOPIC_JOINTS, read_sequence_bag
 from colorglove_ros.tools import make_bag
 
-REPO_DIR = Path(__file__).resolve().parent.parent
 FRAMES = 3
 
 
@@ -27,7 +27,7 @@ FRAMES = 3
 def stereo_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     bag = tmp_path_factory.mktemp('compat') / 'stereo'
     assert make_bag.main(['--seed', '2', '--frames', str(FRAMES), '--output', str(bag),
-                          '--calibration', str(REPO_DIR / 'config' / 'calibration_stereo.yaml')
+                          '--calibration', str(CONFIG_DIR / 'calibration_stereo.yaml')
                           ]) == 0
     return bag
 
