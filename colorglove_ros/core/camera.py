@@ -8,7 +8,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, HAND_LENGTH_RANGE_M
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.validation import MAX_IMAGE_SIDE, check_array, check_number
 from colorglove_ros.core.yaml_io import load_yaml_mapping
@@ -135,9 +135,23 @@ class Calibration:
         return self.cameras[0]
 
 
+MAX_DISTORTION_COEFFICIENT = 1e4
+"""Larger lens distortion coefficients are no lens's (a corrupt or mistyped value)."""
+MAX_CAMERA_DISTANCE_M = 100.0
+"""Cameras of one rig farther apart than this cannot watch one hand."""
+CAMERA_KEYS = frozenset({'name', 'frame_id', 'width', 'height', 'fx', 'fy', 'cx', 'cy',
+                         'distortion', 'rotation_vector', 'translation', 'camera_info_file',
+                         'rectified'})
+"""The fields of one camera entry of the own calibration format."""
+
+
 def _camera_from_dict(entry: dict, where: str) -> PinholeCamera:
     if not isinstance(entry, dict):
         raise CalibrationError(f'{where}: a camera must be a mapping, got {entry!r}')
+    unknown = sorted(set(entry) - CAMERA_KEYS)
+    if unknown:
+        raise CalibrationError(f'{where}: unknown camera field(s) {unknown} (known: '
+                               f'{sorted(CAMERA_KEYS)})')
     missing = [key for key in ('width', 'height', 'fx', 'fy', 'cx', 'cy') if key not in entry]
     if missing:
         raise CalibrationError(f'{where}: bad or missing camera field(s): {missing} missing')
@@ -153,16 +167,17 @@ def _camera_from_dict(entry: dict, where: str) -> PinholeCamera:
     cx = float(number('cx', low=-width, high=2.0 * width))
     cy = float(number('cy', low=-height, high=2.0 * height))
 
-    def vector(key: str, default: list[float], shape: tuple[int | None, ...]) -> np.ndarray:
+    def vector(key: str, default: list[float], shape: tuple[int | None, ...],
+               limit: float) -> np.ndarray:
         value = entry.get(key, default)
         if not isinstance(value, (list, tuple)):
             raise CalibrationError(f'{where}: {key} must be a list of numbers, got {value!r}')
-        return check_array(f'{where}: {key}', value, shape=shape, error=CalibrationError
-                           ).astype(float)
+        return check_array(f'{where}: {key}', value, shape=shape, low=-limit, high=limit,
+                           error=CalibrationError).astype(float)
 
-    distortion = vector('distortion', [0.0] * 5, (None,))
-    rvec = vector('rotation_vector', [0.0, 0.0, 0.0], (3,))
-    translation = vector('translation', [0.0, 0.0, 0.0], (3,))
+    distortion = vector('distortion', [0.0] * 5, (None,), MAX_DISTORTION_COEFFICIENT)
+    rvec = vector('rotation_vector', [0.0, 0.0, 0.0], (3,), 2.0 * np.pi)
+    translation = vector('translation', [0.0, 0.0, 0.0], (3,), MAX_CAMERA_DISTANCE_M)
     rotation = cv2.Rodrigues(rvec)[0]
     try:
         return PinholeCamera(width, height, fx, fy, cx, cy, distortion, rotation, translation,
@@ -276,6 +291,10 @@ def load_calibration(path: str | Path) -> Calibration:
         raise CalibrationError(
             f'calibration file {path} has version {data.get("version")!r}, '
             f'expected {CALIBRATION_VERSION}')
+    unknown = sorted(set(data) - {'version', 'hand_length_m', 'cameras'})
+    if unknown:
+        raise CalibrationError(f'calibration file {path}: unknown setting(s) {unknown} (known: '
+                               'version, hand_length_m, cameras)')
     entries = data.get('cameras')
     if not isinstance(entries, list) or not entries:
         raise CalibrationError(f'calibration file {path} lists no cameras')
@@ -286,7 +305,7 @@ def load_calibration(path: str | Path) -> Calibration:
     hand_length = check_number(f'{path}: hand_length_m',
                                data.get('hand_length_m', DEFAULT_HAND_LENGTH_M),
                                error=CalibrationError)
-    if not 0.08 < hand_length < 0.35:
+    if not HAND_LENGTH_RANGE_M[0] < hand_length < HAND_LENGTH_RANGE_M[1]:
         raise CalibrationError(f'{path}: hand_length_m {hand_length} is not a human hand')
     return Calibration(cameras, hand_length)
 

@@ -1,7 +1,8 @@
 """Constants shared by every stage, defined once: glove layout, tiny-image size, default hand."""
 from __future__ import annotations
 
-__all__ = ['NUM_COLORS', 'NUM_PATCHES', 'TINY_SIZE', 'DEFAULT_HAND_LENGTH_M']
+__all__ = ['NUM_COLORS', 'NUM_PATCHES', 'TINY_SIZE', 'DEFAULT_HAND_LENGTH_M', 'DEFAULT_GLOVE_SEED',
+           'HAND_LENGTH_RANGE_M']
 
 NUM_COLORS = 10
 """Glove colours, labels 1..10 in label images; 0 is background."""
@@ -11,3 +12,7 @@ TINY_SIZE = 40
 """Side in pixels of the tiny label image the lookup compares (paper section 4)."""
 DEFAULT_HAND_LENGTH_M = 0.19
 """Hand length (wrist crease to middle fingertip, metres) used when none is configured."""
+DEFAULT_GLOVE_SEED = 0
+"""Seed of the standard glove's patch layout (a database records the one it was built with)."""
+HAND_LENGTH_RANGE_M = (0.08, 0.35)
+"""Wrist-crease-to-middle-fingertip lengths of human hands a calibration may give (m)."""

@@ -17,6 +17,10 @@ def load_yaml_mapping(path: str | Path, error: type[Exception], what: str) -> di
         data = yaml.safe_load(path.read_text())
     except FileNotFoundError as exc:
         raise error(f'{what} not found: {path}') from exc
+    except UnicodeDecodeError as exc:
+        raise error(f'{what} is not text (binary or another encoding): {path}: {exc}') from exc
+    except OSError as exc:
+        raise error(f'{what} cannot be read: {path}: {exc}') from exc
     except yaml.YAMLError as exc:
         raise error(f'{what} is not valid YAML: {path}: {exc}') from exc
     if not isinstance(data, dict):

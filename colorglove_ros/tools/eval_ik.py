@@ -21,13 +21,14 @@ from colorglove_ros.core.evaluation.sequences import (
     LABEL_SOURCES,
     EvaluationError,
     SequenceEvaluator,
-    TemporalPrior,
     eval_seeds,
     make_observer,
     open_database,
     summarize,
 )
 from colorglove_ros.core.evaluation.targets import target_row
+from colorglove_ros.core.lookup.database import DatabaseBuild, check_hand_length
+from colorglove_ros.core.pipeline import TemporalPrior
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.tracking.config import TRACKER_MODES, load_covariances, load_ik_config
 from colorglove_ros.paths import share_dir
@@ -191,18 +192,8 @@ def main(argv: list[str] | None = None) -> int:
             config = dataclasses.replace(config, covariances=load_covariances(args.covariances))
         mono = load_calibration(args.calibration)
         stereo = load_calibration(args.stereo_calibration)
-        build = db.meta.get('build', {})
-        if 'hand_length_m' not in build or 'glove_seed' not in build:
-            raise EvaluationError(f'database {db_path} does not record the hand length and '
-                                  'glove seed it was built for (meta.build.hand_length_m, '
-                                  'glove_seed): rebuild it with colorglove_build_database')
-        if abs(mono.hand_length_m - float(build['hand_length_m'])) > 1e-9:
-            raise EvaluationError(f'the database was built for a {build["hand_length_m"]} m '
-                                  f'hand, the calibration says {mono.hand_length_m} m')
-        if int(build['glove_seed']) != config.glove_seed:
-            raise EvaluationError(f'the database was built for glove seed '
-                                  f'{build["glove_seed"]}, the IK config says '
-                                  f'{config.glove_seed}')
+        build = DatabaseBuild.from_meta(db.meta, str(db_path))
+        check_hand_length(build, mono.hand_length_m, str(args.calibration), str(db_path))
         observer = make_observer(args.labels, args.color_config, config.min_blob_pixels)
         temporal = None
         if args.temporal_tau is not None:

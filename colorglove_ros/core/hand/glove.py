@@ -19,7 +19,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, NUM_COLORS, NUM_PATCHES
+from colorglove_ros.core.conventions import (
+    DEFAULT_GLOVE_SEED,
+    DEFAULT_HAND_LENGTH_M,
+    NUM_COLORS,
+    NUM_PATCHES,
+)
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.disk_cache import cached_arrays
 from colorglove_ros.core.hand.mesh import HandMesh, build_hand_mesh
@@ -107,7 +112,8 @@ def _surface_graph(centroids: np.ndarray, faces: np.ndarray) -> csr_matrix:
     return coo_matrix((w, (r, c)), shape=(n, n)).tocsr()
 
 
-def make_glove(mesh: HandMesh, seed: int = 0, model: HandModel | None = None) -> Glove:
+def make_glove(mesh: HandMesh, seed: int = DEFAULT_GLOVE_SEED,
+               model: HandModel | None = None) -> Glove:
     """Build the glove pattern on ``mesh`` deterministically from ``seed``."""
     from scipy.sparse.csgraph import connected_components, dijkstra
 
@@ -183,7 +189,7 @@ def export_glove_mesh(mesh: HandMesh, glove: Glove, model: HandModel, path: str 
 
 @lru_cache(maxsize=4)
 def default_hand(hand_length_m: float = DEFAULT_HAND_LENGTH_M,
-                 seed: int = 0) -> tuple[HandModel, HandMesh, Glove]:
+                 seed: int = DEFAULT_GLOVE_SEED) -> tuple[HandModel, HandMesh, Glove]:
     """The standard (model, mesh, glove) triple, cached (in memory, and the glove on disk:
     ``core.hand.disk_cache``)."""
     model = HandModel(hand_length_m)

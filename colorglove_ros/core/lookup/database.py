@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.conventions import (
+    DEFAULT_GLOVE_SEED,
     DEFAULT_HAND_LENGTH_M,
     NUM_COLORS,
     NUM_PATCHES,
@@ -27,7 +28,8 @@ from colorglove_ros.core.validation import validate_database_arrays
 
 __all__ = [
     'DATABASE_VERSION', 'MANIFEST_NAME', 'ENTRY_ARRAYS', 'DatabaseError', 'PoseDatabase',
-    'pixel_keys', 'manifest_entry', 'save_database', 'load_database',
+    'DatabaseBuild', 'pixel_keys', 'manifest_entry', 'save_database', 'load_database',
+    'read_database_build', 'check_hand_length', 'STANDARD_BUILD',
 ]
 
 DATABASE_VERSION = 1
@@ -55,6 +57,38 @@ words, 'K' max glove pixels)."""
 
 class DatabaseError(ColorGloveError):
     """A database directory is missing, corrupt, truncated, inconsistent or of another version."""
+
+
+@dataclass(frozen=True)
+class DatabaseBuild:
+    """The hand a database was rendered with, recorded in its manifest (``meta.build``): the
+    one source of the glove seed and hand length every other stage must use."""
+
+    hand_length_m: float
+    glove_seed: int
+
+    @classmethod
+    def from_meta(cls, meta: dict[str, Any], where: str) -> DatabaseBuild:
+        """The build record of a manifest's ``meta``; :class:`DatabaseError` naming ``where``
+        when it is missing or malformed."""
+        build = meta.get('build') if isinstance(meta, dict) else None
+        if not isinstance(build, dict) or 'hand_length_m' not in build \
+                or 'glove_seed' not in build:
+            raise DatabaseError(f'{where}: the manifest does not record the hand length and glove '
+                                'seed the database was built for (meta.build.hand_length_m, '
+                                'glove_seed); rebuild it with colorglove_build_database')
+        length, seed = build['hand_length_m'], build['glove_seed']
+        if isinstance(length, bool) or not isinstance(length, (int, float)) \
+                or not 0.05 <= float(length) <= 0.4:
+            raise DatabaseError(f'{where}: meta.build.hand_length_m {length!r} is not a hand '
+                                'length in metres')
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise DatabaseError(f'{where}: meta.build.glove_seed {seed!r} is not a seed')
+        return cls(float(length), int(seed))
+
+
+STANDARD_BUILD = DatabaseBuild(DEFAULT_HAND_LENGTH_M, DEFAULT_GLOVE_SEED)
+"""The standard hand and glove (what ``default_hand()`` makes)."""
 
 
 @dataclass
@@ -101,6 +135,11 @@ class PoseDatabase:
     def nbytes(self) -> int:
         """Total bytes of the entry arrays."""
         return sum(int(getattr(self, name).nbytes) for name in ENTRY_ARRAYS)
+
+    @property
+    def build(self) -> DatabaseBuild:
+        """The hand this database was built for (from its manifest)."""
+        return DatabaseBuild.from_meta(self.meta, 'pose database')
 
     def check(self) -> None:
         """Raise :class:`DatabaseError` unless all arrays agree in shape and dtype."""
@@ -160,13 +199,9 @@ def save_database(db: PoseDatabase, path: str | Path) -> Path:
     return path
 
 
-def load_database(path: str | Path, verify: bool = True) -> PoseDatabase:
-    """Open a database directory with memory-mapped arrays.
-
-    Raises :class:`DatabaseError` when the directory or manifest is missing, the version
-    differs, a file is missing, truncated, of the wrong shape/dtype, or (with ``verify``)
-    its CRC-32 does not match the manifest."""
-    path = Path(path)
+def _read_manifest(path: Path) -> dict[str, Any]:
+    """The checked manifest of the database folder ``path`` (format, version, dt_scale, build
+    record); :class:`DatabaseError` naming the file otherwise."""
     mpath = path / MANIFEST_NAME
     if not path.is_dir():
         raise DatabaseError(f'pose database not found: {path} (build it with '
@@ -184,8 +219,41 @@ def load_database(path: str | Path, verify: bool = True) -> PoseDatabase:
                             f'reads version {DATABASE_VERSION}; rebuild the database')
     if manifest.get('dt_scale') != DT_SCALE:
         raise DatabaseError(f'{path}: dt_scale {manifest.get("dt_scale")} != {DT_SCALE}')
+    DatabaseBuild.from_meta(manifest.get('meta', {}), str(mpath))
+    return manifest
+
+
+def read_database_build(path: str | Path) -> DatabaseBuild:
+    """The hand the database at ``path`` was built for, read from its manifest alone (cheap:
+    no array is opened), for stages that need the glove and hand but not the entries."""
+    path = Path(path)
+    return DatabaseBuild.from_meta(_read_manifest(path)['meta'], str(path / MANIFEST_NAME))
+
+
+def check_hand_length(build: DatabaseBuild, hand_length_m: float, calibration: str,
+                      database: str) -> None:
+    """:class:`DatabaseError` unless the calibration's hand length is the database's: the
+    lookup's depth and the IK's hand model both come from it."""
+    if abs(float(hand_length_m) - build.hand_length_m) > 1e-6:
+        raise DatabaseError(
+            f'{calibration}: hand_length_m {hand_length_m} but the pose database {database} was '
+            f'built for a {build.hand_length_m} m hand; rebuild the database with '
+            f'hand_length_m: {hand_length_m} in config/database.yaml or fix the calibration')
+
+
+def load_database(path: str | Path, verify: bool = True) -> PoseDatabase:
+    """Open a database directory with memory-mapped arrays.
+
+    Raises :class:`DatabaseError` when the directory or manifest is missing, the version
+    differs, a file is missing, truncated, of the wrong shape/dtype, or (with ``verify``)
+    its CRC-32 does not match the manifest."""
+    path = Path(path)
+    manifest = _read_manifest(path)
     arrays: dict[str, np.ndarray] = {}
-    for name, info in manifest.get('arrays', {}).items():
+    listed = manifest.get('arrays')
+    if not isinstance(listed, dict) or not all(isinstance(i, dict) for i in listed.values()):
+        raise DatabaseError(f'{path / MANIFEST_NAME}: arrays must map names to file entries')
+    for name, info in listed.items():
         file = path / str(info.get('file', ''))
         if not file.is_file():
             raise DatabaseError(f'{path}: array file {file.name!r} missing')
@@ -224,7 +292,7 @@ def load_database(path: str | Path, verify: bool = True) -> PoseDatabase:
     from colorglove_ros.core.hand.mesh import build_hand_mesh
     from colorglove_ros.core.hand.model import HandModel
 
-    length = float(db.meta.get('build', {}).get('hand_length_m', DEFAULT_HAND_LENGTH_M))
-    validate_database_arrays(db, str(path), build_hand_mesh(HandModel(length)).num_vertices,
+    num_vertices = build_hand_mesh(HandModel(db.build.hand_length_m)).num_vertices
+    validate_database_arrays(db, str(path), num_vertices,
                              error=DatabaseError)
     return db

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from colorglove_ros.core.conventions import (
+    DEFAULT_GLOVE_SEED,
     DEFAULT_HAND_LENGTH_M,
     NUM_COLORS,
     NUM_PATCHES,
@@ -22,6 +23,8 @@ from colorglove_ros.core.conventions import (
 from colorglove_ros.core.lookup.codes import BinaryEncoder, features_from_dts, train_ssc
 from colorglove_ros.core.lookup.database import (
     MANIFEST_NAME,
+    STANDARD_BUILD,
+    DatabaseBuild,
     DatabaseError,
     PoseDatabase,
     load_database,
@@ -35,6 +38,7 @@ from colorglove_ros.core.lookup.distance import (
     quantize_dts,
 )
 from colorglove_ros.core.segmentation.crop import TinyCrop, crop_signature
+from colorglove_ros.core.validation import check_number
 
 if TYPE_CHECKING:
     from colorglove_ros.core.camera import PinholeCamera
@@ -59,6 +63,23 @@ Tuning notes)."""
 
 
 # ------------------------------------------------------------------------------- configuration
+_BUILD_LIMITS: dict[str, tuple[type, float, float]] = {
+    # name: (int: [lowest, highest], or float: (lowest, highest])
+    'entries': (int, 1, 10_000_000), 'orientations_per_config': (int, 1, 100_000),
+    'collection_size': (int, 1, 10_000_000), 'collection_seed': (int, 0, 2**32 - 1),
+    'seed': (int, 0, 2**32 - 1), 'image_size': (int, 16, 4096),
+    'focal_px': (float, 0.0, 1e5), 'distance_m': (float, 0.0, 10.0),
+    'num_bits': (int, 1, 4096), 'num_pairs': (int, 1, 10_000_000),
+    'training_images': (int, 2, 10_000_000), 'hand_length_m': (float, 0.05, 0.4),
+    'glove_seed': (int, 0, 2**32 - 1), 'fps_vertices': (int, 1, 100_000),
+    'batch': (int, 1, 100_000), 'visibility_tolerance_m': (float, 0.0, 0.1),
+}
+"""The range of every :class:`BuildConfig` number the build can run with."""
+LOOKUP_SETTINGS: dict[str, tuple[int, int]] = {'num_candidates': (1, 100_000),
+                                               'num_blend': (1, 300)}
+"""The ``database.lookup`` settings of ``config/database.yaml`` and their ranges."""
+
+
 @dataclass(frozen=True)
 class BuildConfig:
     """Parameters of :func:`build_database` (``config/database.yaml`` holds the defaults)."""
@@ -75,10 +96,17 @@ class BuildConfig:
     num_pairs: int = 10_000
     training_images: int = DEFAULT_TRAINING_IMAGES
     hand_length_m: float = DEFAULT_HAND_LENGTH_M
-    glove_seed: int = 0
+    glove_seed: int = DEFAULT_GLOVE_SEED
     fps_vertices: int = 300
     batch: int = 256
     visibility_tolerance_m: float = 0.004
+
+    def __post_init__(self) -> None:
+        for name, (kind, low, high) in _BUILD_LIMITS.items():
+            value = check_number(name, getattr(self, name), low=low, high=high,
+                                 low_open=kind is float, integer=kind is int,
+                                 error=DatabaseError)
+            object.__setattr__(self, name, value)
 
     def render_camera(self) -> dict[str, float]:
         """Intrinsics of the square database render camera."""
@@ -94,16 +122,37 @@ def read_database_config(path: str | Path) -> tuple[BuildConfig, Path, dict[str,
     from colorglove_ros.core.yaml_io import load_yaml_mapping
     from colorglove_ros.paths import resolve_path
 
-    data = load_yaml_mapping(resolve_path(path), DatabaseError, 'database config').get('database')
-    if not isinstance(data, dict) or 'path' not in data:
+    document = load_yaml_mapping(resolve_path(path), DatabaseError, 'database config')
+    data = document.get('database')
+    if set(document) != {'database'}:
+        raise DatabaseError(f'database config {path}: unknown top-level settings '
+                            f'{sorted(set(document) - {"database"})}')
+    if not isinstance(data, dict) or not isinstance(data.get('path'), str) or not data['path']:
         raise DatabaseError(f'database config {path} has no database.path')
+    unknown = sorted(set(data) - {'path', 'build', 'lookup'})
+    if unknown:
+        raise DatabaseError(f'database config {path}: unknown database settings {unknown}')
+    lookup = data.get('lookup') or {}
+    if not isinstance(lookup, dict) or set(lookup) - set(LOOKUP_SETTINGS):
+        raise DatabaseError(f'database config {path}: database.lookup must be a mapping of '
+                            f'{sorted(LOOKUP_SETTINGS)}')
+    for name, value in lookup.items():
+        check_number(f'database config {path}: database.lookup.{name}', value,
+                     low=LOOKUP_SETTINGS[name][0], high=LOOKUP_SETTINGS[name][1], integer=True,
+                     error=DatabaseError)
     known = {f.name for f in fields(BuildConfig)}
-    build = {k: v for k, v in (data.get('build') or {}).items() if k in known}
+    build = data.get('build') or {}
+    if not isinstance(build, dict):
+        raise DatabaseError(f'database config {path}: database.build must be a mapping')
+    unknown = sorted(set(build) - known)
+    if unknown:
+        raise DatabaseError(f'database config {path}: unknown database.build settings {unknown} '
+                            f'(known: {sorted(known)})')
     try:
         config = BuildConfig(**build)
-    except TypeError as exc:
+    except (TypeError, DatabaseError) as exc:
         raise DatabaseError(f'database config {path}: bad build settings: {exc}') from exc
-    return config, resolve_path(str(data['path'])), dict(data.get('lookup') or {})
+    return config, resolve_path(data['path']), dict(lookup)
 
 
 # ------------------------------------------------------------------------------- sampling
@@ -258,11 +307,13 @@ def assemble_database(tiny: np.ndarray, poses: np.ndarray, crop: np.ndarray,
                       encoder: BinaryEncoder | None = None, num_bits: int = 192,
                       num_pairs: int = 10_000, seed: int = 0,
                       meta: dict[str, Any] | None = None,
+                      build: DatabaseBuild = STANDARD_BUILD,
                       progress: Callable[[str], None] | None = None,
                       max_training_images: int = DEFAULT_TRAINING_IMAGES) -> PoseDatabase:
     """Make a :class:`PoseDatabase` from rendered entries: distance transforms, pixel keys,
     codes (training an SSC encoder on the entries when ``encoder`` is None). Missing patch
-    arrays are filled with 'not visible'."""
+    arrays are filled with 'not visible'. ``build`` is the hand the entries were rendered with
+    (recorded as ``meta.build`` unless ``meta`` has a build record already)."""
     tiny = np.ascontiguousarray(tiny, np.uint8)
     n = len(tiny)
     say = progress or (lambda _msg: None)
@@ -292,6 +343,8 @@ def assemble_database(tiny: np.ndarray, poses: np.ndarray, crop: np.ndarray,
         patch_color=(np.zeros(NUM_PATCHES, np.uint8) if patch_color is None
                      else np.asarray(patch_color, np.uint8)),
         encoder=encoder, render_camera=dict(render_camera), meta=dict(meta or {}))
+    db.meta.setdefault('build', {'hand_length_m': build.hand_length_m,
+                                 'glove_seed': build.glove_seed})
     db.check()
     return db
 
@@ -366,7 +419,8 @@ def render_views(config: BuildConfig, fingers: np.ndarray, rotvecs: np.ndarray
     entries (same camera, distance, crop). Returns poses (M, 26), tiny images (M, 40, 40),
     crops (M, 3) and a (M,) bool ``ok`` (False where crop_to_tiny rejected the render)."""
     from colorglove_ros.core.hand.glove import default_hand
-    from colorglove_ros.core.synthetic.render import Renderer, patch_ids_to_labels
+    from colorglove_ros.core.synthetic.mesh_images import patch_ids_to_labels
+    from colorglove_ros.core.synthetic.render import Renderer
 
     model, mesh, glove = default_hand(config.hand_length_m, seed=config.glove_seed)
     fingers = np.atleast_2d(np.asarray(fingers, np.float64))
@@ -407,7 +461,8 @@ def build_database(config: BuildConfig,
     ``bar`` wraps an iterable with a progress bar (e.g. ``tqdm``)."""
     from colorglove_ros.core.hand.glove import default_hand
     from colorglove_ros.core.hand.poses import sample_global_rotations
-    from colorglove_ros.core.synthetic.render import Renderer, patch_centroids, patch_ids_to_labels
+    from colorglove_ros.core.synthetic.mesh_images import patch_centroids, patch_ids_to_labels
+    from colorglove_ros.core.synthetic.render import Renderer
 
     say = progress or (lambda _msg: None)
     wrap = bar or (lambda it, **_kw: it)

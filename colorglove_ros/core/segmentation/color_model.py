@@ -274,19 +274,17 @@ def load_calibration(path: str | Path) -> ColorCalibration:
 def read_calibration_config(config_path: str | Path) -> dict[str, Any]:
     """Read ``config/color_calibration.yaml``: ``calibration_file`` (resolved to an absolute
     path) and the ``segmenter`` settings (a dict, possibly empty)."""
-    import yaml
-
+    from colorglove_ros.core.yaml_io import load_yaml_mapping
     from colorglove_ros.paths import resolve_path
 
     path = resolve_path(config_path)
-    if not path.is_file():
-        raise ColorCalibrationError(f'colour calibration config not found: {path}')
-    try:
-        cfg = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise ColorCalibrationError(f'cannot parse {path}: {exc}') from exc
-    if not isinstance(cfg, dict) or 'calibration_file' not in cfg:
-        raise ColorCalibrationError(f'{path}: missing key calibration_file')
+    cfg = load_yaml_mapping(path, ColorCalibrationError, 'colour calibration config')
+    if not isinstance(cfg.get('calibration_file'), str) or not cfg['calibration_file']:
+        raise ColorCalibrationError(f'{path}: missing key calibration_file (a path)')
+    unknown = sorted(set(cfg) - {'calibration_file', 'segmenter'})
+    if unknown:
+        raise ColorCalibrationError(f'{path}: unknown setting(s) {unknown} (known: '
+                                    'calibration_file, segmenter)')
     segmenter = cfg.get('segmenter') or {}
     if not isinstance(segmenter, dict):
         raise ColorCalibrationError(f'{path}: segmenter must be a mapping')

@@ -12,6 +12,7 @@ import yaml
 
 from colorglove_ros.core.hand.model import DOF_NAMES, NUM_DOFS
 from colorglove_ros.core.tracking.types import IKError
+from colorglove_ros.core.validation import check_number
 from colorglove_ros.core.yaml_io import load_yaml_mapping
 
 __all__ = [
@@ -25,6 +26,10 @@ COVARIANCE_FORMAT = 'colorglove_ik_covariances'
 COVARIANCE_VERSION = 1
 TRACKER_MODES = ('blend', 'ik', 'ik_smooth')
 CONSTRAINT_MODELS = ('vertex', 'patch')
+
+
+MAX_VARIANCE = 1e8
+"""Larger variances (px^2, m^2, rad^2) mean 'no information': written as a corrupt value."""
 
 
 class IKConfigError(IKError):
@@ -42,17 +47,21 @@ class IKCovariances:
     source: str = 'defaults'
 
     def __post_init__(self) -> None:
-        r = np.asarray(self.r_var_px2, float).reshape(-1)
+        try:
+            r = np.asarray(self.r_var_px2, float).reshape(-1)
+            q = np.asarray(self.q_var, float).reshape(-1)
+            p = np.asarray(self.p_var, float).reshape(-1)
+        except (TypeError, ValueError) as exc:
+            raise IKConfigError(f'covariances must be lists of numbers: {exc}') from exc
         if r.size == 1:
             r = np.repeat(r, 2)
-        q = np.asarray(self.q_var, float).reshape(-1)
-        p = np.asarray(self.p_var, float).reshape(-1)
         if r.shape != (2,) or q.shape != (NUM_DOFS,) or p.shape != (NUM_DOFS,):
             raise IKConfigError(f'covariances need r (2), q (26), p (26); got {r.shape}, '
                                 f'{q.shape}, {p.shape}')
         for name, v in (('r_var_px2', r), ('q_var', q), ('p_var', p)):
-            if not np.all(np.isfinite(v)) or np.any(v <= 0):
-                raise IKConfigError(f'{name} must be finite and positive, got {v.tolist()}')
+            if not np.all(np.isfinite(v)) or np.any(v <= 0) or np.any(v > MAX_VARIANCE):
+                raise IKConfigError(f'{name} must be finite, positive and <= {MAX_VARIANCE:g}, '
+                                    f'got {v.tolist()}')
         object.__setattr__(self, 'r_var_px2', r)
         object.__setattr__(self, 'q_var', q)
         object.__setattr__(self, 'p_var', p)
@@ -113,11 +122,15 @@ def load_covariances(path: str | Path) -> IKCovariances:
                             f'expected {COVARIANCE_VERSION}')
     if list(data.get('dof_names', [])) != list(DOF_NAMES):
         raise IKConfigError(f'{path}: dof_names do not match the 26-DOF hand model')
+    unknown = sorted(set(data) - {'format', 'version', 'dof_names', 'r_var_px2', 'q_var',
+                                  'p_var', 'provenance'})
+    if unknown:
+        raise IKConfigError(f'{path}: unknown keys {unknown}')
     try:
         return IKCovariances(data['r_var_px2'], data['q_var'], data['p_var'], source=str(path))
     except KeyError as exc:
         raise IKConfigError(f'{path}: missing field {exc}') from exc
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, IKConfigError) as exc:
         raise IKConfigError(f'{path}: bad values: {exc}') from exc
 
 
@@ -146,7 +159,6 @@ class IKConfig:
     max_gap_s: float = 0.25
     min_depth_m: float = 0.05
     constraint_model: str = 'patch'
-    glove_seed: int = 0
     finger_spread_gain: float = 1.0
     finger_spread_floor_rad: float = 0.13
     covariances: IKCovariances = field(default_factory=default_covariances)
@@ -161,10 +173,16 @@ class IKConfig:
         if self.constraint_model not in CONSTRAINT_MODELS:
             raise IKConfigError(f'constraint_model must be one of {CONSTRAINT_MODELS}, got '
                                 f'{self.constraint_model!r}')
-        if not (0 <= self.finger_spread_gain < math.inf
-                and 0 < self.finger_spread_floor_rad < math.inf):
-            raise IKConfigError('finger_spread_gain must be finite and >= 0, '
-                                'finger_spread_floor_rad finite and > 0')
+        for name in _SWITCHES:
+            if not isinstance(getattr(self, name), bool):
+                raise IKConfigError(f'{name} must be true or false, got '
+                                    f'{getattr(self, name)!r}')
+        for name, (kind, low, high, low_open) in _NUMBER_LIMITS.items():
+            value = check_number(name, getattr(self, name), low=low, high=high,
+                                 low_open=low_open, integer=kind is int, error=IKConfigError)
+            object.__setattr__(self, name, value)
+        if not isinstance(self.covariances, IKCovariances):
+            raise IKConfigError(f'covariances must be IKCovariances, got {self.covariances!r}')
 
     def prior_covariances(self, finger_std: np.ndarray | None) -> IKCovariances:
         """The covariances for one frame: with ``finger_spread_gain`` > 0 and the lookup's
@@ -186,17 +204,23 @@ class IKConfig:
 # Tracker switches set by the caller (ik_node parameters, the tools' --modes), never by the file:
 # two homes for one switch let one silently win.
 _CALLER_SWITCHES = ('enable_ik', 'enable_smoothing')
-_CONFIG_FIELDS = {
-    'max_iterations': int,
-    'multi_camera_iterations': int, 'refine_iterations': int, 'lambda_init': float,
-    'step_tol': float, 'cost_tol': float,
-    'init_translation': bool, 'min_constraints': int, 'min_blob_pixels': int,
-    'gate_tiny_px': float, 'gate_min_px': float, 'extra_gate_px': float,
-    'extra_shift_max_px': float, 'extra_inlier_px': float, 'extra_rematch': bool,
-    'outlier_px': float,
-    'max_gap_s': float, 'min_depth_m': float, 'constraint_model': str, 'glove_seed': int,
-    'finger_spread_gain': float, 'finger_spread_floor_rad': float,
+_SWITCHES = ('enable_ik', 'enable_smoothing', 'init_translation', 'extra_rematch')
+_NUMBER_LIMITS: dict[str, tuple[type, float, float, bool]] = {
+    # name: (int or float, lowest, highest, lowest excluded)
+    'max_iterations': (int, 1, 100, False), 'multi_camera_iterations': (int, 0, 100, False),
+    'refine_iterations': (int, 0, 100, False), 'lambda_init': (float, 0.0, 1e6, True),
+    'step_tol': (float, 0.0, 1.0, True), 'cost_tol': (float, 0.0, 1.0, True),
+    'min_constraints': (int, 1, 1000, False), 'min_blob_pixels': (int, 1, 1_000_000, False),
+    'gate_tiny_px': (float, 0.0, 1e4, False), 'gate_min_px': (float, 0.0, 1e4, False),
+    'extra_gate_px': (float, 0.0, 1e4, False), 'extra_shift_max_px': (float, 0.0, 1e4, False),
+    'extra_inlier_px': (float, 0.0, 1e4, False), 'outlier_px': (float, 0.0, 1e4, False),
+    'max_gap_s': (float, 0.0, 3600.0, True), 'min_depth_m': (float, 0.0, 10.0, True),
+    'finger_spread_gain': (float, 0.0, 1e3, False),
+    'finger_spread_floor_rad': (float, 0.0, math.pi, True),
 }
+"""Every number of :class:`IKConfig` with the range the tracker can run with."""
+_FILE_SETTINGS = (*(name for name in _SWITCHES if name not in _CALLER_SWITCHES),
+                  *_NUMBER_LIMITS, 'constraint_model')
 
 
 def load_ik_config(path: str | Path) -> IKConfig:
@@ -211,20 +235,17 @@ def load_ik_config(path: str | Path) -> IKConfig:
     if switches:
         raise IKConfigError(f'IK config {path}: {switches} are not IK file settings: set them as '
                             'ik_node parameters (config/nodes.yaml) or with the tools\' --modes')
-    unknown = set(data) - set(_CONFIG_FIELDS) - {'version', 'covariances', 'covariance_file'}
+    if 'glove_seed' in data:
+        raise IKConfigError(f'IK config {path}: glove_seed is not an IK setting: the glove comes '
+                            'from the pose database the lookup uses (its manifest records the '
+                            'glove seed and hand length it was built with)')
+    unknown = set(data) - set(_FILE_SETTINGS) - {'version', 'covariances', 'covariance_file'}
     if unknown:
         raise IKConfigError(f'IK config {path}: unknown keys {sorted(unknown)}')
-    kwargs: dict[str, Any] = {}
-    for key, typ in _CONFIG_FIELDS.items():
-        if key in data:
-            value = data[key]
-            if typ is bool and not isinstance(value, bool):
-                raise IKConfigError(f'IK config {path}: {key} must be true or false')
-            try:
-                kwargs[key] = typ(value)
-            except (TypeError, ValueError) as exc:
-                raise IKConfigError(f'IK config {path}: {key}: {exc}') from exc
+    kwargs: dict[str, Any] = {key: data[key] for key in _FILE_SETTINGS if key in data}
     cov_file = data.get('covariance_file') or ''
+    if not isinstance(cov_file, str):
+        raise IKConfigError(f'IK config {path}: covariance_file must be a path, got {cov_file!r}')
     if cov_file:
         cov_path = Path(cov_file)
         if not cov_path.is_absolute():
@@ -240,5 +261,13 @@ def load_ik_config(path: str | Path) -> IKConfig:
             raise IKConfigError(f'IK config {path}: covariances.r_std_px: {exc}') from exc
         q_std = _group_std(c.get('q_std'), f'{path}: covariances.q_std')
         p_std = _group_std(c.get('p_std'), f'{path}: covariances.p_std')
-        kwargs['covariances'] = IKCovariances(r_std**2, q_std**2, p_std**2, source=str(path))
-    return IKConfig(**kwargs)
+        try:
+            with np.errstate(over='ignore'):       # an overflow to inf is refused below
+                r_var, q_var, p_var = r_std**2, q_std**2, p_std**2
+            kwargs['covariances'] = IKCovariances(r_var, q_var, p_var, source=str(path))
+        except IKConfigError as exc:
+            raise IKConfigError(f'IK config {path}: covariances: {exc}') from exc
+    try:
+        return IKConfig(**kwargs)
+    except IKConfigError as exc:
+        raise IKConfigError(f'IK config {path}: {exc}') from exc

@@ -103,8 +103,9 @@ class HandTracker:
     The world frame is the primary camera's optical frame (``cameras[0]`` must have
     identity extrinsics); poses are expressed in it. With ``constraint_model: patch`` the
     tracker needs the glove's patch of every mesh face: ``glove`` (a ``core.hand.glove.Glove``),
-    or else the standard glove ``default_hand(hand length, config.glove_seed)``, which must
-    have been made on the same mesh.
+    or else the standard glove (``default_hand(hand length)``), which must have been made on
+    the same mesh. Callers tracking with a pose database pass the glove of the database's
+    build record (``core.lookup.database.DatabaseBuild``).
     """
 
     def __init__(self, model: HandModel, mesh: MeshLike, cameras: Sequence[PinholeCamera],
@@ -129,7 +130,7 @@ class HandTracker:
 
     def _face_patch(self, glove: Any) -> np.ndarray:
         if glove is None:
-            _, std_mesh, glove = default_hand(self.model.hand_length_m, self.config.glove_seed)
+            _, std_mesh, glove = default_hand(self.model.hand_length_m)
             faces = getattr(self.mesh, 'faces', None)
             if faces is None or not np.array_equal(np.asarray(faces), std_mesh.faces):
                 raise IKError('constraint_model patch: pass the glove of this mesh (the '

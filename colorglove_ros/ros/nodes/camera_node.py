@@ -4,25 +4,22 @@ from __future__ import annotations
 
 import sys
 
-from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
-from sensor_msgs.msg import CameraInfo, Image, JointState
+from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 from colorglove_ros.core.camera import CalibrationError, load_calibration
 from colorglove_ros.core.frame_sources import FrameSourceError, open_frame_source
 from colorglove_ros.paths import resolve_path
-from colorglove_ros.ros.conversions import (
-    camera_to_camera_info_msg,
-    pose_to_joint_state_msg,
-    pose_to_wrist_pose_msg,
-)
+from colorglove_ros.ros.conversions import camera_to_camera_info_msg
 from colorglove_ros.ros.image import array_to_image
 from colorglove_ros.ros.nodes.common import (
-    StartupError,
+    PosePublishers,
     declare,
+    declare_calibration_file,
     run_node,
+    startup_errors,
 )
 
 CAMERA_QOS = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=2,
@@ -36,8 +33,7 @@ class CameraNode(Node):
         super().__init__('camera', **kwargs)
         source = declare(self, 'source', 'synthetic',
                          'synthetic | V4L2 index or /dev/videoN | video file | image folder')
-        calibration_file = declare(self, 'calibration_file', 'config/calibration.yaml',
-                                   'camera calibration YAML')
+        calibration_file = declare_calibration_file(self, 'camera calibration YAML')
         camera_index = declare(self, 'camera_index', 0,
                                'which camera of the calibration this is (intrinsics, frame_id)',
                                0, 63)
@@ -49,7 +45,7 @@ class CameraNode(Node):
                             'render the whole synthetic sequence at start-up (steady frame rate)')
         self.max_frames = declare(self, 'max_frames', 0,
                                   'stop publishing after this many frames (0 = never)', 0, 10**9)
-        try:
+        with startup_errors('camera_node'):
             calibration = load_calibration(resolve_path(calibration_file))
             if camera_index >= len(calibration.cameras):
                 raise CalibrationError(f'camera_index {camera_index}, but {calibration_file} '
@@ -62,13 +58,11 @@ class CameraNode(Node):
             self.source = open_frame_source(source, self.camera, seed=seed, num_frames=num_frames,
                                             loop=loop, hand_length_m=calibration.hand_length_m,
                                             prerender=prerender)
-        except (CalibrationError, FrameSourceError) as exc:
-            raise StartupError(f'camera_node cannot start: {exc}') from exc
         # Reliable publishers match both reliable and best-effort (sensor-data) subscribers.
         self.image_pub = self.create_publisher(Image, 'camera/image_raw', CAMERA_QOS)
         self.info_pub = self.create_publisher(CameraInfo, 'camera/camera_info', CAMERA_QOS)
-        self.gt_joint_pub = self.create_publisher(JointState, 'hand/ground_truth/joint_states', 10)
-        self.gt_wrist_pub = self.create_publisher(PoseStamped, 'hand/ground_truth/wrist_pose', 10)
+        self.ground_truth_pub = PosePublishers(self, 'hand/ground_truth/joint_states',
+                                               'hand/ground_truth/wrist_pose')
         self.published = 0
         self.timer = self.create_timer(1.0 / rate_hz, self.publish_frame)
         self.get_logger().info(f'publishing {self.source.description} at {rate_hz:g} Hz')
@@ -98,8 +92,7 @@ class CameraNode(Node):
         self.image_pub.publish(array_to_image(frame.image_rgb, 'rgb8', header))
         self.info_pub.publish(camera_to_camera_info_msg(self.camera, header))
         if frame.ground_truth_pose is not None:
-            self.gt_joint_pub.publish(pose_to_joint_state_msg(frame.ground_truth_pose, header))
-            self.gt_wrist_pub.publish(pose_to_wrist_pose_msg(frame.ground_truth_pose, header))
+            self.ground_truth_pub.publish(frame.ground_truth_pose, header)
         self.published += 1
 
     def destroy_node(self) -> None:

@@ -1,10 +1,14 @@
-"""Helpers shared by the node shells: parameter declaration and the Jazzy ``main`` pattern."""
+"""Helpers shared by the node shells: parameter declaration, start-up errors, the tracked-hand
+topics (publishing a pose, subscribing to one) and the Jazzy ``main`` pattern."""
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
+import numpy as np
 import rclpy
+from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import (
     FloatingPointRange,
     IntegerRange,
@@ -13,11 +17,29 @@ from rcl_interfaces.msg import (
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header, String
+from visualization_msgs.msg import MarkerArray
 
+from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, HAND_LENGTH_RANGE_M
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.paths import resolve_path
+from colorglove_ros.ros.conversions import (
+    pose_to_joint_state_msg,
+    pose_to_wrist_pose_msg,
+    skeleton_to_markers_msg,
+)
+from colorglove_ros.ros.pose_pairing import PosePairer
 from colorglove_ros.ros.shm_cleanup import clean_stale_fastdds_segments
 
-__all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'run_node']
+__all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'run_node',
+           'DEFAULT_CALIBRATION_FILE', 'HAND_LENGTH_RANGE_M', 'startup_errors',
+           'declare_calibration_file', 'declare_hand_length', 'split_topics',
+           'hand_model_from_calibration', 'JOINT_STATES_TOPIC', 'WRIST_POSE_TOPIC',
+           'MARKERS_TOPIC', 'TRACKING_STATUS_TOPIC',
+           'PosePublishers', 'TrackerOutputs', 'subscribe_tracked_pose']
 
 # Between pipeline stages keep only the newest message: a slow stage drops old frames instead
 # of queueing them without bound.
@@ -81,3 +103,120 @@ class StartupError(ColorGloveError):
 
 
 __all__ += ['StartupError']
+
+
+# ------------------------------------------------------------------ start-up
+DEFAULT_CALIBRATION_FILE = 'config/calibration.yaml'
+"""Default of every node's ``calibration_file`` parameter."""
+
+
+@contextmanager
+def startup_errors(executable: str, *also: type[Exception]) -> Iterator[None]:
+    """Turn a typed error of the package (or one of ``also``) raised in the block into a
+    :class:`StartupError` ``'<executable> cannot start: <reason>'``; a StartupError passes."""
+    try:
+        yield
+    except StartupError:
+        raise
+    except (ColorGloveError, *also) as exc:
+        raise StartupError(f'{executable} cannot start: {exc}') from exc
+
+
+def declare_calibration_file(node: Node, description: str,
+                             default: str = DEFAULT_CALIBRATION_FILE) -> str:
+    """Declare the ``calibration_file`` parameter; return its value."""
+    return declare(node, 'calibration_file', default, description)
+
+
+def declare_hand_length(node: Node, description: str) -> float:
+    """Declare the ``hand_length_m`` parameter (default: the standard hand); return its value."""
+    return declare(node, 'hand_length_m', DEFAULT_HAND_LENGTH_M, description,
+                   *HAND_LENGTH_RANGE_M)
+
+
+def split_topics(text: str) -> list[str]:
+    """The topics of a comma-separated topic-list parameter (blanks dropped)."""
+    return [topic.strip() for topic in text.split(',') if topic.strip()]
+
+
+def hand_model_from_calibration(node: Node, executable: str) -> HandModel:
+    """Declare ``calibration_file`` and return the hand model of the hand length it gives;
+    a file that cannot be read stops the start with a :class:`StartupError` naming it."""
+    calibration_file = declare_calibration_file(node, 'camera calibration YAML (for the hand '
+                                                      'length)')
+    with startup_errors(executable, ValueError):
+        return HandModel(load_calibration(resolve_path(calibration_file)).hand_length_m)
+
+
+# ------------------------------------------------------------------ tracked-hand topics
+JOINT_STATES_TOPIC = 'hand/joint_states'
+"""Finger joints (URDF names) of the tracked hand, from every hand tracker node."""
+WRIST_POSE_TOPIC = 'hand/wrist_pose'
+"""Wrist pose of the tracked hand in the camera frame, same stamp as its joint state."""
+MARKERS_TOPIC = 'hand/markers'
+"""Skeleton markers of the tracked hand (cleared when the hand is lost)."""
+TRACKING_STATUS_TOPIC = 'hand/tracking_status'
+"""One line per frame: ``tracking: ...`` or ``no hand: <reason>``."""
+
+
+class PosePublishers:
+    """Publishes a 26-DOF pose as a ``JointState`` plus a wrist ``PoseStamped``."""
+
+    def __init__(self, node: Node, joints_topic: str = JOINT_STATES_TOPIC,
+                 wrist_topic: str = WRIST_POSE_TOPIC) -> None:
+        self.joints = node.create_publisher(JointState, joints_topic, 10)
+        self.wrist = node.create_publisher(PoseStamped, wrist_topic, 10)
+
+    def publish(self, q: np.ndarray, header: Header) -> PoseStamped:
+        """Publish pose ``q`` with ``header``; return the wrist message."""
+        self.joints.publish(pose_to_joint_state_msg(q, header))
+        wrist = pose_to_wrist_pose_msg(q, header)
+        self.wrist.publish(wrist)
+        return wrist
+
+
+class TrackerOutputs:
+    """What a hand tracker node publishes: the pose (joints + wrist), skeleton markers and a
+    status line per frame; a frame without a pose clears the markers once and says why."""
+
+    def __init__(self, node: Node) -> None:
+        self.pose = PosePublishers(node)
+        self.markers = node.create_publisher(MarkerArray, MARKERS_TOPIC, 10)
+        self.status = node.create_publisher(String, TRACKING_STATUS_TOPIC, 10)
+        self.hand_was_found = False
+
+    def publish_pose(self, q: np.ndarray, keypoints: np.ndarray, header: Header) -> PoseStamped:
+        """Publish a tracked frame's pose and skeleton (``keypoints`` of ``q``); return the
+        wrist message. The status line is the caller's (:meth:`publish_status`)."""
+        self.hand_was_found = True
+        wrist = self.pose.publish(q, header)
+        self.markers.publish(skeleton_to_markers_msg(keypoints, header))
+        return wrist
+
+    def publish_no_hand(self, header: Header, reason: str) -> None:
+        """Report a frame without a pose: ``no hand: <reason>``; clear a shown skeleton."""
+        if self.hand_was_found:
+            self.markers.publish(skeleton_to_markers_msg(None, header))
+        self.hand_was_found = False
+        self.publish_status(f'no hand: {reason}')
+
+    def publish_status(self, text: str) -> None:
+        """Publish one status line."""
+        self.status.publish(String(data=text))
+
+
+def subscribe_tracked_pose(node: Node,
+                           on_pose: Callable[[np.ndarray, PoseStamped], None]) -> None:
+    """Subscribe to the tracked hand's joint states and wrist pose; call ``on_pose(q, wrist
+    message)`` once both halves of a frame (same stamp) are in."""
+    pairer = PosePairer()
+
+    def deliver(paired: tuple[np.ndarray, PoseStamped] | None) -> None:
+        if paired is not None:
+            on_pose(*paired)
+
+    node.create_subscription(JointState, JOINT_STATES_TOPIC,
+                             lambda msg: deliver(pairer.add_joints(msg)), 10)
+    node.create_subscription(PoseStamped, WRIST_POSE_TOPIC,
+                             lambda msg: deliver(pairer.add_wrist(msg)), 10)
+

@@ -19,28 +19,26 @@ from dataclasses import replace
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, JointState
-from std_msgs.msg import String
-from visualization_msgs.msg import MarkerArray
 
-from colorglove_ros.core.camera import CalibrationError, PinholeCamera, load_calibration
+from colorglove_ros.core.camera import PinholeCamera, load_calibration
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import HandModel
-from colorglove_ros.core.tracking.edge_tracker import EdgeTracker, EdgeTrackerConfig
+from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
+from colorglove_ros.core.tracking.edge_tracker import EdgeTracker
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.bags import camera_info_to_pinhole
-from colorglove_ros.ros.conversions import (
-    pose_from_msgs,
-    pose_to_joint_state_msg,
-    pose_to_wrist_pose_msg,
-    skeleton_to_markers_msg,
-    stamp_to_seconds,
-)
+from colorglove_ros.ros.conversions import pose_from_msgs, stamp_to_seconds
 from colorglove_ros.ros.image import ImageEncodingError, image_to_array
 from colorglove_ros.ros.nodes.common import (
     LATEST_IMAGE,
     StartupError,
+    TrackerOutputs,
     declare,
+    declare_calibration_file,
+    declare_hand_length,
     run_node,
+    split_topics,
+    startup_errors,
 )
 
 __all__ = ['EdgeTrackerNode', 'main']
@@ -51,16 +49,14 @@ class EdgeTrackerNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('edge_tracker', **kwargs)
-        calibration_file = declare(
-            self, 'calibration_file', '',
-            'camera calibration YAML (all its cameras are used; camera 0 is the primary); '
-            'empty: one camera from the first CameraInfo on camera_info_topic')
+        calibration_file = declare_calibration_file(
+            self, 'camera calibration YAML (all its cameras are used; camera 0 is the primary); '
+            'empty: one camera from the first CameraInfo on camera_info_topic', default='')
         topics = declare(self, 'image_topics', 'camera/image_raw',
                          'comma-separated image topics, one per calibrated camera')
         self.info_topic = declare(self, 'camera_info_topic', 'camera/camera_info',
                                   'CameraInfo topic read when calibration_file is empty')
-        hand_length = declare(self, 'hand_length_m', 0.19,
-                              'hand length when no calibration file gives it, m', 0.08, 0.35)
+        hand_length = declare_hand_length(self, 'hand length when no calibration file gives it, m')
         self.stamp_tolerance = declare(self, 'stamp_tolerance_s', 0.02,
                                        'images within this of each other form one frame, s',
                                        0.0, 1.0)
@@ -85,7 +81,7 @@ class EdgeTrackerNode(Node):
                            'bad frames in a row that declare the track lost', 1, 100)
         polarity = declare(self, 'polarity', defaults.polarity,
                            '+1 hand brighter than the background, -1 darker, 0 either', -1, 1)
-        try:
+        with startup_errors('edge_tracker_node', ValueError):
             if len(init_wrist) != 3:
                 raise ColorGloveError(f'init_wrist_position needs 3 values, got {init_wrist}')
             self.config = replace(
@@ -100,16 +96,13 @@ class EdgeTrackerNode(Node):
                 calibration = load_calibration(resolve_path(calibration_file))
                 cameras, hand_length = calibration.cameras, calibration.hand_length_m
             self.model = HandModel(hand_length)
-        except (CalibrationError, ColorGloveError, ValueError) as exc:
-            raise StartupError(f'edge_tracker_node cannot start: {exc}') from exc
-        self.image_topics = [t.strip() for t in topics.split(',') if t.strip()]
-        if cameras and len(self.image_topics) != len(cameras):
-            raise StartupError(
-                f'edge_tracker_node cannot start: {len(cameras)} calibrated camera(s) but '
-                f'{len(self.image_topics)} image topic(s); set image_topics')
-        if not cameras and len(self.image_topics) != 1:
-            raise StartupError('edge_tracker_node cannot start: several image topics need a '
-                               'calibration_file with their extrinsics')
+            self.image_topics = split_topics(topics)
+            if cameras and len(self.image_topics) != len(cameras):
+                raise ColorGloveError(f'{len(cameras)} calibrated camera(s) but '
+                                      f'{len(self.image_topics)} image topic(s); set image_topics')
+            if not cameras and len(self.image_topics) != 1:
+                raise ColorGloveError('several image topics need a calibration_file with their '
+                                      'extrinsics')
         self.tracker: EdgeTracker | None = None
         if cameras:
             self._make_tracker(cameras)
@@ -124,17 +117,11 @@ class EdgeTrackerNode(Node):
                                  self.on_init_wrist, 10)
         self.create_subscription(JointState, 'edge_tracker/init_joint_states',
                                  self.on_init_joints, 10)
-        self.joint_pub = self.create_publisher(JointState, 'hand/joint_states', 10)
-        self.wrist_pub = self.create_publisher(PoseStamped, 'hand/wrist_pose', 10)
-        self.marker_pub = self.create_publisher(MarkerArray, 'hand/markers', 10)
-        self.status_pub = self.create_publisher(String, 'hand/tracking_status', 10)
-        self.hand_was_found = False
+        self.outputs = TrackerOutputs(self)
 
     def _make_tracker(self, cameras: tuple[PinholeCamera, ...]) -> None:
-        try:
+        with startup_errors('edge_tracker_node'):
             self.tracker = EdgeTracker(self.model, cameras, self.config)
-        except ColorGloveError as exc:
-            raise StartupError(f'edge_tracker_node cannot start: {exc}') from exc
         self.get_logger().info(f'edge tracking with {len(cameras)} camera(s)')
 
     def on_camera_info(self, msg: CameraInfo) -> None:
@@ -162,12 +149,12 @@ class EdgeTrackerNode(Node):
         except (ColorGloveError, ValueError, KeyError) as exc:
             self.get_logger().warn(f'bad starting pose: {exc}', throttle_duration_sec=1.0)
             return
-        self.status_pub.publish(String(data='initialised from a given pose'))
+        self.outputs.publish_status('initialised from a given pose')
 
     def on_image(self, index: int, msg: Image) -> None:
         """Collect one frame's images from all cameras, then track it."""
         if self.tracker is None:
-            self.status_pub.publish(String(data='no hand: waiting for CameraInfo'))
+            self.outputs.publish_no_hand(msg.header, 'waiting for CameraInfo')
             return
         stamp_ns = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
         tol_ns = int(self.stamp_tolerance * 1e9)
@@ -188,28 +175,19 @@ class EdgeTrackerNode(Node):
             result = self.tracker.update(arrays)
         except (ImageEncodingError, ColorGloveError, ValueError) as exc:
             self.get_logger().warn(f'frame dropped: {exc}', throttle_duration_sec=1.0)
-            self._report_no_hand(header, f'bad frame: {exc}')
+            self.outputs.publish_no_hand(header, f'bad frame: {exc}')
             return
         if result.q is None:
-            self._report_no_hand(header, result.reason)
+            self.outputs.publish_no_hand(header, result.reason)
             return
         header.frame_id = self.tracker.cameras[0].frame_id
-        self.hand_was_found = True
-        self.joint_pub.publish(pose_to_joint_state_msg(result.q, header))
-        self.wrist_pub.publish(pose_to_wrist_pose_msg(result.q, header))
-        self.marker_pub.publish(skeleton_to_markers_msg(self.model.keypoints(result.q), header))
+        self.outputs.publish_pose(result.q, self.model.keypoints(result.q), header)
         fit = result.fit
         per_camera = ', '.join(f'{c.name} {n}' for c, n in
                                zip(self.tracker.cameras, fit.links_found, strict=True))
-        self.status_pub.publish(String(
-            data=f'tracking: links found {per_camera}, edge residual {fit.rms_px:.1f} px, '
-                 f'{result.time_ms:.1f} ms, stamp {stamp_to_seconds(header.stamp):.3f}'))
-
-    def _report_no_hand(self, header, reason: str) -> None:
-        if self.hand_was_found:
-            self.marker_pub.publish(skeleton_to_markers_msg(None, header))
-        self.hand_was_found = False
-        self.status_pub.publish(String(data=f'no hand: {reason}'))
+        self.outputs.publish_status(
+            f'tracking: links found {per_camera}, edge residual {fit.rms_px:.1f} px, '
+            f'{result.time_ms:.1f} ms, stamp {stamp_to_seconds(header.stamp):.3f}')
 
 
 def main(args: list[str] | None = None) -> int:

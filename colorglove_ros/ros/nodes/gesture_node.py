@@ -9,15 +9,13 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from colorglove_ros.core.camera import CalibrationError, load_calibration
 from colorglove_ros.core.hand.gestures import GestureDetector, GestureEvent, format_event
-from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.hand.poses import full_pose
-from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import pose_from_joint_state_msg, stamp_to_seconds
 from colorglove_ros.ros.nodes.common import (
-    StartupError,
-    declare,
+    JOINT_STATES_TOPIC,
+    TRACKING_STATUS_TOPIC,
+    hand_model_from_calibration,
     run_node,
 )
 from colorglove_ros.ros.pose_pairing import is_no_hand_status
@@ -30,16 +28,11 @@ class GestureNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('gestures', **kwargs)
-        calibration_file = declare(self, 'calibration_file', 'config/calibration.yaml',
-                                   'camera calibration YAML (for the hand length)')
-        try:
-            self.model = HandModel(load_calibration(resolve_path(calibration_file)).hand_length_m)
-        except (CalibrationError, ValueError) as exc:
-            raise StartupError(f'gesture_node cannot start: {exc}') from exc
+        self.model = hand_model_from_calibration(self, 'gesture_node')
         self.detector = GestureDetector(self.model)
         self.event_pub = self.create_publisher(String, 'hand/gesture_events', 10)
-        self.create_subscription(JointState, 'hand/joint_states', self.on_joints, 10)
-        self.create_subscription(String, 'hand/tracking_status', self.on_status, 10)
+        self.create_subscription(JointState, JOINT_STATES_TOPIC, self.on_joints, 10)
+        self.create_subscription(String, TRACKING_STATUS_TOPIC, self.on_status, 10)
 
     def _publish(self, events: list[GestureEvent]) -> None:
         for event in events:

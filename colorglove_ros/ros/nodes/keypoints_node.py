@@ -9,19 +9,15 @@ import numpy as np
 from geometry_msgs.msg import Point, Pose, PoseArray, PoseStamped, Quaternion
 from rclpy.node import Node
 from scipy.spatial.transform import Rotation
-from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
-from colorglove_ros.core.camera import CalibrationError, load_calibration
 from colorglove_ros.core.hand.keypoints import HandKeypoints, hand_keypoints
-from colorglove_ros.core.hand.model import HandModel
-from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.nodes.common import (
-    StartupError,
     declare,
+    hand_model_from_calibration,
     run_node,
+    subscribe_tracked_pose,
 )
-from colorglove_ros.ros.pose_pairing import PosePairer
 
 __all__ = ['KeypointsNode', 'pose_array_from_keypoints', 'main']
 
@@ -40,27 +36,15 @@ class KeypointsNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('keypoints', **kwargs)
-        calibration_file = declare(self, 'calibration_file', 'config/calibration.yaml',
-                                   'camera calibration YAML (for the hand length)')
+        self.model = hand_model_from_calibration(self, 'keypoints_node')
         self.hand_frame = declare(self, 'hand_frame', 'palm',
                                   'frame_id of hand/keypoints_wrist (the hand root link)')
-        try:
-            self.model = HandModel(load_calibration(resolve_path(calibration_file)).hand_length_m)
-        except (CalibrationError, ValueError) as exc:
-            raise StartupError(f'keypoints_node cannot start: {exc}') from exc
-        self.pairer = PosePairer()
         self.camera_pub = self.create_publisher(PoseArray, 'hand/keypoints', 10)
         self.wrist_pub = self.create_publisher(PoseArray, 'hand/keypoints_wrist', 10)
-        self.create_subscription(JointState, 'hand/joint_states',
-                                 lambda m: self.publish(self.pairer.add_joints(m)), 10)
-        self.create_subscription(PoseStamped, 'hand/wrist_pose',
-                                 lambda m: self.publish(self.pairer.add_wrist(m)), 10)
+        subscribe_tracked_pose(self, self.publish)
 
-    def publish(self, paired: tuple[np.ndarray, PoseStamped] | None) -> None:
+    def publish(self, q: np.ndarray, wrist: PoseStamped) -> None:
         """Publish both keypoint arrays of a complete frame."""
-        if paired is None:
-            return
-        q, wrist = paired
         try:
             camera = hand_keypoints(self.model, q, 'camera')
             in_wrist = hand_keypoints(self.model, q, 'wrist')

@@ -20,7 +20,14 @@ from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.tracking.mouse import Mouse3D, MouseConfig, TablePlane
 from colorglove_ros.ros.conversions import pose_from_msgs, stamp_to_seconds
-from colorglove_ros.ros.nodes.common import StartupError, declare, run_node
+from colorglove_ros.ros.nodes.common import (
+    JOINT_STATES_TOPIC,
+    WRIST_POSE_TOPIC,
+    declare,
+    declare_hand_length,
+    run_node,
+    startup_errors,
+)
 
 __all__ = ['MouseNode', 'main']
 
@@ -60,22 +67,19 @@ class MouseNode(Node):
         max_gap = declare(self, 'max_gap_s', defaults.max_gap_s,
                           'a longer gap between poses restarts the filter and releases the '
                           'buttons, s', 0.01, 10.0)
-        hand_length = declare(self, 'hand_length_m', 0.19, 'hand length of the tracker, m',
-                              0.08, 0.35)
+        hand_length = declare_hand_length(self, 'hand length of the tracker, m')
         self.stamp_tolerance = declare(self, 'stamp_tolerance_s', 0.005,
                                        'joint state and wrist pose of one frame differ by '
                                        'at most this, s', 0.0, 1.0)
-        try:
+        with startup_errors('mouse_node', TypeError, ValueError):
             plane = (TablePlane.from_camera_tilt(tilt, distance) if tilt > 0 else
                      TablePlane(tuple(origin), tuple(x_axis), tuple(y_axis)))
             config = MouseConfig(plane, plane_gain, height_gain, rest, tuple(press),
                                  tuple(release), smoothing, max_gap)
             self.mouse = Mouse3D(HandModel(hand_length), config)
-        except (ColorGloveError, TypeError, ValueError) as exc:
-            raise StartupError(f'mouse_node cannot start: {exc}') from exc
         self.wrist: PoseStamped | None = None
-        self.create_subscription(PoseStamped, 'hand/wrist_pose', self.on_wrist, 10)
-        self.create_subscription(JointState, 'hand/joint_states', self.on_joints, 10)
+        self.create_subscription(PoseStamped, WRIST_POSE_TOPIC, self.on_wrist, 10)
+        self.create_subscription(JointState, JOINT_STATES_TOPIC, self.on_joints, 10)
         self.cursor_pub = self.create_publisher(PointStamped, 'mouse/cursor', 10)
         self.buttons_pub = self.create_publisher(Joy, 'mouse/buttons', 10)
 

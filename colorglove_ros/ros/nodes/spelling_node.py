@@ -8,20 +8,18 @@ import sys
 import numpy as np
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from colorglove_ros.core.camera import CalibrationError, load_calibration
-from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.hand.spelling import Speller, SpellingError
-from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import stamp_to_seconds
 from colorglove_ros.ros.nodes.common import (
-    StartupError,
+    TRACKING_STATUS_TOPIC,
     declare,
+    hand_model_from_calibration,
     run_node,
+    subscribe_tracked_pose,
 )
-from colorglove_ros.ros.pose_pairing import PosePairer, is_no_hand_status
+from colorglove_ros.ros.pose_pairing import is_no_hand_status
 
 __all__ = ['SpellingNode', 'main']
 
@@ -31,31 +29,19 @@ class SpellingNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('spelling', **kwargs)
-        calibration_file = declare(self, 'calibration_file', 'config/calibration.yaml',
-                                   'camera calibration YAML (for the hand length)')
+        model = hand_model_from_calibration(self, 'spelling_node')
         self.max_text = declare(self, 'max_text_length', 200,
                                 'longest text kept on hand/spelled_text (oldest letters dropped)',
                                 1, 100000)
-        try:
-            model = HandModel(load_calibration(resolve_path(calibration_file)).hand_length_m)
-        except (CalibrationError, ValueError) as exc:
-            raise StartupError(f'spelling_node cannot start: {exc}') from exc
         self.speller = Speller(model=model)
-        self.pairer = PosePairer()
         self.text = ''
         self.letter_pub = self.create_publisher(String, 'hand/spelled_letters', 10)
         self.text_pub = self.create_publisher(String, 'hand/spelled_text', 10)
-        self.create_subscription(JointState, 'hand/joint_states',
-                                 lambda m: self.on_pose(self.pairer.add_joints(m)), 10)
-        self.create_subscription(PoseStamped, 'hand/wrist_pose',
-                                 lambda m: self.on_pose(self.pairer.add_wrist(m)), 10)
-        self.create_subscription(String, 'hand/tracking_status', self.on_status, 10)
+        subscribe_tracked_pose(self, self.on_pose)
+        self.create_subscription(String, TRACKING_STATUS_TOPIC, self.on_status, 10)
 
-    def on_pose(self, paired: tuple[np.ndarray, PoseStamped] | None) -> None:
+    def on_pose(self, q: np.ndarray, wrist: PoseStamped) -> None:
         """Feed a complete frame to the speller; publish a committed letter."""
-        if paired is None:
-            return
-        q, wrist = paired
         try:
             letter = self.speller.update(q, stamp_to_seconds(wrist.header.stamp))
         except SpellingError as exc:
