@@ -141,7 +141,8 @@ def as_rows(name: str, value: Any, dtype: Any, tail: tuple[int, ...],
 SettingRule = tuple[str, float | None, float | None, bool]
 """(type 'int' | 'float' | 'ints', low, high, odd) of one setting."""
 
-# What GloveSegmenter can run with (core/segmentation/segmenter.py); keys absent keep defaults.
+# What GloveSegmenter can run with (core/segmentation/segmenter.py; its keyword settings are
+# exactly these keys, checked whenever one is built); keys absent keep defaults.
 SEGMENTER_RULES: dict[str, SettingRule] = {
     'coarse_factor': ('int', 1, 16, False),
     'roi_margin': ('float', 1.0, 10.0, False),

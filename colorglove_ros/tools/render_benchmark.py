@@ -10,7 +10,8 @@ from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.hand.poses import pose_collection, sample_global_rotations
 from colorglove_ros.core.report import print_table, write_json
-from colorglove_ros.core.synthetic.render import Renderer, decimate_hand_mesh, vertex_normals
+from colorglove_ros.core.synthetic.mesh_images import decimate_hand_mesh, vertex_normals
+from colorglove_ros.core.synthetic.render import Renderer
 from colorglove_ros.tools._cli import tool_parser
 
 

@@ -1,5 +1,6 @@
 """Accuracy, jitter and latency figures of tracked poses against ground truth (shared by the
-IK evaluation, the end-to-end demo and the benchmark)."""
+IK evaluation, the end-to-end demo and the benchmark), and the centred local average that
+jitter and the IK covariance learning measure deviations from."""
 from __future__ import annotations
 
 import math
@@ -7,15 +8,24 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
+from colorglove_ros.core.validation import check_number
 
 __all__ = [
-    'FINGERTIP_INDICES', 'joint_angle_error_deg', 'fingertip_errors_mm',
-    'fingertip_error_split_mm', 'translation_errors_mm',
-    'jitter_mm', 'contiguous_runs', 'jitter_runs_mm', 'latency_summary_ms', 'pose_accuracy',
+    'FINGERTIP_INDICES', 'LOCAL_WINDOW', 'MetricsError', 'joint_angle_error_deg',
+    'fingertip_errors_mm', 'fingertip_error_split_mm', 'translation_errors_mm',
+    'local_average', 'deviation_from_local_average', 'dof_jitter', 'jitter_mm',
+    'contiguous_runs', 'jitter_runs_mm', 'latency_summary_ms', 'pose_accuracy',
 ]
 
 FINGERTIP_INDICES = np.array([i for i, name in enumerate(KEYPOINT_NAMES) if name.endswith('_tip')])
+#: frames in the centred local average (the papers' 5-frame jitter window)
+LOCAL_WINDOW = 5
+
+
+class MetricsError(ColorGloveError, ValueError):
+    """A sequence too short or of the wrong shape for a figure, or an unusable window."""
 
 
 def joint_angle_error_deg(estimated: np.ndarray, truth: np.ndarray) -> np.ndarray:
@@ -69,19 +79,53 @@ def translation_errors_mm(estimated: np.ndarray,
     return 1000.0 * plane, 1000.0 * depth
 
 
-def jitter_mm(model: HandModel, poses: np.ndarray, window: int = 5) -> float:
+def local_average(values: np.ndarray, window: int = LOCAL_WINDOW) -> np.ndarray:
+    """Centred moving average along the first axis of a sequence (N, ...):
+    ``1/w sum_{j in S} x_{i+j}``, S = {-w//2..w//2}, ``w = window`` odd, each row the sum of
+    its own window divided once by ``w`` (no running sums, so no error that grows with N);
+    rows whose window leaves the sequence are NaN."""
+    x = np.asarray(values, dtype=float)
+    if x.ndim < 1:
+        raise MetricsError(f'values must be a sequence (N, ...), got shape {x.shape}')
+    window = int(check_number('window', window, low=1, integer=True, odd=True,
+                              error=MetricsError))
+    out = np.full_like(x, np.nan)
+    inner = len(x) - window + 1
+    if inner > 0:
+        half = window // 2
+        out[half:half + inner] = sum(x[j:j + inner] for j in range(window)) / window
+    return out
+
+
+def deviation_from_local_average(values: np.ndarray,
+                                 window: int = LOCAL_WINDOW) -> np.ndarray:
+    """``x_i - local_average_i`` (NaN where the window is incomplete)."""
+    x = np.asarray(values, dtype=float)
+    return x - local_average(x, window)
+
+
+def dof_jitter(poses: np.ndarray, window: int = LOCAL_WINDOW) -> np.ndarray:
+    """Per-DOF jitter of a pose sequence (N, D): the mean absolute deviation from the local
+    average over the frames with a complete window, (D,)."""
+    q = np.asarray(poses, dtype=float)
+    if q.ndim != 2:
+        raise MetricsError(f'poses must be (N, D), got shape {q.shape}')
+    dev = deviation_from_local_average(q, window)
+    valid = ~np.isnan(dev).any(axis=1)
+    if not valid.any():
+        raise MetricsError(f'jitter needs at least {window} frames, got {len(q)}')
+    return np.abs(dev[valid]).mean(axis=0)
+
+
+def jitter_mm(model: HandModel, poses: np.ndarray, window: int = LOCAL_WINDOW) -> float:
     """Mean distance of fingertips from their ``window``-frame local average, mm (the paper's
     jitter measure). NaN for sequences shorter than the window."""
     poses = np.asarray(poses)
     if len(poses) < window:
         return float('nan')
-    tips = _fingertips(model, poses)
-    kernel = np.ones(window) / window
     half = window // 2
-    averaged = np.stack([np.apply_along_axis(lambda s: np.convolve(s, kernel, 'valid'), 0,
-                                             tips[:, k]) for k in range(tips.shape[1])], axis=1)
-    centred = tips[half:len(tips) - half]
-    return float(1000.0 * np.linalg.norm(centred - averaged, axis=2).mean())
+    dev = deviation_from_local_average(_fingertips(model, poses), window)
+    return float(1000.0 * np.linalg.norm(dev[half:len(poses) - half], axis=2).mean())
 
 
 def contiguous_runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -93,7 +137,7 @@ def contiguous_runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def jitter_runs_mm(model: HandModel, poses: np.ndarray, valid: np.ndarray,
-                   window: int = 5) -> float:
+                   window: int = LOCAL_WINDOW) -> float:
     """``metrics.jitter_mm`` over each run of consecutive valid frames (>= ``window``),
     averaged weighted by the frames each run contributes; NaN if no run is long enough."""
     total, weight = 0.0, 0

@@ -26,6 +26,7 @@ import numpy as np
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.keypoints import FINGERTIP_INDICES, hand_keypoints
 from colorglove_ros.core.hand.model import DOF_NAMES, HandModel
+from colorglove_ros.core.validation import check_number
 
 __all__ = [
     'GESTURE_NAMES', 'PINCH_FINGERS', 'EVENT_STATES', 'GestureError', 'GestureConfig',
@@ -65,11 +66,8 @@ class GestureConfig:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            value = getattr(self, f.name)
-            if not np.isfinite(value) or value <= 0:
-                raise GestureError(f'{f.name} must be finite and > 0, got {value!r}')
-        if self.score_smoothing > 1.0:
-            raise GestureError(f'score_smoothing must be in (0, 1], got {self.score_smoothing}')
+            check_number(f.name, getattr(self, f.name), low=0.0, low_open=True,
+                         high=1.0 if f.name == 'score_smoothing' else None, error=GestureError)
         if not 0.0 < self.off_score < self.on_score < 1.0:
             raise GestureError(f'need 0 < off_score < on_score < 1, got {self.off_score}, '
                                f'{self.on_score}')

@@ -28,6 +28,7 @@ import numpy as np
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, rotvec_to_matrix
 from colorglove_ros.core.hand.poses import LETTER_SHAPES
+from colorglove_ros.core.validation import check_number
 
 __all__ = [
     'LETTERS', 'THUMB_LETTERS', 'LETTER_ROLL_PITCH', 'SpellingError', 'SpellingConfig',
@@ -42,6 +43,11 @@ LETTER_ROLL_PITCH: dict[str, tuple[float, float]] = {
     'G': (90.0, 0.0), 'H': (90.0, 0.0), 'P': (0.0, 45.0), 'Q': (90.0, 45.0)}
 
 assert len(LETTERS) == 26 and set(THUMB_LETTERS) <= set(LETTERS)
+# (excluded lower, included upper) bound of every SpellingConfig setting
+_SETTING_BOUNDS: dict[str, tuple[float, float | None]] = {
+    'joint_sigma_deg': (0.0, None), 'direction_sigma': (0.0, None), 'smoothing': (0.0, 1.0),
+    'min_posterior': (0.0, 1.0), 'hold_s': (0.0, None), 'vote_share': (0.5, 1.0),
+    'release_s': (0.0, None), 'rearm_motion_m': (0.0, None)}
 
 
 class SpellingError(ColorGloveError, ValueError):
@@ -62,11 +68,11 @@ class SpellingConfig:
     rearm_motion_m: float = 0.03
 
     def __post_init__(self) -> None:
-        values = (self.joint_sigma_deg, self.direction_sigma, self.smoothing, self.hold_s,
-                  self.release_s, self.rearm_motion_m)
-        if not all(np.isfinite(v) and v > 0 for v in values) or self.smoothing > 1 \
-                or not 0.0 < self.min_posterior < 1.0 or not 0.5 < self.vote_share <= 1.0:
-            raise SpellingError(f'bad spelling settings {self}')
+        for name, (low, high) in _SETTING_BOUNDS.items():
+            check_number(name, getattr(self, name), low=low, low_open=True, high=high,
+                         error=SpellingError)
+        if self.min_posterior == 1.0:
+            raise SpellingError('min_posterior must be < 1, got 1.0')
 
 
 def letter_rotation(letter: str) -> np.ndarray:

@@ -8,7 +8,6 @@ import cv2
 import numpy as np
 
 from colorglove_ros.core.colorimetry import srgb_to_linear
-from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.segmentation.blobs import color_components
 from colorglove_ros.core.segmentation.color_model import (
@@ -19,7 +18,7 @@ from colorglove_ros.core.segmentation.color_model import (
 from colorglove_ros.core.segmentation.crop import CropTransform, crop_to_tiny, mean_shift_crop
 from colorglove_ros.core.segmentation.light import estimate_light_gains, gain_table
 from colorglove_ros.core.segmentation.types import Blob, Observation
-from colorglove_ros.core.validation import validate_segmenter_settings
+from colorglove_ros.core.validation import SEGMENTER_RULES, validate_segmenter_settings
 
 __all__ = [
     'SegmentationInputError', 'SegmentationConfigError', 'GloveSegmenter',
@@ -259,6 +258,11 @@ class GloveSegmenter:
     fingertips within ``reattach_radius`` region pixels re-attached, then
     :func:`relabel_borders`); :func:`crop_to_tiny` there gives the tiny image and crop;
     connected components per colour give the blobs.
+
+    Every setting is checked (ranges, odd median kernel, finite numbers) by
+    ``core.validation.validate_segmenter_settings`` however the segmenter is built; a bad one
+    raises :class:`SegmentationConfigError` naming ``source`` (the settings' file, if any)
+    and the setting.
     """
 
     def __init__(self, calibration: ColorCalibration, *, coarse_factor: int = 4,
@@ -269,39 +273,16 @@ class GloveSegmenter:
                  min_glove_pixels: int = 300, min_inside_fraction: float = 0.5,
                  min_blob_pixels: int = 12, min_component_colors: int = 3,
                  reattach_radius: int = 3, reattach_max_share: float = 0.2,
-                 light_passes: int = 1, min_blob_share: float = 0.85) -> None:
-        if coarse_factor < 1 or max_roi_cells < TINY_SIZE or roi_margin < 1.0:
-            raise SegmentationConfigError(
-                f'need coarse_factor >= 1, max_roi_cells >= {TINY_SIZE}, roi_margin >= 1; got '
-                f'{coarse_factor}, {max_roi_cells}, {roi_margin}')
-        if not 0.0 <= min_blob_share <= 1.0:
-            raise SegmentationConfigError(f'need 0 <= min_blob_share <= 1; got {min_blob_share}')
-        if light_passes < 0 or reattach_radius < 0 or not reattach_max_share >= 0.0:
-            raise SegmentationConfigError(
-                f'need light_passes, reattach_radius and reattach_max_share >= 0; got '
-                f'{light_passes}, {reattach_radius}, {reattach_max_share}')
-        if border_passes < 0 or not all(int(d) >= 1 for d in border_distances):
-            raise SegmentationConfigError(
-                f'need border_passes >= 0 and border_distances >= 1; got {border_passes}, '
-                f'{border_distances}')
+                 light_passes: int = 1, min_blob_share: float = 0.85,
+                 source: str = 'GloveSegmenter') -> None:
+        # every keyword argument but ``source`` is a setting named in SEGMENTER_RULES: checked
+        # and converted (int, float, tuple of ints) in one place, kept as the attribute of
+        # the same name
+        given = {name: value for name, value in locals().items() if name in SEGMENTER_RULES}
         self.calibration = calibration
-        self.coarse_factor = int(coarse_factor)
-        self.roi_margin = float(roi_margin)
-        self.max_roi_cells = int(max_roi_cells)
-        self.bilateral_diameter = int(bilateral_diameter)
-        self.bilateral_sigma_color = float(bilateral_sigma_color)
-        self.bilateral_sigma_space = float(bilateral_sigma_space)
-        self.median_size = int(median_size)
-        self.border_passes = int(border_passes)
-        self.border_distances = tuple(int(d) for d in border_distances)
-        self.min_glove_pixels = int(min_glove_pixels)
-        self.min_inside_fraction = float(min_inside_fraction)
-        self.min_blob_pixels = int(min_blob_pixels)
-        self.min_component_colors = int(min_component_colors)
-        self.reattach_radius = int(reattach_radius)
-        self.reattach_max_share = float(reattach_max_share)
-        self.light_passes = int(light_passes)
-        self.min_blob_share = float(min_blob_share)
+        for name, value in validate_segmenter_settings(given, source,
+                                                       SegmentationConfigError).items():
+            setattr(self, name, value)
 
     # ------------------------------------------------------------------ helpers
     def _coarse_labels(self, small: np.ndarray, table: np.ndarray | None = None) -> np.ndarray:
@@ -469,12 +450,7 @@ class GloveSegmenter:
 def load_segmenter(config_path: str = 'config/color_calibration.yaml') -> GloveSegmenter:
     """A segmenter with the calibration file and settings named in a colour config YAML."""
     cfg = read_calibration_config(config_path)
-    # settings checked (odd kernels, finite numbers, ranges) before the calibration is read
-    settings = validate_segmenter_settings(cfg['segmenter'], str(cfg['config_path']),
-                                           SegmentationConfigError)
-    calibration = load_calibration(cfg['calibration_file'])
-    try:
-        return GloveSegmenter(calibration, **settings)
-    except TypeError as exc:
-        raise SegmentationConfigError(
-            f'{cfg["config_path"]}: bad segmenter setting: {exc}') from exc
+    source = str(cfg['config_path'])
+    # a bad setting is refused before the calibration is read (GloveSegmenter checks again)
+    settings = validate_segmenter_settings(cfg['segmenter'], source, SegmentationConfigError)
+    return GloveSegmenter(load_calibration(cfg['calibration_file']), **settings, source=source)

@@ -43,7 +43,8 @@ from colorglove_ros.core.synthetic.conditions import (
     SynthError,
     sample_conditions,
 )
-from colorglove_ros.core.synthetic.render import Renderer, patch_ids_to_labels, vertex_normals
+from colorglove_ros.core.synthetic.mesh_images import patch_ids_to_labels, vertex_normals
+from colorglove_ros.core.synthetic.render import Renderer
 
 __all__ = [
     'SyntheticFrame', 'Synthesizer', 'render_frame', 'render_frames_multi', 'sample_pose',

@@ -1,4 +1,5 @@
-"""Learning the IK covariances R, Q, P from training sequences about 5-frame local averages."""
+"""Learning the IK covariances R, Q, P from training sequences about 5-frame local averages
+(``core.evaluation.metrics.local_average``)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -9,6 +10,7 @@ import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.evaluation.metrics import LOCAL_WINDOW, local_average
 from colorglove_ros.core.geometry import align_rotation_vector
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
 from colorglove_ros.core.tracking.config import IKCovariances
@@ -18,12 +20,9 @@ from colorglove_ros.core.tracking.tracker import IKResult
 from colorglove_ros.core.tracking.types import Correspondences
 
 __all__ = [
-    'LOCAL_WINDOW', 'IKTrainingError', 'TrainingFrame', 'CovarianceFloors', 'local_average',
-    'deviation_from_local_average', 'jitter', 'estimate_r',
-    'learn_covariances', 'training_frame',
+    'IKTrainingError', 'TrainingFrame', 'CovarianceFloors', 'estimate_r', 'learn_covariances',
+    'training_frame',
 ]
-
-LOCAL_WINDOW = 5
 
 
 class IKTrainingError(ColorGloveError):
@@ -67,42 +66,6 @@ class CovarianceFloors:
         std = np.concatenate([[self.translation_m] * 3, [self.rotation_rad] * 3,
                               [self.fingers_rad] * 20])
         return std**2
-
-
-def _poses(x: Any, name: str) -> np.ndarray:
-    a = np.asarray(x, dtype=float)
-    if a.ndim != 2:
-        raise IKTrainingError(f'{name} must be (N, D), got shape {a.shape}')
-    return a
-
-
-def local_average(poses: np.ndarray, window: int = LOCAL_WINDOW) -> np.ndarray:
-    """Centred moving average ``1/|S| sum_{j in S} q_{i+j}``, S = {-w//2..w//2}; rows whose
-    window leaves the sequence are NaN."""
-    q = _poses(poses, 'poses')
-    if window < 1 or window % 2 == 0:
-        raise IKTrainingError(f'window must be odd and positive, got {window}')
-    half = window // 2
-    out = np.full_like(q, np.nan)
-    if len(q) >= window:
-        c = np.cumsum(np.vstack([np.zeros((1, q.shape[1])), q]), axis=0)
-        out[half:len(q) - half] = (c[window:] - c[:-window]) / window
-    return out
-
-
-def deviation_from_local_average(poses: np.ndarray, window: int = LOCAL_WINDOW) -> np.ndarray:
-    """``q_i - local_average_i`` (NaN where the window is incomplete)."""
-    q = _poses(poses, 'poses')
-    return q - local_average(q, window)
-
-
-def jitter(poses: np.ndarray, window: int = LOCAL_WINDOW) -> np.ndarray:
-    """Per-DOF mean absolute deviation from the local average (the papers' jitter)."""
-    dev = deviation_from_local_average(poses, window)
-    valid = ~np.isnan(dev).any(axis=1)
-    if not valid.any():
-        raise IKTrainingError(f'jitter needs at least {window} frames, got {len(dev)}')
-    return np.abs(dev[valid]).mean(axis=0)
 
 
 def estimate_r(residuals_px: np.ndarray) -> np.ndarray:

@@ -1,29 +1,32 @@
 """Accuracy, jitter and latency figures."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
+from pose_samples import MODEL, hand_pose
 
 from colorglove_ros.core.evaluation.metrics import (
     FINGERTIP_INDICES,
+    MetricsError,
+    deviation_from_local_average,
+    dof_jitter,
     fingertip_error_split_mm,
     fingertip_errors_mm,
     jitter_mm,
     joint_angle_error_deg,
     latency_summary_ms,
+    local_average,
     pose_accuracy,
     translation_errors_mm,
 )
-from colorglove_ros.core.hand.model import HandModel
-
-MODEL = HandModel()
 
 
 def _poses(count: int) -> np.ndarray:
-    poses = np.tile(MODEL.rest_pose(), (count, 1))
-    poses[:, 6:] = np.clip(0.3 + 0.1 * np.sin(np.arange(count))[:, None],
-                           MODEL.lower_limits[6:], MODEL.upper_limits[6:])
-    return poses
+    """``count`` poses at the rest pose's wrist, every finger DOF 0.3 + 0.1 sin(frame index)
+    (clipped to its limits)."""
+    return np.stack([hand_pose(np.full(20, 0.3 + 0.1 * np.sin(k))) for k in range(count)])
 
 
 def test_fingertips_are_the_last_keypoint_of_each_digit() -> None:
@@ -88,6 +91,34 @@ def test_finger_error_shows_in_the_hand_frame_and_not_in_rotation_only() -> None
     assert np.all(split['hand_frame'] > 1.0)
     figures = pose_accuracy(MODEL, estimated, truth)
     assert figures['fingertip_hand_frame_mm'] == pytest.approx(split['hand_frame'].mean())
+
+
+def test_local_average_and_dof_jitter() -> None:
+    t = np.arange(10.0)[:, None]
+    lin = np.hstack([2.0 * t, -t + 3.0])
+    avg = local_average(lin)
+    assert np.isnan(avg[:2]).all() and np.isnan(avg[-2:]).all()
+    np.testing.assert_allclose(avg[2:-2], lin[2:-2])          # a line is its own average
+    np.testing.assert_allclose(deviation_from_local_average(lin)[2:-2], 0.0, atol=1e-12)
+    # any trailing shape: (N, 5, 3) fingertips average like (N, 15) columns
+    cube = np.random.default_rng(0).normal(size=(9, 5, 3))
+    np.testing.assert_array_equal(local_average(cube).reshape(9, 15),
+                                  local_average(cube.reshape(9, 15)))
+    alt = np.array([[1.0], [-1.0]] * 5)                        # +-1 alternating
+    # mean of 5 alternating values = +-1/5, deviation = 1 - 1/5 = 0.8
+    np.testing.assert_allclose(dof_jitter(alt), [0.8])
+    with pytest.raises(MetricsError, match='at least 5 frames'):
+        dof_jitter(alt[:4])
+    with pytest.raises(MetricsError, match='window must be odd'):
+        local_average(lin, window=4)
+
+
+def test_local_average_sums_each_window_once() -> None:
+    """Far from the origin and over many frames the average keeps full precision: each row
+    is its own window's sum (a running sum would lose digits as it grows)."""
+    x = 0.5 + 1e-3 * np.sin(np.arange(3000.0))[:, None]
+    exact = np.array([math.fsum(x[i - 2:i + 3, 0]) / 5 for i in range(2, 2998)])
+    np.testing.assert_allclose(local_average(x)[2:-2, 0], exact, rtol=0, atol=3e-16)
 
 
 def test_jitter_sees_alternating_noise_not_smooth_motion() -> None:

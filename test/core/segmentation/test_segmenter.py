@@ -1,6 +1,7 @@
 """Tests for the glove segmenter, its no-hand handling and the calibration/eval tools."""
 from __future__ import annotations
 
+import inspect
 import json
 from pathlib import Path
 
@@ -11,7 +12,12 @@ import pytest
 from colorglove_ros.core.colorimetry import srgb_to_linear
 from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
-from colorglove_ros.core.segmentation.calibration_fit import fit_color_calibration
+from colorglove_ros.core.segmentation.calibration_fit import (
+    fit_color_calibration,
+    read_labelled_frames,
+    render_training_frames,
+    write_labelled_frames,
+)
 from colorglove_ros.core.segmentation.color_model import read_calibration_config
 from colorglove_ros.core.segmentation.crop import crop_to_tiny
 from colorglove_ros.core.segmentation.segmenter import (
@@ -34,6 +40,7 @@ from colorglove_ros.core.synthetic.blob_glove import (
     sample_blob_conditions,
 )
 from colorglove_ros.core.synthetic.held_out import held_out_frames
+from colorglove_ros.core.validation import SEGMENTER_RULES
 from colorglove_ros.tools import calibrate_colors, eval_segmentation
 from colorglove_ros.tools.eval_segmentation import frame_metrics
 
@@ -145,7 +152,7 @@ def _noise_patch_frames(seed: int, count: int) -> list[np.ndarray]:
 @pytest.fixture(scope='module')
 def glove_calibration():
     """A quick colour calibration on rendered frames of the printed glove."""
-    return fit_color_calibration(calibrate_colors.render_training_frames(8, 0), seed=0, **FAST)
+    return fit_color_calibration(render_training_frames(8, 0), seed=0, **FAST)
 
 
 def test_noise_patches_are_fragmented_not_a_hand(glove_calibration) -> None:
@@ -158,7 +165,7 @@ def test_noise_patches_are_fragmented_not_a_hand(glove_calibration) -> None:
     assert all(o.status == STATUS_FRAGMENTED for o in gated), [o.status for o in gated]
     ungated = GloveSegmenter(glove_calibration, min_blob_share=0.0)
     assert all(ungated.process(f).hand_found for f in frames)
-    for image, _ in calibrate_colors.render_training_frames(4, 5, 'test'):
+    for image, _ in render_training_frames(4, 5, 'test'):
         assert segmenter.process(image).status == STATUS_OK
 
 
@@ -245,6 +252,21 @@ def test_segmenter_keeps_cut_off_fingertip_drops_far_clutter(calibration) -> Non
     assert np.count_nonzero(results[3].label_image[near] == 4) > 0.8 * 81
     with pytest.raises(SegmentationConfigError, match='reattach_radius'):
         GloveSegmenter(calibration, reattach_radius=-1)
+
+
+def test_every_setting_is_checked_however_the_segmenter_is_built(calibration) -> None:
+    """The keyword settings are exactly the validation rules' keys, so each is checked and
+    kept; a segmenter built in code refuses what a colour config would."""
+    keywords = set(inspect.signature(GloveSegmenter).parameters) - {'calibration', 'source'}
+    assert keywords == set(SEGMENTER_RULES)
+    segmenter = GloveSegmenter(calibration, border_distances=[3, 5], roi_margin=2)
+    assert segmenter.border_distances == (3, 5) and isinstance(segmenter.roi_margin, float)
+    for key, value, message in [('median_size', 4, 'median_size must be odd'),
+                                ('bilateral_sigma_space', 0.0, 'must be > 0'),
+                                ('coarse_factor', 0, 'coarse_factor must be >= 1'),
+                                ('roi_margin', float('nan'), 'roi_margin must be finite')]:
+        with pytest.raises(SegmentationConfigError, match=f'GloveSegmenter: .*{message}'):
+            GloveSegmenter(calibration, **{key: value})
 
 
 def _mixed_edge(width: int = 40, height: int = 12, edge: float = 19.5, blur: float = 4.0
@@ -382,8 +404,8 @@ def test_tools_calibrate_and_evaluate(tmp_path: Path, capsys) -> None:
     rng = np.random.default_rng(4)
     frames = [render_blob_frame(rng, sample_blob_conditions(rng, 'train'), 320, 240)
               for _ in range(8)]
-    calibrate_colors.write_labelled_frames(tmp_path / 'frames', frames)
-    back = calibrate_colors.read_labelled_frames(tmp_path / 'frames')
+    write_labelled_frames(tmp_path / 'frames', frames)
+    back = read_labelled_frames(tmp_path / 'frames')
     assert len(back) == 8
     np.testing.assert_array_equal(back[3][0], frames[3][0])
     np.testing.assert_array_equal(back[3][1], frames[3][1])

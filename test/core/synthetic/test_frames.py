@@ -25,7 +25,7 @@ from colorglove_ros.core.synthetic.frames import (
     render_frames_multi,
     sample_pose,
 )
-from colorglove_ros.core.synthetic.render import patch_ids_to_labels
+from colorglove_ros.core.synthetic.mesh_images import patch_ids_to_labels
 from colorglove_ros.core.synthetic.sequences import (
     CAPTURE_VOLUME_CENTER,
     CAPTURE_VOLUME_SIZE,

@@ -5,9 +5,7 @@ import numpy as np
 import pytest
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.hand.glove import default_hand
-from colorglove_ros.core.synthetic.render import (
-    Renderer,
+from colorglove_ros.core.synthetic.mesh_images import (
     RenderError,
     decimate_hand_mesh,
     patch_centroids,
@@ -15,6 +13,7 @@ from colorglove_ros.core.synthetic.render import (
     scaled_camera,
     vertex_normals,
 )
+from colorglove_ros.core.synthetic.render import Renderer
 
 CAM = PinholeCamera(160, 120, 170.0, 190.0, 83.3, 55.7)   # deliberately fx != fy, off-centre
 
@@ -24,12 +23,6 @@ def renderer() -> Renderer:
     r = Renderer(CAM.width, CAM.height, max_batch=6)   # 6 tiles per pass: exercises several
     yield r
     r.release()
-
-
-@pytest.fixture(scope='module')
-def hand():
-    model, mesh, glove = default_hand()
-    return model, mesh, glove
 
 
 def _reference_zbuffer(verts: np.ndarray, faces: np.ndarray, camera: PinholeCamera

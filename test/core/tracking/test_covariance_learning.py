@@ -1,5 +1,5 @@
-"""Tests of core.tracking.covariance_learning: local averages, jitter, learning R, Q, P,
-covariance files."""
+"""Tests of core.tracking.covariance_learning: learning R, Q, P, covariance files (the local
+average it learns about: test/core/evaluation/test_metrics.py)."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,39 +7,16 @@ import pytest
 from repo_paths import CONFIG_DIR
 
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.geometry import align_rotation_vector
-from colorglove_ros.core.hand.mesh import build_hand_mesh
-from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.tracking.config import load_ik_config, save_covariances
 from colorglove_ros.core.tracking.covariance_learning import (
     CovarianceFloors,
     IKTrainingError,
     TrainingFrame,
-    deviation_from_local_average,
     estimate_r,
-    jitter,
     learn_covariances,
-    local_average,
 )
-from colorglove_ros.core.tracking.kinematics import FastKinematics
 from colorglove_ros.core.tracking.types import Correspondences
-
-
-def test_local_average_and_jitter():
-    t = np.arange(10.0)[:, None]
-    lin = np.hstack([2.0 * t, -t + 3.0])
-    avg = local_average(lin)
-    assert np.isnan(avg[:2]).all() and np.isnan(avg[-2:]).all()
-    np.testing.assert_allclose(avg[2:-2], lin[2:-2])          # a line is its own average
-    np.testing.assert_allclose(deviation_from_local_average(lin)[2:-2], 0.0, atol=1e-12)
-    alt = np.array([[1.0], [-1.0]] * 5)                        # +-1 alternating
-    # mean of 5 alternating values = +-1/5, deviation = 1 - 1/5 = 0.8
-    np.testing.assert_allclose(jitter(alt), [0.8])
-    with pytest.raises(IKTrainingError):
-        jitter(alt[:4])
-    with pytest.raises(IKTrainingError):
-        local_average(lin, window=4)
 
 
 def test_r_estimate_matches_known_noise():
@@ -59,10 +36,8 @@ def test_rotation_vectors_aligned_across_pi():
 
 
 @pytest.fixture(scope='module')
-def training_sequence():
-    model = HandModel(DEFAULT_HAND_LENGTH_M)
-    mesh = build_hand_mesh(model)
-    kin = FastKinematics(model)
+def training_sequence(hand_kinematics):
+    model, mesh, kin = hand_kinematics
     cams = load_calibration(CONFIG_DIR / 'calibration_stereo.yaml').cameras
     rng = np.random.default_rng(1)
     verts = rng.choice(mesh.num_vertices, 20, replace=False)
@@ -133,7 +108,7 @@ def test_learn_rejects_bad_input(training_sequence):
         learn_covariances([empty], model, cams)
 
 
-def test_learn_from_tracker_run(training_sequence):
+def test_learn_from_tracker_run(training_sequence, hand_kinematics):
     """End to end: run the tracker on a synthetic sequence and learn from its outputs."""
     from colorglove_ros.core.lookup.types import ProjectionConstraints
     from colorglove_ros.core.segmentation.crop import CropTransform
@@ -142,8 +117,7 @@ def test_learn_from_tracker_run(training_sequence):
     from colorglove_ros.core.tracking.tracker import HandTracker
     from colorglove_ros.core.tracking.types import Blobs, CameraObservation, PosePrior
     model, cams, frames, q_sigma, vel = training_sequence
-    mesh = build_hand_mesh(model)
-    kin = FastKinematics(model)
+    _, mesh, kin = hand_kinematics
     cam = cams[0]
     crop = CropTransform(scale=6.0, offset_x=200.0, offset_y=120.0)
     colors = np.arange(20) % 10 + 1

@@ -7,14 +7,13 @@ import pytest
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
 from colorglove_ros.core.synthetic.bare_hand import BareHandSequence
-from colorglove_ros.core.tracking.edge_tracker import (
-    EdgeTracker,
+from colorglove_ros.core.tracking.edge_fit import (
     EdgeTrackerConfig,
     EdgeTrackerError,
-    initialisation_pose,
     link_axis_residuals,
     tip_residuals,
 )
+from colorglove_ros.core.tracking.edge_tracker import EdgeTracker, initialisation_pose
 from colorglove_ros.paths import resolve_path
 
 TIPS = [KEYPOINT_NAMES.index(f'{d}_tip') for d in ('thumb', 'index', 'middle', 'ring', 'little')]

@@ -1,0 +1,438 @@
+"""One frame's DigitEyes fit of the bare hand: predicted link axes and fingertips, their
+measurement, the residuals and the stabilised Gauss-Newton over one or several calibrated
+cameras (Rehg & Kanade 1993, sections 3-4). :mod:`edge_tracker` runs it frame after frame.
+
+Per camera the current pose predicts every finger link as a projected cylinder axis (its
+base and end points) and every fingertip as the projected centre of its hemisphere;
+:mod:`edge_features` measures the axes and tips near those predictions. The residuals are
+the paper's:
+
+* link: the signed pixel distance of the predicted axis end points (base and end) from the
+  measured line, ``n . x(q) - rho`` (two rows per link);
+* tip: predicted minus measured tip centre (two rows per tip).
+
+All cameras' residuals are concatenated (a link seen by one camera still counts) and the
+pose is corrected by Gauss-Newton with a constant diagonal stabiliser ``S``,
+``q <- q - (J^T W J + S)^-1 J^T W R``, projected onto the joint limits (a DOF at a bound
+whose step points outward is frozen). ``W`` is 1 for plain least squares (the paper) or
+Huber weights with ``huber_px > 0``. The pose and the Jacobians come from the existing
+26-DOF :class:`HandModel` through :class:`FastKinematics` (same numbers, faster).
+
+The residual functions (:func:`link_axis_residuals`, :func:`tip_residuals`) take predicted
+pixels and their Jacobians, so other trackers (the glove IK) can add the same constraints.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.model import (
+    DIGITS,
+    LINK_NAMES,
+    NUM_DOFS,
+    HandModel,
+    digit_link_index,
+)
+from colorglove_ros.core.tracking.edge_features import (
+    EdgeSearchConfig,
+    LinkAxes,
+    TipPoints,
+    measure_link_axes,
+    measure_tips,
+    segment_distances,
+)
+from colorglove_ros.core.tracking.kinematics import FastKinematics
+
+__all__ = [
+    'EdgeTrackerError', 'EdgeTrackerConfig', 'DEFAULT_TRACKED_LINKS', 'FeaturePoints',
+    'feature_points', 'EdgePrediction', 'EdgeMeasurement', 'EdgeFit', 'link_axis_residuals',
+    'tip_residuals', 'predict_features', 'measure_features', 'fit_pose',
+]
+
+# every phalanx except the thumb metacarpal, which lies inside the palm's outline
+DEFAULT_TRACKED_LINKS: tuple[str, ...] = tuple(
+    name for name in LINK_NAMES[1:] if name != 'thumb_metacarpal')
+
+
+class EdgeTrackerError(ColorGloveError):
+    """Bad tracker input: cameras, images, configuration or pose shapes."""
+
+
+@dataclass(frozen=True)
+class EdgeTrackerConfig:
+    """Everything the edge tracker can be tuned by (pixels, metres, radians).
+
+    ``stabilizer`` is the diagonal of ``S`` for (translation, rotation, finger) DOFs in
+    px^2 per unit^2: the larger, the smaller and steadier each Gauss-Newton step.
+    """
+
+    search: EdgeSearchConfig = field(default_factory=EdgeSearchConfig)
+    tracked_links: tuple[str, ...] = DEFAULT_TRACKED_LINKS
+    use_tips: bool = True
+    polarity: int = 0
+    measurement_rounds: int = 2
+    gn_iterations: int = 3
+    stabilizer: tuple[float, float, float] = (4.0e4, 1.0e3, 200.0)
+    tip_weight: float = 1.0
+    huber_px: float = 3.0
+    coupling_weight: float = 2000.0
+    min_link_px: float = 10.0
+    min_depth_m: float = 0.1
+    occlusion_margin_px: float = 2.0
+    min_found_fraction: float = 0.6
+    max_rms_px: float = 3.0
+    loss_patience: int = 3
+    init_wrist_position: tuple[float, float, float] = (0.0, 0.095, 0.5)
+    init_rotation_vector: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    init_rounds: int = 6
+    init_hold_frames: int = 8
+    init_hold_tolerance_m: float = 0.004
+    init_max_offset_m: float = 0.05
+
+    def __post_init__(self) -> None:
+        unknown = [n for n in self.tracked_links if n not in LINK_NAMES[1:]]
+        if unknown or not self.tracked_links:
+            raise EdgeTrackerError(f'tracked_links must be finger links, got {unknown or "none"}')
+        if self.polarity not in (-1, 0, 1):
+            raise EdgeTrackerError(f'polarity must be -1, 0 or 1, got {self.polarity}')
+        if self.measurement_rounds < 1 or self.gn_iterations < 1 or self.init_rounds < 1:
+            raise EdgeTrackerError('measurement_rounds, gn_iterations, init_rounds must be >= 1')
+        if len(self.stabilizer) != 3 or min(self.stabilizer) < 0:
+            raise EdgeTrackerError(f'stabilizer needs 3 values >= 0, got {self.stabilizer}')
+        if not 0.0 < self.min_found_fraction <= 1.0 or self.max_rms_px <= 0:
+            raise EdgeTrackerError('min_found_fraction must be in (0, 1], max_rms_px > 0')
+        if self.loss_patience < 1 or self.init_hold_frames < 1:
+            raise EdgeTrackerError('loss_patience and init_hold_frames must be >= 1')
+
+    def stabilizer_diagonal(self) -> np.ndarray:
+        """The (26,) diagonal of S."""
+        t, r, f = self.stabilizer
+        return np.concatenate([np.full(3, t), np.full(3, r), np.full(NUM_DOFS - 6, f)])
+
+
+# ---------------------------------------------------------------------------- residuals
+def link_axis_residuals(normal: np.ndarray, offset: np.ndarray, base_px: np.ndarray,
+                        end_px: np.ndarray, base_jacobian: np.ndarray,
+                        end_jacobian: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """DigitEyes link residuals: signed distances ``n . x - rho`` of the predicted axis base
+    and end pixels (L, 2) from the measured lines (unit normals (L, 2), offsets (L,)), and
+    their Jacobians from the pixel Jacobians (L, 2, D). Returns ((2L,), (2L, D)), rows
+    base0, end0, base1, ..."""
+    r = np.stack([np.einsum('ij,ij->i', normal, base_px) - offset,
+                  np.einsum('ij,ij->i', normal, end_px) - offset], axis=1)
+    J = np.stack([np.einsum('ij,ijd->id', normal, base_jacobian),
+                  np.einsum('ij,ijd->id', normal, end_jacobian)], axis=1)
+    return r.reshape(-1), J.reshape(-1, J.shape[-1])
+
+
+def tip_residuals(predicted_px: np.ndarray, measured_px: np.ndarray,
+                  jacobian: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """DigitEyes tip residuals: predicted minus measured tip centres (T, 2) and the pixel
+    Jacobians (T, 2, D) -> ((2T,), (2T, D)), rows x0, y0, x1, ..."""
+    return (np.asarray(predicted_px) - np.asarray(measured_px)).reshape(-1), \
+        np.asarray(jacobian).reshape(-1, np.shape(jacobian)[-1])
+
+
+# ---------------------------------------------------------------------------- prediction
+@dataclass(frozen=True)
+class FeaturePoints:
+    """The link-fixed points the features are made of, for one hand model."""
+
+    links: np.ndarray        # (L,) tracked link indices
+    tip_links: np.ndarray    # (T,) distal link index of each tip
+    tip_row: np.ndarray      # (T,) row of each tip's distal link in ``links`` (-1 if absent)
+    point_link: np.ndarray   # (2L + 2T,) link of each point
+    point_local: np.ndarray  # (2L + 2T, 3) base, end per link, then tip centre, tip end
+    radius: np.ndarray       # (L,) link radius, m
+    tip_radius: np.ndarray   # (T,) m
+
+
+def feature_points(model: HandModel, tracked: Sequence[str], use_tips: bool) -> FeaturePoints:
+    links = np.array([LINK_NAMES.index(n) for n in tracked], dtype=np.int64)
+    tip_links = np.array([digit_link_index(d, 2) for d in range(len(DIGITS))] if use_tips
+                         else [], dtype=np.int64)
+    length = model.link_lengths
+    radius = model.link_radii
+    local = []
+    for li in links:
+        local += [[0.0, 0.0, 0.0], [0.0, -length[li], 0.0]]
+    for li in tip_links:
+        local += [[0.0, -(length[li] - radius[li]), 0.0], [0.0, -length[li], 0.0]]
+    point_link = np.concatenate([np.repeat(links, 2), np.repeat(tip_links, 2)])
+    row = {int(li): k for k, li in enumerate(links)}
+    tip_row = np.array([row.get(int(li), -1) for li in tip_links], dtype=np.int64)
+    return FeaturePoints(links, tip_links, tip_row, point_link,
+                          np.asarray(local, dtype=float).reshape(-1, 3), radius[links],
+                          radius[tip_links])
+
+
+@dataclass(frozen=True)
+class EdgePrediction:
+    """What one camera should see at pose q: per tracked link the axis base and end pixels
+    (L, 2), their Jacobians (L, 2, 26), the projected radius (L,) and which slices are usable
+    (L, S: in front of the camera, long enough, not behind another link); per tip the centre
+    and extremity pixels (T, 2), the centre's Jacobian (T, 2, 26), projected radius (T,) and
+    whether it is usable (T,)."""
+
+    base_px: np.ndarray
+    end_px: np.ndarray
+    base_jacobian: np.ndarray
+    end_jacobian: np.ndarray
+    half_width_px: np.ndarray
+    slice_valid: np.ndarray
+    link_usable: np.ndarray
+    tip_px: np.ndarray
+    tip_end_px: np.ndarray
+    tip_jacobian: np.ndarray
+    tip_radius_px: np.ndarray
+    tip_usable: np.ndarray
+
+
+def _project(camera: PinholeCamera, p_world: np.ndarray, J_world: np.ndarray | None
+             ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """Pixels, pixel Jacobians (N, 2, 26) and depths of primary-frame points in a camera."""
+    pc = camera.world_to_camera(p_world)
+    depth = pc[:, 2].copy()
+    safe = pc.copy()
+    safe[:, 2] = np.where(np.abs(depth) < 1e-6, 1e-6, depth)
+    pix = camera.project(safe)
+    if J_world is None:
+        return pix, None, depth
+    A = camera.project_jacobian(safe) @ camera.rotation                     # (N, 2, 3)
+    return pix, A @ J_world, depth
+
+
+def predict_features(kin: FastKinematics, points: FeaturePoints, camera: PinholeCamera,
+                     q: np.ndarray, config: EdgeTrackerConfig,
+                     world: tuple[np.ndarray, np.ndarray] | None = None) -> EdgePrediction:
+    """Project the feature points of pose ``q`` into ``camera`` (``world`` = precomputed
+    primary-frame points and Jacobians) and decide which slices and tips can be measured."""
+    p, J = world if world is not None else kin.points(q, points.point_link,
+                                                      points.point_local, True)
+    pix, Jpix, depth = _project(camera, p, J)
+    L = len(points.links)
+    base, end = pix[0:2 * L:2], pix[1:2 * L:2]
+    Jb, Je = Jpix[0:2 * L:2], Jpix[1:2 * L:2]
+    zb, ze = depth[0:2 * L:2], depth[1:2 * L:2]
+    z_mid = 0.5 * (zb + ze)
+    focal = 0.5 * (camera.fx + camera.fy)
+    hw = points.radius * focal / np.maximum(z_mid, 1e-6)
+    in_front = (zb > config.min_depth_m) & (ze > config.min_depth_m)
+    long_enough = np.linalg.norm(end - base, axis=1) >= config.min_link_px
+    usable = in_front & long_enough
+    S = config.search.slices_per_link
+    frac = np.linspace(*config.search.slice_range, S)
+    centres = base[:, None, :] + frac[None, :, None] * (end - base)[:, None, :]
+    margin = hw[:, None] + config.search.search_px
+    inside = ((centres[..., 0] >= margin) & (centres[..., 0] < camera.width - margin)
+              & (centres[..., 1] >= margin) & (centres[..., 1] < camera.height - margin))
+    # occlusion: a slice is spoilt where the silhouette of a nearer link (other than its
+    # neighbours in the chain, which meet it at the joints outside the slice range) overlaps
+    # its own, widened by ``occlusion_margin_px``
+    dist, along = segment_distances(centres.reshape(-1, 2), base, end)
+    dist = dist.reshape(L, S, L)
+    z_other = zb[None, None, :] + along.reshape(L, S, L) * (ze - zb)[None, None, :]
+    z_self = zb[:, None] + frac[None, :] * (ze - zb)[:, None]
+    covered = dist < hw[None, None, :] + hw[:, None, None] + config.occlusion_margin_px
+    nearer = z_other < z_self[:, :, None]
+    same = np.eye(L, dtype=bool)[:, None, :]
+    parent = np.asarray(kin.model.link_parent)[points.links]
+    related = ((parent[:, None] == points.links[None, :])
+               | (parent[None, :] == points.links[:, None]))
+    occluded = np.any(covered & nearer & usable[None, None, :] & ~same & ~related[:, None, :], 2)
+    slice_valid = usable[:, None] & inside & ~occluded
+    link_usable = slice_valid.sum(1) >= config.search.min_slices
+    T = len(points.tip_links)
+    tip = pix[2 * L::2]
+    tip_end = pix[2 * L + 1::2]
+    Jt = Jpix[2 * L::2] if T else np.zeros((0, 2, NUM_DOFS))
+    zt = depth[2 * L::2]
+    tip_r = points.tip_radius * focal / np.maximum(zt, 1e-6)
+    rows = points.tip_row
+    tip_ok = (rows >= 0) & (zt > config.min_depth_m)
+    tip_ok &= np.where(rows >= 0, link_usable[np.maximum(rows, 0)], False)
+    margin_t = config.search.tip_search_px + tip_r
+    tip_ok &= ((tip_end[:, 0] >= margin_t) & (tip_end[:, 0] < camera.width - margin_t)
+               & (tip_end[:, 1] >= margin_t) & (tip_end[:, 1] < camera.height - margin_t))
+    if T:
+        # a tip lying on another (nearer) link cannot be told from it
+        dt, st = segment_distances(tip_end, base, end)
+        zt_other = zb[None, :] + st * (ze - zb)[None, :]
+        tip_row_mask = np.zeros((T, L), dtype=bool)
+        tip_row_mask[np.arange(T)[rows >= 0], rows[rows >= 0]] = True
+        over = (dt < hw[None, :] + tip_r[:, None]) & (zt_other < zt[:, None]) & ~tip_row_mask
+        tip_ok &= ~np.any(over & usable[None, :], axis=1)
+    return EdgePrediction(base, end, Jb, Je, hw, slice_valid, link_usable, tip, tip_end, Jt,
+                          tip_r, tip_ok)
+
+
+# ---------------------------------------------------------------------------- measurement
+@dataclass(frozen=True)
+class EdgeMeasurement:
+    """One camera's measured features for a prediction: the link axes, which links were
+    usable and found, the measured tip centres (T, 2) and which tips were found."""
+
+    prediction: EdgePrediction
+    axes: LinkAxes
+    link_found: np.ndarray   # (L,) bool
+    tips: TipPoints
+    tip_found: np.ndarray    # (T,) bool
+
+
+def measure_features(grey: np.ndarray, prediction: EdgePrediction, config: EdgeTrackerConfig,
+                     tip_rows: np.ndarray, polarity: int | None = None) -> EdgeMeasurement:
+    """Measure one camera's links near the prediction, then each tip along its distal link's
+    measured axis (a tip whose distal link was not found is not measured); ``tip_rows``
+    gives each tip's distal link row."""
+    pol = config.polarity if polarity is None else polarity
+    pred = prediction
+    axes = measure_link_axes(grey, pred.base_px, pred.end_px, pred.half_width_px,
+                             config.search, pol, pred.slice_valid)
+    link_found = axes.found & pred.link_usable
+    T = len(pred.tip_px)
+    if T == 0:
+        empty = TipPoints(np.zeros((0, 2)), np.zeros(0, dtype=bool))
+        return EdgeMeasurement(pred, axes, link_found, empty, np.zeros(0, dtype=bool))
+    rows = np.maximum(tip_rows, 0)
+    n = axes.normal[rows]
+    rho = axes.offset[rows]
+    # the measured axis, directed like the predicted link, through the predicted extremity's
+    # foot point
+    u = np.stack([n[:, 1], -n[:, 0]], axis=1)
+    pred_dir = pred.end_px[rows] - pred.base_px[rows]
+    u *= np.where(np.einsum('ij,ij->i', u, pred_dir) < 0, -1.0, 1.0)[:, None]
+    foot = pred.tip_end_px - (np.einsum('ij,ij->i', n, pred.tip_end_px) - rho)[:, None] * n
+    tip_pol = np.where(axes.polarity[rows] != 0, axes.polarity[rows], pol)
+    tips = measure_tips(grey, foot, u, pred.tip_end_px, pred.tip_radius_px, config.search,
+                        tip_pol)
+    tip_found = tips.found & pred.tip_usable & (tip_rows >= 0) & link_found[rows]
+    return EdgeMeasurement(pred, axes, link_found, tips, tip_found)
+
+
+def _huber(r: np.ndarray, k: float) -> np.ndarray:
+    if k <= 0:
+        return np.ones_like(r)
+    a = np.abs(r)
+    return np.where(a <= k, 1.0, k / np.maximum(a, 1e-12))
+
+
+def _stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
+                     measured: Sequence[EdgeMeasurement | None],
+                     world: tuple[np.ndarray, np.ndarray | None], config: EdgeTrackerConfig,
+                     jacobian: bool = True
+                     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """All cameras' link and tip residuals at the pose of ``world`` (points, Jacobians),
+    their Jacobian and their weights (Huber x tip weight)."""
+    p, Jw = world
+    L = len(points.links)
+    rs, Js, ws = [], [], []
+    for cam, meas in zip(cameras, measured, strict=True):
+        if meas is None:
+            continue
+        pix, Jpix, _ = _project(cam, p, Jw if jacobian else None)
+        if Jpix is None:
+            Jpix = np.zeros((len(pix), 2, 1))
+        f = meas.link_found
+        if f.any():
+            r, J = link_axis_residuals(meas.axes.normal[f], meas.axes.offset[f],
+                                       pix[0:2 * L:2][f], pix[1:2 * L:2][f],
+                                       Jpix[0:2 * L:2][f], Jpix[1:2 * L:2][f])
+            rs.append(r)
+            Js.append(J)
+            ws.append(_huber(r, config.huber_px))
+        t = meas.tip_found
+        if t.any():
+            r, J = tip_residuals(pix[2 * L::2][t], meas.tips.centre[t], Jpix[2 * L::2][t])
+            rs.append(r)
+            Js.append(J)
+            ws.append(config.tip_weight * _huber(r, config.huber_px))
+    if not rs:
+        return np.zeros(0), np.zeros((0, NUM_DOFS)) if jacobian else None, np.zeros(0)
+    return (np.concatenate(rs), np.concatenate(Js) if jacobian else None, np.concatenate(ws))
+
+
+# ---------------------------------------------------------------------------- estimation
+@dataclass(frozen=True)
+class EdgeFit:
+    """Result of :func:`fit_pose`: the pose, the weighted RMS (``sqrt(mean(w r^2))``, Huber
+    weights) of the final residuals against the last round's measurements (pixels, NaN if
+    none), per camera the links found, the links usable
+    and the tips found, and the number of Gauss-Newton iterations taken."""
+
+    q: np.ndarray
+    rms_px: float
+    links_found: tuple[int, ...]
+    links_usable: tuple[int, ...]
+    tips_found: tuple[int, ...]
+    iterations: int
+
+    @property
+    def found_fraction(self) -> float:
+        """Found over usable links, all cameras together (0 when none was usable)."""
+        usable = sum(self.links_usable)
+        return sum(self.links_found) / usable if usable else 0.0
+
+
+def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[PinholeCamera],
+             greys: Sequence[np.ndarray | None], q_start: np.ndarray,
+             config: EdgeTrackerConfig, rounds: int, polarity: int | None = None) -> EdgeFit:
+    """Fit the pose to the edges of the cameras' grey images (None: no frame from that
+    camera): ``rounds`` times predict at the current pose, measure, and take
+    ``gn_iterations`` stabilised Gauss-Newton steps on the concatenated residuals with the
+    joint limits enforced. The stabiliser is anchored at ``q_start``: the steps minimise
+    ``|R(q)|^2_W + |q - q_start|^2_S``, ``dq = -(J^T W J + S)^-1 (J^T W R + S (q - q_start))``,
+    whose first step is the paper's ``-(J^T J + S)^-1 J^T R``; further steps converge on the
+    same measurements without letting weakly observed DOFs wander."""
+    q = kin.clamp(np.asarray(q_start, dtype=float))
+    q_anchor = q.copy()
+    S = np.diag(config.stabilizer_diagonal())
+    C = kin.model.coupling_prior() if config.coupling_weight > 0 else None
+    iterations = 0
+    rms = math.nan
+    found: tuple[int, ...] = ()
+    usable: tuple[int, ...] = ()
+    tips: tuple[int, ...] = ()
+    for _ in range(rounds):
+        world = kin.points(q, points.point_link, points.point_local, True)
+        measured: list[EdgeMeasurement | None] = []
+        for cam, grey in zip(cameras, greys, strict=True):
+            if grey is None:
+                measured.append(None)
+                continue
+            pred = predict_features(kin, points, cam, q, config, world)
+            measured.append(measure_features(grey, pred, config, points.tip_row, polarity))
+        found = tuple(0 if m is None else int(m.link_found.sum()) for m in measured)
+        usable = tuple(0 if m is None else int(m.prediction.link_usable.sum())
+                       for m in measured)
+        tips = tuple(0 if m is None else int(m.tip_found.sum()) for m in measured)
+        if sum(found) == 0:
+            return EdgeFit(q, math.nan, found, usable, tips, iterations)
+        for it in range(config.gn_iterations):
+            if it > 0:
+                world = kin.points(q, points.point_link, points.point_local, True)
+            r, J, w = _stack_residuals(points, cameras, measured, world, config)
+            WJ = J.T * w
+            H = WJ @ J + S
+            g = WJ @ r + S @ (q - q_anchor)
+            if C is not None:
+                H += config.coupling_weight * (C.T @ C)
+                g += config.coupling_weight * (C.T @ (C @ q))
+            at_lo = (q <= kin.lower + 1e-9) & (g > 0)
+            at_hi = (q >= kin.upper - 1e-9) & (g < 0)
+            free = ~(at_lo | at_hi)
+            dq = np.zeros(NUM_DOFS)
+            try:
+                dq[free] = -np.linalg.solve(H[np.ix_(free, free)], g[free])
+            except np.linalg.LinAlgError:
+                break
+            q = kin.clamp(q + dq)
+            iterations += 1
+        world = kin.points(q, points.point_link, points.point_local, False)
+        r, _, w = _stack_residuals(points, cameras, measured, world, config, jacobian=False)
+        rms = float(np.sqrt(np.mean(w * r**2))) if len(r) else math.nan
+    return EdgeFit(q, rms, found, usable, tips, iterations)
