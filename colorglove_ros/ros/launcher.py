@@ -11,6 +11,11 @@ machines. The YAML (see ``config/pipeline.launch.yaml``)::
         overrides: {rate_hz: 15.0}       # optional parameters set after the files (win)
         arguments: []                    # optional extra command-line arguments
 
+``--no-camera`` leaves out the package's ``camera_node`` (images come from your own camera
+driver), and ``--image-topic`` / ``--camera-info-topic`` remap every node's camera input
+(``camera/image_raw``, ``camera/camera_info``) to the driver's topics, like the native launch
+file's ``start_camera``, ``image_topic`` and ``camera_info_topic`` arguments.
+
 On Ctrl-C or SIGTERM every node gets SIGINT, then SIGTERM, then SIGKILL after grace
 periods. If one node exits, the others are stopped too, unless it has ``respawn: true`` and did
 not fail at start-up (exit code 1): then it is started again.
@@ -26,16 +31,23 @@ import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.yaml_io import load_yaml_mapping
 
 __all__ = ['LaunchError', 'NodeSpec', 'load_launch_file', 'node_command', 'Launcher',
-           'use_fastdds_profile', 'main']
+           'use_fastdds_profile', 'with_camera_input', 'CAMERA_NODE_EXECUTABLE',
+           'CAMERA_IMAGE_TOPIC', 'CAMERA_INFO_TOPIC', 'FASTDDS_PROFILE_VARIABLE', 'main']
 
 FASTDDS_PROFILE_VARIABLE = 'FASTRTPS_DEFAULT_PROFILES_FILE'
+CAMERA_NODE_EXECUTABLE = 'camera_node'
+"""The package's own camera: left out when images come from the user's camera driver."""
+CAMERA_IMAGE_TOPIC = 'camera/image_raw'
+"""The camera image topic the nodes publish and subscribe to (relative: follows a namespace)."""
+CAMERA_INFO_TOPIC = 'camera/camera_info'
+"""The camera's ``CameraInfo`` topic (relative)."""
 # Exit code of a node that cannot start (ros/nodes/common.py run_node): never respawned, as a bad
 # configuration does not fix itself.
 STARTUP_FAILURE_CODE = 1
@@ -107,6 +119,18 @@ def load_launch_file(path: str | Path) -> list[NodeSpec]:
             overrides={str(k): v for k, v in overrides.items()},
         ))
     return specs
+
+
+def with_camera_input(specs: list[NodeSpec], *, start_camera: bool = True,
+                      image_topic: str = '', camera_info_topic: str = '') -> list[NodeSpec]:
+    """``specs`` without the package's ``camera_node`` unless ``start_camera``, and with every
+    node's ``camera/image_raw`` and ``camera/camera_info`` remapped to ``image_topic`` and
+    ``camera_info_topic`` where given (these win over the launch file's own remappings)."""
+    remaps = {source: target for source, target in ((CAMERA_IMAGE_TOPIC, image_topic),
+                                                   (CAMERA_INFO_TOPIC, camera_info_topic))
+              if target}
+    return [replace(spec, remappings={**spec.remappings, **remaps}) for spec in specs
+            if start_camera or spec.executable != CAMERA_NODE_EXECUTABLE]
 
 
 def node_command(spec: NodeSpec) -> list[str]:
@@ -216,14 +240,27 @@ def _relay(process: subprocess.Popen, label: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Command-line entry point: ``colorglove_launch LAUNCH_YAML [--duration S]``."""
+    """Command-line entry point: ``colorglove_launch LAUNCH_YAML [--duration S] [--no-camera]
+    [--image-topic T] [--camera-info-topic T]``."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('launch_file', help='YAML listing the nodes to start')
     parser.add_argument('--duration', type=float, default=0.0,
                         help='stop everything after this many seconds (0 = run until Ctrl-C)')
+    parser.add_argument('--no-camera', action='store_true',
+                        help=f'do not start {CAMERA_NODE_EXECUTABLE} (images come from your '
+                             'own camera driver)')
+    parser.add_argument('--image-topic', default='',
+                        help=f'remap every node\'s {CAMERA_IMAGE_TOPIC} to this topic')
+    parser.add_argument('--camera-info-topic', default='',
+                        help=f'remap every node\'s {CAMERA_INFO_TOPIC} to this topic')
     args = parser.parse_args(argv)
     try:
-        launcher = Launcher(load_launch_file(args.launch_file))
+        specs = with_camera_input(load_launch_file(args.launch_file),
+                                  start_camera=not args.no_camera, image_topic=args.image_topic,
+                                  camera_info_topic=args.camera_info_topic)
+        if not specs:
+            raise LaunchError(f'{args.launch_file}: no node left to start')
+        launcher = Launcher(specs)
     except LaunchError as exc:
         print(f'colorglove_launch: {exc}', file=sys.stderr)
         return 2

@@ -28,13 +28,15 @@ from colorglove_ros.ros.launcher import (
 from colorglove_ros.ros.nodes import lookup_node, segmentation_node
 from colorglove_ros.ros.nodes.camera_node import CameraNode
 from colorglove_ros.ros.nodes.common import StartupError
+from colorglove_ros.ros.nodes.hand_description_node import HandDescriptionNode
 from colorglove_ros.ros.nodes.ik_node import IKNode
 
 MONO_LAUNCH = CONFIG_DIR / 'pipeline.launch.yaml'
 STEREO_LAUNCH = CONFIG_DIR / 'pipeline_stereo.launch.yaml'
 STEREO_CALIBRATION = CONFIG_DIR / 'calibration_stereo.yaml'
 NODE_CLASSES = {'camera_node': CameraNode, 'segmentation_node': segmentation_node.SegmentationNode,
-                'lookup_node': lookup_node.LookupNode, 'ik_node': IKNode}
+                'lookup_node': lookup_node.LookupNode, 'ik_node': IKNode,
+                'hand_description_node': HandDescriptionNode}
 #: the parameters in which a node of the two-camera graph may differ from the one-camera one
 STEREO_PARAMETERS = {'calibration_file', 'extra_observation_topics'}
 

@@ -1,5 +1,5 @@
 """URDF of a right or left hand with a name prefix (``left_``, ``right_``) on every link and
-joint, built by ``core/hand/urdf.py``'s generator.
+joint, built by ``core/hand/urdf.py``'s generator (names from ``core/hand/frames.py``).
 
 The left hand is the right model mirrored in its hand frame by ``S = diag(-1, 1, 1)``
 (``core/hand/handedness.py``): every joint origin ``(R, t) -> (S R S, S t)`` and axis
@@ -9,11 +9,11 @@ hand's JointState reads like a right hand's. The root link is ``<prefix>palm``; 
 """
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from colorglove_ros.core.hand.frames import prefixed_joint_names
 from colorglove_ros.core.hand.handedness import HANDS
 from colorglove_ros.core.hand.model import HandModel, JointSpec
 from colorglove_ros.core.hand.urdf import URDF_NAME, UrdfError, urdf_string
@@ -43,11 +43,6 @@ class _MirroredModel:
         return mirrored_joints(self.base)
 
 
-def prefixed_joint_names(names: tuple[str, ...] | list[str], prefix: str) -> list[str]:
-    """Joint names with the hand prefix (the names a prefixed JointState carries)."""
-    return [f'{prefix}{n}' for n in names]
-
-
 def hand_urdf_string(hand: str = 'right', prefix: str | None = None,
                      model: HandModel | None = None) -> str:
     """URDF of a ``hand`` ('right' or 'left') whose link and joint names start with ``prefix``
@@ -55,13 +50,7 @@ def hand_urdf_string(hand: str = 'right', prefix: str | None = None,
     if hand not in HANDS:
         raise UrdfError(f'hand must be one of {HANDS}, got {hand!r}')
     prefix = f'{hand}_' if prefix is None else prefix
-    if prefix and not re.fullmatch(r'[A-Za-z0-9_/]+', prefix):
-        raise UrdfError(f'bad prefix {prefix!r}')
     model = HandModel() if model is None else model
     source = model if hand == 'right' else _MirroredModel(model)
-    text = urdf_string(source, name=f'{URDF_NAME}_{hand}')  # type: ignore[arg-type]
-    if not prefix:
-        return text
-    # every link and joint name: <link name=..>, <joint name=..>, parent/child link=".."
-    text = re.sub(r'<(link|joint) name="([^"]+)"', rf'<\1 name="{prefix}\2"', text)
-    return re.sub(r'<(parent|child) link="([^"]+)"', rf'<\1 link="{prefix}\2"', text)
+    return urdf_string(source, name=f'{URDF_NAME}_{hand}',  # type: ignore[arg-type]
+                       frame_prefix=prefix)
