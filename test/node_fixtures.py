@@ -1,5 +1,6 @@
-"""Shared helpers for the node tests: small assets built once per session, rendered frames,
-an in-process node harness and a runner for node processes."""
+"""Shared helpers for the node tests: the node assets (built once per session by conftest.py),
+rendered frames and the messages the nodes make of them, an in-process node harness and a
+runner for node processes."""
 from __future__ import annotations
 
 import contextlib
@@ -11,7 +12,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -32,48 +32,34 @@ class NodeAssets:
     color_config: Path
     calibration_npz: Path
     database: Path
-    build_seconds: dict[str, float]
 
 
-_ASSETS: dict[str, NodeAssets] = {}
+def synthetic_color_config(folder: Path, frames: int, **options) -> tuple[Path, Path]:
+    """A colour calibration fitted in ``folder`` on ``frames`` rendered training frames
+    (``core.segmentation.calibration_fit.calibrate_synthetic`` with the fit ``options``);
+    returns the calibration file and a colour config YAML naming it absolutely (the nodes
+    resolve a config's relative paths against their working folder)."""
+    from colorglove_ros.core.segmentation.calibration_fit import calibrate_synthetic
 
-
-def _build_assets(folder: Path) -> NodeAssets:
-    from colorglove_ros.core.lookup.database import save_database
-    from colorglove_ros.core.lookup.database_build import BuildConfig, build_database
-    from colorglove_ros.tools import calibrate_colors
-
-    timings = {}
-    started = time.perf_counter()
-    calibration = folder / 'cal.npz'
-    # 8 frames is the tool's minimum; 5-bit LUT and 2000 pixels per class keep it ~15-25 s.
-    code = calibrate_colors.main(['--synthetic', '8', '--bits', '5', '--max-pixels', '2000',
-                                  '--output', str(calibration),
-                                  '--frames-out', str(folder / 'calibration_frames')])
-    assert code == 0 and calibration.is_file(), 'calibrate_colors failed'
-    timings['calibrate_colors'] = time.perf_counter() - started
-    # The tool writes --output; the nodes read the file named by a colour config YAML, whose
-    # relative paths resolve against the working folder, so the copy names it absolutely.
+    fit = calibrate_synthetic(frames, folder / 'color_calibration.npz',
+                              folder / 'calibration_frames', **options)
     lines = (CONFIG_DIR / 'color_calibration.yaml').read_text().splitlines()
-    lines = [f'calibration_file: {calibration}' if line.startswith('calibration_file:')
+    lines = [f'calibration_file: {fit.output}' if line.startswith('calibration_file:')
              else line for line in lines]
     color_config = folder / 'color_calibration.yaml'
     color_config.write_text('\n'.join(lines) + '\n')
-
-    started = time.perf_counter()
-    db = build_database(BuildConfig(entries=96, orientations_per_config=16, collection_size=400,
-                                    num_bits=32, num_pairs=200, training_images=200, batch=64))
-    database = save_database(db, folder / 'db')
-    timings['build_database'] = time.perf_counter() - started
-    return NodeAssets(color_config, calibration, Path(database), timings)
+    return fit.output, color_config
 
 
-def node_assets(tmp_path_factory: pytest.TempPathFactory) -> NodeAssets:
-    """The assets, built on first use in this session (shared by every test module)."""
-    key = str(tmp_path_factory.getbasetemp())
-    if key not in _ASSETS:
-        _ASSETS[key] = _build_assets(tmp_path_factory.mktemp('node_assets'))
-    return _ASSETS[key]
+def build_node_assets(folder: Path, database: Path) -> NodeAssets:
+    """The node assets in ``folder``, with the pose database saved at ``database`` (the
+    ``node_assets`` fixture of conftest.py builds them once per session)."""
+    from colorglove_ros.core.segmentation.calibration_fit import MIN_FRAMES
+
+    # the fewest frames a fit takes, a 5-bit LUT and 2000 pixels per class: a short fit
+    calibration, color_config = synthetic_color_config(folder, MIN_FRAMES, bits=5,
+                                                       max_per_class=2000)
+    return NodeAssets(color_config, calibration, database)
 
 
 # ------------------------------------------------------------------------------ frames
@@ -120,6 +106,44 @@ def header(sec: int, nanosec: int = 0, frame_id: str = 'camera_optical_frame'):
     from std_msgs.msg import Header
 
     return Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id)
+
+
+# ------------------------------------------------------------------------------ messages
+# what lookup_node is given in these tests: 40 candidates re-ranked, the 10 nearest blended
+LOOKUP_CANDIDATES = 40
+LOOKUP_BLEND = 10
+
+
+def observation_msg(segmenter, rgb: np.ndarray, stamp_header):
+    """What ``segmenter`` (``core.segmentation.segmenter.Segmenter``) makes of ``rgb``, as
+    segmentation_node sends it (a ``HandObservation``); the hand must be found."""
+    from colorglove_ros.ros.conversions import observation_to_msg
+
+    observation = segmenter.process(rgb)
+    assert observation.hand_found, observation.status
+    return observation_to_msg(observation, stamp_header)
+
+
+def node_lookup(assets: NodeAssets):
+    """The ``PoseLookup`` of the nodes' database, with lookup_node's settings here."""
+    from colorglove_ros.core.lookup.database import load_database
+    from colorglove_ros.core.lookup.search import PoseLookup
+
+    return PoseLookup(load_database(assets.database), LOOKUP_CANDIDATES, LOOKUP_BLEND)
+
+
+def candidates_msg(lookup, observation, camera):
+    """What ``lookup`` makes of the ``HandObservation`` seen by ``camera`` (without the
+    per-finger blend of its blobs), as a ``HandPoseCandidates`` message."""
+    from colorglove_ros.ros.conversions import (
+        candidates_to_msg,
+        crop_from_observation_msg,
+        tiny_labels_from_observation_msg,
+    )
+
+    result = lookup.lookup(tiny_labels_from_observation_msg(observation),
+                           crop_from_observation_msg(observation), camera)
+    return candidates_to_msg(observation, result, lookup_time_ms=1.0)
 
 
 # ------------------------------------------------------------------------------ harness
@@ -192,6 +216,31 @@ def running(*factories: Callable[[rclpy.Context], Node]) -> Iterator[Harness]:
 def params(**values) -> list[Parameter]:
     """``parameter_overrides`` from keyword arguments."""
     return [Parameter(name, value=value) for name, value in values.items()]
+
+
+def segmentation_node(assets: NodeAssets, **overrides) -> Callable[[rclpy.Context], Node]:
+    """A factory of segmentation_node with the assets' colour calibration (and the
+    parameters ``overrides``)."""
+    from colorglove_ros.ros.nodes.segmentation_node import SegmentationNode
+
+    return lambda ctx: SegmentationNode(context=ctx, parameter_overrides=params(
+        color_calibration_file=str(assets.color_config), **overrides))
+
+
+def lookup_node(assets: NodeAssets) -> Callable[[rclpy.Context], Node]:
+    """A factory of lookup_node with the assets' database (settings of :func:`node_lookup`)."""
+    from colorglove_ros.ros.nodes.lookup_node import LookupNode
+
+    return lambda ctx: LookupNode(context=ctx, parameter_overrides=params(
+        database_path=str(assets.database), num_candidates=LOOKUP_CANDIDATES,
+        num_neighbors=LOOKUP_BLEND))
+
+
+def ik_node(**overrides) -> Callable[[rclpy.Context], Node]:
+    """A factory of ik_node with the parameters ``overrides``."""
+    from colorglove_ros.ros.nodes.ik_node import IKNode
+
+    return lambda ctx: IKNode(context=ctx, parameter_overrides=params(**overrides))
 
 
 # ------------------------------------------------------------------------------ processes

@@ -22,9 +22,10 @@ frame.
 """
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from rosbags.highlevel import AnyReader
@@ -32,6 +33,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from colorglove_ros.core.camera import CalibrationError, PinholeCamera
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import FINGER_DOF_NAMES, KEYPOINT_NAMES, NUM_DOFS
 from colorglove_ros.core.hand.overlay import SKELETON_BONES
@@ -42,7 +44,7 @@ __all__ = [
     'BagError', 'BagFrame', 'SequenceBagWriter', 'write_sequence_bag', 'read_sequence_bag',
     'bag_camera', 'camera_info_to_pinhole', 'camera_topics', 'TOPIC_IMAGE',
     'TOPIC_CAMERA_INFO', 'TOPIC_JOINTS', 'TOPIC_WRIST', 'TOPIC_KEYPOINTS', 'FRAME_ID',
-    'DEFAULT_START_NS', 'SKELETON_BONES', 'bag_size_bytes',
+    'DEFAULT_START_NS', 'SKELETON_BONES', 'bag_size_bytes', 'SyntheticBag', 'write_synthetic_bag',
 ]
 
 TOPIC_IMAGE = '/camera/image_raw'
@@ -274,6 +276,43 @@ def write_sequence_bag(path: str | Path, frames: Iterable[object], camera: Pinho
         for frame in frames:
             writer.write(frame)
         return writer.count
+
+
+@dataclass(frozen=True)
+class SyntheticBag:
+    """A synthetic sequence written as a bag: its folder, frames written and the imaging
+    conditions of the sequence (``core.synthetic.conditions.FrameConditions``)."""
+
+    path: Path
+    frames: int
+    conditions: Any
+
+
+def write_synthetic_bag(path: str | Path, cameras: Sequence[PinholeCamera], *, seed: int = 1,
+                        num_frames: int = 300, fps: float = 30.0,
+                        hand_length_m: float = DEFAULT_HAND_LENGTH_M, split: str = 'test',
+                        progress: Callable[[Iterable[int]], Iterable[int]] | None = None
+                        ) -> SyntheticBag:
+    """Render synthetic sequence ``seed`` (``core.synthetic.sequences.SyntheticSequenceRenderer``
+    with ``split`` conditions) as every camera of ``cameras`` sees it, primary first, and write
+    it to a new MCAP bag at ``path`` (extra cameras on ``/NAME/camera/...``). ``progress``
+    wraps the frame indices (e.g. ``tqdm``). Raises ``SynthError`` for bad sequence settings
+    and :class:`BagError` for a bag that cannot be written."""
+    from colorglove_ros.core.synthetic.sequences import SyntheticSequenceRenderer
+
+    sequence = SyntheticSequenceRenderer(cameras[0], seed=seed, num_frames=num_frames, fps=fps,
+                                         hand_length_m=hand_length_m, split=split)
+    try:
+        with SequenceBagWriter(path, cameras[0], fps=fps,
+                               extra_cameras=cameras[1:]) as writer:
+            indices = range(num_frames)
+            for i in (progress(indices) if progress is not None else indices):
+                # one instant seen by every camera, primary first
+                views = sequence.render_views(i, cameras)
+                writer.write(views[0], extra_images=[v.image_rgb for v in views[1:]])
+    finally:
+        sequence.close()
+    return SyntheticBag(Path(path), writer.count, sequence.conditions)
 
 
 # ----------------------------------------------------------------------------- reading

@@ -37,7 +37,12 @@ from colorglove_ros.ros.latency_probe import LatencyProbe, ProbeRecord
 from colorglove_ros.ros.launcher import Launcher, NodeSpec, use_fastdds_profile
 
 __all__ = ['PipelineMonitor', 'PipelineRun', 'bag_feed', 'node_specs', 'run_pipeline', 'summarize',
-           'ik_times_ms']
+           'ik_times_ms', 'COLOR_CONFIG', 'DATABASE_CONFIG', 'ASSET_CALIBRATION_FRAMES',
+           'prepare_assets', 'pipeline_parameters', 'write_params']
+
+COLOR_CONFIG = 'config/color_calibration.yaml'
+DATABASE_CONFIG = 'config/database.yaml'
+ASSET_CALIBRATION_FRAMES = 12      # rendered training frames of a missing colour calibration
 
 # ik_node's status line of a tracked frame ends with "IK <time> ms"
 _IK_TIME = re.compile(r'IK (\d+(?:\.\d+)?) ms')
@@ -179,6 +184,54 @@ class PipelineRun:
     timed_out: bool = False
     overlays: list[np.ndarray] = field(default_factory=list)
     statuses: list[str] = field(default_factory=list)      # ik_node's tracking status lines
+
+
+def prepare_assets(database: Path | None = None) -> Path:
+    """The pose database to run with (``database``, default the one ``config/database.yaml``
+    names), built first if missing, and the colour calibration ``config/color_calibration.yaml``
+    names, fitted first on rendered training frames if missing (each once)."""
+    from colorglove_ros.core.lookup.database import save_database
+    from colorglove_ros.core.lookup.database_build import build_database, read_database_config
+    from colorglove_ros.core.segmentation.calibration_fit import (
+        SYNTHETIC_FRAMES_DIR,
+        calibrate_synthetic,
+    )
+    from colorglove_ros.core.segmentation.color_model import read_calibration_config
+
+    config, default_database, _ = read_database_config(DATABASE_CONFIG)
+    database = Path(database) if database else default_database
+    calibration_file = read_calibration_config(COLOR_CONFIG)['calibration_file']
+    if not Path(calibration_file).is_file():
+        print(f'[demo] no colour calibration at {calibration_file}: calibrating from '
+              f'{ASSET_CALIBRATION_FRAMES} rendered training frames (once)', flush=True)
+        fit = calibrate_synthetic(ASSET_CALIBRATION_FRAMES, calibration_file,
+                                  SYNTHETIC_FRAMES_DIR)
+        print(f'[demo] colour calibration saved at {fit.output} ({fit.fit_s:.1f} s)',
+              flush=True)
+    if not (database / 'manifest.json').is_file():
+        print(f'[demo] no pose database at {database}: building it (once; the default '
+              '100,000 entries take several minutes on 2 cores)', flush=True)
+        started = time.perf_counter()
+        db = build_database(config, progress=lambda message: print(f'[build] {message}',
+                                                                    flush=True))
+        save_database(db, database)
+        print(f'[demo] pose database of {len(db)} entries saved at {database} '
+              f'({time.perf_counter() - started:.0f} s)', flush=True)
+    return database
+
+
+def pipeline_parameters(database: Path, seed: int, frames: int, rate_hz: float,
+                        calibration: str = 'config/calibration.yaml') -> dict[str, dict]:
+    """Node parameters of a run on synthetic sequence ``seed`` (``frames`` frames offered at
+    ``rate_hz`` by camera_node) with pose database ``database``."""
+    return {
+        'camera': {'source': 'synthetic', 'synthetic_seed': seed, 'synthetic_frames': frames,
+                   'synthetic_prerender': True, 'loop': False, 'rate_hz': rate_hz,
+                   'calibration_file': calibration},
+        'segmentation': {'color_calibration_file': COLOR_CONFIG},
+        'lookup': {'database_path': str(database), 'calibration_file': calibration},
+        'ik': {'calibration_file': calibration, 'publish_overlay': True},
+    }
 
 
 def node_specs(params_file: Path, with_camera: bool) -> list[NodeSpec]:

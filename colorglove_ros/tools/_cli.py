@@ -3,12 +3,17 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.report import write_json
 
-__all__ = ['tool_parser', 'add_sequence_arguments', 'add_scripted_noise_arguments', 'run_tool']
+__all__ = ['tool_parser', 'sequence_tool_parser', 'ScriptedSettings', 'ScriptedEvaluation',
+           'run_scripted_evaluation', 'add_pipeline_arguments', 'tool_error', 'run_tool']
 
 
 def tool_parser(description: str | None, *, raw_description: bool = False,
@@ -24,42 +29,127 @@ def tool_parser(description: str | None, *, raw_description: bool = False,
     return parser
 
 
-def add_sequence_arguments(parser: argparse.ArgumentParser, *, sequences_help: str,
-                           labels: tuple[str, ...], labels_help: str) -> None:
-    """The arguments of the tools that run the tracker over synthetic sequences (eval_ik,
-    learn_ik_covariances): database, sequences, frames, label source, colour, IK and camera
-    configuration, frame rate."""
+def sequence_tool_parser(description: str | None, sequences_help: str
+                         ) -> argparse.ArgumentParser:
+    """The parser of the tools that run the tracker over synthetic sequences (eval_ik,
+    learn_ik_covariances): ``--json``, database, sequences (``sequences_help``), frames, label
+    source, colour, IK and camera configuration, frame rate."""
+    from colorglove_ros.core.evaluation.sequences import LABEL_SOURCES
     from colorglove_ros.paths import share_dir
 
     config = share_dir() / 'config'
+    parser = tool_parser(description, raw_description=True)
     parser.add_argument('--database', help='pose database directory (default: the largest '
                         'under data/)')
     parser.add_argument('--sequences', type=int, default=4, help=sequences_help)
     parser.add_argument('--frames', type=int, default=150, help='frames per sequence')
-    parser.add_argument('--labels', choices=labels, default='truth', help=labels_help)
+    parser.add_argument('--labels', choices=LABEL_SOURCES, default='truth',
+                        help="'truth': the renderer's labels (the IK and lookup without the "
+                             "colour segmentation); 'segmented': the colour segmentation "
+                             '(core.segmentation) of the rendered images')
     parser.add_argument('--color-config', help='colour calibration YAML for --labels '
                         'segmented (default config/color_calibration.yaml)')
     parser.add_argument('--ik-config', default=str(config / 'ik.yaml'))
     parser.add_argument('--calibration', default=str(config / 'calibration.yaml'),
                         help='camera rig the tracker runs with')
     parser.add_argument('--fps', type=float, default=30.0)
+    return parser
 
 
-def add_scripted_noise_arguments(parser: argparse.ArgumentParser, *, default_seeds: list[int],
-                                 tuning_seeds: list[int]) -> None:
-    """The arguments of the evaluations on scripted poses with a tracking-noise model
-    (eval_gestures, eval_spelling): held-out seeds and the noise level."""
-    parser.add_argument('--seeds', type=int, nargs='+', default=list(default_seeds),
-                        help=f'sequence seeds (tuning used {tuning_seeds[0]}-{tuning_seeds[-1]})')
+@dataclass(frozen=True)
+class ScriptedSettings:
+    """An evaluation on scripted poses with a tracking-noise model (eval_gestures,
+    eval_spelling): the sequence seeds its settings were tuned on, the held-out seeds it
+    reports on by default, and what its sequences are made of (``unit``, e.g. 'words', and
+    how many per sequence by default)."""
+
+    tuning_seeds: tuple[int, ...]
+    default_seeds: tuple[int, ...]
+    unit: str
+    default_count: int
+
+
+@dataclass(frozen=True)
+class ScriptedEvaluation:
+    """A run of such an evaluation: its arguments, settings, noise model, result and time."""
+
+    args: argparse.Namespace
+    settings: ScriptedSettings
+    noise: Any                     # core.evaluation.scripted_hands.TrackingNoise
+    result: dict[str, Any]
+    seconds: float
+
+    @property
+    def count(self) -> int:
+        """Units per sequence."""
+        return getattr(self.args, self.settings.unit)
+
+    def title(self, what: str) -> str:
+        """``what``, then the seeds, sequence size and noise level (set and realised)."""
+        seeds = self.args.seeds
+        return (f'{what}, seeds {seeds[0]}..{seeds[-1]} ({len(seeds)} sequences x '
+                f'{self.count} {self.settings.unit}), noise MAE {self.args.noise_mae_deg} deg '
+                f'(realised {self.result["joint_mae_deg_realised"]:.2f})')
+
+    def finish(self, targets: list[dict[str, Any]], noise_settings: dict[str, Any]) -> int:
+        """Print the time; with ``--json`` write the settings (seeds, units per sequence,
+        ``noise_settings``, tuning seeds), the result, ``targets`` and the time. Returns 0."""
+        print(f'{self.seconds:.1f} s')
+        if self.args.json:
+            write_json(self.args.json, {
+                'settings': {'seeds': self.args.seeds, self.settings.unit: self.count,
+                             **noise_settings,
+                             'tuning_seeds': list(self.settings.tuning_seeds)},
+                **self.result, 'targets': targets, 'seconds': self.seconds})
+        return 0
+
+
+def run_scripted_evaluation(argv: list[str] | None, description: str | None,
+                            settings: ScriptedSettings,
+                            evaluate: Callable[[list[int], int, Any], dict[str, Any]]
+                            ) -> ScriptedEvaluation:
+    """Parse the arguments of an evaluation on scripted poses (held-out ``--seeds``,
+    ``--noise-mae-deg``, ``--UNIT`` per sequence) and run ``evaluate(seeds, count, noise)``
+    with that noise level (``TrackingNoise``), timed."""
+    from colorglove_ros.core.evaluation.scripted_hands import TrackingNoise
+
+    tuning, unit = settings.tuning_seeds, settings.unit
+    parser = tool_parser(description, raw_description=True)
+    parser.add_argument('--seeds', type=int, nargs='+', default=list(settings.default_seeds),
+                        help=f'sequence seeds (tuning used {tuning[0]}-{tuning[-1]})')
     parser.add_argument('--noise-mae-deg', type=float, default=7.0,
                         help='mean absolute finger-joint error of the noise model, degrees')
+    parser.add_argument(f'--{unit}', type=int, default=settings.default_count,
+                        help=f'{unit} per sequence')
+    args = parser.parse_args(argv)
+    started = time.perf_counter()
+    noise = TrackingNoise(joint_mae_deg=args.noise_mae_deg)
+    result = evaluate(args.seeds, getattr(args, unit), noise)
+    return ScriptedEvaluation(args, settings, noise, result, time.perf_counter() - started)
+
+
+def add_pipeline_arguments(parser: argparse.ArgumentParser, *, frames: int, seed: int,
+                           sequence: str) -> None:
+    """The arguments of the tools that run the node pipeline on a synthetic sequence (demo,
+    benchmark, soak): its length and seed (``sequence`` names it in the help) and the pose
+    database."""
+    parser.add_argument('--frames', type=int, default=frames, help=f'frames of the {sequence}')
+    parser.add_argument('--seed', type=int, default=seed, help=f'seed of the {sequence}')
+    parser.add_argument('--database', type=Path,
+                        help='pose database (default: the one config/database.yaml names)')
+
+
+def tool_error(name: str, exc: Exception) -> int:
+    """Report one of the package's errors (bad file, bad setting, bad input) as one line
+    ``NAME: error: ...`` on stderr; return the tool's exit code 1."""
+    print(f'{name}: error: {exc}', file=sys.stderr, flush=True)
+    return 1
 
 
 def run_tool(name: str, body: Callable[[], int]) -> int:
-    """Run a tool's body; any of the package's own errors (bad file, bad setting, bad input)
-    becomes one line ``NAME: error: ...`` on stderr and exit code 1 instead of a traceback."""
+    """Run a tool's body; any of the package's own errors becomes :func:`tool_error`'s one
+    line and exit code 1 instead of a traceback."""
     try:
         return body()
     except ColorGloveError as exc:
-        print(f'{name}: error: {exc}', file=sys.stderr, flush=True)
-        return 1
+        return tool_error(name, exc)

@@ -10,14 +10,21 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.core.synthetic.frames import default_camera
 from colorglove_ros.paths import resolve_path
-from colorglove_ros.ros.pipeline_run import bag_feed, run_pipeline, summarize
-from colorglove_ros.tools import build_database, make_bag
-from colorglove_ros.tools._cli import tool_parser
-from colorglove_ros.tools.demo import DATABASE_CONFIG, pipeline_parameters, prepare_assets
+from colorglove_ros.ros.bags import write_synthetic_bag
+from colorglove_ros.ros.pipeline_run import (
+    bag_feed,
+    pipeline_parameters,
+    prepare_assets,
+    run_pipeline,
+    summarize,
+)
+from colorglove_ros.tools._cli import add_pipeline_arguments, tool_error, tool_parser
 
 __all__ = ['TARGETS', 'ensure_bag', 'main']
 
@@ -33,10 +40,8 @@ def ensure_bag(seed: int, frames: int) -> Path:
     bag = resolve_path('data') / 'bags' / f'benchmark_seed{seed}_{frames}'
     if not (bag / 'metadata.yaml').is_file():
         print(f'[benchmark] writing {bag} ({frames} frames, once)', flush=True)
-        code = make_bag.main(['--seed', str(seed), '--frames', str(frames), '--output', str(bag),
-                              '--split', 'test'])
-        if code != 0:
-            raise RuntimeError('make_bag failed')
+        write_synthetic_bag(bag, (default_camera(),), seed=seed, num_frames=frames,
+                            split='test')
     return bag
 
 
@@ -49,21 +54,20 @@ def check_targets(figures: dict[str, float]) -> list[dict[str, object]]:
 def main(argv: list[str] | None = None) -> int:
     """``colorglove_benchmark [--frames N] [--rate R] [--json PATH]``."""
     parser = tool_parser(__doc__.splitlines()[0])
-    parser.add_argument('--frames', type=int, default=300, help='frames in the bag')
-    parser.add_argument('--seed', type=int, default=2, help='seed of the synthetic bag')
+    add_pipeline_arguments(parser, frames=300, seed=2, sequence='synthetic bag')
     parser.add_argument('--rate', type=float, default=1.0,
                         help='playback speed of the latency pass (1.0 = the 30 Hz camera rate)')
     parser.add_argument('--throughput-rate', type=float, default=2.0,
                         help='playback speed of the throughput pass (2.0 = offered at 60 Hz)')
-    parser.add_argument('--database', type=Path, help='pose database (default: config)')
     parser.add_argument('--overlay', action='store_true',
                         help='ik_node also draws and publishes the overlay image (it then '
                              'receives every camera image); off by default, as in '
                              'config/nodes.yaml')
     args = parser.parse_args(argv)
-    _, default_db, _ = build_database.load_build_config(resolve_path(DATABASE_CONFIG))
-    database = args.database or default_db
-    prepare_assets(database)
+    try:
+        database = prepare_assets(args.database)
+    except ColorGloveError as exc:     # a missing or corrupt config, calibration or database
+        return tool_error('colorglove_benchmark', exc)
     bag = ensure_bag(args.seed, args.frames)
     parameters = pipeline_parameters(database, args.seed, args.frames, 30.0)
     del parameters['camera']

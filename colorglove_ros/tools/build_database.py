@@ -16,7 +16,7 @@ from colorglove_ros.core.lookup.database_build import (
 )
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.paths import share_dir
-from colorglove_ros.tools._cli import tool_parser
+from colorglove_ros.tools._cli import tool_error, tool_parser
 
 __all__ = ['main', 'load_build_config', 'DEFAULT_CONFIG']
 
@@ -55,8 +55,7 @@ def main(argv: list[str] | None = None) -> int:
             enc = retrain_codes(output, config.num_bits, config.num_pairs, config.seed,
                                 config.training_images)
         except DatabaseError as exc:
-            print(f'build_database: {exc}')
-            return 1
+            return tool_error('colorglove_build_database', exc)
         row = {'database': str(output), 'bits': enc.num_bits, 'pairs': config.num_pairs,
                'training_images': config.training_images,
                'seconds': time.perf_counter() - t0}
@@ -70,8 +69,7 @@ def main(argv: list[str] | None = None) -> int:
         t1 = time.perf_counter()
         save_database(db, output)
     except DatabaseError as exc:
-        print(f'build_database: {exc}')
-        return 1
+        return tool_error('colorglove_build_database', exc)
     t2 = time.perf_counter()
     timings = db.meta.get('timings', {})
     rows = [{'entries': len(db), 'configs': db.meta['num_configs'], 'bits': db.num_bits,

@@ -12,46 +12,18 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.report import print_table, write_json
-from colorglove_ros.core.segmentation.color_model import read_calibration_config
-from colorglove_ros.paths import resolve_path
-from colorglove_ros.ros.pipeline_run import run_pipeline, summarize
-from colorglove_ros.tools import build_database, calibrate_colors
-from colorglove_ros.tools._cli import tool_parser
+from colorglove_ros.ros.pipeline_run import (
+    pipeline_parameters,
+    prepare_assets,
+    run_pipeline,
+    summarize,
+)
+from colorglove_ros.tools._cli import add_pipeline_arguments, tool_error, tool_parser
 
-__all__ = ['prepare_assets', 'pipeline_parameters', 'overlay_strip', 'main']
-
-COLOR_CONFIG = 'config/color_calibration.yaml'
-DATABASE_CONFIG = 'config/database.yaml'
-
-
-def prepare_assets(database: Path) -> None:
-    """Make the colour calibration and the pose database if they do not exist yet."""
-    calibration_file = read_calibration_config(COLOR_CONFIG)['calibration_file']
-    if not Path(calibration_file).is_file():
-        print(f'[demo] no colour calibration at {calibration_file}: calibrating from 12 '
-              'rendered training frames (once)', flush=True)
-        if calibrate_colors.main(['--synthetic', '12', '--config', COLOR_CONFIG]) != 0:
-            raise RuntimeError('colour calibration failed')
-    if not (database / 'manifest.json').is_file():
-        print(f'[demo] no pose database at {database}: building it (once; the default '
-              '100,000 entries take several minutes on 2 cores)', flush=True)
-        if build_database.main(['--output', str(database)]) != 0:
-            raise RuntimeError('database build failed')
-
-
-def pipeline_parameters(database: Path, seed: int, frames: int, rate_hz: float,
-                        calibration: str = 'config/calibration.yaml') -> dict[str, dict]:
-    """Node parameters of a run on a synthetic sequence."""
-    return {
-        'camera': {'source': 'synthetic', 'synthetic_seed': seed, 'synthetic_frames': frames,
-                   'synthetic_prerender': True, 'loop': False, 'rate_hz': rate_hz,
-                   'calibration_file': calibration},
-        'segmentation': {'color_calibration_file': COLOR_CONFIG},
-        'lookup': {'database_path': str(database), 'calibration_file': calibration},
-        'ik': {'calibration_file': calibration, 'publish_overlay': True},
-    }
+__all__ = ['overlay_strip', 'main']
 
 
 def overlay_strip(images: list[np.ndarray], columns: int = 4, width: int = 320) -> np.ndarray:
@@ -68,17 +40,16 @@ def overlay_strip(images: list[np.ndarray], columns: int = 4, width: int = 320) 
 def main(argv: list[str] | None = None) -> int:
     """``colorglove_demo [--frames N] [--seed S] [--json PATH]``."""
     parser = tool_parser(__doc__.splitlines()[0])
-    parser.add_argument('--frames', type=int, default=150, help='sequence length (frames)')
-    parser.add_argument('--seed', type=int, default=1, help='seed of the synthetic sequence')
+    add_pipeline_arguments(parser, frames=150, seed=1, sequence='synthetic sequence')
     parser.add_argument('--rate', type=float, default=30.0, help='camera rate, frames/s')
-    parser.add_argument('--database', type=Path, help='pose database (default: config)')
     parser.add_argument('--output', type=Path, default=Path('out/demo'),
                         help='folder for the overlay strip')
     args = parser.parse_args(argv)
-    _, default_db, _ = build_database.load_build_config(resolve_path(DATABASE_CONFIG))
-    database = args.database or default_db
     started = time.perf_counter()
-    prepare_assets(database)
+    try:
+        database = prepare_assets(args.database)
+    except ColorGloveError as exc:     # a missing or corrupt config, calibration or database
+        return tool_error('colorglove_demo', exc)
     print(f'[demo] running camera_node (synthetic seed {args.seed}, {args.frames} frames at '
           f'{args.rate:g} Hz), segmentation_node, lookup_node, ik_node', flush=True)
     run = run_pipeline(pipeline_parameters(database, args.seed, args.frames, args.rate),

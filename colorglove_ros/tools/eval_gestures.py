@@ -25,7 +25,6 @@ Thresholds were tuned on seeds 0-4; the default report seeds 100-109 were not us
 """
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
 
 import numpy as np
@@ -54,15 +53,15 @@ from colorglove_ros.core.hand.poses import (
     full_pose,
     sample_global_rotations,
 )
-from colorglove_ros.core.report import print_table, write_json
-from colorglove_ros.tools._cli import add_scripted_noise_arguments, tool_parser
+from colorglove_ros.core.report import print_table
+from colorglove_ros.tools._cli import ScriptedSettings, run_scripted_evaluation
 
-__all__ = ['GESTURE_EXEMPLARS', 'NEUTRAL_SHAPES', 'pinch_shape', 'gesture_script',
-           'score_events', 'evaluate', 'main']
+__all__ = ['SETTINGS', 'GESTURE_EXEMPLARS', 'NEUTRAL_SHAPES', 'pinch_shape',
+           'gesture_script', 'score_events', 'evaluate', 'main']
 
 TARGET = 0.95
-TUNING_SEEDS = tuple(range(5))
-DEFAULT_SEEDS = tuple(range(100, 110))
+SETTINGS = ScriptedSettings(tuning_seeds=tuple(range(5)), default_seeds=tuple(range(100, 110)),
+                            unit='episodes', default_count=60)
 MATCH_GRACE_S = 0.3
 HOLD_SETTLE_S = 0.2
 VARIATION_DEG = 3.0
@@ -265,18 +264,9 @@ def evaluate(seeds: Sequence[int], episodes: int = 60, noise: TrackingNoise | No
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``colorglove_eval_gestures``."""
-    parser = tool_parser(__doc__, raw_description=True)
-    add_scripted_noise_arguments(parser, default_seeds=list(DEFAULT_SEEDS),
-                                 tuning_seeds=list(TUNING_SEEDS))
-    parser.add_argument('--episodes', type=int, default=60, help='episodes per sequence')
-    args = parser.parse_args(argv)
-    started = time.perf_counter()
-    noise = TrackingNoise(joint_mae_deg=args.noise_mae_deg)
-    result = evaluate(args.seeds, args.episodes, noise)
-    seconds = time.perf_counter() - started
-    print_table(result['rows'], f'Gesture events, seeds {args.seeds[0]}..{args.seeds[-1]} '
-                f'({len(args.seeds)} sequences x {args.episodes} episodes), noise MAE '
-                f'{args.noise_mae_deg} deg (realised {result["joint_mae_deg_realised"]:.2f})')
+    run = run_scripted_evaluation(argv, __doc__, SETTINGS, evaluate)
+    result = run.result
+    print_table(result['rows'], run.title('Gesture events'))
     frames = result['frames']
     print_table([{'held gesture active (settled hold frames)':
                   frames['held_gesture_active_share'],
@@ -289,15 +279,9 @@ def main(argv: list[str] | None = None) -> int:
                target_row('recall >= 95 % (every gesture)', worst_r, TARGET, '>=')]
     print_table(targets, 'Targets (lowest gesture; overall precision '
                 f'{overall["precision"]:.3f}, recall {overall["recall"]:.3f})')
-    print(f'{seconds:.1f} s')
-    if args.json:
-        write_json(args.json, {'settings': {'seeds': args.seeds, 'episodes': args.episodes,
-                                            'noise': vars(noise) if hasattr(noise, '__dict__')
-                                            else str(noise),
-                                            'tuning_seeds': list(TUNING_SEEDS)},
-                               **result, 'targets': targets, 'seconds': seconds})
-    return 0
-
+    noise = run.noise
+    return run.finish(targets, {'noise': vars(noise) if hasattr(noise, '__dict__')
+                                else str(noise)})
 
 if __name__ == '__main__':
     raise SystemExit(main())

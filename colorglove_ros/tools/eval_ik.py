@@ -18,7 +18,6 @@ from typing import Any
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.evaluation.sequences import (
-    LABEL_SOURCES,
     EvaluationError,
     SequenceEvaluator,
     eval_seeds,
@@ -32,7 +31,7 @@ from colorglove_ros.core.pipeline import TemporalPrior
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.tracking.config import TRACKER_MODES, load_covariances, load_ik_config
 from colorglove_ros.paths import share_dir
-from colorglove_ros.tools._cli import add_sequence_arguments, tool_parser
+from colorglove_ros.tools._cli import sequence_tool_parser, tool_error
 
 __all__ = ['main', 'TARGETS', 'REFERENCE_FIGURES', 'evaluate_targets', 'reference_figures',
            'JSON_KEYS', 'PACKAGE_ROOT']
@@ -155,11 +154,7 @@ def _plot(rows: list[dict[str, Any]], path: Path) -> Path:
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point."""
-    parser = tool_parser(__doc__, raw_description=True)
-    add_sequence_arguments(
-        parser, sequences_help='evaluation sequences (seeds O..O+S-1)', labels=LABEL_SOURCES,
-        labels_help="'truth': renderer labels (IK alone); 'segmented': the colour "
-                    'segmentation (core.segmentation) of the rendered images')
+    parser = sequence_tool_parser(__doc__, 'evaluation sequences (seeds O..O+S-1)')
     parser.add_argument('--seed-offset', type=int, default=0, help='first sequence seed O: '
                         '0 for the reported figures, another (e.g. 1000) to tune on')
     parser.add_argument('--covariances', help='learned covariance file overriding the '
@@ -209,8 +204,7 @@ def main(argv: list[str] | None = None) -> int:
             finger_evidence=not args.no_finger_evidence)
         seeds = eval_seeds(args.sequences, args.seed_offset)
     except ColorGloveError as exc:
-        print(f'eval_ik: {exc}')
-        return 1
+        return tool_error('colorglove_eval_ik', exc)
     t0 = time.perf_counter()
     runs: dict[tuple[str, str], list] = {}
     for s in seeds:

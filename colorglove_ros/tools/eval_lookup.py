@@ -34,7 +34,7 @@ from colorglove_ros.core.lookup.database_build import (
 from colorglove_ros.core.lookup.distance import QueryDistance, dequantize_dts
 from colorglove_ros.core.lookup.search import PoseLookup, top_k_with_ties
 from colorglove_ros.core.report import print_table, write_json
-from colorglove_ros.tools._cli import tool_parser
+from colorglove_ros.tools._cli import tool_error, tool_parser
 from colorglove_ros.tools.build_database import DEFAULT_CONFIG, load_build_config
 
 __all__ = ['main']
@@ -281,8 +281,7 @@ def _diagnose(args: argparse.Namespace, db: PoseDatabase, lookup: PoseLookup, pa
                                   'calibration.yaml').cameras[0]
         observer = make_observer(args.labels)
     except ColorGloveError as exc:
-        print(f'eval_lookup: {exc}')
-        return 1
+        return tool_error('colorglove_eval_lookup', exc)
     synth = Synthesizer(cfg.hand_length_m, cfg.glove_seed)
     try:
         t0 = time.perf_counter()
@@ -347,8 +346,7 @@ def main(argv: list[str] | None = None) -> int:
         db = load_database(path)
         load_s = time.perf_counter() - t0
     except DatabaseError as exc:
-        print(f'eval_lookup: {exc}')
-        return 1
+        return tool_error('colorglove_eval_lookup', exc)
     k = int(lookup_cfg.get('num_candidates', 300))
     lookup = PoseLookup(db, num_candidates=k, num_blend=int(lookup_cfg.get('num_blend', 10)))
     if args.diagnose:

@@ -34,7 +34,7 @@ from colorglove_ros.core.segmentation.segmenter import (
     load_segmenter,
 )
 from colorglove_ros.core.synthetic.held_out import held_out_frames
-from colorglove_ros.tools._cli import tool_parser
+from colorglove_ros.tools._cli import tool_error, tool_parser
 
 __all__ = ['frame_metrics', 'evaluate', 'main']
 
@@ -236,14 +236,12 @@ def main(argv: list[str] | None = None) -> int:
         seg = load_segmenter(args.config)
         cal_path = read_calibration_config(args.config)['calibration_file']
     except ColorCalibrationError as exc:
-        print(f'error: {exc}')
-        return 1
+        return tool_error('colorglove_eval_segmentation', exc)
     try:
         frames = held_out_frames(args.source, args.frames, args.seed, args.empty,
                              args.clutter_near_hand)
     except ValueError as exc:
-        print(f'error: {exc}')
-        return 1
+        return tool_error('colorglove_eval_segmentation', exc)
     t0 = time.perf_counter()
     result = evaluate(seg, frames, args.repeats)
     summary = result['summary']

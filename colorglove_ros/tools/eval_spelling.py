@@ -19,7 +19,6 @@ Settings were tuned on seeds 0-4; the default report seeds 100-119 were not used
 """
 from __future__ import annotations
 
-import time
 from collections import Counter
 from collections.abc import Sequence
 
@@ -42,14 +41,15 @@ from colorglove_ros.core.hand.spelling import (
     SpellingConfig,
     letter_rotation,
 )
-from colorglove_ros.core.report import print_table, write_json
-from colorglove_ros.tools._cli import add_scripted_noise_arguments, tool_parser
+from colorglove_ros.core.report import print_table
+from colorglove_ros.tools._cli import ScriptedSettings, run_scripted_evaluation
 
-__all__ = ['WORDS', 'spelling_script', 'score_letters', 'edit_distance', 'evaluate', 'main']
+__all__ = ['SETTINGS', 'WORDS', 'spelling_script', 'score_letters', 'edit_distance', 'evaluate',
+           'main']
 
 TARGET = 0.90
-TUNING_SEEDS = tuple(range(5))
-DEFAULT_SEEDS = tuple(range(100, 120))
+SETTINGS = ScriptedSettings(tuning_seeds=tuple(range(5)), default_seeds=tuple(range(100, 120)),
+                            unit='words', default_count=8)
 WORDS: tuple[str, ...] = (
     'THE', 'QUICK', 'BROWN', 'FOX', 'JUMPS', 'OVER', 'LAZY', 'DOG', 'MENTION', 'SENSE', 'STEM',
     'MEET', 'TEST', 'NEST', 'MUST', 'MEAN', 'TENSE', 'NAMES', 'HELLO', 'ROBOT', 'GLOVE', 'HAND',
@@ -177,18 +177,9 @@ def evaluate(seeds: Sequence[int], words_per_sequence: int = 8,
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``colorglove_eval_spelling``."""
-    parser = tool_parser(__doc__, raw_description=True)
-    add_scripted_noise_arguments(parser, default_seeds=list(DEFAULT_SEEDS),
-                                 tuning_seeds=list(TUNING_SEEDS))
-    parser.add_argument('--words', type=int, default=8, help='words per sequence')
-    args = parser.parse_args(argv)
-    started = time.perf_counter()
-    noise = TrackingNoise(joint_mae_deg=args.noise_mae_deg)
-    result = evaluate(args.seeds, args.words, noise)
-    seconds = time.perf_counter() - started
-    print_table(result['per_letter'], f'Finger-spelling per letter, seeds {args.seeds[0]}..'
-                f'{args.seeds[-1]} ({len(args.seeds)} sequences x {args.words} words), noise '
-                f'MAE {args.noise_mae_deg} deg (realised {result["joint_mae_deg_realised"]:.2f})')
+    run = run_scripted_evaluation(argv, __doc__, SETTINGS, evaluate)
+    result = run.result
+    print_table(result['per_letter'], run.title('Finger-spelling per letter'))
     print_table(result['thumb_confusion'], 'E, M, N, S, T: what was committed (- = nothing)')
     summary = {k: result[k] for k in ('letters', 'letter_accuracy', 'thumb_letter_accuracy',
                                       'other_letter_accuracy', 'insertions', 'text_accuracy')}
@@ -197,14 +188,7 @@ def main(argv: list[str] | None = None) -> int:
                {'target': 'E M N S T (reported separately)',
                 'measured': result['thumb_letter_accuracy'], 'result': '-'}]
     print_table(targets, 'Targets')
-    print(f'{seconds:.1f} s')
-    if args.json:
-        write_json(args.json, {'settings': {'seeds': args.seeds, 'words': args.words,
-                                            'noise_mae_deg': args.noise_mae_deg,
-                                            'tuning_seeds': list(TUNING_SEEDS)},
-                               **result, 'targets': targets, 'seconds': seconds})
-    return 0
-
+    return run.finish(targets, {'noise_mae_deg': run.args.noise_mae_deg})
 
 if __name__ == '__main__':
     raise SystemExit(main())

@@ -20,8 +20,8 @@ import numpy as np
 
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.evaluation.metrics import LOCAL_WINDOW
 from colorglove_ros.core.evaluation.sequences import (
-    LABEL_SOURCES,
     SequenceEvaluator,
     make_observer,
     open_database,
@@ -35,12 +35,9 @@ from colorglove_ros.core.tracking.config import (
     load_ik_config,
     save_covariances,
 )
-from colorglove_ros.core.tracking.covariance_learning import (
-    LOCAL_WINDOW,
-    learn_covariances,
-)
+from colorglove_ros.core.tracking.covariance_learning import learn_covariances
 from colorglove_ros.paths import share_dir
-from colorglove_ros.tools._cli import add_sequence_arguments, tool_parser
+from colorglove_ros.tools._cli import sequence_tool_parser, tool_error
 
 __all__ = ['main', 'covariance_rows', 'PACKAGE_ROOT', 'DEFAULT_OUTPUT']
 
@@ -76,10 +73,7 @@ def covariance_rows(q_var: np.ndarray, p_var: np.ndarray, q_ref: np.ndarray | No
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point."""
-    parser = tool_parser(__doc__, raw_description=True)
-    add_sequence_arguments(
-        parser, sequences_help='training sequences', labels=LABEL_SOURCES,
-        labels_help="'truth': renderer labels; 'segmented': colour segmentation")
+    parser = sequence_tool_parser(__doc__, 'training sequences')
     parser.add_argument('--reference', choices=('local_average', 'truth'),
                         default='local_average',
                         help="reference pose of the covariances: 'local_average' of the "
@@ -112,8 +106,7 @@ def main(argv: list[str] | None = None) -> int:
         evaluator.close()
         cov, stats = learn_covariances(sequences, evaluator.model, cal.cameras, LOCAL_WINDOW)
     except ColorGloveError as exc:
-        print(f'learn_ik_covariances: {exc}')
-        return 1
+        return tool_error('colorglove_learn_ik_covariances', exc)
     provenance = {'tool': 'colorglove_ros.tools.learn_ik_covariances',
                   'database': _rel(db_path), 'entries': len(db),
                   'train_seeds': f'{seeds[0]}..{seeds[-1]}', 'frames_per_sequence': args.frames,

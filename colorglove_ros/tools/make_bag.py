@@ -12,8 +12,7 @@ from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.synthetic.conditions import SPLITS, SynthError
 from colorglove_ros.core.synthetic.frames import default_camera
-from colorglove_ros.core.synthetic.sequences import SyntheticSequenceRenderer
-from colorglove_ros.ros.bags import SequenceBagWriter, bag_size_bytes
+from colorglove_ros.ros.bags import bag_size_bytes, write_synthetic_bag
 from colorglove_ros.tools._cli import tool_parser
 
 
@@ -50,24 +49,14 @@ def main(argv: list[str] | None = None) -> int:
         parser.error('--frames must be >= 1')
     t0 = time.perf_counter()
     try:
-        seq = SyntheticSequenceRenderer(cameras[0], seed=args.seed, num_frames=args.frames,
-                                        fps=args.fps, hand_length_m=hand_length,
-                                        split=args.split)
+        bag = write_synthetic_bag(output, cameras, seed=args.seed, num_frames=args.frames,
+                                  fps=args.fps, hand_length_m=hand_length, split=args.split,
+                                  progress=lambda it: tqdm(it, desc='frames', unit='frame'))
     except SynthError as exc:
         parser.error(str(exc))
-    try:
-        with SequenceBagWriter(output, cameras[0], fps=args.fps,
-                               extra_cameras=cameras[1:]) as writer:
-            for i in tqdm(range(args.frames), desc='frames', unit='frame'):
-                # one instant seen by every camera, primary first
-                views = seq.render_views(i, cameras)
-                writer.write(views[0], extra_images=[v.image_rgb for v in views[1:]])
-        written = writer.count
-    finally:
-        seq.close()
     elapsed = time.perf_counter() - t0
     size = bag_size_bytes(output)
-    c = seq.conditions
+    written, c = bag.frames, bag.conditions
     row = {'bag': str(output), 'frames': written, 'cameras': len(cameras),
            'size_MB': size / 1e6, 'seconds': elapsed,
            'frames_per_s': written / elapsed, 'split': args.split,

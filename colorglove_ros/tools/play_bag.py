@@ -9,7 +9,6 @@ recorded stamp get the same new stamp), so arrival minus header stamp downstream
 of the replayed frame, as with a live camera."""
 from __future__ import annotations
 
-import argparse
 import struct
 import sys
 import threading
@@ -24,8 +23,29 @@ from rosgraph_msgs.msg import Clock
 
 from colorglove_ros.ros.bag_qos import publisher_qos_for_recorded
 from colorglove_ros.ros.typestore import colorglove_typestore, message_class
+from colorglove_ros.tools._cli import tool_parser
 
-__all__ = ['BagPlayer', 'main']
+__all__ = ['BagPlayer', 'PLAYBACK_OPTIONS', 'main']
+
+# The player's options: --NAME -> (type, default, help); bool options are flags.
+PLAYBACK_OPTIONS: dict[str, tuple[type, object, str]] = {
+    'rate': (float, 1.0, 'playback speed factor of the original timing (0 = no delays)'),
+    'paced': (bool, False, 'publish each frame after the previous one produced --pace-topic'),
+    'pace-on': (str, '/camera/image_raw',
+                'the input topic that waits for the output when --paced'),
+    'pace-topic': (str, '/hand/tracking_status',
+                   'the output topic (std_msgs/String, one per processed frame, hand or no '
+                   'hand) whose messages release the next frame'),
+    'pace-timeout': (float, 1.0, 'longest wait for an output before going on, seconds'),
+    'wait-subscribers': (float, 10.0,
+                         'wait this long for a subscriber on --pace-on before starting'),
+    'min-subscribers': (int, 1, 'subscribers on --pace-on to wait for before starting'),
+    'loop': (bool, False, 'play again from the start until Ctrl-C'),
+    'clock': (bool, False, "publish the bag's time on /clock (rosgraph_msgs/Clock)"),
+    'restamp': (bool, False, 'stamp each message with its publish time (wall clock) instead of '
+                'its recorded header stamp (for latency measurements)'),
+    'linger': (float, 1.0, 'seconds to stay up after the last message, for late deliveries'),
+}
 
 
 class BagPlayer(Node):
@@ -117,33 +137,14 @@ class BagPlayer(Node):
 
 def main(argv: list[str] | None = None) -> int:
     """``colorglove_play_bag BAG [--rate R | --paced]``."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = tool_parser(__doc__.splitlines()[0], json_help=None)
     parser.add_argument('bag', type=Path, help='rosbag2 folder (sqlite3 or MCAP)')
     parser.add_argument('--topics', nargs='*', help='only these topics (default: all)')
-    parser.add_argument('--rate', type=float, default=1.0,
-                        help='playback speed factor of the original timing (0 = no delays)')
-    parser.add_argument('--paced', action='store_true',
-                        help='publish each frame after the previous one produced --pace-topic')
-    parser.add_argument('--pace-on', default='/camera/image_raw',
-                        help='the input topic that waits for the output when --paced')
-    parser.add_argument('--pace-topic', default='/hand/tracking_status',
-                        help='the output topic (std_msgs/String, one per processed frame, '
-                             'hand or no hand) whose messages release the next frame')
-    parser.add_argument('--pace-timeout', type=float, default=1.0,
-                        help='longest wait for an output before going on, seconds')
-    parser.add_argument('--wait-subscribers', type=float, default=10.0,
-                        help='wait this long for a subscriber on --pace-on before starting')
-    parser.add_argument('--min-subscribers', type=int, default=1,
-                        help='subscribers on --pace-on to wait for before starting')
-    parser.add_argument('--loop', action='store_true', help='play again from the start until '
-                        'Ctrl-C')
-    parser.add_argument('--clock', action='store_true',
-                        help="publish the bag's time on /clock (rosgraph_msgs/Clock)")
-    parser.add_argument('--restamp', action='store_true',
-                        help='stamp each message with its publish time (wall clock) instead '
-                             'of its recorded header stamp (for latency measurements)')
-    parser.add_argument('--linger', type=float, default=1.0,
-                        help='seconds to stay up after the last message, for late deliveries')
+    for name, (kind, default, text) in PLAYBACK_OPTIONS.items():
+        if kind is bool:
+            parser.add_argument(f'--{name}', action='store_true', help=text)
+        else:
+            parser.add_argument(f'--{name}', type=kind, default=default, help=text)
     args, ros_args = parser.parse_known_args(argv)
     if not args.bag.exists():
         print(f'colorglove_play_bag: no bag at {args.bag}', file=sys.stderr)

@@ -2,7 +2,6 @@
 playable by ``ros2 bag play`` on a native install."""
 from __future__ import annotations
 
-import argparse
 import signal
 import sys
 import threading
@@ -25,6 +24,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 
 from colorglove_ros.ros.bag_qos import subscription_qos_for_offers
 from colorglove_ros.ros.typestore import colorglove_typestore, message_class
+from colorglove_ros.tools._cli import tool_parser
 
 __all__ = ['DEFAULT_TOPICS', 'BagRecorder', 'main', 'offered_qos']
 
@@ -95,7 +95,7 @@ class BagRecorder(Node):
 
 def main(argv: list[str] | None = None) -> int:
     """``colorglove_record_bag OUTPUT [--topics ...] [--duration S]``."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = tool_parser(__doc__.splitlines()[0], json_help=None)
     parser.add_argument('output', type=Path, help='bag folder to create (must not exist)')
     parser.add_argument('--topics', nargs='*', default=list(DEFAULT_TOPICS))
     parser.add_argument('--duration', type=float, default=0.0, help='seconds (0 = until Ctrl-C)')

@@ -16,8 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from colorglove_ros.core.report import print_table, write_json
-from colorglove_ros.paths import resolve_path
-from colorglove_ros.tools._cli import run_tool, tool_parser
+from colorglove_ros.tools._cli import add_pipeline_arguments, run_tool, tool_parser
 
 __all__ = ['rss_anon_mb', 'main']
 
@@ -88,13 +87,14 @@ class _StageTimes:
 def _soak(args) -> int:
     from colorglove_ros.ros.latency_probe import LatencyProbe, ProbeRecord, window_summaries
     from colorglove_ros.ros.launcher import Launcher, use_fastdds_profile
-    from colorglove_ros.ros.pipeline_run import node_specs, write_params
-    from colorglove_ros.tools import build_database
-    from colorglove_ros.tools.demo import DATABASE_CONFIG, pipeline_parameters, prepare_assets
+    from colorglove_ros.ros.pipeline_run import (
+        node_specs,
+        pipeline_parameters,
+        prepare_assets,
+        write_params,
+    )
 
-    _, default_db, _ = build_database.load_build_config(resolve_path(DATABASE_CONFIG))
-    database = args.database or default_db
-    prepare_assets(database)
+    database = prepare_assets(args.database)
     parameters = pipeline_parameters(database, args.seed, args.frames, args.rate)
     parameters['camera']['loop'] = True
     parameters['ik']['publish_overlay'] = False
@@ -183,10 +183,7 @@ def main(argv: list[str] | None = None) -> int:
                         help='seconds after the first JointState before measuring')
     parser.add_argument('--startup-timeout', type=float, default=180.0,
                         help='longest wait for the first JointState, seconds')
-    parser.add_argument('--seed', type=int, default=1, help='synthetic sequence seed')
-    parser.add_argument('--frames', type=int, default=300,
-                        help='frames of the looping synthetic sequence')
-    parser.add_argument('--database', type=Path, help='pose database (default: config)')
+    add_pipeline_arguments(parser, frames=300, seed=1, sequence='looping synthetic sequence')
     args = parser.parse_args(argv)
     if args.minutes <= 0 or args.rate <= 0 or args.window <= 0:
         parser.error('--minutes, --rate and --window must be > 0')

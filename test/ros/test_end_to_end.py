@@ -16,14 +16,14 @@ import os
 from pathlib import Path
 
 import pytest
-from repo_paths import CONFIG_DIR
+from node_fixtures import synthetic_color_config
 
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.lookup.database import save_database
 from colorglove_ros.core.lookup.database_build import build_database
 from colorglove_ros.ros.pipeline_run import bag_feed, run_pipeline, summarize
 from colorglove_ros.tools import build_database as build_database_tool
-from colorglove_ros.tools import calibrate_colors, make_bag
+from colorglove_ros.tools import make_bag
 
 pytestmark = pytest.mark.dds
 
@@ -38,14 +38,7 @@ DEPTH_TARGET_MM = 25.0                 # the IK target; measured 17.1 mm
 @pytest.fixture(scope='module')
 def assets(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     folder = tmp_path_factory.mktemp('e2e')
-    calibration = folder / 'color_calibration.npz'
-    assert calibrate_colors.main(['--synthetic', '12', '--output', str(calibration),
-                                  '--frames-out', str(folder / 'frames')]) == 0
-    lines = (CONFIG_DIR / 'color_calibration.yaml').read_text().splitlines()
-    color_config = folder / 'color_calibration.yaml'
-    color_config.write_text('\n'.join(
-        f'calibration_file: {calibration}' if line.startswith('calibration_file:') else line
-        for line in lines) + '\n')
+    _, color_config = synthetic_color_config(folder, 12)
     config, _, _ = build_database_tool.load_build_config()
     config = dataclasses.replace(config, entries=DATABASE_ENTRIES,
                                  orientations_per_config=min(config.orientations_per_config,

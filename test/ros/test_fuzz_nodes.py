@@ -10,25 +10,11 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates, PatchBlob
-from node_fixtures import NodeAssets, glove_frame, header, node_assets, params, running
+from node_fixtures import NodeAssets, header, ik_node, lookup_node, running, segmentation_node
 from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import String
 
-from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.lookup.database import load_database
-from colorglove_ros.core.lookup.search import PoseLookup
-from colorglove_ros.core.segmentation.segmenter import load_segmenter
-from colorglove_ros.paths import resolve_path
-from colorglove_ros.ros.conversions import (
-    candidates_to_msg,
-    crop_from_observation_msg,
-    observation_to_msg,
-    tiny_labels_from_observation_msg,
-)
 from colorglove_ros.ros.image import array_to_image
-from colorglove_ros.ros.nodes.ik_node import IKNode
-from colorglove_ros.ros.nodes.lookup_node import LookupNode
-from colorglove_ros.ros.nodes.segmentation_node import SegmentationNode
 
 pytestmark = [pytest.mark.dds, pytest.mark.usefixtures('isolated_ros_domain')]
 
@@ -37,30 +23,8 @@ VALID_EVERY = 25            # after this many bad messages, two valid frames mus
 SEED = 16
 
 
-@pytest.fixture(scope='module')
-def assets(tmp_path_factory: pytest.TempPathFactory) -> NodeAssets:
-    return node_assets(tmp_path_factory)
-
-
-@pytest.fixture(scope='module')
-def good_rgb() -> np.ndarray:
-    return glove_frame(1).image_rgb
-
-
-@pytest.fixture(scope='module')
-def good_observation(assets: NodeAssets, good_rgb: np.ndarray) -> HandObservation:
-    observation = load_segmenter(str(assets.color_config)).process(good_rgb)
-    assert observation.hand_found, observation.status
-    return observation_to_msg(observation, header(1, 0))
-
-
-@pytest.fixture(scope='module')
-def good_candidates(assets: NodeAssets, good_observation: HandObservation) -> HandPoseCandidates:
-    lookup = PoseLookup(load_database(assets.database), 40, 10)
-    camera = load_calibration(resolve_path('config/calibration.yaml')).primary
-    result = lookup.lookup(tiny_labels_from_observation_msg(good_observation),
-                           crop_from_observation_msg(good_observation), camera)
-    return candidates_to_msg(good_observation, result, lookup_time_ms=1.0)
+# good_rgb, good_observation and good_candidates: session fixtures of test/ros/conftest.py
+# (every message is copied and stamped anew before it is sent)
 
 
 # ------------------------------------------------------------------------ bad inputs
@@ -260,17 +224,12 @@ def _fuzz(h, topic: str, msg_type, bad: list, good_factory: Callable[[], object]
 
 
 @pytest.mark.slow
-def test_fuzz_node_boundaries(assets: NodeAssets, good_rgb: np.ndarray,
+def test_fuzz_node_boundaries(node_assets: NodeAssets, good_rgb: np.ndarray,
                               good_observation: HandObservation,
                               good_candidates: HandPoseCandidates) -> None:
     rng = np.random.default_rng(SEED)
-    factories = [
-        lambda ctx: SegmentationNode(context=ctx, parameter_overrides=params(
-            color_calibration_file=str(assets.color_config))),
-        lambda ctx: LookupNode(context=ctx, parameter_overrides=params(
-            database_path=str(assets.database), num_candidates=40, num_neighbors=10)),
-        lambda ctx: IKNode(context=ctx, parameter_overrides=params(publish_overlay=False)),
-    ]
+    factories = [segmentation_node(node_assets), lookup_node(node_assets),
+                 ik_node(publish_overlay=False)]
     runs = {}
     with running(*factories) as h:    # an exception in any callback fails the test here
         status = h.collect(String, 'hand/tracking_status')

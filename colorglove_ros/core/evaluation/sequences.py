@@ -14,31 +14,35 @@ import numpy as np
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.evaluation.metrics import (
+    LOCAL_WINDOW,
     contiguous_runs,
     jitter_runs_mm,
     latency_summary_ms,
     pose_accuracy,
 )
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
-from colorglove_ros.core.lookup.temporal_prior import reweight_by_previous
+from colorglove_ros.core.pipeline import (
+    UNGATED,
+    FramePipeline,
+    Observer,
+    StageLimits,
+    TemporalPrior,
+    Tracked,
+    image_observer,
+)
 from colorglove_ros.core.segmentation.blobs import extract_blobs
 from colorglove_ros.core.segmentation.crop import TinyCrop, crop_to_tiny
 from colorglove_ros.core.tracking.config import TRACKER_MODES, IKConfig
-from colorglove_ros.core.tracking.covariance_learning import (
-    LOCAL_WINDOW,
-    TrainingFrame,
-    training_frame,
-)
+from colorglove_ros.core.tracking.covariance_learning import TrainingFrame, training_frame
 from colorglove_ros.core.tracking.tracker import HandTracker, IKResult
-from colorglove_ros.core.tracking.types import Blobs, CameraObservation
+from colorglove_ros.core.tracking.types import CameraObservation
 
 __all__ = [
     'LABEL_SOURCES', 'EVAL_SEED_BASE', 'TRAIN_SEED_BASE', 'SEED_SPAN', 'EvaluationError',
-    'eval_seeds', 'train_seeds', 'Observer', 'observe_camera', 'truth_observer',
-    'segmenter_observer', 'make_observer', 'FramePrior', 'LookupStage', 'TrackedSequence',
+    'eval_seeds', 'train_seeds', 'observe_camera', 'truth_observer',
+    'segmenter_observer', 'make_observer', 'TrackedSequence',
     'SequenceEvaluator', 'same_camera', 'jitter_runs_mm', 'contiguous_runs', 'summarize',
-    'training_sequences', 'find_database', 'open_database', 'TemporalPrior',
-    'EvaluationSequence',
+    'training_sequences', 'find_database', 'open_database', 'EvaluationSequence',
 ]
 
 LABEL_SOURCES = ('truth', 'segmented')
@@ -105,12 +109,6 @@ class EvaluationSequence:
 
 
 # ---------------------------------------------------------------------------- observations
-Observer = Callable[[Any, bool], tuple[CameraObservation, TinyCrop | None]]
-"""Maps (``core.synthetic.frames.SyntheticFrame``, is-primary-camera) to the camera's
-observation for the tracker and, for the primary camera, the tiny crop the lookup runs on (None =
-no hand)."""
-
-
 def observe_camera(labels: np.ndarray, primary: bool, min_blob_pixels: int = 4
                    ) -> tuple[CameraObservation, TinyCrop | None]:
     """A camera's observation from its label image: blobs, and for the primary camera the
@@ -132,18 +130,8 @@ def truth_observer(min_blob_pixels: int = 4) -> Observer:
 
 def segmenter_observer(segmenter: Any) -> Observer:
     """Observations from the colour segmentation of the rendered RGB image
-    (``core.segmentation.segmenter.GloveSegmenter.process``: filter, classify, crop, blobs)."""
-    def observe(frame: Any, primary: bool) -> tuple[CameraObservation, TinyCrop | None]:
-        obs = segmenter.process(frame.image_rgb)
-        blobs = Blobs.empty()
-        if obs.blobs:
-            blobs = Blobs(np.array([b.color_label for b in obs.blobs]),
-                          np.array([[b.centroid_x, b.centroid_y] for b in obs.blobs]),
-                          np.array([b.pixel_count for b in obs.blobs], float))
-        found = bool(obs.hand_found) and len(blobs) > 0
-        tiny = TinyCrop(obs.tiny_labels, obs.crop) if found and primary else None
-        return CameraObservation(found, blobs, obs.crop), tiny
-    return observe
+    (``core.pipeline.observe_image``: ``GloveSegmenter.process`` and its checks)."""
+    return image_observer(segmenter, lambda frame: frame.image_rgb)
 
 
 def make_observer(labels: str, color_config: str | Path | None = None,
@@ -161,48 +149,6 @@ def make_observer(labels: str, color_config: str | Path | None = None,
             share_dir() / 'config' / 'color_calibration.yaml')
         return segmenter_observer(load_segmenter(str(path)))
     raise EvaluationError(f'unknown label source {labels!r}, expected one of {LABEL_SOURCES}')
-
-
-# ---------------------------------------------------------------------------- one frame
-@dataclass(frozen=True)
-class FramePrior:
-    """The lookup outcome of one primary-camera label image."""
-
-    result: Any            # core.lookup.types.LookupResult, or None when no hand / no glove pixels
-    tiny: TinyCrop | None
-    time_ms: float
-    error: str = ''
-
-
-class LookupStage:
-    """Crop + database lookup on the primary camera's labels."""
-
-    def __init__(self, lookup: Any, camera: PinholeCamera) -> None:
-        self.lookup = lookup
-        self.camera = camera
-
-    def __call__(self, tiny: TinyCrop | None, blobs: Any = None) -> FramePrior:
-        """Look up a tiny crop (None = no hand); with the same image's ``blobs`` the
-        fingers are blended per finger (``PoseLookup.lookup``)."""
-        if tiny is None:
-            return FramePrior(None, None, 0.0, 'no crop')
-        from colorglove_ros.core.lookup.search import SearchError
-
-        t0 = time.perf_counter()
-        try:
-            res = self.lookup.lookup(tiny.labels, tiny.transform, self.camera, blobs)
-        except SearchError as exc:
-            return FramePrior(None, tiny, 1e3 * (time.perf_counter() - t0), str(exc))
-        return FramePrior(res, tiny, 1e3 * (time.perf_counter() - t0))
-
-
-@dataclass(frozen=True)
-class TemporalPrior:
-    """Settings of the temporal reweighting of the lookup's neighbours
-    (``core.lookup.temporal_prior.reweight_by_previous``) by each tracker's previous output."""
-
-    tau_rad: float
-    rotation_weight: float = 1.0
 
 
 @dataclass
@@ -233,19 +179,22 @@ def same_camera(a: PinholeCamera, b: PinholeCamera) -> bool:
 
 
 class SequenceEvaluator:
-    """Renders seeded synthetic sequences once with every camera of the largest rig, runs
-    the labels -> crop -> lookup stage once per frame on the primary camera, and feeds one
-    :class:`HandTracker` per (rig, mode), optionally with the lookup's neighbours reweighted
-    by that tracker's previous output (``temporal``). With ``finger_evidence`` (default) the
-    lookup also gets the primary camera's blobs and blends each finger by its own patch
-    evidence (``core.lookup.finger_evidence``). Every rig must be a prefix of the largest one
-    (same primary camera), so all rows of a table see identical frames and lookups."""
+    """Renders seeded synthetic sequences once with every camera of the largest rig and runs
+    the per-frame recipe (``core.pipeline.FramePipeline``): the observations, the lookup once
+    per frame on the primary camera, and one :class:`HandTracker` per (rig, mode), optionally
+    with the lookup's neighbours reweighted by that tracker's previous output (``temporal``).
+    With ``finger_evidence`` (default) the lookup also gets the primary camera's blobs and
+    blends each finger by its own patch evidence (``core.lookup.finger_evidence``). ``limits``
+    are the pipeline's gates (default ``UNGATED``: every output of the tracker counts). Every
+    rig must be a prefix of the largest one (same primary camera), so all rows of a table see
+    identical frames and lookups."""
 
     def __init__(self, lookup: Any, rigs: Mapping[str, Sequence[PinholeCamera]],
                  modes: Sequence[str] = TRACKER_MODES, ik_config: IKConfig | None = None,
                  observer: Observer | None = None, synthesizer: Any = None,
                  fps: float = 30.0, keep_results: bool = False,
-                 temporal: TemporalPrior | None = None, finger_evidence: bool = True) -> None:
+                 temporal: TemporalPrior | None = None, finger_evidence: bool = True,
+                 limits: StageLimits = UNGATED) -> None:
         from colorglove_ros.core.synthetic.frames import Synthesizer
 
         if not rigs:
@@ -262,17 +211,16 @@ class SequenceEvaluator:
                                       '(the lookup runs once on a shared primary camera)')
         self.modes = tuple(modes)
         self.config = ik_config or IKConfig()
-        self.observer = observer or truth_observer(self.config.min_blob_pixels)
         self.synth = synthesizer or Synthesizer()
         self.fps = float(fps)
         self.keep_results = keep_results
-        self.temporal = temporal
-        self.finger_evidence = bool(finger_evidence)
-        if temporal is not None and self.finger_evidence:
+        if temporal is not None and finger_evidence:
             # reweight_by_previous re-blends every DOF with one weight per neighbour
             raise EvaluationError('temporal reweighting re-blends the fingers with one weight '
                                   'per neighbour: use it without the per-finger blend')
-        self.stage = LookupStage(lookup, self.cameras[0])
+        self.pipeline = FramePipeline(observer or truth_observer(self.config.min_blob_pixels),
+                                      lookup, self.cameras[0], limits=limits,
+                                      finger_evidence=finger_evidence, temporal=temporal)
         self.trackers = {(r, m): HandTracker(self.synth.model, self.synth.mesh, cams,
                                              self.config.with_mode(m), glove=self.synth.glove)
                          for r, cams in self.rigs.items() for m in self.modes}
@@ -302,28 +250,19 @@ class SequenceEvaluator:
         for tr in self.trackers.values():
             tr.reset()
         for i in range(n):
-            frames = sequence.render(i, self.cameras)
-            obs, tiny = [], None
-            for k, fr in enumerate(frames):
-                o, t = self.observer(fr, k == 0)
-                obs.append(o)
-                tiny = t if k == 0 else tiny
-            prior = self.stage(tiny if obs[0].hand_found else None,
-                               obs[0].blobs if self.finger_evidence else None)
-            for (rig, mode), tracker in self.trackers.items():
+            seen = self.pipeline.observe(sequence.render(i, self.cameras))
+            found = self.pipeline.look_up(seen)
+            for key, tracker in self.trackers.items():
                 c0 = time.thread_time()
-                lookup = prior.result
-                if self.temporal is not None and lookup is not None:
-                    lookup = reweight_by_previous(lookup, tracker.previous_pose,
-                                                  self.temporal.tau_rad,
-                                                  self.temporal.rotation_weight)
-                res = tracker.update(lookup, obs[:len(self.rigs[rig])], i / self.fps)
+                outcome = self.pipeline.track(tracker, found, seen, i / self.fps)
                 cpu_ms = 1e3 * (time.thread_time() - c0)
-                ts = out[(rig, mode)]
-                ts.lookup_ms[i] = prior.time_ms
+                ts = out[key]
+                ts.lookup_ms[i] = found.time_ms
+                tracked = isinstance(outcome, Tracked)
+                res = outcome.result if tracked else outcome.partial
                 if self.keep_results:
                     ts.results.append(res)
-                if res.found and res.q is not None:
+                if tracked:
                     ts.found[i] = True
                     ts.q_est[i] = res.q
                     ts.reprojection_px[i] = res.reprojection_error_px

@@ -1,15 +1,20 @@
 """Fit the glove colour model from labelled frames: sample each class's pixels, re-light them
 (light level, black-body light colour, white-balance error, noise), fit one Gaussian mixture
-per class and compile the lookup table."""
+per class and compile the lookup table; read and write labelled frames (PNG pairs), render
+synthetic training frames, and fit and save a calibration file from either."""
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 
 from colorglove_ros.core.colorimetry import linear_to_srgb, srgb_to_linear
+from colorglove_ros.core.conventions import NUM_COLORS
 from colorglove_ros.core.segmentation.color_model import (
     FEATURE_KINDS,
     ColorCalibration,
@@ -17,10 +22,21 @@ from colorglove_ros.core.segmentation.color_model import (
     GaussianMixtureParams,
     compile_lut,
     rgb_features,
+    save_calibration,
 )
 from colorglove_ros.core.segmentation.light import planckian_illuminants
 
-__all__ = ['RESIDUAL_TEMPERATURES_K', 'fit_color_calibration']
+__all__ = ['RESIDUAL_TEMPERATURES_K', 'DEFAULT_LUT_BITS', 'DEFAULT_MAX_PIXELS_PER_CLASS',
+           'MIN_FRAMES', 'MASK_SUFFIX', 'SYNTHETIC_FRAMES_DIR', 'fit_color_calibration',
+           'read_labelled_frames', 'write_labelled_frames', 'render_training_frames',
+           'CalibrationFit', 'calibrate_frames', 'calibrate_synthetic']
+
+DEFAULT_LUT_BITS = 6                  # lookup table bits per RGB channel
+DEFAULT_MAX_PIXELS_PER_CLASS = 5000   # training pixels sampled per class
+MIN_FRAMES = 8                        # labelled frames a fit needs at least
+MASK_SUFFIX = '_mask'                 # NAME.png (RGB image) + NAME_mask.png (labels)
+# where rendered training frames are written by default (relative to the working folder)
+SYNTHETIC_FRAMES_DIR = Path('data/color_calibration_frames')
 
 
 def _sample_pixels(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_colors: int,
@@ -82,18 +98,20 @@ def _augment(pix: np.ndarray, rng: np.random.Generator, light: tuple[float, floa
     return np.clip(np.round(srgb), 0, 255).astype(np.uint8)
 
 
-def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_colors: int = 10,
+def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]],
+                          num_colors: int = NUM_COLORS,
                           components: int = 3, background_components: int = 12,
                           feature_kind: str = 'chroma', intensity_weight: float = 0.1,
-                          bits: int = 6, background_prior: float = 0.5,
-                          reject_quantile: float = 1e-4, max_per_class: int = 5000,
+                          bits: int = DEFAULT_LUT_BITS, background_prior: float = 0.5,
+                          reject_quantile: float = 1e-4,
+                          max_per_class: int = DEFAULT_MAX_PIXELS_PER_CLASS,
                           erode: int = 1, glove_covariance_floor: float = 1.0,
                           augment_copies: int = 2, augment_light: tuple[float, float] = (0.4, 1.8),
                           augment_white_balance: float = 0.15,
                           augment_temperatures_k: tuple[float, float] | None = (
                               RESIDUAL_TEMPERATURES_K),
                           augment_noise: float = 3.0,
-                          seed: int = 0, min_frames: int = 8,
+                          seed: int = 0, min_frames: int = MIN_FRAMES,
                           metadata: Mapping[str, Any] | None = None) -> ColorCalibration:
     """Fit one Gaussian mixture per glove colour and one for the background, build the LUT.
 
@@ -161,3 +179,93 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_c
                            reference_linear_rgb=reference, metadata=meta)
     cal.lut = compile_lut(cal)
     return cal
+
+
+# ---------------------------------------------------------------------------- labelled frames
+def read_labelled_frames(folder: str | Path) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Read every ``NAME.png`` + ``NAME_mask.png`` pair in a folder (sorted by name): the RGB
+    camera image and its single-channel 8-bit labels (0 background, 1..10 glove colour)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ColorCalibrationError(f'frame folder not found: {folder}')
+    frames = []
+    for mask_path in sorted(folder.glob(f'*{MASK_SUFFIX}.png')):
+        image_path = mask_path.with_name(mask_path.name[:-len(MASK_SUFFIX) - 4] + '.png')
+        if not image_path.is_file():
+            raise ColorCalibrationError(f'{mask_path} has no image {image_path.name}')
+        bgr = cv2.imread(str(image_path), cv2.IMREAD_COLOR)
+        mask = cv2.imread(str(mask_path), cv2.IMREAD_UNCHANGED)
+        if bgr is None or mask is None:
+            raise ColorCalibrationError(f'cannot read {image_path} or {mask_path}')
+        if mask.ndim != 2 or mask.dtype != np.uint8:
+            raise ColorCalibrationError(f'{mask_path} must be a single-channel 8-bit PNG')
+        frames.append((np.ascontiguousarray(bgr[..., ::-1]), mask))
+    return frames
+
+
+def write_labelled_frames(folder: str | Path,
+                          frames: Sequence[tuple[np.ndarray, np.ndarray]]) -> list[Path]:
+    """Write (image RGB, labels) pairs as ``frame_NNNN.png`` + ``frame_NNNN_mask.png``."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i, (rgb, mask) in enumerate(frames):
+        p = folder / f'frame_{i:04d}.png'
+        cv2.imwrite(str(p), np.ascontiguousarray(rgb[..., ::-1]))
+        cv2.imwrite(str(folder / f'frame_{i:04d}{MASK_SUFFIX}.png'), mask.astype(np.uint8))
+        paths.append(p)
+    return paths
+
+
+def render_training_frames(count: int, seed: int, split: str = 'train'
+                           ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Render ``count`` synthetic (image, labels) frames, hand fully in view
+    (``core.synthetic.frames``) under ``split`` imaging conditions."""
+    from colorglove_ros.core.synthetic import frames as synth
+    from colorglove_ros.core.synthetic.conditions import sample_conditions
+
+    rng = np.random.default_rng(seed)
+    camera = synth.default_camera()
+    frames = []
+    for _ in range(count):
+        q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
+        frame = synth.render_frame(q, camera, rng, sample_conditions(rng, split))
+        frames.append((frame.image_rgb, frame.labels))
+    return frames
+
+
+# ---------------------------------------------------------------------------- calibration file
+@dataclass(frozen=True)
+class CalibrationFit:
+    """A calibration fitted and saved: the model, the file, the frames it was fitted on and
+    the fit time (seconds, LUT included)."""
+
+    calibration: ColorCalibration
+    output: Path
+    frames: list[tuple[np.ndarray, np.ndarray]]
+    fit_s: float
+
+
+def calibrate_frames(frames: Sequence[tuple[np.ndarray, np.ndarray]], output: str | Path,
+                     source: str, *, seed: int = 0, **options: Any) -> CalibrationFit:
+    """Fit the colour calibration on labelled ``frames`` (:func:`fit_color_calibration` with
+    ``options``; ``source`` is recorded in its metadata) and save it at ``output``."""
+    started = time.perf_counter()
+    calibration = fit_color_calibration(frames, seed=seed, metadata={'source': source},
+                                        **options)
+    fit_s = time.perf_counter() - started
+    return CalibrationFit(calibration, save_calibration(calibration, output), list(frames),
+                          fit_s)
+
+
+def calibrate_synthetic(count: int, output: str | Path, frames_out: str | Path, *,
+                        seed: int = 0, **options: Any) -> CalibrationFit:
+    """Render ``count`` synthetic 'train' frames (:func:`render_training_frames`), write them
+    to ``frames_out`` as labelled pairs, and fit and save the calibration at ``output``
+    (:func:`calibrate_frames`)."""
+    if count < 1:
+        raise ColorCalibrationError(f'need at least one synthetic frame, got {count}')
+    frames = render_training_frames(count, seed)
+    write_labelled_frames(frames_out, frames)
+    return calibrate_frames(frames, output, f'synthetic train frames, seed {seed} ({frames_out})',
+                            seed=seed, **options)

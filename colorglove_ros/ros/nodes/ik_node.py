@@ -8,28 +8,22 @@ import traceback
 from collections import deque
 from dataclasses import replace
 
-import numpy as np
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
-from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from sensor_msgs.msg import Image, JointState
-from std_msgs.msg import String
-from visualization_msgs.msg import MarkerArray
+from sensor_msgs.msg import Image
 
 from colorglove_ros.core.camera import CalibrationError, load_calibration
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.hand.overlay import draw_skeleton
+from colorglove_ros.core.pipeline import NoHand, Tracked, bad_prior, track
 from colorglove_ros.core.tracking.config import load_ik_config
 from colorglove_ros.core.tracking.tracker import HandTracker
 from colorglove_ros.core.tracking.types import CameraObservation, IKError
-from colorglove_ros.core.validation import InvalidInputError, validate_hand_depth
+from colorglove_ros.core.validation import InvalidInputError
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
     camera_observation_from_msg,
     pose_prior_from_candidates_msg,
-    pose_to_joint_state_msg,
-    pose_to_wrist_pose_msg,
-    skeleton_to_markers_msg,
     stamp_to_seconds,
     wrist_pose_to_tf_msg,
 )
@@ -39,8 +33,10 @@ from colorglove_ros.ros.nodes.common import (
     LATEST_IMAGE,
     LATEST_ONLY,
     StartupError,
+    TrackerOutputs,
     declare,
     run_node,
+    split_topics,
 )
 
 STAMP_MATCH_TOLERANCE_S = 0.02   # an extra camera's frame within this of the primary's counts
@@ -74,10 +70,9 @@ class IKNode(Node):
             self.tracker = HandTracker(model, mesh, calibration.cameras, config)
         except (CalibrationError, IKError, ValueError) as exc:
             raise StartupError(f'ik_node cannot start: {exc}') from exc
-        self.model = model
         self.num_vertices = mesh.num_vertices
         self.cameras = calibration.cameras
-        topics = [t.strip() for t in extra_topics.split(',') if t.strip()]
+        topics = split_topics(extra_topics)
         if len(topics) != len(self.cameras) - 1:
             raise StartupError(
                 f'ik_node cannot start: {len(self.cameras)} cameras calibrated but '
@@ -91,17 +86,13 @@ class IKNode(Node):
         self.pending: HandPoseCandidates | None = None
         self.pending_timer = self.create_timer(wait_s, self._process_pending, autostart=False)
         self.recent_images: deque[Image] = deque(maxlen=15)
-        self.joint_pub = self.create_publisher(JointState, 'hand/joint_states', 10)
-        self.wrist_pub = self.create_publisher(PoseStamped, 'hand/wrist_pose', 10)
-        self.marker_pub = self.create_publisher(MarkerArray, 'hand/markers', 10)
+        self.outputs = TrackerOutputs(self)
         self.overlay_pub = self.create_publisher(Image, 'hand/overlay', 2)
-        self.status_pub = self.create_publisher(String, 'hand/tracking_status', 10)
         self.create_subscription(HandPoseCandidates, 'hand/pose_candidates', self.on_candidates,
                                  LATEST_ONLY)
         if self.publish_overlay:
             self.create_subscription(Image, 'camera/image_raw',
                                      lambda image: self.recent_images.append(image), LATEST_IMAGE)
-        self.hand_was_found = False
         self.tf_pub = self._tf_publisher()
         self.get_logger().info(f'tracking with {len(self.cameras)} camera(s)')
 
@@ -177,83 +168,55 @@ class IKNode(Node):
         self.pending = msg
         self.pending_timer.reset()
 
-    def _check_depth(self, q: np.ndarray) -> np.ndarray:
-        """Refuse a pose with any hand keypoint at an implausible depth from any camera
-        (behind or just in front of its plane, or far away); return the keypoints."""
-        keypoints = self.model.keypoints(q)
-        for camera in self.cameras:
-            validate_hand_depth(camera.world_to_camera(keypoints), camera.name)
-        return keypoints
-
     def track(self, msg: HandPoseCandidates) -> None:
-        """Run the tracker on one frame's candidates and publish the results. Candidates
-        that fail validation, and results without a matched constraint or at an implausible
-        depth, give 'no hand' with the reason; no message stops the node."""
+        """Run the tracker on one frame's candidates (``core.pipeline.track``) and publish the
+        results. Candidates that fail validation, and results the pipeline refuses, give 'no
+        hand' with the reason; no message stops the node."""
         try:
-            self._track(msg)
+            outcome = self._track(msg)
+            if isinstance(outcome, NoHand):
+                if outcome.warn:
+                    self.get_logger().warn(f'no pose published: {outcome.reason}',
+                                           throttle_duration_sec=1.0)
+                self.outputs.publish_no_hand(msg.header, outcome.reason)
+            else:
+                self._publish(msg, outcome)
         except Exception as exc:   # last line of defence: a message must never stop the node
             self.get_logger().error(f'tracking failed: {exc!r}\n{traceback.format_exc()}',
                                     throttle_duration_sec=1.0)
             self.tracker.reset()
-            self._report_no_hand(msg, f'tracking failed: {exc!r}')
+            self.outputs.publish_no_hand(msg.header, f'tracking failed: {exc!r}')
 
-    def _track(self, msg: HandPoseCandidates) -> None:
+    def _track(self, msg: HandPoseCandidates) -> Tracked | NoHand:
+        """The tracker's outcome for one frame's candidates and the extra cameras'
+        observations of it."""
         stamp = stamp_to_seconds(msg.header.stamp)
         try:
             prior = None
             if msg.hand_found:
                 camera = self.cameras[0]
-                blended = check_candidates_msg(msg, self.num_vertices,
-                                               (camera.width, camera.height))
-                self._check_depth(blended)
+                check_candidates_msg(msg, self.num_vertices, (camera.width, camera.height))
                 prior = pose_prior_from_candidates_msg(msg)
             observations = [camera_observation_from_msg(msg.observation),
                             *self._extra_camera_observations(stamp)]
-            result = self.tracker.update(prior, observations, stamp)
         except (IKError, InvalidInputError, ValueError) as exc:
-            self.get_logger().warn(f'bad candidates message: {exc}', throttle_duration_sec=1.0)
-            self.tracker.reset()
-            self._report_no_hand(msg, f'bad candidates: {exc}')
-            return
-        if not result.found:
-            self._report_no_hand(msg, msg.status or 'lost')
-            return
-        reason = ''
-        keypoints = None
-        if result.num_constraints == 0:
-            reason = 'no constraint matched an observed blob'
-        elif not np.all(np.isfinite(result.q)):
-            reason = 'non-finite pose'
-        else:
-            try:
-                keypoints = self._check_depth(result.q)
-            except InvalidInputError as exc:
-                reason = f'fitted pose refused: {exc}'
-        if reason:
-            self.get_logger().warn(f'no pose published: {reason}', throttle_duration_sec=1.0)
-            self.tracker.reset()
-            self._report_no_hand(msg, reason)
-            return
-        self.hand_was_found = True
-        self.joint_pub.publish(pose_to_joint_state_msg(result.q, msg.header))
-        wrist = pose_to_wrist_pose_msg(result.q, msg.header)
-        self.wrist_pub.publish(wrist)
+            return bad_prior(self.tracker, exc)
+        return track(self.tracker, prior, observations, stamp, upstream_reason=msg.status)
+
+    def _publish(self, msg: HandPoseCandidates, tracked: Tracked) -> None:
+        """Publish a tracked frame: joint state, wrist pose (and TF), markers, status line and
+        the overlay."""
+        result, keypoints = tracked.result, tracked.keypoints
+        wrist = self.outputs.publish_pose(result.q, keypoints, msg.header)
         if self.tf_pub is not None:
             self.tf_pub.publish(wrist_pose_to_tf_msg(wrist, child_frame_id='palm'))
-        self.marker_pub.publish(skeleton_to_markers_msg(keypoints, msg.header))
         per_camera = ', '.join(f'{camera.name} {count}' for camera, count in
                                zip(self.cameras, result.constraints_per_camera, strict=False))
-        self.status_pub.publish(String(
-            data=f'tracking: {result.num_constraints} constraints ({per_camera}), reprojection '
-                 f'{result.reprojection_error_px:.1f} px, IK {result.time_ms:.1f} ms'))
+        self.outputs.publish_status(
+            f'tracking: {result.num_constraints} constraints ({per_camera}), reprojection '
+            f'{result.reprojection_error_px:.1f} px, IK {result.time_ms:.1f} ms')
         if self.publish_overlay:
             self._publish_overlay(msg, keypoints, result.reprojection_error_px)
-
-    def _report_no_hand(self, msg: HandPoseCandidates, reason: str) -> None:
-        if self.hand_was_found:
-            self.marker_pub.publish(skeleton_to_markers_msg(None, msg.header))
-        self.hand_was_found = False
-        self.status_pub.publish(String(data=f'no hand: {reason}'))
 
     def _publish_overlay(self, msg: HandPoseCandidates, keypoints, error_px: float) -> None:
         stamp = msg.header.stamp

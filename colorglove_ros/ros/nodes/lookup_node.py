@@ -12,7 +12,10 @@ from rclpy.node import Node
 from colorglove_ros.core.camera import CalibrationError, load_calibration
 from colorglove_ros.core.lookup.database import DatabaseError, load_database
 from colorglove_ros.core.lookup.database_build import read_database_config
-from colorglove_ros.core.lookup.search import PoseLookup, SearchError
+from colorglove_ros.core.lookup.search import PoseLookup
+from colorglove_ros.core.lookup.types import LookupResult
+from colorglove_ros.core.pipeline import DEFAULT_MAX_IMAGE_DISTANCE, NoHand, StageLimits, look_up
+from colorglove_ros.core.segmentation.crop import TinyCrop
 from colorglove_ros.core.validation import InvalidInputError
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
@@ -43,10 +46,10 @@ class LookupNode(Node):
         num_candidates = declare(self, 'num_candidates', 300,
                                  'entries re-ranked with the exact distance', 1, 100000)
         num_neighbors = declare(self, 'num_neighbors', 10, 'nearest entries blended', 1, 300)
-        self.max_image_distance = declare(
-            self, 'max_image_distance', 4.5,
+        self.limits = StageLimits(max_image_distance=declare(
+            self, 'max_image_distance', DEFAULT_MAX_IMAGE_DISTANCE,
             'nearest database image farther than this (tiny pixels) from the observation: no '
-            'hand (glove-coloured clutter or noise resembles no hand pose)', 0.0, 1000.0)
+            'hand (glove-coloured clutter or noise resembles no hand pose)', 0.0, 1000.0))
         self.finger_evidence = declare(
             self, 'finger_evidence', True, 'blend each finger from the neighbours whose '
             'patches on it match the observed blobs (false: one weight per entry, the paper)')
@@ -66,26 +69,26 @@ class LookupNode(Node):
         self.get_logger().info(f'loaded {len(self.lookup.db)} database entries from {path} '
                                f'in {time.perf_counter() - started:.1f} s; subscribed')
 
+    def _look_up(self, observation: HandObservation) -> LookupResult | NoHand:
+        """The lookup of an observation with a hand (``core.pipeline.look_up``), or 'no hand'
+        for one that fails its message checks."""
+        try:
+            tiny = check_observation_msg(observation, (self.camera.width, self.camera.height))
+        except InvalidInputError as exc:
+            return NoHand(f'lookup: invalid observation: {exc}', warn=True)
+        blobs = blobs_from_observation_msg(observation) if self.finger_evidence else None
+        return look_up(self.lookup, TinyCrop(tiny, crop_from_observation_msg(observation)),
+                       self.camera, blobs, self.limits)
+
     def on_observation(self, observation: HandObservation) -> None:
-        """Look one observation up and publish the candidates (or a 'no hand' message)."""
+        """Look one observation up and publish the candidates, or a 'no hand' message with
+        the reason. No message stops the node."""
         started = time.perf_counter()
         if not observation.hand_found:
             self.publisher.publish(candidates_to_msg(observation, None))
             return
         try:
-            tiny = check_observation_msg(observation, (self.camera.width, self.camera.height))
-            blobs = blobs_from_observation_msg(observation) if self.finger_evidence else None
-            result = self.lookup.lookup(tiny, crop_from_observation_msg(observation), self.camera,
-                                        blobs)
-        except InvalidInputError as exc:
-            self.get_logger().warn(f'invalid observation: {exc}', throttle_duration_sec=1.0)
-            self.publisher.publish(candidates_to_msg(observation, None,
-                                                  status=f'lookup: invalid observation: {exc}'))
-            return
-        except (SearchError, ValueError) as exc:
-            self.get_logger().warn(f'lookup failed: {exc}', throttle_duration_sec=1.0)
-            self.publisher.publish(candidates_to_msg(observation, None, status=f'lookup: {exc}'))
-            return
+            result = self._look_up(observation)
         except Exception as exc:   # last line of defence: a message must never stop the node
             self.get_logger().error(f'lookup failed: {exc!r}\n{traceback.format_exc()}',
                                     throttle_duration_sec=1.0)
@@ -93,15 +96,15 @@ class LookupNode(Node):
                                                   status=f'lookup failed: {exc!r}'))
             return
         elapsed_ms = 1e3 * (time.perf_counter() - started)
-        nearest = float(result.distances[0]) if len(result.distances) else float('inf')
-        if not nearest <= self.max_image_distance:
+        if isinstance(result, NoHand):
+            if result.warn:
+                self.get_logger().warn(result.reason, throttle_duration_sec=1.0)
+            # the time of a lookup that ran (its result refused), none of one that failed
             self.publisher.publish(candidates_to_msg(
-                observation, None, lookup_time_ms=elapsed_ms,
-                status=f'lookup: nearest database image {nearest:.2f} tiny px away (more '
-                       f'than max_image_distance {self.max_image_distance:g}): not a hand'))
+                observation, None, status=result.reason,
+                lookup_time_ms=elapsed_ms if result.partial is not None else 0.0))
             return
         self.publisher.publish(candidates_to_msg(observation, result, lookup_time_ms=elapsed_ms))
-
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``lookup_node``."""

@@ -11,12 +11,13 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image
 
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
+from colorglove_ros.core.pipeline import NoHand, bad_image, segment_frame
 from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
-from colorglove_ros.core.segmentation.segmenter import SegmentationInputError, load_segmenter
-from colorglove_ros.core.validation import InvalidObservationError, validate_image_size
+from colorglove_ros.core.segmentation.segmenter import load_segmenter
+from colorglove_ros.core.segmentation.types import Observation
+from colorglove_ros.core.validation import validate_image_size
 from colorglove_ros.ros.conversions import observation_to_msg
 from colorglove_ros.ros.image import ImageEncodingError, array_to_image, image_to_rgb8
-from colorglove_ros.ros.message_checks import check_observation_msg
 from colorglove_ros.ros.nodes.common import (
     LATEST_IMAGE,
     StartupError,
@@ -51,27 +52,32 @@ class SegmentationNode(Node):
                                                status=reason, image_width=image.width,
                                                image_height=image.height))
 
+    def _segment(self, image: Image) -> Observation | NoHand:
+        """The frame's observation (``core.pipeline.segment_frame``), or 'no hand' for an
+        image that cannot be decoded."""
+        try:
+            validate_image_size(image.width, image.height, error=ImageEncodingError)
+            rgb = image_to_rgb8(image)
+        except ImageEncodingError as exc:
+            return bad_image(exc)
+        return segment_frame(self.segmenter, rgb, keep_labels=self.publish_debug)
+
     def on_image(self, image: Image) -> None:
         """Segment one frame; bad frames, and observations that fail their own checks, are
         reported as 'no hand' with the reason. No message stops the node."""
         try:
-            validate_image_size(image.width, image.height, error=ImageEncodingError)
-            rgb = image_to_rgb8(image)
-            observation = self.segmenter.process(rgb, keep_labels=self.publish_debug)
-            msg = observation_to_msg(observation, image.header)
-            if msg.hand_found:
-                check_observation_msg(msg)
-        except (ImageEncodingError, SegmentationInputError) as exc:
-            self.get_logger().warn(f'bad camera frame: {exc}', throttle_duration_sec=1.0)
-            self._no_hand(image, f'bad image: {exc}')
-            return
-        except InvalidObservationError as exc:
-            self._no_hand(image, f'implausible observation: {exc}')
-            return
+            observation = self._segment(image)
+            if not isinstance(observation, NoHand):
+                msg = observation_to_msg(observation, image.header)
         except Exception as exc:   # last line of defence: a frame must never stop the node
             self.get_logger().error(f'segmentation failed: {exc!r}\n{traceback.format_exc()}',
                                     throttle_duration_sec=1.0)
             self._no_hand(image, f'segmentation failed: {exc!r}')
+            return
+        if isinstance(observation, NoHand):
+            if observation.warn:
+                self.get_logger().warn(observation.reason, throttle_duration_sec=1.0)
+            self._no_hand(image, observation.reason)
             return
         self.publisher.publish(msg)
         if self.publish_debug and observation.label_image is not None:

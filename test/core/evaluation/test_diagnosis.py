@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from label_samples import random_blob_images
 from scipy.spatial.transform import Rotation
+from small_databases import blob_database, poses_on_axis
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.evaluation.diagnosis import (
@@ -14,12 +15,8 @@ from colorglove_ros.core.evaluation.diagnosis import (
     coverage,
     diagnose,
 )
-from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.hand.poses import pose_collection, sample_global_rotations
-from colorglove_ros.core.lookup.database_build import assemble_database
 from colorglove_ros.core.lookup.search import PoseLookup
-
-RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5, 'cy': 63.5}
 
 
 @pytest.fixture(scope='module')
@@ -30,18 +27,14 @@ def hand_db():
     n_cfg, views = 12, 10
     fingers = pose_collection(0, 200)[rng.choice(200, n_cfg, replace=False)]
     cfg = np.repeat(np.arange(n_cfg), views)
-    poses = np.zeros((n_cfg * views, 26))
-    poses[:, 2] = 0.5
-    poses[:, 3:6] = sample_global_rotations(rng, len(poses))
-    poses[:, 6:] = fingers[cfg]
+    poses = poses_on_axis(sample_global_rotations(rng, len(cfg)), fingers[cfg])
     tiny = random_blob_images(rng, len(poses))
     crop = np.tile([1.2, 40.0, 41.0], (len(poses), 1))
-    return assemble_database(tiny, poses, crop, RENDER_CAM, config_index=cfg, num_bits=64,
-                             num_pairs=300)
+    return blob_database(tiny, poses, crop, config_index=cfg, num_bits=64, num_pairs=300)
 
 
-def test_full_pose_distances_match_skinned_vertices(hand_db) -> None:
-    model, mesh, _ = default_hand()
+def test_full_pose_distances_match_skinned_vertices(hand_db, hand) -> None:
+    model, mesh, _ = hand
     poses = np.asarray(hand_db.poses, np.float64)
     index = FullPoseIndex(model, mesh, poses[:, 6:], hand_db.config_index, num_vertices=80)
     truth = poses[13].copy()
@@ -57,10 +50,10 @@ def test_full_pose_distances_match_skinned_vertices(hand_db) -> None:
     assert fd[index.entry_config[57]] == pytest.approx(0.0, abs=1e-7) and np.sum(fd < 1e-7) == 1
 
 
-def test_diagnosis_of_exact_entries(hand_db) -> None:
+def test_diagnosis_of_exact_entries(hand_db, hand) -> None:
     """Queries that are database entries: the image NN and the pipeline's top-1 are exact
     matches, and the pose oracle is the entry itself (zero error)."""
-    model, mesh, _ = default_hand()
+    model, mesh, _ = hand
     lookup = PoseLookup(hand_db, num_candidates=40, num_blend=5, threads=1)
     entries = np.array([3, 44, 90])
     frames = QueryFrames(np.asarray(hand_db.tiny)[entries], np.asarray(hand_db.crop)[entries],

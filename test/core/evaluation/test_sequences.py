@@ -1,6 +1,6 @@
 """Tests of the evaluation pipeline (core/evaluation/sequences.py) and the eval_ik /
 learn_ik_covariances
-commands, on a tiny database built in a temporary folder."""
+commands, on the session's small rendered database (conftest.py)."""
 from __future__ import annotations
 
 import json
@@ -15,9 +15,7 @@ from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.evaluation.metrics import fingertip_errors_mm, jitter_mm
 from colorglove_ros.core.evaluation.sequences import (
     EvaluationError,
-    LookupStage,
     SequenceEvaluator,
-    TemporalPrior,
     contiguous_runs,
     eval_seeds,
     find_database,
@@ -27,10 +25,9 @@ from colorglove_ros.core.evaluation.sequences import (
     train_seeds,
     training_sequences,
 )
-from colorglove_ros.core.lookup.database import save_database
-from colorglove_ros.core.lookup.database_build import BuildConfig, build_database
 from colorglove_ros.core.lookup.search import PoseLookup
 from colorglove_ros.core.lookup.temporal_prior import reweight_by_previous
+from colorglove_ros.core.pipeline import UNGATED, FrameObservations, FramePipeline, TemporalPrior
 from colorglove_ros.core.synthetic.frames import Synthesizer, render_frame
 from colorglove_ros.core.synthetic.sequences import generate_sequence
 from colorglove_ros.core.tracking.config import IKConfig, load_covariances
@@ -43,16 +40,6 @@ def rigs():
     root = CONFIG_DIR
     return (load_calibration(root / 'calibration.yaml'),
             load_calibration(root / 'calibration_stereo.yaml'))
-
-
-@pytest.fixture(scope='module')
-def tiny_db_path(tmp_path_factory):
-    cfg = BuildConfig(entries=120, orientations_per_config=20, num_pairs=200,
-                      training_images=120, num_bits=32, collection_size=200,
-                      fps_vertices=100, batch=64)
-    path = tmp_path_factory.mktemp('db') / 'db_tiny'
-    save_database(build_database(cfg), path)
-    return path
 
 
 @pytest.fixture(scope='module')
@@ -99,21 +86,21 @@ def test_find_database_picks_the_largest(tmp_path):
     assert find_database(tmp_path / 'junk') is None
 
 
-def test_rigs_must_share_the_primary_camera(tiny_db_path, rigs, synth):
+def test_rigs_must_share_the_primary_camera(small_database_path, rigs, synth):
     from colorglove_ros.core.lookup.database import load_database
 
     mono, stereo = rigs
-    lookup = PoseLookup(load_database(tiny_db_path))
+    lookup = PoseLookup(load_database(small_database_path))
     with pytest.raises(EvaluationError):
         SequenceEvaluator(lookup, {'a': stereo.cameras[1:], 'b': stereo.cameras},
                           synthesizer=synth)
 
 
-def test_pipeline_end_to_end_finite(tiny_db_path, rigs, synth):
+def test_pipeline_end_to_end_finite(small_database_path, rigs, synth):
     from colorglove_ros.core.lookup.database import load_database
 
     mono, stereo = rigs
-    ev = SequenceEvaluator(PoseLookup(load_database(tiny_db_path)),
+    ev = SequenceEvaluator(PoseLookup(load_database(small_database_path)),
                            {'1': mono.cameras, '2': stereo.cameras}, synthesizer=synth,
                            keep_results=True)
     out = ev.run(eval_seeds(1)[0], 8)
@@ -138,9 +125,9 @@ def test_pipeline_end_to_end_finite(tiny_db_path, rigs, synth):
     assert sum(len(s) for s in seqs) == int(out[('1', 'ik')].found.sum())
 
 
-def test_temporal_prior_reweights_by_each_trackers_previous_output(tiny_db_path, rigs, synth,
-                                                                    monkeypatch):
-    from colorglove_ros.core.evaluation import sequences as evaluation
+def test_temporal_prior_reweights_by_each_trackers_previous_output(small_database_path, rigs, synth,
+                                                                   monkeypatch):
+    from colorglove_ros.core.lookup import temporal_prior
     from colorglove_ros.core.lookup.database import load_database
 
     calls = []
@@ -151,9 +138,9 @@ def test_temporal_prior_reweights_by_each_trackers_previous_output(tiny_db_path,
                       out.blended))
         return out
 
-    monkeypatch.setattr(evaluation, 'reweight_by_previous', spy)
+    monkeypatch.setattr(temporal_prior, 'reweight_by_previous', spy)
     mono, _ = rigs
-    ev = SequenceEvaluator(PoseLookup(load_database(tiny_db_path), num_blend=5),
+    ev = SequenceEvaluator(PoseLookup(load_database(small_database_path), num_blend=5),
                            {'1': mono.cameras}, modes=('blend',), synthesizer=synth,
                            keep_results=True, temporal=TemporalPrior(0.3, 0.5),
                            finger_evidence=False)
@@ -168,9 +155,9 @@ def test_temporal_prior_reweights_by_each_trackers_previous_output(tiny_db_path,
         np.testing.assert_allclose(run.results[i].q_blend[6:], blended[6:], atol=1e-9)
 
 
-def test_eval_ik_cli_temporal_option(tiny_db_path, tmp_path, capsys):
+def test_eval_ik_cli_temporal_option(small_database_path, tmp_path, capsys):
     out = tmp_path / 'eval.json'
-    args = ['--database', str(tiny_db_path), '--frames', '4', '--sequences', '1', '--modes',
+    args = ['--database', str(small_database_path), '--frames', '4', '--sequences', '1', '--modes',
             'blend', '--plot', '']
     assert eval_ik.main([*args, '--temporal-tau', '30', '--num-blend', '12',
                          '--temporal-rotation-weight', '0', '--no-finger-evidence',
@@ -180,10 +167,10 @@ def test_eval_ik_cli_temporal_option(tiny_db_path, tmp_path, capsys):
             settings['num_blend']) == (30.0, 0.0, 12)
     assert 'temporal tau: 30 deg' in capsys.readouterr().out
     assert eval_ik.main([*args, '--temporal-tau', '0']) == 1
-    assert '--temporal-tau must be > 0' in capsys.readouterr().out
+    assert '--temporal-tau must be > 0' in capsys.readouterr().err
     # the temporal reweighting re-blends every DOF: refused with the per-finger blend
     assert eval_ik.main([*args, '--temporal-tau', '30']) == 1
-    assert 'without the per-finger blend' in capsys.readouterr().out
+    assert 'without the per-finger blend' in capsys.readouterr().err
 
 
 class _OracleLookup:
@@ -228,7 +215,8 @@ def test_ik_lowers_fingertip_error_on_ground_truth_neighbours(rigs, synth):
     mono, _ = rigs
     cam = mono.cameras[0]
     oracle = _OracleLookup(synth, np.random.default_rng(0))
-    stage = LookupStage(oracle, cam)
+    pipeline = FramePipeline(lambda frame, primary: observe_camera(frame.labels, primary),
+                             oracle, cam, limits=UNGATED, finger_evidence=False)
     err = {'blend': [], 'ik': []}
     for seed in (3, 4, 5):
         # the oracle's constraint vertices are the ones nearest the true patch centroids, the
@@ -241,7 +229,7 @@ def test_ik_lowers_fingertip_error_on_ground_truth_neighbours(rigs, synth):
             frame = render_frame(q, cam, np.random.default_rng(i), synthesizer=synth)
             oracle.truth, oracle.frame = q, frame
             obs, tiny = observe_camera(frame.labels, True)
-            prior = stage(tiny)
+            prior = pipeline.look_up(FrameObservations((obs,), tiny))
             assert prior.result is not None
             for m, tr in trackers.items():
                 r = tr.update(prior.result, [obs], i / 30)
@@ -254,10 +242,10 @@ def test_ik_lowers_fingertip_error_on_ground_truth_neighbours(rigs, synth):
     assert e_ik < 0.75 * e_blend
 
 
-def test_eval_ik_cli_writes_documented_json(tiny_db_path, tmp_path, capsys):
+def test_eval_ik_cli_writes_documented_json(small_database_path, tmp_path, capsys):
     out = tmp_path / 'eval.json'
     png = tmp_path / 'eval.png'
-    rc = eval_ik.main(['--database', str(tiny_db_path), '--frames', '6', '--sequences', '1',
+    rc = eval_ik.main(['--database', str(small_database_path), '--frames', '6', '--sequences', '1',
                        '--json', str(out), '--plot', str(png)])
     assert rc == 0
     data = json.loads(out.read_text())
@@ -292,18 +280,18 @@ def test_eval_ik_cli_refuses_a_database_without_its_hand_length(tmp_path, capsys
     db = SimpleNamespace(meta={'build': {'glove_seed': 0}})
     monkeypatch.setattr(eval_ik, 'open_database', lambda path, root: (tmp_path, db))
     assert eval_ik.main(['--plot', '']) == 1
-    assert 'hand length' in capsys.readouterr().out
+    assert 'hand length' in capsys.readouterr().err
 
 
 def test_eval_ik_cli_reports_missing_database(tmp_path, capsys):
     assert eval_ik.main(['--database', str(tmp_path / 'none'), '--plot', '']) == 1
-    assert 'not found' in capsys.readouterr().out
+    assert 'not found' in capsys.readouterr().err
 
 
-def test_learn_covariances_cli_saves_a_loadable_file(tiny_db_path, tmp_path):
+def test_learn_covariances_cli_saves_a_loadable_file(small_database_path, tmp_path):
     out = tmp_path / 'cov.yaml'
     js = tmp_path / 'cov.json'
-    rc = learn_ik_covariances.main(['--database', str(tiny_db_path), '--frames', '10',
+    rc = learn_ik_covariances.main(['--database', str(small_database_path), '--frames', '10',
                                     '--sequences', '1', '--output', str(out), '--json', str(js)])
     assert rc == 0
     cov = load_covariances(out)
@@ -325,8 +313,8 @@ def test_segmenter_observer_converts_blobs_and_crop():
                        [Blob(3, 100.5, 50.0, 40), Blob(7, 120.0, 60.0, 12)])
 
     class _Seg:
-        def process(self, image):
-            assert image.shape == (480, 640, 3)
+        def process(self, image, keep_labels=False):
+            assert image.shape == (480, 640, 3) and not keep_labels
             return seen
 
     frame = SimpleNamespace(image_rgb=np.zeros((480, 640, 3), np.uint8))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from pose_samples import MODEL, hand_pose
 
 from colorglove_ros.core.evaluation.scripted_hands import TrackingNoise
 from colorglove_ros.core.hand.gestures import (
@@ -16,16 +17,12 @@ from colorglove_ros.core.hand.gestures import (
     gesture_scores,
     parse_event,
 )
-from colorglove_ros.core.hand.model import HandModel
-from colorglove_ros.core.hand.poses import GESTURE_SHAPES, finger_limits, full_pose
+from colorglove_ros.core.hand.poses import GESTURE_SHAPES, full_pose
 from colorglove_ros.tools import eval_gestures
-
-MODEL = HandModel()
 
 
 def _pose(shape: str) -> np.ndarray:
-    lo, hi = finger_limits(MODEL)
-    return full_pose(MODEL, np.clip(GESTURE_SHAPES[shape], lo, hi))
+    return hand_pose(GESTURE_SHAPES[shape])
 
 
 @pytest.mark.parametrize('shape, gesture', [
@@ -38,10 +35,8 @@ def test_shape_scores(shape: str, gesture: str) -> None:
 
 
 def test_neutral_shapes_score_no_gesture() -> None:
-    lo, hi = finger_limits(MODEL)
     for name in eval_gestures.NEUTRAL_SHAPES:
-        scores = gesture_scores(gesture_features(
-            MODEL, full_pose(MODEL, np.clip(eval_gestures._SHAPES[name], lo, hi))))
+        scores = gesture_scores(gesture_features(MODEL, hand_pose(eval_gestures._SHAPES[name])))
         assert max(scores.values()) < 0.3, (name, scores)
 
 

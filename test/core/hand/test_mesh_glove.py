@@ -10,18 +10,12 @@ import trimesh
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, NUM_COLORS, NUM_PATCHES
 from colorglove_ros.core.hand.glove import (
     GLOVE_PALETTE_RGB,
-    default_hand,
     export_glove_mesh,
     glove_reference_pose,
     make_glove,
 )
 from colorglove_ros.core.hand.mesh import HandMeshError, build_hand_mesh, skin_batch
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
-
-
-@pytest.fixture(scope='module')
-def hand():
-    return default_hand()
 
 
 def test_mesh_size_and_binding(hand) -> None:

@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 
 from colorglove_ros.core.geometry import matrix_to_rotvec, rotvec_to_matrix
-from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.hand.model import FINGER_DOF_NAMES
 from colorglove_ros.core.hand.poses import (
     GESTURE_SHAPES,
@@ -18,11 +17,6 @@ from colorglove_ros.core.hand.poses import (
     pose_features,
     sample_global_rotations,
 )
-
-
-@pytest.fixture(scope='module')
-def hand():
-    return default_hand()
 
 
 @pytest.fixture(scope='module')

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from pose_samples import MODEL, allowed_fingers
 
 from colorglove_ros.core.evaluation.scripted_hands import Segment, TrackingNoise, script_poses
-from colorglove_ros.core.hand.model import HandModel
-from colorglove_ros.core.hand.poses import LETTER_SHAPES, finger_limits
+from colorglove_ros.core.hand.poses import LETTER_SHAPES
 from colorglove_ros.core.hand.spelling import (
     LETTERS,
     LetterClassifier,
@@ -19,12 +19,9 @@ from colorglove_ros.core.hand.spelling import (
 )
 from colorglove_ros.tools import eval_spelling
 
-MODEL = HandModel()
-
 
 def _segment(letter: str, position=(0.0, 0.05, 0.5), hold_s: float = 0.8) -> Segment:
-    lo, hi = finger_limits(MODEL)
-    return Segment(letter, np.clip(LETTER_SHAPES[letter], lo, hi), letter_rotation(letter),
+    return Segment(letter, allowed_fingers(LETTER_SHAPES[letter]), letter_rotation(letter),
                    np.asarray(position, dtype=float), hold_s=hold_s, move_s=0.3)
 
 
@@ -42,10 +39,9 @@ def _spell(segments: list[Segment], speller: Speller | None = None) -> list[tupl
 def test_every_template_is_its_own_letter() -> None:
     classifier = LetterClassifier(model=MODEL)
     q = MODEL.rest_pose()
-    lo, hi = finger_limits(MODEL)
     for letter in LETTERS:
         q[3:6] = letter_rotation(letter)
-        q[6:] = np.clip(LETTER_SHAPES[letter], lo, hi)
+        q[6:] = allowed_fingers(LETTER_SHAPES[letter])
         assert LETTERS[int(np.argmax(classifier.log_likelihoods(q)))] == letter
 
 

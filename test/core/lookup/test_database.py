@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from label_samples import random_blob_images
 from repo_paths import CONFIG_DIR
+from small_databases import RENDER_CAM, blob_database
 
 from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.lookup.database import (
@@ -18,14 +19,9 @@ from colorglove_ros.core.lookup.database import (
     save_database,
 )
 from colorglove_ros.core.lookup.database_build import (
-    BuildConfig,
-    assemble_database,
-    build_database,
     farthest_point_sampling,
     read_database_config,
 )
-
-RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5, 'cy': 63.5}
 
 
 def _small_db(n: int = 120):
@@ -33,8 +29,7 @@ def _small_db(n: int = 120):
     tiny = random_blob_images(rng, n, blobs=4)
     poses = rng.normal(size=(n, 26))
     crop = rng.uniform(1, 2, (n, 3))
-    return assemble_database(tiny, poses, crop, RENDER_CAM, num_bits=32, num_pairs=200,
-                             meta={'note': 'test'})
+    return blob_database(tiny, poses, crop, num_bits=32, num_pairs=200, meta={'note': 'test'})
 
 
 def test_farthest_point_sampling_is_low_dispersion() -> None:
@@ -114,18 +109,17 @@ def test_refuses_missing_directory(tmp_path: Path) -> None:
         load_database(tmp_path / 'nothing_here')
 
 
-def test_build_small_database_with_renderer(tmp_path: Path) -> None:
-    from colorglove_ros.core.hand.glove import default_hand
+def test_build_small_database_with_renderer(small_database, hand, tmp_path: Path) -> None:
+    """The session's small database (``small_databases.SMALL_BUILD``, rendered by
+    ``build_database``): entries, renders and patch constraints."""
     from colorglove_ros.core.lookup.search import PoseLookup
 
-    cfg = BuildConfig(entries=96, orientations_per_config=16, collection_size=400,
-                      num_bits=32, num_pairs=200, batch=64)
-    db = build_database(cfg)
+    db = small_database
     assert len(db) == 96 and db.meta['num_configs'] >= 6
     assert np.all(db.tiny.max(axis=(1, 2)) >= 1)
     assert db.tiny.shape == (96, TINY_SIZE, TINY_SIZE)
     # the hand's centre sits on the optical axis at the configured distance
-    _, mesh, glove = default_hand()
+    _, mesh, glove = hand
     # constraints: a visible patch has a centroid inside the render (it may fall outside the
     # tiny crop window), a positive area and a vertex of that patch; an invisible one has none
     vis = db.patch_vertex >= 0

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from small_databases import blob_database, poses_on_axis
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.lookup.database_build import assemble_database
 from colorglove_ros.core.lookup.finger_evidence import (
     PALM_DIGIT,
     FingerEvidenceConfig,
@@ -123,9 +123,7 @@ def test_lookup_blends_fingers_from_blobs() -> None:
         y, x = rng.integers(5, 30, 2)
         tiny[i, y:y + 8, x:x + 8] = 1 + i % 10
     tiny[1] = tiny[0]
-    poses = np.zeros((n, 26))
-    poses[:, 2] = 0.5
-    poses[:, 6:] = rng.uniform(0.0, 1.0, (n, 20))
+    poses = poses_on_axis(fingers=rng.uniform(0.0, 1.0, (n, 20)))
     patch_vertex = np.full((n, 20), -1, np.int32)
     patch_vertex[:, 0] = 1                            # vertex 1: on the thumb
     patch_vertex[:, 1] = 0                            # vertex 0: on the palm
@@ -137,11 +135,8 @@ def test_lookup_blends_fingers_from_blobs() -> None:
     patch_xy[0, 2] = [25.0, 25.0]
     patch_xy[1, 0] = [13.0, 10.0]                     # entry 1: thumb patch at (13, 10)
     color = np.arange(20) % 10 + 1
-    db = assemble_database(tiny, poses, np.tile([1.0, 0.0, 0.0], (n, 1)),
-                           {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0,
-                            'cx': 63.5, 'cy': 63.5}, num_bits=32, num_pairs=200,
-                           patch_vertex=patch_vertex, patch_xy=patch_xy,
-                           patch_pixels=np.full((n, 20), 5.0), patch_color=color)
+    db = blob_database(tiny, poses, num_bits=32, num_pairs=200, patch_vertex=patch_vertex,
+                       patch_xy=patch_xy, patch_pixels=np.full((n, 20), 5.0), patch_color=color)
     lookup = PoseLookup(db, num_candidates=n, num_blend=1, threads=1,
                         finger_evidence=FingerEvidenceConfig(num_neighbours=2),
                         vertex_link=np.array([0, 1, 2]))

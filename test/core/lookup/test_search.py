@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from label_samples import random_blob_images
 from scipy.spatial.transform import Rotation
+from small_databases import RENDER_CAM, blob_database, poses_on_axis
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.lookup.blend import blend_poses, blend_weights
-from colorglove_ros.core.lookup.database_build import assemble_database
 from colorglove_ros.core.lookup.distance import image_distance
 from colorglove_ros.core.lookup.search import (
     PoseLookup,
@@ -16,8 +16,6 @@ from colorglove_ros.core.lookup.search import (
     estimate_global_pose,
     top_k_with_ties,
 )
-
-RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5, 'cy': 63.5}
 
 
 def _blob_images(seed: int, n: int) -> np.ndarray:
@@ -31,18 +29,15 @@ def blob_db():
     shifted = [np.roll(base, (dy, dx), axis=(1, 2)) for dy, dx in ((1, 0), (0, -1), (2, 1))]
     tiny = np.concatenate([base, *shifted])
     n = len(tiny)
-    poses = np.zeros((n, 26))
-    poses[:, 2] = 0.5
-    poses[:, 3:6] = rng.normal(0.0, 0.4, (n, 3))
-    poses[:, 6:] = rng.uniform(0.0, 1.0, (n, 20))
+    poses = poses_on_axis(rng.normal(0.0, 0.4, (n, 3)), rng.uniform(0.0, 1.0, (n, 20)))
     crop = np.tile([1.2, 40.0, 41.0], (n, 1))
     patch_vertex = np.full((n, 20), -1, np.int32)
     patch_vertex[:, :3] = [[11, 22, 33]]
     patch_xy = np.full((n, 20, 2), np.nan, np.float32)
     patch_xy[:, :3] = [[5.0, 6.0], [10.0, 12.0], [20.0, 30.0]]
-    return assemble_database(tiny, poses, crop, RENDER_CAM, num_bits=64, num_pairs=600,
-                             patch_vertex=patch_vertex, patch_xy=patch_xy,
-                             patch_pixels=np.ones((n, 20)), patch_color=np.arange(1, 21) % 10 + 1)
+    return blob_database(tiny, poses, crop, num_bits=64, num_pairs=600,
+                         patch_vertex=patch_vertex, patch_xy=patch_xy,
+                         patch_pixels=np.ones((n, 20)), patch_color=np.arange(1, 21) % 10 + 1)
 
 
 def test_top_k_keeps_ties() -> None:

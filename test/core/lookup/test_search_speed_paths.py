@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from label_samples import random_blob_images
+from small_databases import blob_database, poses_on_axis
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.lookup.codes import (
@@ -11,22 +13,13 @@ from colorglove_ros.core.lookup.codes import (
     pack_codes,
     train_random_projections,
 )
-from colorglove_ros.core.lookup.database_build import assemble_database
 from colorglove_ros.core.lookup.distance import QueryDistance, distance_transforms_batch
 from colorglove_ros.core.lookup.search import PoseLookup, SearchError, top_k_with_ties
 
-RENDER_CAM = {'width': 128, 'height': 128, 'fx': 150.0, 'fy': 150.0, 'cx': 63.5, 'cy': 63.5}
-
 
 def _blobs(seed: int, n: int) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    yy, xx = np.mgrid[0:40, 0:40]
-    out = np.zeros((n, 40, 40), np.uint8)
-    for i in range(n):
-        for _ in range(int(rng.integers(1, 7))):      # very different glove-pixel counts
-            c, x, y, r = rng.integers(1, 11), *rng.integers(6, 34, 2), rng.integers(2, 10)
-            out[i][(xx - x) ** 2 + (yy - y) ** 2 <= r * r] = c
-    return out
+    # 1 to 6 discs of radius 2 to 9: very different glove-pixel counts
+    return random_blob_images(np.random.default_rng(seed), n, blobs=(1, 7), radius=(2, 10))
 
 
 def _db(n: int = 240):
@@ -34,11 +27,8 @@ def _db(n: int = 240):
     tiny = _blobs(3, n)
     tiny[5] = 0
     tiny[5, 10:12, 10:12] = 4                          # a 4-pixel entry
-    poses = np.zeros((n, 26))
-    poses[:, 2] = 0.5
-    poses[:, 3:6] = rng.normal(0.0, 0.5, (n, 3))
-    return assemble_database(tiny, poses, np.tile([1.0, 0.0, 0.0], (n, 1)), RENDER_CAM,
-                             num_bits=96, num_pairs=400)
+    return blob_database(tiny, poses_on_axis(rng.normal(0.0, 0.5, (n, 3))), num_bits=96,
+                         num_pairs=400)
 
 
 def test_query_encoder_equals_full_feature_path() -> None:

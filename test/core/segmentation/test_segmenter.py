@@ -440,7 +440,7 @@ def test_tools_calibrate_and_evaluate(tmp_path: Path, capsys) -> None:
     # glove-like clutter next to the hand exists only in the synthetic frames
     assert eval_segmentation.main(['--config', str(config), '--source', 'blobs',
                                    '--clutter-near-hand']) == 1
-    assert 'needs source' in capsys.readouterr().out
+    assert 'needs source' in capsys.readouterr().err
     config.write_text(f'calibration_file: {cal_path}\nsegmenter:\n  no_such_key: 1\n')
     with pytest.raises(SegmentationConfigError, match='no_such_key'):
         load_segmenter(str(config))

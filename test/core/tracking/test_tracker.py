@@ -9,7 +9,6 @@ import pytest
 from repo_paths import CONFIG_DIR
 
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.hand.mesh import build_hand_mesh
 from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
 from colorglove_ros.core.lookup.types import ProjectionConstraints
@@ -24,7 +23,6 @@ from colorglove_ros.core.tracking.config import (
     load_ik_config,
     save_covariances,
 )
-from colorglove_ros.core.tracking.kinematics import FastKinematics
 from colorglove_ros.core.tracking.matching import match_by_color, match_extra_camera, match_primary
 from colorglove_ros.core.tracking.projection import (
     estimate_translation,
@@ -48,10 +46,8 @@ TIPS = [KEYPOINT_NAMES.index(f'{d}_tip') for d in ('thumb', 'index', 'middle', '
 
 
 @pytest.fixture(scope='module')
-def rig():
-    model = HandModel(DEFAULT_HAND_LENGTH_M)
-    mesh = build_hand_mesh(model)
-    kin = FastKinematics(model)
+def rig(hand_kinematics):
+    model, mesh, kin = hand_kinematics
     mono = load_calibration(CONFIG_DIR / 'calibration.yaml').cameras
     stereo = load_calibration(CONFIG_DIR / 'calibration_stereo.yaml').cameras
     # 20 constraint vertices spread over the hand (farthest-point sampling), one per patch
@@ -84,6 +80,14 @@ def synthetic_corr(rig, q, cams, rng, noise_px):
     return Correspondences.concat(out)
 
 
+def pose_and_correspondences(rig, seed: int, cams, noise_px: float):
+    """A seeded true pose and its synthetic correspondences in ``cams``, and the generator
+    (for the test's further draws): (q, correspondences, rng)."""
+    rng = np.random.default_rng(seed)
+    q = true_pose(rig[0], rng)
+    return q, synthetic_corr(rig, q, cams, rng, noise_px), rng
+
+
 def tip_error(model, q, q_true):
     return float(np.linalg.norm(model.keypoints(q)[TIPS] - model.keypoints(q_true)[TIPS],
                                 axis=1).mean())
@@ -101,9 +105,7 @@ def test_fast_kinematics_matches_model(rig):
 
 def test_jacobian_chain_matches_finite_differences(rig):
     model, mesh, kin, mono, stereo, verts = rig
-    rng = np.random.default_rng(4)
-    q = true_pose(model, rng)
-    corr = synthetic_corr(rig, q, stereo, rng, 0.0)
+    q, corr, _ = pose_and_correspondences(rig, 4, stereo, 0.0)
     _, J, _ = project_correspondences(kin, stereo, corr, q, jacobian=True)
     assert J.shape == (2 * len(corr), 26)
     h = 1e-6
@@ -183,9 +185,7 @@ def test_joint_limits_respected(rig):
 
 def test_translation_estimate_from_constraints(rig):
     model, mesh, kin, mono, stereo, verts = rig
-    rng = np.random.default_rng(8)
-    q_true = true_pose(model, rng)
-    corr = synthetic_corr(rig, q_true, mono, rng, 0.0)
+    q_true, corr, _ = pose_and_correspondences(rig, 8, mono, 0.0)
     q_bad = q_true.copy()
     q_bad[0:3] = [0.05, -0.04, 0.35]
     q_fit = estimate_translation(kin, mono, corr, q_bad)
@@ -205,9 +205,7 @@ def test_translation_estimate_with_two_cameras_trims_per_camera_rows(rig):
     """The vectorised fit (rows of all cameras stacked per correspondence) recovers the
     translation from both cameras, and trims a wild target of the second camera only."""
     model, mesh, kin, mono, stereo, verts = rig
-    rng = np.random.default_rng(9)
-    q_true = true_pose(model, rng)
-    corr = synthetic_corr(rig, q_true, stereo, rng, 0.0)
+    q_true, corr, _ = pose_and_correspondences(rig, 9, stereo, 0.0)
     assert set(corr.camera.tolist()) == {0, 1}
     q_bad = q_true.copy()
     q_bad[0:3] += [0.03, -0.02, 0.06]
@@ -334,6 +332,19 @@ def observe(rig, q_true, q_blend, cams, rng, noise_px=1.0, tiny_noise=0.3):
     return prior, obs
 
 
+def observe_with_finger_error(rig, seed: int, cams):
+    """A true pose, a blend 0.1 rad off on every finger DOF (clamped), and what ``cams`` see of
+    the true pose (0.5 px blob noise): (q, q_blend, prior, observations)."""
+    model = rig[0]
+    rng = np.random.default_rng(seed)
+    q = true_pose(model, rng)
+    q_b = q.copy()
+    q_b[6:] += rng.normal(0.0, 0.1, 20)
+    q_b = model.clamp(q_b)
+    prior, obs = observe(rig, q, q_b, cams, rng, noise_px=0.5)
+    return q, q_b, prior, obs
+
+
 def run_sequence(rig, cams, mode, n=30, seed=0):
     model, mesh, kin, *_ = rig
     rng = np.random.default_rng(seed)
@@ -392,11 +403,7 @@ def test_tracker_two_cameras(rig):
 
 def test_patches_seen_by_second_camera_only_count(rig):
     model, mesh, kin, mono, stereo, verts = rig
-    rng = np.random.default_rng(13)
-    q = true_pose(model, rng)
-    q_b = q.copy()
-    q_b[6:] += rng.normal(0.0, 0.1, 20)
-    prior, obs = observe(rig, q, model.clamp(q_b), stereo, rng, noise_px=0.5)
+    q, q_b, prior, obs = observe_with_finger_error(rig, 13, stereo)
     b0 = obs[0].blobs
     keep = np.array([0, 1])                     # the primary camera sees two patches only
     obs[0] = CameraObservation(True, Blobs(b0.color[keep], b0.centroid_px[keep],
@@ -405,7 +412,7 @@ def test_patches_seen_by_second_camera_only_count(rig):
     assert res.constraints_per_camera[0] == 2 and res.constraints_per_camera[1] >= 6
     assert res.iterations > 0
     assert res.reprojection_error_per_camera[1] < 3.0
-    assert tip_error(model, res.q, q) < tip_error(model, model.clamp(q_b), q)
+    assert tip_error(model, res.q, q) < tip_error(model, q_b, q)
 
 
 def test_tracker_resets_when_hand_lost(rig):
@@ -472,11 +479,7 @@ def test_blend_mode_fits_translation_only(rig):
 
 def test_wrong_match_is_rejected(rig):
     model, mesh, kin, mono, stereo, verts = rig
-    rng = np.random.default_rng(11)
-    q = true_pose(model, rng)
-    q_b = q.copy()
-    q_b[6:] += rng.normal(0.0, 0.1, 20)
-    prior, obs = observe(rig, q, model.clamp(q_b), mono, rng, noise_px=0.5)
+    q, _, prior, obs = observe_with_finger_error(rig, 11, mono)
     moved = obs[0].blobs.centroid_px.copy()
     moved[3] += [30.0, -25.0]                 # a spurious blob, still inside the match gate
     obs = [CameraObservation(True, Blobs(COLORS, moved, np.full(20, 60)), CROP)]
@@ -582,9 +585,7 @@ def test_extra_camera_shift_matches_dense_reference(rig, seed):
 
 def test_solution_residual_is_the_reprojection_error(rig):
     model, mesh, kin, mono, stereo, verts = rig
-    rng = np.random.default_rng(12)
-    q = true_pose(model, rng)
-    corr = synthetic_corr(rig, q, stereo, rng, 2.0)
+    q, corr, rng = pose_and_correspondences(rig, 12, stereo, 2.0)
     q0 = q.copy()
     q0[6:] += rng.normal(0.0, 0.1, 20)
     for iterations in (0, 1, 3):

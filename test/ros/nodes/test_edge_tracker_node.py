@@ -1,10 +1,14 @@
 """edge_tracker_node in one process: rendered bare-hand images in, pose or reason out."""
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
+from dataclasses import dataclass
+
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped
-from node_fixtures import header, params, running
+from node_fixtures import Harness, header, params, running
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -32,13 +36,33 @@ def _node(**overrides):
     return lambda ctx: EdgeTrackerNode(context=ctx, parameter_overrides=params(**values))
 
 
+@dataclass
+class _Outputs:
+    """What edge_tracker_node publishes, collected as it arrives."""
+
+    joints: list[JointState]
+    wrists: list[PoseStamped]
+    status: list[String]
+
+
+@contextlib.contextmanager
+def _tracker() -> Iterator[tuple[Harness, EdgeTrackerNode, _Outputs]]:
+    """edge_tracker_node (defaults of :func:`_node`) running, with its outputs collected."""
+    with running(_node()) as h:
+        yield h, h.nodes[0], _Outputs(h.collect(JointState, 'hand/joint_states'),
+                                      h.collect(PoseStamped, 'hand/wrist_pose'),
+                                      h.collect(String, 'hand/tracking_status'))
+
+
+def _position(msg: PoseStamped) -> np.ndarray:
+    point = msg.pose.position
+    return np.array([point.x, point.y, point.z])
+
+
 def test_holds_then_publishes_the_pose_with_urdf_names(sequence) -> None:
     seq, frames = sequence
-    with running(_node()) as h:
-        node = h.nodes[0]
-        joints = h.collect(JointState, 'hand/joint_states')
-        wrists = h.collect(PoseStamped, 'hand/wrist_pose')
-        status = h.collect(String, 'hand/tracking_status')
+    with _tracker() as (h, node, out):
+        joints, wrists, status = out.joints, out.wrists, out.status
         for k in range(2):
             msg = array_to_image(frames[0], 'rgb8', header(10 + k, 0, 'camera_optical_frame'))
             node.on_image(0, msg)
@@ -48,29 +72,22 @@ def test_holds_then_publishes_the_pose_with_urdf_names(sequence) -> None:
         names = list(joints[0].name)
         assert names == [n for n in names if n in set(names)] and len(names) >= 20
         assert not any(n in DOF_NAMES[:6] for n in names)
-        wrist = np.array([wrists[0].pose.position.x, wrists[0].pose.position.y,
-                          wrists[0].pose.position.z])
-        assert np.linalg.norm(wrist - seq.poses[0][0:3]) < 0.01
+        assert np.linalg.norm(_position(wrists[0]) - seq.poses[0][0:3]) < 0.01
         # a given starting pose, then a moving frame
         node.on_init_wrist(pose_to_wrist_pose_msg(seq.poses[20], header(20)))
         node.on_init_joints(pose_to_joint_state_msg(seq.poses[20], header(20)))
         node.on_image(0, array_to_image(frames[21], 'rgb8', header(21)))
         assert h.spin_until(lambda: len(wrists) >= 2, 10.0)
-        wrist = np.array([wrists[-1].pose.position.x, wrists[-1].pose.position.y,
-                          wrists[-1].pose.position.z])
-        assert np.linalg.norm(wrist - seq.poses[21][0:3]) < 0.01
+        assert np.linalg.norm(_position(wrists[-1]) - seq.poses[21][0:3]) < 0.01
 
 
 def test_blank_frames_give_reasons_not_poses(sequence) -> None:
     _, frames = sequence
-    with running(_node()) as h:
-        node = h.nodes[0]
-        joints = h.collect(JointState, 'hand/joint_states')
-        status = h.collect(String, 'hand/tracking_status')
+    with _tracker() as (h, node, out):
         node.on_image(0, array_to_image(np.full_like(frames[0], 80), 'rgb8', header(1)))
-        assert h.spin_until(lambda: len(status) >= 1, 10.0)
+        assert h.spin_until(lambda: len(out.status) >= 1, 10.0)
         h.settle(0.2)
-        assert not joints and 'no hand' in status[0].data
+        assert not out.joints and 'no hand' in out.status[0].data
 
 
 def test_two_topics_without_calibration_refuse_to_start() -> None:

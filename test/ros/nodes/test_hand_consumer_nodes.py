@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from geometry_msgs.msg import PoseArray, PoseStamped
 from node_fixtures import header, params, running
+from pose_samples import MODEL, hand_pose
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from colorglove_ros.core.hand.keypoints import hand_keypoints
-from colorglove_ros.core.hand.model import HandModel
-from colorglove_ros.core.hand.poses import GESTURE_SHAPES, LETTER_SHAPES, finger_limits
+from colorglove_ros.core.hand.poses import GESTURE_SHAPES, LETTER_SHAPES
 from colorglove_ros.core.hand.spelling import letter_rotation
 from colorglove_ros.ros.conversions import pose_to_joint_state_msg, pose_to_wrist_pose_msg
 from colorglove_ros.ros.nodes.gesture_node import GestureNode
@@ -20,16 +20,8 @@ from colorglove_ros.ros.nodes.spelling_node import SpellingNode
 
 pytestmark = [pytest.mark.dds, pytest.mark.usefixtures('isolated_ros_domain')]
 
-MODEL = HandModel()
-
-
 def _pose(fingers: np.ndarray, rotvec=(0.3, -0.2, 0.4)) -> np.ndarray:
-    lo, hi = finger_limits(MODEL)
-    q = MODEL.rest_pose()
-    q[0:3] = [0.05, 0.02, 0.5]
-    q[3:6] = rotvec
-    q[6:] = np.clip(fingers, lo, hi)
-    return q
+    return hand_pose(fingers, np.array([0.05, 0.02, 0.5, *rotvec]))
 
 
 def _frame(k: int, frame_id: str = 'cam_a'):

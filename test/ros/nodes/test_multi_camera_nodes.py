@@ -13,24 +13,24 @@ from pathlib import Path
 import numpy as np
 import pytest
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
-from node_fixtures import CONFIG_DIR, NodeAssets, header, node_assets, params, running
+from node_fixtures import (
+    NodeAssets,
+    candidates_msg,
+    header,
+    ik_node,
+    node_lookup,
+    observation_msg,
+    running,
+)
+from repo_paths import CONFIG_DIR
 from std_msgs.msg import String
 
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.hand.glove import default_hand
-from colorglove_ros.core.lookup.database import load_database
-from colorglove_ros.core.lookup.search import PoseLookup
 from colorglove_ros.core.segmentation.segmenter import load_segmenter
 from colorglove_ros.core.synthetic import frames as synth
 from colorglove_ros.core.synthetic.conditions import sample_conditions
-from colorglove_ros.ros.conversions import (
-    candidates_to_msg,
-    crop_from_observation_msg,
-    observation_to_msg,
-    tiny_labels_from_observation_msg,
-)
 from colorglove_ros.ros.launcher import NodeSpec
-from colorglove_ros.ros.nodes.ik_node import IKNode
 from colorglove_ros.ros.pipeline_run import PipelineRun, bag_feed, run_pipeline, summarize
 from colorglove_ros.tools import make_bag
 
@@ -48,11 +48,6 @@ DEPTH_TARGET_2_CAMERAS_MM = 10.0
 
 
 @pytest.fixture(scope='module')
-def assets(tmp_path_factory: pytest.TempPathFactory) -> NodeAssets:
-    return node_assets(tmp_path_factory)
-
-
-@pytest.fixture(scope='module')
 def stereo_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     bag = tmp_path_factory.mktemp('stereo') / 'bag'
     assert make_bag.main(['--seed', str(SEED), '--frames', str(FRAMES), '--output', str(bag),
@@ -61,20 +56,16 @@ def stereo_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope='module')
-def stereo_messages(assets: NodeAssets) -> tuple[HandPoseCandidates, HandObservation]:
+def stereo_messages(node_assets: NodeAssets) -> tuple[HandPoseCandidates, HandObservation]:
     """One instant seen by both cameras: the primary's candidates and the second camera's
     observation, as lookup_node and the second segmentation_node would send them."""
     rng = np.random.default_rng(SEED)
     q = synth.sample_pose(rng, RIG[0], out_of_frame_prob=0.0)
     views = synth.render_frames_multi(q, RIG, rng, sample_conditions(rng, 'test'))
-    segmenter = load_segmenter(str(assets.color_config))
-    first, second = (segmenter.process(view.image_rgb) for view in views)
-    assert first.hand_found and second.hand_found, (first.status, second.status)
-    primary = observation_to_msg(first, header(300, 0, RIG[0].frame_id))
-    result = PoseLookup(load_database(assets.database), 40, 10).lookup(
-        tiny_labels_from_observation_msg(primary), crop_from_observation_msg(primary), RIG[0])
-    return (candidates_to_msg(primary, result, lookup_time_ms=1.0),
-            observation_to_msg(second, header(300, 0, SECOND.frame_id)))
+    segmenter = load_segmenter(str(node_assets.color_config))
+    primary = observation_msg(segmenter, views[0].image_rgb, header(300, 0, RIG[0].frame_id))
+    return (candidates_msg(node_lookup(node_assets), primary, RIG[0]),
+            observation_msg(segmenter, views[1].image_rgb, header(300, 0, SECOND.frame_id)))
 
 
 def _second_camera_constraints(status: str) -> int:
@@ -92,9 +83,9 @@ def test_ik_node_waits_for_the_second_view_of_a_frame(
     wrong_frame.header = header(301, 0, RIG[0].frame_id)
     late = copy.deepcopy(candidates)
     late.header = header(301, 0, RIG[0].frame_id)
-    with running(lambda ctx: IKNode(context=ctx, parameter_overrides=params(
-            calibration_file=str(STEREO), publish_overlay=False,
-            extra_observation_topics=SECOND_OBSERVATION, extra_observation_wait_s=0.5))) as h:
+    with running(ik_node(calibration_file=str(STEREO), publish_overlay=False,
+                         extra_observation_topics=SECOND_OBSERVATION,
+                         extra_observation_wait_s=0.5)) as h:
         status = h.collect(String, 'hand/tracking_status')
         candidates_pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
         second_pub = h.publisher(HandObservation, SECOND_OBSERVATION)
@@ -140,10 +131,10 @@ def _constraints_per_camera(statuses: list[str]) -> np.ndarray:
     return np.array([[int(m.group(1)), int(m.group(2))] for m in counts]).reshape(-1, 2)
 
 
-def test_second_camera_lowers_depth_error(assets: NodeAssets, stereo_bag: Path) -> None:
+def test_second_camera_lowers_depth_error(node_assets: NodeAssets, stereo_bag: Path) -> None:
     model = default_hand()[0]
-    mono = _run(assets, stereo_bag, two_cameras=False)
-    stereo = _run(assets, stereo_bag, two_cameras=True)
+    mono = _run(node_assets, stereo_bag, two_cameras=False)
+    stereo = _run(node_assets, stereo_bag, two_cameras=True)
     one, two = summarize(mono, model), summarize(stereo, model)
     print({'1 camera': one, '2 cameras': two})
     for run, figures in ((mono, one), (stereo, two)):

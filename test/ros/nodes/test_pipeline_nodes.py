@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import shutil
 import subprocess
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -18,9 +19,12 @@ from node_fixtures import (
     glove_frame,
     hand_far_out_of_frame_rgb,
     header,
-    node_assets,
+    ik_node,
+    lookup_node,
+    node_lookup,
     params,
     running,
+    segmentation_node,
     start_node_process,
 )
 from rclpy.qos import qos_profile_sensor_data
@@ -32,64 +36,27 @@ from visualization_msgs.msg import Marker, MarkerArray
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.hand.model import DOF_NAMES, FINGER_DOF_NAMES
-from colorglove_ros.core.lookup.database import load_database
-from colorglove_ros.core.lookup.search import PoseLookup
 from colorglove_ros.core.segmentation.segmenter import load_segmenter
 from colorglove_ros.ros.conversions import (
     blobs_from_observation_msg,
     crop_from_observation_msg,
-    observation_to_msg,
     tiny_labels_from_observation_msg,
 )
 from colorglove_ros.ros.image import array_to_image
 from colorglove_ros.ros.nodes.camera_node import CameraNode
 from colorglove_ros.ros.nodes.common import StartupError
-from colorglove_ros.ros.nodes.ik_node import IKNode
-from colorglove_ros.ros.nodes.lookup_node import LookupNode
-from colorglove_ros.ros.nodes.segmentation_node import DEBUG_PALETTE, SegmentationNode
+from colorglove_ros.ros.nodes.segmentation_node import DEBUG_PALETTE
 
 # every test gets a ROS domain of its own on loopback (other runs on this machine share domain 0)
 pytestmark = [pytest.mark.dds, pytest.mark.usefixtures('isolated_ros_domain')]
 
-GOOD_SEED = 1
-
-
-@pytest.fixture(scope='session')
-def assets(tmp_path_factory: pytest.TempPathFactory) -> NodeAssets:
-    return node_assets(tmp_path_factory)
-
-
-@pytest.fixture(scope='session')
-def good_rgb() -> np.ndarray:
-    return glove_frame(GOOD_SEED).image_rgb
-
-
-@pytest.fixture(scope='session')
-def good_observation(assets: NodeAssets, good_rgb: np.ndarray) -> HandObservation:
-    """What the segmenter makes of the good frame, as the segmentation node would send it."""
-    observation = load_segmenter(str(assets.color_config)).process(good_rgb)
-    assert observation.hand_found, observation.status
-    return observation_to_msg(observation, header(200, 500, 'camera_optical_frame'))
-
-
-def _segmentation(assets: NodeAssets):
-    return lambda ctx: SegmentationNode(context=ctx, parameter_overrides=params(
-        color_calibration_file=str(assets.color_config)))
-
-
-def _lookup(assets: NodeAssets):
-    return lambda ctx: LookupNode(context=ctx, parameter_overrides=params(
-        database_path=str(assets.database), num_candidates=40, num_neighbors=10))
-
-
-def _ik(**overrides):
-    return lambda ctx: IKNode(context=ctx, parameter_overrides=params(**overrides))
+# good_rgb, good_observation and good_candidates: session fixtures of test/ros/conftest.py
 
 
 # ------------------------------------------------------------------------ segmentation_node
-def test_segmentation_node_rgb8_and_bgr8(assets: NodeAssets, good_rgb: np.ndarray) -> None:
-    expected = load_segmenter(str(assets.color_config)).process(good_rgb)
-    with running(_segmentation(assets)) as h:
+def test_segmentation_node_rgb8_and_bgr8(node_assets: NodeAssets, good_rgb: np.ndarray) -> None:
+    expected = load_segmenter(str(node_assets.color_config)).process(good_rgb)
+    with running(segmentation_node(node_assets)) as h:
         out = h.collect(HandObservation, 'hand/observation')
         pub = h.publisher(Image, 'camera/image_raw')
         rgb_msg = h.exchange(pub, array_to_image(good_rgb, 'rgb8', header(100, 7, 'cam_rgb')),
@@ -119,8 +86,8 @@ def test_segmentation_node_rgb8_and_bgr8(assets: NodeAssets, good_rgb: np.ndarra
         [(b.color_label, b.pixel_count) for b in bgr_msg.blobs]
 
 
-def test_segmentation_node_padded_rows_and_debug_image(assets: NodeAssets,
-                                                        good_rgb: np.ndarray) -> None:
+def test_segmentation_node_padded_rows_and_debug_image(node_assets: NodeAssets,
+                                                       good_rgb: np.ndarray) -> None:
     """Rows padded to a larger ``step`` segment like packed rows; the debug image shows the
     glove colours where the segmenter found glove."""
     packed = array_to_image(good_rgb, 'rgb8')
@@ -128,9 +95,7 @@ def test_segmentation_node_padded_rows_and_debug_image(assets: NodeAssets,
     padded_rows[:, :1920] = good_rgb.reshape(480, 1920)
     padded = Image(header=header(120, 0, 'cam'), height=480, width=640, encoding='rgb8',
                    step=1920 + 64, data=padded_rows.tobytes())
-    factory = lambda ctx: SegmentationNode(context=ctx, parameter_overrides=params(  # noqa: E731
-        color_calibration_file=str(assets.color_config), publish_debug_image=True))
-    with running(factory) as h:
+    with running(segmentation_node(node_assets, publish_debug_image=True)) as h:
         out = h.collect(HandObservation, 'hand/observation')
         debug = h.collect(Image, 'hand/segmentation_debug')
         pub = h.publisher(Image, 'camera/image_raw')
@@ -162,9 +127,9 @@ def _bad_images(rgb: np.ndarray) -> dict[str, tuple[Image, str]]:
             'short': (short, 'image data holds'), 'depth': (depth, '32FC1')}
 
 
-def test_segmentation_node_reports_bad_frames_and_keeps_going(assets: NodeAssets,
-                                                               good_rgb: np.ndarray) -> None:
-    with running(_segmentation(assets)) as h:
+def test_segmentation_node_reports_bad_frames_and_keeps_going(node_assets: NodeAssets,
+                                                              good_rgb: np.ndarray) -> None:
+    with running(segmentation_node(node_assets)) as h:
         out = h.collect(HandObservation, 'hand/observation')
         pub = h.publisher(Image, 'camera/image_raw')
         for sec, (name, (bad, problem)) in enumerate(_bad_images(good_rgb).items()):
@@ -178,12 +143,12 @@ def test_segmentation_node_reports_bad_frames_and_keeps_going(assets: NodeAssets
             assert good.hand_found and good.header.stamp.sec == 11 + 2 * sec, name
 
 
-def test_segmentation_node_no_hand_and_hand_out_of_frame(assets: NodeAssets,
+def test_segmentation_node_no_hand_and_hand_out_of_frame(node_assets: NodeAssets,
                                                          good_rgb: np.ndarray) -> None:
     frames = {'background': background_rgb(),
               'far_left': hand_far_out_of_frame_rgb(4),
               **{f'border_{s}': glove_frame(s, out_of_frame=True).image_rgb for s in (2, 5, 9)}}
-    with running(_segmentation(assets)) as h:
+    with running(segmentation_node(node_assets)) as h:
         out = h.collect(HandObservation, 'hand/observation')
         pub = h.publisher(Image, 'camera/image_raw')
         results = {name: h.exchange(pub, array_to_image(rgb, 'rgb8', header(50 + i)), out)
@@ -204,14 +169,14 @@ def test_segmentation_node_no_hand_and_hand_out_of_frame(assets: NodeAssets,
 
 
 # ------------------------------------------------------------------------------ lookup_node
-def test_lookup_node_candidates(assets: NodeAssets, good_observation: HandObservation) -> None:
-    lookup = PoseLookup(load_database(assets.database), 40, 10)
+def test_lookup_node_candidates(node_assets: NodeAssets, good_observation: HandObservation) -> None:
+    lookup = node_lookup(node_assets)
     camera = load_calibration(CONFIG_DIR / 'calibration.yaml').primary
     # the node blends each finger from the observation's blobs (finger_evidence: true)
     expected = lookup.lookup(tiny_labels_from_observation_msg(good_observation),
                              crop_from_observation_msg(good_observation), camera,
                              blobs_from_observation_msg(good_observation))
-    with running(_lookup(assets)) as h:
+    with running(lookup_node(node_assets)) as h:
         out = h.collect(HandPoseCandidates, 'hand/pose_candidates')
         pub = h.publisher(HandObservation, 'hand/observation')
         msg = h.exchange(pub, good_observation, out)
@@ -237,12 +202,12 @@ def test_lookup_node_candidates(assets: NodeAssets, good_observation: HandObserv
     assert msg.lookup_time_ms > 0.0
 
 
-def test_lookup_node_passes_no_hand_through(assets: NodeAssets) -> None:
+def test_lookup_node_passes_no_hand_through(node_assets: NodeAssets) -> None:
     no_hand = HandObservation(header=header(300, 1, 'cam'), hand_found=False,
                               status='out_of_frame', image_width=640, image_height=480)
     bad_size = HandObservation(header=header(301, 0, 'cam'), hand_found=True, image_width=640,
                                image_height=480, tiny_labels=[1] * 100, crop_scale=3.0)
-    with running(_lookup(assets)) as h:
+    with running(lookup_node(node_assets)) as h:
         out = h.collect(HandPoseCandidates, 'hand/pose_candidates')
         pub = h.publisher(HandObservation, 'hand/observation')
         msg = h.exchange(pub, no_hand, out)
@@ -254,11 +219,11 @@ def test_lookup_node_passes_no_hand_through(assets: NodeAssets) -> None:
     assert not bad.hand_found and 'tiny_labels must have shape (1600)' in bad.status, bad.status
 
 
-def test_lookup_node_rejects_non_finite_crop(assets: NodeAssets,
+def test_lookup_node_rejects_non_finite_crop(node_assets: NodeAssets,
                                              good_observation: HandObservation) -> None:
     bad = copy.deepcopy(good_observation)
     bad.crop_offset_x = float('inf')
-    with running(_lookup(assets)) as h:
+    with running(lookup_node(node_assets)) as h:
         out = h.collect(HandPoseCandidates, 'hand/pose_candidates')
         pub = h.publisher(HandObservation, 'hand/observation')
         msg = h.exchange(pub, bad, out)
@@ -267,22 +232,11 @@ def test_lookup_node_rejects_non_finite_crop(assets: NodeAssets,
 
 
 # ------------------------------------------------------------------------------ ik_node
-@pytest.fixture(scope='session')
-def good_candidates(assets: NodeAssets, good_observation: HandObservation) -> HandPoseCandidates:
-    from colorglove_ros.ros.conversions import candidates_to_msg
-
-    lookup = PoseLookup(load_database(assets.database), 40, 10)
-    camera = load_calibration(CONFIG_DIR / 'calibration.yaml').primary
-    result = lookup.lookup(tiny_labels_from_observation_msg(good_observation),
-                           crop_from_observation_msg(good_observation), camera)
-    return candidates_to_msg(good_observation, result, lookup_time_ms=1.0)
-
-
 def test_ik_node_outputs(good_candidates: HandPoseCandidates, good_rgb: np.ndarray) -> None:
     no_hand = HandPoseCandidates(header=header(200, 600_000_000, 'camera_optical_frame'),
                                  hand_found=False, status='no_glove',
                                  dof_names=list(DOF_NAMES))
-    with running(_ik(publish_overlay=True)) as h:
+    with running(ik_node(publish_overlay=True)) as h:
         joints = h.collect(JointState, 'hand/joint_states')
         wrist = h.collect(PoseStamped, 'hand/wrist_pose')
         markers = h.collect(MarkerArray, 'hand/markers')
@@ -320,6 +274,32 @@ def test_ik_node_outputs(good_candidates: HandPoseCandidates, good_rgb: np.ndarr
     assert len(joints) == 1 and len(wrist) == 1
 
 
+@dataclass
+class _IKAnswers:
+    """What ik_node did with a bad candidates message followed by a good one."""
+
+    bad_status: str
+    good_status: str
+    joints: list[JointState]
+    overlays: list[Image]
+    camera_subscribers: int
+
+
+def _bad_then_good(bad: HandPoseCandidates, good: HandPoseCandidates,
+                   **overrides) -> _IKAnswers:
+    """Send ``bad`` then ``good`` to an ik_node with the parameters ``overrides``."""
+    with running(ik_node(**overrides)) as h:
+        status = h.collect(String, 'hand/tracking_status')
+        joints = h.collect(JointState, 'hand/joint_states')
+        overlays = h.collect(Image, 'hand/overlay')
+        pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
+        bad_status = h.exchange(pub, bad, status).data
+        good_status = h.exchange(pub, good, status).data
+        h.settle(0.2)
+        camera_subscribers = h.probe.count_subscribers('/camera/image_raw')
+    return _IKAnswers(bad_status, good_status, joints, overlays, camera_subscribers)
+
+
 def test_ik_node_survives_malformed_candidates(good_candidates: HandPoseCandidates) -> None:
     """A candidates message with hand_found and wrong DOF names is reported, not fatal."""
     wrong_names = HandPoseCandidates()
@@ -328,17 +308,11 @@ def test_ik_node_survives_malformed_candidates(good_candidates: HandPoseCandidat
     wrong_names.observation = good_candidates.observation
     wrong_names.dof_names = ['a', 'b']
     wrong_names.blended_pose = [0.0, 0.0]
-    with running(_ik()) as h:     # defaults: no overlay, so no camera image subscription
-        status = h.collect(String, 'hand/tracking_status')
-        overlay = h.collect(Image, 'hand/overlay')
-        pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
-        bad = h.exchange(pub, wrong_names, status)
-        good = h.exchange(pub, good_candidates, status)
-        h.settle(0.2)
-        camera_subscribers = h.probe.count_subscribers('/camera/image_raw')
-    assert bad.data.startswith('no hand')
-    assert good.data.startswith('tracking:')
-    assert not overlay and camera_subscribers == 0
+    # defaults: no overlay, so no camera image subscription
+    answers = _bad_then_good(wrong_names, good_candidates)
+    assert answers.bad_status.startswith('no hand')
+    assert answers.good_status.startswith('tracking:')
+    assert not answers.overlays and answers.camera_subscribers == 0
 
 
 def _short_pose(msg: HandPoseCandidates) -> None:
@@ -362,16 +336,10 @@ def test_ik_node_survives_bad_candidates(spoil, good_candidates: HandPoseCandida
     bad = copy.deepcopy(good_candidates)
     bad.header = header(200, 400_000_000, 'camera_optical_frame')
     spoil(bad)
-    with running(_ik(publish_overlay=False)) as h:
-        status = h.collect(String, 'hand/tracking_status')
-        joints = h.collect(JointState, 'hand/joint_states')
-        pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
-        reported = h.exchange(pub, bad, status)
-        good = h.exchange(pub, good_candidates, status)
-        h.settle(0.2)
-    assert reported.data.startswith('no hand'), reported.data
-    assert good.data.startswith('tracking:')
-    assert [m.header.stamp.nanosec for m in joints] == [500]
+    answers = _bad_then_good(bad, good_candidates, publish_overlay=False)
+    assert answers.bad_status.startswith('no hand'), answers.bad_status
+    assert answers.good_status.startswith('tracking:')
+    assert [m.header.stamp.nanosec for m in answers.joints] == [500]
 
 
 # ------------------------------------------------------------------------------ camera_node
@@ -450,12 +418,12 @@ def test_camera_node_publishes_the_calibrated_camera_it_is(tmp_path: Path) -> No
 
 
 # ------------------------------------------------------------------------ start-up failures
-def test_nodes_exit_with_code_1_on_bad_startup(tmp_path: Path, assets: NodeAssets,
+def test_nodes_exit_with_code_1_on_bad_startup(tmp_path: Path, node_assets: NodeAssets,
                                                isolated_ros_domain: dict) -> None:
     """Each node process given a bad device, file, database or config prints why and exits 1.
     The processes run side by side (each takes seconds to import on a loaded machine)."""
     corrupt = tmp_path / 'corrupt_db'
-    shutil.copytree(assets.database, corrupt)
+    shutil.copytree(node_assets.database, corrupt)
     (corrupt / 'manifest.json').write_text('{not json')
     missing_db = tmp_path / 'no_database_here'
     missing_ik = tmp_path / 'no_ik.yaml'
@@ -497,16 +465,16 @@ def test_nodes_exit_with_code_1_on_bad_startup(tmp_path: Path, assets: NodeAsset
 
 
 # ------------------------------------------------------------------------ parameters
-def test_start_up_parameters_are_read_only(assets: NodeAssets) -> None:
+def test_start_up_parameters_are_read_only(node_assets: NodeAssets) -> None:
     """A parameter read only at start-up is declared read-only: ROS refuses a run-time change
     with its standard reason instead of accepting a value the node would never use."""
     from rclpy.parameter import Parameter
 
-    with running(_segmentation(assets)) as h:
+    with running(segmentation_node(node_assets)) as h:
         node = h.nodes[0]
         descriptor = node.describe_parameter('color_calibration_file')
         assert descriptor.read_only
         result = node.set_parameters([Parameter('color_calibration_file',
                                                 value='config/other.yaml')])[0]
         assert not result.successful and 'read-only' in result.reason
-        assert node.get_parameter('color_calibration_file').value == str(assets.color_config)
+        assert node.get_parameter('color_calibration_file').value == str(node_assets.color_config)

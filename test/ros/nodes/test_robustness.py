@@ -15,7 +15,6 @@ from node_fixtures import (
     executable,
     glove_frame,
     header,
-    node_assets,
     running,
     write_params_file,
 )
@@ -30,11 +29,6 @@ pytestmark = [pytest.mark.dds, pytest.mark.usefixtures('isolated_ros_domain')]
 
 FRAME_PERIOD_S = 0.2
 LATEST = QoSProfile(depth=1, reliability=QoSReliabilityPolicy.RELIABLE)
-
-
-@pytest.fixture(scope='module')
-def assets(tmp_path_factory: pytest.TempPathFactory) -> NodeAssets:
-    return node_assets(tmp_path_factory)
 
 
 @pytest.fixture(scope='module')
@@ -114,9 +108,9 @@ def _watch_in_background(launcher: Launcher) -> tuple[threading.Event, threading
     return stop, thread
 
 
-def test_hand_leaves_and_reenters_view(tmp_path: Path, assets: NodeAssets,
+def test_hand_leaves_and_reenters_view(tmp_path: Path, node_assets: NodeAssets,
                                        hand_frames: list[np.ndarray]) -> None:
-    launcher = Launcher(_specs(assets, tmp_path, with_ik=True), sigint_grace_s=5.0)
+    launcher = Launcher(_specs(node_assets, tmp_path, with_ik=True), sigint_grace_s=5.0)
     launcher.start()
     try:
         with running() as h:
@@ -153,9 +147,9 @@ def test_hand_leaves_and_reenters_view(tmp_path: Path, assets: NodeAssets,
                                                  (1, '/hand/observation')],
                          ids=['segmentation', 'lookup'])
 def test_graph_recovers_after_a_node_is_killed(victim: int, input_topic: str, tmp_path: Path,
-                                               assets: NodeAssets,
+                                               node_assets: NodeAssets,
                                                hand_frames: list[np.ndarray]) -> None:
-    launcher = Launcher(_specs(assets, tmp_path, respawn=True), sigint_grace_s=5.0)
+    launcher = Launcher(_specs(node_assets, tmp_path, respawn=True), sigint_grace_s=5.0)
     launcher.start()
     stop, watcher = _watch_in_background(launcher)
     try:

@@ -1,0 +1,342 @@
+"""One frame through the tracker: segment -> look up -> track, each stage a function of the core
+objects and plain data that returns the stage's result or a :class:`NoHand` with the reason.
+
+Every gate of the per-frame recipe is here once: a bad image, an implausible observation, a
+failed lookup, no database image near enough (``max_image_distance``), a prior the tracker
+cannot use (or at an implausible depth), a fit with no matched constraint, a non-finite pose,
+a fitted hand at an implausible depth. The ROS nodes (segmentation, lookup, ik) call these
+stage functions between their message conversions; the evaluation
+(``core.evaluation.sequences``) and a single-process runner go through
+:class:`FramePipeline`. No rclpy import.
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from colorglove_ros.core.lookup.types import LookupResult
+from colorglove_ros.core.segmentation.crop import TinyCrop
+from colorglove_ros.core.segmentation.types import Observation
+from colorglove_ros.core.tracking.types import Blobs, CameraObservation, IKError, PosePrior
+from colorglove_ros.core.validation import (
+    InvalidInputError,
+    InvalidObservationError,
+    validate_hand_depth,
+    validate_observation,
+)
+
+if TYPE_CHECKING:
+    from colorglove_ros.core.hand.model import HandModel
+    from colorglove_ros.core.tracking.tracker import IKResult
+
+# The stages import the segmenter, the search and the temporal prior where they run: a node
+# imports only the stage it runs (start-up time).
+
+__all__ = [
+    'DEFAULT_MAX_IMAGE_DISTANCE', 'StageLimits', 'NODE_LIMITS', 'UNGATED', 'NoHand', 'Tracked',
+    'TemporalPrior', 'Observer', 'FrameObservations', 'FrameLookup', 'FramePipeline',
+    'segment_frame', 'bad_image', 'observe_image', 'image_observer', 'look_up', 'track',
+    'bad_prior', 'hand_keypoints_at_plausible_depth',
+]
+
+# Nearest database image farther than this from the observation (tiny-image pixels): glove-
+# coloured clutter or noise that resembles no hand pose. lookup_node's parameter default.
+DEFAULT_MAX_IMAGE_DISTANCE = 4.5
+
+
+@dataclass(frozen=True)
+class StageLimits:
+    """The gates' settings. The defaults are the nodes' (the product): a lookup whose nearest
+    database image is farther than ``max_image_distance`` is no hand; with
+    ``require_constraint`` a fit that matched no observed blob is refused; with
+    ``check_depth`` a prior or a fit with any hand keypoint at an implausible depth from any
+    camera (``core.validation.validate_hand_depth``) is refused."""
+
+    max_image_distance: float = DEFAULT_MAX_IMAGE_DISTANCE
+    require_constraint: bool = True
+    check_depth: bool = True
+
+
+NODE_LIMITS = StageLimits()
+
+# Every output of the tracker counts (a non-finite pose is still refused): the IK evaluation
+# measures the tracker itself, as its figures always have, not the nodes' refusals.
+UNGATED = StageLimits(max_image_distance=math.inf, require_constraint=False, check_depth=False)
+
+
+@dataclass(frozen=True)
+class NoHand:
+    """No hand in this frame at one stage, and why (the nodes publish ``reason`` as the 'no
+    hand' status). ``warn``: the stage failed on its input or refused a fit (the nodes log a
+    warning), as opposed to nothing seen, the track lost or not a hand. ``partial``: what the
+    stage computed before it gave up (the segmenter's ``Observation``, the ``LookupResult``,
+    the tracker's ``IKResult``), if anything."""
+
+    reason: str
+    warn: bool = False
+    partial: Any = None
+
+
+class Tracked:
+    """A tracked frame: the tracker's result (``found``, finite ``q``) and the hand keypoints
+    at its pose (computed on first use unless the depth gate already did)."""
+
+    def __init__(self, result: IKResult, model: HandModel,
+                 keypoints: np.ndarray | None = None) -> None:
+        self.result = result
+        self._model = model
+        self._keypoints = keypoints
+
+    @property
+    def keypoints(self) -> np.ndarray:
+        """(21, 3) hand keypoints of the pose in the primary camera's optical frame."""
+        if self._keypoints is None:
+            self._keypoints = self._model.keypoints(self.result.q)
+        return self._keypoints
+
+
+@dataclass(frozen=True)
+class TemporalPrior:
+    """Settings of the temporal reweighting of the lookup's neighbours
+    (``core.lookup.temporal_prior.reweight_by_previous``) by the tracker's previous output."""
+
+    tau_rad: float
+    rotation_weight: float = 1.0
+
+
+# ---------------------------------------------------------------------------- segment
+def bad_image(exc: Exception) -> NoHand:
+    """The 'no hand' of a camera image that cannot be segmented (wrong size or encoding)."""
+    return NoHand(f'bad image: {exc}', warn=True)
+
+
+def _check_observation(observation: Observation) -> None:
+    """What the lookup and the IK will read from an observation with ``hand_found``
+    (``core.validation.validate_observation``); raises ``InvalidObservationError``."""
+    blobs = observation.blobs
+    crop = observation.crop
+    validate_observation(
+        image_width=observation.image_width, image_height=observation.image_height,
+        tiny_labels=observation.tiny_labels,
+        crop=(None, None, None) if crop is None else (crop.scale, crop.offset_x, crop.offset_y),
+        blob_color=np.array([b.color_label for b in blobs], dtype=np.int64),
+        blob_centroid_px=np.array([[b.centroid_x, b.centroid_y] for b in blobs],
+                                  dtype=float).reshape(-1, 2),
+        blob_pixel_count=np.array([b.pixel_count for b in blobs], dtype=np.int64),
+        glove_pixel_count=observation.glove_pixel_count)
+
+
+def segment_frame(segmenter: Any, image_rgb: np.ndarray, keep_labels: bool = False
+                  ) -> Observation | NoHand:
+    """Segment one (H, W, 3) uint8 RGB image (``GloveSegmenter.process``). The observation
+    says itself whether the glove was found (``hand_found``, ``status``); :class:`NoHand` for
+    an image the segmenter refuses ('bad image') or an observation with a hand that fails its
+    own checks ('implausible observation')."""
+    from colorglove_ros.core.segmentation.segmenter import SegmentationInputError
+
+    try:
+        observation = segmenter.process(image_rgb, keep_labels=keep_labels)
+    except SegmentationInputError as exc:
+        return bad_image(exc)
+    if observation.hand_found:
+        try:
+            _check_observation(observation)
+        except InvalidObservationError as exc:
+            return NoHand(f'implausible observation: {exc}', partial=observation)
+    return observation
+
+
+Observer = Callable[[Any, bool], tuple[CameraObservation, TinyCrop | None]]
+"""Maps (one camera's view of a frame, is-primary-camera) to the camera's observation for the
+tracker and, for the primary camera, the tiny crop the lookup runs on (None = no hand)."""
+
+
+def observe_image(segmenter: Any, image_rgb: np.ndarray, primary: bool
+                  ) -> tuple[CameraObservation, TinyCrop | None]:
+    """One camera's observation of an RGB image (:func:`segment_frame`): its blobs and crop,
+    found when the segmentation found the glove with at least one blob; for the primary
+    camera also the tiny crop to look up."""
+    observation = segment_frame(segmenter, image_rgb)
+    if isinstance(observation, NoHand):
+        return CameraObservation(False), None
+    blobs = Blobs.empty()
+    if observation.blobs:
+        blobs = Blobs(np.array([b.color_label for b in observation.blobs]),
+                      np.array([[b.centroid_x, b.centroid_y] for b in observation.blobs]),
+                      np.array([b.pixel_count for b in observation.blobs], float))
+    found = bool(observation.hand_found) and len(blobs) > 0
+    tiny = TinyCrop(observation.tiny_labels, observation.crop) if found and primary else None
+    return CameraObservation(found, blobs, observation.crop), tiny
+
+
+def image_observer(segmenter: Any, image_of: Callable[[Any], np.ndarray] = np.asarray
+                   ) -> Observer:
+    """An :data:`Observer` segmenting each view's RGB image (``image_of(view)``; default: the
+    view is the image) with ``segmenter``."""
+    def observe(view: Any, primary: bool) -> tuple[CameraObservation, TinyCrop | None]:
+        return observe_image(segmenter, image_of(view), primary)
+    return observe
+
+
+# ---------------------------------------------------------------------------- look up
+def look_up(lookup: Any, tiny: TinyCrop, camera: Any, blobs: Blobs | None = None,
+            limits: StageLimits = NODE_LIMITS) -> LookupResult | NoHand:
+    """Look a tiny crop of ``camera``'s image up (``PoseLookup.lookup``; with the same image's
+    ``blobs`` the fingers are blended per finger). :class:`NoHand` when the lookup fails
+    ('lookup: ...') or its nearest database image is more than
+    ``limits.max_image_distance`` tiny pixels away (not a hand; ``partial`` is the result)."""
+    from colorglove_ros.core.lookup.search import SearchError
+
+    try:
+        result = lookup.lookup(tiny.labels, tiny.transform, camera, blobs)
+    except (SearchError, ValueError) as exc:
+        return NoHand(f'lookup: {exc}', warn=True)
+    if limits.max_image_distance < math.inf:
+        nearest = float(result.distances[0]) if len(result.distances) else math.inf
+        if not nearest <= limits.max_image_distance:
+            return NoHand(f'lookup: nearest database image {nearest:.2f} tiny px away (more '
+                          f'than max_image_distance {limits.max_image_distance:g}): not a hand',
+                          partial=result)
+    return result
+
+
+# ---------------------------------------------------------------------------- track
+def bad_prior(tracker: Any, exc: Exception) -> NoHand:
+    """The 'no hand' of a lookup prior (or observation) the tracker cannot use; the tracker
+    starts again from the next frame."""
+    tracker.reset()
+    return NoHand(f'bad candidates: {exc}', warn=True)
+
+
+def hand_keypoints_at_plausible_depth(tracker: Any, q: np.ndarray) -> np.ndarray:
+    """The hand keypoints of pose ``q`` (primary camera frame), refused with
+    ``InvalidPriorError`` when any is at an implausible depth from any of the tracker's
+    cameras (behind or just in front of its plane, or far away)."""
+    keypoints = tracker.model.keypoints(q)
+    for camera in tracker.cameras:
+        validate_hand_depth(camera.world_to_camera(keypoints), camera.name)
+    return keypoints
+
+
+def track(tracker: Any, prior: PosePrior | LookupResult | None,
+          observations: Sequence[CameraObservation], stamp: float,
+          limits: StageLimits = NODE_LIMITS, *, temporal: TemporalPrior | None = None,
+          upstream_reason: str = '') -> Tracked | NoHand:
+    """Track one frame (``HandTracker.update``) from the lookup's ``prior`` (None: no hand
+    upstream, ``upstream_reason`` says why) and one observation per camera (primary first),
+    ``stamp`` in seconds. With ``temporal`` the neighbours of a ``LookupResult`` are first
+    reweighted by the tracker's previous output.
+
+    :class:`NoHand` when the prior is unusable or at an implausible depth ('bad candidates:
+    ...'), the tracker found nothing (the upstream reason, or 'lost'), or the fit is refused:
+    no constraint matched an observed blob (``limits.require_constraint``), a non-finite pose,
+    or a hand at an implausible depth (``limits.check_depth``). A refusal resets the tracker.
+    """
+    if temporal is not None and prior is not None:
+        from colorglove_ros.core.lookup.temporal_prior import reweight_by_previous
+
+        prior = reweight_by_previous(prior, tracker.previous_pose, temporal.tau_rad,
+                                     temporal.rotation_weight)
+    try:
+        if prior is not None and not isinstance(prior, PosePrior):
+            prior = PosePrior.from_lookup(prior)
+        if prior is not None and limits.check_depth:
+            hand_keypoints_at_plausible_depth(tracker, prior.q_blend)
+        result = tracker.update(prior, observations, stamp)
+    except (IKError, InvalidInputError, ValueError) as exc:
+        return bad_prior(tracker, exc)
+    if not result.found or result.q is None:
+        return NoHand(upstream_reason or 'lost', partial=result)
+    reason = ''
+    keypoints = None
+    if limits.require_constraint and result.num_constraints == 0:
+        reason = 'no constraint matched an observed blob'
+    elif not np.all(np.isfinite(result.q)):
+        reason = 'non-finite pose'
+    elif limits.check_depth:
+        try:
+            keypoints = hand_keypoints_at_plausible_depth(tracker, result.q)
+        except InvalidInputError as exc:
+            reason = f'fitted pose refused: {exc}'
+    if reason:
+        tracker.reset()
+        return NoHand(reason, warn=True, partial=result)
+    return Tracked(result, tracker.model, keypoints)
+
+
+# ---------------------------------------------------------------------------- one process
+@dataclass(frozen=True)
+class FrameObservations:
+    """What every camera saw in one frame (primary first) and the primary camera's tiny crop
+    (None = no hand)."""
+
+    cameras: tuple[CameraObservation, ...]
+    tiny: TinyCrop | None
+
+
+@dataclass(frozen=True)
+class FrameLookup:
+    """The look-up stage's outcome for one frame and its wall time (0 when nothing was looked
+    up)."""
+
+    outcome: LookupResult | NoHand
+    time_ms: float
+
+    @property
+    def result(self) -> LookupResult | None:
+        """The lookup result, None when no hand."""
+        return None if isinstance(self.outcome, NoHand) else self.outcome
+
+
+class FramePipeline:
+    """Observe -> look up -> track in one process: ``observer`` turns each camera's view into
+    its observation (:func:`image_observer` segments RGB images), the lookup runs once on the
+    primary camera (``camera``), and any number of trackers (whose camera rigs start with the
+    same primary camera) track from that one lookup. With ``finger_evidence`` the lookup gets
+    the primary camera's blobs; ``limits`` are the gates (the nodes' by default);
+    ``temporal`` reweights the neighbours by each tracker's previous output."""
+
+    def __init__(self, observer: Observer, lookup: Any, camera: Any, *,
+                 limits: StageLimits = NODE_LIMITS, finger_evidence: bool = True,
+                 temporal: TemporalPrior | None = None) -> None:
+        self.observer = observer
+        self.lookup = lookup
+        self.camera = camera
+        self.limits = limits
+        self.finger_evidence = bool(finger_evidence)
+        self.temporal = temporal
+
+    def observe(self, views: Sequence[Any]) -> FrameObservations:
+        """Every camera's observation of one frame's views (primary first)."""
+        seen = [self.observer(view, k == 0) for k, view in enumerate(views)]
+        return FrameObservations(tuple(obs for obs, _ in seen), seen[0][1] if seen else None)
+
+    def look_up(self, seen: FrameObservations) -> FrameLookup:
+        """:func:`look_up` on the primary camera's crop, timed; no hand without one."""
+        primary = seen.cameras[0] if seen.cameras else None
+        if seen.tiny is None or primary is None or not primary.hand_found:
+            return FrameLookup(NoHand('no crop'), 0.0)
+        started = time.perf_counter()
+        outcome = look_up(self.lookup, seen.tiny, self.camera,
+                          primary.blobs if self.finger_evidence else None, self.limits)
+        return FrameLookup(outcome, 1e3 * (time.perf_counter() - started))
+
+    def track(self, tracker: Any, found: FrameLookup, seen: FrameObservations,
+              stamp: float) -> Tracked | NoHand:
+        """:func:`track` with the frame's lookup and the observations of the tracker's own
+        cameras (the first ``len(tracker.cameras)``)."""
+        outcome = found.outcome
+        prior = None if isinstance(outcome, NoHand) else outcome
+        return track(tracker, prior, seen.cameras[:len(tracker.cameras)], stamp, self.limits,
+                     temporal=self.temporal,
+                     upstream_reason=outcome.reason if isinstance(outcome, NoHand) else '')
+
+    def process(self, tracker: Any, views: Sequence[Any], stamp: float) -> Tracked | NoHand:
+        """One frame: observe every view, look up, track."""
+        seen = self.observe(views)
+        return self.track(tracker, self.look_up(seen), seen, stamp)

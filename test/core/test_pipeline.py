@@ -1,0 +1,235 @@
+"""The per-frame recipe (core/pipeline.py): every gate refuses with its reason, a refusal resets
+the tracker, and a rendered glove frame goes through segment -> look up -> track in one
+process."""
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from colorglove_ros.core.lookup.search import PoseLookup
+from colorglove_ros.core.lookup.types import LookupResult, ProjectionConstraints
+from colorglove_ros.core.pipeline import (
+    NODE_LIMITS,
+    UNGATED,
+    FramePipeline,
+    NoHand,
+    StageLimits,
+    TemporalPrior,
+    Tracked,
+    image_observer,
+    look_up,
+    segment_frame,
+    track,
+)
+from colorglove_ros.core.segmentation.calibration_fit import (
+    fit_color_calibration,
+    render_training_frames,
+)
+from colorglove_ros.core.segmentation.crop import CropTransform, TinyCrop
+from colorglove_ros.core.segmentation.segmenter import GloveSegmenter
+from colorglove_ros.core.segmentation.types import Blob, Observation
+from colorglove_ros.core.synthetic import frames as synth
+from colorglove_ros.core.synthetic.conditions import sample_conditions
+from colorglove_ros.core.tracking.tracker import HandTracker, IKResult
+from colorglove_ros.core.tracking.types import Blobs, CameraObservation, PosePrior
+
+CAMERA = synth.default_camera()
+FAST_FIT = dict(max_per_class=1500, bits=5, augment_copies=1, background_components=6)
+
+
+@pytest.fixture(scope='module')
+def segmenter() -> GloveSegmenter:
+    """A segmenter with a quickly fitted calibration (8 rendered training frames)."""
+    return GloveSegmenter(fit_color_calibration(render_training_frames(8, 0), seed=0,
+                                                **FAST_FIT))
+
+
+@pytest.fixture(scope='module')
+def glove_rgb() -> np.ndarray:
+    """A rendered 640x480 'test' frame with the whole gloved hand in view."""
+    rng = np.random.default_rng(1)
+    q = synth.sample_pose(rng, CAMERA, out_of_frame_prob=0.0)
+    return synth.render_frame(q, CAMERA, rng, sample_conditions(rng, 'test')).image_rgb
+
+
+@pytest.fixture(scope='module')
+def lookup(small_database) -> PoseLookup:
+    return PoseLookup(small_database, 40, 10)
+
+
+@pytest.fixture
+def tracker(hand) -> HandTracker:
+    model, mesh, glove = hand
+    return HandTracker(model, mesh, [CAMERA], glove=glove)
+
+
+class _FakeTracker:
+    """A tracker whose update returns a given result; counts its resets."""
+
+    def __init__(self, model, result: IKResult | Exception) -> None:
+        self.model = model
+        self.cameras = (CAMERA,)
+        self.result = result
+        self.resets = 0
+        self.previous_pose = None
+
+    def update(self, prior, observations, stamp):
+        if isinstance(self.result, Exception):
+            raise self.result
+        return self.result
+
+    def reset(self) -> None:
+        self.resets += 1
+
+
+def _pose(depth_m: float = 0.5) -> np.ndarray:
+    q = np.zeros(26)
+    q[2] = depth_m
+    return q
+
+
+def _prior(depth_m: float = 0.5) -> PosePrior:
+    empty = ProjectionConstraints(np.zeros(0, np.int64), np.zeros(0, np.int64),
+                                  np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros(0))
+    return PosePrior(_pose(depth_m), empty)
+
+
+SEEN = [CameraObservation(True, Blobs(np.array([3]), np.array([[320.0, 240.0]]),
+                                      np.array([50.0])), CropTransform(4.0, 240.0, 160.0))]
+
+
+# ---------------------------------------------------------------------------- segment
+def test_segment_refuses_a_bad_image_with_its_reason(segmenter) -> None:
+    out = segment_frame(segmenter, np.zeros((480, 640), np.uint8))
+    assert isinstance(out, NoHand) and out.warn
+    assert out.reason.startswith('bad image: ') and 'shape' in out.reason
+
+
+def test_segment_refuses_an_implausible_observation() -> None:
+    crop = CropTransform(2.0, 10.0, 20.0)
+    seen = Observation(True, 'ok', 640, 480, np.ones((40, 40), np.uint8), crop,
+                       [Blob(3, 900.0, 50.0, 40)])       # centroid outside the image
+
+    fake = SimpleNamespace(process=lambda image, keep_labels=False: seen)
+    out = segment_frame(fake, np.zeros((480, 640, 3), np.uint8))
+    assert isinstance(out, NoHand) and not out.warn and out.partial is seen
+    assert out.reason.startswith('implausible observation: blob centroid')
+    seen.blobs = [Blob(3, 100.0, 50.0, 40)]
+    assert segment_frame(fake, np.zeros((480, 640, 3), np.uint8)) is seen
+
+
+def test_segment_passes_the_segmenters_own_no_hand(segmenter) -> None:
+    out = segment_frame(segmenter, np.full((480, 640, 3), 128, np.uint8))
+    assert isinstance(out, Observation) and not out.hand_found and out.status
+
+
+# ---------------------------------------------------------------------------- look up
+def test_look_up_failure_and_distance_gate(lookup, small_database) -> None:
+    crop = CropTransform(4.0, 240.0, 160.0)
+    out = look_up(lookup, TinyCrop(np.zeros((40, 40), np.uint8), crop), CAMERA)
+    assert isinstance(out, NoHand) and out.warn and out.partial is None
+    assert out.reason == 'lookup: query tiny image has no glove pixels'
+    # an entry of the database itself: at distance 0, and refused by a negative limit only
+    tiny = TinyCrop(np.asarray(small_database.tiny[5]), crop)
+    found = look_up(lookup, tiny, CAMERA, limits=NODE_LIMITS)
+    assert isinstance(found, LookupResult) and found.distances[0] == pytest.approx(0.0)
+    refused = look_up(lookup, TinyCrop(np.roll(tiny.labels, 3, axis=1), crop), CAMERA,
+                      limits=StageLimits(max_image_distance=0.5))
+    assert isinstance(refused, NoHand) and not refused.warn
+    assert isinstance(refused.partial, LookupResult)
+    assert 'more than max_image_distance 0.5): not a hand' in refused.reason
+    assert isinstance(look_up(lookup, TinyCrop(np.roll(tiny.labels, 3, axis=1), crop),
+                              CAMERA, limits=UNGATED), LookupResult)
+
+
+# ---------------------------------------------------------------------------- track
+def test_track_without_a_prior_says_why(hand, tracker) -> None:
+    out = track(tracker, None, SEEN, 0.0, upstream_reason='no_glove')
+    assert isinstance(out, NoHand) and out.reason == 'no_glove' and not out.warn
+    assert track(tracker, None, SEEN, 0.0).reason == 'lost'
+
+
+def test_track_refuses_a_prior_at_an_implausible_depth(hand) -> None:
+    fake = _FakeTracker(hand[0], IKResult(True, 0.0, q=_pose(), num_constraints=5))
+    out = track(fake, _prior(depth_m=-0.4), SEEN, 0.0)
+    assert isinstance(out, NoHand) and out.warn and fake.resets == 1
+    assert out.reason.startswith('bad candidates: hand depth')
+    # the evaluation's limits do not look at the depth
+    assert isinstance(track(fake, _prior(depth_m=-0.4), SEEN, 0.0, UNGATED), Tracked)
+
+
+def test_track_refuses_what_the_tracker_cannot_use(hand) -> None:
+    from colorglove_ros.core.tracking.types import IKError
+
+    fake = _FakeTracker(hand[0], IKError('camera mismatch'))
+    out = track(fake, _prior(), SEEN, 0.0)
+    assert isinstance(out, NoHand) and out.reason == 'bad candidates: camera mismatch'
+    assert fake.resets == 1
+
+
+@pytest.mark.parametrize(('result', 'limits', 'reason'), [
+    (IKResult(True, 0.0, q=_pose(), num_constraints=0), NODE_LIMITS,
+     'no constraint matched an observed blob'),
+    (IKResult(True, 0.0, q=np.full(26, np.nan), num_constraints=4), UNGATED, 'non-finite pose'),
+    (IKResult(True, 0.0, q=_pose(depth_m=9.0), num_constraints=4), NODE_LIMITS,
+     'fitted pose refused: hand depth'),
+])
+def test_track_refuses_a_fit_with_its_reason(hand, result, limits, reason) -> None:
+    fake = _FakeTracker(hand[0], result)
+    out = track(fake, _prior(), SEEN, 0.0, limits)
+    assert isinstance(out, NoHand) and out.warn and out.reason.startswith(reason)
+    assert out.partial is result and fake.resets == 1
+
+
+def test_track_lets_a_plausible_fit_through_with_its_keypoints(hand) -> None:
+    result = IKResult(True, 0.0, q=_pose(), num_constraints=4)
+    fake = _FakeTracker(hand[0], result)
+    out = track(fake, _prior(), SEEN, 0.0)
+    assert isinstance(out, Tracked) and out.result is result and fake.resets == 0
+    np.testing.assert_allclose(out.keypoints, hand[0].keypoints(result.q))
+    assert isinstance(track(fake, _prior(), SEEN, 0.0, StageLimits(check_depth=False)),
+                      Tracked)
+
+
+def test_track_reweights_a_lookup_result_by_the_previous_pose(hand, lookup, small_database,
+                                                              monkeypatch) -> None:
+    from colorglove_ros.core.lookup import temporal_prior
+
+    crop = CropTransform(4.0, 240.0, 160.0)
+    result = lookup.lookup(np.asarray(small_database.tiny[5]), crop, CAMERA)
+    calls = []
+
+    def spy(res, q_prev, tau, weight):
+        calls.append((res, q_prev, tau, weight))
+        return res
+
+    monkeypatch.setattr(temporal_prior, 'reweight_by_previous', spy)
+    fake = _FakeTracker(hand[0], IKResult(True, 0.0, q=_pose(), num_constraints=4))
+    fake.previous_pose = _pose(0.6)
+    track(fake, result, SEEN, 0.0, UNGATED, temporal=TemporalPrior(0.3, 0.5))
+    assert len(calls) == 1 and calls[0][0] is result and calls[0][2:] == (0.3, 0.5)
+    np.testing.assert_array_equal(calls[0][1], _pose(0.6))
+
+
+# ---------------------------------------------------------------------------- one process
+def test_a_rendered_glove_frame_goes_through(segmenter, glove_rgb, lookup, tracker) -> None:
+    observation = segment_frame(segmenter, glove_rgb)
+    assert isinstance(observation, Observation) and observation.hand_found
+    # the small test database is far from every real frame: its distance gate is lifted
+    pipeline = FramePipeline(image_observer(segmenter), lookup, CAMERA,
+                             limits=StageLimits(max_image_distance=math.inf))
+    seen = pipeline.observe([glove_rgb])
+    assert seen.cameras[0].hand_found and seen.tiny is not None
+    found = pipeline.look_up(seen)
+    assert isinstance(found.result, LookupResult) and found.time_ms > 0
+    out = pipeline.track(tracker, found, seen, 0.0)
+    assert isinstance(out, Tracked), out.reason
+    assert out.result.num_constraints > 0 and np.all(np.isfinite(out.result.q))
+    assert out.keypoints.shape == (21, 3) and np.all(out.keypoints[:, 2] > 0.1)
+    # a frame without the glove: no hand, the tracker forgets the track
+    blank = pipeline.process(tracker, [np.full((480, 640, 3), 128, np.uint8)], 1 / 30)
+    assert isinstance(blank, NoHand) and blank.reason == 'no crop'
+    assert tracker.previous_pose is None
