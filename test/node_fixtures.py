@@ -236,11 +236,13 @@ def lookup_node(assets: NodeAssets) -> Callable[[rclpy.Context], Node]:
         num_neighbors=LOOKUP_BLEND))
 
 
-def ik_node(**overrides) -> Callable[[rclpy.Context], Node]:
-    """A factory of ik_node with the parameters ``overrides``."""
+def ik_node(database: Path, **overrides) -> Callable[[rclpy.Context], Node]:
+    """A factory of ik_node (with the glove and hand of pose database ``database``) with the
+    parameters ``overrides``."""
     from colorglove_ros.ros.nodes.ik_node import IKNode
 
-    return lambda ctx: IKNode(context=ctx, parameter_overrides=params(**overrides))
+    return lambda ctx: IKNode(context=ctx, parameter_overrides=params(
+        database_path=str(database), **overrides))
 
 
 # ------------------------------------------------------------------------------ processes

@@ -230,7 +230,8 @@ def pipeline_parameters(database: Path, seed: int, frames: int, rate_hz: float,
                    'calibration_file': calibration},
         'segmentation': {'color_calibration_file': COLOR_CONFIG},
         'lookup': {'database_path': str(database), 'calibration_file': calibration},
-        'ik': {'calibration_file': calibration, 'publish_overlay': True},
+        'ik': {'database_path': str(database), 'calibration_file': calibration,
+               'publish_overlay': True},
     }
 
 

@@ -54,7 +54,7 @@ def test_bag_through_the_pipeline(assets: dict[str, Path], isolated_ros_domain: 
     parameters = {
         'segmentation': {'color_calibration_file': str(assets['color_config'])},
         'lookup': {'database_path': str(assets['database'])},
-        'ik': {'publish_overlay': False},
+        'ik': {'publish_overlay': False, 'database_path': str(assets['database'])},
     }
     run = run_pipeline(parameters, expected_frames=E2E_FRAMES,
                        feed=bag_feed(assets['bag'], paced=True), timeout_s=300.0)

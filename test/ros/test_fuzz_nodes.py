@@ -229,7 +229,7 @@ def test_fuzz_node_boundaries(node_assets: NodeAssets, good_rgb: np.ndarray,
                               good_candidates: HandPoseCandidates) -> None:
     rng = np.random.default_rng(SEED)
     factories = [segmentation_node(node_assets), lookup_node(node_assets),
-                 ik_node(publish_overlay=False)]
+                 ik_node(node_assets.database, publish_overlay=False)]
     runs = {}
     with running(*factories) as h:    # an exception in any callback fails the test here
         status = h.collect(String, 'hand/tracking_status')

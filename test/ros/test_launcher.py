@@ -8,6 +8,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 import rclpy
@@ -17,6 +18,7 @@ from rclpy.parameter import Parameter
 from repo_paths import CONFIG_DIR, REPO_DIR, TEST_DIR
 
 from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.lookup.database import STANDARD_BUILD
 from colorglove_ros.ros.bags import camera_topics
 from colorglove_ros.ros.launcher import (
     Launcher,
@@ -25,7 +27,7 @@ from colorglove_ros.ros.launcher import (
     load_launch_file,
     node_command,
 )
-from colorglove_ros.ros.nodes import lookup_node, segmentation_node
+from colorglove_ros.ros.nodes import ik_node, lookup_node, segmentation_node
 from colorglove_ros.ros.nodes.camera_node import CameraNode
 from colorglove_ros.ros.nodes.common import StartupError
 from colorglove_ros.ros.nodes.hand_description_node import HandDescriptionNode
@@ -162,7 +164,10 @@ def test_stereo_launch_file_runs_the_two_camera_graph(monkeypatch: pytest.Monkey
     ik_node listens for camera 2; lookup and IK on the stereo calibration; otherwise every
     node's parameters are those of the one-camera pipeline.launch.yaml (nodes.yaml)."""
     monkeypatch.setattr(segmentation_node, 'load_segmenter', lambda config: None)
-    monkeypatch.setattr(lookup_node, 'load_database', lambda path: None)
+    # no pose database on a fresh clone: the lookup's and the IK's view of it stand in
+    monkeypatch.setattr(lookup_node, 'load_database',
+                        lambda path: SimpleNamespace(build=STANDARD_BUILD))
+    monkeypatch.setattr(ik_node, 'read_database_build', lambda path: STANDARD_BUILD)
     monkeypatch.setattr(lookup_node, 'PoseLookup', _NoLookup)
     rig = load_calibration(STEREO_CALIBRATION).cameras
     assert len(rig) == 2

@@ -211,7 +211,10 @@ class SequenceEvaluator:
                                       '(the lookup runs once on a shared primary camera)')
         self.modes = tuple(modes)
         self.config = ik_config or IKConfig()
-        self.synth = synthesizer or Synthesizer()
+        if synthesizer is None:      # the hand and glove the lookup's database was built with
+            build = lookup.db.build
+            synthesizer = Synthesizer(build.hand_length_m, build.glove_seed)
+        self.synth = synthesizer
         self.fps = float(fps)
         self.keep_results = keep_results
         if temporal is not None and finger_evidence:

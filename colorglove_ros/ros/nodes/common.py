@@ -35,7 +35,8 @@ from colorglove_ros.ros.pose_pairing import PosePairer
 from colorglove_ros.ros.shm_cleanup import clean_stale_fastdds_segments
 
 __all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'run_node',
-           'DEFAULT_CALIBRATION_FILE', 'HAND_LENGTH_RANGE_M', 'startup_errors',
+           'DEFAULT_CALIBRATION_FILE', 'DEFAULT_DATABASE_CONFIG', 'declare_database',
+           'HAND_LENGTH_RANGE_M', 'startup_errors',
            'declare_calibration_file', 'declare_hand_length', 'split_topics',
            'hand_model_from_calibration', 'JOINT_STATES_TOPIC', 'WRIST_POSE_TOPIC',
            'MARKERS_TOPIC', 'TRACKING_STATUS_TOPIC',
@@ -108,6 +109,8 @@ __all__ += ['StartupError']
 # ------------------------------------------------------------------ start-up
 DEFAULT_CALIBRATION_FILE = 'config/calibration.yaml'
 """Default of every node's ``calibration_file`` parameter."""
+DEFAULT_DATABASE_CONFIG = 'config/database.yaml'
+"""Default of the ``database_config`` parameter (lookup_node, ik_node)."""
 
 
 @contextmanager
@@ -126,6 +129,20 @@ def declare_calibration_file(node: Node, description: str,
                              default: str = DEFAULT_CALIBRATION_FILE) -> str:
     """Declare the ``calibration_file`` parameter; return its value."""
     return declare(node, 'calibration_file', default, description)
+
+
+def declare_database(node: Node) -> str:
+    """Declare ``database_config`` and ``database_path`` (the pose database the lookup uses,
+    whose manifest also names the glove and hand the IK must use); return the folder named."""
+    database_config = declare(node, 'database_config', DEFAULT_DATABASE_CONFIG,
+                              'YAML naming the pose database folder (database.path)')
+    database_path = declare(node, 'database_path', '',
+                            'pose database folder; overrides database_config when set')
+    if database_path:
+        return str(resolve_path(database_path))
+    from colorglove_ros.core.lookup.database_build import read_database_config
+
+    return str(read_database_config(database_config)[1])
 
 
 def declare_hand_length(node: Node, description: str) -> float:

@@ -12,9 +12,10 @@ from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from rclpy.node import Node
 from sensor_msgs.msg import Image
 
-from colorglove_ros.core.camera import CalibrationError, load_calibration
+from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.hand.overlay import draw_skeleton
+from colorglove_ros.core.lookup.database import check_hand_length, read_database_build
 from colorglove_ros.core.pipeline import NoHand, Tracked, bad_prior, track
 from colorglove_ros.core.tracking.config import load_ik_config
 from colorglove_ros.core.tracking.tracker import HandTracker
@@ -35,8 +36,11 @@ from colorglove_ros.ros.nodes.common import (
     StartupError,
     TrackerOutputs,
     declare,
+    declare_calibration_file,
+    declare_database,
     run_node,
     split_topics,
+    startup_errors,
 )
 
 STAMP_MATCH_TOLERANCE_S = 0.02   # an extra camera's frame within this of the primary's counts
@@ -47,8 +51,8 @@ class IKNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('ik', **kwargs)
-        calibration_file = declare(self, 'calibration_file', 'config/calibration.yaml',
-                                   'camera calibration YAML; camera 0 is the lookup camera')
+        calibration_file = declare_calibration_file(
+            self, 'camera calibration YAML; camera 0 is the lookup camera')
         ik_config = declare(self, 'ik_config', 'config/ik.yaml', 'IK settings and covariances')
         enable_ik = declare(self, 'enable_ik', True, 'false: publish the blended lookup pose')
         enable_smoothing = declare(self, 'enable_smoothing', True,
@@ -62,14 +66,16 @@ class IKNode(Node):
         wait_s = declare(self, 'extra_observation_wait_s', 0.05,
                          'longest wait for the extra cameras\' observations of a frame, seconds',
                          0.0, 1.0)
-        try:
+        with startup_errors('ik_node', ValueError):
             calibration = load_calibration(resolve_path(calibration_file))
             config = load_ik_config(resolve_path(ik_config))
-            model, mesh, _ = default_hand(calibration.hand_length_m)
+            # the glove and hand of the lookup's database (its manifest; no array is read)
+            database = declare_database(self)
+            build = read_database_build(database)
+            check_hand_length(build, calibration.hand_length_m, calibration_file, database)
+            model, mesh, glove = default_hand(calibration.hand_length_m, build.glove_seed)
             config = replace(config, enable_ik=enable_ik, enable_smoothing=enable_smoothing)
-            self.tracker = HandTracker(model, mesh, calibration.cameras, config)
-        except (CalibrationError, IKError, ValueError) as exc:
-            raise StartupError(f'ik_node cannot start: {exc}') from exc
+            self.tracker = HandTracker(model, mesh, calibration.cameras, config, glove)
         self.num_vertices = mesh.num_vertices
         self.cameras = calibration.cameras
         topics = split_topics(extra_topics)

@@ -9,9 +9,8 @@ import traceback
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from rclpy.node import Node
 
-from colorglove_ros.core.camera import CalibrationError, load_calibration
-from colorglove_ros.core.lookup.database import DatabaseError, load_database
-from colorglove_ros.core.lookup.database_build import read_database_config
+from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.lookup.database import check_hand_length, load_database
 from colorglove_ros.core.lookup.search import PoseLookup
 from colorglove_ros.core.lookup.types import LookupResult
 from colorglove_ros.core.pipeline import DEFAULT_MAX_IMAGE_DISTANCE, NoHand, StageLimits, look_up
@@ -26,9 +25,11 @@ from colorglove_ros.ros.conversions import (
 from colorglove_ros.ros.message_checks import check_observation_msg
 from colorglove_ros.ros.nodes.common import (
     LATEST_ONLY,
-    StartupError,
     declare,
+    declare_calibration_file,
+    declare_database,
     run_node,
+    startup_errors,
 )
 
 
@@ -37,12 +38,8 @@ class LookupNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('lookup', **kwargs)
-        database_config = declare(self, 'database_config', 'config/database.yaml',
-                                  'YAML naming the pose database folder (database.path)')
-        database_path = declare(self, 'database_path', '',
-                                'pose database folder; overrides database_config when set')
-        calibration_file = declare(self, 'calibration_file', 'config/calibration.yaml',
-                                   'camera calibration YAML (camera 0 is the lookup camera)')
+        calibration_file = declare_calibration_file(
+            self, 'camera calibration YAML (camera 0 is the lookup camera)')
         num_candidates = declare(self, 'num_candidates', 300,
                                  'entries re-ranked with the exact distance', 1, 100000)
         num_neighbors = declare(self, 'num_neighbors', 10, 'nearest entries blended', 1, 300)
@@ -53,16 +50,16 @@ class LookupNode(Node):
         self.finger_evidence = declare(
             self, 'finger_evidence', True, 'blend each finger from the neighbours whose '
             'patches on it match the observed blobs (false: one weight per entry, the paper)')
-        try:
-            path = str(resolve_path(database_path) if database_path
-                       else read_database_config(database_config)[1])
-            self.camera = load_calibration(resolve_path(calibration_file)).primary
+        with startup_errors('lookup_node'):
+            path = declare_database(self)
+            calibration = load_calibration(resolve_path(calibration_file))
+            self.camera = calibration.primary
             started = time.perf_counter()
-            self.lookup = PoseLookup(load_database(path), num_candidates, num_neighbors)
+            database = load_database(path)
+            check_hand_length(database.build, calibration.hand_length_m, calibration_file, path)
+            self.lookup = PoseLookup(database, num_candidates, num_neighbors)
             if self.finger_evidence:
                 self.lookup.patch_digit_table()      # built now, not on the first frame
-        except (DatabaseError, CalibrationError) as exc:
-            raise StartupError(f'lookup_node cannot start: {exc}') from exc
         self.publisher = self.create_publisher(HandPoseCandidates, 'hand/pose_candidates', 10)
         self.create_subscription(HandObservation, 'hand/observation', self.on_observation,
                                  LATEST_ONLY)

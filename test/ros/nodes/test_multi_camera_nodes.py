@@ -75,7 +75,8 @@ def _second_camera_constraints(status: str) -> int:
 
 
 def test_ik_node_waits_for_the_second_view_of_a_frame(
-        stereo_messages: tuple[HandPoseCandidates, HandObservation]) -> None:
+        stereo_messages: tuple[HandPoseCandidates, HandObservation],
+        small_database_path: Path) -> None:
     """Candidates that arrive before the second camera's observation of the same stamp wait
     for it; an observation whose frame_id is not the calibrated one is ignored."""
     candidates, second = stereo_messages
@@ -83,7 +84,7 @@ def test_ik_node_waits_for_the_second_view_of_a_frame(
     wrong_frame.header = header(301, 0, RIG[0].frame_id)
     late = copy.deepcopy(candidates)
     late.header = header(301, 0, RIG[0].frame_id)
-    with running(ik_node(calibration_file=str(STEREO), publish_overlay=False,
+    with running(ik_node(small_database_path, calibration_file=str(STEREO), publish_overlay=False,
                          extra_observation_topics=SECOND_OBSERVATION,
                          extra_observation_wait_s=0.5)) as h:
         status = h.collect(String, 'hand/tracking_status')
@@ -108,7 +109,8 @@ def _run(assets: NodeAssets, bag: Path, two_cameras: bool) -> PipelineRun:
         'segmentation': segmentation,
         'lookup': {'database_path': str(assets.database)},
         # a loaded 2-core machine runs six processes here: give the second view time to arrive
-        'ik': {'publish_overlay': False, 'calibration_file': str(STEREO if two_cameras else MONO),
+        'ik': {'publish_overlay': False, 'database_path': str(assets.database),
+               'calibration_file': str(STEREO if two_cameras else MONO),
                'extra_observation_topics': SECOND_OBSERVATION if two_cameras else '',
                'extra_observation_wait_s': 0.3},
     }

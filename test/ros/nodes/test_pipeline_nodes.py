@@ -232,11 +232,12 @@ def test_lookup_node_rejects_non_finite_crop(node_assets: NodeAssets,
 
 
 # ------------------------------------------------------------------------------ ik_node
-def test_ik_node_outputs(good_candidates: HandPoseCandidates, good_rgb: np.ndarray) -> None:
+def test_ik_node_outputs(good_candidates: HandPoseCandidates, good_rgb: np.ndarray,
+                        small_database_path: Path) -> None:
     no_hand = HandPoseCandidates(header=header(200, 600_000_000, 'camera_optical_frame'),
                                  hand_found=False, status='no_glove',
                                  dof_names=list(DOF_NAMES))
-    with running(ik_node(publish_overlay=True)) as h:
+    with running(ik_node(small_database_path, publish_overlay=True)) as h:
         joints = h.collect(JointState, 'hand/joint_states')
         wrist = h.collect(PoseStamped, 'hand/wrist_pose')
         markers = h.collect(MarkerArray, 'hand/markers')
@@ -285,10 +286,11 @@ class _IKAnswers:
     camera_subscribers: int
 
 
-def _bad_then_good(bad: HandPoseCandidates, good: HandPoseCandidates,
+def _bad_then_good(database: Path, bad: HandPoseCandidates, good: HandPoseCandidates,
                    **overrides) -> _IKAnswers:
-    """Send ``bad`` then ``good`` to an ik_node with the parameters ``overrides``."""
-    with running(ik_node(**overrides)) as h:
+    """Send ``bad`` then ``good`` to an ik_node (database ``database``) with the parameters
+    ``overrides``."""
+    with running(ik_node(database, **overrides)) as h:
         status = h.collect(String, 'hand/tracking_status')
         joints = h.collect(JointState, 'hand/joint_states')
         overlays = h.collect(Image, 'hand/overlay')
@@ -300,7 +302,8 @@ def _bad_then_good(bad: HandPoseCandidates, good: HandPoseCandidates,
     return _IKAnswers(bad_status, good_status, joints, overlays, camera_subscribers)
 
 
-def test_ik_node_survives_malformed_candidates(good_candidates: HandPoseCandidates) -> None:
+def test_ik_node_survives_malformed_candidates(good_candidates: HandPoseCandidates,
+                                               small_database_path: Path) -> None:
     """A candidates message with hand_found and wrong DOF names is reported, not fatal."""
     wrong_names = HandPoseCandidates()
     wrong_names.header = header(200, 400_000_000, 'camera_optical_frame')
@@ -309,7 +312,7 @@ def test_ik_node_survives_malformed_candidates(good_candidates: HandPoseCandidat
     wrong_names.dof_names = ['a', 'b']
     wrong_names.blended_pose = [0.0, 0.0]
     # defaults: no overlay, so no camera image subscription
-    answers = _bad_then_good(wrong_names, good_candidates)
+    answers = _bad_then_good(small_database_path, wrong_names, good_candidates)
     assert answers.bad_status.startswith('no hand')
     assert answers.good_status.startswith('tracking:')
     assert not answers.overlays and answers.camera_subscribers == 0
@@ -330,13 +333,14 @@ def _nan_pose(msg: HandPoseCandidates) -> None:
 
 @pytest.mark.parametrize('spoil', [_short_pose, _vertex_out_of_range, _nan_pose],
                          ids=['short_pose', 'vertex_out_of_range', 'nan_pose'])
-def test_ik_node_survives_bad_candidates(spoil, good_candidates: HandPoseCandidates) -> None:
+def test_ik_node_survives_bad_candidates(spoil, good_candidates: HandPoseCandidates,
+                                         small_database_path: Path) -> None:
     """A hand_found candidates message the tracker cannot use is reported as 'no hand' and the
     node goes on with the next frame."""
     bad = copy.deepcopy(good_candidates)
     bad.header = header(200, 400_000_000, 'camera_optical_frame')
     spoil(bad)
-    answers = _bad_then_good(bad, good_candidates, publish_overlay=False)
+    answers = _bad_then_good(small_database_path, bad, good_candidates, publish_overlay=False)
     assert answers.bad_status.startswith('no hand'), answers.bad_status
     assert answers.good_status.startswith('tracking:')
     assert [m.header.stamp.nanosec for m in answers.joints] == [500]

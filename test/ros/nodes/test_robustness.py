@@ -45,7 +45,8 @@ def _specs(assets: NodeAssets, folder: Path, with_ik: bool = False,
     specs = [NodeSpec(executable('segmentation_node'), parameters=[seg], respawn=respawn),
              NodeSpec(executable('lookup_node'), parameters=[lookup], respawn=respawn)]
     if with_ik:
-        ik = write_params_file(folder / 'ik.yaml', {'publish_overlay': False})
+        ik = write_params_file(folder / 'ik.yaml', {'publish_overlay': False,
+                                                    'database_path': str(assets.database)})
         specs.append(NodeSpec(executable('ik_node'), parameters=[ik]))
     return specs
 
