@@ -10,7 +10,12 @@ import numpy as np
 
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, HAND_LENGTH_RANGE_M
 from colorglove_ros.core.errors import ColorGloveError
-from colorglove_ros.core.validation import MAX_IMAGE_SIDE, check_array, check_number
+from colorglove_ros.core.validation import (
+    MAX_IMAGE_SIDE,
+    check_array,
+    check_known_keys,
+    check_number,
+)
 from colorglove_ros.core.yaml_io import load_yaml_mapping
 
 __all__ = [
@@ -148,10 +153,7 @@ CAMERA_KEYS = frozenset({'name', 'frame_id', 'width', 'height', 'fx', 'fy', 'cx'
 def _camera_from_dict(entry: dict, where: str) -> PinholeCamera:
     if not isinstance(entry, dict):
         raise CalibrationError(f'{where}: a camera must be a mapping, got {entry!r}')
-    unknown = sorted(set(entry) - CAMERA_KEYS)
-    if unknown:
-        raise CalibrationError(f'{where}: unknown camera field(s) {unknown} (known: '
-                               f'{sorted(CAMERA_KEYS)})')
+    check_known_keys(f'{where}: camera', entry, CAMERA_KEYS, error=CalibrationError)
     missing = [key for key in ('width', 'height', 'fx', 'fy', 'cx', 'cy') if key not in entry]
     if missing:
         raise CalibrationError(f'{where}: bad or missing camera field(s): {missing} missing')
@@ -291,10 +293,8 @@ def load_calibration(path: str | Path) -> Calibration:
         raise CalibrationError(
             f'calibration file {path} has version {data.get("version")!r}, '
             f'expected {CALIBRATION_VERSION}')
-    unknown = sorted(set(data) - {'version', 'hand_length_m', 'cameras'})
-    if unknown:
-        raise CalibrationError(f'calibration file {path}: unknown setting(s) {unknown} (known: '
-                               'version, hand_length_m, cameras)')
+    check_known_keys(f'calibration file {path}', data, ('version', 'hand_length_m', 'cameras'),
+                     error=CalibrationError)
     entries = data.get('cameras')
     if not isinstance(entries, list) or not entries:
         raise CalibrationError(f'calibration file {path} lists no cameras')

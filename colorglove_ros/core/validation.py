@@ -19,6 +19,7 @@ from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import NUM_DOFS, NUM_FINGER_DOFS
 
 __all__ = [
+    'check_known_keys',
     'InvalidInputError', 'InvalidObservationError', 'InvalidPriorError', 'InvalidConfigError',
     'MAX_BLOBS', 'MAX_IMAGE_SIDE', 'MIN_HAND_DEPTH_M', 'MAX_HAND_DEPTH_M',
     'check_number', 'check_array', 'as_rows', 'check_settings', 'SettingRule',
@@ -59,6 +60,15 @@ ErrorType = type[Exception]
 
 
 # ---------------------------------------------------------------------------- helper family
+def check_known_keys(name: str, mapping: dict, known: Any, *,
+                     error: ErrorType = InvalidConfigError) -> None:
+    """Raise ``error`` naming ``name`` and the keys of ``mapping`` that are not in ``known``
+    (a misspelt setting would otherwise be ignored silently)."""
+    unknown = sorted(str(key) for key in set(mapping) - set(known))
+    if unknown:
+        raise error(f'{name}: unknown setting(s) {unknown} (known: {sorted(known)})')
+
+
 def check_number(name: str, value: Any, *, low: float | None = None,
                  high: float | None = None, low_open: bool = False, integer: bool = False,
                  odd: bool = False, error: ErrorType = InvalidInputError) -> float | int:

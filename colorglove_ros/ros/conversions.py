@@ -2,6 +2,8 @@
 message classes work without ``rclpy.init`` so all of this is unit-testable in one process."""
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from builtin_interfaces.msg import Time
 from colorglove_msgs.msg import (
@@ -56,23 +58,38 @@ def camera_from_camera_info_msg(msg: CameraInfo, *, rectified: bool = False) -> 
         'camera_optical_frame', where=f'CameraInfo of {msg.header.frame_id or "(no frame_id)"}')
 
 
-def pose_to_joint_state_msg(pose: np.ndarray, header: Header) -> JointState:
-    """The 20 finger joints of a 26-DOF pose as ``JointState`` (URDF joint names, radians)."""
-    return JointState(header=header, name=list(FINGER_DOF_NAMES),
+def pose_to_joint_state_msg(pose: np.ndarray, header: Header,
+                            joint_names: Sequence[str] = FINGER_DOF_NAMES) -> JointState:
+    """The 20 finger joints of a 26-DOF pose as ``JointState`` (radians), named
+    ``joint_names`` (``FINGER_DOF_NAMES`` order; default the plain URDF joint names, a
+    prefixed hand's from ``core.hand.frames.finger_joint_names``)."""
+    return JointState(header=header, name=_finger_joint_names(joint_names),
                       position=[float(v) for v in np.asarray(pose)[6:26]])
 
 
-def pose_from_joint_state_msg(msg: JointState) -> np.ndarray:
-    """The 20 finger joint angles of a ``JointState``, in ``FINGER_DOF_NAMES`` order."""
+def pose_from_joint_state_msg(msg: JointState,
+                              joint_names: Sequence[str] = FINGER_DOF_NAMES) -> np.ndarray:
+    """The 20 finger joint angles of a ``JointState``, in ``FINGER_DOF_NAMES`` order, read
+    from the joints named ``joint_names`` (that order); a missing joint is a KeyError."""
     positions = dict(zip(msg.name, msg.position, strict=False))
-    return np.array([positions[name] for name in FINGER_DOF_NAMES])
+    return np.array([positions[name] for name in _finger_joint_names(joint_names)])
 
 
-def pose_from_msgs(joints: JointState, wrist: PoseStamped) -> np.ndarray:
-    """The 26-DOF pose of a ``JointState`` (finger joints) and a wrist ``PoseStamped``."""
+def pose_from_msgs(joints: JointState, wrist: PoseStamped,
+                   joint_names: Sequence[str] = FINGER_DOF_NAMES) -> np.ndarray:
+    """The 26-DOF pose of a ``JointState`` (finger joints named ``joint_names``) and a wrist
+    ``PoseStamped``."""
     p, o = wrist.pose.position, wrist.pose.orientation
     return pose_from_fields([p.x, p.y, p.z], [o.x, o.y, o.z, o.w],
-                            pose_from_joint_state_msg(joints))
+                            pose_from_joint_state_msg(joints, joint_names))
+
+
+def _finger_joint_names(joint_names: Sequence[str]) -> list[str]:
+    names = list(joint_names)
+    if len(names) != len(FINGER_DOF_NAMES):
+        raise ValueError(f'{len(names)} joint names given, expected {len(FINGER_DOF_NAMES)} '
+                         '(FINGER_DOF_NAMES order)')
+    return names
 
 
 def pose_to_wrist_pose_msg(pose: np.ndarray, header: Header) -> PoseStamped:

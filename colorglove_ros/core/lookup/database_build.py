@@ -38,7 +38,7 @@ from colorglove_ros.core.lookup.distance import (
     quantize_dts,
 )
 from colorglove_ros.core.segmentation.crop import TinyCrop, crop_signature
-from colorglove_ros.core.validation import check_number
+from colorglove_ros.core.validation import check_known_keys, check_number
 
 if TYPE_CHECKING:
     from colorglove_ros.core.camera import PinholeCamera
@@ -124,18 +124,16 @@ def read_database_config(path: str | Path) -> tuple[BuildConfig, Path, dict[str,
 
     document = load_yaml_mapping(resolve_path(path), DatabaseError, 'database config')
     data = document.get('database')
-    if set(document) != {'database'}:
-        raise DatabaseError(f'database config {path}: unknown top-level settings '
-                            f'{sorted(set(document) - {"database"})}')
+    check_known_keys(f'database config {path}', document, ('database',), error=DatabaseError)
     if not isinstance(data, dict) or not isinstance(data.get('path'), str) or not data['path']:
         raise DatabaseError(f'database config {path} has no database.path')
-    unknown = sorted(set(data) - {'path', 'build', 'lookup'})
-    if unknown:
-        raise DatabaseError(f'database config {path}: unknown database settings {unknown}')
+    check_known_keys(f'database config {path}: database', data, ('path', 'build', 'lookup'),
+                     error=DatabaseError)
     lookup = data.get('lookup') or {}
-    if not isinstance(lookup, dict) or set(lookup) - set(LOOKUP_SETTINGS):
-        raise DatabaseError(f'database config {path}: database.lookup must be a mapping of '
-                            f'{sorted(LOOKUP_SETTINGS)}')
+    if not isinstance(lookup, dict):
+        raise DatabaseError(f'database config {path}: database.lookup must be a mapping')
+    check_known_keys(f'database config {path}: database.lookup', lookup, LOOKUP_SETTINGS,
+                     error=DatabaseError)
     for name, value in lookup.items():
         check_number(f'database config {path}: database.lookup.{name}', value,
                      low=LOOKUP_SETTINGS[name][0], high=LOOKUP_SETTINGS[name][1], integer=True,
@@ -144,10 +142,8 @@ def read_database_config(path: str | Path) -> tuple[BuildConfig, Path, dict[str,
     build = data.get('build') or {}
     if not isinstance(build, dict):
         raise DatabaseError(f'database config {path}: database.build must be a mapping')
-    unknown = sorted(set(build) - known)
-    if unknown:
-        raise DatabaseError(f'database config {path}: unknown database.build settings {unknown} '
-                            f'(known: {sorted(known)})')
+    check_known_keys(f'database config {path}: database.build', build, known,
+                     error=DatabaseError)
     try:
         config = BuildConfig(**build)
     except (TypeError, DatabaseError) as exc:

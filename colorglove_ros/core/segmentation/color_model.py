@@ -274,6 +274,7 @@ def load_calibration(path: str | Path) -> ColorCalibration:
 def read_calibration_config(config_path: str | Path) -> dict[str, Any]:
     """Read ``config/color_calibration.yaml``: ``calibration_file`` (resolved to an absolute
     path) and the ``segmenter`` settings (a dict, possibly empty)."""
+    from colorglove_ros.core.validation import check_known_keys
     from colorglove_ros.core.yaml_io import load_yaml_mapping
     from colorglove_ros.paths import resolve_path
 
@@ -281,10 +282,8 @@ def read_calibration_config(config_path: str | Path) -> dict[str, Any]:
     cfg = load_yaml_mapping(path, ColorCalibrationError, 'colour calibration config')
     if not isinstance(cfg.get('calibration_file'), str) or not cfg['calibration_file']:
         raise ColorCalibrationError(f'{path}: missing key calibration_file (a path)')
-    unknown = sorted(set(cfg) - {'calibration_file', 'segmenter'})
-    if unknown:
-        raise ColorCalibrationError(f'{path}: unknown setting(s) {unknown} (known: '
-                                    'calibration_file, segmenter)')
+    check_known_keys(str(path), cfg, ('calibration_file', 'segmenter'),
+                     error=ColorCalibrationError)
     segmenter = cfg.get('segmenter') or {}
     if not isinstance(segmenter, dict):
         raise ColorCalibrationError(f'{path}: segmenter must be a mapping')

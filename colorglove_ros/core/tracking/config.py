@@ -12,7 +12,7 @@ import yaml
 
 from colorglove_ros.core.hand.model import DOF_NAMES, NUM_DOFS
 from colorglove_ros.core.tracking.types import IKError
-from colorglove_ros.core.validation import check_number
+from colorglove_ros.core.validation import check_known_keys, check_number
 from colorglove_ros.core.yaml_io import load_yaml_mapping
 
 __all__ = [
@@ -122,10 +122,8 @@ def load_covariances(path: str | Path) -> IKCovariances:
                             f'expected {COVARIANCE_VERSION}')
     if list(data.get('dof_names', [])) != list(DOF_NAMES):
         raise IKConfigError(f'{path}: dof_names do not match the 26-DOF hand model')
-    unknown = sorted(set(data) - {'format', 'version', 'dof_names', 'r_var_px2', 'q_var',
-                                  'p_var', 'provenance'})
-    if unknown:
-        raise IKConfigError(f'{path}: unknown keys {unknown}')
+    check_known_keys(str(path), data, ('format', 'version', 'dof_names', 'r_var_px2', 'q_var',
+                                       'p_var', 'provenance'), error=IKConfigError)
     try:
         return IKCovariances(data['r_var_px2'], data['q_var'], data['p_var'], source=str(path))
     except KeyError as exc:
@@ -239,9 +237,9 @@ def load_ik_config(path: str | Path) -> IKConfig:
         raise IKConfigError(f'IK config {path}: glove_seed is not an IK setting: the glove comes '
                             'from the pose database the lookup uses (its manifest records the '
                             'glove seed and hand length it was built with)')
-    unknown = set(data) - set(_FILE_SETTINGS) - {'version', 'covariances', 'covariance_file'}
-    if unknown:
-        raise IKConfigError(f'IK config {path}: unknown keys {sorted(unknown)}')
+    check_known_keys(f'IK config {path}', data,
+                     (*_FILE_SETTINGS, 'version', 'covariances', 'covariance_file'),
+                     error=IKConfigError)
     kwargs: dict[str, Any] = {key: data[key] for key in _FILE_SETTINGS if key in data}
     cov_file = data.get('covariance_file') or ''
     if not isinstance(cov_file, str):

@@ -97,6 +97,11 @@ class _FrameFit:
     rejected: int = 0
 
 
+def _check_primary(camera: PinholeCamera) -> None:
+    if not (np.allclose(camera.rotation, np.eye(3)) and np.allclose(camera.translation, 0.0)):
+        raise IKError('cameras[0] (primary) must have identity extrinsics')
+
+
 class HandTracker:
     """Temporal IK tracker: blended lookup pose -> refined pose, several cameras.
 
@@ -112,9 +117,7 @@ class HandTracker:
                  config: IKConfig | None = None, glove: Any = None) -> None:
         if not cameras:
             raise IKError('the tracker needs at least one camera')
-        c0 = cameras[0]
-        if not (np.allclose(c0.rotation, np.eye(3)) and np.allclose(c0.translation, 0.0)):
-            raise IKError('cameras[0] (primary) must have identity extrinsics')
+        _check_primary(cameras[0])
         if len(mesh.vertex_link) != len(mesh.local_vertices):
             raise IKError('mesh vertex_link and local_vertices differ in length')
         self.model = model
@@ -167,6 +170,14 @@ class HandTracker:
             raise IKError(f'mesh is for a {mesh_length} m hand, calibration says '
                           f'{model.hand_length_m} m')
         return cls(model, mesh, calibration.cameras, config)
+
+    def set_primary_camera(self, camera: PinholeCamera) -> None:
+        """Use ``camera`` as camera 0 from now on (new intrinsics or image size of the same,
+        fixed camera, e.g. from its CameraInfo; identity extrinsics). The track restarts: the
+        previous pose was fitted with the old model."""
+        _check_primary(camera)
+        self.cameras = (camera, *self.cameras[1:])
+        self.reset()
 
     def reset(self) -> None:
         """Forget the previous pose (hand lost, long gap, new sequence)."""

@@ -17,27 +17,35 @@ from rcl_interfaces.msg import (
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import CameraInfo, JointState
 from std_msgs.msg import Header, String
 from visualization_msgs.msg import MarkerArray
 
-from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.camera import PinholeCamera, load_calibration
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, HAND_LENGTH_RANGE_M
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.frames import (
+    DEFAULT_FRAME_PREFIX,
+    check_frame_prefix,
+    finger_joint_names,
+)
 from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.pipeline import NoHand
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
     pose_to_joint_state_msg,
     pose_to_wrist_pose_msg,
     skeleton_to_markers_msg,
 )
+from colorglove_ros.ros.frame_camera import FrameCamera
 from colorglove_ros.ros.pose_pairing import PosePairer
 from colorglove_ros.ros.shm_cleanup import clean_stale_fastdds_segments
 
 __all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'run_node',
            'DEFAULT_CALIBRATION_FILE', 'DEFAULT_DATABASE_CONFIG', 'declare_database',
            'HAND_LENGTH_RANGE_M', 'startup_errors',
-           'declare_calibration_file', 'declare_hand_length', 'split_topics',
+           'declare_calibration_file', 'declare_hand_length', 'declare_frame_prefix',
+           'CAMERA_INFO_TOPIC', 'declare_frame_camera', 'refuse_frame', 'split_topics',
            'hand_model_from_calibration', 'JOINT_STATES_TOPIC', 'WRIST_POSE_TOPIC',
            'MARKERS_TOPIC', 'TRACKING_STATUS_TOPIC',
            'PosePublishers', 'TrackerOutputs', 'subscribe_tracked_pose']
@@ -151,6 +159,40 @@ def declare_hand_length(node: Node, description: str) -> float:
                    *HAND_LENGTH_RANGE_M)
 
 
+def declare_frame_prefix(node: Node, executable: str) -> str:
+    """Declare the ``frame_prefix`` parameter (the hand's name in front of every frame and
+    joint name, ``core.hand.frames``); return it, or stop the start if it is not valid."""
+    prefix = declare(node, 'frame_prefix', DEFAULT_FRAME_PREFIX,
+                     'hand name put in front of every frame and joint name (e.g. "right_" '
+                     'gives right_palm); "" keeps the plain names')
+    with startup_errors(executable):
+        return check_frame_prefix(prefix)
+
+
+CAMERA_INFO_TOPIC = 'camera/camera_info'
+"""CameraInfo of camera 0 (remap it to the driver's), read by the glove pipeline nodes."""
+
+
+def declare_frame_camera(node: Node, calibrated: PinholeCamera) -> FrameCamera:
+    """Declare ``use_camera_info``; return the :class:`FrameCamera` giving each frame its
+    camera model (fed from ``camera/camera_info`` when true, else ``calibrated``)."""
+    use_camera_info = declare(
+        node, 'use_camera_info', True,
+        'true: intrinsics from the newest CameraInfo on camera/camera_info (frames whose size '
+        'or frame_id differ from it are refused); false: camera 0 of calibration_file (frames '
+        'of another size are refused)')
+    frame_camera = FrameCamera(calibrated, use_camera_info)
+    if use_camera_info:
+        node.create_subscription(CameraInfo, CAMERA_INFO_TOPIC, frame_camera.set_camera_info,
+                                 10)
+    return frame_camera
+
+
+def refuse_frame(node: Node, refusal: NoHand) -> None:
+    """Log a frame refused for its camera model (throttled; FrameCamera counted it)."""
+    node.get_logger().warn(f'frame refused: {refusal.reason}', throttle_duration_sec=1.0)
+
+
 def split_topics(text: str) -> list[str]:
     """The topics of a comma-separated topic-list parameter (blanks dropped)."""
     return [topic.strip() for topic in text.split(',') if topic.strip()]
@@ -177,16 +219,19 @@ TRACKING_STATUS_TOPIC = 'hand/tracking_status'
 
 
 class PosePublishers:
-    """Publishes a 26-DOF pose as a ``JointState`` plus a wrist ``PoseStamped``."""
+    """Publishes a 26-DOF pose as a ``JointState`` (joint names with ``frame_prefix``) plus a
+    wrist ``PoseStamped``."""
 
     def __init__(self, node: Node, joints_topic: str = JOINT_STATES_TOPIC,
-                 wrist_topic: str = WRIST_POSE_TOPIC) -> None:
+                 wrist_topic: str = WRIST_POSE_TOPIC,
+                 frame_prefix: str = DEFAULT_FRAME_PREFIX) -> None:
+        self.joint_names = finger_joint_names(frame_prefix)
         self.joints = node.create_publisher(JointState, joints_topic, 10)
         self.wrist = node.create_publisher(PoseStamped, wrist_topic, 10)
 
     def publish(self, q: np.ndarray, header: Header) -> PoseStamped:
         """Publish pose ``q`` with ``header``; return the wrist message."""
-        self.joints.publish(pose_to_joint_state_msg(q, header))
+        self.joints.publish(pose_to_joint_state_msg(q, header, self.joint_names))
         wrist = pose_to_wrist_pose_msg(q, header)
         self.wrist.publish(wrist)
         return wrist
@@ -194,10 +239,11 @@ class PosePublishers:
 
 class TrackerOutputs:
     """What a hand tracker node publishes: the pose (joints + wrist), skeleton markers and a
-    status line per frame; a frame without a pose clears the markers once and says why."""
+    status line per frame; a frame without a pose clears the markers once and says why.
+    Joint names carry ``frame_prefix``."""
 
-    def __init__(self, node: Node) -> None:
-        self.pose = PosePublishers(node)
+    def __init__(self, node: Node, frame_prefix: str = DEFAULT_FRAME_PREFIX) -> None:
+        self.pose = PosePublishers(node, frame_prefix=frame_prefix)
         self.markers = node.create_publisher(MarkerArray, MARKERS_TOPIC, 10)
         self.status = node.create_publisher(String, TRACKING_STATUS_TOPIC, 10)
         self.hand_was_found = False
@@ -223,10 +269,12 @@ class TrackerOutputs:
 
 
 def subscribe_tracked_pose(node: Node,
-                           on_pose: Callable[[np.ndarray, PoseStamped], None]) -> None:
-    """Subscribe to the tracked hand's joint states and wrist pose; call ``on_pose(q, wrist
-    message)`` once both halves of a frame (same stamp) are in."""
-    pairer = PosePairer()
+                           on_pose: Callable[[np.ndarray, PoseStamped], None],
+                           frame_prefix: str = DEFAULT_FRAME_PREFIX) -> None:
+    """Subscribe to the tracked hand's joint states (joint names with ``frame_prefix``) and
+    wrist pose; call ``on_pose(q, wrist message)`` once both halves of a frame (same stamp)
+    are in."""
+    pairer = PosePairer(finger_joint_names(frame_prefix))
 
     def deliver(paired: tuple[np.ndarray, PoseStamped] | None) -> None:
         if paired is not None:

@@ -22,6 +22,7 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 
 from colorglove_ros.core.camera import PinholeCamera, load_calibration
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.frames import finger_joint_names
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
 from colorglove_ros.core.tracking.edge_tracker import EdgeTracker
@@ -35,6 +36,7 @@ from colorglove_ros.ros.nodes.common import (
     TrackerOutputs,
     declare,
     declare_calibration_file,
+    declare_frame_prefix,
     declare_hand_length,
     run_node,
     split_topics,
@@ -57,6 +59,8 @@ class EdgeTrackerNode(Node):
         self.info_topic = declare(self, 'camera_info_topic', 'camera/camera_info',
                                   'CameraInfo topic read when calibration_file is empty')
         hand_length = declare_hand_length(self, 'hand length when no calibration file gives it, m')
+        frame_prefix = declare_frame_prefix(self, 'edge_tracker_node')
+        self.joint_names = finger_joint_names(frame_prefix)
         self.stamp_tolerance = declare(self, 'stamp_tolerance_s', 0.02,
                                        'images within this of each other form one frame, s',
                                        0.0, 1.0)
@@ -117,7 +121,7 @@ class EdgeTrackerNode(Node):
                                  self.on_init_wrist, 10)
         self.create_subscription(JointState, 'edge_tracker/init_joint_states',
                                  self.on_init_joints, 10)
-        self.outputs = TrackerOutputs(self)
+        self.outputs = TrackerOutputs(self, frame_prefix)
 
     def _make_tracker(self, cameras: tuple[PinholeCamera, ...]) -> None:
         with startup_errors('edge_tracker_node'):
@@ -145,7 +149,7 @@ class EdgeTrackerNode(Node):
                                    throttle_duration_sec=1.0)
             return
         try:
-            self.tracker.initialize(pose_from_msgs(msg, self.init_wrist))
+            self.tracker.initialize(pose_from_msgs(msg, self.init_wrist, self.joint_names))
         except (ColorGloveError, ValueError, KeyError) as exc:
             self.get_logger().warn(f'bad starting pose: {exc}', throttle_duration_sec=1.0)
             return

@@ -9,12 +9,14 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
+from colorglove_ros.core.hand.frames import finger_joint_names
 from colorglove_ros.core.hand.gestures import GestureDetector, GestureEvent, format_event
 from colorglove_ros.core.hand.poses import full_pose
 from colorglove_ros.ros.conversions import pose_from_joint_state_msg, stamp_to_seconds
 from colorglove_ros.ros.nodes.common import (
     JOINT_STATES_TOPIC,
     TRACKING_STATUS_TOPIC,
+    declare_frame_prefix,
     hand_model_from_calibration,
     run_node,
 )
@@ -29,6 +31,7 @@ class GestureNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('gestures', **kwargs)
         self.model = hand_model_from_calibration(self, 'gesture_node')
+        self.joint_names = finger_joint_names(declare_frame_prefix(self, 'gesture_node'))
         self.detector = GestureDetector(self.model)
         self.event_pub = self.create_publisher(String, 'hand/gesture_events', 10)
         self.create_subscription(JointState, JOINT_STATES_TOPIC, self.on_joints, 10)
@@ -41,7 +44,7 @@ class GestureNode(Node):
     def on_joints(self, msg: JointState) -> None:
         """Detect on one frame's finger joints (the wrist pose does not matter)."""
         try:
-            q = full_pose(self.model, pose_from_joint_state_msg(msg))
+            q = full_pose(self.model, pose_from_joint_state_msg(msg, self.joint_names))
             events = self.detector.update(q, stamp_to_seconds(msg.header.stamp))
         except (KeyError, ValueError) as exc:
             self.get_logger().warn(f'bad JointState: {exc}', throttle_duration_sec=1.0)

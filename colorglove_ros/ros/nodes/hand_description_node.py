@@ -16,18 +16,16 @@ from rclpy.node import Node
 from rclpy.qos import QoSDurabilityPolicy, QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from std_msgs.msg import String
 
-from colorglove_ros.core.hand.frames import DEFAULT_FRAME_PREFIX, check_frame_prefix
 from colorglove_ros.core.hand.urdf import calibrated_hand_urdf
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.nodes.common import (
-    declare,
     declare_calibration_file,
+    declare_frame_prefix,
     run_node,
     startup_errors,
 )
 
-__all__ = ['ROBOT_DESCRIPTION_TOPIC', 'ROBOT_DESCRIPTION_QOS', 'HandDescriptionNode',
-           'declare_frame_prefix', 'main']
+__all__ = ['ROBOT_DESCRIPTION_TOPIC', 'ROBOT_DESCRIPTION_QOS', 'HandDescriptionNode', 'main']
 
 EXECUTABLE = 'hand_description_node'
 ROBOT_DESCRIPTION_TOPIC = 'robot_description'
@@ -37,16 +35,6 @@ ROBOT_DESCRIPTION_QOS = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=1,
                                    durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
 """robot_state_publisher's ``rclcpp::QoS(1).transient_local()``: a late subscriber (RViz,
 Foxglove) asking for transient local still gets the description."""
-
-
-def declare_frame_prefix(node: Node, executable: str) -> str:
-    """Declare the ``frame_prefix`` parameter (the hand's name in front of every frame and
-    joint name, ``core.hand.frames``); return it, or stop the start if it is not valid."""
-    prefix = declare(node, 'frame_prefix', DEFAULT_FRAME_PREFIX,
-                     'hand name put in front of every frame and joint name (e.g. "right_" '
-                     'gives right_palm); "" keeps the plain names')
-    with startup_errors(executable):
-        return check_frame_prefix(prefix)
 
 
 class HandDescriptionNode(Node):

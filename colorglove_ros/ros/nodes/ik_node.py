@@ -1,6 +1,11 @@
 """ik_node: ``HandPoseCandidates`` -> ``JointState`` (URDF joint names), the wrist pose, a
 skeleton ``MarkerArray`` and an overlay image, by Gauss-Newton IK with temporal smoothing over
-one or several calibrated cameras."""
+one or several calibrated cameras.
+
+Camera 0's intrinsics come from the newest ``camera/camera_info`` (``use_camera_info``, the
+default) or from ``calibration_file``; candidates whose observation's image size or frame_id
+does not match are refused ('no hand: camera: ...'). The extra cameras' intrinsics and
+extrinsics, and the hand length, come from ``calibration_file``."""
 from __future__ import annotations
 
 import sys
@@ -12,7 +17,8 @@ from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from rclpy.node import Node
 from sensor_msgs.msg import Image
 
-from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.camera import PinholeCamera, load_calibration
+from colorglove_ros.core.hand.frames import hand_root_frame
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.hand.overlay import draw_skeleton
 from colorglove_ros.core.lookup.database import check_hand_length, read_database_build
@@ -38,6 +44,8 @@ from colorglove_ros.ros.nodes.common import (
     declare,
     declare_calibration_file,
     declare_database,
+    declare_frame_camera,
+    declare_frame_prefix,
     run_node,
     split_topics,
     startup_errors,
@@ -66,6 +74,8 @@ class IKNode(Node):
         wait_s = declare(self, 'extra_observation_wait_s', 0.05,
                          'longest wait for the extra cameras\' observations of a frame, seconds',
                          0.0, 1.0)
+        frame_prefix = declare_frame_prefix(self, 'ik_node')
+        self.hand_frame = hand_root_frame(frame_prefix)
         with startup_errors('ik_node', ValueError):
             calibration = load_calibration(resolve_path(calibration_file))
             config = load_ik_config(resolve_path(ik_config))
@@ -78,6 +88,7 @@ class IKNode(Node):
             self.tracker = HandTracker(model, mesh, calibration.cameras, config, glove)
         self.num_vertices = mesh.num_vertices
         self.cameras = calibration.cameras
+        self.frame_camera = declare_frame_camera(self, calibration.primary)
         topics = split_topics(extra_topics)
         if len(topics) != len(self.cameras) - 1:
             raise StartupError(
@@ -92,7 +103,7 @@ class IKNode(Node):
         self.pending: HandPoseCandidates | None = None
         self.pending_timer = self.create_timer(wait_s, self._process_pending, autostart=False)
         self.recent_images: deque[Image] = deque(maxlen=15)
-        self.outputs = TrackerOutputs(self)
+        self.outputs = TrackerOutputs(self, frame_prefix)
         self.overlay_pub = self.create_publisher(Image, 'hand/overlay', 2)
         self.create_subscription(HandPoseCandidates, 'hand/pose_candidates', self.on_candidates,
                                  LATEST_ONLY)
@@ -103,13 +114,13 @@ class IKNode(Node):
         self.get_logger().info(f'tracking with {len(self.cameras)} camera(s)')
 
     def _tf_publisher(self):
-        """A /tf publisher for the camera -> palm transform (so robot_state_publisher's URDF
-        frames hang off the camera), when tf2_msgs is installed (native ROS 2; it is not on
-        PyPI, where the wrist pose is on /hand/wrist_pose only)."""
+        """A /tf publisher for the camera -> hand root (``<frame_prefix>palm``) transform (so
+        robot_state_publisher's URDF frames hang off the camera), when tf2_msgs is installed
+        (native ROS 2; it is not on PyPI, where the wrist pose is on /hand/wrist_pose only)."""
         try:
             from tf2_msgs.msg import TFMessage
         except ImportError:
-            self.get_logger().info('tf2_msgs not installed: camera->palm TF not broadcast '
+            self.get_logger().info('tf2_msgs not installed: camera->hand TF not broadcast '
                                    '(the wrist pose is on hand/wrist_pose)')
             return None
         return self.create_publisher(TFMessage, '/tf', 10)
@@ -200,7 +211,10 @@ class IKNode(Node):
         try:
             prior = None
             if msg.hand_found:
-                camera = self.cameras[0]
+                camera = self._primary_camera(msg.observation)
+                if isinstance(camera, NoHand):
+                    self.tracker.reset()
+                    return camera
                 check_candidates_msg(msg, self.num_vertices, (camera.width, camera.height))
                 prior = pose_prior_from_candidates_msg(msg)
             observations = [camera_observation_from_msg(msg.observation),
@@ -209,15 +223,29 @@ class IKNode(Node):
             return bad_prior(self.tracker, exc)
         return track(self.tracker, prior, observations, stamp, upstream_reason=msg.status)
 
+    def _primary_camera(self, observation: HandObservation) -> PinholeCamera | NoHand:
+        """Camera 0's model for this observation (its CameraInfo's or the calibrated one; the
+        tracker switches to it when it changed), or why the frame is refused."""
+        camera = self.frame_camera.camera_for(observation.image_width, observation.image_height,
+                                              observation.header.frame_id)
+        if not isinstance(camera, NoHand) and camera is not self.tracker.cameras[0]:
+            self.tracker.set_primary_camera(camera)
+            self.get_logger().info(
+                f'camera 0: {camera.width}x{camera.height}, fx {camera.fx:.1f}, fy '
+                f'{camera.fy:.1f}, cx {camera.cx:.1f}, cy {camera.cy:.1f} '
+                f'({"CameraInfo" if self.frame_camera.use_camera_info else "calibration"})')
+        return camera
+
     def _publish(self, msg: HandPoseCandidates, tracked: Tracked) -> None:
         """Publish a tracked frame: joint state, wrist pose (and TF), markers, status line and
         the overlay."""
         result, keypoints = tracked.result, tracked.keypoints
         wrist = self.outputs.publish_pose(result.q, keypoints, msg.header)
         if self.tf_pub is not None:
-            self.tf_pub.publish(wrist_pose_to_tf_msg(wrist, child_frame_id='palm'))
+            self.tf_pub.publish(wrist_pose_to_tf_msg(wrist, child_frame_id=self.hand_frame))
         per_camera = ', '.join(f'{camera.name} {count}' for camera, count in
-                               zip(self.cameras, result.constraints_per_camera, strict=False))
+                               zip(self.tracker.cameras, result.constraints_per_camera,
+                                   strict=False))
         self.outputs.publish_status(
             f'tracking: {result.num_constraints} constraints ({per_camera}), reprojection '
             f'{result.reprojection_error_px:.1f} px, IK {result.time_ms:.1f} ms')
@@ -233,7 +261,7 @@ class IKNode(Node):
             rgb = image_to_rgb8(image)
         except ImageEncodingError:
             return
-        drawn = draw_skeleton(rgb, keypoints, self.cameras[0],
+        drawn = draw_skeleton(rgb, keypoints, self.tracker.cameras[0],
                               label=f'reprojection {error_px:.1f} px')
         self.overlay_pub.publish(array_to_image(drawn, 'rgb8', msg.header))
 

@@ -11,9 +11,11 @@ from rclpy.node import Node
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Header
 
+from colorglove_ros.core.hand.frames import hand_root_frame
 from colorglove_ros.core.hand.keypoints import HandKeypoints, hand_keypoints
 from colorglove_ros.ros.nodes.common import (
     declare,
+    declare_frame_prefix,
     hand_model_from_calibration,
     run_node,
     subscribe_tracked_pose,
@@ -37,11 +39,13 @@ class KeypointsNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('keypoints', **kwargs)
         self.model = hand_model_from_calibration(self, 'keypoints_node')
-        self.hand_frame = declare(self, 'hand_frame', 'palm',
-                                  'frame_id of hand/keypoints_wrist (the hand root link)')
+        frame_prefix = declare_frame_prefix(self, 'keypoints_node')
+        self.hand_frame = declare(self, 'hand_frame', '',
+                                  'frame_id of hand/keypoints_wrist; empty: the hand root link '
+                                  '<frame_prefix>palm') or hand_root_frame(frame_prefix)
         self.camera_pub = self.create_publisher(PoseArray, 'hand/keypoints', 10)
         self.wrist_pub = self.create_publisher(PoseArray, 'hand/keypoints_wrist', 10)
-        subscribe_tracked_pose(self, self.publish)
+        subscribe_tracked_pose(self, self.publish, frame_prefix)
 
     def publish(self, q: np.ndarray, wrist: PoseStamped) -> None:
         """Publish both keypoint arrays of a complete frame."""

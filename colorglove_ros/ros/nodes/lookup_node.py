@@ -1,5 +1,9 @@
 """lookup_node: ``HandObservation`` -> ``HandPoseCandidates`` (Hamming search over learned
-binary codes, exact re-rank, Gaussian-weighted blend of the nearest database poses)."""
+binary codes, exact re-rank, Gaussian-weighted blend of the nearest database poses).
+
+The camera that turns the crop into a depth is the newest ``camera/camera_info``'s
+(``use_camera_info``, the default) or camera 0 of ``calibration_file``; an observation whose
+image size or frame_id does not match it is refused ('camera: ...')."""
 from __future__ import annotations
 
 import sys
@@ -28,6 +32,7 @@ from colorglove_ros.ros.nodes.common import (
     declare,
     declare_calibration_file,
     declare_database,
+    declare_frame_camera,
     run_node,
     startup_errors,
 )
@@ -53,13 +58,13 @@ class LookupNode(Node):
         with startup_errors('lookup_node'):
             path = declare_database(self)
             calibration = load_calibration(resolve_path(calibration_file))
-            self.camera = calibration.primary
             started = time.perf_counter()
             database = load_database(path)
             check_hand_length(database.build, calibration.hand_length_m, calibration_file, path)
             self.lookup = PoseLookup(database, num_candidates, num_neighbors)
             if self.finger_evidence:
                 self.lookup.patch_digit_table()      # built now, not on the first frame
+        self.frame_camera = declare_frame_camera(self, calibration.primary)
         self.publisher = self.create_publisher(HandPoseCandidates, 'hand/pose_candidates', 10)
         self.create_subscription(HandObservation, 'hand/observation', self.on_observation,
                                  LATEST_ONLY)
@@ -69,13 +74,17 @@ class LookupNode(Node):
     def _look_up(self, observation: HandObservation) -> LookupResult | NoHand:
         """The lookup of an observation with a hand (``core.pipeline.look_up``), or 'no hand'
         for one that fails its message checks."""
+        camera = self.frame_camera.camera_for(observation.image_width, observation.image_height,
+                                              observation.header.frame_id)
+        if isinstance(camera, NoHand):
+            return camera
         try:
-            tiny = check_observation_msg(observation, (self.camera.width, self.camera.height))
+            tiny = check_observation_msg(observation, (camera.width, camera.height))
         except InvalidInputError as exc:
             return NoHand(f'lookup: invalid observation: {exc}', warn=True)
         blobs = blobs_from_observation_msg(observation) if self.finger_evidence else None
         return look_up(self.lookup, TinyCrop(tiny, crop_from_observation_msg(observation)),
-                       self.camera, blobs, self.limits)
+                       camera, blobs, self.limits)
 
     def on_observation(self, observation: HandObservation) -> None:
         """Look one observation up and publish the candidates, or a 'no hand' message with

@@ -17,6 +17,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState, Joy
 
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.frames import finger_joint_names
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.tracking.mouse import Mouse3D, MouseConfig, TablePlane
 from colorglove_ros.ros.conversions import pose_from_msgs, stamp_to_seconds
@@ -24,6 +25,7 @@ from colorglove_ros.ros.nodes.common import (
     JOINT_STATES_TOPIC,
     WRIST_POSE_TOPIC,
     declare,
+    declare_frame_prefix,
     declare_hand_length,
     run_node,
     startup_errors,
@@ -68,6 +70,7 @@ class MouseNode(Node):
                           'a longer gap between poses restarts the filter and releases the '
                           'buttons, s', 0.01, 10.0)
         hand_length = declare_hand_length(self, 'hand length of the tracker, m')
+        self.joint_names = finger_joint_names(declare_frame_prefix(self, 'mouse_node'))
         self.stamp_tolerance = declare(self, 'stamp_tolerance_s', 0.005,
                                        'joint state and wrist pose of one frame differ by '
                                        'at most this, s', 0.0, 1.0)
@@ -94,7 +97,7 @@ class MouseNode(Node):
                 > self.stamp_tolerance:
             return
         try:
-            state = self.mouse.update(pose_from_msgs(msg, self.wrist), stamp)
+            state = self.mouse.update(pose_from_msgs(msg, self.wrist, self.joint_names), stamp)
         except (ColorGloveError, ValueError, KeyError) as exc:
             self.get_logger().warn(f'pose dropped: {exc}', throttle_duration_sec=1.0)
             return

@@ -1,5 +1,9 @@
 """segmentation_node: camera ``Image`` -> ``HandObservation`` (per-pixel glove colour
-classification, mean-shift crop, 40x40 tiny label image, patch blobs)."""
+classification, mean-shift crop, 40x40 tiny label image, patch blobs).
+
+A frame is segmented only when its camera model is known: with ``use_camera_info`` (default)
+the newest ``camera/camera_info`` must have the image's size and frame_id, else camera 0 of
+``calibration_file`` its size; other frames give 'camera: ...' observations without a hand."""
 from __future__ import annotations
 
 import sys
@@ -10,19 +14,24 @@ from colorglove_msgs.msg import HandObservation
 from rclpy.node import Node
 from sensor_msgs.msg import Image
 
+from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
 from colorglove_ros.core.pipeline import NoHand, bad_image, segment_frame
 from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
 from colorglove_ros.core.segmentation.segmenter import load_segmenter
 from colorglove_ros.core.segmentation.types import Observation
 from colorglove_ros.core.validation import validate_image_size
+from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import observation_to_msg
 from colorglove_ros.ros.image import ImageEncodingError, array_to_image, image_to_rgb8
 from colorglove_ros.ros.nodes.common import (
     LATEST_IMAGE,
     StartupError,
     declare,
+    declare_calibration_file,
+    declare_frame_camera,
     run_node,
+    startup_errors,
 )
 
 # Label image -> colours for the debug image: background black, glove colours as printed.
@@ -38,10 +47,16 @@ class SegmentationNode(Node):
                          'colour calibration config YAML (calibration file + segmenter settings)')
         self.publish_debug = declare(self, 'publish_debug_image', False,
                                      'also publish the per-pixel classification as an image')
+        calibration_file = declare_calibration_file(
+            self, 'camera calibration YAML (camera 0: the image size expected when '
+                  'use_camera_info is false)')
         try:
             self.segmenter = load_segmenter(config)
         except (ColorCalibrationError, OSError, ValueError) as exc:
             raise StartupError(f'segmentation_node cannot start: {exc}') from exc
+        with startup_errors('segmentation_node', ValueError):
+            calibration = load_calibration(resolve_path(calibration_file))
+        self.frame_camera = declare_frame_camera(self, calibration.primary)
         self.publisher = self.create_publisher(HandObservation, 'hand/observation', 10)
         self.debug_publisher = self.create_publisher(Image, 'hand/segmentation_debug', 2)
         self.create_subscription(Image, 'camera/image_raw', self.on_image, LATEST_IMAGE)
@@ -54,7 +69,10 @@ class SegmentationNode(Node):
 
     def _segment(self, image: Image) -> Observation | NoHand:
         """The frame's observation (``core.pipeline.segment_frame``), or 'no hand' for an
-        image that cannot be decoded."""
+        image that cannot be decoded or whose camera model is not known."""
+        camera = self.frame_camera.camera_for(image.width, image.height, image.header.frame_id)
+        if isinstance(camera, NoHand):
+            return camera
         try:
             validate_image_size(image.width, image.height, error=ImageEncodingError)
             rgb = image_to_rgb8(image)

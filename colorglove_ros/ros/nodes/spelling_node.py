@@ -15,6 +15,7 @@ from colorglove_ros.ros.conversions import stamp_to_seconds
 from colorglove_ros.ros.nodes.common import (
     TRACKING_STATUS_TOPIC,
     declare,
+    declare_frame_prefix,
     hand_model_from_calibration,
     run_node,
     subscribe_tracked_pose,
@@ -33,11 +34,12 @@ class SpellingNode(Node):
         self.max_text = declare(self, 'max_text_length', 200,
                                 'longest text kept on hand/spelled_text (oldest letters dropped)',
                                 1, 100000)
+        frame_prefix = declare_frame_prefix(self, 'spelling_node')
         self.speller = Speller(model=model)
         self.text = ''
         self.letter_pub = self.create_publisher(String, 'hand/spelled_letters', 10)
         self.text_pub = self.create_publisher(String, 'hand/spelled_text', 10)
-        subscribe_tracked_pose(self, self.on_pose)
+        subscribe_tracked_pose(self, self.on_pose, frame_prefix)
         self.create_subscription(String, TRACKING_STATUS_TOPIC, self.on_status, 10)
 
     def on_pose(self, q: np.ndarray, wrist: PoseStamped) -> None:

@@ -532,7 +532,7 @@ def test_covariance_file_round_trip_and_errors(tmp_path):
     with pytest.raises(IKConfigError, match='not found'):
         load_ik_config(tmp_path / 'ik_bad.yaml')
     (tmp_path / 'ik_typo.yaml').write_text('version: 1\nmax_iteration: 4\n')
-    with pytest.raises(IKConfigError, match='unknown keys'):
+    with pytest.raises(IKConfigError, match='unknown setting'):
         load_ik_config(tmp_path / 'ik_typo.yaml')
 
 
