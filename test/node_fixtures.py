@@ -218,22 +218,28 @@ def params(**values) -> list[Parameter]:
     return [Parameter(name, value=value) for name, value in values.items()]
 
 
+# The pipeline node factories below default to use_camera_info false (camera 0 of
+# config/calibration.yaml): the tests send images and messages without a CameraInfo, except
+# those of CameraInfo itself (test/ros/nodes/test_camera_info_nodes.py), which set it true.
 def segmentation_node(assets: NodeAssets, **overrides) -> Callable[[rclpy.Context], Node]:
     """A factory of segmentation_node with the assets' colour calibration (and the
     parameters ``overrides``)."""
     from colorglove_ros.ros.nodes.segmentation_node import SegmentationNode
 
+    overrides.setdefault('use_camera_info', False)
     return lambda ctx: SegmentationNode(context=ctx, parameter_overrides=params(
         color_calibration_file=str(assets.color_config), **overrides))
 
 
-def lookup_node(assets: NodeAssets) -> Callable[[rclpy.Context], Node]:
-    """A factory of lookup_node with the assets' database (settings of :func:`node_lookup`)."""
+def lookup_node(assets: NodeAssets, **overrides) -> Callable[[rclpy.Context], Node]:
+    """A factory of lookup_node with the assets' database (settings of :func:`node_lookup`)
+    and the parameters ``overrides``."""
     from colorglove_ros.ros.nodes.lookup_node import LookupNode
 
+    overrides.setdefault('use_camera_info', False)
     return lambda ctx: LookupNode(context=ctx, parameter_overrides=params(
         database_path=str(assets.database), num_candidates=LOOKUP_CANDIDATES,
-        num_neighbors=LOOKUP_BLEND))
+        num_neighbors=LOOKUP_BLEND, **overrides))
 
 
 def ik_node(database: Path, **overrides) -> Callable[[rclpy.Context], Node]:
@@ -241,6 +247,7 @@ def ik_node(database: Path, **overrides) -> Callable[[rclpy.Context], Node]:
     parameters ``overrides``."""
     from colorglove_ros.ros.nodes.ik_node import IKNode
 
+    overrides.setdefault('use_camera_info', False)
     return lambda ctx: IKNode(context=ctx, parameter_overrides=params(
         database_path=str(database), **overrides))
 

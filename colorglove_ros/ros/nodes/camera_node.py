@@ -89,8 +89,10 @@ class CameraNode(Node):
                 throttle_duration_sec=1.0)
             return
         header = Header(stamp=self.get_clock().now().to_msg(), frame_id=self.camera.frame_id)
-        self.image_pub.publish(array_to_image(frame.image_rgb, 'rgb8', header))
+        # CameraInfo first (same header): a tracker taking its intrinsics from it has them
+        # when the image arrives
         self.info_pub.publish(camera_to_camera_info_msg(self.camera, header))
+        self.image_pub.publish(array_to_image(frame.image_rgb, 'rgb8', header))
         if frame.ground_truth_pose is not None:
             self.ground_truth_pub.publish(frame.ground_truth_pose, header)
         self.published += 1

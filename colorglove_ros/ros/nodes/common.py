@@ -30,7 +30,6 @@ from colorglove_ros.core.hand.frames import (
     finger_joint_names,
 )
 from colorglove_ros.core.hand.model import HandModel
-from colorglove_ros.core.pipeline import NoHand
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
     pose_to_joint_state_msg,
@@ -45,7 +44,7 @@ __all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'run_node',
            'DEFAULT_CALIBRATION_FILE', 'DEFAULT_DATABASE_CONFIG', 'declare_database',
            'HAND_LENGTH_RANGE_M', 'startup_errors',
            'declare_calibration_file', 'declare_hand_length', 'declare_frame_prefix',
-           'CAMERA_INFO_TOPIC', 'declare_frame_camera', 'refuse_frame', 'split_topics',
+           'CAMERA_INFO_TOPIC', 'declare_frame_camera', 'split_topics',
            'hand_model_from_calibration', 'JOINT_STATES_TOPIC', 'WRIST_POSE_TOPIC',
            'MARKERS_TOPIC', 'TRACKING_STATUS_TOPIC',
            'PosePublishers', 'TrackerOutputs', 'subscribe_tracked_pose']
@@ -175,7 +174,8 @@ CAMERA_INFO_TOPIC = 'camera/camera_info'
 
 def declare_frame_camera(node: Node, calibrated: PinholeCamera) -> FrameCamera:
     """Declare ``use_camera_info``; return the :class:`FrameCamera` giving each frame its
-    camera model (fed from ``camera/camera_info`` when true, else ``calibrated``)."""
+    camera model (fed from ``camera/camera_info`` when true, else ``calibrated``). Frames
+    before the first CameraInfo are refused ('camera: waiting for CameraInfo')."""
     use_camera_info = declare(
         node, 'use_camera_info', True,
         'true: intrinsics from the newest CameraInfo on camera/camera_info (frames whose size '
@@ -186,11 +186,6 @@ def declare_frame_camera(node: Node, calibrated: PinholeCamera) -> FrameCamera:
         node.create_subscription(CameraInfo, CAMERA_INFO_TOPIC, frame_camera.set_camera_info,
                                  10)
     return frame_camera
-
-
-def refuse_frame(node: Node, refusal: NoHand) -> None:
-    """Log a frame refused for its camera model (throttled; FrameCamera counted it)."""
-    node.get_logger().warn(f'frame refused: {refusal.reason}', throttle_duration_sec=1.0)
 
 
 def split_topics(text: str) -> list[str]:

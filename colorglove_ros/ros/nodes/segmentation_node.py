@@ -70,14 +70,14 @@ class SegmentationNode(Node):
     def _segment(self, image: Image) -> Observation | NoHand:
         """The frame's observation (``core.pipeline.segment_frame``), or 'no hand' for an
         image that cannot be decoded or whose camera model is not known."""
-        camera = self.frame_camera.camera_for(image.width, image.height, image.header.frame_id)
-        if isinstance(camera, NoHand):
-            return camera
         try:
             validate_image_size(image.width, image.height, error=ImageEncodingError)
             rgb = image_to_rgb8(image)
         except ImageEncodingError as exc:
             return bad_image(exc)
+        camera = self.frame_camera.camera_for(image.width, image.height, image.header.frame_id)
+        if isinstance(camera, NoHand):
+            return camera
         return segment_frame(self.segmenter, rgb, keep_labels=self.publish_debug)
 
     def on_image(self, image: Image) -> None:

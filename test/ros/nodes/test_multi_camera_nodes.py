@@ -119,6 +119,7 @@ def _run(assets: NodeAssets, bag: Path, two_cameras: bool) -> PipelineRun:
         parameters['segmentation2'] = segmentation
         extra_nodes = [NodeSpec('segmentation_node', 'segmentation2', remappings={
             'camera/image_raw': SECOND_IMAGE, 'hand/observation': SECOND_OBSERVATION,
+            'camera/camera_info': f'/{SECOND.name}/camera/camera_info',
             'hand/segmentation_debug': f'/{SECOND.name}/hand/segmentation_debug'})]
         extra_inputs = {SECOND_IMAGE: 'segmentation2'}
     return run_pipeline(parameters, FRAMES, feed=bag_feed(bag, paced=True), timeout_s=300.0,

@@ -275,6 +275,37 @@ def test_ik_node_outputs(good_candidates: HandPoseCandidates, good_rgb: np.ndarr
     assert len(joints) == 1 and len(wrist) == 1
 
 
+def test_ik_node_frame_prefix_names_joints_and_tf_child(good_candidates: HandPoseCandidates,
+                                                        small_database_path: Path) -> None:
+    """ik_node with frame_prefix 'right_' publishes 'right_...' joints and the camera ->
+    right_palm transform; a consumer node with the same prefix reads those joint states."""
+    from geometry_msgs.msg import PoseArray
+    from tf2_msgs.msg import TFMessage
+
+    from colorglove_ros.core.hand.frames import finger_joint_names
+    from colorglove_ros.ros.nodes.keypoints_node import KeypointsNode
+
+    keypoints = lambda ctx: KeypointsNode(context=ctx, parameter_overrides=params(  # noqa: E731
+        frame_prefix='right_'))
+    with running(ik_node(small_database_path, frame_prefix='right_'), keypoints) as h:
+        joints = h.collect(JointState, 'hand/joint_states')
+        tf = h.collect(TFMessage, '/tf')
+        in_hand = h.collect(PoseArray, 'hand/keypoints_wrist')
+        status = h.collect(String, 'hand/tracking_status')
+        pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
+        first = h.exchange(pub, good_candidates, status)
+        assert h.spin_until(lambda: joints and tf and in_hand, 10.0), \
+            (len(joints), len(tf), len(in_hand))
+    assert first.data.startswith('tracking:'), first.data
+    assert list(joints[0].name) == finger_joint_names('right_')
+    assert all(name.startswith('right_') for name in joints[0].name)
+    transform = tf[0].transforms[0]
+    assert transform.child_frame_id == 'right_palm'
+    assert transform.header.frame_id == 'camera_optical_frame'
+    # the consumer found every prefixed joint (a plain-name reader would miss them all)
+    assert in_hand[0].header.frame_id == 'right_palm' and len(in_hand[0].poses) == 21
+
+
 @dataclass
 class _IKAnswers:
     """What ik_node did with a bad candidates message followed by a good one."""

@@ -38,15 +38,19 @@ def hand_frames() -> list[np.ndarray]:
 
 def _specs(assets: NodeAssets, folder: Path, with_ik: bool = False,
            respawn: bool = False) -> list[NodeSpec]:
+    # the stream sends images without CameraInfo: camera 0 of config/calibration.yaml
     seg = write_params_file(folder / 'segmentation.yaml',
-                            {'color_calibration_file': str(assets.color_config)})
+                            {'color_calibration_file': str(assets.color_config),
+                             'use_camera_info': False})
     lookup = write_params_file(folder / 'lookup.yaml', {'database_path': str(assets.database),
-                                                        'num_candidates': 40})
+                                                        'num_candidates': 40,
+                                                        'use_camera_info': False})
     specs = [NodeSpec(executable('segmentation_node'), parameters=[seg], respawn=respawn),
              NodeSpec(executable('lookup_node'), parameters=[lookup], respawn=respawn)]
     if with_ik:
         ik = write_params_file(folder / 'ik.yaml', {'publish_overlay': False,
-                                                    'database_path': str(assets.database)})
+                                                    'database_path': str(assets.database),
+                                                    'use_camera_info': False})
         specs.append(NodeSpec(executable('ik_node'), parameters=[ik]))
     return specs
 
