@@ -243,6 +243,21 @@ def node_specs(params_file: Path, with_camera: bool) -> list[NodeSpec]:
     return [NodeSpec(executable, name, [params_file]) for executable, name in names]
 
 
+def looping_pipeline(database: Path | None, seed: int, frames: int, rate_hz: float,
+                     folder: Path) -> tuple[Any, Path]:
+    """A launcher (not started) of the four nodes on synthetic sequence ``seed`` looped at
+    ``rate_hz`` without overlays, its parameter file in ``folder``, with the Fast DDS profile
+    set; and the pose database it runs with (see :func:`prepare_assets`)."""
+    from colorglove_ros.ros.launcher import Launcher, use_fastdds_profile
+
+    database = prepare_assets(database)
+    parameters = pipeline_parameters(database, seed, frames, rate_hz)
+    parameters['camera']['loop'] = True
+    parameters['ik']['publish_overlay'] = False
+    use_fastdds_profile()
+    return Launcher(node_specs(write_params(parameters, folder), True)), database
+
+
 def write_params(parameters: dict[str, dict[str, Any]], folder: Path) -> Path:
     """A ROS 2 parameter file from {node name: {parameter: value}}."""
     path = folder / 'params.yaml'

@@ -9,7 +9,6 @@ from __future__ import annotations
 import os
 import signal
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -29,25 +28,20 @@ class _OutputTimes:
     """Arrival times (time.monotonic) of every message on the victims' output topics."""
 
     def __init__(self) -> None:
-        import rclpy
         from colorglove_msgs.msg import HandObservation, HandPoseCandidates
-        from rclpy.executors import SingleThreadedExecutor
         from sensor_msgs.msg import JointState
 
+        from colorglove_ros.ros.background_node import BackgroundNode
+
         self.arrivals: dict[str, list[float]] = {name: [] for name in VICTIMS}
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node('restart_probe', context=self.context)
+        self.listener = BackgroundNode('restart_probe')
         types = {'segmentation': HandObservation, 'lookup': HandPoseCandidates,
                  'ik': JointState}
         for name, topic in VICTIMS.items():
-            self.node.create_subscription(
+            self.listener.node.create_subscription(
                 types[name], '/' + topic,
                 lambda _msg, n=name: self.arrivals[n].append(time.monotonic()), 10)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self.thread.start()
+        self.listener.start()
 
     def first_after(self, name: str, since: float, timeout_s: float) -> float:
         """Seconds from ``since`` to the first ``name`` output after it (NaN on timeout)."""
@@ -60,31 +54,17 @@ class _OutputTimes:
         return float('nan')
 
     def close(self) -> None:
-        import rclpy
-
-        self.executor.shutdown()
-        self.thread.join(timeout=5.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
+        """Stop listening."""
+        self.listener.close()
 
 
 def _measure(args) -> int:
-    from colorglove_ros.ros.launcher import Launcher, use_fastdds_profile
-    from colorglove_ros.ros.pipeline_run import (
-        node_specs,
-        pipeline_parameters,
-        prepare_assets,
-        write_params,
-    )
+    from colorglove_ros.ros.pipeline_run import looping_pipeline
 
-    database = prepare_assets(args.database)
-    parameters = pipeline_parameters(database, args.seed, args.frames, args.rate)
-    parameters['camera']['loop'] = True
-    parameters['ik']['publish_overlay'] = False
-    use_fastdds_profile()
     rows: list[dict[str, object]] = []
     with tempfile.TemporaryDirectory() as folder:
-        launcher = Launcher(node_specs(write_params(parameters, Path(folder)), True))
+        launcher, database = looping_pipeline(args.database, args.seed, args.frames, args.rate,
+                                              Path(folder))
         outputs = _OutputTimes()
         launcher.start()
         try:

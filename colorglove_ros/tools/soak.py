@@ -38,19 +38,14 @@ class _StageTimes:
     """Collects the stages' processing times with the time they arrived (no images)."""
 
     def __init__(self) -> None:
-        import threading
-
-        import rclpy
         from colorglove_msgs.msg import HandPoseCandidates
-        from rclpy.executors import SingleThreadedExecutor
         from std_msgs.msg import String
 
+        from colorglove_ros.ros.background_node import BackgroundNode
         from colorglove_ros.ros.pipeline_run import ik_times_ms
 
         self.rows: list[tuple[float, str, float]] = []      # (time, stage, ms)
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node('soak_stage_times', context=self.context)
+        self.listener = BackgroundNode('soak_stage_times')
 
         def on_candidates(msg: HandPoseCandidates) -> None:
             now = time.time()
@@ -62,13 +57,10 @@ class _StageTimes:
         def on_status(msg: String) -> None:
             self.rows.extend((time.time(), 'ik', ms) for ms in ik_times_ms([msg.data]))
 
-        self.node.create_subscription(HandPoseCandidates, '/hand/pose_candidates',
-                                      on_candidates, 50)
-        self.node.create_subscription(String, '/hand/tracking_status', on_status, 50)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self.thread.start()
+        node = self.listener.node
+        node.create_subscription(HandPoseCandidates, '/hand/pose_candidates', on_candidates, 50)
+        node.create_subscription(String, '/hand/tracking_status', on_status, 50)
+        self.listener.start()
 
     def p95_ms(self, stage: str, start: float, end: float) -> float:
         """95th percentile of ``stage``'s times that arrived in [start, end)."""
@@ -76,32 +68,18 @@ class _StageTimes:
         return float(np.percentile(values, 95)) if values else float('nan')
 
     def close(self) -> None:
-        import rclpy
-
-        self.executor.shutdown()
-        self.thread.join(timeout=5.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
+        """Stop listening."""
+        self.listener.close()
 
 
 def _soak(args) -> int:
     from colorglove_ros.ros.latency_probe import LatencyProbe, ProbeRecord, window_summaries
-    from colorglove_ros.ros.launcher import Launcher, use_fastdds_profile
-    from colorglove_ros.ros.pipeline_run import (
-        node_specs,
-        pipeline_parameters,
-        prepare_assets,
-        write_params,
-    )
+    from colorglove_ros.ros.pipeline_run import looping_pipeline
 
-    database = prepare_assets(args.database)
-    parameters = pipeline_parameters(database, args.seed, args.frames, args.rate)
-    parameters['camera']['loop'] = True
-    parameters['ik']['publish_overlay'] = False
-    use_fastdds_profile()
     memory_rows: list[dict[str, float]] = []
     with tempfile.TemporaryDirectory() as folder:
-        launcher = Launcher(node_specs(write_params(parameters, Path(folder)), True))
+        launcher, _ = looping_pipeline(args.database, args.seed, args.frames, args.rate,
+                                       Path(folder))
         probe = LatencyProbe()
         probe.start()
         stages = _StageTimes()
