@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 __all__ = ['NUM_COLORS', 'NUM_PATCHES', 'TINY_SIZE', 'DEFAULT_HAND_LENGTH_M', 'DEFAULT_GLOVE_SEED',
-           'HAND_LENGTH_RANGE_M']
+           'HAND_LENGTH_RANGE_M', 'MODEL_HAND_LENGTH_RANGE_M']
 
 NUM_COLORS = 10
 """Glove colours, labels 1..10 in label images; 0 is background."""
@@ -16,3 +16,6 @@ DEFAULT_GLOVE_SEED = 0
 """Seed of the standard glove's patch layout (a database records the one it was built with)."""
 HAND_LENGTH_RANGE_M = (0.08, 0.35)
 """Wrist-crease-to-middle-fingertip lengths of human hands a calibration may give (m)."""
+MODEL_HAND_LENGTH_RANGE_M = (0.05, 0.4)
+"""Hand lengths (m) the kinematic model and the database builder are made for (wider than
+``HAND_LENGTH_RANGE_M``: also test and toy hands)."""

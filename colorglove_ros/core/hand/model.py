@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, MODEL_HAND_LENGTH_RANGE_M
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.geometry import rotvec_to_matrix, so3_left_jacobian, vector_to_skew
 
@@ -128,8 +128,9 @@ class HandModel:
     """
 
     def __init__(self, hand_length_m: float = DEFAULT_HAND_LENGTH_M) -> None:
-        if not (0.05 <= hand_length_m <= 0.4):
-            raise HandModelError(f'hand_length_m {hand_length_m!r} outside [0.05, 0.4]')
+        low, high = MODEL_HAND_LENGTH_RANGE_M
+        if not (low <= hand_length_m <= high):
+            raise HandModelError(f'hand_length_m {hand_length_m!r} outside [{low}, {high}]')
         self.hand_length_m = float(hand_length_m)
         self.dof_names: tuple[str, ...] = DOF_NAMES
         self.link_names: tuple[str, ...] = LINK_NAMES

@@ -15,6 +15,7 @@ import numpy as np
 from colorglove_ros.core.conventions import (
     DEFAULT_GLOVE_SEED,
     DEFAULT_HAND_LENGTH_M,
+    MODEL_HAND_LENGTH_RANGE_M,
     NUM_COLORS,
     NUM_PATCHES,
     TINY_SIZE,
@@ -79,7 +80,8 @@ class DatabaseBuild:
                                 'glove_seed); rebuild it with colorglove_build_database')
         length, seed = build['hand_length_m'], build['glove_seed']
         if isinstance(length, bool) or not isinstance(length, (int, float)) \
-                or not 0.05 <= float(length) <= 0.4:
+                or not MODEL_HAND_LENGTH_RANGE_M[0] <= float(length) \
+                <= MODEL_HAND_LENGTH_RANGE_M[1]:
             raise DatabaseError(f'{where}: meta.build.hand_length_m {length!r} is not a hand '
                                 'length in metres')
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:

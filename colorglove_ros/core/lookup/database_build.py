@@ -16,6 +16,7 @@ import numpy as np
 from colorglove_ros.core.conventions import (
     DEFAULT_GLOVE_SEED,
     DEFAULT_HAND_LENGTH_M,
+    MODEL_HAND_LENGTH_RANGE_M,
     NUM_COLORS,
     NUM_PATCHES,
     TINY_SIZE,
@@ -70,7 +71,7 @@ _BUILD_LIMITS: dict[str, tuple[type, float, float]] = {
     'seed': (int, 0, 2**32 - 1), 'image_size': (int, 16, 4096),
     'focal_px': (float, 0.0, 1e5), 'distance_m': (float, 0.0, 10.0),
     'num_bits': (int, 1, 4096), 'num_pairs': (int, 1, 10_000_000),
-    'training_images': (int, 2, 10_000_000), 'hand_length_m': (float, 0.05, 0.4),
+    'training_images': (int, 2, 10_000_000), 'hand_length_m': (float, *MODEL_HAND_LENGTH_RANGE_M),
     'glove_seed': (int, 0, 2**32 - 1), 'fps_vertices': (int, 1, 100_000),
     'batch': (int, 1, 100_000), 'visibility_tolerance_m': (float, 0.0, 0.1),
 }
