@@ -38,7 +38,8 @@ if TYPE_CHECKING:
 # imports only the stage it runs (start-up time).
 
 __all__ = [
-    'DEFAULT_MAX_IMAGE_DISTANCE', 'StageLimits', 'NODE_LIMITS', 'UNGATED', 'NoHand', 'Tracked',
+    'DEFAULT_MAX_IMAGE_DISTANCE', 'CUT_BY_BORDER', 'StageLimits', 'NODE_LIMITS', 'UNGATED',
+    'NoHand', 'Tracked',
     'TemporalPrior', 'Observer', 'FrameObservations', 'FrameLookup', 'FramePipeline',
     'segment_frame', 'bad_image', 'observe_image', 'image_observer', 'look_up', 'track',
     'bad_prior', 'hand_keypoints_at_plausible_depth',
@@ -47,6 +48,8 @@ __all__ = [
 # Nearest database image farther than this from the observation (tiny-image pixels): glove-
 # coloured clutter or noise that resembles no hand pose. lookup_node's parameter default.
 DEFAULT_MAX_IMAGE_DISTANCE = 4.5
+#: The 'no hand' reason of a hand that reaches the image border.
+CUT_BY_BORDER = 'hand cut by the image border: its depth and pose are not known until it is in view'
 
 
 @dataclass(frozen=True)
@@ -55,18 +58,23 @@ class StageLimits:
     database image is farther than ``max_image_distance`` is no hand; with
     ``require_constraint`` a fit that matched no observed blob is refused; with
     ``check_depth`` a prior or a fit with any hand keypoint at an implausible depth from any
-    camera (``core.validation.validate_hand_depth``) is refused."""
+    camera (``core.validation.validate_hand_depth``) is refused. With ``refuse_cut_hands`` a
+    hand cut by the primary image's border (``CameraObservation.cut_by_border``) is no hand:
+    the lookup normalises the visible part as if it were the whole hand, so neither the crop's
+    size (depth) nor the nearest entries (pose) can be trusted, tracked or not."""
 
     max_image_distance: float = DEFAULT_MAX_IMAGE_DISTANCE
     require_constraint: bool = True
     check_depth: bool = True
+    refuse_cut_hands: bool = True
 
 
 NODE_LIMITS = StageLimits()
 
 # Every output of the tracker counts (a non-finite pose is still refused): the IK evaluation
 # measures the tracker itself, as its figures always have, not the nodes' refusals.
-UNGATED = StageLimits(max_image_distance=math.inf, require_constraint=False, check_depth=False)
+UNGATED = StageLimits(max_image_distance=math.inf, require_constraint=False, check_depth=False,
+                      refuse_cut_hands=False)
 
 
 @dataclass(frozen=True)
@@ -171,7 +179,8 @@ def observe_image(segmenter: Any, image_rgb: np.ndarray, primary: bool
                       np.array([b.pixel_count for b in observation.blobs], float))
     found = bool(observation.hand_found) and len(blobs) > 0
     tiny = TinyCrop(observation.tiny_labels, observation.crop) if found and primary else None
-    return CameraObservation(found, blobs, observation.crop), tiny
+    return CameraObservation(found, blobs, observation.crop,
+                             bool(observation.cut_by_border)), tiny
 
 
 def image_observer(segmenter: Any, image_of: Callable[[Any], np.ndarray] = np.asarray
@@ -235,8 +244,14 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
     :class:`NoHand` when the prior is unusable or at an implausible depth ('bad candidates:
     ...'), the tracker found nothing (the upstream reason, or 'lost'), or the fit is refused:
     no constraint matched an observed blob (``limits.require_constraint``), a non-finite pose,
-    or a hand at an implausible depth (``limits.check_depth``). A refusal resets the tracker.
+    or a hand at an implausible depth (``limits.check_depth``); with
+    ``limits.refuse_cut_hands`` a hand cut by the primary image's border is not tracked
+    (:data:`CUT_BY_BORDER`). A refusal resets the tracker.
     """
+    if (limits.refuse_cut_hands and prior is not None and observations
+            and observations[0].hand_found and observations[0].cut_by_border):
+        tracker.reset()
+        return NoHand(CUT_BY_BORDER)
     if temporal is not None and prior is not None:
         from colorglove_ros.core.lookup.temporal_prior import reweight_by_previous
 

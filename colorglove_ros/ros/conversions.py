@@ -130,7 +130,8 @@ def camera_observation_from_msg(msg: HandObservation) -> CameraObservation:
     if not msg.hand_found:
         return CameraObservation(hand_found=False)
     return CameraObservation(hand_found=True, blobs=blobs_from_observation_msg(msg),
-                             crop=crop_from_observation_msg(msg))
+                             crop=crop_from_observation_msg(msg),
+                             cut_by_border=bool(msg.cut_by_border))
 
 
 def candidates_to_msg(observation: HandObservation, result: LookupResult | None,
@@ -214,6 +215,7 @@ def observation_to_msg(observation: Observation, header: Header) -> HandObservat
                           image_width=int(observation.image_width),
                           image_height=int(observation.image_height),
                           glove_pixel_count=int(observation.glove_pixel_count),
+                          cut_by_border=bool(observation.cut_by_border),
                           processing_time_ms=float(observation.timings_ms.get('total', 0.0)))
     msg.status = '' if observation.hand_found else observation.status
     if observation.crop is not None:

@@ -4,6 +4,7 @@ process."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -12,6 +13,7 @@ import pytest
 from colorglove_ros.core.lookup.search import PoseLookup
 from colorglove_ros.core.lookup.types import LookupResult, ProjectionConstraints
 from colorglove_ros.core.pipeline import (
+    CUT_BY_BORDER,
     NODE_LIMITS,
     UNGATED,
     FramePipeline,
@@ -182,6 +184,18 @@ def test_track_refuses_a_fit_with_its_reason(hand, result, limits, reason) -> No
     out = track(fake, _prior(), SEEN, 0.0, limits)
     assert isinstance(out, NoHand) and out.warn and out.reason.startswith(reason)
     assert out.partial is result and fake.resets == 1
+
+
+def test_track_refuses_a_hand_cut_by_the_image_border(hand) -> None:
+    result = IKResult(True, 0.0, q=_pose(), num_constraints=4)
+    fake = _FakeTracker(hand[0], result)
+    fake.previous_pose = _pose()          # tracked or not: the crop says nothing reliable
+    cut = [replace(SEEN[0], cut_by_border=True)]
+    out = track(fake, _prior(), cut, 0.0)
+    assert isinstance(out, NoHand) and out.reason == CUT_BY_BORDER and not out.warn
+    assert fake.resets == 1
+    assert isinstance(track(fake, _prior(), cut, 0.0, UNGATED), Tracked)
+    assert isinstance(track(fake, _prior(), SEEN, 0.0), Tracked)
 
 
 def test_track_lets_a_plausible_fit_through_with_its_keypoints(hand) -> None:

@@ -76,6 +76,9 @@ def test_observation_round_trips() -> None:
     np.testing.assert_array_equal(back.pixel_count, [blobs[i].pixel_count for i in order])
     assert camera_observation_from_msg(msg).blobs.centroid_px.shape == (2, 2)
     assert msg.processing_time_ms == 6.5
+    assert not camera_observation_from_msg(msg).cut_by_border
+    observation.cut_by_border = True
+    assert camera_observation_from_msg(observation_to_msg(observation, HEADER)).cut_by_border
 
 
 def test_candidates_round_trip_into_the_ik_prior() -> None:

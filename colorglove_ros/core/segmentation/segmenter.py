@@ -232,6 +232,18 @@ def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
     return out
 
 
+def _touches_image_border(labels: np.ndarray, roi: tuple[int, int, int, int], reduction: int,
+                          width: int, height: int) -> bool:
+    """Whether glove labels of the region of interest ``roi`` = (x0, x1, y0, y1) (full-image
+    bounds of ``labels``, each label ``reduction`` pixels wide) lie on the image's outermost
+    rows or columns (within a label's width of them)."""
+    x0, x1, y0, y1 = roi
+    return bool((x0 == 0 and labels[:, 0].any())
+                or (x1 + reduction > width and labels[:, -1].any())
+                or (y0 == 0 and labels[0].any())
+                or (y1 + reduction > height and labels[-1].any()))
+
+
 def _check_image(image: object) -> np.ndarray:
     if not isinstance(image, np.ndarray):
         raise SegmentationInputError(f'expected a numpy array, got {type(image).__name__}')
@@ -425,6 +437,7 @@ class GloveSegmenter:
         wx0, wx1 = max(int(np.ceil(cx - half)), 0), int(np.floor(cx + half)) + 1
         wy0, wy1 = max(int(np.ceil(cy - half)), 0), int(np.floor(cy + half)) + 1
         obs.glove_pixel_count = int(np.count_nonzero(labels[wy0:wy1, wx0:wx1])) * r * r
+        obs.cut_by_border = _touches_image_border(labels, (x0, x1, y0, y1), r, w, h)
         obs.blobs = self._blobs(labels, r, x0, y0, (wx0, wx1, wy0, wy1))
         tick('blobs', t)
         # Reasons to reject: crop mostly outside the frame, or too little glove.

@@ -32,5 +32,6 @@ class Observation:
     crop: CropTransform | None = None       # tiny -> full image pixels (or None)
     blobs: list[Blob] = field(default_factory=list)
     glove_pixel_count: int = 0              # glove pixels inside the crop (full-res units)
+    cut_by_border: bool = False             # glove pixels on the image's outermost pixels
     timings_ms: dict[str, float] = field(default_factory=dict)
     label_image: np.ndarray | None = None   # (H, W) uint8, only with keep_labels=True

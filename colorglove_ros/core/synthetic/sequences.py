@@ -28,7 +28,7 @@ from colorglove_ros.core.synthetic.frames import (
 
 __all__ = [
     'CAPTURE_VOLUME_CENTER', 'CAPTURE_VOLUME_SIZE', 'min_jerk', 'generate_sequence',
-    'SyntheticSequenceRenderer',
+    'SyntheticSequenceRenderer', 'BORDERS', 'border_crossing_sequence',
 ]
 
 CAPTURE_VOLUME_CENTER = np.array([0.0, 0.02, 0.55])   # metres, camera frame
@@ -181,3 +181,76 @@ class SyntheticSequenceRenderer:
     def close(self) -> None:
         """Free the GL contexts."""
         self.synth.release()
+
+
+BORDERS: tuple[str, ...] = ('left', 'right', 'top', 'bottom')
+
+
+def _beyond_border(border: str, along: float, camera: PinholeCamera, depth: float,
+                   margin_px: float) -> np.ndarray:
+    """The 3-D point at ``depth`` whose projection lies ``margin_px`` beyond ``border`` of the
+    image, at relative position ``along`` (0..1) along that border."""
+    w, h = camera.width, camera.height
+    u, v = {'left': (-margin_px, along * h), 'right': (w + margin_px, along * h),
+            'top': (along * w, -margin_px), 'bottom': (along * w, h + margin_px)}[border]
+    return np.array([(u - camera.cx) * depth / camera.fx, (v - camera.cy) * depth / camera.fy,
+                     depth])
+
+
+def border_crossing_sequence(seed: int, num_frames: int, fps: float = 30.0, *,
+                             camera: PinholeCamera | None = None,
+                             model: HandModel | None = None) -> tuple[np.ndarray, list[str]]:
+    """(num_frames, 26) motion of a hand that repeatedly enters the image across a border,
+    moves inside it and leaves across another, with a short stretch fully out of view between
+    visits; and the borders it enters across, in order.
+
+    Fingers and wrist orientation are those of :func:`generate_sequence` (same seed); the hand
+    centre moves with minimum-jerk profiles between a point one hand size beyond the entry
+    border, two inside points (the middle 60 % of the image, depth 0.45-0.7 m) and a point
+    beyond the exit border (0.8-1.6 s for a move across a border, 0.5-0.9 s inside) and stays
+    0.1-0.4 s out of view. The borders cycle
+    so that every border is crossed; the first one is chosen by ``seed``."""
+    camera = default_camera() if camera is None else camera
+    model = default_hand()[0] if model is None else model
+    base = generate_sequence(seed, num_frames, fps, camera=camera, model=model)
+    rng = np.random.default_rng([seed, 23])
+    centre_local = np.array([0.0, -0.45 * model.hand_length_m, 0.0])
+    order = list(BORDERS)
+    start = int(rng.integers(len(order)))
+    order = order[start:] + order[:start]
+    t = np.arange(num_frames) / fps
+    segments: list[tuple[float, float, np.ndarray, np.ndarray]] = []   # (t0, t1, from, to)
+    entered: list[str] = []
+    time_now = 0.0
+
+    def outside(border: str, depth: float) -> np.ndarray:
+        size_px = camera.fx * 1.2 * model.hand_length_m / depth
+        return _beyond_border(border, rng.uniform(0.25, 0.75), camera, depth, size_px)
+
+    while time_now <= t[-1] + 1e-9:
+        depth = float(rng.uniform(0.45, 0.7))
+        visit = len(entered)
+        entry = order[visit % 4]
+        exit_border = order[(visit + 1 + int(rng.integers(3))) % 4]
+        entered.append(entry)
+        inside = [np.array(
+            [(rng.uniform(0.2, 0.8) * camera.width - camera.cx) * depth / camera.fx,
+             (rng.uniform(0.2, 0.8) * camera.height - camera.cy) * depth / camera.fy, depth])
+            for _ in range(2)]
+        points = [outside(entry, depth), *inside, outside(exit_border, depth)]
+        for k, (a, b) in enumerate(zip(points[:-1], points[1:], strict=True)):
+            # crossing a border slowly, as a hand reaching into view does
+            move = float(rng.uniform(0.5, 0.9) if k == 1 else rng.uniform(0.8, 1.6))
+            segments.append((time_now, time_now + move, a, b))
+            time_now += move
+        gap = float(rng.uniform(0.1, 0.4))      # out of view beyond the exit border
+        segments.append((time_now, time_now + gap, points[-1], points[-1]))
+        time_now += gap
+    centres = np.empty((num_frames, 3))
+    for t0, t1, a, b in segments:
+        sel = (t >= t0) & (t < t1)
+        centres[sel] = a + min_jerk((t[sel] - t0) / (t1 - t0))[:, None] * (b - a)
+    Q = base.copy()
+    R = np.stack([rotvec_to_matrix(r) for r in Q[:, 3:6]])
+    Q[:, 0:3] = centres - R @ centre_local
+    return Q, entered

@@ -60,6 +60,8 @@ class CameraObservation:
     hand_found: bool
     blobs: Blobs = field(default_factory=Blobs.empty)
     crop: Any = None    # core.segmentation.crop.CropTransform (scale, offset_x, offset_y)
+    cut_by_border: bool = False   # the glove reaches the image border (depth from the crop
+    #                               size is unreliable)
 
 
 @dataclass(frozen=True)

@@ -136,6 +136,24 @@ def test_hand_mostly_out_of_frame(segmenter) -> None:
     assert obs.status in (STATUS_OUT_OF_FRAME, STATUS_TOO_SMALL, STATUS_NO_GLOVE)
 
 
+@pytest.mark.parametrize('side', ['left', 'right', 'top', 'bottom'])
+def test_a_glove_reaching_the_image_border_is_marked_cut(segmenter, side) -> None:
+    rng = np.random.default_rng(8)
+    img, lab = render_blob_frame(rng, BlobConditions(1.0, (1.0, 1.0, 1.0), 2.0, 0, False, 1.5))
+    whole = segmenter.process(img)
+    assert whole.hand_found and not whole.cut_by_border
+    ys, xs = np.nonzero(lab)
+    # move the glove so a fifth of its width or height lies beyond one border
+    dx = {'left': -int(xs.min() + 0.2 * np.ptp(xs)), 'right': int(639 - xs.max() + 0.2 * np.ptp(xs))
+          }.get(side, 0)
+    dy = {'top': -int(ys.min() + 0.2 * np.ptp(ys)), 'bottom': int(479 - ys.max() + 0.2 * np.ptp(ys))
+          }.get(side, 0)
+    moved = cv2.warpAffine(img, np.float32([[1, 0, dx], [0, 1, dy]]), (640, 480),
+                           borderMode=cv2.BORDER_REPLICATE)
+    obs = segmenter.process(moved)
+    assert obs.glove_pixel_count > 0 and obs.cut_by_border
+
+
 def _noise_patch_frames(seed: int, count: int) -> list[np.ndarray]:
     """Black frames with a hand-sized square of uniform random colours (issue 16)."""
     rng = np.random.default_rng(seed)
