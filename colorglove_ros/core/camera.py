@@ -10,6 +10,10 @@ import numpy as np
 
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, HAND_LENGTH_RANGE_M
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.model import (
+    NOMINAL_FINGER_LENGTH_FACTORS,
+    check_finger_length_factors,
+)
 from colorglove_ros.core.validation import (
     MAX_IMAGE_SIDE,
     check_array,
@@ -129,10 +133,13 @@ class PinholeCamera:
 
 @dataclass(frozen=True)
 class Calibration:
-    """All cameras of a rig plus the user's hand length."""
+    """All cameras of a rig plus the user's hand: its length and finger length factors
+    (thumb, index, middle, ring, little; ``core.hand.model.HandModel``, which
+    ``calibrated_hand_model`` builds from this)."""
 
     cameras: tuple[PinholeCamera, ...]
     hand_length_m: float = DEFAULT_HAND_LENGTH_M
+    finger_length_factors: tuple[float, ...] = NOMINAL_FINGER_LENGTH_FACTORS
 
     @property
     def primary(self) -> PinholeCamera:
@@ -148,6 +155,8 @@ CAMERA_KEYS = frozenset({'name', 'frame_id', 'width', 'height', 'fx', 'fy', 'cx'
                          'distortion', 'rotation_vector', 'translation', 'camera_info_file',
                          'rectified'})
 """The fields of one camera entry of the own calibration format."""
+CALIBRATION_KEYS = frozenset({'version', 'hand_length_m', 'finger_length_factors', 'cameras'})
+"""The top-level fields of the own calibration format."""
 
 
 def _camera_from_dict(entry: dict, where: str) -> PinholeCamera:
@@ -279,11 +288,12 @@ def load_camera_info_yaml(path: str | Path, *, rectified: bool = False,
 def load_calibration(path: str | Path) -> Calibration:
     """Read a calibration YAML; raise :class:`CalibrationError` naming what is wrong.
 
-    Besides this package's own format (``version: 1``, ``hand_length_m``, a list of cameras),
-    a standard camera_info YAML from ``camera_calibration`` is read as one camera at the origin
-    with the default hand length; a camera entry of the own format may also name one with
-    ``camera_info_file`` (and ``rectified: true`` for ``image_rect`` input), keeping its
-    extrinsics, name and frame_id in the own file.
+    Besides this package's own format (``version: 1``, ``hand_length_m``, optional
+    ``finger_length_factors``, a list of cameras), a standard camera_info YAML from
+    ``camera_calibration`` is read as one camera at the origin with the default hand; a camera
+    entry of the own format may also name one with ``camera_info_file`` (and
+    ``rectified: true`` for ``image_rect`` input), keeping its extrinsics, name and frame_id in
+    the own file.
     """
     path = Path(path)
     data = load_yaml_mapping(path, CalibrationError, 'calibration file')
@@ -293,8 +303,7 @@ def load_calibration(path: str | Path) -> Calibration:
         raise CalibrationError(
             f'calibration file {path} has version {data.get("version")!r}, '
             f'expected {CALIBRATION_VERSION}')
-    check_known_keys(f'calibration file {path}', data, ('version', 'hand_length_m', 'cameras'),
-                     error=CalibrationError)
+    check_known_keys(f'calibration file {path}', data, CALIBRATION_KEYS, error=CalibrationError)
     entries = data.get('cameras')
     if not isinstance(entries, list) or not entries:
         raise CalibrationError(f'calibration file {path} lists no cameras')
@@ -307,7 +316,11 @@ def load_calibration(path: str | Path) -> Calibration:
                                error=CalibrationError)
     if not HAND_LENGTH_RANGE_M[0] < hand_length < HAND_LENGTH_RANGE_M[1]:
         raise CalibrationError(f'{path}: hand_length_m {hand_length} is not a human hand')
-    return Calibration(cameras, hand_length)
+    factors = check_finger_length_factors(
+        f'{path}: finger_length_factors',
+        data.get('finger_length_factors', list(NOMINAL_FINGER_LENGTH_FACTORS)),
+        error=CalibrationError)
+    return Calibration(cameras, hand_length, factors)
 
 
 def look_at_extrinsics(eye: np.ndarray, target: np.ndarray,

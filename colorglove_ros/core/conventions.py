@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 __all__ = ['NUM_COLORS', 'NUM_PATCHES', 'TINY_SIZE', 'DEFAULT_HAND_LENGTH_M', 'DEFAULT_GLOVE_SEED',
-           'HAND_LENGTH_RANGE_M', 'MODEL_HAND_LENGTH_RANGE_M']
+           'HAND_LENGTH_RANGE_M', 'MODEL_HAND_LENGTH_RANGE_M', 'FINGER_LENGTH_FACTOR_RANGE']
 
 NUM_COLORS = 10
 """Glove colours, labels 1..10 in label images; 0 is background."""
@@ -19,3 +19,6 @@ HAND_LENGTH_RANGE_M = (0.08, 0.35)
 MODEL_HAND_LENGTH_RANGE_M = (0.05, 0.4)
 """Hand lengths (m) the kinematic model and the database builder are made for (wider than
 ``HAND_LENGTH_RANGE_M``: also test and toy hands)."""
+FINGER_LENGTH_FACTOR_RANGE = (0.7, 1.3)
+"""Per-digit length factors (a user's digit over the model's nominal proportions) a hand model
+and a calibration accept; beyond them a measurement is wrong, not a hand."""

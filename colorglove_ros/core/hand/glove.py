@@ -9,9 +9,15 @@ the fingers spread (``glove_reference_pose``), so a patch does not jump through 
 or from a finger to its neighbour. Colours: a seeded random permutation of
 ``[1..10] * 2`` (every colour on exactly two patches), redrawn until no two neighbouring
 patches share a colour.
+
+The glove is a printed object: a hand with other finger proportions
+(``HandModel.finger_length_factors``) wears the standard glove of its hand length, every mesh
+face keeping its patch (the mesh keeps its topology and each face lies on one link, so a patch
+stretches with the phalanges under it).
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -28,14 +34,23 @@ from colorglove_ros.core.conventions import (
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.disk_cache import cached_arrays
 from colorglove_ros.core.hand.mesh import HandMesh, build_hand_mesh
-from colorglove_ros.core.hand.model import DOF_NAMES, HandModel
+from colorglove_ros.core.hand.model import (
+    DOF_NAMES,
+    NOMINAL_FINGER_LENGTH_FACTORS,
+    HandModel,
+    calibrated_hand_model,
+    check_finger_length_factors,
+)
 
 if TYPE_CHECKING:   # scipy and trimesh are imported where a glove is built (slow to import)
     from scipy.sparse import csr_matrix
 
+    from colorglove_ros.core.camera import Calibration
+
 __all__ = [
     'GLOVE_PALETTE_RGB', 'GLOVE_COLOR_NAMES', 'GloveError',
     'Glove', 'make_glove', 'glove_reference_pose', 'export_glove_mesh', 'default_hand',
+    'calibrated_hand',
 ]
 
 GLOVE_COLOR_NAMES: tuple[str, ...] = (
@@ -117,7 +132,7 @@ def make_glove(mesh: HandMesh, seed: int = DEFAULT_GLOVE_SEED,
     """Build the glove pattern on ``mesh`` deterministically from ``seed``."""
     from scipy.sparse.csgraph import connected_components, dijkstra
 
-    model = HandModel(mesh.hand_length_m) if model is None else model
+    model = HandModel(mesh.hand_length_m, mesh.finger_length_factors) if model is None else model
     rng = np.random.default_rng(seed)
     verts = mesh.skin(model, glove_reference_pose(model))
     centroids = verts[mesh.faces].mean(axis=1)
@@ -187,13 +202,38 @@ def export_glove_mesh(mesh: HandMesh, glove: Glove, model: HandModel, path: str 
     return path
 
 
-@lru_cache(maxsize=4)
 def default_hand(hand_length_m: float = DEFAULT_HAND_LENGTH_M,
-                 seed: int = DEFAULT_GLOVE_SEED) -> tuple[HandModel, HandMesh, Glove]:
-    """The standard (model, mesh, glove) triple, cached (in memory, and the glove on disk:
-    ``core.hand.disk_cache``)."""
-    model = HandModel(hand_length_m)
+                 seed: int = DEFAULT_GLOVE_SEED,
+                 finger_length_factors: Sequence[float] | None = None
+                 ) -> tuple[HandModel, HandMesh, Glove]:
+    """The (model, mesh, glove) triple of a hand length, glove seed and finger length factors
+    (default: the nominal proportions), cached (in memory, and the glove on disk:
+    ``core.hand.disk_cache``). With factors the glove is the standard glove of that hand length
+    and seed, on the stretched mesh of the same topology."""
+    factors = (NOMINAL_FINGER_LENGTH_FACTORS if finger_length_factors is None else
+               check_finger_length_factors('finger_length_factors', finger_length_factors))
+    return _hand(float(hand_length_m), int(seed), factors)
+
+
+def calibrated_hand(calibration: Calibration, seed: int = DEFAULT_GLOVE_SEED
+                    ) -> tuple[HandModel, HandMesh, Glove]:
+    """The user's (model, mesh, glove): ``calibrated_hand_model(calibration)`` (hand length and
+    finger length factors) wearing the glove of ``seed``."""
+    model = calibrated_hand_model(calibration)
+    return default_hand(model.hand_length_m, seed, model.finger_length_factors)
+
+
+@lru_cache(maxsize=8)
+def _hand(hand_length_m: float, seed: int, finger_length_factors: tuple[float, ...]
+          ) -> tuple[HandModel, HandMesh, Glove]:
+    model = HandModel(hand_length_m, finger_length_factors)
     mesh = build_hand_mesh(model)
+    if finger_length_factors != NOMINAL_FINGER_LENGTH_FACTORS:
+        _, standard_mesh, glove = _hand(hand_length_m, seed, NOMINAL_FINGER_LENGTH_FACTORS)
+        if not np.array_equal(mesh.faces, standard_mesh.faces):
+            raise GloveError('the mesh of these finger proportions has another topology than '
+                             'the standard mesh: the glove cannot be carried over')
+        return model, mesh, glove
 
     def build() -> dict[str, np.ndarray]:
         glove = make_glove(mesh, seed=seed, model=model)

@@ -1,4 +1,10 @@
-"""Procedural hand mesh, rigidly skinned to the model: capsule phalanges, convex-hull palm."""
+"""Procedural hand mesh, rigidly skinned to the model: capsule phalanges, convex-hull palm.
+
+A hand with finger length factors (``HandModel.finger_length_factors``) gets the mesh of the
+standard hand of its length with each capsule keeping its number of rings: the same vertices,
+faces and links (so pose-database vertex indices and the glove's face patches stay valid),
+stretched to the user's phalanges.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -12,7 +18,12 @@ from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand import model as _model_module
 from colorglove_ros.core.hand.disk_cache import cached_arrays
-from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, digit_link_index
+from colorglove_ros.core.hand.model import (
+    NOMINAL_FINGER_LENGTH_FACTORS,
+    NUM_DOFS,
+    HandModel,
+    digit_link_index,
+)
 
 if TYPE_CHECKING:   # trimesh is imported where a mesh is built or exported (slow to import)
     import trimesh
@@ -37,6 +48,7 @@ class HandMesh:
     vertex_link: np.ndarray      # (V,) int64 link index
     faces: np.ndarray            # (F, 3) int32, counter-clockwise seen from outside
     hand_length_m: float = DEFAULT_HAND_LENGTH_M
+    finger_length_factors: tuple[float, ...] = NOMINAL_FINGER_LENGTH_FACTORS
 
     @property
     def num_vertices(self) -> int:
@@ -85,6 +97,10 @@ def skin_batch(mesh: HandMesh, model: HandModel, Q: np.ndarray,
     if not np.isclose(mesh.hand_length_m, model.hand_length_m):
         raise HandMeshError(
             f'mesh built for {mesh.hand_length_m} m, model is {model.hand_length_m} m')
+    if not np.allclose(mesh.finger_length_factors, model.finger_length_factors):
+        raise HandMeshError(
+            f'mesh built for finger length factors {mesh.finger_length_factors}, model has '
+            f'{model.finger_length_factors}')
     T = model.link_transforms_batch(Q).astype(dtype)
     out = np.empty((len(Q), mesh.num_vertices, 3), dtype=dtype)
     for link, idx in enumerate(_link_groups(mesh)):
@@ -100,17 +116,27 @@ def _link_groups(mesh: HandMesh) -> list[np.ndarray]:
     return [np.flatnonzero(mesh.vertex_link == k) for k in range(16)]
 
 
-def _capsule(length: float, radius: float, is_tip: bool, max_segment: float) -> trimesh.Trimesh:
-    """Capsule along the link's -y axis from the joint (y=0), with rings at most
-    ``max_segment`` apart along the cylinder (even triangles for the glove patches);
-    a fingertip capsule ends exactly at -length."""
+def _cylinder_height(length: float, radius: float, is_tip: bool) -> float:
+    """Length of a phalanx capsule's cylinder (a fingertip's ends in its cap)."""
+    return max(length - radius, 1e-4) if is_tip else length
+
+
+def _ring_count(model: HandModel, link: int, is_tip: bool) -> int:
+    """Cylinder segments of a phalanx capsule of ``model``: rings at most
+    ``RING_SPACING_FRACTION * hand length`` apart (even triangles for the glove patches)."""
+    height = _cylinder_height(model.link_lengths[link], model.link_radii[link], is_tip)
+    return max(1, int(np.ceil(height / (RING_SPACING_FRACTION * model.hand_length_m))))
+
+
+def _capsule(length: float, radius: float, is_tip: bool, n_cyl: int) -> trimesh.Trimesh:
+    """Capsule along the link's -y axis from the joint (y=0), with ``n_cyl`` cylinder
+    segments; a fingertip capsule ends exactly at -length."""
     import trimesh
 
-    height = max(length - radius, 1e-4) if is_tip else length
+    height = _cylinder_height(length, radius, is_tip)
     n_theta, n_cap = 12, 4
     prof = [(radius * np.sin(a), radius * np.cos(a))
             for a in np.linspace(-np.pi / 2, 0.0, n_cap + 1)[1:]]
-    n_cyl = max(1, int(np.ceil(height / max_segment)))
     prof += [(z, radius) for z in np.linspace(0.0, height, n_cyl + 1)[1:]]
     prof += [(height + radius * np.sin(a), radius * np.cos(a))
              for a in np.linspace(0.0, np.pi / 2, n_cap + 1)[1:-1]]
@@ -170,31 +196,39 @@ def _palm(model: HandModel) -> trimesh.Trimesh:
 
 
 def build_hand_mesh(model: HandModel) -> HandMesh:
-    """Build (cached per hand length) the procedural mesh for ``model``."""
-    return _build_cached(round(float(model.hand_length_m), 9))
+    """Build (cached per hand length and finger length factors) the procedural mesh for
+    ``model``."""
+    return _build_cached(round(float(model.hand_length_m), 9),
+                         tuple(round(float(f), 9) for f in model.finger_length_factors))
 
 
 @lru_cache(maxsize=8)
-def _build_cached(hand_length_m: float) -> HandMesh:
-    arrays = cached_arrays(f'hand_mesh-{hand_length_m!r}',
-                           [Path(__file__), Path(_model_module.__file__)],
-                           lambda: _build_arrays(hand_length_m))
+def _build_cached(hand_length_m: float, finger_length_factors: tuple[float, ...]) -> HandMesh:
+    name = f'hand_mesh-{hand_length_m!r}'
+    if finger_length_factors != NOMINAL_FINGER_LENGTH_FACTORS:
+        name += '-fingers-' + '-'.join(repr(f) for f in finger_length_factors)
+    arrays = cached_arrays(name, [Path(__file__), Path(_model_module.__file__)],
+                           lambda: _build_arrays(hand_length_m, finger_length_factors))
     mesh = HandMesh(arrays['local_vertices'], arrays['vertex_link'], arrays['faces'],
-                    hand_length_m)
+                    hand_length_m, finger_length_factors)
     for arr in (mesh.local_vertices, mesh.vertex_link, mesh.faces):
         arr.setflags(write=False)
     return mesh
 
 
-def _build_arrays(hand_length_m: float) -> dict[str, np.ndarray]:
-    """The mesh arrays built with trimesh (palm hull, phalanx capsules)."""
-    model = HandModel(hand_length_m)
+def _build_arrays(hand_length_m: float,
+                  finger_length_factors: tuple[float, ...] = NOMINAL_FINGER_LENGTH_FACTORS
+                  ) -> dict[str, np.ndarray]:
+    """The mesh arrays built with trimesh (palm hull, phalanx capsules), the capsules with the
+    ring counts of the standard hand of this length (one topology for every proportion)."""
+    model = HandModel(hand_length_m, finger_length_factors)
+    standard = HandModel(hand_length_m)
     parts = [(0, _palm(model))]
     for d in range(5):
         for k in range(3):
             li = digit_link_index(d, k)
             parts.append((li, _capsule(model.link_lengths[li], model.link_radii[li], k == 2,
-                                        RING_SPACING_FRACTION * hand_length_m)))
+                                        _ring_count(standard, li, k == 2))))
     verts, links, faces = [], [], []
     offset = 0
     for li, m in parts:

@@ -19,21 +19,38 @@ skewed axes (abduction, then flexion across the palm), then MCP and IP flexion.
 Pose vector ``q`` (26): ``q[0:3]`` wrist position in the camera frame (m), ``q[3:6]``
 rotation vector of the hand frame in the camera frame, ``q[6:26]`` finger DOFs named
 ``FINGER_DOF_NAMES`` (see docs/DESIGN.md).
+
+Proportions: nominal (``_FINGER_GEOMETRY``, ``_THUMB_LENGTHS``), each digit's phalanges
+optionally lengthened by a per-user factor (``finger_length_factors``, thumb..little), then the
+whole hand scaled so that ``hand_length_m`` stays the wrist-to-middle-fingertip distance of the
+flat rest pose.
 """
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, MODEL_HAND_LENGTH_RANGE_M
+from colorglove_ros.core.conventions import (
+    DEFAULT_HAND_LENGTH_M,
+    FINGER_LENGTH_FACTOR_RANGE,
+    MODEL_HAND_LENGTH_RANGE_M,
+)
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.geometry import rotvec_to_matrix, so3_left_jacobian, vector_to_skew
+
+if TYPE_CHECKING:   # core.camera imports this module
+    from colorglove_ros.core.camera import Calibration
 
 __all__ = [
     'DIGITS', 'DOF_NAMES', 'FINGER_DOF_NAMES', 'GLOBAL_DOF_NAMES', 'NUM_DOFS',
     'NUM_FINGER_DOFS', 'KEYPOINT_NAMES', 'LINK_NAMES', 'DIP_PIP_RATIO',
     'HandModelError', 'HandModel', 'digit_link_index', 'JointSpec',
+    'NOMINAL_FINGER_LENGTH_FACTORS', 'KNUCKLE_TO_TIP_SEGMENTS', 'check_finger_length_factors',
+    'finger_length_factors_for', 'calibrated_hand_model',
 ]
 
 DIGITS: tuple[str, ...] = ('thumb', 'index', 'middle', 'ring', 'little')
@@ -53,13 +70,43 @@ KEYPOINT_NAMES: tuple[str, ...] = ('wrist', *(
     f'{d}_{k}' for d in DIGITS
     for k in (('cmc', 'mcp', 'ip', 'tip') if d == 'thumb' else ('mcp', 'pip', 'dip', 'tip'))))
 DIP_PIP_RATIO = 2.0 / 3.0
+NOMINAL_FINGER_LENGTH_FACTORS: tuple[float, ...] = (1.0,) * len(DIGITS)
+"""Finger length factors of the model's own proportions (thumb, index, middle, ring, little)."""
+KNUCKLE_TO_TIP_SEGMENTS: tuple[tuple[int, ...], ...] = ((1, 2), *((0, 1, 2),) * 4)
+"""Segments (0..2, proximal to distal) of each digit from its base knuckle (MCP joint) to its
+tip: a finger's three phalanges; the thumb's proximal and distal phalanx (its metacarpal lies in
+the palm). Their summed lengths are a digit's measurable length (``HandModel.digit_lengths_m``)."""
 
 assert len(DOF_NAMES) == NUM_DOFS and len(FINGER_DOF_NAMES) == NUM_FINGER_DOFS
 assert len(LINK_NAMES) == 16 and len(KEYPOINT_NAMES) == 21
 
 
 class HandModelError(ColorGloveError):
-    """Invalid hand-model input (shape of a pose, unknown link, bad hand length)."""
+    """Invalid hand-model input (shape of a pose, unknown link, bad hand length or finger
+    length factors)."""
+
+
+def check_finger_length_factors(name: str, value: Any,
+                                error: type[Exception] = HandModelError) -> tuple[float, ...]:
+    """``value`` as five finite finger length factors (thumb, index, middle, ring, little)
+    within ``FINGER_LENGTH_FACTOR_RANGE``; raise ``error`` naming ``name`` and the value."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)) \
+            or len(value) != len(DIGITS):
+        raise error(f'{name} must be a list of {len(DIGITS)} numbers ({", ".join(DIGITS)}), '
+                    f'got {value!r}')
+    low, high = FINGER_LENGTH_FACTOR_RANGE
+    factors = []
+    for digit, item in zip(DIGITS, value, strict=True):
+        if isinstance(item, (bool, np.bool_)) or not isinstance(
+                item, (int, float, np.integer, np.floating)):
+            raise error(f'{name}: the {digit} factor must be a number, got {item!r}')
+        factor = float(item)
+        if not math.isfinite(factor) or not low <= factor <= high:
+            raise error(f'{name}: the {digit} factor {item!r} is outside [{low}, {high}] '
+                        '(a digit this much longer or shorter than the model\'s is a '
+                        'measurement error)')
+        factors.append(factor)
+    return tuple(factors)
 
 
 def digit_link_index(digit: int, segment: int) -> int:
@@ -125,13 +172,20 @@ class HandModel:
     """Right hand, 16 rigid links (palm + 3 per digit), 26 DOF, scaled to a hand length.
 
     ``hand_length_m`` is the wrist-to-middle-fingertip distance of the flat rest pose.
+    ``finger_length_factors`` (thumb, index, middle, ring, little; default all 1, the nominal
+    proportions) multiply each digit's phalanx lengths before the whole hand is scaled to
+    ``hand_length_m``; radii and the palm follow the overall scale only.
     """
 
-    def __init__(self, hand_length_m: float = DEFAULT_HAND_LENGTH_M) -> None:
+    def __init__(self, hand_length_m: float = DEFAULT_HAND_LENGTH_M,
+                 finger_length_factors: Sequence[float] | None = None) -> None:
         low, high = MODEL_HAND_LENGTH_RANGE_M
         if not (low <= hand_length_m <= high):
             raise HandModelError(f'hand_length_m {hand_length_m!r} outside [{low}, {high}]')
         self.hand_length_m = float(hand_length_m)
+        self.finger_length_factors: tuple[float, ...] = (
+            NOMINAL_FINGER_LENGTH_FACTORS if finger_length_factors is None else
+            check_finger_length_factors('finger_length_factors', finger_length_factors))
         self.dof_names: tuple[str, ...] = DOF_NAMES
         self.link_names: tuple[str, ...] = LINK_NAMES
         self.keypoint_names: tuple[str, ...] = KEYPOINT_NAMES
@@ -163,6 +217,7 @@ class HandModel:
         eye = np.eye(3)
         for d, digit in enumerate(DIGITS):
             base = 6 + 4 * d
+            factor = self.finger_length_factors[d]
             if digit == 'thumb':
                 anchor = np.array(_THUMB_ANCHOR) * s
                 R0 = _rz(_THUMB_REST_YAW) @ _ry(_THUMB_PRONATION)
@@ -175,6 +230,7 @@ class HandModel:
                 R0 = _rz(splay)
                 a1 = np.array([0.0, 0.0, 1.0])
                 a2 = np.array([1.0, 0.0, 0.0])
+            seg_len = tuple(length * factor for length in seg_len)   # exact when factor is 1
             ex = np.array([1.0, 0.0, 0.0])
             zero = np.zeros(3)
             f0 = len(joints) + 1
@@ -220,6 +276,13 @@ class HandModel:
             kp_local.append(np.array([0.0, -lengths[li], 0.0]))
         self.keypoint_link = np.array(kp_link, dtype=np.int64)
         self.keypoint_local = np.array(kp_local)
+
+    @property
+    def digit_lengths_m(self) -> np.ndarray:
+        """(5,) each digit's length from its base knuckle (MCP joint centre) to its tip,
+        straight (``KNUCKLE_TO_TIP_SEGMENTS``), thumb..little, metres."""
+        return np.array([sum(self.link_lengths[digit_link_index(d, k)] for k in segments)
+                         for d, segments in enumerate(KNUCKLE_TO_TIP_SEGMENTS)])
 
     @property
     def joints(self) -> tuple[JointSpec, ...]:
@@ -355,3 +418,45 @@ class HandModel:
     def keypoint_jacobian(self, q: np.ndarray) -> np.ndarray:
         """(21, 3, 26) analytic Jacobian of the keypoints."""
         return self.point_jacobian(q, self.keypoint_link, self.keypoint_local)
+
+
+def _nominal_digit_lengths() -> np.ndarray:
+    """(5,) knuckle-to-tip lengths of the nominal proportions before any scaling."""
+    segments = [_THUMB_LENGTHS, *(_FINGER_GEOMETRY[digit][2] for digit in DIGITS[1:])]
+    return np.array([sum(seg[k] for k in keep)
+                     for seg, keep in zip(segments, KNUCKLE_TO_TIP_SEGMENTS, strict=True)])
+
+
+def finger_length_factors_for(hand_length_m: float,
+                              digit_lengths_m: Sequence[float]) -> tuple[float, ...]:
+    """The finger length factors with which ``HandModel(hand_length_m, factors)`` has the
+    knuckle-to-tip lengths ``digit_lengths_m`` (thumb..little, metres; see
+    ``HandModel.digit_lengths_m``). Not range-checked (``check_finger_length_factors``).
+
+    The overall scale s depends on the middle finger only: its flat tip is at
+    ``s a + u d`` (``a`` its base anchor, ``d`` its rest direction, ``u`` its measured length),
+    whose distance from the wrist must be the hand length; the factors follow from s.
+    """
+    lengths = np.asarray(digit_lengths_m, dtype=float)
+    if lengths.shape != (len(DIGITS),) or not np.all(np.isfinite(lengths)) \
+            or np.any(lengths <= 0.0):
+        raise HandModelError(f'digit lengths must be {len(DIGITS)} positive finite numbers '
+                             f'(m), got {digit_lengths_m!r}')
+    if not math.isfinite(hand_length_m) or hand_length_m <= 0.0:
+        raise HandModelError(f'hand length must be a positive number (m), got {hand_length_m!r}')
+    middle = DIGITS.index('middle')
+    anchor, splay = np.array(_FINGER_GEOMETRY['middle'][0]), _FINGER_GEOMETRY['middle'][1]
+    direction = _rz(splay) @ np.array([0.0, -1.0, 0.0])
+    u = float(lengths[middle])
+    if u >= hand_length_m:
+        raise HandModelError(f'the middle finger ({u} m) must be shorter than the hand '
+                             f'({hand_length_m} m), which runs from the wrist to its tip')
+    ad, aa = float(anchor @ direction), float(anchor @ anchor)
+    scale = (-u * ad + math.sqrt((u * ad) ** 2 - aa * (u * u - hand_length_m ** 2))) / aa
+    return tuple(float(f) for f in lengths / (_nominal_digit_lengths() * scale))
+
+
+def calibrated_hand_model(calibration: Calibration) -> HandModel:
+    """The user's hand model from a calibration (``core.camera.Calibration``): its hand
+    length and finger length factors. Every place that builds the user's hand uses this."""
+    return HandModel(calibration.hand_length_m, calibration.finger_length_factors)

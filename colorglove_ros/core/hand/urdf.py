@@ -11,7 +11,14 @@ from scipy.spatial.transform import Rotation
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.frames import DEFAULT_FRAME_PREFIX, HAND_ROOT_LINK, prefixed_name
-from colorglove_ros.core.hand.model import DIGITS, FINGER_DOF_NAMES, HandModel, digit_link_index
+from colorglove_ros.core.hand.model import (
+    DIGITS,
+    FINGER_DOF_NAMES,
+    NOMINAL_FINGER_LENGTH_FACTORS,
+    HandModel,
+    calibrated_hand_model,
+    digit_link_index,
+)
 
 __all__ = ['URDF_NAME', 'URDF_PATH', 'UrdfError', 'tip_link_name', 'urdf_string', 'write_urdf',
            'calibrated_hand_urdf']
@@ -70,6 +77,9 @@ def urdf_string(model: HandModel | None = None, name: str = URDF_NAME,
         return quoteattr(prefixed_name(plain, frame_prefix))
 
     prefix_note = f', frame prefix {frame_prefix!r}' if frame_prefix else ''
+    if tuple(model.finger_length_factors) != NOMINAL_FINGER_LENGTH_FACTORS:
+        prefix_note = (', finger length factors (thumb..little) '
+                       f'{list(model.finger_length_factors)}{prefix_note}')
     s = model.scale
     palm_size = np.array([0.075, 0.095, 0.028]) * s
     palm_geo = (f'<origin xyz="0 {_f(-0.045 * s)} 0" rpy="0 0 0"/>'
@@ -131,9 +141,10 @@ def write_urdf(path: str | Path = URDF_PATH, model: HandModel | None = None) -> 
 
 def calibrated_hand_urdf(calibration_path: str | Path,
                          frame_prefix: str = DEFAULT_FRAME_PREFIX) -> str:
-    """URDF of the user's hand: the hand length of the calibration file ``calibration_path``
-    (``core.camera.load_calibration``), names with ``frame_prefix``. What the
+    """URDF of the user's hand: the hand length and finger length factors of the calibration
+    file ``calibration_path`` (``core.camera.load_calibration``,
+    ``core.hand.model.calibrated_hand_model``), names with ``frame_prefix``. What the
     ``robot_description`` topic carries (hand_description_node, the native launch file's
     robot_state_publisher)."""
     calibration = load_calibration(calibration_path)
-    return urdf_string(HandModel(calibration.hand_length_m), frame_prefix=frame_prefix)
+    return urdf_string(calibrated_hand_model(calibration), frame_prefix=frame_prefix)

@@ -13,7 +13,7 @@ from colorglove_ros.core.camera import Calibration, PinholeCamera
 from colorglove_ros.core.geometry import align_rotation_vector
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.hand.mesh import build_hand_mesh
-from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
+from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, calibrated_hand_model
 from colorglove_ros.core.tracking.config import IKConfig, IKCovariances
 from colorglove_ros.core.tracking.kinematics import FastKinematics
 from colorglove_ros.core.tracking.matching import match_extra_camera, match_primary
@@ -133,7 +133,8 @@ class HandTracker:
 
     def _face_patch(self, glove: Any) -> np.ndarray:
         if glove is None:
-            _, std_mesh, glove = default_hand(self.model.hand_length_m)
+            _, std_mesh, glove = default_hand(
+                self.model.hand_length_m, finger_length_factors=self.model.finger_length_factors)
             faces = getattr(self.mesh, 'faces', None)
             if faces is None or not np.array_equal(np.asarray(faces), std_mesh.faces):
                 raise IKError('constraint_model patch: pass the glove of this mesh (the '
@@ -161,14 +162,20 @@ class HandTracker:
     def from_calibration(cls, calibration: Calibration, config: IKConfig | None = None,
                          mesh: MeshLike | None = None) -> HandTracker:
         """A tracker for a calibrated rig: the hand model (and, if not given, the mesh) is
-        scaled to the user's ``hand_length_m``."""
-        model = HandModel(calibration.hand_length_m)
+        the user's (``calibrated_hand_model``: ``hand_length_m`` and finger length
+        factors)."""
+        model = calibrated_hand_model(calibration)
         if mesh is None:
             mesh = build_hand_mesh(model)
         mesh_length = getattr(mesh, 'hand_length_m', None)
         if mesh_length is not None and abs(float(mesh_length) - model.hand_length_m) > 1e-9:
             raise IKError(f'mesh is for a {mesh_length} m hand, calibration says '
                           f'{model.hand_length_m} m')
+        mesh_factors = getattr(mesh, 'finger_length_factors', None)
+        if mesh_factors is not None and not np.allclose(mesh_factors,
+                                                        model.finger_length_factors):
+            raise IKError(f'mesh is for finger length factors {tuple(mesh_factors)}, '
+                          f'calibration says {model.finger_length_factors}')
         return cls(model, mesh, calibration.cameras, config)
 
     def set_primary_camera(self, camera: PinholeCamera) -> None:

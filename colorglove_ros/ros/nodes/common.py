@@ -29,7 +29,7 @@ from colorglove_ros.core.hand.frames import (
     check_frame_prefix,
     finger_joint_names,
 )
-from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.hand.model import HandModel, calibrated_hand_model
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
     pose_to_joint_state_msg,
@@ -194,12 +194,13 @@ def split_topics(text: str) -> list[str]:
 
 
 def hand_model_from_calibration(node: Node, executable: str) -> HandModel:
-    """Declare ``calibration_file`` and return the hand model of the hand length it gives;
-    a file that cannot be read stops the start with a :class:`StartupError` naming it."""
+    """Declare ``calibration_file`` and return the user's hand model (hand length and finger
+    length factors, ``calibrated_hand_model``); a file that cannot be read stops the start with
+    a :class:`StartupError` naming it."""
     calibration_file = declare_calibration_file(node, 'camera calibration YAML (for the hand '
-                                                      'length)')
+                                                      'length and finger proportions)')
     with startup_errors(executable, ValueError):
-        return HandModel(load_calibration(resolve_path(calibration_file)).hand_length_m)
+        return calibrated_hand_model(load_calibration(resolve_path(calibration_file)))
 
 
 # ------------------------------------------------------------------ tracked-hand topics

@@ -1,7 +1,7 @@
-"""hand_description_node: the URDF of the calibrated hand (``hand_length_m`` of the calibration
-file, link and joint names with ``frame_prefix``) on ``robot_description`` (``std_msgs/String``,
-latched: reliable, transient local, depth 1, as robot_state_publisher publishes it), and as its
-read-only parameter ``robot_description``.
+"""hand_description_node: the URDF of the calibrated hand (``hand_length_m`` and
+``finger_length_factors`` of the calibration file, link and joint names with ``frame_prefix``)
+on ``robot_description`` (``std_msgs/String``, latched: reliable, transient local, depth 1, as
+robot_state_publisher publishes it), and as its read-only parameter ``robot_description``.
 
 It is for graphs without robot_state_publisher (pip-only machines, or the native launch file
 with ``use_robot_state_publisher:=false``): there robot_state_publisher, given the same URDF by
@@ -43,7 +43,7 @@ class HandDescriptionNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('hand_description', **kwargs)
         calibration_file = declare_calibration_file(
-            self, 'calibration YAML whose hand_length_m sizes the URDF')
+            self, 'calibration YAML whose hand_length_m and finger_length_factors size the URDF')
         frame_prefix = declare_frame_prefix(self, EXECUTABLE)
         with startup_errors(EXECUTABLE, ValueError):
             self.urdf = calibrated_hand_urdf(resolve_path(calibration_file), frame_prefix)

@@ -5,7 +5,8 @@ one or several calibrated cameras.
 Camera 0's intrinsics come from the newest ``camera/camera_info`` (``use_camera_info``, the
 default) or from ``calibration_file``; candidates whose observation's image size or frame_id
 does not match are refused ('no hand: camera: ...'). The extra cameras' intrinsics and
-extrinsics, and the hand length, come from ``calibration_file``."""
+extrinsics, and the user's hand (length and finger length factors), come from
+``calibration_file``."""
 from __future__ import annotations
 
 import sys
@@ -19,7 +20,7 @@ from sensor_msgs.msg import Image
 
 from colorglove_ros.core.camera import PinholeCamera, load_calibration
 from colorglove_ros.core.hand.frames import hand_root_frame
-from colorglove_ros.core.hand.glove import default_hand
+from colorglove_ros.core.hand.glove import calibrated_hand
 from colorglove_ros.core.hand.overlay import draw_skeleton
 from colorglove_ros.core.lookup.database import check_hand_length, read_database_build
 from colorglove_ros.core.pipeline import NoHand, Tracked, bad_prior, track
@@ -83,7 +84,7 @@ class IKNode(Node):
             database = declare_database(self)
             build = read_database_build(database)
             check_hand_length(build, calibration.hand_length_m, calibration_file, database)
-            model, mesh, glove = default_hand(calibration.hand_length_m, build.glove_seed)
+            model, mesh, glove = calibrated_hand(calibration, build.glove_seed)
             config = replace(config, enable_ik=enable_ik, enable_smoothing=enable_smoothing)
             self.tracker = HandTracker(model, mesh, calibration.cameras, config, glove)
         self.num_vertices = mesh.num_vertices

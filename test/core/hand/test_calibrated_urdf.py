@@ -1,5 +1,5 @@
 """The URDF of the user's hand (``core.hand.urdf.calibrated_hand_urdf``): sized by the
-calibration file's hand length, read back with xml.etree."""
+calibration file's hand length and finger length factors, read back with xml.etree."""
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
@@ -8,13 +8,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 from calibration_files import calibration_with_hand_length
+from hand_calibration_files import UNEVEN_FACTORS, calibration_with_hand
 from repo_paths import CONFIG_DIR
 from scipy.spatial.transform import Rotation
 
 from colorglove_ros.core.camera import CalibrationError
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
-from colorglove_ros.core.hand.frames import hand_root_frame, prefixed_name
+from colorglove_ros.core.hand.frames import HAND_ROOT_LINK, hand_root_frame, prefixed_name
+from colorglove_ros.core.hand.model import DIGITS, HandModel, digit_link_index
 from colorglove_ros.core.hand.urdf import calibrated_hand_urdf, tip_link_name, urdf_string
+from colorglove_ros.core.hand.urdf_variants import hand_urdf_string
 
 
 def _joints(text: str) -> dict[str, ET.Element]:
@@ -79,3 +82,42 @@ def test_a_bad_calibration_file_is_refused(tmp_path: Path) -> None:
         calibrated_hand_urdf(tmp_path / 'missing.yaml')
     with pytest.raises(CalibrationError, match='not a human hand'):
         calibrated_hand_urdf(calibration_with_hand_length(tmp_path, 0.9))
+
+
+def _cylinder_lengths(text: str) -> dict[str, float]:
+    """Visual cylinder length of every phalanx link of the XML."""
+    lengths = {}
+    for link in ET.fromstring(text).iter('link'):
+        cylinder = link.find('visual/geometry/cylinder')
+        if cylinder is not None:
+            lengths[link.get('name')] = float(cylinder.get('length'))
+    return lengths
+
+
+def test_link_lengths_follow_the_finger_length_factors(tmp_path: Path) -> None:
+    text = calibrated_hand_urdf(calibration_with_hand(tmp_path, UNEVEN_FACTORS, 0.18))
+    model = HandModel(0.18, UNEVEN_FACTORS)
+    plain = _cylinder_lengths(urdf_string(HandModel(0.18)))
+    lengths = _cylinder_lengths(text)
+    assert set(lengths) == set(plain) and len(lengths) == 15
+    overall = model.scale / HandModel(0.18).scale
+    for d, digit in enumerate(DIGITS):
+        for k in range(3):
+            name = model.link_names[digit_link_index(d, k)]
+            assert lengths[name] == pytest.approx(model.link_lengths[digit_link_index(d, k)],
+                                                  rel=1e-12)
+            assert lengths[name] / plain[name] == pytest.approx(
+                UNEVEN_FACTORS[d] * overall, rel=1e-9), name
+        tip = _rest_transform(text, HAND_ROOT_LINK, tip_link_name(digit))[:3, 3]
+        base = _rest_transform(text, HAND_ROOT_LINK, f'{digit}_base')[:3, 3]
+        if digit != 'thumb':     # a flat finger: the tip is its knuckle-to-tip length away
+            assert np.linalg.norm(tip - base) == pytest.approx(model.digit_lengths_m[d],
+                                                               rel=1e-9)
+    # the flat middle fingertip is still the hand length from the wrist
+    tip = _rest_transform(text, HAND_ROOT_LINK, tip_link_name('middle'))
+    assert np.linalg.norm(tip[:3, 3]) == pytest.approx(0.18, abs=1e-9)
+    assert 'finger length factors' in text and 'hand length 0.18 m' in text
+    assert 'finger length factors' not in urdf_string(HandModel(0.18))
+    # the left hand of the same model mirrors the same lengths
+    left = _cylinder_lengths(hand_urdf_string('left', '', model))
+    assert left == lengths

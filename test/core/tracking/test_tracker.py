@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from hand_calibration_files import UNEVEN_FACTORS
 from repo_paths import CONFIG_DIR
 
 from colorglove_ros.core.camera import load_calibration
@@ -444,6 +445,23 @@ def test_tracker_from_calibration_uses_hand_length():
     assert len(tracker.cameras) == 2
     with pytest.raises(IKError, match='mesh'):
         HandTracker.from_calibration(cal, mesh=build_hand_mesh(HandModel(0.17)))
+
+
+def test_tracker_from_calibration_uses_finger_proportions():
+    """The calibration's finger length factors reach the tracker's model, mesh and (with
+    constraint_model patch) the standard glove's patches on the stretched mesh."""
+    cal = replace(load_calibration(CONFIG_DIR / 'calibration.yaml'),
+                  finger_length_factors=UNEVEN_FACTORS)
+    tracker = HandTracker.from_calibration(cal, load_ik_config(CONFIG_DIR / 'ik.yaml'))
+    assert tracker.model.finger_length_factors == UNEVEN_FACTORS
+    assert tracker.mesh.finger_length_factors == UNEVEN_FACTORS
+    assert tracker.model.hand_length_m == pytest.approx(cal.hand_length_m)
+    standard = HandModel(cal.hand_length_m)
+    assert not np.allclose(tracker.model.digit_lengths_m, standard.digit_lengths_m)
+    patched = HandTracker.from_calibration(cal, IKConfig(constraint_model='patch'))
+    assert patched.mesh is tracker.mesh
+    with pytest.raises(IKError, match='finger length factors'):
+        HandTracker.from_calibration(cal, mesh=build_hand_mesh(standard))
 
 
 def test_tracker_accepts_lookup_result(rig):
