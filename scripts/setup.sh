@@ -45,4 +45,7 @@ build_interfaces colorglove_msgs "$repo/colorglove_msgs"
 echo "==> installing colorglove_ros"
 python -m pip install --quiet --no-deps --no-build-isolation -e "$repo"
 
+echo "==> installing the photos of synthetic backgrounds (Debian package, see config/photos.yaml)"
+PYTHON="$venv/bin/python" bash "$repo/scripts/fetch_photos.sh"
+
 python -c "import rclpy, colorglove_msgs.msg, tf2_msgs.msg, colorglove_ros; print('colorglove_ros ready in', '$venv')"

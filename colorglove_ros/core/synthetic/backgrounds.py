@@ -1,6 +1,8 @@
-"""Procedural backgrounds of synthetic frames (desk, clutter, noise, office), deterministic from
-a seed: muted textures and objects, slightly defocused, plus 0-3 saturated glove-coloured
-distractors that single frames keep away from the hand."""
+"""Backgrounds of synthetic frames, deterministic from a seed: procedural (desk, clutter,
+noise, office: muted textures and objects) or a real photograph ('photo': ``photos.py``),
+slightly defocused, plus 0-3 saturated glove-coloured distractors that single frames keep
+away from the hand and, on request, other people's skin (``people.py``: bare hands and arms,
+faces) anywhere behind it."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -11,9 +13,17 @@ import numpy as np
 
 from colorglove_ros.core.colorimetry import srgb_to_linear
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
-from colorglove_ros.core.synthetic.conditions import BACKGROUND_KINDS, GLOVE_ALBEDO, SynthError
+from colorglove_ros.core.synthetic.conditions import (
+    BACKGROUND_KINDS,
+    GLOVE_ALBEDO,
+    FrameConditions,
+    SynthError,
+    background_seed_split,
+)
+from colorglove_ros.core.synthetic.people import people_layers
+from colorglove_ros.core.synthetic.photos import photo_albedo
 
-__all__ = ['make_background', 'background_light_field']
+__all__ = ['make_background', 'background_light_field', 'scene_background']
 
 
 def _fbm(rng: np.random.Generator, h: int, w: int, channels: int = 1,
@@ -84,13 +94,17 @@ class _Background:
 
 
 @lru_cache(maxsize=16)
-def _background(kind: str, seed: int, width: int, height: int) -> _Background:
+def _background(kind: str, seed: int, width: int, height: int,
+                photos: tuple[str, ...] = ()) -> _Background:
     if kind not in BACKGROUND_KINDS:
         raise SynthError(f'unknown background kind {kind!r}')
     rng = np.random.default_rng(seed)
     h, w = height, width
     scale = max(h, w) / 640.0
-    if kind == 'desk':
+    if kind == 'photo':
+        img, _ = photo_albedo(rng, background_seed_split(seed), w, h, photos)
+        n_objects = 0
+    elif kind == 'desk':
         img = np.ones((h, w, 3), np.float32) * _random_muted(rng)
         grain_dir = rng.uniform(0, np.pi)
         ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
@@ -145,13 +159,23 @@ def _background(kind: str, seed: int, width: int, height: int) -> _Background:
 
 
 def make_background(kind: str, seed: int, width: int, height: int,
-                    keep_out: tuple[int, int, int, int] | None = None) -> np.ndarray:
-    """(H, W, 3) float32 linear albedo of a procedural background, deterministic from
-    ``seed`` (cached). Its 0-3 saturated glove-coloured objects are left out where their
+                    keep_out: tuple[int, int, int, int] | None = None, *,
+                    photos: tuple[str, ...] = (), glove_distractors: bool = True,
+                    skin_distractors: bool = False) -> np.ndarray:
+    """(H, W, 3) float32 linear albedo of a background, deterministic from ``seed`` (cached);
+    kind 'photo' uses a photo of the seed's split (among ``photos`` when given). With
+    ``skin_distractors`` other people's hands, arms or a face stand in it. Its 0-3 saturated
+    glove-coloured objects (none without ``glove_distractors``) are left out where their
     box meets ``keep_out`` (x0, y0, x1, y1), so they never touch the hand's box."""
-    bg = _background(kind, int(seed), int(width), int(height))
+    bg = _background(kind, int(seed), int(width), int(height), tuple(photos))
     img = bg.base.copy()
+    if skin_distractors:
+        for layer in people_layers(int(seed), int(width), int(height)):
+            x0, y0, x1, y1 = layer.box
+            img[y0:y1, x0:x1] = img[y0:y1, x0:x1] * (1.0 - layer.alpha[..., None]) + layer.rgb
     for (x0, y0, x1, y1), mask, rgb in bg.distractors:
+        if not glove_distractors:
+            break
         if keep_out is not None:
             kx0, ky0, kx1, ky1 = keep_out
             if x0 <= kx1 and kx0 <= x1 and y0 <= ky1 and ky0 <= y1:
@@ -161,6 +185,20 @@ def make_background(kind: str, seed: int, width: int, height: int,
     return img
 
 
-def background_light_field(kind: str, seed: int, width: int, height: int) -> np.ndarray:
+def background_light_field(kind: str, seed: int, width: int, height: int, *,
+                           photos: tuple[str, ...] = ()) -> np.ndarray:
     """(H, W, 1) float32 smooth illumination variation over the background ``(kind, seed)``."""
-    return _background(kind, int(seed), int(width), int(height)).light_field
+    return _background(kind, int(seed), int(width), int(height), tuple(photos)).light_field
+
+
+def scene_background(conditions: FrameConditions, width: int, height: int,
+                     keep_out: tuple[int, int, int, int] | None = None
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """The background albedo (:func:`make_background`) and light field
+    (:func:`background_light_field`) that ``conditions`` ask for."""
+    kind, seed, photos = (conditions.background_kind, conditions.background_seed,
+                          tuple(conditions.background_photos))
+    albedo = make_background(kind, seed, width, height, keep_out, photos=photos,
+                             glove_distractors=conditions.glove_distractors,
+                             skin_distractors=conditions.skin_distractors)
+    return albedo, background_light_field(kind, seed, width, height, photos=photos)

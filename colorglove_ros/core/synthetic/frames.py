@@ -9,10 +9,12 @@ Image formation (all in linear RGB, then the camera's sRGB encoding):
 * the light has a colour temperature (its residual cast relative to the camera's white
   balance at ``WHITE_BALANCE_K``, ``core/colorimetry.py``) and a level (``gain``, exposure
   included) that apply to the hand and the background alike;
-* a procedural background (``backgrounds.py``: desk, clutter, noise or office; some saturated
-  glove-like colours, never over the hand), slightly defocused;
-* optional linear motion blur of the hand layer, vignetting, shot + read noise, clipping,
-  sRGB gamma, 8-bit quantisation and optional JPEG compression.
+* a background (``backgrounds.py``: procedural desk, clutter, noise or office, or a real
+  photograph; some saturated glove-like colours, never over the hand; optionally other
+  people's bare hands, arms and faces), slightly defocused;
+* optional linear motion blur of the hand layer, vignetting, shot + read noise, the camera's
+  colour processing (white-balance error, saturation, gamma and contrast: identity by
+  default), clipping, sRGB gamma, 8-bit quantisation and optional JPEG compression.
 
 Ground truth: ``labels`` (0 background, 1..10 glove colour) and ``patch_ids`` (0 background,
 patch + 1) are the visible glove at each pixel centre, from the unblurred geometry. The
@@ -29,27 +31,33 @@ import cv2
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.colorimetry import illuminant_rgb, linear_to_srgb, srgb_to_linear
+from colorglove_ros.core.colorimetry import (
+    LUMINANCE_WEIGHTS,
+    illuminant_rgb,
+    linear_to_srgb,
+    srgb_to_linear,
+)
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.geometry import matrix_to_rotvec, rotvec_to_matrix
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB, Glove, default_hand
 from colorglove_ros.core.hand.mesh import HandMesh
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
 from colorglove_ros.core.hand.poses import pose_collection, sample_global_rotations
-from colorglove_ros.core.synthetic.backgrounds import background_light_field, make_background
+from colorglove_ros.core.synthetic.backgrounds import scene_background
 from colorglove_ros.core.synthetic.conditions import (
     GLOVE_ALBEDO,
     FrameConditions,
     SynthError,
     sample_conditions,
 )
+from colorglove_ros.core.synthetic.forearm import forearm_mesh
 from colorglove_ros.core.synthetic.mesh_images import patch_ids_to_labels, vertex_normals
 from colorglove_ros.core.synthetic.render import Renderer
 
 __all__ = [
     'SyntheticFrame', 'Synthesizer', 'render_frame', 'render_frames_multi', 'sample_pose',
     'default_camera', 'transform_pose', 'natural_finger_shapes', 'primary_to_camera',
-    'view_of_scene',
+    'view_of_scene', 'camera_encode',
 ]
 
 @dataclass
@@ -71,40 +79,41 @@ _SRGB8_LUT = np.round(linear_to_srgb(np.arange(65536) / 65535.0, np.float32) * 2
                       ).astype(np.uint8)
 
 
-def _encode_srgb8(c: np.ndarray) -> np.ndarray:
+def _encode_srgb8(c: np.ndarray, lut: np.ndarray = _SRGB8_LUT) -> np.ndarray:
     """Linear float image -> clipped, sRGB-encoded uint8 (16-bit look-up table)."""
     idx = (np.clip(c, 0.0, 1.0) * 65535.0 + 0.5).astype(np.uint16)
-    return _SRGB8_LUT[idx]
+    return lut[idx]
+
+
+@lru_cache(maxsize=64)
+def _tone_lut(gamma: float, contrast: float) -> np.ndarray:
+    """The sRGB look-up table followed by the tone curve ``v ** (1 / gamma)`` and the
+    S-curve ``v + contrast * v (1 - v) (2 v - 1)`` (monotonic for contrast in [-1, 1])."""
+    v = linear_to_srgb(np.arange(65536) / 65535.0) ** (1.0 / gamma)
+    v = v + contrast * v * (1.0 - v) * (2.0 * v - 1.0)
+    lut = np.round(np.clip(v, 0.0, 1.0) * 255.0).astype(np.uint8)
+    lut.setflags(write=False)
+    return lut
+
+
+def camera_encode(linear: np.ndarray, conditions: FrameConditions) -> np.ndarray:
+    """A linear sensor image (noise included) -> the camera's 8-bit sRGB: the colour
+    processing of ``conditions`` (white-balance gains, saturation about the luminance, then
+    the gamma and contrast tone curve on the encoded values), clipping and quantisation.
+    With the default conditions it is the plain sRGB encoding."""
+    if not conditions.processes_color:
+        return _encode_srgb8(linear)
+    img = linear * np.asarray(conditions.white_balance_gains, np.float32)
+    if conditions.saturation != 1.0:
+        luma = img @ LUMINANCE_WEIGHTS.astype(np.float32)
+        img = luma[..., None] + np.float32(conditions.saturation) * (img - luma[..., None])
+    return _encode_srgb8(img, _tone_lut(float(conditions.gamma), float(conditions.contrast)))
 
 
 # ----------------------------------------------------------------------------- geometry
 def default_camera() -> PinholeCamera:
     """The 640x480, fx = fy = 600 camera of ``config/calibration.yaml``."""
     return PinholeCamera(640, 480, 600.0, 600.0, 319.5, 239.5)
-
-
-def _forearm_mesh(model: HandModel) -> tuple[np.ndarray, np.ndarray]:
-    """A closed elliptic frustum (hand frame, along +y from the wrist), outward CCW faces."""
-    s = model.hand_length_m / DEFAULT_HAND_LENGTH_M
-    n = 20
-    ang = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
-    rings = []
-    for y, rx, rz in ((-0.004, 0.028, 0.0135), (0.50, 0.040, 0.032)):
-        rings.append(np.stack([rx * s * np.cos(ang), np.full(n, y * s),
-                               rz * s * np.sin(ang) - 0.001 * s], axis=1))
-    verts = np.concatenate([*rings, [[0.0, -0.004 * s, -0.001 * s], [0.0, 0.50 * s, -0.001 * s]]])
-    faces = []
-    for i in range(n):
-        j = (i + 1) % n
-        faces += [[i, j, n + j], [i, n + j, n + i]]
-        faces += [[2 * n, j, i], [2 * n + 1, n + i, n + j]]
-    verts, faces = np.asarray(verts), np.asarray(faces, dtype=np.int32)
-    # orient outward: flip all faces if the signed volume is negative
-    tri = verts[faces]
-    vol = np.einsum('ij,ij->i', tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum()
-    if vol < 0:
-        faces = faces[:, ::-1].copy()
-    return verts, faces
 
 
 def transform_pose(q: np.ndarray, rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
@@ -159,7 +168,7 @@ class Synthesizer:
                  ) -> None:
         self.model, self.mesh, self.glove = hand or default_hand(hand_length_m, glove_seed)
         self.supersample = int(supersample)
-        arm_v, arm_f = _forearm_mesh(self.model)
+        arm_v, arm_f = forearm_mesh(self.model)
         nv = self.mesh.num_vertices
         self._arm_local = arm_v
         self.faces = np.concatenate([self.mesh.faces, arm_f + nv]).astype(np.int32)
@@ -215,10 +224,7 @@ class Synthesizer:
         keep_out = None
         if len(xs) and conditions.distractors_avoid_hand:
             keep_out = (int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max()))
-        bg = make_background(conditions.background_kind, conditions.background_seed, w, h,
-                             keep_out=keep_out)
-        light_field = background_light_field(conditions.background_kind,
-                                              conditions.background_seed, w, h)
+        bg, light_field = scene_background(conditions, w, h, keep_out)
         bg *= light_field * light.astype(np.float32)
         img = rgb + (1.0 - alpha[..., None]) * bg
         # optics (lens distortion, vignetting) then the sensor
@@ -229,7 +235,7 @@ class Synthesizer:
         img = img * (1.0 - conditions.vignetting * r2)[..., None]
         sigma = conditions.noise_sigma * np.sqrt(1.0 + 8.0 * np.clip(img, 0.0, None))
         img = img + sigma * rng.standard_normal(img.shape, dtype=np.float32)
-        out = _encode_srgb8(img)
+        out = camera_encode(img, conditions)
         if conditions.jpeg_quality > 0:
             ok, enc = cv2.imencode('.jpg', out[..., ::-1],
                                    [cv2.IMWRITE_JPEG_QUALITY, int(conditions.jpeg_quality)])
