@@ -13,9 +13,16 @@ from colorglove_ros.core.segmentation.blobs import color_components
 from colorglove_ros.core.segmentation.color_model import (
     ColorCalibration,
     load_calibration,
+    lut_index,
     read_calibration_config,
 )
 from colorglove_ros.core.segmentation.crop import CropTransform, crop_to_tiny, mean_shift_crop
+from colorglove_ros.core.segmentation.detection import (
+    SCENE_COLOUR_BITS,
+    drop_oversized_components,
+    glove_region_mask,
+    scene_colour_table,
+)
 from colorglove_ros.core.segmentation.light import estimate_light_gains, gain_table
 from colorglove_ros.core.segmentation.types import Blob, Observation
 from colorglove_ros.core.validation import SEGMENTER_RULES, validate_segmenter_settings
@@ -25,7 +32,7 @@ __all__ = [
     'STATUS_OK',
     'STATUS_NO_GLOVE', 'STATUS_TOO_SMALL', 'STATUS_OUT_OF_FRAME', 'STATUS_FRAGMENTED',
     'STAGES', 'load_segmenter',
-    'keep_multicolor_components', 'relabel_borders',
+    'keep_multicolor_components', 'relabel_borders', 'border_contact_px',
 ]
 
 STATUS_OK = 'ok'
@@ -232,16 +239,16 @@ def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
     return out
 
 
-def _touches_image_border(labels: np.ndarray, roi: tuple[int, int, int, int], reduction: int,
-                          width: int, height: int) -> bool:
-    """Whether glove labels of the region of interest ``roi`` = (x0, x1, y0, y1) (full-image
-    bounds of ``labels``, each label ``reduction`` pixels wide) lie on the image's outermost
-    rows or columns (within a label's width of them)."""
+def border_contact_px(labels: np.ndarray, roi: tuple[int, int, int, int], reduction: int,
+                      width: int, height: int) -> int:
+    """How many full-image pixels along the image's outermost rows and columns the glove
+    labels of the region of interest ``roi`` = (x0, x1, y0, y1) (full-image bounds of
+    ``labels``, each label ``reduction`` pixels wide) cover."""
     x0, x1, y0, y1 = roi
-    return bool((x0 == 0 and labels[:, 0].any())
-                or (x1 + reduction > width and labels[:, -1].any())
-                or (y0 == 0 and labels[0].any())
-                or (y1 + reduction > height and labels[-1].any()))
+    sides = ((x0 == 0, labels[:, 0]), (x1 + reduction > width, labels[:, -1]),
+             (y0 == 0, labels[0]), (y1 + reduction > height, labels[-1]))
+    return reduction * sum(int(np.count_nonzero(edge)) for on_border, edge in sides
+                           if on_border)
 
 
 def _check_image(image: object) -> np.ndarray:
@@ -269,7 +276,18 @@ class GloveSegmenter:
     lookup) and cleaned (median filter, :func:`keep_multicolor_components` with cut-off
     fingertips within ``reattach_radius`` region pixels re-attached, then
     :func:`relabel_borders`); :func:`crop_to_tiny` there gives the tiny image and crop;
-    connected components per colour give the blobs.
+    connected components per colour give the blobs. A glove whose pixels run along the
+    image border for more than ``max_border_contact`` times the crop window's side is
+    ``cut_by_border`` (partly outside the image; a fingertip grazing the border is not).
+
+    Finding the glove, not its colours (``core.segmentation.detection``): on both passes,
+    single-colour regions larger than ``max_patch_fraction`` of the image are background,
+    and only pixels within ``diversity_window`` coarse pixels of a window showing
+    ``min_region_colors`` glove colours (each on ``diversity_density`` of it) count. Colours
+    the coarse pass labelled glove but found to be background (at least
+    ``scene_colour_min_share`` of the coarse frame in one quantised colour: surfaces, not
+    small clutter) are the scene's own colours in this frame: the region of interest labels
+    them background (0 disables).
 
     Every setting is checked (ranges, odd median kernel, finite numbers) by
     ``core.validation.validate_segmenter_settings`` however the segmenter is built; a bad one
@@ -286,6 +304,9 @@ class GloveSegmenter:
                  min_blob_pixels: int = 12, min_component_colors: int = 3,
                  reattach_radius: int = 3, reattach_max_share: float = 0.2,
                  light_passes: int = 1, min_blob_share: float = 0.85,
+                 max_border_contact: float = 0.1, diversity_window: int = 24,
+                 min_region_colors: int = 6, diversity_density: float = 0.01,
+                 max_patch_fraction: float = 0.1, scene_colour_min_share: float = 0.001,
                  source: str = 'GloveSegmenter') -> None:
         # every keyword argument but ``source`` is a setting named in SEGMENTER_RULES: checked
         # and converted (int, float, tuple of ints) in one place, kept as the attribute of
@@ -297,17 +318,37 @@ class GloveSegmenter:
             setattr(self, name, value)
 
     # ------------------------------------------------------------------ helpers
-    def _coarse_labels(self, small: np.ndarray, table: np.ndarray | None = None) -> np.ndarray:
+    def _glove_only(self, labels: np.ndarray, reduction: float, image_pixels: int
+                    ) -> np.ndarray:
+        """Background surfaces out of a label image whose pixels are ``reduction`` image
+        pixels wide: single-colour regions larger than ``max_patch_fraction`` of the image
+        (``image_pixels``), then everything farther than ``diversity_window`` (coarse pixels)
+        from a window showing ``min_region_colors`` glove colours
+        (``core.segmentation.detection``)."""
+        labels = drop_oversized_components(
+            labels, self.max_patch_fraction * image_pixels / reduction ** 2)
+        if self.diversity_window > 0:
+            window = max(int(round(self.diversity_window * self.coarse_factor / reduction)), 1)
+            labels = labels * glove_region_mask(labels, self.calibration.num_colors, window,
+                                                self.min_region_colors,
+                                                self.diversity_density).view(np.uint8)
+        return labels
+
+    def _coarse_labels(self, small: np.ndarray, table: np.ndarray | None = None,
+                       reduction: float = 1.0, image_pixels: int = 0) -> np.ndarray:
         labels = self._median(self.calibration.classify(small, table))
+        labels = self._glove_only(labels, reduction, image_pixels or labels.size)
         if self.min_component_colors > 1:
             # no re-attaching here: it changes neither the coarse window nor the light estimate
             labels = keep_multicolor_components(labels, self.min_component_colors, min_pixels=2)
         return labels
 
     def _coarse(self, image: np.ndarray
-                ) -> tuple[tuple[tuple[float, float], float] | None, np.ndarray | None]:
+                ) -> tuple[tuple[tuple[float, float], float] | None, np.ndarray | None,
+                           np.ndarray | None]:
         """Find the glove on the downsampled frame: (centre (x, y), half window) in full
-        pixels or None, and the light-colour correction table (None for no correction)."""
+        pixels or None, the light-colour correction table (None for no correction) and the
+        frame's scene colours (:func:`scene_colour_table`; None when off)."""
         f = self.coarse_factor
         h, w = image.shape[:2]
         if f > 1 and h >= 2 * f and w >= 2 * f:
@@ -315,24 +356,31 @@ class GloveSegmenter:
             sx, sy = w / (w // f), h / (h // f)
         else:
             small, sx, sy = image, 1.0, 1.0
-        labels = self._coarse_labels(small)
+        reduction = float(np.sqrt(sx * sy))
+        labels = self._coarse_labels(small, None, reduction, h * w)
         table = None
         gains = np.ones(3)
         seen = small
         for k in range(self.light_passes):
             if k:   # refine: classify the corrected coarse frame, estimate what is left
                 seen = cv2.LUT(small, table)
-                labels = self._coarse_labels(small, table)
+                labels = self._coarse_labels(small, table, reduction, h * w)
             gains = gains * estimate_light_gains(cv2.LUT(seen, _LINEAR_RGB), labels,
                                                  self.calibration.reference_linear_rgb)
             table = gain_table(gains)
+        scene = None
+        if self.scene_colour_min_share > 0:
+            rejected = (self.calibration.classify(small, table) > 0) & (labels == 0)
+            scene = scene_colour_table(small[rejected], SCENE_COLOUR_BITS,
+                                       self.scene_colour_min_share * labels.size)
         min_px = max(int(self.min_glove_pixels / (sx * sy)), 1)
         found = mean_shift_crop(labels, min_pixels=min_px)
         if found is None:
-            return None, table
+            return None, table, scene
         (cx, cy), half = found
         # small pixel u covers full pixels [u * s, (u + 1) * s): centre (u + 0.5) s - 0.5
-        return (((cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5), half * max(sx, sy)), table
+        return ((((cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5), half * max(sx, sy)), table,
+                scene)
 
     def _blobs(self, labels: np.ndarray, r: int, x0: int, y0: int,
                window: tuple[int, int, int, int]) -> list[Blob]:
@@ -384,7 +432,7 @@ class GloveSegmenter:
             timings[stage] = (now - t) * 1e3
             return now
 
-        coarse, table = self._coarse(image)
+        coarse, table, scene = self._coarse(image)
         t = tick('coarse', t0)
         if coarse is None:
             timings['total'] = (time.perf_counter() - t0) * 1e3
@@ -404,8 +452,10 @@ class GloveSegmenter:
         roi = self._filter(roi)
         t = tick('filter', t)
         labels = self.calibration.classify(roi, table)
+        if scene is not None:
+            labels[scene.take(lut_index(roi, SCENE_COLOUR_BITS))] = 0
         t = tick('classify', t)
-        labels = self._median(labels)
+        labels = self._glove_only(self._median(labels), r, h * w)
         if self.min_component_colors > 1:
             labels = keep_multicolor_components(labels, self.min_component_colors,
                                                 min_pixels=max(self.min_blob_pixels // (r * r), 2),
@@ -437,7 +487,8 @@ class GloveSegmenter:
         wx0, wx1 = max(int(np.ceil(cx - half)), 0), int(np.floor(cx + half)) + 1
         wy0, wy1 = max(int(np.ceil(cy - half)), 0), int(np.floor(cy + half)) + 1
         obs.glove_pixel_count = int(np.count_nonzero(labels[wy0:wy1, wx0:wx1])) * r * r
-        obs.cut_by_border = _touches_image_border(labels, (x0, x1, y0, y1), r, w, h)
+        obs.cut_by_border = (border_contact_px(labels, (x0, x1, y0, y1), r, w, h)
+                             > self.max_border_contact * 2.0 * crop.half_size)
         obs.blobs = self._blobs(labels, r, x0, y0, (wx0, wx1, wy0, wy1))
         tick('blobs', t)
         # Reasons to reject: crop mostly outside the frame, or too little glove.

@@ -179,9 +179,15 @@ def test_noise_patches_are_fragmented_not_a_hand(glove_calibration) -> None:
     are never fragmented."""
     frames = _noise_patch_frames(3, 6)
     segmenter = GloveSegmenter(glove_calibration)
-    gated = [segmenter.process(f) for f in frames]
+    assert not any(segmenter.process(f).hand_found for f in frames)
+    # the blob-share check alone (without finding the glove by its colour diversity and the
+    # scene's own colours) calls them fragmented ...
+    no_detection = dict(diversity_window=0, scene_colour_min_share=0.0)
+    blob_share_only = GloveSegmenter(glove_calibration, **no_detection)
+    gated = [blob_share_only.process(f) for f in frames]
     assert all(o.status == STATUS_FRAGMENTED for o in gated), [o.status for o in gated]
-    ungated = GloveSegmenter(glove_calibration, min_blob_share=0.0)
+    # ... and with neither they pass as a hand
+    ungated = GloveSegmenter(glove_calibration, min_blob_share=0.0, **no_detection)
     assert all(ungated.process(f).hand_found for f in frames)
     for image, _ in render_training_frames(4, 5, 'test'):
         assert segmenter.process(image).status == STATUS_OK
@@ -408,8 +414,11 @@ def test_roi_reduction_keeps_crop_consistent(calibration) -> None:
     """A big glove is processed at reduced resolution; the crop must still match."""
     rng = np.random.default_rng(21)
     img, lab = render_blob_frame(rng, BlobConditions(1.0, (1.0, 1.0, 1.0), 2.0, 3, False, 2.2))
-    fine = GloveSegmenter(calibration, max_roi_cells=400).process(img)
-    coarse = GloveSegmenter(calibration, max_roi_cells=60).process(img)
+    # the frame's glove-coloured clutter shares the glove's exact colours: the scene-colour
+    # filter would take those patches off the glove too, which is not what this test is about
+    exact = dict(scene_colour_min_share=0.0)
+    fine = GloveSegmenter(calibration, max_roi_cells=400, **exact).process(img)
+    coarse = GloveSegmenter(calibration, max_roi_cells=60, **exact).process(img)
     truth = crop_to_tiny(lab)
     for obs in (fine, coarse):
         assert obs.hand_found

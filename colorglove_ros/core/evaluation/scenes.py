@@ -1,0 +1,249 @@
+"""The real-scene ladder: the whole per-frame recipe (segmentation of rendered RGB frames, lookup,
+IK with the nodes' gates) on synthetic sequences that look like a user's camera, one rung per
+condition, so that each regression shows where it comes from.
+
+A rung (:class:`SceneCondition`) names three things: the appearance of the frames
+(``core.synthetic.conditions.scene_conditions``: clean, real photographs behind the hand,
+sleeves, other cameras' colour processing, or all of them), the hand (the database's model, or
+finger proportions varied +-10 % per digit with the hand length kept, the tracker either not
+knowing them or given them as the user's hand calibration) and the motion (the desk motion of
+``generate_sequence``, or ``border_crossing_sequence``: the hand entering and leaving across
+every border). Every sequence ends with frames with no hand at all (the hand moved out of
+view), and the border motion has more between its visits.
+
+Each frame is classed from the renderer's ground truth: *fully visible* (all 21 hand keypoints
+inside the image), *no hand* (no glove pixel in the image) or *partly visible*; the figures
+(:func:`summarize_scene`) are those of the issue on real scenes. No rclpy import.
+"""
+from __future__ import annotations
+
+import time
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from colorglove_ros.core.camera import PinholeCamera
+from colorglove_ros.core.evaluation.metrics import FINGERTIP_INDICES, translation_errors_mm
+from colorglove_ros.core.evaluation.sequences import EvaluationError
+from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.pipeline import NODE_LIMITS, FramePipeline, StageLimits, Tracked
+
+__all__ = [
+    'SceneCondition', 'SCENE_LADDER', 'HAND_SHAPES', 'MOTIONS', 'FINGER_FACTOR_SPREAD',
+    'NO_HAND_TAIL_FRACTION', 'OFF_POSE_MM', 'BORDER_DEPTH_MM', 'SceneRun',
+    'varied_finger_factors', 'scene_poses', 'run_scene', 'summarize_scene',
+]
+
+HAND_SHAPES = ('model', 'varied', 'varied_calibrated')
+MOTIONS = ('desk', 'borders')
+FINGER_FACTOR_SPREAD = 0.10       # per-digit length factors drawn from 1 +- this
+NO_HAND_TAIL_FRACTION = 0.15      # share of each sequence's last frames without the hand
+OFF_POSE_MM = 50.0                # a tracked frame this far off (mean fingertip) is wrong
+BORDER_DEPTH_MM = 100.0           # depth error allowed on a hand cut by the image border
+_AWAY = np.array([25.0, 0.0, 0.5])   # wrist position far out of every camera's view
+
+
+@dataclass(frozen=True)
+class SceneCondition:
+    """One rung of the ladder: frame appearance, hand shape and motion."""
+
+    name: str
+    appearance: str
+    hand: str = 'model'
+    motion: str = 'desk'
+
+    def __post_init__(self) -> None:
+        if self.hand not in HAND_SHAPES or self.motion not in MOTIONS:
+            raise EvaluationError(f'condition {self.name!r}: hand must be one of {HAND_SHAPES}'
+                                  f' and motion one of {MOTIONS}')
+
+
+SCENE_LADDER: tuple[SceneCondition, ...] = (
+    SceneCondition('clean', 'clean'),
+    SceneCondition('photos', 'photos'),
+    SceneCondition('sleeve', 'sleeve'),
+    SceneCondition('color_processing', 'color_processing'),
+    SceneCondition('proportions', 'clean', hand='varied'),
+    SceneCondition('proportions_calibrated', 'clean', hand='varied_calibrated'),
+    SceneCondition('borders', 'clean', motion='borders'),
+    SceneCondition('all', 'all', hand='varied_calibrated', motion='borders'),
+)
+
+
+def varied_finger_factors(seed: int) -> tuple[float, ...]:
+    """Per-digit length factors (thumb..little) of sequence ``seed``'s hand, each drawn
+    uniformly from 1 +- ``FINGER_FACTOR_SPREAD``, independently of the hand length."""
+    rng = np.random.default_rng([seed, 31])
+    return tuple(float(f) for f in 1.0 + rng.uniform(-FINGER_FACTOR_SPREAD,
+                                                     FINGER_FACTOR_SPREAD, 5))
+
+
+def scene_poses(condition: SceneCondition, seed: int, num_frames: int, camera: PinholeCamera,
+                model: HandModel, fps: float = 30.0) -> np.ndarray:
+    """(num_frames, 26) true poses of the rung's motion, the last
+    ``NO_HAND_TAIL_FRACTION`` of them moved out of view (no hand in the frame)."""
+    from colorglove_ros.core.synthetic.sequences import (
+        border_crossing_sequence,
+        generate_sequence,
+    )
+
+    if condition.motion == 'borders':
+        poses, _ = border_crossing_sequence(seed, num_frames, fps, camera=camera, model=model)
+    else:
+        poses = generate_sequence(seed, num_frames, fps, camera=camera, model=model)
+    tail = int(round(NO_HAND_TAIL_FRACTION * num_frames)) if num_frames >= 4 else 0
+    if tail:
+        poses[num_frames - tail:, 0:3] = _AWAY
+    return poses
+
+
+@dataclass
+class SceneRun:
+    """One sequence of one rung: truth, outputs and per-frame classes."""
+
+    condition: str
+    seed: int
+    q_true: np.ndarray                  # (N, 26)
+    q_est: np.ndarray                   # (N, 26), NaN where no pose was published
+    tracked: np.ndarray                 # (N,) bool: a pose was published
+    fully_visible: np.ndarray           # (N,) bool
+    no_hand: np.ndarray                 # (N,) bool
+    segmentation_ms: np.ndarray         # (N,) primary camera's segmentation wall time
+    reasons: Counter                    # 'no hand' reasons on frames with a visible hand
+    true_model: HandModel
+    tracker_model: HandModel
+
+
+def _fingertips(model: HandModel, poses: np.ndarray) -> np.ndarray:
+    return np.stack([model.keypoints(q)[FINGERTIP_INDICES] for q in poses])
+
+
+def run_scene(condition: SceneCondition, seed: int, num_frames: int, *, lookup: Any,
+              camera: PinholeCamera, observer_factory: Callable[[], Any],
+              tracker_factory: Callable[[Any], Any], hand_factory: Callable[[Any], Any],
+              limits: StageLimits = NODE_LIMITS, fps: float = 30.0, split: str = 'test',
+              progress: Callable[[int], None] | None = None) -> SceneRun:
+    """Render and track one sequence of a rung.
+
+    ``hand_factory(finger_factors or None)`` gives the (model, mesh, glove) of a hand with
+    the database's hand length and glove; ``tracker_factory(hand)`` a fresh tracker for
+    that hand; ``observer_factory()`` a fresh observer (``core.pipeline.image_observer``
+    of a new segmenter: nothing carries over between sequences)."""
+    from colorglove_ros.core.synthetic.conditions import scene_conditions
+    from colorglove_ros.core.synthetic.frames import Synthesizer
+
+    factors = varied_finger_factors(seed) if condition.hand != 'model' else None
+    true_hand = hand_factory(factors)
+    tracker_hand = true_hand if condition.hand != 'varied' else hand_factory(None)
+    synth = Synthesizer(hand=true_hand)
+    try:
+        poses = scene_poses(condition, seed, num_frames, camera, true_hand[0], fps)
+        rng = np.random.default_rng([seed, 7, SCENE_LADDER.index(condition)
+                                     if condition in SCENE_LADDER else 99])
+        look = replace(scene_conditions(condition.appearance, rng, split),
+                       distractors_avoid_hand=False)
+        tracker = tracker_factory(tracker_hand)
+        observe = observer_factory()
+        timed_ms: list[float] = []
+
+        def timed(view: Any, primary: bool) -> Any:
+            started = time.perf_counter()
+            out = observe(view, primary)
+            if primary:
+                timed_ms.append(1e3 * (time.perf_counter() - started))
+            return out
+
+        pipeline = FramePipeline(timed, lookup, camera, limits=limits)
+        n = len(poses)
+        q_est = np.full((n, poses.shape[1]), np.nan)
+        tracked = np.zeros(n, bool)
+        fully = np.zeros(n, bool)
+        empty = np.zeros(n, bool)
+        reasons: Counter = Counter()
+        w, h = camera.width, camera.height
+        for i in range(n):
+            frame = synth.render_frame(poses[i], camera, np.random.default_rng([seed, i, 11]),
+                                       look)
+            uv = camera.project(true_hand[0].keypoints(poses[i]))
+            fully[i] = bool(np.all((uv[:, 0] >= 0) & (uv[:, 0] <= w - 1)
+                                   & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1)))
+            empty[i] = not np.any(frame.labels)
+            fully[i] &= not empty[i]
+            outcome = pipeline.process(tracker, [frame.image_rgb], i / fps)
+            if isinstance(outcome, Tracked):
+                tracked[i] = True
+                q_est[i] = outcome.result.q
+            elif not empty[i]:
+                reasons[outcome.reason.split(':')[0]] += 1
+            if progress is not None:
+                progress(i)
+        return SceneRun(condition.name, seed, poses, q_est, tracked, fully, empty,
+                        np.array(timed_ms), reasons, true_hand[0], tracker_hand[0])
+    finally:
+        synth.release()
+
+
+def summarize_scene(runs: Sequence[SceneRun]) -> dict[str, Any]:
+    """The rung's figures over its sequences: fully visible frames tracked (share), no-hand
+    frames with a pose (share and count), tracked frames more than ``OFF_POSE_MM`` off (mean
+    fingertip error, absolute), fingertip error relative to the wrist and absolute (mean and
+    median over tracked fully visible frames, mm), the largest wrist depth error of a pose
+    published for a partly visible hand and how many exceed ``BORDER_DEPTH_MM``, the
+    segmentation's median time and the commonest 'no hand' reasons on frames with a hand."""
+    if not runs:
+        raise EvaluationError('no sequence to summarise')
+    visible = np.concatenate([r.fully_visible for r in runs])
+    empty = np.concatenate([r.no_hand for r in runs])
+    tracked = np.concatenate([r.tracked for r in runs])
+    abs_err, rel_err, depth_err, partial = [], [], [], []
+    for r in runs:
+        sel = r.tracked & ~r.no_hand
+        if not sel.any():
+            continue
+        est, truth = r.q_est[sel], r.q_true[sel]
+        tips_est = _fingertips(r.tracker_model, est)
+        tips_true = _fingertips(r.true_model, truth)
+        abs_err.append(1e3 * np.linalg.norm(tips_est - tips_true, axis=2).mean(axis=1))
+        rel_err.append(1e3 * np.linalg.norm((tips_est - est[:, None, 0:3])
+                                            - (tips_true - truth[:, None, 0:3]),
+                                            axis=2).mean(axis=1))
+        depth_err.append(translation_errors_mm(est, truth)[1])
+        partial.append(~r.fully_visible[sel])
+    out: dict[str, Any] = {
+        'frames': int(len(visible)), 'fully_visible_frames': int(visible.sum()),
+        'no_hand_frames': int(empty.sum()),
+        'visible_tracked': float(tracked[visible].mean()) if visible.any() else float('nan'),
+        'no_hand_with_pose': float(tracked[empty].mean()) if empty.any() else float('nan'),
+        'no_hand_with_pose_count': int(tracked[empty].sum()),
+    }
+    nan = float('nan')
+    if abs_err:
+        a, rel = np.concatenate(abs_err), np.concatenate(rel_err)
+        d, part = np.concatenate(depth_err), np.concatenate(partial)
+        vis = ~part
+        out.update({
+            'tracked_frames': int(len(a)),
+            'off_50mm': float((a > OFF_POSE_MM).mean()),
+            'fingertip_rel_wrist_mm': float(rel[vis].mean()) if vis.any() else nan,
+            'fingertip_rel_wrist_median_mm': float(np.median(rel[vis])) if vis.any() else nan,
+            'fingertip_mm': float(a[vis].mean()) if vis.any() else nan,
+            'fingertip_median_mm': float(np.median(a[vis])) if vis.any() else nan,
+            'partial_tracked_frames': int(part.sum()),
+            'partial_depth_max_mm': float(d[part].max()) if part.any() else 0.0,
+            'partial_depth_over_100mm': int((d[part] > BORDER_DEPTH_MM).sum()),
+        })
+    else:
+        out.update({'tracked_frames': 0, 'off_50mm': nan, 'fingertip_rel_wrist_mm': nan,
+                    'fingertip_rel_wrist_median_mm': nan, 'fingertip_mm': nan,
+                    'fingertip_median_mm': nan, 'partial_tracked_frames': 0,
+                    'partial_depth_max_mm': 0.0, 'partial_depth_over_100mm': 0})
+    seg = np.concatenate([r.segmentation_ms for r in runs])
+    out['segmentation_ms_median'] = float(np.median(seg)) if len(seg) else nan
+    reasons: Counter = Counter()
+    for r in runs:
+        reasons.update(r.reasons)
+    out['no_hand_reasons'] = dict(reasons.most_common(4))
+    return out

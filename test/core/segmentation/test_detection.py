@@ -1,0 +1,94 @@
+"""Finding the glove, not its colours (core/segmentation/detection.py and its use in the
+segmenter): colourful hand-sized patchworks are kept, wide single-colour surfaces and
+few-colour textures are not."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
+from colorglove_ros.core.segmentation.calibration_fit import (
+    fit_color_calibration,
+    render_training_frames,
+)
+from colorglove_ros.core.segmentation.detection import (
+    colour_diversity,
+    drop_oversized_components,
+    glove_region_mask,
+    scene_colour_table,
+)
+from colorglove_ros.core.segmentation.segmenter import GloveSegmenter
+from colorglove_ros.core.synthetic import frames as synth
+from colorglove_ros.core.synthetic.conditions import FrameConditions
+
+FAST = dict(max_per_class=1500, bits=5, augment_copies=1, background_components=6)
+
+
+def _patchwork(h: int = 24, w: int = 24, colours: int = 8) -> np.ndarray:
+    """A glove-like block of 4x4 patches cycling through ``colours`` colours."""
+    yy, xx = np.mgrid[0:h, 0:w]
+    return (((yy // 4) * 3 + (xx // 4)) % colours + 1).astype(np.uint8)
+
+
+def test_diversity_tells_a_patchwork_from_a_two_colour_texture() -> None:
+    labels = np.zeros((60, 120), np.uint8)
+    labels[10:34, 10:34] = _patchwork()
+    labels[10:50, 70:110] = np.where(np.arange(40)[:, None] % 6 < 3, 1, 2)   # red/orange
+    counts = colour_diversity(labels, 10, 12, 0.02)
+    assert counts[22, 22] >= 6 and counts[30, 90] <= 2
+
+
+def test_region_mask_keeps_the_glove_and_its_long_finger_drops_far_texture() -> None:
+    labels = np.zeros((80, 160), np.uint8)
+    labels[10:34, 10:34] = _patchwork()
+    labels[20:24, 34:70] = 3                          # a long finger reaching from the glove
+    labels[40:78, 100:158] = np.where(np.arange(58)[None, :] % 8 < 4, 1, 2)
+    mask = glove_region_mask(labels, 10, 12, 6, 0.02)
+    assert mask[10:34, 10:34].all() and mask[20:24, 34:70].all()
+    assert not mask[60:78, 130:158].any()
+    assert not glove_region_mask(labels[40:], 10, 12, 6, 0.02).any()
+
+
+def test_oversized_single_colour_regions_are_background() -> None:
+    labels = np.zeros((100, 100), np.uint8)
+    labels[:, :60] = 1                                # a table top, 6000 px
+    labels[70:80, 70:80] = 1                          # a patch of the same colour, 100 px
+    out = drop_oversized_components(labels, 1000)
+    assert not out[:, :60].any() and out[70:80, 70:80].all()
+    assert drop_oversized_components(labels, 0) is labels
+
+
+def test_scene_colour_table_counts_quantised_colours() -> None:
+    rgb = np.array([[200, 30, 30]] * 5 + [[30, 200, 30]] * 2, np.uint8)
+    table = scene_colour_table(rgb, 5, 3)
+    assert table.shape == (1 << 15,) and table.sum() == 1
+    assert table[(200 >> 3) << 10 | (30 >> 3) << 5 | (30 >> 3)]
+
+
+@pytest.fixture(scope='module')
+def calibration():
+    return fit_color_calibration(render_training_frames(8, 0), seed=0, **FAST)
+
+
+def test_a_glove_in_front_of_a_warm_wood_like_surface_is_found(calibration) -> None:
+    """A rendered glove beside a surface grained in four of the glove's colours: with the
+    detection the crop is on the hand; with it off the surface pulls the crop away."""
+    camera = synth.default_camera()
+    rng = np.random.default_rng(4)
+    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
+    q[0:3] = [0.12, 0.05, 0.6]
+    frame = synth.render_frame(q, camera, rng, FrameConditions())
+    image = frame.image_rgb.copy()
+    yy, xx = np.mgrid[0:480, 0:260]
+    grain = ((yy + 7 * np.sin(xx / 13.0)) // 9).astype(int) % 4     # wavy grain, 4 colours
+    surface = GLOVE_PALETTE_RGB[[0, 1, 2, 3]][grain].astype(np.uint8)
+    image[:, :260][frame.labels[:, :260] == 0] = surface[frame.labels[:, :260] == 0]
+    ys, xs = np.nonzero(frame.labels)
+    centre = np.array([xs.mean(), ys.mean()])
+    found = GloveSegmenter(calibration).process(image)
+    assert found.hand_found
+    assert np.hypot(*(np.array(found.crop.center_xy) - centre)) < 0.25 * found.crop.half_size
+    off = GloveSegmenter(calibration, diversity_window=0, max_patch_fraction=0.0,
+                         scene_colour_min_share=0.0).process(image)
+    assert (not off.hand_found or np.hypot(*(np.array(off.crop.center_xy) - centre))
+            > 0.25 * off.crop.half_size)

@@ -1,0 +1,70 @@
+"""The real-scene ladder (core/evaluation/scenes.py, tools/eval_scenes.py): every rung runs the
+whole recipe on rendered RGB frames, classes frames from the ground truth and prints and writes
+the same figures; a hand entering across a border is never published from the crop alone."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from colorglove_ros.core.evaluation.scenes import (
+    NO_HAND_TAIL_FRACTION,
+    SCENE_LADDER,
+    scene_poses,
+    varied_finger_factors,
+)
+from colorglove_ros.core.synthetic.frames import default_camera
+from colorglove_ros.core.synthetic.sequences import BORDERS, border_crossing_sequence
+from colorglove_ros.tools import eval_scenes
+
+
+def test_border_crossings_visit_every_border_and_leave_the_view(hand) -> None:
+    camera = default_camera()
+    model = hand[0]
+    seen = set()
+    for seed in range(4):
+        poses, entered = border_crossing_sequence(seed, 150, camera=camera, model=model)
+        seen.update(entered)
+        inside = []
+        for q in poses:
+            uv = camera.project(model.keypoints(q))
+            inside.append(np.mean((uv[:, 0] >= 0) & (uv[:, 0] < 640) & (uv[:, 1] >= 0)
+                                  & (uv[:, 1] < 480)))
+        inside = np.array(inside)
+        assert inside[0] == 0.0 and (inside == 1.0).any()
+        assert ((inside > 0) & (inside < 1)).any()       # partly visible on the way in/out
+    assert seen == set(BORDERS)
+
+
+def test_scene_poses_end_without_a_hand_and_proportions_vary(hand) -> None:
+    camera = default_camera()
+    poses = scene_poses(SCENE_LADDER[0], 3, 40, camera, hand[0])
+    tail = int(round(NO_HAND_TAIL_FRACTION * 40))
+    uv = camera.project(hand[0].keypoints(poses[-1]))
+    assert not ((uv[:, 0] >= 0) & (uv[:, 0] < 640)).any() and tail > 0
+    factors = varied_finger_factors(3)
+    assert len(factors) == 5 and all(0.9 <= f <= 1.1 for f in factors)
+    assert factors != varied_finger_factors(4)
+
+
+def test_eval_scenes_prints_and_writes_the_ladder(node_assets, tmp_path, capsys) -> None:
+    out = tmp_path / 'ladder.json'
+    code = eval_scenes.main(['--conditions', 'clean', 'borders', '--sequences', '1',
+                             '--frames', '24', '--database', str(node_assets.database),
+                             '--color-config', str(node_assets.color_config),
+                             '--json', str(out)])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert 'Real-scene ladder' in text and 'Targets' in text
+    figures = json.loads(out.read_text())
+    rows = {r['condition']: r for r in figures['rows']}
+    assert set(rows) == {'clean', 'borders'}
+    for row in rows.values():
+        assert row['frames'] == 24 and row['no_hand_frames'] >= 4
+        assert row['no_hand_with_pose_count'] == 0
+        assert row['partial_depth_over_100mm'] == 0
+    assert any(t['target'].startswith('clean: fully visible') for t in figures['targets'])
+
+
+def test_eval_scenes_refuses_a_missing_database(tmp_path, capsys) -> None:
+    assert eval_scenes.main(['--database', str(tmp_path / 'none'), '--sequences', '1']) != 0
