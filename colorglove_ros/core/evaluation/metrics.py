@@ -13,7 +13,8 @@ from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
 from colorglove_ros.core.validation import check_number
 
 __all__ = [
-    'FINGERTIP_INDICES', 'LOCAL_WINDOW', 'MetricsError', 'joint_angle_error_deg',
+    'FINGERTIP_INDICES', 'fingertip_positions', 'LOCAL_WINDOW', 'MetricsError',
+    'joint_angle_error_deg',
     'fingertip_errors_mm', 'fingertip_error_split_mm', 'translation_errors_mm',
     'local_average', 'deviation_from_local_average', 'dof_jitter', 'jitter_mm',
     'contiguous_runs', 'jitter_runs_mm', 'latency_summary_ms', 'pose_accuracy',
@@ -34,7 +35,8 @@ def joint_angle_error_deg(estimated: np.ndarray, truth: np.ndarray) -> np.ndarra
     return np.degrees(np.abs(diff)).mean(axis=1)
 
 
-def _fingertips(model: HandModel, poses: np.ndarray) -> np.ndarray:
+def fingertip_positions(model: HandModel, poses: np.ndarray) -> np.ndarray:
+    """(N, 5, 3) fingertip positions of poses (N, 26)."""
     return np.stack([model.keypoints(q)[FINGERTIP_INDICES] for q in np.asarray(poses)])
 
 
@@ -44,7 +46,7 @@ def fingertip_errors_mm(model: HandModel, estimated: np.ndarray, truth: np.ndarr
     fingertips are taken relative to each pose's wrist position, which removes the wrist
     translation error only: the wrist rotation error stays in (see
     :func:`fingertip_error_split_mm` for the articulation alone)."""
-    est, gt = _fingertips(model, estimated), _fingertips(model, truth)
+    est, gt = fingertip_positions(model, estimated), fingertip_positions(model, truth)
     if relative_to_wrist:
         est = est - np.asarray(estimated)[:, None, 0:3]
         gt = gt - np.asarray(truth)[:, None, 0:3]
@@ -124,7 +126,7 @@ def jitter_mm(model: HandModel, poses: np.ndarray, window: int = LOCAL_WINDOW) -
     if len(poses) < window:
         return float('nan')
     half = window // 2
-    dev = deviation_from_local_average(_fingertips(model, poses), window)
+    dev = deviation_from_local_average(fingertip_positions(model, poses), window)
     return float(1000.0 * np.linalg.norm(dev[half:len(poses) - half], axis=2).mean())
 
 

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.evaluation.metrics import FINGERTIP_INDICES, translation_errors_mm
+from colorglove_ros.core.evaluation.metrics import fingertip_positions, translation_errors_mm
 from colorglove_ros.core.evaluation.sequences import EvaluationError
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.pipeline import NODE_LIMITS, FramePipeline, StageLimits, Tracked
@@ -117,10 +117,6 @@ class SceneRun:
     tracker_model: HandModel
 
 
-def _fingertips(model: HandModel, poses: np.ndarray) -> np.ndarray:
-    return np.stack([model.keypoints(q)[FINGERTIP_INDICES] for q in poses])
-
-
 def run_scene(condition: SceneCondition, seed: int, num_frames: int, *, lookup: Any,
               camera: PinholeCamera, observer_factory: Callable[[], Any],
               tracker_factory: Callable[[Any], Any], hand_factory: Callable[[Any], Any],
@@ -204,8 +200,8 @@ def summarize_scene(runs: Sequence[SceneRun]) -> dict[str, Any]:
         if not sel.any():
             continue
         est, truth = r.q_est[sel], r.q_true[sel]
-        tips_est = _fingertips(r.tracker_model, est)
-        tips_true = _fingertips(r.true_model, truth)
+        tips_est = fingertip_positions(r.tracker_model, est)
+        tips_true = fingertip_positions(r.true_model, truth)
         abs_err.append(1e3 * np.linalg.norm(tips_est - tips_true, axis=2).mean(axis=1))
         rel_err.append(1e3 * np.linalg.norm((tips_est - est[:, None, 0:3])
                                             - (tips_true - truth[:, None, 0:3]),
