@@ -29,7 +29,8 @@ from colorglove_ros.core.segmentation.light import planckian_illuminants
 __all__ = ['RESIDUAL_TEMPERATURES_K', 'DEFAULT_LUT_BITS', 'DEFAULT_MAX_PIXELS_PER_CLASS',
            'MIN_FRAMES', 'MASK_SUFFIX', 'SYNTHETIC_FRAMES_DIR', 'fit_color_calibration',
            'read_labelled_frames', 'write_labelled_frames', 'render_training_frames',
-           'CalibrationFit', 'calibrate_frames', 'calibrate_synthetic']
+           'CalibrationFit', 'calibrate_frames', 'calibrate_synthetic', 'relit_copies',
+           'fit_mixture']
 
 DEFAULT_LUT_BITS = 6                  # lookup table bits per RGB channel
 DEFAULT_MAX_PIXELS_PER_CLASS = 5000   # training pixels sampled per class
@@ -98,6 +99,31 @@ def _augment(pix: np.ndarray, rng: np.random.Generator, light: tuple[float, floa
     return np.clip(np.round(srgb), 0, 255).astype(np.uint8)
 
 
+def relit_copies(pix: np.ndarray, rng: np.random.Generator, copies: int,
+                 light: tuple[float, float], white_balance: float,
+                 illuminants: np.ndarray | None, noise: float) -> np.ndarray:
+    """sRGB pixels (N, 3) uint8 followed by ``copies`` re-lit copies of them: each pixel under
+    a random light level in ``light``, a random row of ``illuminants`` (linear RGB gains,
+    e.g. :func:`planckian_illuminants`; None for none), per-channel gains
+    ``exp(+-white_balance)`` and Gaussian noise of ``noise`` levels."""
+    if copies <= 0:
+        return pix
+    return np.concatenate([pix] + [_augment(pix, rng, light, white_balance, illuminants, noise)
+                                   for _ in range(copies)])
+
+
+def fit_mixture(features: np.ndarray, components: int, reg_covar: float,
+                seed: int) -> GaussianMixtureParams:
+    """A Gaussian mixture of ``components`` full-covariance components fitted to ``features``
+    (N, D) by EM (scikit-learn, ``reg_covar`` added to every covariance's diagonal)."""
+    from sklearn.mixture import GaussianMixture
+
+    gmm = GaussianMixture(n_components=components, covariance_type='full',
+                          reg_covar=reg_covar, random_state=seed, max_iter=200).fit(features)
+    return GaussianMixtureParams(gmm.weights_.copy(), gmm.means_.copy(),
+                                 gmm.covariances_.copy())
+
+
 def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]],
                           num_colors: int = NUM_COLORS,
                           components: int = 3, background_components: int = 12,
@@ -128,8 +154,6 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]],
     glove colour's (not re-lit) training pixels is kept as its reference colour, the light
     the segmenter corrects frames to.
     """
-    from sklearn.mixture import GaussianMixture
-
     if feature_kind not in FEATURE_KINDS:
         raise ColorCalibrationError(f'unknown feature kind {feature_kind!r}')
     if len(frames) < min_frames:
@@ -147,19 +171,12 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]],
     counts = []
     for c, pix in enumerate(samples):
         counts.append(len(pix))
-        if augment_copies > 0:
-            pix = np.concatenate([pix] + [
-                _augment(pix, rng, augment_light, augment_white_balance, illuminants,
-                         augment_noise)
-                for _ in range(augment_copies)])
+        pix = relit_copies(pix, rng, augment_copies, augment_light, augment_white_balance,
+                           illuminants, augment_noise)
         feats = rgb_features(pix, feature_kind, intensity_weight)
         k = background_components if c == 0 else components
         k = max(1, min(k, len(np.unique(pix, axis=0))))
-        gmm = GaussianMixture(n_components=k, covariance_type='full',
-                              reg_covar=1e-1 if c == 0 else glove_covariance_floor,
-                              random_state=seed, max_iter=200).fit(feats)
-        params = GaussianMixtureParams(gmm.weights_.copy(), gmm.means_.copy(),
-                                       gmm.covariances_.copy())
+        params = fit_mixture(feats, k, 1e-1 if c == 0 else glove_covariance_floor, seed)
         mixtures.append(params)
         if c > 0:
             thresholds[c] = float(np.quantile(params.log_likelihood(feats), reject_quantile))
