@@ -13,7 +13,10 @@ ROSDEP_KEYS = {
     'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'cv2': 'python3-opencv',
     'yaml': 'python3-yaml', 'tqdm': 'python3-tqdm', 'trimesh': 'python3-trimesh-pip',
     'rosbags': 'python3-rosbags-pip', 'matplotlib': 'python3-matplotlib',
-    'sklearn': 'python3-sklearn', 'moderngl': None, 'rclpy': 'rclpy',
+    'sklearn': 'python3-sklearn', 'moderngl': None,
+    # scikit-learn's own dependency (Debian's python3-sklearn depends on it), pinned in
+    # requirements.txt
+    'threadpoolctl': 'python3-sklearn', 'rclpy': 'rclpy',
     'rcl_interfaces': 'rcl_interfaces', 'std_msgs': 'std_msgs', 'sensor_msgs': 'sensor_msgs',
     'geometry_msgs': 'geometry_msgs', 'visualization_msgs': 'visualization_msgs',
     'builtin_interfaces': 'builtin_interfaces', 'colorglove_msgs': 'colorglove_msgs',
