@@ -186,9 +186,20 @@ def observe_image(segmenter: Any, image_rgb: np.ndarray, primary: bool
 def image_observer(segmenter: Any, image_of: Callable[[Any], np.ndarray] = np.asarray
                    ) -> Observer:
     """An :data:`Observer` segmenting each view's RGB image (``image_of(view)``; default: the
-    view is the image) with ``segmenter``."""
+    view is the image) with ``segmenter``. A frame's views come primary first, in camera
+    order (as :class:`FramePipeline` gives them): every further camera gets a segmenter of its
+    own (``segmenter.fresh()``, where it has one), since a segmenter learns its camera's
+    static background."""
+    per_camera = [segmenter]
+    index = -1
+
     def observe(view: Any, primary: bool) -> tuple[CameraObservation, TinyCrop | None]:
-        return observe_image(segmenter, image_of(view), primary)
+        nonlocal index
+        index = 0 if primary else index + 1
+        while len(per_camera) <= index:
+            first = per_camera[0]
+            per_camera.append(first.fresh() if hasattr(first, 'fresh') else first)
+        return observe_image(per_camera[index], image_of(view), primary)
     return observe
 
 

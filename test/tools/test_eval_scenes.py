@@ -10,6 +10,7 @@ import numpy as np
 from colorglove_ros.core.evaluation.scenes import (
     NO_HAND_TAIL_FRACTION,
     SCENE_LADDER,
+    fully_visible,
     scene_poses,
     varied_finger_factors,
 )
@@ -45,6 +46,20 @@ def test_scene_poses_end_without_a_hand_and_proportions_vary(hand) -> None:
     factors = varied_finger_factors(3)
     assert len(factors) == 5 and all(0.9 <= f <= 1.1 for f in factors)
     assert factors != varied_finger_factors(4)
+
+
+def test_a_glove_on_the_image_border_is_not_fully_visible() -> None:
+    labels = np.zeros((48, 64), np.uint8)
+    labels[10:30, 20:40] = 3
+    keypoints = np.array([[25.0, 15.0], [35.0, 25.0]])
+    assert fully_visible(labels, keypoints)
+    assert not fully_visible(labels, keypoints + [40.0, 0.0])       # a keypoint outside
+    assert not fully_visible(np.zeros_like(labels), keypoints)       # no glove
+    for edge in ((0, slice(20, 40)), (-1, slice(20, 40)), (slice(5, 9), 0),
+                 (slice(5, 9), -1)):
+        cut = labels.copy()
+        cut[edge] = 5                                                # fingers run off it
+        assert not fully_visible(cut, keypoints)
 
 
 def test_eval_scenes_prints_and_writes_the_ladder(node_assets, tmp_path, capsys) -> None:

@@ -12,7 +12,8 @@ every border). Every sequence ends with frames with no hand at all (the hand mov
 view), and the border motion has more between its visits.
 
 Each frame is classed from the renderer's ground truth: *fully visible* (all 21 hand keypoints
-inside the image), *no hand* (no glove pixel in the image) or *partly visible*; the figures
+inside the image and no glove pixel on its border: the whole glove is in view), *no hand* (no
+glove pixel in the image) or *partly visible*; the figures
 (:func:`summarize_scene`) are those of the issue on real scenes. No rclpy import.
 """
 from __future__ import annotations
@@ -34,7 +35,7 @@ from colorglove_ros.core.pipeline import NODE_LIMITS, FramePipeline, StageLimits
 __all__ = [
     'SceneCondition', 'SCENE_LADDER', 'HAND_SHAPES', 'MOTIONS', 'FINGER_FACTOR_SPREAD',
     'NO_HAND_TAIL_FRACTION', 'OFF_POSE_MM', 'BORDER_DEPTH_MM', 'SceneRun',
-    'varied_finger_factors', 'scene_poses', 'run_scene', 'summarize_scene',
+    'varied_finger_factors', 'fully_visible', 'scene_poses', 'run_scene', 'summarize_scene',
 ]
 
 HAND_SHAPES = ('model', 'varied', 'varied_calibrated')
@@ -117,6 +118,19 @@ class SceneRun:
     tracker_model: HandModel
 
 
+def fully_visible(labels: np.ndarray, keypoints_uv: np.ndarray) -> bool:
+    """Whether the whole glove is in view: every hand keypoint (``keypoints_uv``, (K, 2)
+    pixels) inside the truth label image ``labels`` and no glove pixel on its outermost rows
+    or columns (there, part of the glove may be outside)."""
+    h, w = labels.shape
+    uv = np.asarray(keypoints_uv, float)
+    inside = bool(np.all((uv[:, 0] >= 0) & (uv[:, 0] <= w - 1) & (uv[:, 1] >= 0)
+                         & (uv[:, 1] <= h - 1)))
+    on_border = bool(labels[0].any() or labels[-1].any() or labels[:, 0].any()
+                     or labels[:, -1].any())
+    return inside and bool(labels.any()) and not on_border
+
+
 def run_scene(condition: SceneCondition, seed: int, num_frames: int, *, lookup: Any,
               camera: PinholeCamera, observer_factory: Callable[[], Any],
               tracker_factory: Callable[[Any], Any], hand_factory: Callable[[Any], Any],
@@ -159,15 +173,12 @@ def run_scene(condition: SceneCondition, seed: int, num_frames: int, *, lookup: 
         fully = np.zeros(n, bool)
         empty = np.zeros(n, bool)
         reasons: Counter = Counter()
-        w, h = camera.width, camera.height
         for i in range(n):
             frame = synth.render_frame(poses[i], camera, np.random.default_rng([seed, i, 11]),
                                        look)
-            uv = camera.project(true_hand[0].keypoints(poses[i]))
-            fully[i] = bool(np.all((uv[:, 0] >= 0) & (uv[:, 0] <= w - 1)
-                                   & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1)))
+            fully[i] = fully_visible(frame.labels,
+                                     camera.project(true_hand[0].keypoints(poses[i])))
             empty[i] = not np.any(frame.labels)
-            fully[i] &= not empty[i]
             outcome = pipeline.process(tracker, [frame.image_rgb], i / fps)
             if isinstance(outcome, Tracked):
                 tracked[i] = True

@@ -9,6 +9,7 @@ import numpy as np
 
 from colorglove_ros.core.colorimetry import srgb_to_linear
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.segmentation.background import StaticBackground
 from colorglove_ros.core.segmentation.blobs import color_components
 from colorglove_ros.core.segmentation.color_model import (
     ColorCalibration,
@@ -19,6 +20,7 @@ from colorglove_ros.core.segmentation.color_model import (
 from colorglove_ros.core.segmentation.crop import CropTransform, crop_to_tiny, mean_shift_crop
 from colorglove_ros.core.segmentation.detection import (
     SCENE_COLOUR_BITS,
+    colour_diversity,
     drop_oversized_components,
     glove_region_mask,
     scene_colour_table,
@@ -45,6 +47,13 @@ STATUS_FRAGMENTED = 'fragmented'
 #: Timed stages, in pipeline order (``Observation.timings_ms`` also has ``'total'``);
 #: 'coarse' includes estimating the light colour.
 STAGES = ('coarse', 'filter', 'classify', 'cleanup', 'borders', 'crop', 'blobs')
+# Glove-like coarse pixels, which never learn static background: within this many pixels of
+# one whose neighbourhood (twice as wide) shows this many glove colours.
+GLOVE_MARGIN_COARSE_PX = 2
+GLOVE_LIKE_COLOURS = 3
+# ... and the glove's single-colour regions up to this share of the crop window's area (the
+# largest printed patch, the palm's, seen flat: about 0.12)
+MAX_PATCH_WINDOW_SHARE = 0.15
 
 
 class SegmentationInputError(ColorGloveError, ValueError):
@@ -251,6 +260,20 @@ def border_contact_px(labels: np.ndarray, roi: tuple[int, int, int, int], reduct
                            if on_border)
 
 
+def _coarse_cells(coarse: np.ndarray, origin: tuple[int, int], r: int, shape: tuple[int, int],
+                  image_hw: tuple[int, int]) -> np.ndarray:
+    """``coarse`` (a mask over the downsampled frame) at the pixels of a region of interest
+    starting at full pixel ``origin`` (x, y), ``r`` full pixels a side, ``shape`` (rows,
+    cols); ``image_hw`` is the full frame's size."""
+    ch, cw = coarse.shape
+    h, w = image_hw
+    xs = origin[0] + r * np.arange(shape[1]) + 0.5 * (r - 1)
+    ys = origin[1] + r * np.arange(shape[0]) + 0.5 * (r - 1)
+    cols = np.clip((xs + 0.5) * cw / w, 0, cw - 1).astype(np.intp)
+    rows = np.clip((ys + 0.5) * ch / h, 0, ch - 1).astype(np.intp)
+    return coarse[np.ix_(rows, cols)]
+
+
 def _check_image(image: object) -> np.ndarray:
     if not isinstance(image, np.ndarray):
         raise SegmentationInputError(f'expected a numpy array, got {type(image).__name__}')
@@ -307,6 +330,7 @@ class GloveSegmenter:
                  max_border_contact: float = 0.1, diversity_window: int = 24,
                  min_region_colors: int = 6, diversity_density: float = 0.01,
                  max_patch_fraction: float = 0.1, scene_colour_min_share: float = 0.001,
+                 background_frames: int = 15, background_tolerance: float = 12.0,
                  source: str = 'GloveSegmenter') -> None:
         # every keyword argument but ``source`` is a setting named in SEGMENTER_RULES: checked
         # and converted (int, float, tuple of ints) in one place, kept as the attribute of
@@ -316,6 +340,21 @@ class GloveSegmenter:
         for name, value in validate_segmenter_settings(given, source,
                                                        SegmentationConfigError).items():
             setattr(self, name, value)
+        self.source = source
+        self.background = StaticBackground(self.background_frames, self.background_tolerance)
+
+    def settings(self) -> dict[str, object]:
+        """The segmenter's settings (the keyword arguments it was built with, checked)."""
+        return {name: getattr(self, name) for name in SEGMENTER_RULES}
+
+    def fresh(self) -> GloveSegmenter:
+        """A segmenter with the same calibration and settings and nothing learnt (its own
+        static background): one per camera stream."""
+        return GloveSegmenter(self.calibration, **self.settings(), source=self.source)
+
+    def reset(self) -> None:
+        """Forget the learnt background (a new sequence, or the camera moved)."""
+        self.background.reset()
 
     # ------------------------------------------------------------------ helpers
     def _glove_only(self, labels: np.ndarray, reduction: float, image_pixels: int
@@ -334,21 +373,55 @@ class GloveSegmenter:
                                                 self.diversity_density).view(np.uint8)
         return labels
 
+    def _glove_like(self, labels: np.ndarray,
+                    window: tuple[tuple[float, float], float] | None) -> np.ndarray:
+        """(H, W) bool: the coarse pixels that may be the glove, which must not become
+        static background however still the hand is held: those within
+        ``GLOVE_MARGIN_COARSE_PX`` of a pixel whose small neighbourhood shows at least
+        ``GLOVE_LIKE_COLOURS`` glove colours, and the single-colour regions reaching such a
+        pixel that are no larger than a printed patch can be in the coarse crop ``window``
+        (``MAX_PATCH_WINDOW_SHARE`` of its area). A uniform or two-coloured surface beside
+        the hand is not glove-like."""
+        side = 2 * GLOVE_MARGIN_COARSE_PX + 1
+        mixed = colour_diversity(labels, self.calibration.num_colors, 2 * side - 1,
+                                 0.5 / side ** 2) >= GLOVE_LIKE_COLOURS
+        out = cv2.dilate(mixed.view(np.uint8), cv2.getStructuringElement(
+            cv2.MORPH_RECT, (side, side))).view(bool)
+        if window is None or not mixed.any():
+            return out
+        max_area = MAX_PATCH_WINDOW_SHARE * (2.0 * window[1]) ** 2
+        for colour in np.unique(labels[mixed]):
+            if colour == 0:
+                continue
+            n, comp, stats, _ = cv2.connectedComponentsWithStats(
+                (labels == colour).view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+            patch = np.zeros(n, bool)
+            patch[comp[mixed]] = True
+            patch &= stats[:, cv2.CC_STAT_AREA] <= max_area
+            patch[0] = False
+            out |= patch[comp]
+        return out
+
     def _coarse_labels(self, small: np.ndarray, table: np.ndarray | None = None,
-                       reduction: float = 1.0, image_pixels: int = 0) -> np.ndarray:
+                       reduction: float = 1.0, image_pixels: int = 0,
+                       static: np.ndarray | None = None) -> np.ndarray:
         labels = self._median(self.calibration.classify(small, table))
+        if static is not None:
+            labels[static] = 0
         labels = self._glove_only(labels, reduction, image_pixels or labels.size)
         if self.min_component_colors > 1:
             # no re-attaching here: it changes neither the coarse window nor the light estimate
             labels = keep_multicolor_components(labels, self.min_component_colors, min_pixels=2)
         return labels
 
-    def _coarse(self, image: np.ndarray
+    def _coarse(self, image: np.ndarray, learn: bool = False
                 ) -> tuple[tuple[tuple[float, float], float] | None, np.ndarray | None,
-                           np.ndarray | None]:
+                           np.ndarray | None, np.ndarray | None]:
         """Find the glove on the downsampled frame: (centre (x, y), half window) in full
-        pixels or None, the light-colour correction table (None for no correction) and the
-        frame's scene colours (:func:`scene_colour_table`; None when off)."""
+        pixels or None, the light-colour correction table (None for no correction), the
+        frame's scene colours (:func:`scene_colour_table`; None when off) and the coarse
+        pixels that are learnt static background (None when none). With ``learn`` the
+        static background learns from this frame."""
         f = self.coarse_factor
         h, w = image.shape[:2]
         if f > 1 and h >= 2 * f and w >= 2 * f:
@@ -357,14 +430,15 @@ class GloveSegmenter:
         else:
             small, sx, sy = image, 1.0, 1.0
         reduction = float(np.sqrt(sx * sy))
-        labels = self._coarse_labels(small, None, reduction, h * w)
+        static = self.background.match(small) if learn else None
+        labels = self._coarse_labels(small, None, reduction, h * w, static)
         table = None
         gains = np.ones(3)
         seen = small
         for k in range(self.light_passes):
             if k:   # refine: classify the corrected coarse frame, estimate what is left
                 seen = cv2.LUT(small, table)
-                labels = self._coarse_labels(small, table, reduction, h * w)
+                labels = self._coarse_labels(small, table, reduction, h * w, static)
             gains = gains * estimate_light_gains(cv2.LUT(seen, _LINEAR_RGB), labels,
                                                  self.calibration.reference_linear_rgb)
             table = gain_table(gains)
@@ -375,12 +449,14 @@ class GloveSegmenter:
                                        self.scene_colour_min_share * labels.size)
         min_px = max(int(self.min_glove_pixels / (sx * sy)), 1)
         found = mean_shift_crop(labels, min_pixels=min_px)
+        if learn:
+            self.background.update(small, self._glove_like(labels, found))
         if found is None:
-            return None, table, scene
+            return None, table, scene, static
         (cx, cy), half = found
         # small pixel u covers full pixels [u * s, (u + 1) * s): centre (u + 0.5) s - 0.5
         return ((((cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5), half * max(sx, sy)), table,
-                scene)
+                scene, static)
 
     def _blobs(self, labels: np.ndarray, r: int, x0: int, y0: int,
                window: tuple[int, int, int, int]) -> list[Blob]:
@@ -432,7 +508,7 @@ class GloveSegmenter:
             timings[stage] = (now - t) * 1e3
             return now
 
-        coarse, table, scene = self._coarse(image)
+        coarse, table, scene, static = self._coarse(image, learn=True)
         t = tick('coarse', t0)
         if coarse is None:
             timings['total'] = (time.perf_counter() - t0) * 1e3
@@ -454,6 +530,8 @@ class GloveSegmenter:
         labels = self.calibration.classify(roi, table)
         if scene is not None:
             labels[scene.take(lut_index(roi, SCENE_COLOUR_BITS))] = 0
+        if static is not None:
+            labels[_coarse_cells(static, (x0, y0), r, labels.shape, (h, w))] = 0
         t = tick('classify', t)
         labels = self._glove_only(self._median(labels), r, h * w)
         if self.min_component_colors > 1:

@@ -1,0 +1,91 @@
+"""What a static camera learns about its scene while it tracks: a pixel whose colour has held
+still for a while is background, whatever colour it has.
+
+Warm wood, a red mug or an orange shirt beside the hand are labelled glove colours, and no
+colour rule can tell them from the glove's own patches. A camera on a desk or a tripod sees
+them unchanged frame after frame, while the glove moves. :class:`StaticBackground` keeps, per
+pixel of the segmenter's coarse (downsampled) frame, a running colour and for how many frames
+in a row the pixel has matched it; a pixel that has matched for ``frames_needed`` frames and
+still matches is background. Pixels at and around the glove found in a frame do not count
+towards that (a hand held still never becomes background), and a pixel that changes starts
+again. When most of the frame changes at once (the camera moved, the exposure jumped) the
+model starts again: until it has learnt, the segmenter works as without it.
+
+One model per camera stream, fed its frames in order. No rclpy import.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+__all__ = ['StaticBackground']
+
+
+class StaticBackground:
+    """Per-pixel background of one static camera's coarse frames.
+
+    ``frames_needed``: frames a pixel must match its running colour before it counts as
+    background; ``tolerance``: the largest channel difference (sRGB levels) that still
+    matches; ``adapt``: how fast the running colour follows slow changes (share per frame);
+    ``max_changed_share``: when more of the frame than this changes at once, start again."""
+
+    def __init__(self, frames_needed: int, tolerance: float, adapt: float = 0.05,
+                 max_changed_share: float = 0.5) -> None:
+        self.frames_needed = int(frames_needed)
+        self.tolerance = float(tolerance)
+        self.adapt = float(adapt)
+        self.max_changed_share = float(max_changed_share)
+        self._colour: np.ndarray | None = None    # (h, w, 3) float32 running colour
+        self._matched: np.ndarray | None = None   # (h, w) int32 frames matched in a row
+        self._same: np.ndarray | None = None      # this frame's match, from :meth:`match`
+
+    @property
+    def enabled(self) -> bool:
+        """False when ``frames_needed`` is 0 (no background is ever learnt)."""
+        return self.frames_needed > 0
+
+    def reset(self) -> None:
+        """Forget everything learnt (a new stream, the camera moved)."""
+        self._colour = self._matched = self._same = None
+
+    def match(self, small: np.ndarray) -> np.ndarray | None:
+        """(h, w) bool: the pixels of coarse frame ``small`` (uint8 RGB) that are learnt
+        background and still show it; None when nothing is learnt yet (or disabled). Call
+        :meth:`update` with the same frame afterwards."""
+        self._same = None
+        if not self.enabled:
+            return None
+        if self._colour is None or self._colour.shape != small.shape:
+            self.reset()
+            return None
+        diff = cv2.absdiff(small.astype(np.float32), self._colour)
+        diff = np.maximum(np.maximum(diff[..., 0], diff[..., 1]), diff[..., 2])
+        same = diff <= self.tolerance
+        if 1.0 - float(same.mean()) > self.max_changed_share:
+            self.reset()
+            return None
+        self._same = same
+        learnt = same & (self._matched >= self.frames_needed)
+        return learnt if learnt.any() else None
+
+    def update(self, small: np.ndarray, glove: np.ndarray | None) -> None:
+        """Learn from coarse frame ``small`` (the one just given to :meth:`match`): pixels that
+        matched count one frame more, unless in ``glove`` ((h, w) bool: the glove found and a
+        margin around it), which keep their count; the others start again from this frame's
+        colour."""
+        if not self.enabled:
+            return
+        frame = small.astype(np.float32)
+        if self._colour is None or self._same is None:
+            self._colour = frame
+            self._matched = np.zeros(small.shape[:2], np.int32)
+            self._same = None
+            return
+        same = self._same
+        counting = same if glove is None else same & ~glove
+        self._matched += counting
+        self._matched *= same
+        # matched pixels follow slow changes (light drifting); changed ones restart
+        cv2.accumulateWeighted(frame, self._colour, self.adapt, counting.view(np.uint8))
+        np.copyto(self._colour, frame, where=~same[..., None])
+        self._same = None

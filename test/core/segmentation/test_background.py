@@ -1,0 +1,159 @@
+"""Tests for the static background a segmenter learns from its camera's frames."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
+from colorglove_ros.core.pipeline import image_observer
+from colorglove_ros.core.segmentation.background import StaticBackground
+from colorglove_ros.core.segmentation.calibration_fit import fit_color_calibration
+from colorglove_ros.core.segmentation.crop import crop_to_tiny
+from colorglove_ros.core.segmentation.segmenter import GloveSegmenter, SegmentationConfigError
+from colorglove_ros.core.synthetic.blob_glove import (
+    BlobConditions,
+    render_blob_frame,
+    sample_blob_conditions,
+)
+
+
+def _feed(model: StaticBackground, frame: np.ndarray, glove: np.ndarray | None = None
+          ) -> np.ndarray | None:
+    learnt = model.match(frame)
+    model.update(frame, glove)
+    return learnt
+
+
+def test_a_pixel_that_holds_still_becomes_background_and_a_change_restarts_it() -> None:
+    frame = np.random.default_rng(0).integers(0, 256, (12, 16, 3), dtype=np.uint8)
+    model = StaticBackground(frames_needed=3, tolerance=10)
+    seen = [_feed(model, frame) for _ in range(4)]
+    assert all(s is None for s in seen)          # the first frame, then 3 matching ones
+    learnt = _feed(model, frame)
+    assert learnt is not None and learnt.all()
+    moved = frame.copy()
+    moved[2:4, 5:7] = 255 - moved[2:4, 5:7]      # something moves there
+    learnt = _feed(model, moved)
+    assert not learnt[2:4, 5:7].any() and learnt.sum() == learnt.size - 4
+    learnt = _feed(model, moved)                 # the changed pixels start again
+    assert not learnt[2:4, 5:7].any()
+    noisy = np.clip(moved.astype(int) + 6, 0, 255).astype(np.uint8)   # within tolerance
+    assert _feed(model, noisy)[0, 0]
+
+
+def test_the_glove_never_becomes_background_and_a_moved_camera_starts_again() -> None:
+    frame = np.random.default_rng(1).integers(0, 256, (12, 16, 3), dtype=np.uint8)
+    glove = np.zeros((12, 16), bool)
+    glove[3:8, 4:10] = True
+    model = StaticBackground(frames_needed=2, tolerance=10)
+    for _ in range(10):
+        learnt = _feed(model, frame, glove)
+    assert learnt is not None and not learnt[glove].any() and learnt[~glove].all()
+    other = np.random.default_rng(2).integers(0, 256, (12, 16, 3), dtype=np.uint8)
+    assert _feed(model, other) is None           # most of the frame changed: forget all
+    assert _feed(model, frame[:, :8]) is None    # another size: forget all
+    off = StaticBackground(frames_needed=0, tolerance=10)
+    assert not off.enabled and all(_feed(off, frame) is None for _ in range(5))
+
+
+@pytest.fixture(scope='module')
+def calibration():
+    rng = np.random.default_rng(11)
+    train = [render_blob_frame(rng, sample_blob_conditions(rng, 'train')) for _ in range(8)]
+    return fit_color_calibration(train, seed=0, max_per_class=1500, bits=5, augment_copies=1,
+                                 background_components=6)
+
+
+def _glove_clutter(image: np.ndarray, x0: int, y0: int, cell: int = 12) -> None:
+    """Paint a 3 x 3 grid of distinct glove colours (a poster, a toy) at (x0, y0)."""
+    for k in range(9):
+        r, c = divmod(k, 3)
+        image[y0 + r * cell:y0 + (r + 1) * cell, x0 + c * cell:x0 + (c + 1) * cell] = \
+            GLOVE_PALETTE_RGB[k + 1]
+
+
+def _moving_hand_frames(count: int, step: int = 10
+                        ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """A hand sliding left over a still scene until it is just above glove-coloured clutter
+    (a poster, a toy: a grid of distinct glove colours)."""
+    img, lab = render_blob_frame(np.random.default_rng(8),
+                                 BlobConditions(1.0, (1.0, 1.0, 1.0), 0.0, 0, False, 1.0))
+    ys, xs = np.nonzero(lab)
+    hand = img[ys.min():ys.max() + 1, xs.min():xs.max() + 1]
+    hand_lab = lab[ys.min():ys.max() + 1, xs.min():xs.max() + 1]
+    scene = np.full_like(img, 110)
+    scene[:, :, 2] = 125
+    y = (scene.shape[0] - hand.shape[0]) // 2
+    _glove_clutter(scene, 150, y + hand.shape[0] + 4)    # just below the final palm
+    frames, labels = [], []
+    for i in range(count):
+        x = 84 + step * (count - 1 - i)
+        frame, truth = scene.copy(), np.zeros(lab.shape, np.uint8)
+        region = (slice(y, y + hand.shape[0]), slice(x, x + hand.shape[1]))
+        frame[region] = np.where(hand_lab[..., None] > 0, hand, frame[region])
+        truth[region] = hand_lab
+        frames.append(frame)
+        labels.append(truth)
+    return frames, labels
+
+
+def test_still_glove_coloured_clutter_stops_pulling_the_crop(calibration) -> None:
+    """Clutter of many glove colours beside a moving hand pulls the crop towards it until the
+    segmenter has seen it hold still; without the background model it always does."""
+    frames, labels = _moving_hand_frames(30)
+    errors = {}
+    for needed in (0, 10):
+        segmenter = GloveSegmenter(calibration, background_frames=needed)
+        errors[needed] = []
+        for frame, truth in zip(frames, labels, strict=True):
+            obs = segmenter.process(frame)
+            true_crop = crop_to_tiny(truth).transform
+            assert obs.crop is not None
+            errors[needed].append(abs(obs.crop.half_size / true_crop.half_size - 1.0))
+    assert max(errors[0][:10]) < 0.02            # far from the hand, the clutter is shed
+    assert min(errors[0][-10:]) > 0.1            # beside it, it is in the crop
+    assert max(errors[10][-10:]) < 0.02          # ... unless it has been seen holding still
+
+
+def test_a_hand_held_still_stays_found(calibration) -> None:
+    """The glove's patches, however large and still, never become background (a few
+    outline pixels may)."""
+    frames, labels = _moving_hand_frames(1)
+    segmenter = GloveSegmenter(calibration, background_frames=3)
+    first = segmenter.process(frames[0])
+    for _ in range(20):
+        obs = segmenter.process(frames[0])
+    assert obs.hand_found and obs.glove_pixel_count >= 0.99 * first.glove_pixel_count
+    assert obs.crop.half_size == pytest.approx(first.crop.half_size, rel=0.01)
+
+
+def test_every_camera_gets_its_own_background(calibration) -> None:
+    segmenter = GloveSegmenter(calibration, background_frames=5)
+    fresh = segmenter.fresh()
+    assert fresh is not segmenter and fresh.background is not segmenter.background
+    assert fresh.settings() == segmenter.settings()
+    seen: list[int] = []
+    made: list[int] = []
+
+    class Recording:
+        """Says which of the per-camera segmenters segments each view."""
+
+        def __init__(self) -> None:
+            self.number = len(made)
+            made.append(self.number)
+
+        def fresh(self) -> Recording:
+            return Recording()
+
+        def process(self, image: np.ndarray, keep_labels: bool = False) -> object:
+            seen.append(self.number)
+            return GloveSegmenter.process(segmenter, image, keep_labels)
+
+    observe = image_observer(Recording())
+    blank = np.zeros((48, 64, 3), np.uint8)
+    for _ in range(2):
+        for k in range(3):
+            observe(blank, k == 0)
+    assert seen == [0, 1, 2, 0, 1, 2]
+    with pytest.raises(SegmentationConfigError, match='background_tolerance'):
+        GloveSegmenter(calibration, background_tolerance=0.0)
