@@ -249,13 +249,24 @@ def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
 
 
 def border_contact_px(labels: np.ndarray, roi: tuple[int, int, int, int], reduction: int,
-                      width: int, height: int) -> int:
+                      width: int, height: int,
+                      window: tuple[int, int, int, int] | None = None) -> int:
     """How many full-image pixels along the image's outermost rows and columns the glove
     labels of the region of interest ``roi`` = (x0, x1, y0, y1) (full-image bounds of
-    ``labels``, each label ``reduction`` pixels wide) cover."""
+    ``labels``, each label ``reduction`` pixels wide) cover; with ``window`` = (x0, x1, y0,
+    y1) (bounds in ``labels``' pixels: the hand's crop window) only the border pixels inside
+    it (glove-coloured clutter running off the image elsewhere does not cut the hand)."""
     x0, x1, y0, y1 = roi
-    sides = ((x0 == 0, labels[:, 0]), (x1 + reduction > width, labels[:, -1]),
-             (y0 == 0, labels[0]), (y1 + reduction > height, labels[-1]))
+    rows, cols = labels.shape
+    wx0, wx1, wy0, wy1 = window if window is not None else (0, cols, 0, rows)
+    wx0, wy0 = max(wx0, 0), max(wy0, 0)
+    wx1, wy1 = min(wx1, cols), min(wy1, rows)
+    if wx1 <= wx0 or wy1 <= wy0:
+        return 0
+    sides = ((x0 == 0 and wx0 == 0, labels[wy0:wy1, 0]),
+             (x1 + reduction > width and wx1 == cols, labels[wy0:wy1, -1]),
+             (y0 == 0 and wy0 == 0, labels[0, wx0:wx1]),
+             (y1 + reduction > height and wy1 == rows, labels[-1, wx0:wx1]))
     return reduction * sum(int(np.count_nonzero(edge)) for on_border, edge in sides
                            if on_border)
 
@@ -565,7 +576,8 @@ class GloveSegmenter:
         wx0, wx1 = max(int(np.ceil(cx - half)), 0), int(np.floor(cx + half)) + 1
         wy0, wy1 = max(int(np.ceil(cy - half)), 0), int(np.floor(cy + half)) + 1
         obs.glove_pixel_count = int(np.count_nonzero(labels[wy0:wy1, wx0:wx1])) * r * r
-        obs.cut_by_border = (border_contact_px(labels, (x0, x1, y0, y1), r, w, h)
+        obs.cut_by_border = (border_contact_px(labels, (x0, x1, y0, y1), r, w, h,
+                                               (wx0, wx1, wy0, wy1))
                              > self.max_border_contact * 2.0 * crop.half_size)
         obs.blobs = self._blobs(labels, r, x0, y0, (wx0, wx1, wy0, wy1))
         tick('blobs', t)

@@ -28,6 +28,7 @@ from colorglove_ros.core.segmentation.segmenter import (
     STATUS_OUT_OF_FRAME,
     STATUS_TOO_SMALL,
     GloveSegmenter,
+    border_contact_px,
     SegmentationConfigError,
     SegmentationInputError,
     keep_multicolor_components,
@@ -152,6 +153,18 @@ def test_a_glove_reaching_the_image_border_is_marked_cut(segmenter, side) -> Non
                            borderMode=cv2.BORDER_REPLICATE)
     obs = segmenter.process(moved)
     assert obs.glove_pixel_count > 0 and obs.cut_by_border
+
+
+def test_only_the_hands_window_counts_towards_border_contact() -> None:
+    """Glove-coloured clutter running off the image beside the hand does not cut the hand;
+    the hand's own crop window reaching the border does."""
+    labels = np.zeros((40, 60), np.uint8)
+    labels[:, 0] = 2                      # clutter along the left border, rows 0..39
+    labels[10:20, 30:50] = 5              # the hand, away from it
+    roi = (0, 120, 100, 180)              # the region starts at the image's left border
+    assert border_contact_px(labels, roi, 2, 640, 480) == 80
+    assert border_contact_px(labels, roi, 2, 640, 480, (25, 55, 5, 25)) == 0
+    assert border_contact_px(labels, roi, 2, 640, 480, (0, 55, 5, 25)) == 40
 
 
 def _noise_patch_frames(seed: int, count: int) -> list[np.ndarray]:
