@@ -341,7 +341,7 @@ class GloveSegmenter:
                  max_border_contact: float = 0.1, diversity_window: int = 24,
                  min_region_colors: int = 6, diversity_density: float = 0.01,
                  max_patch_fraction: float = 0.1, scene_colour_min_share: float = 0.001,
-                 background_frames: int = 15, background_tolerance: float = 12.0,
+                 background_frames: int = 0, background_tolerance: float = 12.0,
                  source: str = 'GloveSegmenter') -> None:
         # every keyword argument but ``source`` is a setting named in SEGMENTER_RULES: checked
         # and converted (int, float, tuple of ints) in one place, kept as the attribute of
