@@ -363,10 +363,6 @@ class GloveSegmenter:
         static background): one per camera stream."""
         return GloveSegmenter(self.calibration, **self.settings(), source=self.source)
 
-    def reset(self) -> None:
-        """Forget the learnt background (a new sequence, or the camera moved)."""
-        self.background.reset()
-
     # ------------------------------------------------------------------ helpers
     def _glove_only(self, labels: np.ndarray, reduction: float, image_pixels: int
                     ) -> np.ndarray:
@@ -460,7 +456,7 @@ class GloveSegmenter:
                                        self.scene_colour_min_share * labels.size)
         min_px = max(int(self.min_glove_pixels / (sx * sy)), 1)
         found = mean_shift_crop(labels, min_pixels=min_px)
-        if learn:
+        if learn and self.background.enabled:   # (the glove-like mask costs a few loops)
             self.background.update(small, self._glove_like(labels, found))
         if found is None:
             return None, table, scene, static
