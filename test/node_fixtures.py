@@ -242,12 +242,19 @@ def lookup_node(assets: NodeAssets, **overrides) -> Callable[[rclpy.Context], No
         num_neighbors=LOOKUP_BLEND, **overrides))
 
 
+# The small test databases match rendered frames only loosely (their nearest image is rarely a
+# close match), so the weak-evidence gate is off in the node tests that track with them; the
+# gate itself is tested in test/core/test_pipeline.py and by test_ik_node_refuses_weak_evidence.
+SMALL_DATABASE_EXPLAINED_SHARE = 0.0
+
+
 def ik_node(database: Path, **overrides) -> Callable[[rclpy.Context], Node]:
     """A factory of ik_node (with the glove and hand of pose database ``database``) with the
     parameters ``overrides``."""
     from colorglove_ros.ros.nodes.ik_node import IKNode
 
     overrides.setdefault('use_camera_info', False)
+    overrides.setdefault('min_explained_blob_share', SMALL_DATABASE_EXPLAINED_SHARE)
     return lambda ctx: IKNode(context=ctx, parameter_overrides=params(
         database_path=str(database), **overrides))
 

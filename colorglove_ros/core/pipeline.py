@@ -42,7 +42,7 @@ __all__ = [
     'NoHand', 'Tracked',
     'TemporalPrior', 'Observer', 'FrameObservations', 'FrameLookup', 'FramePipeline',
     'segment_frame', 'bad_image', 'observe_image', 'image_observer', 'look_up', 'track',
-    'bad_prior', 'hand_keypoints_at_plausible_depth',
+    'bad_prior', 'hand_keypoints_at_plausible_depth', 'weak_evidence',
 ]
 
 # Nearest database image farther than this from the observation (tiny-image pixels): glove-
@@ -61,12 +61,20 @@ class StageLimits:
     camera (``core.validation.validate_hand_depth``) is refused. With ``refuse_cut_hands`` a
     hand cut by the primary image's border (``CameraObservation.cut_by_border``) is no hand:
     the lookup normalises the visible part as if it were the whole hand, so neither the crop's
-    size (depth) nor the nearest entries (pose) can be trusted, tracked or not."""
+    size (depth) nor the nearest entries (pose) can be trusted, tracked or not.
+
+    Weak evidence: a fit whose lookup was not a close match (nearest database image farther
+    than ``close_match_distance``, or unknown) and that explains less than
+    ``min_explained_blob_share`` of the primary camera's glove blobs is refused. That is the
+    signature of glove-coloured clutter inside the hand's crop: the lookup matched hand plus
+    clutter to some pose, and the fitted hand leaves the clutter's blobs unexplained."""
 
     max_image_distance: float = DEFAULT_MAX_IMAGE_DISTANCE
     require_constraint: bool = True
     check_depth: bool = True
     refuse_cut_hands: bool = True
+    close_match_distance: float = 2.0
+    min_explained_blob_share: float = 0.5
 
 
 NODE_LIMITS = StageLimits()
@@ -74,7 +82,7 @@ NODE_LIMITS = StageLimits()
 # Every output of the tracker counts (a non-finite pose is still refused): the IK evaluation
 # measures the tracker itself, as its figures always have, not the nodes' refusals.
 UNGATED = StageLimits(max_image_distance=math.inf, require_constraint=False, check_depth=False,
-                      refuse_cut_hands=False)
+                      refuse_cut_hands=False, min_explained_blob_share=0.0)
 
 
 @dataclass(frozen=True)
@@ -243,6 +251,20 @@ def hand_keypoints_at_plausible_depth(tracker: Any, q: np.ndarray) -> np.ndarray
     return keypoints
 
 
+def weak_evidence(prior: PosePrior, result: IKResult, limits: StageLimits) -> str:
+    """Why the fit rests on too little evidence ('' when it does not): the lookup was not a
+    close match and the fitted hand explains too few of the observed glove blobs
+    (:class:`StageLimits`)."""
+    share = result.explained_blob_share
+    if (limits.min_explained_blob_share <= 0.0
+            or prior.image_distance <= limits.close_match_distance
+            or share >= limits.min_explained_blob_share):
+        return ''
+    return (f'weak evidence: the fitted hand explains {share:.0%} of the glove blobs (less '
+            f'than {limits.min_explained_blob_share:.0%}) and the nearest database image is '
+            f'{prior.image_distance:.2f} tiny px away (more than {limits.close_match_distance:g})')
+
+
 def track(tracker: Any, prior: PosePrior | LookupResult | None,
           observations: Sequence[CameraObservation], stamp: float,
           limits: StageLimits = NODE_LIMITS, *, temporal: TemporalPrior | None = None,
@@ -255,7 +277,8 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
     :class:`NoHand` when the prior is unusable or at an implausible depth ('bad candidates:
     ...'), the tracker found nothing (the upstream reason, or 'lost'), or the fit is refused:
     no constraint matched an observed blob (``limits.require_constraint``), a non-finite pose,
-    or a hand at an implausible depth (``limits.check_depth``); with
+    weak evidence (:func:`weak_evidence`) or a hand at an implausible depth
+    (``limits.check_depth``); with
     ``limits.refuse_cut_hands`` a hand cut by the primary image's border is not tracked
     (:data:`CUT_BY_BORDER`). A refusal resets the tracker.
     """
@@ -284,6 +307,8 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
         reason = 'no constraint matched an observed blob'
     elif not np.all(np.isfinite(result.q)):
         reason = 'non-finite pose'
+    elif weak := weak_evidence(prior, result, limits):
+        reason = weak
     elif limits.check_depth:
         try:
             keypoints = hand_keypoints_at_plausible_depth(tracker, result.q)

@@ -2,6 +2,7 @@
 message classes work without ``rclpy.init`` so all of this is unit-testable in one process."""
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -163,7 +164,8 @@ def candidates_to_msg(observation: HandObservation, result: LookupResult | None,
 
 
 def pose_prior_from_candidates_msg(msg: HandPoseCandidates) -> PosePrior:
-    """The IK's starting point from a candidates message (blended pose + constraints)."""
+    """The IK's starting point from a candidates message (blended pose + constraints, and the
+    nearest candidate's image distance: NaN, i.e. not a close match, when unknown)."""
     if list(msg.dof_names) != list(DOF_NAMES):
         raise ValueError(f'candidates carry DOFs {list(msg.dof_names)[:3]}..., '
                          f'expected {list(DOF_NAMES)[:3]}...')
@@ -178,8 +180,10 @@ def pose_prior_from_candidates_msg(msg: HandPoseCandidates) -> PosePrior:
         if finger_std.shape != (len(DOF_NAMES) - 6,) or not np.all(np.isfinite(finger_std)) \
                 or np.any(finger_std < 0):
             raise ValueError('finger_std must be empty or hold 20 finite values >= 0')
+    nearest = msg.candidates[0].image_distance if len(msg.candidates) else math.nan
     return PosePrior(
         finger_std=finger_std,
+        image_distance=float(nearest) if math.isfinite(nearest) and nearest >= 0 else math.nan,
         q_blend=np.asarray(msg.blended_pose, dtype=float),
         constraints=ProjectionConstraints(
             patch_ids=np.array([c.patch_id for c in constraints], dtype=np.int64),

@@ -93,10 +93,11 @@ def _pose(depth_m: float = 0.5) -> np.ndarray:
     return q
 
 
-def _prior(depth_m: float = 0.5) -> PosePrior:
+def _prior(depth_m: float = 0.5, image_distance: float = 0.5) -> PosePrior:
+    """A prior whose lookup was a close match unless ``image_distance`` says otherwise."""
     empty = ProjectionConstraints(np.zeros(0, np.int64), np.zeros(0, np.int64),
                                   np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros(0))
-    return PosePrior(_pose(depth_m), empty)
+    return PosePrior(_pose(depth_m), empty, image_distance=image_distance)
 
 
 SEEN = [CameraObservation(True, Blobs(np.array([3]), np.array([[320.0, 240.0]]),
@@ -186,6 +187,34 @@ def test_track_refuses_a_fit_with_its_reason(hand, result, limits, reason) -> No
     assert out.partial is result and fake.resets == 1
 
 
+@pytest.mark.parametrize(('image_distance', 'share', 'refused'), [
+    (3.0, 0.3, True),             # far match, most blobs unexplained: clutter in the crop
+    (math.nan, 0.3, True),        # distance unknown: not a close match
+    (3.0, math.nan, True),        # no usable blob to explain
+    (3.0, 0.8, False),            # far match but the fit explains what was seen
+    (1.0, 0.3, False),            # close match: the lookup's own evidence suffices
+])
+def test_track_refuses_a_fit_on_weak_evidence(hand, image_distance, share, refused) -> None:
+    result = IKResult(True, 0.0, q=_pose(), num_constraints=6, explained_blob_share=share)
+    fake = _FakeTracker(hand[0], result)
+    out = track(fake, _prior(image_distance=image_distance), SEEN, 0.0)
+    if refused:
+        assert isinstance(out, NoHand) and out.warn and fake.resets == 1
+        assert out.reason.startswith('weak evidence: the fitted hand explains')
+        assert isinstance(track(fake, _prior(image_distance=image_distance), SEEN, 0.0,
+                                UNGATED), Tracked)
+    else:
+        assert isinstance(out, Tracked)
+
+
+def test_pose_prior_keeps_the_nearest_image_distance(lookup, small_database) -> None:
+    crop = CropTransform(4.0, 240.0, 160.0)
+    result = lookup.lookup(np.roll(np.asarray(small_database.tiny[5]), 3, axis=1), crop, CAMERA)
+    prior = PosePrior.from_lookup(result)
+    assert prior.image_distance == pytest.approx(float(result.distances[0]))
+    assert prior.image_distance > 0
+
+
 def test_track_refuses_a_hand_cut_by_the_image_border(hand) -> None:
     result = IKResult(True, 0.0, q=_pose(), num_constraints=4)
     fake = _FakeTracker(hand[0], result)
@@ -232,9 +261,11 @@ def test_track_reweights_a_lookup_result_by_the_previous_pose(hand, lookup, smal
 def test_a_rendered_glove_frame_goes_through(segmenter, glove_rgb, lookup, tracker) -> None:
     observation = segment_frame(segmenter, glove_rgb)
     assert isinstance(observation, Observation) and observation.hand_found
-    # the small test database is far from every real frame: its distance gate is lifted
+    # the small test database is far from every real frame: its distance gate and the weak-
+    # evidence gate are lifted
     pipeline = FramePipeline(image_observer(segmenter), lookup, CAMERA,
-                             limits=StageLimits(max_image_distance=math.inf))
+                             limits=StageLimits(max_image_distance=math.inf,
+                                                min_explained_blob_share=0.0))
     seen = pipeline.observe([glove_rgb])
     assert seen.cameras[0].hand_found and seen.tiny is not None
     found = pipeline.look_up(seen)

@@ -3,6 +3,7 @@ crop, the other cameras through the projected constraint vertices (one image shi
 one-to-one per colour)."""
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -13,7 +14,7 @@ from colorglove_ros.core.lookup.types import ProjectionConstraints
 from colorglove_ros.core.segmentation.crop import tiny_to_full
 from colorglove_ros.core.tracking.types import Blobs, Correspondences, IKError, MeshLike
 
-__all__ = ['match_by_color', 'match_primary', 'match_extra_camera']
+__all__ = ['match_by_color', 'match_primary', 'match_extra_camera', 'explained_blob_share']
 
 
 def match_by_color(pred_xy: np.ndarray, pred_color: np.ndarray, blob_xy: np.ndarray,
@@ -35,6 +36,10 @@ def match_by_color(pred_xy: np.ndarray, pred_color: np.ndarray, blob_xy: np.ndar
     r, c = linear_sum_assignment(np.where(ok, d, big))
     keep = ok[r, c]
     return r[keep].astype(np.int64), c[keep].astype(np.int64)
+
+
+# A correspondence's target is its blob's undistorted centroid, computed the same way.
+_SAME_PIXEL = 1e-6
 
 
 def _usable(blobs: Blobs, min_pixels: int) -> np.ndarray:
@@ -59,6 +64,23 @@ def match_primary(constraints: ProjectionConstraints, blobs: Blobs, crop: Any,
                           blobs.color[keep], gate)
     m = keep[m]
     return _make_corr(0, constraints, k, camera.undistort_pixels(blobs.centroid_px[m]), mesh)
+
+
+def explained_blob_share(corr: Correspondences, blobs: Blobs, camera: PinholeCamera,
+                         min_blob_pixels: int = 4) -> float:
+    """The share of the primary camera's blobs (those large enough to be matched) that a
+    correspondence of camera 0 targets: how much of what the segmenter found the fitted hand
+    explains. Glove-coloured clutter inside the hand's crop leaves many blobs unexplained.
+    NaN without a usable blob."""
+    keep = _usable(blobs, min_blob_pixels)
+    if len(keep) == 0:
+        return math.nan
+    targets = np.asarray(corr.target_px, float)[np.asarray(corr.camera) == 0]
+    if len(targets) == 0:
+        return 0.0
+    centroids = camera.undistort_pixels(blobs.centroid_px[keep])
+    gap = np.linalg.norm(centroids[:, None, :] - targets[None, :, :], axis=2).min(axis=1)
+    return float(np.mean(gap <= _SAME_PIXEL))
 
 
 def _make_corr(cam: int, constraints: ProjectionConstraints, k: np.ndarray, target: np.ndarray,

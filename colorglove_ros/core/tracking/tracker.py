@@ -16,11 +16,16 @@ from colorglove_ros.core.hand.mesh import build_hand_mesh
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, calibrated_hand_model
 from colorglove_ros.core.tracking.config import IKConfig, IKCovariances
 from colorglove_ros.core.tracking.kinematics import FastKinematics
-from colorglove_ros.core.tracking.matching import match_extra_camera, match_primary
+from colorglove_ros.core.tracking.matching import (
+    explained_blob_share,
+    match_extra_camera,
+    match_primary,
+)
 from colorglove_ros.core.tracking.patch_surface import PatchSurface
 from colorglove_ros.core.tracking.projection import estimate_translation, reprojection_errors
 from colorglove_ros.core.tracking.solver import IKSolution, solve_ik
 from colorglove_ros.core.tracking.types import (
+    Blobs,
     CameraObservation,
     Correspondences,
     IKError,
@@ -53,6 +58,9 @@ class IKResult:
     correspondences: Correspondences | None = None
     num_rejected: int = 0
     q_prior: np.ndarray | None = None
+    # share of the primary camera's blobs the fit's correspondences explain
+    # (``matching.explained_blob_share``; NaN when there was no usable blob)
+    explained_blob_share: float = math.nan
 
 
 def _local_vertex_normals(mesh: MeshLike) -> np.ndarray | None:
@@ -257,7 +265,7 @@ class HandTracker:
         q_prev = self._q_prev if (cfg.enable_smoothing and self._q_prev is not None) else None
         priors = _FramePriors(q_b, q_prev, cfg.prior_covariances(prior.finger_std))
         fit = self._fit_frame(prior, observations, corr0, tracked, priors)
-        return self._finish(fit, stamp, t0, q_blend, priors, was_reset)
+        return self._finish(fit, stamp, t0, q_blend, priors, was_reset, primary.blobs)
 
     def _reset_after_gap(self, stamp: float) -> bool:
         """Reset when the time since the last frame is not in (0, ``max_gap_s``]."""
@@ -367,9 +375,10 @@ class HandTracker:
                                  priors)
 
     def _finish(self, fit: _FrameFit, stamp: float, t0: float, q_blend: np.ndarray,
-                priors: _FramePriors, was_reset: bool) -> IKResult:
+                priors: _FramePriors, was_reset: bool, primary_blobs: Blobs) -> IKResult:
         """Remember the pose (rotation angle in [0, pi]) and build the tracker output (the
-        errors of a fit that made no solve are measured here)."""
+        errors of a fit that made no solve are measured here, and the share of the primary
+        camera's blobs it explains)."""
         corr = fit.corr
         err = (fit.err if fit.err is not None
                else reprojection_errors(self.kin, self.cameras, corr, fit.q))
@@ -384,4 +393,6 @@ class HandTracker:
             True, stamp, q.copy(), q_blend, float(err.mean()) if len(err) else math.nan,
             per_cam, fit.iterations, 1e3 * (time.perf_counter() - t0), len(corr),
             corr.counts(n_cam), priors.q_prev is not None and fit.iterations > 0, was_reset,
-            corr, fit.rejected, priors.q_b.copy())
+            corr, fit.rejected, priors.q_b.copy(),
+            explained_blob_share(corr, primary_blobs, self.cameras[0],
+                                 self.config.min_blob_pixels))

@@ -3,6 +3,7 @@ entry's ``core.lookup.types.ProjectionConstraints``) and matched correspondences
 dataclasses only, light to import: the ROS message adapters use them)."""
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -72,6 +73,7 @@ class PosePrior:
     q_blend: np.ndarray
     constraints: ProjectionConstraints
     finger_std: np.ndarray | None = None    # (20,) spread of the neighbours' fingers (rad)
+    image_distance: float = math.nan        # the nearest entry's image distance (tiny px)
 
     @classmethod
     def from_lookup(cls, result: Any) -> PosePrior:
@@ -87,7 +89,9 @@ class PosePrior:
         if q_blend.shape != (NUM_DOFS,):
             raise IKError(f'blended pose must have shape (26,), got {q_blend.shape}')
         spread = getattr(result, 'finger_std', None)
-        return cls(q_blend, cons, None if spread is None else np.asarray(spread, float))
+        distances = np.asarray(getattr(result, 'distances', ()), dtype=float).reshape(-1)
+        return cls(q_blend, cons, None if spread is None else np.asarray(spread, float),
+                   float(distances[0]) if len(distances) else math.nan)
 
 
 @dataclass(frozen=True)

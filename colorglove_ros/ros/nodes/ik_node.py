@@ -23,7 +23,14 @@ from colorglove_ros.core.hand.frames import hand_root_frame
 from colorglove_ros.core.hand.glove import calibrated_hand
 from colorglove_ros.core.hand.overlay import draw_skeleton
 from colorglove_ros.core.lookup.database import check_hand_length, read_database_build
-from colorglove_ros.core.pipeline import NoHand, Tracked, bad_prior, track
+from colorglove_ros.core.pipeline import (
+    NODE_LIMITS,
+    NoHand,
+    StageLimits,
+    Tracked,
+    bad_prior,
+    track,
+)
 from colorglove_ros.core.tracking.config import load_ik_config
 from colorglove_ros.core.tracking.tracker import HandTracker
 from colorglove_ros.core.tracking.types import CameraObservation, IKError
@@ -75,6 +82,17 @@ class IKNode(Node):
         wait_s = declare(self, 'extra_observation_wait_s', 0.05,
                          'longest wait for the extra cameras\' observations of a frame, seconds',
                          0.0, 1.0)
+        self.limits = StageLimits(
+            close_match_distance=declare(
+                self, 'close_match_distance', NODE_LIMITS.close_match_distance,
+                'a lookup whose nearest database image is at most this far (tiny pixels) is a '
+                'close match; a fit after a farther one must explain min_explained_blob_share '
+                'of the glove blobs', 0.0, 1000.0),
+            min_explained_blob_share=declare(
+                self, 'min_explained_blob_share', NODE_LIMITS.min_explained_blob_share,
+                'share of the observed glove blobs the fitted hand must explain after a lookup '
+                'that was not a close match, else no pose ("weak evidence"); 0 turns this off',
+                0.0, 1.0))
         frame_prefix = declare_frame_prefix(self, 'ik_node')
         self.hand_frame = hand_root_frame(frame_prefix)
         with startup_errors('ik_node', ValueError):
@@ -222,7 +240,8 @@ class IKNode(Node):
                             *self._extra_camera_observations(stamp)]
         except (IKError, InvalidInputError, ValueError) as exc:
             return bad_prior(self.tracker, exc)
-        return track(self.tracker, prior, observations, stamp, upstream_reason=msg.status)
+        return track(self.tracker, prior, observations, stamp, self.limits,
+                     upstream_reason=msg.status)
 
     def _primary_camera(self, observation: HandObservation) -> PinholeCamera | NoHand:
         """Camera 0's model for this observation (its CameraInfo's or the calibrated one; the

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from node_fixtures import (
+    SMALL_DATABASE_EXPLAINED_SHARE,
     NodeAssets,
     candidates_msg,
     header,
@@ -112,7 +113,8 @@ def _run(assets: NodeAssets, bag: Path, two_cameras: bool) -> PipelineRun:
         'ik': {'publish_overlay': False, 'database_path': str(assets.database),
                'calibration_file': str(STEREO if two_cameras else MONO),
                'extra_observation_topics': SECOND_OBSERVATION if two_cameras else '',
-               'extra_observation_wait_s': 0.3},
+               'extra_observation_wait_s': 0.3,
+               'min_explained_blob_share': SMALL_DATABASE_EXPLAINED_SHARE},
     }
     extra_nodes, extra_inputs = [], {}
     if two_cameras:

@@ -11,7 +11,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from colorglove_msgs.msg import HandObservation, HandPoseCandidates
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates, PatchBlob
 from geometry_msgs.msg import PoseStamped
 from node_fixtures import (
     NodeAssets,
@@ -347,6 +347,38 @@ def test_ik_node_survives_malformed_candidates(good_candidates: HandPoseCandidat
     assert answers.bad_status.startswith('no hand')
     assert answers.good_status.startswith('tracking:')
     assert not answers.overlays and answers.camera_subscribers == 0
+
+
+def _with_clutter_blobs(good: HandPoseCandidates, nearest_distance: float
+                        ) -> HandPoseCandidates:
+    """``good`` after a far lookup, with three times as many glove-coloured blobs in a row
+    along the image's top edge (clutter no fitted hand explains)."""
+    msg = copy.deepcopy(good)
+    msg.header = header(200, 400_000_000, 'camera_optical_frame')
+    msg.candidates[0].image_distance = nearest_distance
+    seen = msg.observation
+    count = 3 * len(seen.blobs)
+    seen.blobs = list(seen.blobs) + [
+        PatchBlob(color_label=1 + k % 10, x=10.0 + 9.0 * k, y=5.0, pixel_count=40)
+        for k in range(count)]
+    seen.glove_pixel_count += 40 * count
+    return msg
+
+
+def test_ik_node_refuses_weak_evidence(good_candidates: HandPoseCandidates,
+                                       small_database_path: Path) -> None:
+    """After a lookup that was not a close match, a fit that leaves most of the observed glove
+    blobs unexplained is 'no hand: weak evidence', with no JointState; the same clutter after
+    a close match, or the far match without the clutter, is tracked."""
+    gate = {'min_explained_blob_share': 0.5, 'close_match_distance': 2.0}
+    cluttered = _with_clutter_blobs(good_candidates, nearest_distance=3.0)
+    answers = _bad_then_good(small_database_path, cluttered, good_candidates, **gate)
+    assert answers.bad_status.startswith('no hand: weak evidence'), answers.bad_status
+    assert answers.good_status.startswith('tracking:')
+    assert [m.header.stamp.nanosec for m in answers.joints] == [500]
+    close = _with_clutter_blobs(good_candidates, nearest_distance=1.0)
+    answers = _bad_then_good(small_database_path, close, good_candidates, **gate)
+    assert answers.bad_status.startswith('tracking:'), answers.bad_status
 
 
 def _short_pose(msg: HandPoseCandidates) -> None:

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from colorglove_msgs.msg import HandPoseCandidates
 from node_fixtures import (
+    SMALL_DATABASE_EXPLAINED_SHARE,
     NodeAssets,
     background_rgb,
     executable,
@@ -50,7 +51,9 @@ def _specs(assets: NodeAssets, folder: Path, with_ik: bool = False,
     if with_ik:
         ik = write_params_file(folder / 'ik.yaml', {'publish_overlay': False,
                                                     'database_path': str(assets.database),
-                                                    'use_camera_info': False})
+                                                    'use_camera_info': False,
+                                                    'min_explained_blob_share':
+                                                        SMALL_DATABASE_EXPLAINED_SHARE})
         specs.append(NodeSpec(executable('ik_node'), parameters=[ik]))
     return specs
 
