@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
 __all__ = ['DIAGNOSTICS_TOPIC', 'DIAGNOSTICS_PERIOD_S', 'OK', 'WARN', 'ERROR', 'FrameStats',
-           'Summary', 'refusal_kind', 'status_msg', 'diagnostic_array']
+           'Summary', 'refusal_kind', 'upstream', 'status_msg', 'diagnostic_array']
 
 DIAGNOSTICS_TOPIC = '/diagnostics'
 """Where diagnostic_updater publishes (absolute: one topic for the whole graph)."""
@@ -26,6 +26,11 @@ def refusal_kind(reason: str) -> str:
     """The kind of a 'no hand' reason: its text before the first ':' (``'camera: image
     1280x960 but ...'`` -> ``'camera'``, ``'lost'`` -> ``'lost'``)."""
     return reason.split(':', 1)[0].strip() or 'unknown'
+
+
+def upstream(reason: str) -> str:
+    """The reason of a frame an earlier stage already found no hand in (kind 'upstream')."""
+    return f'upstream: {reason or "no hand"}'
 
 
 @dataclass(frozen=True)

@@ -184,7 +184,7 @@ def test_stereo_launch_file_runs_the_two_camera_graph(monkeypatch: pytest.Monkey
             calibration = Path(stereo[name].get_parameter('calibration_file').value)
             assert (REPO_DIR / calibration).resolve() == STEREO_CALIBRATION, name
         ik = stereo['/ik']
-        extra_topics = ik.get_parameter('extra_observation_topics').value.split(',')
+        extra_topics = ik.get_parameter('extra_observation_topics').value
         ik_inputs = _topics(ik.subscriptions, HandObservation)
         assert ik_inputs == extra_topics                # one per extra camera, in rig order
         for index, seg in enumerate((stereo['/segmentation'], stereo[extra])):

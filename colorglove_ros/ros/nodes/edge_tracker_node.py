@@ -38,8 +38,8 @@ from colorglove_ros.ros.nodes.common import (
     declare_calibration_file,
     declare_frame_prefix,
     declare_hand_length,
+    declare_topic_list,
     run_node,
-    split_topics,
     startup_errors,
 )
 
@@ -54,8 +54,9 @@ class EdgeTrackerNode(Node):
         calibration_file = declare_calibration_file(
             self, 'camera calibration YAML (all its cameras are used; camera 0 is the primary); '
             'empty: one camera from the first CameraInfo on camera_info_topic', default='')
-        topics = declare(self, 'image_topics', 'camera/image_raw',
-                         'comma-separated image topics, one per calibrated camera')
+        topics = declare_topic_list(self, 'image_topics', ['camera/image_raw'],
+                                    'image topics, one per calibrated camera',
+                                    'edge_tracker_node')
         self.info_topic = declare(self, 'camera_info_topic', 'camera/camera_info',
                                   'CameraInfo topic read when calibration_file is empty')
         hand_length = declare_hand_length(self, 'hand length when no calibration file gives it, m')
@@ -100,7 +101,7 @@ class EdgeTrackerNode(Node):
                 calibration = load_calibration(resolve_path(calibration_file))
                 cameras, hand_length = calibration.cameras, calibration.hand_length_m
             self.model = HandModel(hand_length)
-            self.image_topics = split_topics(topics)
+            self.image_topics = topics
             if cameras and len(self.image_topics) != len(cameras):
                 raise ColorGloveError(f'{len(cameras)} calibrated camera(s) but '
                                       f'{len(self.image_topics)} image topic(s); set image_topics')

@@ -92,7 +92,7 @@ def test_blank_frames_give_reasons_not_poses(sequence) -> None:
 
 def test_two_topics_without_calibration_refuse_to_start() -> None:
     with pytest.raises(StartupError):
-        with running(_node(calibration_file='', image_topics='a,b')):
+        with running(_node(calibration_file='', image_topics=['a', 'b'])):
             pass
     with pytest.raises(StartupError):
         with running(_node(calibration_file='config/calibration_stereo.yaml')):
