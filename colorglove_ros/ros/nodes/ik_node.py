@@ -158,7 +158,8 @@ class IKNode(Node):
         """Receive the camera images (for the overlay) only while ``overlay``."""
         if overlay and self.overlay_subscription is None:
             self.overlay_subscription = self.create_subscription(
-                Image, 'camera/image_raw', self.recent_images.append, LATEST_IMAGE)
+                Image, 'camera/image_raw', lambda image: self.recent_images.append(image),
+                LATEST_IMAGE)
         elif not overlay and self.overlay_subscription is not None:
             self.destroy_subscription(self.overlay_subscription)
             self.overlay_subscription = None
