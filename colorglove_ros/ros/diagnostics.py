@@ -49,7 +49,7 @@ class FrameStats:
     Refusals are counted per :func:`refusal_kind` since start-up; kinds in ``counted_elsewhere``
     are read from that counter instead (e.g. ``{'camera': FrameCamera.refused}``, which counts
     its refusals per kind itself) and reported as ``'<kind>: <sub-kind>'``. ``what`` names the
-    outputs in the messages (``'hand'``, ``'frame'``).
+    outputs in the messages (``'hand'``, ``'image'``).
     """
 
     def __init__(self, counted_elsewhere: Mapping[str, Mapping[str, int]] | None = None,
