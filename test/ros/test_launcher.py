@@ -19,6 +19,7 @@ from repo_paths import CONFIG_DIR, REPO_DIR, TEST_DIR
 
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.lookup.database import STANDARD_BUILD
+from colorglove_ros.core.segmentation.segmenter import GloveSegmenter
 from colorglove_ros.ros.bags import camera_topics
 from colorglove_ros.ros.launcher import (
     Launcher,
@@ -163,7 +164,9 @@ def test_stereo_launch_file_runs_the_two_camera_graph(monkeypatch: pytest.Monkey
     calibration, the second reading the topics its bag view is played on and publishing where
     ik_node listens for camera 2; lookup and IK on the stereo calibration; otherwise every
     node's parameters are those of the one-camera pipeline.launch.yaml (nodes.yaml)."""
-    monkeypatch.setattr(segmentation_node, 'load_segmenter', lambda config: None)
+    # no colour calibration on a fresh clone: a segmenter with the default settings stands in
+    monkeypatch.setattr(segmentation_node, 'load_segmenter',
+                        lambda config: GloveSegmenter(calibration=None))
     # no pose database on a fresh clone: the lookup's and the IK's view of it stand in
     monkeypatch.setattr(lookup_node, 'load_database',
                         lambda path: SimpleNamespace(build=STANDARD_BUILD))
@@ -184,7 +187,7 @@ def test_stereo_launch_file_runs_the_two_camera_graph(monkeypatch: pytest.Monkey
             calibration = Path(stereo[name].get_parameter('calibration_file').value)
             assert (REPO_DIR / calibration).resolve() == STEREO_CALIBRATION, name
         ik = stereo['/ik']
-        extra_topics = ik.get_parameter('extra_observation_topics').value.split(',')
+        extra_topics = ik.get_parameter('extra_observation_topics').value
         ik_inputs = _topics(ik.subscriptions, HandObservation)
         assert ik_inputs == extra_topics                # one per extra camera, in rig order
         for index, seg in enumerate((stereo['/segmentation'], stereo[extra])):

@@ -1,5 +1,6 @@
 """camera_node: publish camera frames (V4L2, video file, image folder or the synthetic renderer)
-as ``sensor_msgs/Image`` + ``CameraInfo``; synthetic frames also publish their ground truth."""
+as ``sensor_msgs/Image`` + ``CameraInfo``; synthetic frames also publish their ground truth.
+Health (rate, frames not read or refused) goes to ``/diagnostics``."""
 from __future__ import annotations
 
 import sys
@@ -13,6 +14,7 @@ from colorglove_ros.core.camera import CalibrationError, load_calibration
 from colorglove_ros.core.frame_sources import FrameSourceError, open_frame_source
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import camera_to_camera_info_msg
+from colorglove_ros.ros.diagnostics import FrameStats
 from colorglove_ros.ros.image import array_to_image
 from colorglove_ros.ros.nodes.common import (
     PosePublishers,
@@ -21,6 +23,7 @@ from colorglove_ros.ros.nodes.common import (
     run_node,
     startup_errors,
 )
+from colorglove_ros.ros.nodes.diagnostics_publisher import DiagnosticsPublisher
 
 CAMERA_QOS = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=2,
                         reliability=QoSReliabilityPolicy.RELIABLE)
@@ -64,6 +67,9 @@ class CameraNode(Node):
         self.ground_truth_pub = PosePublishers(self, 'hand/ground_truth/joint_states',
                                                'hand/ground_truth/wrist_pose')
         self.published = 0
+        self.stats = FrameStats(what='image')
+        self.diagnostics = DiagnosticsPublisher(self, 'frames', self.source.description,
+                                                self.stats)
         self.timer = self.create_timer(1.0 / rate_hz, self.publish_frame)
         self.get_logger().info(f'publishing {self.source.description} at {rate_hz:g} Hz')
 
@@ -75,6 +81,7 @@ class CameraNode(Node):
             frame = self.source.read()
         except FrameSourceError as exc:
             self.get_logger().error(f'frame read failed: {exc}', throttle_duration_sec=1.0)
+            self.stats.no_hand(f'frame read failed: {exc}', error=True)
             return
         if frame is None:
             self.get_logger().info('source exhausted; no more frames')
@@ -82,11 +89,11 @@ class CameraNode(Node):
             return
         size = frame.image_rgb.shape[1::-1]
         if size != (self.camera.width, self.camera.height):
-            self.get_logger().error(
-                f'frame of {size[0]}x{size[1]} does not match the calibrated '
-                f'{self.camera.width}x{self.camera.height} of camera {self.camera.name!r}: '
-                'not published (fix calibration_file or the source)',
-                throttle_duration_sec=1.0)
+            reason = (f'size: frame of {size[0]}x{size[1]} does not match the calibrated '
+                      f'{self.camera.width}x{self.camera.height} of camera {self.camera.name!r}')
+            self.get_logger().error(f'{reason}: not published (fix calibration_file or the '
+                                    'source)', throttle_duration_sec=1.0)
+            self.stats.no_hand(reason, error=True)
             return
         header = Header(stamp=self.get_clock().now().to_msg(), frame_id=self.camera.frame_id)
         # CameraInfo first (same header): a tracker taking its intrinsics from it has them
@@ -96,6 +103,7 @@ class CameraNode(Node):
         if frame.ground_truth_pose is not None:
             self.ground_truth_pub.publish(frame.ground_truth_pose, header)
         self.published += 1
+        self.stats.hand()
 
     def destroy_node(self) -> None:
         """Release the device or file."""

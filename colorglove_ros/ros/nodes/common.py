@@ -13,9 +13,12 @@ from rcl_interfaces.msg import (
     FloatingPointRange,
     IntegerRange,
     ParameterDescriptor,
+    ParameterType,
 )
+from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, JointState
 from std_msgs.msg import Header, String
@@ -44,7 +47,7 @@ __all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'run_node',
            'DEFAULT_CALIBRATION_FILE', 'DEFAULT_DATABASE_CONFIG', 'declare_database',
            'HAND_LENGTH_RANGE_M', 'startup_errors',
            'declare_calibration_file', 'declare_hand_length', 'declare_frame_prefix',
-           'CAMERA_INFO_TOPIC', 'declare_frame_camera', 'split_topics',
+           'CAMERA_INFO_TOPIC', 'declare_frame_camera', 'declare_topic_list',
            'hand_model_from_calibration', 'JOINT_STATES_TOPIC', 'WRIST_POSE_TOPIC',
            'MARKERS_TOPIC', 'TRACKING_STATUS_TOPIC',
            'PosePublishers', 'TrackerOutputs', 'subscribe_tracked_pose']
@@ -188,9 +191,26 @@ def declare_frame_camera(node: Node, calibrated: PinholeCamera) -> FrameCamera:
     return frame_camera
 
 
-def split_topics(text: str) -> list[str]:
-    """The topics of a comma-separated topic-list parameter (blanks dropped)."""
-    return [topic.strip() for topic in text.split(',') if topic.strip()]
+def declare_topic_list(node: Node, name: str, default: list[str], description: str,
+                       executable: str) -> list[str]:
+    """Declare a read-only topic-list parameter (``string[]``, ``default`` when not given,
+    which may be empty); return its topics. Any other type (such as a comma-separated string)
+    stops the start with the reason."""
+    def descriptor(read_only: bool) -> ParameterDescriptor:
+        return ParameterDescriptor(description=f'{description} (list of topic names)',
+                                   type=ParameterType.PARAMETER_STRING_ARRAY, read_only=read_only)
+    try:
+        value = node.declare_parameter(name, Parameter.Type.STRING_ARRAY,
+                                       descriptor(False)).value
+    except InvalidParameterTypeException as exc:
+        raise StartupError(f'{executable} cannot start: {name} must be a list of topic names, '
+                           f'e.g. [/camera2/hand/observation]: {exc}') from exc
+    if value is None:
+        # rclpy cannot infer string[] from an empty default: set it once typed, then freeze it
+        value = list(default)
+        node.set_parameters([Parameter(name, Parameter.Type.STRING_ARRAY, value)])
+    node.set_descriptor(name, descriptor(True))
+    return [str(topic) for topic in value]
 
 
 def hand_model_from_calibration(node: Node, executable: str) -> HandModel:

@@ -29,6 +29,7 @@ from colorglove_ros.core.tracking.edge_tracker import EdgeTracker
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.bags import camera_info_to_pinhole
 from colorglove_ros.ros.conversions import pose_from_msgs, stamp_to_seconds
+from colorglove_ros.ros.diagnostics import FrameStats
 from colorglove_ros.ros.image import ImageEncodingError, image_to_array
 from colorglove_ros.ros.nodes.common import (
     LATEST_IMAGE,
@@ -38,10 +39,11 @@ from colorglove_ros.ros.nodes.common import (
     declare_calibration_file,
     declare_frame_prefix,
     declare_hand_length,
+    declare_topic_list,
     run_node,
-    split_topics,
     startup_errors,
 )
+from colorglove_ros.ros.nodes.diagnostics_publisher import DiagnosticsPublisher
 
 __all__ = ['EdgeTrackerNode', 'main']
 
@@ -54,8 +56,9 @@ class EdgeTrackerNode(Node):
         calibration_file = declare_calibration_file(
             self, 'camera calibration YAML (all its cameras are used; camera 0 is the primary); '
             'empty: one camera from the first CameraInfo on camera_info_topic', default='')
-        topics = declare(self, 'image_topics', 'camera/image_raw',
-                         'comma-separated image topics, one per calibrated camera')
+        topics = declare_topic_list(self, 'image_topics', ['camera/image_raw'],
+                                    'image topics, one per calibrated camera',
+                                    'edge_tracker_node')
         self.info_topic = declare(self, 'camera_info_topic', 'camera/camera_info',
                                   'CameraInfo topic read when calibration_file is empty')
         hand_length = declare_hand_length(self, 'hand length when no calibration file gives it, m')
@@ -100,7 +103,7 @@ class EdgeTrackerNode(Node):
                 calibration = load_calibration(resolve_path(calibration_file))
                 cameras, hand_length = calibration.cameras, calibration.hand_length_m
             self.model = HandModel(hand_length)
-            self.image_topics = split_topics(topics)
+            self.image_topics = topics
             if cameras and len(self.image_topics) != len(cameras):
                 raise ColorGloveError(f'{len(cameras)} calibrated camera(s) but '
                                       f'{len(self.image_topics)} image topic(s); set image_topics')
@@ -122,6 +125,11 @@ class EdgeTrackerNode(Node):
         self.create_subscription(JointState, 'edge_tracker/init_joint_states',
                                  self.on_init_joints, 10)
         self.outputs = TrackerOutputs(self, frame_prefix)
+        self.stats = FrameStats()
+        self.diagnostics = DiagnosticsPublisher(
+            self, 'edge tracking',
+            lambda: self.tracker.cameras[0].frame_id if self.tracker is not None else '',
+            self.stats)
 
     def _make_tracker(self, cameras: tuple[PinholeCamera, ...]) -> None:
         with startup_errors('edge_tracker_node'):
@@ -158,6 +166,7 @@ class EdgeTrackerNode(Node):
     def on_image(self, index: int, msg: Image) -> None:
         """Collect one frame's images from all cameras, then track it."""
         if self.tracker is None:
+            self.stats.no_hand('waiting for CameraInfo', error=True)
             self.outputs.publish_no_hand(msg.header, 'waiting for CameraInfo')
             return
         stamp_ns = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
@@ -174,14 +183,17 @@ class EdgeTrackerNode(Node):
     def track(self, images: list[Image]) -> None:
         """Run the tracker on one frame and publish its pose or the reason there is none."""
         header = images[0].header
+        latency_s = self.diagnostics.latency_s(header.stamp)
         try:
             arrays = [image_to_array(m) for m in images]
             result = self.tracker.update(arrays)
         except (ImageEncodingError, ColorGloveError, ValueError) as exc:
             self.get_logger().warn(f'frame dropped: {exc}', throttle_duration_sec=1.0)
+            self.stats.no_hand(f'bad frame: {exc}', error=True, latency_s=latency_s)
             self.outputs.publish_no_hand(header, f'bad frame: {exc}')
             return
         if result.q is None:
+            self.stats.no_hand(result.reason, latency_s=latency_s)
             self.outputs.publish_no_hand(header, result.reason)
             return
         header.frame_id = self.tracker.cameras[0].frame_id
@@ -189,6 +201,8 @@ class EdgeTrackerNode(Node):
         fit = result.fit
         per_camera = ', '.join(f'{c.name} {n}' for c, n in
                                zip(self.tracker.cameras, fit.links_found, strict=True))
+        self.stats.hand(latency_s, **{f'links found {c.name}': n for c, n in
+                                      zip(self.tracker.cameras, fit.links_found, strict=True)})
         self.outputs.publish_status(
             f'tracking: links found {per_camera}, edge residual {fit.rms_px:.1f} px, '
             f'{result.time_ms:.1f} ms, stamp {stamp_to_seconds(header.stamp):.3f}')

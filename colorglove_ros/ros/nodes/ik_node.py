@@ -13,6 +13,7 @@ import sys
 import traceback
 from collections import deque
 from dataclasses import replace
+from typing import Any
 
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from rclpy.node import Node
@@ -26,12 +27,11 @@ from colorglove_ros.core.lookup.database import check_hand_length, read_database
 from colorglove_ros.core.pipeline import (
     NODE_LIMITS,
     NoHand,
-    StageLimits,
     Tracked,
     bad_prior,
     track,
 )
-from colorglove_ros.core.tracking.config import load_ik_config
+from colorglove_ros.core.tracking.config import IKConfig, load_ik_config
 from colorglove_ros.core.tracking.tracker import HandTracker
 from colorglove_ros.core.tracking.types import CameraObservation, IKError
 from colorglove_ros.core.validation import InvalidInputError
@@ -42,6 +42,7 @@ from colorglove_ros.ros.conversions import (
     stamp_to_seconds,
     wrist_pose_to_tf_msg,
 )
+from colorglove_ros.ros.diagnostics import FrameStats, upstream
 from colorglove_ros.ros.image import ImageEncodingError, array_to_image, image_to_rgb8
 from colorglove_ros.ros.message_checks import check_candidates_msg, check_observation_msg
 from colorglove_ros.ros.nodes.common import (
@@ -54,12 +55,38 @@ from colorglove_ros.ros.nodes.common import (
     declare_database,
     declare_frame_camera,
     declare_frame_prefix,
+    declare_topic_list,
     run_node,
-    split_topics,
     startup_errors,
 )
+from colorglove_ros.ros.nodes.diagnostics_publisher import DiagnosticsPublisher
+from colorglove_ros.ros.nodes.live_parameters import Apply, LiveParameters
 
 STAMP_MATCH_TOLERANCE_S = 0.02   # an extra camera's frame within this of the primary's counts
+# IKConfig settings that ik_node exposes as parameters settable at run time (start: ik_config's
+# value; the tracker reads them every frame; IKConfig checks every new value)
+LIVE_IK_SETTINGS = {
+    'enable_ik': 'false: publish the blended lookup pose',
+    'enable_smoothing': 'use the previous frame as a prior (temporal smoothing)',
+    'gate_tiny_px': 'camera 0: a constraint matches a blob within max(gate_min_px, this times '
+                    'the crop scale), px',
+    'gate_min_px': 'camera 0: smallest matching gate, px',
+    'extra_gate_px': 'other cameras: matching gate around the shifted projection, px',
+    'outlier_px': 'constraints farther than this from their projection after the IK are '
+                  'dropped and the pose re-solved, px (0 disables)',
+}
+
+# The evidence gate's settings (core.pipeline.StageLimits), settable at run time: description
+# and range.
+LIVE_EVIDENCE_LIMITS = {
+    'close_match_distance': (
+        'a lookup whose nearest database image is at most this far (tiny pixels) is a close '
+        'match; a fit after a farther one must explain min_explained_blob_share of the glove '
+        'blobs', (0.0, 1000.0)),
+    'min_explained_blob_share': (
+        'share of the observed glove blobs the fitted hand must explain after a lookup that '
+        'was not a close match, else no pose ("weak evidence"); 0 turns this off', (0.0, 1.0)),
+}
 
 
 class IKNode(Node):
@@ -70,29 +97,12 @@ class IKNode(Node):
         calibration_file = declare_calibration_file(
             self, 'camera calibration YAML; camera 0 is the lookup camera')
         ik_config = declare(self, 'ik_config', 'config/ik.yaml', 'IK settings and covariances')
-        enable_ik = declare(self, 'enable_ik', True, 'false: publish the blended lookup pose')
-        enable_smoothing = declare(self, 'enable_smoothing', True,
-                                   'use the previous frame as a prior (temporal smoothing)')
-        self.publish_overlay = declare(
-            self, 'publish_overlay', False,
-            'also draw the fitted skeleton on the camera image and publish it on hand/overlay '
-            '(subscribes to the camera images; a few ms of CPU per frame)')
-        extra_topics = declare(self, 'extra_observation_topics', '',
-                               'comma-separated HandObservation topics of cameras 1..N-1')
+        topics = declare_topic_list(self, 'extra_observation_topics', [],
+                                          'HandObservation topics of cameras 1..N-1, in '
+                                          'calibration order', 'ik_node')
         wait_s = declare(self, 'extra_observation_wait_s', 0.05,
                          'longest wait for the extra cameras\' observations of a frame, seconds',
                          0.0, 1.0)
-        self.limits = StageLimits(
-            close_match_distance=declare(
-                self, 'close_match_distance', NODE_LIMITS.close_match_distance,
-                'a lookup whose nearest database image is at most this far (tiny pixels) is a '
-                'close match; a fit after a farther one must explain min_explained_blob_share '
-                'of the glove blobs', 0.0, 1000.0),
-            min_explained_blob_share=declare(
-                self, 'min_explained_blob_share', NODE_LIMITS.min_explained_blob_share,
-                'share of the observed glove blobs the fitted hand must explain after a lookup '
-                'that was not a close match, else no pose ("weak evidence"); 0 turns this off',
-                0.0, 1.0))
         frame_prefix = declare_frame_prefix(self, 'ik_node')
         self.hand_frame = hand_root_frame(frame_prefix)
         with startup_errors('ik_node', ValueError):
@@ -103,12 +113,22 @@ class IKNode(Node):
             build = read_database_build(database)
             check_hand_length(build, calibration.hand_length_m, calibration_file, database)
             model, mesh, glove = calibrated_hand(calibration, build.glove_seed)
-            config = replace(config, enable_ik=enable_ik, enable_smoothing=enable_smoothing)
+            self.live = LiveParameters(self)
+            config = replace(config, **self._declare_live_ik_settings(config))
             self.tracker = HandTracker(model, mesh, calibration.cameras, config, glove)
+        self.limits = replace(NODE_LIMITS, **{
+            name: self.live.declare(name, getattr(NODE_LIMITS, name), description,
+                                    lambda v, name=name: self._check_limit(name, v), *bounds)
+            for name, (description, bounds) in LIVE_EVIDENCE_LIMITS.items()})
+        self.overlay_subscription = None
+        self.publish_overlay = self.live.declare(
+            'publish_overlay', False,
+            'also draw the fitted skeleton on the camera image and publish it on hand/overlay '
+            '(subscribes to the camera images; a few ms of CPU per frame)',
+            self._check_publish_overlay)
         self.num_vertices = mesh.num_vertices
         self.cameras = calibration.cameras
         self.frame_camera = declare_frame_camera(self, calibration.primary)
-        topics = split_topics(extra_topics)
         if len(topics) != len(self.cameras) - 1:
             raise StartupError(
                 f'ik_node cannot start: {len(self.cameras)} cameras calibrated but '
@@ -126,11 +146,54 @@ class IKNode(Node):
         self.overlay_pub = self.create_publisher(Image, 'hand/overlay', 2)
         self.create_subscription(HandPoseCandidates, 'hand/pose_candidates', self.on_candidates,
                                  LATEST_ONLY)
-        if self.publish_overlay:
-            self.create_subscription(Image, 'camera/image_raw',
-                                     lambda image: self.recent_images.append(image), LATEST_IMAGE)
+        self._subscribe_images(self.publish_overlay)
+        self.stats = FrameStats({'camera': self.frame_camera.refused})
+        self.diagnostics = DiagnosticsPublisher(self, 'tracking', calibration.primary.frame_id,
+                                                self.stats)
         self.tf_pub = self._tf_publisher()
         self.get_logger().info(f'tracking with {len(self.cameras)} camera(s)')
+
+    # ------------------------------------------------------------------ run-time parameters
+    def _declare_live_ik_settings(self, config: IKConfig) -> dict[str, Any]:
+        """Declare the IK settings settable at run time (:data:`LIVE_IK_SETTINGS`), starting
+        from ``config``'s values (``ik_config``'s, or the tracker's defaults); return their
+        start values."""
+        return {name: self.live.declare(name, getattr(config, name), description,
+                                        lambda v, name=name: self._check_ik_setting(name, v))
+                for name, description in LIVE_IK_SETTINGS.items()}
+
+    def _check_ik_setting(self, name: str, value: Any) -> Apply:
+        """A new value of an IK setting, checked by the IK config's own rules."""
+        replace(self.tracker.config, **{name: value})
+
+        def apply() -> None:
+            self.tracker.config = replace(self.tracker.config, **{name: value})
+        return apply
+
+    def _check_limit(self, name: str, value: Any) -> Apply:
+        """A new value of an evidence-gate setting (its range is the parameter's)."""
+        number = float(value)
+
+        def apply() -> None:
+            self.limits = replace(self.limits, **{name: number})
+        return apply
+
+    def _check_publish_overlay(self, value: Any) -> Apply:
+        def apply() -> None:
+            self.publish_overlay = bool(value)
+            self._subscribe_images(self.publish_overlay)
+        return apply
+
+    def _subscribe_images(self, overlay: bool) -> None:
+        """Receive the camera images (for the overlay) only while ``overlay``."""
+        if overlay and self.overlay_subscription is None:
+            self.overlay_subscription = self.create_subscription(
+                Image, 'camera/image_raw', lambda image: self.recent_images.append(image),
+                LATEST_IMAGE)
+        elif not overlay and self.overlay_subscription is not None:
+            self.destroy_subscription(self.overlay_subscription)
+            self.overlay_subscription = None
+            self.recent_images.clear()
 
     def _tf_publisher(self):
         """A /tf publisher for the camera -> hand root (``<frame_prefix>palm``) transform (so
@@ -214,6 +277,8 @@ class IKNode(Node):
                 if outcome.warn:
                     self.get_logger().warn(f'no pose published: {outcome.reason}',
                                            throttle_duration_sec=1.0)
+                self.stats.no_hand(outcome.reason if msg.hand_found else upstream(outcome.reason),
+                                   outcome.warn, self.diagnostics.latency_s(msg.header.stamp))
                 self.outputs.publish_no_hand(msg.header, outcome.reason)
             else:
                 self._publish(msg, outcome)
@@ -221,6 +286,7 @@ class IKNode(Node):
             self.get_logger().error(f'tracking failed: {exc!r}\n{traceback.format_exc()}',
                                     throttle_duration_sec=1.0)
             self.tracker.reset()
+            self.stats.no_hand(f'tracking failed: {exc!r}', error=True)
             self.outputs.publish_no_hand(msg.header, f'tracking failed: {exc!r}')
 
     def _track(self, msg: HandPoseCandidates) -> Tracked | NoHand:
@@ -269,6 +335,12 @@ class IKNode(Node):
         self.outputs.publish_status(
             f'tracking: {result.num_constraints} constraints ({per_camera}), reprojection '
             f'{result.reprojection_error_px:.1f} px, IK {result.time_ms:.1f} ms')
+        self.stats.hand(self.diagnostics.latency_s(msg.header.stamp),
+                        constraints=result.num_constraints,
+                        **{f'constraints {camera.name}': count for camera, count in
+                           zip(self.tracker.cameras, result.constraints_per_camera,
+                               strict=False)},
+                        **{'reprojection (px)': f'{result.reprojection_error_px:.1f}'})
         if self.publish_overlay:
             self._publish_overlay(msg, keypoints, result.reprojection_error_px)
 

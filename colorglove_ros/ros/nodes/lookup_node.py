@@ -3,12 +3,15 @@ binary codes, exact re-rank, Gaussian-weighted blend of the nearest database pos
 
 The camera that turns the crop into a depth is the newest ``camera/camera_info``'s
 (``use_camera_info``, the default) or camera 0 of ``calibration_file``; an observation whose
-image size or frame_id does not match it is refused ('camera: ...')."""
+image size or frame_id does not match it is refused ('camera: ...'). The distance gate
+``max_image_distance`` can be changed at run time; health goes to ``/diagnostics``."""
 from __future__ import annotations
 
 import sys
 import time
 import traceback
+from dataclasses import replace
+from typing import Any
 
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from rclpy.node import Node
@@ -26,6 +29,7 @@ from colorglove_ros.ros.conversions import (
     candidates_to_msg,
     crop_from_observation_msg,
 )
+from colorglove_ros.ros.diagnostics import FrameStats, upstream
 from colorglove_ros.ros.message_checks import check_observation_msg
 from colorglove_ros.ros.nodes.common import (
     LATEST_ONLY,
@@ -36,6 +40,8 @@ from colorglove_ros.ros.nodes.common import (
     run_node,
     startup_errors,
 )
+from colorglove_ros.ros.nodes.diagnostics_publisher import DiagnosticsPublisher
+from colorglove_ros.ros.nodes.live_parameters import Apply, LiveParameters
 
 
 class LookupNode(Node):
@@ -48,10 +54,12 @@ class LookupNode(Node):
         num_candidates = declare(self, 'num_candidates', 300,
                                  'entries re-ranked with the exact distance', 1, 100000)
         num_neighbors = declare(self, 'num_neighbors', 10, 'nearest entries blended', 1, 300)
-        self.limits = StageLimits(max_image_distance=declare(
-            self, 'max_image_distance', DEFAULT_MAX_IMAGE_DISTANCE,
+        self.live = LiveParameters(self)
+        self.limits = StageLimits(max_image_distance=self.live.declare(
+            'max_image_distance', DEFAULT_MAX_IMAGE_DISTANCE,
             'nearest database image farther than this (tiny pixels) from the observation: no '
-            'hand (glove-coloured clutter or noise resembles no hand pose)', 0.0, 1000.0))
+            'hand (glove-coloured clutter or noise resembles no hand pose)',
+            self._check_max_image_distance, 0.0, 1000.0))
         self.finger_evidence = declare(
             self, 'finger_evidence', True, 'blend each finger from the neighbours whose '
             'patches on it match the observed blobs (false: one weight per entry, the paper)')
@@ -65,11 +73,20 @@ class LookupNode(Node):
             if self.finger_evidence:
                 self.lookup.patch_digit_table()      # built now, not on the first frame
         self.frame_camera = declare_frame_camera(self, calibration.primary)
+        self.stats = FrameStats({'camera': self.frame_camera.refused})
+        self.diagnostics = DiagnosticsPublisher(self, 'lookup', calibration.primary.frame_id,
+                                                self.stats)
         self.publisher = self.create_publisher(HandPoseCandidates, 'hand/pose_candidates', 10)
         self.create_subscription(HandObservation, 'hand/observation', self.on_observation,
                                  LATEST_ONLY)
         self.get_logger().info(f'loaded {len(self.lookup.db)} database entries from {path} '
                                f'in {time.perf_counter() - started:.1f} s; subscribed')
+
+    def _check_max_image_distance(self, value: Any) -> Apply:
+        """The distance gate's new value (its range is the parameter's)."""
+        def apply() -> None:
+            self.limits = replace(self.limits, max_image_distance=float(value))
+        return apply
 
     def _look_up(self, observation: HandObservation) -> LookupResult | NoHand:
         """The lookup of an observation with a hand (``core.pipeline.look_up``), or 'no hand'
@@ -90,7 +107,9 @@ class LookupNode(Node):
         """Look one observation up and publish the candidates, or a 'no hand' message with
         the reason. No message stops the node."""
         started = time.perf_counter()
+        latency_s = self.diagnostics.latency_s(observation.header.stamp)
         if not observation.hand_found:
+            self.stats.no_hand(upstream(observation.status), latency_s=latency_s)
             self.publisher.publish(candidates_to_msg(observation, None))
             return
         try:
@@ -98,6 +117,7 @@ class LookupNode(Node):
         except Exception as exc:   # last line of defence: a message must never stop the node
             self.get_logger().error(f'lookup failed: {exc!r}\n{traceback.format_exc()}',
                                     throttle_duration_sec=1.0)
+            self.stats.no_hand(f'lookup failed: {exc!r}', error=True, latency_s=latency_s)
             self.publisher.publish(candidates_to_msg(observation, None,
                                                   status=f'lookup failed: {exc!r}'))
             return
@@ -105,12 +125,15 @@ class LookupNode(Node):
         if isinstance(result, NoHand):
             if result.warn:
                 self.get_logger().warn(result.reason, throttle_duration_sec=1.0)
+            self.stats.no_hand(result.reason, result.warn, latency_s)
             # the time of a lookup that ran (its result refused), none of one that failed
             self.publisher.publish(candidates_to_msg(
                 observation, None, status=result.reason,
                 lookup_time_ms=elapsed_ms if result.partial is not None else 0.0))
             return
+        self.stats.hand(latency_s)
         self.publisher.publish(candidates_to_msg(observation, result, lookup_time_ms=elapsed_ms))
+
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``lookup_node``."""

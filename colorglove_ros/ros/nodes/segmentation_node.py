@@ -1,29 +1,50 @@
-"""segmentation_node: camera ``Image`` -> ``HandObservation`` (per-pixel glove colour
-classification, mean-shift crop, 40x40 tiny label image, patch blobs).
+"""segmentation_node: camera ``Image`` (or ``CompressedImage``, ``image_transport:
+compressed``) -> ``HandObservation`` (per-pixel glove colour classification, mean-shift crop,
+40x40 tiny label image, patch blobs).
 
 A frame is segmented only when its camera model is known: with ``use_camera_info`` (default)
 the newest ``camera/camera_info`` must have the image's size and frame_id, else camera 0 of
-``calibration_file`` its size; other frames give 'camera: ...' observations without a hand."""
+``calibration_file`` its size; other frames give 'camera: ...' observations without a hand.
+The segmenter's settings (``segmenter.<name>``) and ``publish_debug_image`` can be changed at
+run time; health goes to ``/diagnostics``."""
 from __future__ import annotations
 
 import sys
 import traceback
+from array import array
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from colorglove_msgs.msg import HandObservation
 from rclpy.node import Node
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CompressedImage, Image
+from std_msgs.msg import Header
 
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
 from colorglove_ros.core.pipeline import NoHand, bad_image, segment_frame
 from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
-from colorglove_ros.core.segmentation.segmenter import load_segmenter
+from colorglove_ros.core.segmentation.segmenter import (
+    GloveSegmenter,
+    SegmentationConfigError,
+    load_segmenter,
+)
 from colorglove_ros.core.segmentation.types import Observation
-from colorglove_ros.core.validation import validate_image_size
+from colorglove_ros.core.validation import (
+    SEGMENTER_RULES,
+    validate_image_size,
+    validate_segmenter_settings,
+)
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import observation_to_msg
-from colorglove_ros.ros.image import ImageEncodingError, array_to_image, image_to_rgb8
+from colorglove_ros.ros.diagnostics import FrameStats
+from colorglove_ros.ros.image import (
+    ImageEncodingError,
+    array_to_image,
+    compressed_image_to_rgb8,
+    image_to_rgb8,
+)
 from colorglove_ros.ros.nodes.common import (
     LATEST_IMAGE,
     StartupError,
@@ -33,9 +54,22 @@ from colorglove_ros.ros.nodes.common import (
     run_node,
     startup_errors,
 )
+from colorglove_ros.ros.nodes.diagnostics_publisher import DiagnosticsPublisher
+from colorglove_ros.ros.nodes.live_parameters import Apply, LiveParameters
 
 # Label image -> colours for the debug image: background black, glove colours as printed.
 DEBUG_PALETTE = np.vstack([[0, 0, 0], GLOVE_PALETTE_RGB]).astype(np.uint8)
+IMAGE_TOPIC = 'camera/image_raw'
+# image_transport's transports this node reads: raw Image on the base topic, CompressedImage
+# (jpeg, png) on '<base topic>/compressed'
+IMAGE_TRANSPORTS = ('raw', 'compressed')
+SEGMENTER_PARAMETER_PREFIX = 'segmenter.'
+
+
+def _parameter_value(value: Any) -> Any:
+    """A segmenter setting as a parameter value: a sequence of ints (a checked setting's tuple,
+    an integer-array parameter's array) as a list, anything else as it is."""
+    return list(value) if isinstance(value, (tuple, list, array)) else value
 
 
 class SegmentationNode(Node):
@@ -45,62 +79,143 @@ class SegmentationNode(Node):
         super().__init__('segmentation', **kwargs)
         config = declare(self, 'color_calibration_file', 'config/color_calibration.yaml',
                          'colour calibration config YAML (calibration file + segmenter settings)')
-        self.publish_debug = declare(self, 'publish_debug_image', False,
-                                     'also publish the per-pixel classification as an image')
+        transport = declare(self, 'image_transport', 'raw',
+                            'raw: sensor_msgs/Image on camera/image_raw; compressed: '
+                            'sensor_msgs/CompressedImage (jpeg, png) on '
+                            'camera/image_raw/compressed, as image_transport names it')
         calibration_file = declare_calibration_file(
             self, 'camera calibration YAML (camera 0: the image size expected when '
                   'use_camera_info is false)')
+        if transport not in IMAGE_TRANSPORTS:
+            raise StartupError(f'segmentation_node cannot start: image_transport {transport!r} '
+                               f'is not one of {", ".join(IMAGE_TRANSPORTS)}')
         try:
             self.segmenter = load_segmenter(config)
         except (ColorCalibrationError, OSError, ValueError) as exc:
             raise StartupError(f'segmentation_node cannot start: {exc}') from exc
         with startup_errors('segmentation_node', ValueError):
             calibration = load_calibration(resolve_path(calibration_file))
+        self.live = LiveParameters(self)
+        self.publish_debug = self.live.declare(
+            'publish_debug_image', False,
+            'also publish the per-pixel classification as an image on hand/segmentation_debug',
+            self._check_publish_debug)
+        self._declare_segmenter_settings()
         self.frame_camera = declare_frame_camera(self, calibration.primary)
+        self.stats = FrameStats({'camera': self.frame_camera.refused})
+        self.diagnostics = DiagnosticsPublisher(self, 'segmentation', calibration.primary.frame_id,
+                                                self.stats)
         self.publisher = self.create_publisher(HandObservation, 'hand/observation', 10)
         self.debug_publisher = self.create_publisher(Image, 'hand/segmentation_debug', 2)
-        self.create_subscription(Image, 'camera/image_raw', self.on_image, LATEST_IMAGE)
-        self.get_logger().info(f'colour calibration from {config}')
+        if transport == 'compressed':
+            topic = f'{self.resolve_topic_name(IMAGE_TOPIC)}/compressed'
+            self.create_subscription(CompressedImage, topic, self.on_compressed_image,
+                                     LATEST_IMAGE)
+        else:
+            topic = IMAGE_TOPIC
+            self.create_subscription(Image, topic, self.on_image, LATEST_IMAGE)
+        self.get_logger().info(f'colour calibration from {config}; {transport} images on {topic}')
 
-    def _no_hand(self, image: Image, reason: str) -> None:
-        self.publisher.publish(HandObservation(header=image.header, hand_found=False,
-                                               status=reason, image_width=image.width,
-                                               image_height=image.height))
+    # ------------------------------------------------------------------ run-time parameters
+    def _check_publish_debug(self, value: Any) -> Apply:
+        def apply() -> None:
+            self.publish_debug = bool(value)
+        return apply
 
-    def _segment(self, image: Image) -> Observation | NoHand:
-        """The frame's observation (``core.pipeline.segment_frame``), or 'no hand' for an
-        image that cannot be decoded or whose camera model is not known."""
-        try:
-            validate_image_size(image.width, image.height, error=ImageEncodingError)
-            rgb = image_to_rgb8(image)
-        except ImageEncodingError as exc:
-            return bad_image(exc)
-        camera = self.frame_camera.camera_for(image.width, image.height, image.header.frame_id)
+    def _declare_segmenter_settings(self) -> None:
+        """``segmenter.<name>`` for every segmenter setting (``SEGMENTER_RULES``), starting
+        from the colour config's values; a value given at start-up is applied like a later
+        change."""
+        start = {}
+        for name, value in self.segmenter.settings().items():
+            kind, low, high, _ = SEGMENTER_RULES[name]
+            start[name] = _parameter_value(self.live.declare(
+                SEGMENTER_PARAMETER_PREFIX + name, _parameter_value(value),
+                f'segmenter setting {name} (starts from color_calibration_file)',
+                lambda v, name=name: self._check_segmenter_setting(name, v),
+                *((low, high) if kind != 'ints' else ())))
+        changed = {name: value for name, value in start.items()
+                   if value != _parameter_value(self.segmenter.settings()[name])}
+        if changed:
+            with startup_errors('segmentation_node'):
+                self.segmenter = self._segmenter_with(changed)
+
+    def _segmenter_with(self, changed: dict[str, Any]) -> GloveSegmenter:
+        """A segmenter with the current one's calibration and settings but ``changed``
+        (checked by the segmenter itself; it starts with nothing learnt)."""
+        return GloveSegmenter(self.segmenter.calibration,
+                              **{**self.segmenter.settings(), **changed},
+                              source=self.segmenter.source)
+
+    def _check_segmenter_setting(self, name: str, value: Any) -> Apply:
+        checked = validate_segmenter_settings({name: _parameter_value(value)},
+                                              'segmenter parameter',
+                                              SegmentationConfigError)[name]
+
+        def apply() -> None:
+            self.segmenter = self._segmenter_with({name: checked})
+        return apply
+
+    # ------------------------------------------------------------------ frames
+    def _segment(self, header: Header, rgb: np.ndarray) -> Observation | NoHand:
+        """The frame's observation (``core.pipeline.segment_frame``), or 'no hand' when its
+        camera model is not known."""
+        height, width = rgb.shape[:2]
+        camera = self.frame_camera.camera_for(width, height, header.frame_id)
         if isinstance(camera, NoHand):
             return camera
         return segment_frame(self.segmenter, rgb, keep_labels=self.publish_debug)
 
     def on_image(self, image: Image) -> None:
-        """Segment one frame; bad frames, and observations that fail their own checks, are
-        reported as 'no hand' with the reason. No message stops the node."""
+        """Segment one raw frame."""
+        def decode() -> np.ndarray:
+            validate_image_size(image.width, image.height, error=ImageEncodingError)
+            return image_to_rgb8(image)
+        self._process(image.header, (image.width, image.height), decode)
+
+    def on_compressed_image(self, image: CompressedImage) -> None:
+        """Decode and segment one compressed frame."""
+        self._process(image.header, (0, 0), lambda: compressed_image_to_rgb8(image))
+
+    def _process(self, header: Header, size: tuple[int, int],
+                 decode: Callable[[], np.ndarray]) -> None:
+        """Decode (``size``: the image's, as far as known before) and segment one frame; an
+        image that does not decode is a bad image (a throttled error), and such frames and
+        observations that fail their own checks are reported as 'no hand' with the reason and
+        counted in the diagnostics. No message stops the node."""
+        width, height = size
         try:
-            observation = self._segment(image)
+            try:
+                rgb = decode()
+            except ImageEncodingError as exc:
+                self.get_logger().error(f'bad image: {exc}', throttle_duration_sec=1.0)
+                observation: Observation | NoHand = bad_image(exc)
+            else:
+                height, width = rgb.shape[:2]
+                observation = self._segment(header, rgb)
+                if isinstance(observation, NoHand) and observation.warn:
+                    self.get_logger().warn(observation.reason, throttle_duration_sec=1.0)
             if not isinstance(observation, NoHand):
-                msg = observation_to_msg(observation, image.header)
+                msg = observation_to_msg(observation, header)
         except Exception as exc:   # last line of defence: a frame must never stop the node
             self.get_logger().error(f'segmentation failed: {exc!r}\n{traceback.format_exc()}',
                                     throttle_duration_sec=1.0)
-            self._no_hand(image, f'segmentation failed: {exc!r}')
-            return
+            observation = NoHand(f'segmentation failed: {exc!r}', warn=True)
+        latency_s = self.diagnostics.latency_s(header.stamp)
         if isinstance(observation, NoHand):
-            if observation.warn:
-                self.get_logger().warn(observation.reason, throttle_duration_sec=1.0)
-            self._no_hand(image, observation.reason)
+            self.stats.no_hand(observation.reason, observation.warn, latency_s)
+            self.publisher.publish(HandObservation(header=header, hand_found=False,
+                                                   status=observation.reason,
+                                                   image_width=width, image_height=height))
             return
+        if observation.hand_found:
+            self.stats.hand(latency_s)
+        else:
+            self.stats.no_hand(observation.status, latency_s=latency_s)
         self.publisher.publish(msg)
         if self.publish_debug and observation.label_image is not None:
             self.debug_publisher.publish(array_to_image(DEBUG_PALETTE[observation.label_image],
-                                                        'rgb8', image.header))
+                                                        'rgb8', header))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -88,11 +88,12 @@ def test_blank_frames_give_reasons_not_poses(sequence) -> None:
         assert h.spin_until(lambda: len(out.status) >= 1, 10.0)
         h.settle(0.2)
         assert not out.joints and 'no hand' in out.status[0].data
+        assert node.stats.frames == 1 and node.stats.frames_with_hand == 0   # diagnostics
 
 
 def test_two_topics_without_calibration_refuse_to_start() -> None:
     with pytest.raises(StartupError):
-        with running(_node(calibration_file='', image_topics='a,b')):
+        with running(_node(calibration_file='', image_topics=['a', 'b'])):
             pass
     with pytest.raises(StartupError):
         with running(_node(calibration_file='config/calibration_stereo.yaml')):

@@ -86,7 +86,7 @@ def test_ik_node_waits_for_the_second_view_of_a_frame(
     late = copy.deepcopy(candidates)
     late.header = header(301, 0, RIG[0].frame_id)
     with running(ik_node(small_database_path, calibration_file=str(STEREO), publish_overlay=False,
-                         extra_observation_topics=SECOND_OBSERVATION,
+                         extra_observation_topics=[SECOND_OBSERVATION],
                          extra_observation_wait_s=0.5)) as h:
         status = h.collect(String, 'hand/tracking_status')
         candidates_pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
@@ -112,7 +112,7 @@ def _run(assets: NodeAssets, bag: Path, two_cameras: bool) -> PipelineRun:
         # a loaded 2-core machine runs six processes here: give the second view time to arrive
         'ik': {'publish_overlay': False, 'database_path': str(assets.database),
                'calibration_file': str(STEREO if two_cameras else MONO),
-               'extra_observation_topics': SECOND_OBSERVATION if two_cameras else '',
+               **({'extra_observation_topics': [SECOND_OBSERVATION]} if two_cameras else {}),
                'extra_observation_wait_s': 0.3,
                'min_explained_blob_share': SMALL_DATABASE_EXPLAINED_SHARE},
     }
