@@ -2,8 +2,11 @@
 classification, mean-shift crop, 40x40 tiny label image, patch blobs).
 
 A frame is segmented only when its camera model is known: with ``use_camera_info`` (default)
-the newest ``camera/camera_info`` must have the image's size and frame_id, else camera 0 of
-``calibration_file`` its size; other frames give 'camera: ...' observations without a hand."""
+the newest ``camera/camera_info`` must have the image's size and frame_id, else camera
+``camera_index`` of ``calibration_file`` its size; other frames give 'camera: ...'
+observations without a hand. An extra camera's segmentation_node runs in the camera's
+namespace ``NS`` (``NS/camera/image_raw``, ``NS/camera/camera_info`` -> ``NS/hand/observation``,
+which ik_node's ``extra_observation_topics`` names)."""
 from __future__ import annotations
 
 import sys
@@ -26,9 +29,12 @@ from colorglove_ros.ros.conversions import observation_to_msg
 from colorglove_ros.ros.image import ImageEncodingError, array_to_image, image_to_rgb8
 from colorglove_ros.ros.nodes.common import (
     LATEST_IMAGE,
+    OBSERVATION_TOPIC,
     StartupError,
+    calibrated_camera,
     declare,
     declare_calibration_file,
+    declare_camera_index,
     declare_frame_camera,
     run_node,
     startup_errors,
@@ -48,7 +54,10 @@ class SegmentationNode(Node):
         self.publish_debug = declare(self, 'publish_debug_image', False,
                                      'also publish the per-pixel classification as an image')
         calibration_file = declare_calibration_file(
-            self, 'camera calibration YAML (camera 0: the image size expected when '
+            self, 'camera calibration YAML (camera camera_index: the image size expected when '
+                  'use_camera_info is false)')
+        camera_index = declare_camera_index(
+            self, 'which camera of calibration_file this node segments (used when '
                   'use_camera_info is false)')
         try:
             self.segmenter = load_segmenter(config)
@@ -56,8 +65,9 @@ class SegmentationNode(Node):
             raise StartupError(f'segmentation_node cannot start: {exc}') from exc
         with startup_errors('segmentation_node', ValueError):
             calibration = load_calibration(resolve_path(calibration_file))
-        self.frame_camera = declare_frame_camera(self, calibration.primary)
-        self.publisher = self.create_publisher(HandObservation, 'hand/observation', 10)
+            camera = calibrated_camera(calibration, camera_index, calibration_file)
+        self.frame_camera = declare_frame_camera(self, camera)
+        self.publisher = self.create_publisher(HandObservation, OBSERVATION_TOPIC, 10)
         self.debug_publisher = self.create_publisher(Image, 'hand/segmentation_debug', 2)
         self.create_subscription(Image, 'camera/image_raw', self.on_image, LATEST_IMAGE)
         self.get_logger().info(f'colour calibration from {config}')
