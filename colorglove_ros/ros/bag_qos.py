@@ -15,12 +15,12 @@ from rclpy.qos import (
 )
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 
+from colorglove_ros.ros.bags import INFINITE_QOS_TIME
+
 __all__ = ['RECORD_DEPTH', 'PLAY_DEPTH', 'subscription_qos_for_offers', 'qos_from_recorded',
            'publisher_qos_for_recorded']
 
 RECORD_DEPTH = 100
-# rosbag2 metadata writes an unset (infinite) QoS duration as this pair
-_INFINITE_SEC, _INFINITE_NSEC = 2**31 - 1, 2**32 - 1
 PLAY_DEPTH = 10
 
 
@@ -59,7 +59,8 @@ def qos_from_recorded(recorded: Qos) -> QoSProfile:
                          reliability=reliability, durability=durability, liveliness=liveliness)
     for name in ('deadline', 'lifespan', 'liveliness_lease_duration'):
         value = getattr(recorded, name)
-        default = (value.sec, value.nsec) in ((0, 0), (_INFINITE_SEC, _INFINITE_NSEC))
+        default = (value.sec, value.nsec) in ((0, 0), (INFINITE_QOS_TIME.sec,
+                                                       INFINITE_QOS_TIME.nsec))
         if not default:
             setattr(profile, name, _duration(value))
     return profile

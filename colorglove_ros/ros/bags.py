@@ -3,7 +3,8 @@
 Topics (standard Jazzy types only, so ``ros2 bag play`` works on a native install; every
 message of a frame carries the same header stamp and frame_id ``camera_optical_frame``):
 
-* ``/camera/image_raw``: ``sensor_msgs/msg/Image``, ``rgb8``;
+* ``/camera/image_raw``: ``sensor_msgs/msg/Image``, ``rgb8`` (or another encoding a driver
+  sends, ``image_codec.RGB8_ENCODERS``, e.g. usb_cam's ``yuv422_yuy2``);
 * ``/camera/camera_info``: ``sensor_msgs/msg/CameraInfo`` (plumb_bob, from a PinholeCamera);
 * ``/hand/ground_truth/joint_states``: ``sensor_msgs/msg/JointState``, the 20 finger joints
   named ``FINGER_DOF_NAMES`` (radians);
@@ -11,14 +12,20 @@ message of a frame carries the same header stamp and frame_id ``camera_optical_f
   (wrist) in the camera optical frame (``q[0:6]``);
 * ``/hand/ground_truth/keypoints``: ``visualization_msgs/msg/MarkerArray`` holding marker
   ns ``keypoints`` id 0 of type POINTS with the 21 keypoints in ``KEYPOINT_NAMES`` order
-  (metres, camera frame), plus ns ``skeleton`` id 1, a LINE_LIST of the bones for RViz.
+  (metres, camera frame), plus ns ``skeleton`` id 1, a LINE_LIST of the bones for RViz;
+* ``/tf``: ``tf2_msgs/msg/TFMessage``, the ground-truth camera -> hand root (``palm``)
+  transform of the frame (what ik_node broadcasts for its estimate), so a viewer shows the
+  hand from the bag alone.
 
 A bag of a calibrated rig also holds, for every extra camera k >= 1 named ``NAME`` in the
 calibration, ``/NAME/camera/image_raw`` and ``/NAME/camera/camera_info`` (the topics of a
 ``camera_node`` run in namespace ``NAME``) with the same stamps and that camera's frame_id;
 within a frame they are written before the primary image, so a player paced on the primary
 image has published every view of the frame when it waits. Ground truth stays in camera 0's
-frame.
+frame. Such a bag also holds ``/tf_static`` (``tf2_msgs/msg/TFMessage``, once at the first
+stamp, offered transient-local as a latched static broadcaster's and recorded so in the
+metadata as rosbag2 does): camera 0's optical frame -> each extra camera's optical frame from
+the calibrated extrinsics.
 """
 from __future__ import annotations
 
@@ -29,22 +36,38 @@ from typing import Any
 
 import numpy as np
 from rosbags.highlevel import AnyReader
+from rosbags.interfaces import (
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from colorglove_ros.core.camera import CalibrationError, PinholeCamera
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.geometry import matrix_to_rotvec, rotvec_to_quaternion
+from colorglove_ros.core.hand.frames import hand_root_frame
 from colorglove_ros.core.hand.model import FINGER_DOF_NAMES, KEYPOINT_NAMES, NUM_DOFS
 from colorglove_ros.core.hand.overlay import SKELETON_BONES
 from colorglove_ros.core.hand.pose_fields import pose_from_fields, wrist_quaternion
-from colorglove_ros.ros.image_codec import ImageEncodingError, image_to_rgb8
+from colorglove_ros.ros.image_codec import (
+    ImageEncodingError,
+    image_to_rgb8,
+    rgb8_to_encoding,
+)
 
 __all__ = [
     'BagError', 'BagFrame', 'SequenceBagWriter', 'write_sequence_bag', 'read_sequence_bag',
     'bag_camera', 'camera_info_to_pinhole', 'camera_topics', 'TOPIC_IMAGE',
     'TOPIC_CAMERA_INFO', 'TOPIC_JOINTS', 'TOPIC_WRIST', 'TOPIC_KEYPOINTS', 'FRAME_ID',
     'DEFAULT_START_NS', 'SKELETON_BONES', 'bag_size_bytes', 'SyntheticBag', 'write_synthetic_bag',
+    'TOPIC_TF', 'TOPIC_TF_STATIC', 'INFINITE_QOS_TIME', 'STATIC_TF_QOS', 'BagTransform',
+    'read_transforms',
 ]
 
 TOPIC_IMAGE = '/camera/image_raw'
@@ -52,7 +75,10 @@ TOPIC_CAMERA_INFO = '/camera/camera_info'
 TOPIC_JOINTS = '/hand/ground_truth/joint_states'
 TOPIC_WRIST = '/hand/ground_truth/wrist_pose'
 TOPIC_KEYPOINTS = '/hand/ground_truth/keypoints'
+TOPIC_TF = '/tf'
+TOPIC_TF_STATIC = '/tf_static'
 FRAME_ID = 'camera_optical_frame'
+HAND_FRAME = hand_root_frame()
 DEFAULT_START_NS = 1_700_000_000 * 10**9     # fixed so bags from one seed are identical
 _KEYPOINTS_NS = 'keypoints'
 
@@ -62,7 +88,15 @@ _TYPES = {
     TOPIC_JOINTS: 'sensor_msgs/msg/JointState',
     TOPIC_WRIST: 'geometry_msgs/msg/PoseStamped',
     TOPIC_KEYPOINTS: 'visualization_msgs/msg/MarkerArray',
+    TOPIC_TF: 'tf2_msgs/msg/TFMessage',
 }
+INFINITE_QOS_TIME = QosTime(2**31 - 1, 2**32 - 1)
+"""How rosbag2 metadata writes an unset (infinite) QoS duration."""
+STATIC_TF_QOS = Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE,
+                    QosDurability.TRANSIENT_LOCAL, INFINITE_QOS_TIME, INFINITE_QOS_TIME,
+                    QosLiveliness.AUTOMATIC, INFINITE_QOS_TIME, False)
+"""The QoS a static transform broadcaster (tf2_ros) offers on ``/tf_static``: reliable,
+transient local, depth 1, as recorded in a bag's metadata."""
 
 class BagError(ColorGloveError):
     """A bag cannot be written or read, or holds an unsupported message."""
@@ -105,11 +139,14 @@ class SequenceBagWriter:
     """Write frames one at a time: ``with SequenceBagWriter(path, camera) as w: w.write(f)``.
     A frame is anything with ``image_rgb`` (H, W, 3) uint8, ``pose`` (26,) and
     ``keypoints_3d`` (21, 3) attributes (e.g. ``synth.SyntheticFrame``). ``extra_cameras``
-    (cameras 1.. of a calibrated rig) add their images at the same stamps."""
+    (cameras 1.. of a calibrated rig) add their images at the same stamps (and their
+    extrinsics on ``/tf_static``). Images are written in ``encoding``
+    (``image_codec.RGB8_ENCODERS``); ``hand_frame`` is the child frame of ``/tf``."""
 
     def __init__(self, path: str | Path, camera: PinholeCamera, *, fps: float = 30.0,
                  start_ns: int = DEFAULT_START_NS, frame_id: str = FRAME_ID,
-                 extra_cameras: Sequence[PinholeCamera] = ()) -> None:
+                 extra_cameras: Sequence[PinholeCamera] = (), encoding: str = 'rgb8',
+                 hand_frame: str = HAND_FRAME) -> None:
         if fps <= 0:
             raise BagError(f'fps must be positive, got {fps}')
         self.path = Path(path)
@@ -123,6 +160,12 @@ class SequenceBagWriter:
         self.fps = float(fps)
         self.start_ns = int(start_ns)
         self.frame_id = frame_id
+        self.encoding = encoding
+        self.hand_frame = hand_frame
+        try:
+            rgb8_to_encoding(np.zeros((2, 2, 3), np.uint8), encoding)
+        except ImageEncodingError as exc:
+            raise BagError(str(exc)) from exc
         self.count = 0
         self._ts = _typestore()
         self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
@@ -149,6 +192,19 @@ class SequenceBagWriter:
         for topic, msgtype in self._topic_types().items():
             self._conns[topic] = (self._writer.add_connection(topic, msgtype,
                                                               typestore=self._ts), msgtype)
+        if self.extra_cameras:
+            msgtype = _TYPES[TOPIC_TF]
+            connection = self._writer.add_connection(
+                TOPIC_TF_STATIC, msgtype, typestore=self._ts,
+                offered_qos_profiles=[STATIC_TF_QOS])
+            header = self._header(self.start_ns, self.frame_id)
+            static = self._ts.types[msgtype](transforms=[
+                _transform(self._ts, header, camera.frame_id,
+                           -camera.rotation.T @ camera.translation,
+                           rotvec_to_quaternion(matrix_to_rotvec(camera.rotation.T)))
+                for camera in self.extra_cameras])
+            self._writer.write(connection, self.start_ns,
+                               self._ts.serialize_cdr(static, msgtype))
 
     def close(self) -> None:
         """Finish the bag (writes metadata.yaml)."""
@@ -172,11 +228,15 @@ class SequenceBagWriter:
                            f'3) uint8, got {image.shape} {image.dtype}')
         t = self._ts.types
         image_topic, info_topic = camera_topics(camera, index)
+        try:
+            pixels = rgb8_to_encoding(image, self.encoding)
+        except ImageEncodingError as exc:
+            raise BagError(f'camera {index}: {exc}') from exc
         return {
             image_topic: t['sensor_msgs/msg/Image'](
-                header=header, height=camera.height, width=camera.width, encoding='rgb8',
-                is_bigendian=0, step=camera.width * 3,
-                data=np.ascontiguousarray(image).reshape(-1)),
+                header=header, height=camera.height, width=camera.width,
+                encoding=self.encoding, is_bigendian=0,
+                step=camera.width * pixels.shape[2], data=pixels.reshape(-1)),
             info_topic: _camera_info(self._ts, header, camera),
         }
 
@@ -209,6 +269,8 @@ class SequenceBagWriter:
             TOPIC_WRIST: t['geometry_msgs/msg/PoseStamped'](
                 header=header, pose=_pose_msg(ts, pose[0:3], wrist_quaternion(pose))),
             TOPIC_KEYPOINTS: _keypoint_markers(ts, header, keypoints),
+            TOPIC_TF: t['tf2_msgs/msg/TFMessage'](transforms=[
+                _transform(ts, header, self.hand_frame, pose[0:3], wrist_quaternion(pose))]),
         })
         for topic, msg in msgs.items():
             connection, msgtype = self._conns[topic]
@@ -224,6 +286,18 @@ def _pose_msg(ts, position: np.ndarray, quat_xyzw: np.ndarray):
     return t['geometry_msgs/msg/Pose'](
         position=t['geometry_msgs/msg/Point'](x=x, y=y, z=z),
         orientation=t['geometry_msgs/msg/Quaternion'](x=qx, y=qy, z=qz, w=qw))
+
+
+def _transform(ts, header, child: str, translation: np.ndarray, quat_xyzw: np.ndarray):
+    """A ``geometry_msgs/TransformStamped`` header.frame_id -> ``child``: the child frame's
+    origin (``translation``) and axes (``quat_xyzw``) in the parent frame."""
+    t = ts.types
+    x, y, z = (float(v) for v in translation)
+    qx, qy, qz, qw = (float(v) for v in quat_xyzw)
+    return t['geometry_msgs/msg/TransformStamped'](
+        header=header, child_frame_id=child, transform=t['geometry_msgs/msg/Transform'](
+            translation=t['geometry_msgs/msg/Vector3'](x=x, y=y, z=z),
+            rotation=t['geometry_msgs/msg/Quaternion'](x=qx, y=qy, z=qz, w=qw)))
 
 
 def _camera_info(ts, header, cam: PinholeCamera):
@@ -291,20 +365,21 @@ class SyntheticBag:
 def write_synthetic_bag(path: str | Path, cameras: Sequence[PinholeCamera], *, seed: int = 1,
                         num_frames: int = 300, fps: float = 30.0,
                         hand_length_m: float = DEFAULT_HAND_LENGTH_M, split: str = 'test',
-                        progress: Callable[[Iterable[int]], Iterable[int]] | None = None
-                        ) -> SyntheticBag:
+                        progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
+                        encoding: str = 'rgb8') -> SyntheticBag:
     """Render synthetic sequence ``seed`` (``core.synthetic.sequences.SyntheticSequenceRenderer``
     with ``split`` conditions) as every camera of ``cameras`` sees it, primary first, and write
     it to a new MCAP bag at ``path`` (extra cameras on ``/NAME/camera/...``). ``progress``
-    wraps the frame indices (e.g. ``tqdm``). Raises ``SynthError`` for bad sequence settings
+    wraps the frame indices (e.g. ``tqdm``); images in ``encoding``. Raises ``SynthError`` for
+    bad sequence settings
     and :class:`BagError` for a bag that cannot be written."""
     from colorglove_ros.core.synthetic.sequences import SyntheticSequenceRenderer
 
     sequence = SyntheticSequenceRenderer(cameras[0], seed=seed, num_frames=num_frames, fps=fps,
                                          hand_length_m=hand_length_m, split=split)
     try:
-        with SequenceBagWriter(path, cameras[0], fps=fps,
-                               extra_cameras=cameras[1:]) as writer:
+        with SequenceBagWriter(path, cameras[0], fps=fps, extra_cameras=cameras[1:],
+                               encoding=encoding) as writer:
             indices = range(num_frames)
             for i in (progress(indices) if progress is not None else indices):
                 # one instant seen by every camera, primary first
@@ -347,7 +422,7 @@ def read_sequence_bag(path: str | Path, *, with_images: bool = True,
         raise BagError(f'bag not found: {path}')
     pending: dict[int, BagFrame] = {}
     with AnyReader([path], default_typestore=_typestore()) as reader:
-        topics = set(_TYPES) if with_images else set(_TYPES) - {TOPIC_IMAGE}
+        topics = set(_TYPES) - {TOPIC_TF} - (set() if with_images else {TOPIC_IMAGE})
         conns = [c for c in reader.connections if c.topic in topics]
         if not conns:
             raise BagError(f'{path} holds none of the topics {sorted(_TYPES)}')
@@ -402,3 +477,30 @@ def bag_camera(path: str | Path) -> PinholeCamera:
 def bag_size_bytes(path: str | Path) -> int:
     """Total size of the files of a bag directory."""
     return sum(f.stat().st_size for f in Path(path).rglob('*') if f.is_file())
+
+
+@dataclass(frozen=True)
+class BagTransform:
+    """One transform of a ``/tf`` or ``/tf_static`` message: ``parent`` -> ``child`` at
+    ``stamp_ns``, the child's origin (3,) and axes as a quaternion (x, y, z, w) in the
+    parent frame."""
+
+    stamp_ns: int
+    parent: str
+    child: str
+    translation: np.ndarray
+    rotation_xyzw: np.ndarray
+
+
+def read_transforms(path: str | Path, topic: str = TOPIC_TF) -> list[BagTransform]:
+    """Every transform on ``topic`` (``/tf`` or ``/tf_static``) of a bag, in bag order."""
+    out = []
+    with AnyReader([Path(path)], default_typestore=_typestore()) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        for conn, _, raw in reader.messages(connections=conns):
+            for tf in reader.deserialize(raw, conn.msgtype).transforms:
+                v, q = tf.transform.translation, tf.transform.rotation
+                out.append(BagTransform(_stamp(tf), str(tf.header.frame_id),
+                                        str(tf.child_frame_id), np.array([v.x, v.y, v.z]),
+                                        np.array([q.x, q.y, q.z, q.w])))
+    return out

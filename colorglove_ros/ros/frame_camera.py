@@ -26,17 +26,19 @@ class FrameCamera:
     With ``use_camera_info`` the model is the newest CameraInfo given to
     :meth:`set_camera_info` (a fixed camera: its newest message describes every frame); a
     frame is accepted only when its width, height and frame_id equal the CameraInfo's. Without,
-    the model is ``calibrated`` (camera 0 of the calibration YAML) and a frame of another size
-    is refused. The returned camera keeps the calibrated camera's name (status lines) and
-    extrinsics (identity for camera 0). Refusals are :class:`NoHand` ``'camera: ...'`` and are
-    counted per kind in :attr:`refused`.
+    the model is ``calibrated`` (its camera of the calibration YAML) and a frame of another size
+    is refused (and, with ``calibrated_frame_id``, one of another frame_id than the calibrated
+    camera's). The returned camera keeps the calibrated camera's name (status lines) and
+    extrinsics (identity for camera 0, the calibration's for the others). Refusals are
+    :class:`NoHand` ``'camera: ...'`` and are counted per kind in :attr:`refused`.
     """
 
     def __init__(self, calibrated: PinholeCamera, use_camera_info: bool = True, *,
-                 rectified: bool = False) -> None:
+                 rectified: bool = False, calibrated_frame_id: bool = False) -> None:
         self.calibrated = calibrated
         self.use_camera_info = bool(use_camera_info)
         self.rectified = bool(rectified)
+        self.calibrated_frame_id = bool(calibrated_frame_id)
         self.refused: Counter[str] = Counter()
         self._info_key: tuple | None = None
         self._info_camera: PinholeCamera | None = None
@@ -88,4 +90,8 @@ class FrameCamera:
         if self.use_camera_info and frame_id != self._info_frame_id:
             return self._refuse('frame_id', f'frame_id {frame_id!r} != CameraInfo frame_id '
                                             f'{self._info_frame_id!r}')
+        if not self.use_camera_info and self.calibrated_frame_id \
+                and frame_id != camera.frame_id:
+            return self._refuse('frame_id', f'frame_id {frame_id!r} != calibrated frame_id '
+                                            f'{camera.frame_id!r}')
         return camera

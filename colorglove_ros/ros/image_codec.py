@@ -18,7 +18,8 @@ import numpy as np
 from colorglove_ros.core.errors import ColorGloveError
 
 __all__ = ['COMPRESSED_FORMATS', 'ENCODINGS', 'ImageEncodingError', 'ImageFormat',
-           'compressed_image_to_rgb8', 'image_format', 'image_to_array', 'image_to_rgb8']
+           'compressed_image_to_rgb8', 'image_format', 'image_to_array', 'image_to_rgb8',
+           'RGB8_ENCODERS', 'rgb8_to_encoding']
 
 
 class ImageEncodingError(ColorGloveError, ValueError):
@@ -178,3 +179,30 @@ def compressed_image_to_rgb8(msg: Any) -> np.ndarray:
         raise ImageEncodingError(f'compressed image ({msg.format!r}, {data.size} bytes) does not '
                                  'decode')
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+RGB8_ENCODERS: dict[str, int | None] = {
+    'rgb8': None, 'bgr8': cv2.COLOR_RGB2BGR, '8UC3': cv2.COLOR_RGB2BGR,
+    'yuv422': cv2.COLOR_RGB2YUV_UYVY, 'uyvy': cv2.COLOR_RGB2YUV_UYVY,
+    'yuv422_yuy2': cv2.COLOR_RGB2YUV_YUYV, 'yuyv': cv2.COLOR_RGB2YUV_YUYV,
+}
+"""Encodings an RGB image can be written in (what camera drivers send), with OpenCV's
+converter from RGB (None: as is)."""
+
+
+def rgb8_to_encoding(rgb: np.ndarray, encoding: str) -> np.ndarray:
+    """The pixel array of (H, W, 3) uint8 RGB ``rgb`` in ``encoding`` (one of
+    :data:`RGB8_ENCODERS`; YUV 4:2:2 needs an even width), as a driver would send it: (H, W,
+    3) for the 3-channel encodings, (H, W, 2) for YUV 4:2:2."""
+    if encoding not in RGB8_ENCODERS:
+        raise ImageEncodingError(f'cannot write RGB as {encoding!r}; supported: '
+                                 f'{", ".join(RGB8_ENCODERS)}')
+    rgb = np.asarray(rgb)
+    if rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ImageEncodingError(f'need an (H, W, 3) uint8 RGB image, got {rgb.shape} {rgb.dtype}')
+    conversion = RGB8_ENCODERS[encoding]
+    if conversion is None:
+        return np.ascontiguousarray(rgb)
+    if image_format(encoding).channels == 2 and rgb.shape[1] % 2:
+        raise ImageEncodingError(f'{encoding} needs an even width, got {rgb.shape[1]}')
+    return np.ascontiguousarray(cv2.cvtColor(np.ascontiguousarray(rgb), conversion))

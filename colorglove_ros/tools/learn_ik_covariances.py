@@ -104,7 +104,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f'[learn] sequence {s}: {int(run.found.sum())}/{len(run.found)} frames '
                   f'tracked, {len(seqs)} runs', flush=True)
         evaluator.close()
-        cov, stats = learn_covariances(sequences, evaluator.model, cal.cameras, LOCAL_WINDOW)
+        cov, stats = learn_covariances(sequences, evaluator.model, cal.cameras, LOCAL_WINDOW,
+                                       reference_focal_px=config.reference_focal_px)
     except ColorGloveError as exc:
         return tool_error('colorglove_learn_ik_covariances', exc)
     provenance = {'tool': 'colorglove_ros.tools.learn_ik_covariances',
@@ -112,7 +113,8 @@ def main(argv: list[str] | None = None) -> int:
                   'train_seeds': f'{seeds[0]}..{seeds[-1]}', 'frames_per_sequence': args.frames,
                   'labels': args.labels, 'reference': args.reference,
                   'window': LOCAL_WINDOW, 'calibration': _rel(args.calibration),
-                  'tracker_mode': 'ik', **{f'stats_{k}': v for k, v in stats.items()}}
+                  'tracker_mode': 'ik', 'reference_focal_px': config.reference_focal_px,
+                  **{f'stats_{k}': v for k, v in stats.items()}}
     out = save_covariances(args.output, cov, **provenance)
     default = default_covariances()
     r_std = np.sqrt(cov.r_var_px2)

@@ -13,6 +13,7 @@ from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.synthetic.conditions import SPLITS, SynthError
 from colorglove_ros.core.synthetic.frames import default_camera
 from colorglove_ros.ros.bags import bag_size_bytes, write_synthetic_bag
+from colorglove_ros.ros.image_codec import RGB8_ENCODERS
 from colorglove_ros.tools._cli import tool_parser
 
 
@@ -28,6 +29,9 @@ def main(argv: list[str] | None = None) -> int:
                              'on /NAME/camera/...); default one camera, 640x480, f = 600')
     parser.add_argument('--split', choices=SPLITS, default='test',
                         help="conditions range: 'test' (held out) or 'train'")
+    parser.add_argument('--encoding', choices=sorted(RGB8_ENCODERS), default='rgb8',
+                        help='image encoding, as a camera driver sends it (e.g. yuv422_yuy2: '
+                             "usb_cam's yuyv mode)")
     parser.add_argument('--hand-length', type=float, default=None,
                         help='hand length in metres (default: from the calibration, or '
                              f'{DEFAULT_HAND_LENGTH_M})')
@@ -51,6 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         bag = write_synthetic_bag(output, cameras, seed=args.seed, num_frames=args.frames,
                                   fps=args.fps, hand_length_m=hand_length, split=args.split,
+                                  encoding=args.encoding,
                                   progress=lambda it: tqdm(it, desc='frames', unit='frame'))
     except SynthError as exc:
         parser.error(str(exc))

@@ -29,7 +29,7 @@ from colorglove_ros.tools._cli import tool_parser
 __all__ = ['DEFAULT_TOPICS', 'BagRecorder', 'main', 'offered_qos']
 
 DEFAULT_TOPICS = ('/hand/joint_states', '/hand/wrist_pose', '/hand/markers',
-                  '/hand/pose_candidates', '/hand/observation')
+                  '/hand/pose_candidates', '/hand/observation', '/tf', '/tf_static')
 
 
 def _time(duration: Duration) -> QosTime:

@@ -17,7 +17,14 @@ from repo_paths import CONFIG_DIR
 from rosbag2_compat import check_jazzy_bag
 
 from colorglove_ros.core.hand.model import FINGER_DOF_NAMES
-from colorglove_ros.ros.bags import TOPIC_CAMERA_INFO, TOPIC_IMAGE, TOPIC_JOINTS, read_sequence_bag
+from colorglove_ros.ros.bags import (
+    TOPIC_CAMERA_INFO,
+    TOPIC_IMAGE,
+    TOPIC_JOINTS,
+    TOPIC_TF,
+    TOPIC_TF_STATIC,
+    read_sequence_bag,
+)
 from colorglove_ros.tools import make_bag
 
 FRAMES = 3
@@ -34,9 +41,13 @@ def stereo_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_make_bag_output_decodes_with_mcap_ros2(stereo_bag: Path) -> None:
     decoded = check_jazzy_bag(stereo_bag)
+    static = decoded.pop(TOPIC_TF_STATIC)
     assert all(len(messages) == FRAMES for messages in decoded.values()), \
         {topic: len(messages) for topic, messages in decoded.items()}
-    assert len(decoded) == 7          # 5 primary topics + the second camera's image and info
+    # 5 primary topics, /tf, the second camera's image and info; /tf_static once
+    assert len(decoded) == 8
+    assert [t.child_frame_id for t in static[0].transforms] == ['camera2_optical_frame']
+    assert decoded[TOPIC_TF][0].transforms[0].child_frame_id == 'palm'
     # the independent decoder reads the same pixels and values as rosbags
     frames = list(read_sequence_bag(stereo_bag))
     for image, info, joints, frame in zip(decoded[TOPIC_IMAGE], decoded[TOPIC_CAMERA_INFO],

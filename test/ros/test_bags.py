@@ -18,18 +18,30 @@ from colorglove_ros.ros.bags import (
     TOPIC_IMAGE,
     TOPIC_JOINTS,
     TOPIC_KEYPOINTS,
+    TOPIC_TF,
+    TOPIC_TF_STATIC,
     TOPIC_WRIST,
     BagError,
     SequenceBagWriter,
     bag_camera,
     camera_info_to_pinhole,
     read_sequence_bag,
+    read_transforms,
     write_sequence_bag,
 )
 from colorglove_ros.ros.image_codec import ImageEncodingError, image_to_rgb8
 from colorglove_ros.tools import make_bag
 
 CAM = PinholeCamera(160, 120, 150.0, 150.0, 79.5, 59.5)
+
+
+def _header(topic: str, msg):
+    """The header of a bag message (a marker array's and a TF message's first element's)."""
+    if topic == TOPIC_KEYPOINTS:
+        return msg.markers[0].header
+    if topic in (TOPIC_TF, TOPIC_TF_STATIC):
+        return msg.transforms[0].header
+    return msg.header
 
 
 @pytest.fixture(scope='module')
@@ -64,17 +76,18 @@ def test_round_trip(tmp_path: Path, frames) -> None:
                           TOPIC_CAMERA_INFO: 'sensor_msgs/msg/CameraInfo',
                           TOPIC_JOINTS: 'sensor_msgs/msg/JointState',
                           TOPIC_WRIST: 'geometry_msgs/msg/PoseStamped',
-                          TOPIC_KEYPOINTS: 'visualization_msgs/msg/MarkerArray'}
+                          TOPIC_KEYPOINTS: 'visualization_msgs/msg/MarkerArray',
+                          TOPIC_TF: 'tf2_msgs/msg/TFMessage'}
         per_topic: dict[str, list[int]] = {}
         for conn, log_ns, raw in reader.messages():
             msg = reader.deserialize(raw, conn.msgtype)
-            header = msg.markers[0].header if conn.topic == TOPIC_KEYPOINTS else msg.header
+            header = _header(conn.topic, msg)
             stamp = header.stamp.sec * 10**9 + header.stamp.nanosec
             assert stamp == log_ns and header.frame_id == FRAME_ID
             per_topic.setdefault(conn.topic, []).append(stamp)
             if conn.topic == TOPIC_IMAGE:
                 assert (msg.encoding, msg.step) == ('rgb8', 480)
-    assert all(v == stamps for v in per_topic.values()) and len(per_topic) == 5
+    assert all(v == stamps for v in per_topic.values()) and len(per_topic) == 6
     # without images the ground truth still comes back
     light = list(read_sequence_bag(path, with_images=False))
     assert light[2].image_rgb is None
@@ -158,7 +171,7 @@ def test_stereo_bag_from_make_bag(tmp_path: Path) -> None:
     with AnyReader([out]) as reader:
         for conn, log_ns, raw in reader.messages():
             msg = reader.deserialize(raw, conn.msgtype)
-            header = msg.markers[0].header if conn.topic == TOPIC_KEYPOINTS else msg.header
+            header = _header(conn.topic, msg)
             order.append(conn.topic)
             stamps.setdefault(conn.topic, []).append(log_ns)
             frame_ids[conn.topic] = header.frame_id
@@ -169,6 +182,7 @@ def test_stereo_bag_from_make_bag(tmp_path: Path) -> None:
     assert frame_ids['/camera2/camera/image_raw'] == second.frame_id == 'camera2_optical_frame'
     assert frame_ids[TOPIC_IMAGE] == FRAME_ID
     assert order.index('/camera2/camera/image_raw') < order.index(TOPIC_IMAGE)
+    assert order[0] == TOPIC_TF_STATIC and order.count(TOPIC_TF_STATIC) == 1
     # the two views differ (another viewpoint) but both show the glove
     back = list(read_sequence_bag(out))
     assert len(back) == 2 and back[0].pose is not None
@@ -207,3 +221,56 @@ def test_camera_info_model_follows_the_coefficients() -> None:
                            header=SimpleNamespace(frame_id=FRAME_ID))
     with pytest.raises(BagError, match="model 'plumb_bob' with 8"):
         camera_info_to_pinhole(info)
+
+
+def test_bags_carry_tf_and_static_camera_frames(tmp_path: Path, frames) -> None:
+    """/tf holds the ground-truth camera -> palm transform of every frame (the wrist pose);
+    a rig's /tf_static, once and latched (transient local in the metadata, as rosbag2 records
+    a static broadcaster), places each extra camera's optical frame in camera 0's."""
+    from colorglove_ros.core.camera import look_at_extrinsics
+    from colorglove_ros.core.geometry import quaternion_to_rotvec, rotvec_to_matrix
+
+    rotation, translation = look_at_extrinsics(np.array([0.3, -0.05, 0.2]),
+                                               np.array([0.0, 0.0, 0.55]))
+    side = PinholeCamera(160, 120, 150.0, 150.0, 79.5, 59.5, rotation=rotation,
+                         translation=translation, name='side', frame_id='side_optical_frame')
+    path = tmp_path / 'tf'
+    with SequenceBagWriter(path, CAM, extra_cameras=[side]) as writer:
+        stamps = [writer.write(f, extra_images=[f.image_rgb]) for f in frames]
+    dynamic = read_transforms(path)
+    assert [t.stamp_ns for t in dynamic] == stamps
+    for tf, frame, back in zip(dynamic, frames, read_sequence_bag(path), strict=True):
+        assert (tf.parent, tf.child) == (FRAME_ID, 'palm')
+        np.testing.assert_allclose(tf.translation, frame.pose[0:3], atol=1e-12)
+        np.testing.assert_allclose(tf.rotation_xyzw, back.wrist_quaternion, atol=1e-12)
+    (static,) = read_transforms(path, TOPIC_TF_STATIC)
+    assert (static.parent, static.child, static.stamp_ns) == (FRAME_ID, 'side_optical_frame',
+                                                              stamps[0])
+    # the child's origin and axes in camera 0's frame: p0 = R^T (p_side - t)
+    np.testing.assert_allclose(static.translation, [0.3, -0.05, 0.2], atol=1e-9)
+    np.testing.assert_allclose(rotvec_to_matrix(quaternion_to_rotvec(static.rotation_xyzw)),
+                               rotation.T, atol=1e-9)
+    with AnyReader([path]) as reader:
+        (conn,) = [c for c in reader.connections if c.topic == TOPIC_TF_STATIC]
+        (qos,) = conn.ext.offered_qos_profiles
+        assert (qos.durability.name, qos.reliability.name) == ('TRANSIENT_LOCAL', 'RELIABLE')
+    metadata = (path / 'metadata.yaml').read_text()
+    static_entry = metadata[metadata.index(f'name: {TOPIC_TF_STATIC}'):]
+    assert 'durability: transient_local' in static_entry.split('type:')[0]
+
+
+def test_bag_in_a_driver_encoding(tmp_path: Path, frames) -> None:
+    """Images written as usb_cam's yuyv mode sends them (yuv422_yuy2, 2 bytes a pixel) come
+    back as RGB close to the rendered image (4:2:2 halves the colour resolution)."""
+    path = tmp_path / 'yuyv'
+    with SequenceBagWriter(path, CAM, encoding='yuv422_yuy2') as writer:
+        writer.write(frames[0])
+    with AnyReader([path]) as reader:
+        (conn,) = [c for c in reader.connections if c.topic == TOPIC_IMAGE]
+        (_, _, raw), = list(reader.messages(connections=[conn]))
+        msg = reader.deserialize(raw, conn.msgtype)
+    assert (msg.encoding, msg.step, len(msg.data)) == ('yuv422_yuy2', 320, 320 * 120)
+    back = next(read_sequence_bag(path)).image_rgb
+    assert np.abs(back.astype(int) - frames[0].image_rgb).mean() < 6.0
+    with pytest.raises(BagError, match='cannot write RGB'):
+        SequenceBagWriter(tmp_path / 'bad', CAM, encoding='mono8')

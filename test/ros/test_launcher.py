@@ -41,7 +41,7 @@ NODE_CLASSES = {'camera_node': CameraNode, 'segmentation_node': segmentation_nod
                 'lookup_node': lookup_node.LookupNode, 'ik_node': IKNode,
                 'hand_description_node': HandDescriptionNode}
 #: the parameters in which a node of the two-camera graph may differ from the one-camera one
-STEREO_PARAMETERS = {'calibration_file', 'extra_observation_topics'}
+STEREO_PARAMETERS = {'calibration_file', 'extra_observation_topics', 'camera_index'}
 
 
 def _write(tmp_path: Path, text: str) -> Path:
@@ -190,6 +190,10 @@ def test_stereo_launch_file_runs_the_two_camera_graph(monkeypatch: pytest.Monkey
         extra_topics = ik.get_parameter('extra_observation_topics').value
         ik_inputs = _topics(ik.subscriptions, HandObservation)
         assert ik_inputs == extra_topics                # one per extra camera, in rig order
+        # each extra camera's intrinsics: ik_node reads the CameraInfo its segmentation reads
+        assert {camera_topics(camera, index)[1] for index, camera in enumerate(rig)} <= {
+            sub.topic_name for sub in ik.subscriptions}
+        assert stereo[extra].get_parameter('camera_index').value == 1
         for index, seg in enumerate((stereo['/segmentation'], stereo[extra])):
             # input: the image and CameraInfo topics colorglove_make_bag writes for this camera
             assert sorted(s.topic_name for s in seg.subscriptions) == sorted(

@@ -134,7 +134,10 @@ def load_covariances(path: str | Path) -> IKCovariances:
 
 @dataclass(frozen=True)
 class IKConfig:
-    """Tracker options (see ``config/ik.yaml`` for the meaning of each)."""
+    """Tracker options (see ``config/ik.yaml`` for the meaning of each). Every pixel setting
+    (R, the gates, ``outlier_px``, ``min_blob_pixels``) is in pixels of a camera whose focal
+    length is ``reference_focal_px``; each camera uses them scaled by its own focal length
+    (``projection.pixel_scale``), so the pose does not depend on the image resolution."""
 
     enable_ik: bool = True
     enable_smoothing: bool = True
@@ -157,6 +160,7 @@ class IKConfig:
     max_gap_s: float = 0.25
     min_depth_m: float = 0.05
     constraint_model: str = 'patch'
+    reference_focal_px: float = 600.0
     finger_spread_gain: float = 1.0
     finger_spread_floor_rad: float = 0.13
     covariances: IKCovariances = field(default_factory=default_covariances)
@@ -213,6 +217,7 @@ _NUMBER_LIMITS: dict[str, tuple[type, float, float, bool]] = {
     'extra_gate_px': (float, 0.0, 1e4, False), 'extra_shift_max_px': (float, 0.0, 1e4, False),
     'extra_inlier_px': (float, 0.0, 1e4, False), 'outlier_px': (float, 0.0, 1e4, False),
     'max_gap_s': (float, 0.0, 3600.0, True), 'min_depth_m': (float, 0.0, 10.0, True),
+    'reference_focal_px': (float, 0.0, 1e5, True),
     'finger_spread_gain': (float, 0.0, 1e3, False),
     'finger_spread_floor_rad': (float, 0.0, math.pi, True),
 }

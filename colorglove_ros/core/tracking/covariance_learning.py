@@ -15,7 +15,7 @@ from colorglove_ros.core.geometry import align_rotation_vector
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
 from colorglove_ros.core.tracking.config import IKCovariances
 from colorglove_ros.core.tracking.kinematics import FastKinematics
-from colorglove_ros.core.tracking.projection import project_correspondences
+from colorglove_ros.core.tracking.projection import per_point_cameras, project_correspondences
 from colorglove_ros.core.tracking.tracker import IKResult
 from colorglove_ros.core.tracking.types import Correspondences
 
@@ -85,13 +85,16 @@ def _rot_aligned(q: np.ndarray, ref: np.ndarray) -> np.ndarray:
 
 def learn_covariances(sequences: Sequence[Sequence[TrainingFrame]], model: HandModel,
                       cameras: Sequence[PinholeCamera], window: int = LOCAL_WINDOW,
-                      floors: CovarianceFloors | None = None
+                      floors: CovarianceFloors | None = None,
+                      reference_focal_px: float | None = None
                       ) -> tuple[IKCovariances, dict[str, Any]]:
     """Learn diagonal R, Q, P (Wang-Popovic 5.3-5.4). The reference pose of a frame is its
     ground truth when every frame of the sequence has one, else the ``window``-frame local
     average of the tracker's estimates (the paper's "covariances about a local average"):
     R from the constraint residuals at the reference, Q from blended minus reference,
     P from the previous frame about the current local average. Variances are floored.
+    Residuals are measured in pixels of a camera of focal length ``reference_focal_px``
+    (``IKConfig.reference_focal_px``; None: each camera's own pixels).
     Returns the covariances and counts (frames, residuals, sequences used)."""
     floors = floors or CovarianceFloors()
     kin = FastKinematics(model)
@@ -120,7 +123,8 @@ def learn_covariances(sequences: Sequence[Sequence[TrainingFrame]], model: HandM
             corr = seq[i].correspondences
             if len(corr):
                 pix, _, _ = project_correspondences(kin, cameras, corr, ref[i])
-                residuals.append(corr.target_px - pix)
+                scale = per_point_cameras(cameras, corr).axis_scale(reference_focal_px)
+                residuals.append((corr.target_px - pix) / scale)
         q_devs.append(_rot_aligned(blend[ok], ref[ok]) - ref[ok])
         p_devs.append(_p_deviations(traj, window))
         n_frames += int(ok.sum())

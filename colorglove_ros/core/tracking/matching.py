@@ -42,13 +42,13 @@ def match_by_color(pred_xy: np.ndarray, pred_color: np.ndarray, blob_xy: np.ndar
 _SAME_PIXEL = 1e-6
 
 
-def _usable(blobs: Blobs, min_pixels: int) -> np.ndarray:
+def _usable(blobs: Blobs, min_pixels: float) -> np.ndarray:
     return np.flatnonzero(blobs.pixel_count >= min_pixels)
 
 
 def match_primary(constraints: ProjectionConstraints, blobs: Blobs, crop: Any,
                   camera: PinholeCamera, mesh: MeshLike, gate_tiny_px: float = 8.0,
-                  gate_min_px: float = 10.0, min_blob_pixels: int = 4) -> Correspondences:
+                  gate_min_px: float = 10.0, min_blob_pixels: float = 4) -> Correspondences:
     """Match the entry's constraints (tiny-image centroids mapped to full-image pixels with
     the query's crop, ``full = offset + scale * tiny``) to same-colour blobs of the primary
     camera; targets are the undistorted blob centroids."""
@@ -99,7 +99,7 @@ def _make_corr(cam: int, constraints: ProjectionConstraints, k: np.ndarray, targ
 def match_extra_camera(cam_index: int, camera: PinholeCamera, constraints: ProjectionConstraints,
                        predicted_world: np.ndarray, blobs: Blobs, mesh: MeshLike,
                        gate_px: float = 30.0, shift_max_px: float = 150.0,
-                       inlier_px: float = 15.0, min_blob_pixels: int = 4,
+                       inlier_px: float = 15.0, min_blob_pixels: float = 4,
                        min_depth_m: float = 0.05,
                        normals_world: np.ndarray | None = None) -> Correspondences:
     """Match constraints to same-colour blobs of a camera with no lookup: project the

@@ -13,9 +13,20 @@ from colorglove_ros.core.tracking.kinematics import FastKinematics
 from colorglove_ros.core.tracking.types import Correspondences, IKError
 
 __all__ = [
-    'PerPointCameras', 'per_point_cameras', 'constraint_points', 'project_correspondences',
-    'reprojection_errors', 'estimate_translation',
+    'PerPointCameras', 'per_point_cameras', 'pixel_scale', 'constraint_points',
+    'project_correspondences', 'reprojection_errors', 'estimate_translation',
 ]
+
+
+def pixel_scale(camera: PinholeCamera, reference_focal_px: float | None) -> float:
+    """How many of ``camera``'s pixels span what one pixel spans for a camera of focal
+    length ``reference_focal_px``: sqrt(fx fy) / reference_focal_px (1 for None). A pixel
+    distance set for the reference camera is this many times longer in ``camera``'s image
+    (an area the square), so a frame and its upscale with scaled intrinsics are treated
+    alike."""
+    if reference_focal_px is None:
+        return 1.0
+    return float(np.sqrt(camera.fx * camera.fy)) / float(reference_focal_px)
 
 
 @dataclass(frozen=True)
@@ -26,6 +37,13 @@ class PerPointCameras:
     t: np.ndarray       # (K, 3)
     f: np.ndarray       # (K, 2)
     c: np.ndarray       # (K, 2)
+
+    def axis_scale(self, reference_focal_px: float | None) -> np.ndarray:
+        """(K, 2) each point's camera's pixels per reference pixel along x and y (focal
+        length over ``reference_focal_px``; ones for None)."""
+        if reference_focal_px is None:
+            return np.ones_like(self.f)
+        return self.f / float(reference_focal_px)
 
 
 def per_point_cameras(cameras: Sequence[PinholeCamera], corr: Correspondences) -> PerPointCameras:
@@ -94,13 +112,16 @@ def reprojection_errors(kin: FastKinematics, cameras: Sequence[PinholeCamera],
 def estimate_translation(kin: FastKinematics, cameras: Sequence[PinholeCamera],
                          corr: Correspondences, q: np.ndarray,
                          min_depth_m: float = 0.05, prior_var: np.ndarray | None = None,
-                         r_var_px2: float = 9.0, outlier_px: float = 0.0) -> np.ndarray:
+                         r_var_px2: float = 9.0, outlier_px: float = 0.0,
+                         reference_focal_px: float | None = None) -> np.ndarray:
     """Keep rotation and fingers of ``q`` and solve the wrist translation that best
     projects the constraint points onto their targets: linear least squares on the
     cross-multiplied projection equations of all cameras, each row weighted as a pixel
     residual of variance ``r_var_px2``, optionally regularised toward ``q[0:3]`` with
     per-axis variances ``prior_var`` (m^2), and refitted once without the constraints
-    farther than ``outlier_px`` (0 = no trimming). Returns the new pose; raises
+    farther than ``outlier_px`` (0 = no trimming). ``r_var_px2`` and ``outlier_px`` are
+    pixels of a camera of focal length ``reference_focal_px`` (:func:`pixel_scale`; None:
+    each camera's own pixels). Returns the new pose; raises
     :class:`IKError` if the points are too few or the solution is behind a camera."""
     if len(corr) < 2:
         raise IKError('translation needs at least 2 correspondences')
@@ -112,7 +133,9 @@ def estimate_translation(kin: FastKinematics, cameras: Sequence[PinholeCamera],
     G = pp.R[:, :2, :] - coef[:, :, None] * pp.R[:, 2:3, :]                 # (K, 2, 3)
     y = -np.einsum('kij,kj->ki', G, p) - (pp.t[:, :2] - coef * pp.t[:, 2:3])
     _, _, depth = _project_points(pp, p, None)
-    w = (pp.f / np.maximum(depth, min_depth_m)[:, None]) ** 2 / r_var_px2  # residual * f / z
+    scale = pp.axis_scale(reference_focal_px)                               # (K, 2)
+    # a row's residual in reference pixels is (f / scale) / z times its value
+    w = (pp.f / scale / np.maximum(depth, min_depth_m)[:, None]) ** 2 / r_var_px2
     A, y, w = G.reshape(-1, 3), y.reshape(-1), w.reshape(-1)
     reg = np.zeros((3, 3)) if prior_var is None else np.diag(1.0 / np.asarray(prior_var, float))
     keep = np.ones(len(A), dtype=bool)
@@ -127,7 +150,7 @@ def estimate_translation(kin: FastKinematics, cameras: Sequence[PinholeCamera],
         if outlier_px <= 0:
             break
         pix, _, _ = _project_points(pp, p + dt, None)
-        good = np.linalg.norm(pix - corr.target_px, axis=1) <= outlier_px
+        good = np.linalg.norm((pix - corr.target_px) / scale, axis=1) <= outlier_px
         if good.all() or good.sum() < 3:
             break
         keep = np.repeat(good, 2)                    # rows x0, y0, x1, y1, ...

@@ -54,21 +54,24 @@ def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Corres
              q_init: np.ndarray, q_blend: np.ndarray, cov: IKCovariances,
              q_prev: np.ndarray | None = None, max_iterations: int = 6,
              lambda_init: float = 1e-3, step_tol: float = 1e-5,
-             min_depth_m: float = 0.05, cost_tol: float = 1e-4) -> IKSolution:
+             min_depth_m: float = 0.05, cost_tol: float = 1e-4,
+             reference_focal_px: float | None = None) -> IKSolution:
     """Minimise |f(q) - c|^2_{R^-1} + |q - q_b|^2_{Q^-1} (+ |q - q_prev|^2_{P^-1}) by
     Levenberg-damped Gauss-Newton steps
     dq = (J^T R^-1 J + Q^-1 + P^-1 + lambda diag)^-1 (J^T R^-1 (c - f) + Q^-1 (q_b - q)
     + P^-1 (q_prev - q)), projected onto the joint limits (DOFs at a bound whose step
     points outward are frozen). ``max_iterations`` counts linear solves; it stops early when
     the largest DOF change is below ``step_tol`` or the cost falls by less than the
-    fraction ``cost_tol``."""
+    fraction ``cost_tol``. R is in pixels of a camera of focal length ``reference_focal_px``
+    (each residual divided by its camera's ``pixel_scale`` per axis; None: each camera's own
+    pixels), so the pose does not depend on the image resolution."""
     q = kin.clamp(np.asarray(q_init, dtype=float))
     q_blend = np.asarray(q_blend, dtype=float)
     q_inv = 1.0 / cov.q_var
     p_inv = 1.0 / cov.p_var if q_prev is not None else None
-    w = np.tile(1.0 / cov.r_var_px2, len(corr))
-    target = corr.target_px.reshape(-1)
     per_point = per_point_cameras(cameras, corr)
+    w = (1.0 / cov.r_var_px2 / per_point.axis_scale(reference_focal_px) ** 2).reshape(-1)
+    target = corr.target_px.reshape(-1)
 
     def evaluate(qq: np.ndarray, jacobian: bool) -> tuple[float, np.ndarray, np.ndarray | None]:
         pix, J, depth = project_correspondences(kin, cameras, corr, qq, jacobian, per_point)

@@ -22,7 +22,11 @@ from colorglove_ros.core.tracking.matching import (
     match_primary,
 )
 from colorglove_ros.core.tracking.patch_surface import PatchSurface
-from colorglove_ros.core.tracking.projection import estimate_translation, reprojection_errors
+from colorglove_ros.core.tracking.projection import (
+    estimate_translation,
+    pixel_scale,
+    reprojection_errors,
+)
 from colorglove_ros.core.tracking.solver import IKSolution, solve_ik
 from colorglove_ros.core.tracking.types import (
     Blobs,
@@ -190,9 +194,25 @@ class HandTracker:
         """Use ``camera`` as camera 0 from now on (new intrinsics or image size of the same,
         fixed camera, e.g. from its CameraInfo; identity extrinsics). The track restarts: the
         previous pose was fitted with the old model."""
-        _check_primary(camera)
-        self.cameras = (camera, *self.cameras[1:])
+        self.set_camera(0, camera)
+
+    def set_camera(self, index: int, camera: PinholeCamera) -> None:
+        """Use ``camera`` as camera ``index`` from now on (new intrinsics or image size of the
+        same, fixed camera, e.g. from its CameraInfo, with its calibrated extrinsics). The
+        track restarts: the previous pose was fitted with the old model."""
+        if not 0 <= index < len(self.cameras):
+            raise IKError(f'camera index {index} outside [0, {len(self.cameras)})')
+        if index == 0:
+            _check_primary(camera)
+        cameras = list(self.cameras)
+        cameras[index] = camera
+        self.cameras = tuple(cameras)
         self.reset()
+
+    def _pixel_scale(self, index: int) -> float:
+        """Camera ``index``'s pixels per pixel of the configuration's reference focal
+        length (the factor on its pixel gates; areas take the square)."""
+        return pixel_scale(self.cameras[index], self.config.reference_focal_px)
 
     def reset(self) -> None:
         """Forget the previous pose (hand lost, long gap, new sequence)."""
@@ -224,10 +244,11 @@ class HandTracker:
             obs = observations[ci] if ci < len(observations) else None
             if obs is None or not obs.hand_found or len(obs.blobs) == 0:
                 continue
+            s = self._pixel_scale(ci)
             out.append(match_extra_camera(
-                ci, self.cameras[ci], cons, pw, obs.blobs, self.mesh, cfg.extra_gate_px,
-                cfg.extra_shift_max_px, cfg.extra_inlier_px, cfg.min_blob_pixels,
-                cfg.min_depth_m, normals))
+                ci, self.cameras[ci], cons, pw, obs.blobs, self.mesh, cfg.extra_gate_px * s,
+                cfg.extra_shift_max_px * s, cfg.extra_inlier_px * s,
+                cfg.min_blob_pixels * s * s, cfg.min_depth_m, normals))
         out = Correspondences.concat(out)
         return self._with_patch_points(out, q) if patch_points else out
 
@@ -236,7 +257,7 @@ class HandTracker:
         cfg = self.config
         return solve_ik(self.kin, self.cameras, corr, q_init, priors.q_b, priors.covariances,
                         priors.q_prev, iterations, cfg.lambda_init, cfg.step_tol,
-                        cfg.min_depth_m, cfg.cost_tol)
+                        cfg.min_depth_m, cfg.cost_tol, cfg.reference_focal_px)
 
     def _solve_into(self, fit: _FrameFit, corr: Correspondences, q_init: np.ndarray,
                     iterations: int, priors: _FramePriors) -> None:
@@ -290,9 +311,10 @@ class HandTracker:
         cameras' correspondences matched at the last pose (else None)."""
         cfg = self.config
         primary = observations[0]
+        s = self._pixel_scale(0)
         corr0 = match_primary(prior.constraints, primary.blobs, primary.crop, self.cameras[0],
-                              self.mesh, cfg.gate_tiny_px, cfg.gate_min_px,
-                              cfg.min_blob_pixels)
+                              self.mesh, cfg.gate_tiny_px, cfg.gate_min_px * s,
+                              cfg.min_blob_pixels * s * s)
         # IK on several cameras, tracking: the other cameras are matched at the last pose and
         # every camera's visible patches predicted there, in one pass (the blend is the
         # coarser guess)
@@ -312,7 +334,7 @@ class HandTracker:
                 return estimate_translation(
                     self.kin, self.cameras, corr0, q_blend, cfg.min_depth_m,
                     cfg.covariances.q_var[0:3], float(cfg.covariances.r_var_px2.mean()),
-                    cfg.outlier_px)
+                    cfg.outlier_px, cfg.reference_focal_px)
             except IKError:
                 return q_blend
         return q_blend
@@ -368,7 +390,8 @@ class HandTracker:
         enough remain."""
         cfg = self.config
         if cfg.outlier_px > 0 and fit.err is not None:
-            bad = fit.err > cfg.outlier_px
+            scale = np.array([self._pixel_scale(c) for c in range(len(self.cameras))])
+            bad = fit.err > cfg.outlier_px * scale[fit.corr.camera]
             if bad.any() and int((~bad).sum()) >= cfg.min_constraints:
                 fit.rejected = int(bad.sum())
                 self._solve_into(fit, fit.corr.select(~bad), fit.q, cfg.refine_iterations,
@@ -395,4 +418,4 @@ class HandTracker:
             corr.counts(n_cam), priors.q_prev is not None and fit.iterations > 0, was_reset,
             corr, fit.rejected, priors.q_b.copy(),
             explained_blob_share(corr, primary_blobs, self.cameras[0],
-                                 self.config.min_blob_pixels))
+                                 self.config.min_blob_pixels * self._pixel_scale(0) ** 2))

@@ -10,7 +10,7 @@ from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
-from colorglove_ros.core.camera import CalibrationError, load_calibration
+from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.frame_sources import FrameSourceError, open_frame_source
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import camera_to_camera_info_msg
@@ -18,8 +18,10 @@ from colorglove_ros.ros.diagnostics import FrameStats
 from colorglove_ros.ros.image import array_to_image
 from colorglove_ros.ros.nodes.common import (
     PosePublishers,
+    calibrated_camera,
     declare,
     declare_calibration_file,
+    declare_camera_index,
     run_node,
     startup_errors,
 )
@@ -37,9 +39,8 @@ class CameraNode(Node):
         source = declare(self, 'source', 'synthetic',
                          'synthetic | V4L2 index or /dev/videoN | video file | image folder')
         calibration_file = declare_calibration_file(self, 'camera calibration YAML')
-        camera_index = declare(self, 'camera_index', 0,
-                               'which camera of the calibration this is (intrinsics, frame_id)',
-                               0, 63)
+        camera_index = declare_camera_index(
+            self, 'which camera of the calibration this is (intrinsics, frame_id)')
         rate_hz = declare(self, 'rate_hz', 30.0, 'publish rate, frames per second', 0.1, 240.0)
         seed = declare(self, 'synthetic_seed', 1, 'seed of the synthetic sequence', 0, 2**31 - 1)
         num_frames = declare(self, 'synthetic_frames', 300, 'synthetic sequence length', 1, 10**6)
@@ -50,14 +51,11 @@ class CameraNode(Node):
                                   'stop publishing after this many frames (0 = never)', 0, 10**9)
         with startup_errors('camera_node'):
             calibration = load_calibration(resolve_path(calibration_file))
-            if camera_index >= len(calibration.cameras):
-                raise CalibrationError(f'camera_index {camera_index}, but {calibration_file} '
-                                       f'lists {len(calibration.cameras)} camera(s)')
             if camera_index > 0 and source == 'synthetic':
                 raise FrameSourceError(
                     'the synthetic source renders camera 0 only; for synchronised views of '
                     'several cameras play a bag from colorglove_make_bag --calibration')
-            self.camera = calibration.cameras[camera_index]
+            self.camera = calibrated_camera(calibration, camera_index, calibration_file)
             self.source = open_frame_source(source, self.camera, seed=seed, num_frames=num_frames,
                                             loop=loop, hand_length_m=calibration.hand_length_m,
                                             prerender=prerender)

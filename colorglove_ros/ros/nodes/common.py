@@ -2,7 +2,7 @@
 topics (publishing a pose, subscribing to one) and the Jazzy ``main`` pattern."""
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any
 
@@ -24,7 +24,12 @@ from sensor_msgs.msg import CameraInfo, JointState
 from std_msgs.msg import Header, String
 from visualization_msgs.msg import MarkerArray
 
-from colorglove_ros.core.camera import PinholeCamera, load_calibration
+from colorglove_ros.core.camera import (
+    Calibration,
+    CalibrationError,
+    PinholeCamera,
+    load_calibration,
+)
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, HAND_LENGTH_RANGE_M
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.frames import (
@@ -47,7 +52,9 @@ __all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'run_node',
            'DEFAULT_CALIBRATION_FILE', 'DEFAULT_DATABASE_CONFIG', 'declare_database',
            'HAND_LENGTH_RANGE_M', 'startup_errors',
            'declare_calibration_file', 'declare_hand_length', 'declare_frame_prefix',
-           'CAMERA_INFO_TOPIC', 'declare_frame_camera', 'declare_topic_list',
+           'CAMERA_INFO_TOPIC', 'OBSERVATION_TOPIC', 'declare_frame_camera',
+           'declare_topic_list', 'extra_camera_info_topic', 'extra_frame_cameras',
+           'declare_camera_index', 'calibrated_camera',
            'hand_model_from_calibration', 'JOINT_STATES_TOPIC', 'WRIST_POSE_TOPIC',
            'MARKERS_TOPIC', 'TRACKING_STATUS_TOPIC',
            'PosePublishers', 'TrackerOutputs', 'subscribe_tracked_pose']
@@ -173,6 +180,8 @@ def declare_frame_prefix(node: Node, executable: str) -> str:
 
 CAMERA_INFO_TOPIC = 'camera/camera_info'
 """CameraInfo of camera 0 (remap it to the driver's), read by the glove pipeline nodes."""
+OBSERVATION_TOPIC = 'hand/observation'
+"""What segmentation_node publishes (``HandObservation``), relative to its namespace."""
 
 
 def declare_frame_camera(node: Node, calibrated: PinholeCamera) -> FrameCamera:
@@ -211,6 +220,54 @@ def declare_topic_list(node: Node, name: str, default: list[str], description: s
         node.set_parameters([Parameter(name, Parameter.Type.STRING_ARRAY, value)])
     node.set_descriptor(name, descriptor(True))
     return [str(topic) for topic in value]
+
+
+def extra_camera_info_topic(observation_topic: str) -> str:
+    """The CameraInfo topic of the extra camera whose observations come on
+    ``observation_topic``: a segmentation_node in namespace ``NS`` publishes ``NS/``
+    :data:`OBSERVATION_TOPIC` and reads ``NS/`` :data:`CAMERA_INFO_TOPIC` (the topics of a
+    camera in a bag, ``ros.bags.camera_topics``). Raises :class:`StartupError` for a topic of
+    another form."""
+    if observation_topic != OBSERVATION_TOPIC \
+            and not observation_topic.endswith('/' + OBSERVATION_TOPIC):
+        raise StartupError(
+            f'extra observation topic {observation_topic!r} does not end in '
+            f'{OBSERVATION_TOPIC!r}: its camera\'s CameraInfo topic (NS/{CAMERA_INFO_TOPIC}) '
+            'cannot be told; remap the segmentation output, or set use_camera_info false')
+    return observation_topic[:-len(OBSERVATION_TOPIC)] + CAMERA_INFO_TOPIC
+
+
+def extra_frame_cameras(node: Node, calibrated: Sequence[PinholeCamera],
+                        observation_topics: Sequence[str], use_camera_info: bool
+                        ) -> list[FrameCamera]:
+    """One :class:`FrameCamera` per extra camera (cameras 1.. of the calibration, in the order
+    of their ``observation_topics``): with ``use_camera_info`` its intrinsics come from its own
+    CameraInfo (:func:`extra_camera_info_topic`), extrinsics staying the calibration's; else the
+    calibrated camera, whose frame_id the observations must carry too."""
+    frame_cameras = []
+    for camera, topic in zip(calibrated, observation_topics, strict=True):
+        frame_camera = FrameCamera(camera, use_camera_info, calibrated_frame_id=True)
+        if use_camera_info:
+            node.create_subscription(CameraInfo, extra_camera_info_topic(topic),
+                                     frame_camera.set_camera_info, 10)
+        frame_cameras.append(frame_camera)
+    return frame_cameras
+
+
+def declare_camera_index(node: Node, description: str) -> int:
+    """Declare the ``camera_index`` parameter (which camera of ``calibration_file`` the node
+    serves); return it (:func:`calibrated_camera` picks the camera)."""
+    return declare(node, 'camera_index', 0, description, 0, 63)
+
+
+def calibrated_camera(calibration: Calibration, index: int, calibration_file: str
+                      ) -> PinholeCamera:
+    """Camera ``index`` of ``calibration``; :class:`CalibrationError` naming the file if it
+    lists fewer cameras."""
+    if not 0 <= index < len(calibration.cameras):
+        raise CalibrationError(f'camera_index {index}, but {calibration_file} lists '
+                               f'{len(calibration.cameras)} camera(s)')
+    return calibration.cameras[index]
 
 
 def hand_model_from_calibration(node: Node, executable: str) -> HandModel:

@@ -4,9 +4,11 @@ one or several calibrated cameras.
 
 Camera 0's intrinsics come from the newest ``camera/camera_info`` (``use_camera_info``, the
 default) or from ``calibration_file``; candidates whose observation's image size or frame_id
-does not match are refused ('no hand: camera: ...'). The extra cameras' intrinsics and
-extrinsics, and the user's hand (length and finger length factors), come from
-``calibration_file``."""
+does not match are refused ('no hand: camera: ...'). Each extra camera's intrinsics likewise
+come from its own CameraInfo (``NS/camera/camera_info`` for observations on
+``NS/hand/observation``) or from ``calibration_file``, and an observation that does not match
+is ignored; the extra cameras' extrinsics and the user's hand (length and finger length
+factors) come from ``calibration_file``."""
 from __future__ import annotations
 
 import sys
@@ -56,6 +58,7 @@ from colorglove_ros.ros.nodes.common import (
     declare_frame_camera,
     declare_frame_prefix,
     declare_topic_list,
+    extra_frame_cameras,
     run_node,
     startup_errors,
 )
@@ -135,6 +138,9 @@ class IKNode(Node):
                 f'{len(topics)} extra observation topic(s) given; set extra_observation_topics')
         self.extra_observations: list[deque[HandObservation]] = [deque(maxlen=30)
                                                                  for _ in topics]
+        with startup_errors('ik_node'):
+            self.extra_frame_cameras = extra_frame_cameras(
+                self, self.cameras[1:], topics, self.frame_camera.use_camera_info)
         for index, topic in enumerate(topics):
             self.create_subscription(HandObservation, topic,
                                      lambda msg, i=index: self.on_extra_observation(i, msg), 10)
@@ -216,23 +222,35 @@ class IKNode(Node):
             return None
         return match
 
+    def _extra_camera(self, index: int, observation: HandObservation) -> PinholeCamera | None:
+        """Extra camera ``index``'s model for ``observation`` (its CameraInfo's or the
+        calibrated one; the tracker switches to it when it changed), or None when the
+        observation's size or frame_id does not match it (logged)."""
+        camera = self.extra_frame_cameras[index - 1].camera_for(
+            observation.image_width, observation.image_height, observation.header.frame_id)
+        if isinstance(camera, NoHand):
+            self.get_logger().warn(f'observation of camera {index} ignored: {camera.reason}',
+                                   throttle_duration_sec=1.0)
+            return None
+        if camera is not self.tracker.cameras[index]:
+            self.tracker.set_camera(index, camera)
+        return camera
+
     def _extra_camera_observations(self, stamp: float) -> list[CameraObservation]:
         """The extra cameras' observations of the frame at ``stamp``; a camera with none
-        matching in time, or whose frame_id is not its calibrated one, did not see the hand."""
+        matching in time, or whose size or frame_id does not match its camera model, did not
+        see the hand."""
         observations = []
-        for index, camera in enumerate(self.cameras[1:]):
-            match = self._matching_observation(index, stamp)
-            if match is not None and match.header.frame_id != camera.frame_id:
-                self.get_logger().warn(
-                    f'observation of camera {index + 1} has frame_id '
-                    f'{match.header.frame_id!r}, calibrated {camera.frame_id!r}: ignored',
-                    throttle_duration_sec=1.0)
+        for index in range(1, len(self.cameras)):
+            match = self._matching_observation(index - 1, stamp)
+            camera = None if match is None else self._extra_camera(index, match)
+            if camera is None:
                 match = None
             if match is not None and match.hand_found:
                 try:
                     check_observation_msg(match, (camera.width, camera.height))
                 except InvalidInputError as exc:
-                    self.get_logger().warn(f'observation of camera {index + 1} ignored: {exc}',
+                    self.get_logger().warn(f'observation of camera {index} ignored: {exc}',
                                            throttle_duration_sec=1.0)
                     match = None
             observations.append(CameraObservation(hand_found=False) if match is None

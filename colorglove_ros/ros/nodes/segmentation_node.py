@@ -3,10 +3,13 @@ compressed``) -> ``HandObservation`` (per-pixel glove colour classification, mea
 40x40 tiny label image, patch blobs).
 
 A frame is segmented only when its camera model is known: with ``use_camera_info`` (default)
-the newest ``camera/camera_info`` must have the image's size and frame_id, else camera 0 of
-``calibration_file`` its size; other frames give 'camera: ...' observations without a hand.
-The segmenter's settings (``segmenter.<name>``) and ``publish_debug_image`` can be changed at
-run time; health goes to ``/diagnostics``."""
+the newest ``camera/camera_info`` must have the image's size and frame_id, else camera
+``camera_index`` of ``calibration_file`` its size; other frames give 'camera: ...'
+observations without a hand. An extra camera's segmentation_node runs in the camera's
+namespace ``NS`` (``NS/camera/image_raw``, ``NS/camera/camera_info`` -> ``NS/hand/observation``,
+which ik_node's ``extra_observation_topics`` names). The segmenter's settings
+(``segmenter.<name>``) and ``publish_debug_image`` can be changed at run time; health goes to
+``/diagnostics``."""
 from __future__ import annotations
 
 import sys
@@ -47,9 +50,12 @@ from colorglove_ros.ros.image import (
 )
 from colorglove_ros.ros.nodes.common import (
     LATEST_IMAGE,
+    OBSERVATION_TOPIC,
     StartupError,
+    calibrated_camera,
     declare,
     declare_calibration_file,
+    declare_camera_index,
     declare_frame_camera,
     run_node,
     startup_errors,
@@ -84,7 +90,10 @@ class SegmentationNode(Node):
                             'sensor_msgs/CompressedImage (jpeg, png) on '
                             'camera/image_raw/compressed, as image_transport names it')
         calibration_file = declare_calibration_file(
-            self, 'camera calibration YAML (camera 0: the image size expected when '
+            self, 'camera calibration YAML (camera camera_index: the image size expected when '
+                  'use_camera_info is false)')
+        camera_index = declare_camera_index(
+            self, 'which camera of calibration_file this node segments (used when '
                   'use_camera_info is false)')
         if transport not in IMAGE_TRANSPORTS:
             raise StartupError(f'segmentation_node cannot start: image_transport {transport!r} '
@@ -95,17 +104,18 @@ class SegmentationNode(Node):
             raise StartupError(f'segmentation_node cannot start: {exc}') from exc
         with startup_errors('segmentation_node', ValueError):
             calibration = load_calibration(resolve_path(calibration_file))
+            camera = calibrated_camera(calibration, camera_index, calibration_file)
         self.live = LiveParameters(self)
         self.publish_debug = self.live.declare(
             'publish_debug_image', False,
             'also publish the per-pixel classification as an image on hand/segmentation_debug',
             self._check_publish_debug)
         self._declare_segmenter_settings()
-        self.frame_camera = declare_frame_camera(self, calibration.primary)
+        self.frame_camera = declare_frame_camera(self, camera)
         self.stats = FrameStats({'camera': self.frame_camera.refused})
-        self.diagnostics = DiagnosticsPublisher(self, 'segmentation', calibration.primary.frame_id,
+        self.diagnostics = DiagnosticsPublisher(self, 'segmentation', camera.frame_id,
                                                 self.stats)
-        self.publisher = self.create_publisher(HandObservation, 'hand/observation', 10)
+        self.publisher = self.create_publisher(HandObservation, OBSERVATION_TOPIC, 10)
         self.debug_publisher = self.create_publisher(Image, 'hand/segmentation_debug', 2)
         if transport == 'compressed':
             topic = f'{self.resolve_topic_name(IMAGE_TOPIC)}/compressed'

@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import copy
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
+from geometry_msgs.msg import PoseStamped
 from node_fixtures import (
     SMALL_DATABASE_EXPLAINED_SHARE,
     NodeAssets,
@@ -24,14 +26,17 @@ from node_fixtures import (
     running,
 )
 from repo_paths import CONFIG_DIR
+from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import String
 
-from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.camera import PinholeCamera, load_calibration
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.segmentation.segmenter import load_segmenter
 from colorglove_ros.core.synthetic import frames as synth
 from colorglove_ros.core.synthetic.conditions import sample_conditions
+from colorglove_ros.ros.conversions import camera_to_camera_info_msg
 from colorglove_ros.ros.launcher import NodeSpec
+from colorglove_ros.ros.nodes.ik_node import IKNode
 from colorglove_ros.ros.pipeline_run import PipelineRun, bag_feed, run_pipeline, summarize
 from colorglove_ros.tools import make_bag
 
@@ -102,6 +107,84 @@ def test_ik_node_waits_for_the_second_view_of_a_frame(
     assert status[0].data.startswith('tracking:'), status[0].data
     assert _second_camera_constraints(status[0].data) > 0
     assert _second_camera_constraints(status[1].data) == 0
+
+
+def _upscaled_camera(camera: PinholeCamera, k: int = 2) -> PinholeCamera:
+    """``camera`` for its images resized k times (pixel centres: x' = k x + (k - 1) / 2)."""
+    shift = 0.5 * (k - 1)
+    return replace(camera, width=camera.width * k, height=camera.height * k,
+                   fx=camera.fx * k, fy=camera.fy * k, cx=camera.cx * k + shift,
+                   cy=camera.cy * k + shift)
+
+
+def _upscaled_observation(msg: HandObservation, k: int = 2) -> HandObservation:
+    """What the segmentation reports of the k times resized image."""
+    shift = 0.5 * (k - 1)
+    big = copy.deepcopy(msg)
+    big.image_width, big.image_height = msg.image_width * k, msg.image_height * k
+    big.crop_scale = msg.crop_scale * k
+    big.crop_offset_x, big.crop_offset_y = (msg.crop_offset_x * k + shift,
+                                            msg.crop_offset_y * k + shift)
+    for blob in big.blobs:
+        blob.x, blob.y, blob.pixel_count = blob.x * k + shift, blob.y * k + shift, \
+            blob.pixel_count * k * k
+    big.glove_pixel_count = msg.glove_pixel_count * k * k
+    return big
+
+
+def _track_stereo_frame(database: Path, candidates: HandPoseCandidates,
+                        second: HandObservation, second_info: PinholeCamera | None
+                        ) -> tuple[str, float, IKNode]:
+    """One stereo frame through ik_node: with ``second_info`` every camera's intrinsics come
+    from its CameraInfo (camera 0's: the calibration's, camera2's: ``second_info`` on
+    /camera2/camera/camera_info), else from the calibration. Returns the status line, the
+    wrist depth and the node."""
+    use_info = second_info is not None
+    with running(ik_node(database, calibration_file=str(STEREO), publish_overlay=False,
+                         use_camera_info=use_info, extra_observation_topics=[SECOND_OBSERVATION],
+                         extra_observation_wait_s=0.5)) as h:
+        status = h.collect(String, 'hand/tracking_status')
+        wrist = h.collect(PoseStamped, 'hand/wrist_pose')
+        if use_info:
+            for topic, camera in (('camera/camera_info', RIG[0]),
+                                  (f'/{SECOND.name}/camera/camera_info', second_info)):
+                h.publisher(CameraInfo, topic).publish(
+                    camera_to_camera_info_msg(camera, header(50, 0, camera.frame_id)))
+            h.settle(0.3)
+        second_pub = h.publisher(HandObservation, SECOND_OBSERVATION)
+        candidates_pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
+        second_pub.publish(second)
+        h.settle(0.2)
+        line = h.exchange(candidates_pub, candidates, status, timeout=10.0)
+        h.settle(0.2)
+        return line.data, wrist[0].pose.position.z if wrist else float('nan'), h.nodes[0]
+
+
+def test_extra_camera_intrinsics_come_from_its_camera_info(
+        stereo_messages: tuple[HandPoseCandidates, HandObservation],
+        small_database_path: Path) -> None:
+    """With use_camera_info, camera2's intrinsics come from /camera2/camera/camera_info (its
+    extrinsics from the calibration): its view at twice the calibrated resolution is used and
+    gives the pose its calibrated view gives; a view that does not match its CameraInfo is
+    ignored and counted."""
+    candidates, second = stereo_messages
+    calibrated, z_calibrated, _ = _track_stereo_frame(small_database_path, candidates, second,
+                                                      None)
+    big = _upscaled_camera(SECOND)
+    from_info, z_info, node = _track_stereo_frame(small_database_path, candidates,
+                                                  _upscaled_observation(second), big)
+    assert calibrated.startswith('tracking:') and from_info.startswith('tracking:'), \
+        (calibrated, from_info)
+    assert _second_camera_constraints(from_info) == _second_camera_constraints(calibrated) > 0
+    assert abs(z_info - z_calibrated) < 1e-3, (z_calibrated, z_info)
+    used = node.tracker.cameras[1]
+    assert (used.width, used.fx, used.name) == (1280, big.fx, SECOND.name)
+    np.testing.assert_allclose(used.translation, SECOND.translation)
+    np.testing.assert_allclose(used.rotation, SECOND.rotation)
+    # the calibrated 640x480 view no longer matches camera2's CameraInfo
+    ignored, _, node = _track_stereo_frame(small_database_path, candidates, second, big)
+    assert _second_camera_constraints(ignored) == 0, ignored
+    assert node.extra_frame_cameras[0].refused == {'size': 1}
 
 
 def _run(assets: NodeAssets, bag: Path, two_cameras: bool) -> PipelineRun:
