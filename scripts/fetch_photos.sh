@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Install the Debian photos of config/photos.yaml into data/photos/ (synthetic backgrounds):
+# Install the Debian photos of colorglove_ros/config/photos.yaml into data/photos/ (synthetic backgrounds):
 # download the pinned Debian package with apt-get, unpack it with dpkg-deb, copy the listed
 # photos, and check every photo (pip-shipped ones too) against its sha256. Safe to run again:
 # nothing is downloaded when all photos are present and match. Fails loudly otherwise.
@@ -17,7 +17,7 @@ options=()
 if [ -n "${COLORGLOVE_PHOTO_MANIFEST:-}" ]; then options+=(--manifest "$COLORGLOVE_PHOTO_MANIFEST"); fi
 if [ -n "${COLORGLOVE_PHOTO_DIR:-}" ]; then options+=(--photo-dir "$COLORGLOVE_PHOTO_DIR"); fi
 photos() {
-    PYTHONPATH="$repo${PYTHONPATH:+:$PYTHONPATH}" "$PYTHON" -m colorglove_ros.core.synthetic.photos \
+    PYTHONPATH="$repo/colorglove_ros${PYTHONPATH:+:$PYTHONPATH}" "$PYTHON" -m colorglove_ros.core.synthetic.photos \
         ${options[@]+"${options[@]}"} "$@"
 }
 fail() { echo "fetch_photos: error: $*" >&2; exit 1; }

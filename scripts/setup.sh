@@ -27,7 +27,7 @@ build_interfaces() {
     local name=$1 source=$2
     echo "==> building $name into the venv"
     local build_dir=$repo/build/$name
-    mkdir -p "$repo/build"
+    mkdir -p "$repo/build" && touch "$repo/build/COLCON_IGNORE"
     cmake -S "$source" -B "$build_dir" \
         -DCMAKE_INSTALL_PREFIX="$venv" -DCMAKE_PREFIX_PATH="$venv" \
         -DPython3_EXECUTABLE="$venv/bin/python" -DBUILD_TESTING=OFF > "$build_dir.log" 2>&1 \
@@ -43,9 +43,9 @@ fi
 build_interfaces colorglove_msgs "$repo/colorglove_msgs"
 
 echo "==> installing colorglove_ros"
-python -m pip install --quiet --no-deps --no-build-isolation -e "$repo"
+python -m pip install --quiet --no-deps --no-build-isolation -e "$repo/colorglove_ros"
 
-echo "==> installing the photos of synthetic backgrounds (Debian package, see config/photos.yaml)"
+echo "==> installing the photos of synthetic backgrounds (Debian package, see colorglove_ros/config/photos.yaml)"
 PYTHON="$venv/bin/python" bash "$repo/scripts/fetch_photos.sh"
 
 python -c "import rclpy, colorglove_msgs.msg, tf2_msgs.msg, colorglove_ros; print('colorglove_ros ready in', '$venv')"

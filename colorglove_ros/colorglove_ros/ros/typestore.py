@@ -15,7 +15,7 @@ _MSG_PACKAGE = 'colorglove_msgs'
 
 def colorglove_msg_files() -> list[Path]:
     """The ``.msg`` files of colorglove_msgs (source checkout, else the installed share folder)."""
-    source = Path(__file__).resolve().parents[2] / _MSG_PACKAGE / 'msg'
+    source = Path(__file__).resolve().parents[3] / _MSG_PACKAGE / 'msg'
     if source.is_dir():
         return sorted(source.glob('*.msg'))
     from ament_index_python.packages import get_package_share_directory

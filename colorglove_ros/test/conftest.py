@@ -17,7 +17,7 @@ from colorglove_ros.ros.launcher import FASTDDS_PROFILE_VARIABLE
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from repo_paths import REPO_DIR  # noqa: E402
+from repo_paths import PKG_DIR  # noqa: E402
 from small_databases import SMALL_BUILD  # noqa: E402
 
 if TYPE_CHECKING:
@@ -36,7 +36,7 @@ def isolated_ros_domain(monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
     domain = str(100 + os.getpid() % 100)
     monkeypatch.setenv('ROS_DOMAIN_ID', domain)
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    monkeypatch.setenv(FASTDDS_PROFILE_VARIABLE, str(REPO_DIR / 'config' / 'fastdds_profile.xml'))
+    monkeypatch.setenv(FASTDDS_PROFILE_VARIABLE, str(PKG_DIR / 'config' / 'fastdds_profile.xml'))
     return dict(os.environ)
 
 

@@ -5,7 +5,7 @@ import ast
 import sys
 import xml.etree.ElementTree as ET
 
-from repo_paths import REPO_DIR
+from repo_paths import PKG_DIR
 
 # import name -> the rosdep key (rosdistro rosdep/python.yaml, or a ROS package) declaring it;
 # None: no rosdep key exists, installed by pip (said in a package.xml comment)
@@ -28,7 +28,7 @@ ROSDEP_KEYS = {
 
 def third_party_imports() -> set[str]:
     names = set()
-    for path in [*(REPO_DIR / 'colorglove_ros').rglob('*.py'), *(REPO_DIR / 'launch').glob('*.py')]:
+    for path in [*(PKG_DIR / 'colorglove_ros').rglob('*.py'), *(PKG_DIR / 'launch').glob('*.py')]:
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.Import):
                 names.update(a.name.split('.')[0] for a in node.names)
@@ -38,7 +38,7 @@ def third_party_imports() -> set[str]:
 
 
 def test_every_import_has_a_declared_rosdep_key() -> None:
-    root = ET.parse(REPO_DIR / 'package.xml').getroot()
+    root = ET.parse(PKG_DIR / 'package.xml').getroot()
     declared = {e.text for e in root if e.tag in ('depend', 'exec_depend', 'build_depend')}
     imports = third_party_imports()
     unknown = sorted(imports - set(ROSDEP_KEYS))

@@ -15,7 +15,7 @@ import rclpy
 from colorglove_msgs.msg import HandObservation
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from repo_paths import CONFIG_DIR, REPO_DIR, TEST_DIR
+from repo_paths import CONFIG_DIR, PKG_DIR, TEST_DIR
 
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.lookup.database import STANDARD_BUILD
@@ -185,7 +185,7 @@ def test_stereo_launch_file_runs_the_two_camera_graph(monkeypatch: pytest.Monkey
             assert {k for k in got if got[k] != expected[k]} <= STEREO_PARAMETERS, name
         for name in ('/lookup', '/ik'):
             calibration = Path(stereo[name].get_parameter('calibration_file').value)
-            assert (REPO_DIR / calibration).resolve() == STEREO_CALIBRATION, name
+            assert (PKG_DIR / calibration).resolve() == STEREO_CALIBRATION, name
         ik = stereo['/ik']
         extra_topics = ik.get_parameter('extra_observation_topics').value
         ik_inputs = _topics(ik.subscriptions, HandObservation)

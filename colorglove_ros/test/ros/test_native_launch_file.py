@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 import yaml
 from calibration_files import calibration_with_hand_length
-from repo_paths import CONFIG_DIR, REPO_DIR
+from repo_paths import CONFIG_DIR, PKG_DIR
 
 from colorglove_ros.core.hand.frames import finger_joint_names, hand_root_frame
 from colorglove_ros.core.hand.urdf import calibrated_hand_urdf
@@ -28,7 +28,7 @@ from colorglove_ros.ros.launcher import (
 )
 from colorglove_ros.ros.nodes.common import JOINT_STATES_TOPIC
 
-LAUNCH_FILE = REPO_DIR / 'launch' / 'colorglove.launch.py'
+LAUNCH_FILE = PKG_DIR / 'launch' / 'colorglove.launch.py'
 ARGUMENTS = {'image_topic', 'camera_info_topic', 'start_camera', 'namespace', 'frame_prefix',
              'fastdds_profile', 'params_file', 'use_robot_state_publisher', 'calibration_file'}
 
@@ -143,7 +143,7 @@ class PushRosNamespace(_Recorded):
 
 def get_package_share_directory(package_name: str) -> str:
     assert package_name == 'colorglove_ros'
-    return str(REPO_DIR)
+    return str(PKG_DIR)
 
 
 def _perform(value, context: _Context):
@@ -241,12 +241,12 @@ def test_defaults_start_the_package_camera_and_robot_state_publisher(launch) -> 
     assert set(launched.nodes) == {*TRACKERS, 'robot_state_publisher'}
     assert launched.namespace == ''
     assert launched.environment == {
-        FASTDDS_PROFILE_VARIABLE: str(REPO_DIR / 'config' / 'fastdds_profile.xml')}
+        FASTDDS_PROFILE_VARIABLE: str(PKG_DIR / 'config' / 'fastdds_profile.xml')}
     sections = yaml.safe_load((CONFIG_DIR / 'nodes.yaml').read_text())
     for name, executable in TRACKERS.items():
         node = launched.nodes[name]
         assert (node['package'], node['executable']) == ('colorglove_ros', executable)
-        assert (REPO_DIR / 'colorglove_ros' / 'ros' / 'nodes' / f'{executable}.py').is_file()
+        assert (PKG_DIR / 'colorglove_ros' / 'ros' / 'nodes' / f'{executable}.py').is_file()
         assert f'/**/{name}' in sections                 # nodes.yaml has its section
         assert node['remappings'] == [(CAMERA_IMAGE_TOPIC, CAMERA_IMAGE_TOPIC),
                                       (CAMERA_INFO_TOPIC, CAMERA_INFO_TOPIC)]
@@ -288,7 +288,7 @@ def test_without_robot_state_publisher_the_description_node_runs(launch) -> None
     assert set(launched.nodes) == {*TRACKERS, 'hand_description'}
     node = launched.nodes['hand_description']
     assert node['executable'] == 'hand_description_node'
-    assert (REPO_DIR / 'colorglove_ros' / 'ros' / 'nodes' / 'hand_description_node.py').is_file()
+    assert (PKG_DIR / 'colorglove_ros' / 'ros' / 'nodes' / 'hand_description_node.py').is_file()
     assert node['parameters'][1]['frame_prefix'] == 'left_'
 
 

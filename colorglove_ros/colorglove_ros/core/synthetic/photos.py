@@ -27,7 +27,7 @@ from colorglove_ros.core.colorimetry import LUMINANCE_WEIGHTS, srgb_to_linear
 from colorglove_ros.core.synthetic.conditions import SPLITS, SynthError
 from colorglove_ros.core.validation import check_known_keys
 from colorglove_ros.core.yaml_io import load_yaml_mapping
-from colorglove_ros.paths import share_dir
+from colorglove_ros.paths import data_dir, share_dir
 
 __all__ = [
     'PhotoError', 'PHOTO_FORMAT', 'PHOTO_FORMAT_VERSION', 'PHOTO_TAGS', 'SOURCE_KINDS',
@@ -119,7 +119,7 @@ def default_manifest_path() -> Path:
 
 def default_photo_dir() -> Path:
     """``data/photos`` of the package, where the 'deb' photos are installed."""
-    return share_dir() / 'data' / 'photos'
+    return data_dir() / 'photos'
 
 
 def _text(where: str, value: object) -> str:

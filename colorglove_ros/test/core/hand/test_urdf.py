@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import yourdfpy
-from repo_paths import REPO_DIR
+from repo_paths import PKG_DIR
 
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
 from colorglove_ros.core.hand.model import DIGITS, FINGER_DOF_NAMES, KEYPOINT_NAMES, HandModel
@@ -54,6 +54,6 @@ def test_forward_kinematics_agree(pair, seed: int) -> None:
 
 
 def test_committed_urdf_is_current() -> None:
-    committed = REPO_DIR / URDF_PATH
+    committed = PKG_DIR / URDF_PATH
     assert committed.exists(), 'regenerate with write_urdf(URDF_PATH)'
     assert committed.read_text() == urdf_string()

@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import yaml
-from repo_paths import REPO_DIR
+from repo_paths import PKG_DIR
 
 from colorglove_ros.core.camera import CalibrationError, load_calibration
 from colorglove_ros.core.file_checksums import STAMP_NAME, crc32_matches, crc32_of_file
@@ -149,7 +149,7 @@ CALIBRATION_CASES = {
 @pytest.mark.parametrize('case', sorted(CALIBRATION_CASES))
 def test_corrupt_calibration_refused_naming_file_and_problem(case: str, tmp_path: Path) -> None:
     key, value, message = CALIBRATION_CASES[case]
-    data = yaml.safe_load((REPO_DIR / 'config' / 'calibration.yaml').read_text())
+    data = yaml.safe_load((PKG_DIR / 'config' / 'calibration.yaml').read_text())
     if value is None:
         del data['cameras'][0][key]
     else:
@@ -162,7 +162,7 @@ def test_corrupt_calibration_refused_naming_file_and_problem(case: str, tmp_path
 
 
 def test_calibration_hand_length_nan_refused(tmp_path: Path) -> None:
-    data = yaml.safe_load((REPO_DIR / 'config' / 'calibration.yaml').read_text())
+    data = yaml.safe_load((PKG_DIR / 'config' / 'calibration.yaml').read_text())
     data['hand_length_m'] = math.nan
     path = tmp_path / 'hand.yaml'
     path.write_text(yaml.safe_dump(data))
