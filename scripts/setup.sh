@@ -43,7 +43,10 @@ fi
 build_interfaces colorglove_msgs "$repo/colorglove_msgs"
 
 echo "==> installing colorglove_ros"
-python -m pip install --quiet --no-deps --no-build-isolation -e "$repo/colorglove_ros"
+# compat: the package folder goes on sys.path, so from the repository root `colorglove_ros` is
+# the Python package colorglove_ros/colorglove_ros/, not the package folder colorglove_ros/
+python -m pip install --quiet --no-deps --no-build-isolation \
+    --config-settings editable_mode=compat -e "$repo/colorglove_ros"
 
 echo "==> installing the photos of synthetic backgrounds (Debian package, see colorglove_ros/config/photos.yaml)"
 PYTHON="$venv/bin/python" bash "$repo/scripts/fetch_photos.sh"

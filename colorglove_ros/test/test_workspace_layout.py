@@ -146,3 +146,12 @@ def test_the_package_imports_from_the_repository_root() -> None:
     out = subprocess.run([sys.executable, '-c', code], cwd=REPO_DIR, capture_output=True,
                          text=True, check=True).stdout.strip()
     assert Path(out) == PKG_DIR / 'colorglove_ros' / 'paths.py'
+
+
+def test_the_python_package_is_imported_from_the_repository_root() -> None:
+    """From the repository root, ``import colorglove_ros`` is the Python package, not the
+    package folder of the same name (which has no __init__.py)."""
+    found = subprocess.run([sys.executable, '-c', 'import colorglove_ros; '
+                            'print(colorglove_ros.__file__)'], cwd=REPO_DIR, text=True,
+                           capture_output=True, check=True).stdout.strip()
+    assert Path(found) == PKG_DIR / 'colorglove_ros' / '__init__.py'
