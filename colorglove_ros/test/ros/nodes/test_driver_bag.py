@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from node_fixtures import SMALL_DATABASE_EXPLAINED_SHARE, NodeAssets
+from node_fixtures import SMALL_DATABASE_EXPLAINED_SHARE, NodeAssets, assert_run_tracked
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.hand.glove import default_hand
@@ -73,10 +73,7 @@ def test_driver_bag_is_tracked_as_well_as_the_package_camera(node_assets: NodeAs
     at_vga, at_driver = summarize(vga, model), summarize(driver, model)
     print({'640x480 rgb8': at_vga, '1280x720 yuv422_yuy2': at_driver})
     for run, figures in ((vga, at_vga), (driver, at_driver)):
-        assert not run.timed_out
-        assert run.segmented == FRAMES, 'segmentation_node missed camera frames'
-        assert figures['tracked_fraction'] >= 0.9, figures
-        assert figures['frames_with_truth'] >= 0.9 * FRAMES
+        assert_run_tracked(run, figures, FRAMES)
     # no frame refused for its size or frame_id; only the first may beat its CameraInfo
     refused = [line for line in driver.statuses if line.startswith('no hand: camera:')]
     assert refused in ([], ['no hand: camera: waiting for CameraInfo']), refused

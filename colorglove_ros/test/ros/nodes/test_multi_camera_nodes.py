@@ -18,6 +18,7 @@ from geometry_msgs.msg import PoseStamped
 from node_fixtures import (
     SMALL_DATABASE_EXPLAINED_SHARE,
     NodeAssets,
+    assert_run_tracked,
     candidates_msg,
     header,
     ik_node,
@@ -226,10 +227,7 @@ def test_second_camera_lowers_depth_error(node_assets: NodeAssets, stereo_bag: P
     one, two = summarize(mono, model), summarize(stereo, model)
     print({'1 camera': one, '2 cameras': two})
     for run, figures in ((mono, one), (stereo, two)):
-        assert not run.timed_out
-        assert run.segmented == FRAMES, 'segmentation_node missed camera frames'
-        assert figures['tracked_fraction'] >= 0.9, figures
-        assert figures['frames_with_truth'] >= 0.9 * FRAMES
+        assert_run_tracked(run, figures, FRAMES)
     assert all('camera2' not in line for line in mono.statuses)
     counts = _constraints_per_camera(stereo.statuses)
     assert len(counts) >= 0.9 * FRAMES
