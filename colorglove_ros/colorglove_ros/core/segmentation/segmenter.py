@@ -358,10 +358,12 @@ class GloveSegmenter:
         """The segmenter's settings (the keyword arguments it was built with, checked)."""
         return {name: getattr(self, name) for name in SEGMENTER_RULES}
 
-    def fresh(self) -> GloveSegmenter:
-        """A segmenter with the same calibration and settings and nothing learnt (its own
-        static background): one per camera stream."""
-        return GloveSegmenter(self.calibration, **self.settings(), source=self.source)
+    def fresh(self, **changed: object) -> GloveSegmenter:
+        """A segmenter with the same calibration and settings but ``changed`` (checked like
+        any setting) and nothing learnt (its own static background): one per camera stream,
+        or this one with new settings."""
+        return GloveSegmenter(self.calibration, **{**self.settings(), **changed},
+                              source=self.source)
 
     # ------------------------------------------------------------------ helpers
     def _glove_only(self, labels: np.ndarray, reduction: float, image_pixels: int

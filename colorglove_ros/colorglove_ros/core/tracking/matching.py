@@ -67,7 +67,7 @@ def match_primary(constraints: ProjectionConstraints, blobs: Blobs, crop: Any,
 
 
 def explained_blob_share(corr: Correspondences, blobs: Blobs, camera: PinholeCamera,
-                         min_blob_pixels: int = 4) -> float:
+                         min_blob_pixels: float = 4) -> float:
     """The share of the primary camera's blobs (those large enough to be matched) that a
     correspondence of camera 0 targets: how much of what the segmenter found the fitted hand
     explains. Glove-coloured clutter inside the hand's crop leaves many blobs unexplained.

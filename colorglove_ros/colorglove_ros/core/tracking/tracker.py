@@ -190,12 +190,6 @@ class HandTracker:
                           f'calibration says {model.finger_length_factors}')
         return cls(model, mesh, calibration.cameras, config)
 
-    def set_primary_camera(self, camera: PinholeCamera) -> None:
-        """Use ``camera`` as camera 0 from now on (new intrinsics or image size of the same,
-        fixed camera, e.g. from its CameraInfo; identity extrinsics). The track restarts: the
-        previous pose was fitted with the old model."""
-        self.set_camera(0, camera)
-
     def set_camera(self, index: int, camera: PinholeCamera) -> None:
         """Use ``camera`` as camera ``index`` from now on (new intrinsics or image size of the
         same, fixed camera, e.g. from its CameraInfo, with its calibrated extrinsics). The
@@ -213,6 +207,11 @@ class HandTracker:
         """Camera ``index``'s pixels per pixel of the configuration's reference focal
         length (the factor on its pixel gates; areas take the square)."""
         return pixel_scale(self.cameras[index], self.config.reference_focal_px)
+
+    def _min_blob_pixels(self, index: int) -> float:
+        """The smallest blob camera ``index`` matches: ``min_blob_pixels`` (an area at the
+        reference focal length) in its own pixels."""
+        return self.config.min_blob_pixels * self._pixel_scale(index) ** 2
 
     def reset(self) -> None:
         """Forget the previous pose (hand lost, long gap, new sequence)."""
@@ -248,7 +247,7 @@ class HandTracker:
             out.append(match_extra_camera(
                 ci, self.cameras[ci], cons, pw, obs.blobs, self.mesh, cfg.extra_gate_px * s,
                 cfg.extra_shift_max_px * s, cfg.extra_inlier_px * s,
-                cfg.min_blob_pixels * s * s, cfg.min_depth_m, normals))
+                self._min_blob_pixels(ci), cfg.min_depth_m, normals))
         out = Correspondences.concat(out)
         return self._with_patch_points(out, q) if patch_points else out
 
@@ -314,7 +313,7 @@ class HandTracker:
         s = self._pixel_scale(0)
         corr0 = match_primary(prior.constraints, primary.blobs, primary.crop, self.cameras[0],
                               self.mesh, cfg.gate_tiny_px, cfg.gate_min_px * s,
-                              cfg.min_blob_pixels * s * s)
+                              self._min_blob_pixels(0))
         # IK on several cameras, tracking: the other cameras are matched at the last pose and
         # every camera's visible patches predicted there, in one pass (the blend is the
         # coarser guess)
@@ -418,4 +417,4 @@ class HandTracker:
             corr.counts(n_cam), priors.q_prev is not None and fit.iterations > 0, was_reset,
             corr, fit.rejected, priors.q_b.copy(),
             explained_blob_share(corr, primary_blobs, self.cameras[0],
-                                 self.config.min_blob_pixels * self._pixel_scale(0) ** 2))
+                                 self._min_blob_pixels(0)))

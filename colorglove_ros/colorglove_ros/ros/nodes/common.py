@@ -193,10 +193,17 @@ def declare_frame_camera(node: Node, calibrated: PinholeCamera) -> FrameCamera:
         'true: intrinsics from the newest CameraInfo on camera/camera_info (frames whose size '
         'or frame_id differ from it are refused); false: camera 0 of calibration_file (frames '
         'of another size are refused)')
-    frame_camera = FrameCamera(calibrated, use_camera_info)
+    return _frame_camera(node, calibrated, use_camera_info, CAMERA_INFO_TOPIC)
+
+
+def _frame_camera(node: Node, calibrated: PinholeCamera, use_camera_info: bool,
+                  info_topic: str, calibrated_frame_id: bool = False) -> FrameCamera:
+    """A :class:`FrameCamera` of ``calibrated``, fed from ``info_topic`` when
+    ``use_camera_info``."""
+    frame_camera = FrameCamera(calibrated, use_camera_info,
+                               calibrated_frame_id=calibrated_frame_id)
     if use_camera_info:
-        node.create_subscription(CameraInfo, CAMERA_INFO_TOPIC, frame_camera.set_camera_info,
-                                 10)
+        node.create_subscription(CameraInfo, info_topic, frame_camera.set_camera_info, 10)
     return frame_camera
 
 
@@ -244,14 +251,10 @@ def extra_frame_cameras(node: Node, calibrated: Sequence[PinholeCamera],
     of their ``observation_topics``): with ``use_camera_info`` its intrinsics come from its own
     CameraInfo (:func:`extra_camera_info_topic`), extrinsics staying the calibration's; else the
     calibrated camera, whose frame_id the observations must carry too."""
-    frame_cameras = []
-    for camera, topic in zip(calibrated, observation_topics, strict=True):
-        frame_camera = FrameCamera(camera, use_camera_info, calibrated_frame_id=True)
-        if use_camera_info:
-            node.create_subscription(CameraInfo, extra_camera_info_topic(topic),
-                                     frame_camera.set_camera_info, 10)
-        frame_cameras.append(frame_camera)
-    return frame_cameras
+    return [_frame_camera(node, camera, use_camera_info,
+                          extra_camera_info_topic(topic) if use_camera_info else '',
+                          calibrated_frame_id=True)
+            for camera, topic in zip(calibrated, observation_topics, strict=True)]
 
 
 def declare_camera_index(node: Node, description: str) -> int:

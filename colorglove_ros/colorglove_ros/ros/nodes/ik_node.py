@@ -101,8 +101,8 @@ class IKNode(Node):
             self, 'camera calibration YAML; camera 0 is the lookup camera')
         ik_config = declare(self, 'ik_config', 'config/ik.yaml', 'IK settings and covariances')
         topics = declare_topic_list(self, 'extra_observation_topics', [],
-                                          'HandObservation topics of cameras 1..N-1, in '
-                                          'calibration order', 'ik_node')
+                                    'HandObservation topics of cameras 1..N-1, in calibration '
+                                    'order', 'ik_node')
         wait_s = declare(self, 'extra_observation_wait_s', 0.05,
                          'longest wait for the extra cameras\' observations of a frame, seconds',
                          0.0, 1.0)
@@ -222,20 +222,6 @@ class IKNode(Node):
             return None
         return match
 
-    def _extra_camera(self, index: int, observation: HandObservation) -> PinholeCamera | None:
-        """Extra camera ``index``'s model for ``observation`` (its CameraInfo's or the
-        calibrated one; the tracker switches to it when it changed), or None when the
-        observation's size or frame_id does not match it (logged)."""
-        camera = self.extra_frame_cameras[index - 1].camera_for(
-            observation.image_width, observation.image_height, observation.header.frame_id)
-        if isinstance(camera, NoHand):
-            self.get_logger().warn(f'observation of camera {index} ignored: {camera.reason}',
-                                   throttle_duration_sec=1.0)
-            return None
-        if camera is not self.tracker.cameras[index]:
-            self.tracker.set_camera(index, camera)
-        return camera
-
     def _extra_camera_observations(self, stamp: float) -> list[CameraObservation]:
         """The extra cameras' observations of the frame at ``stamp``; a camera with none
         matching in time, or whose size or frame_id does not match its camera model, did not
@@ -243,8 +229,11 @@ class IKNode(Node):
         observations = []
         for index in range(1, len(self.cameras)):
             match = self._matching_observation(index - 1, stamp)
-            camera = None if match is None else self._extra_camera(index, match)
-            if camera is None:
+            camera = None if match is None else self._camera_model(index, match)
+            if isinstance(camera, NoHand):
+                self.get_logger().warn(f'observation of camera {index} ignored: {camera.reason}',
+                                       throttle_duration_sec=1.0)
+            if not isinstance(camera, PinholeCamera):
                 match = None
             if match is not None and match.hand_found:
                 try:
@@ -314,7 +303,7 @@ class IKNode(Node):
         try:
             prior = None
             if msg.hand_found:
-                camera = self._primary_camera(msg.observation)
+                camera = self._camera_model(0, msg.observation)
                 if isinstance(camera, NoHand):
                     self.tracker.reset()
                     return camera
@@ -327,17 +316,21 @@ class IKNode(Node):
         return track(self.tracker, prior, observations, stamp, self.limits,
                      upstream_reason=msg.status)
 
-    def _primary_camera(self, observation: HandObservation) -> PinholeCamera | NoHand:
-        """Camera 0's model for this observation (its CameraInfo's or the calibrated one; the
-        tracker switches to it when it changed), or why the frame is refused."""
-        camera = self.frame_camera.camera_for(observation.image_width, observation.image_height,
-                                              observation.header.frame_id)
-        if not isinstance(camera, NoHand) and camera is not self.tracker.cameras[0]:
-            self.tracker.set_primary_camera(camera)
+    def _camera_model(self, index: int, observation: HandObservation
+                      ) -> PinholeCamera | NoHand:
+        """Camera ``index``'s model for this observation (its CameraInfo's or the calibrated
+        one; the tracker switches to it when it changed), or why the observation is
+        refused (its size or frame_id does not match)."""
+        frame_camera = (self.frame_camera if index == 0
+                        else self.extra_frame_cameras[index - 1])
+        camera = frame_camera.camera_for(observation.image_width, observation.image_height,
+                                         observation.header.frame_id)
+        if not isinstance(camera, NoHand) and camera is not self.tracker.cameras[index]:
+            self.tracker.set_camera(index, camera)
             self.get_logger().info(
-                f'camera 0: {camera.width}x{camera.height}, fx {camera.fx:.1f}, fy '
+                f'camera {index}: {camera.width}x{camera.height}, fx {camera.fx:.1f}, fy '
                 f'{camera.fy:.1f}, cx {camera.cx:.1f}, cy {camera.cy:.1f} '
-                f'({"CameraInfo" if self.frame_camera.use_camera_info else "calibration"})')
+                f'({"CameraInfo" if frame_camera.use_camera_info else "calibration"})')
         return camera
 
     def _publish(self, msg: HandPoseCandidates, tracked: Tracked) -> None:

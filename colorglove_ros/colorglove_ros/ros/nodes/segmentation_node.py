@@ -29,7 +29,6 @@ from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
 from colorglove_ros.core.pipeline import NoHand, bad_image, segment_frame
 from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
 from colorglove_ros.core.segmentation.segmenter import (
-    GloveSegmenter,
     SegmentationConfigError,
     load_segmenter,
 )
@@ -148,14 +147,7 @@ class SegmentationNode(Node):
                    if value != _parameter_value(self.segmenter.settings()[name])}
         if changed:
             with startup_errors('segmentation_node'):
-                self.segmenter = self._segmenter_with(changed)
-
-    def _segmenter_with(self, changed: dict[str, Any]) -> GloveSegmenter:
-        """A segmenter with the current one's calibration and settings but ``changed``
-        (checked by the segmenter itself; it starts with nothing learnt)."""
-        return GloveSegmenter(self.segmenter.calibration,
-                              **{**self.segmenter.settings(), **changed},
-                              source=self.segmenter.source)
+                self.segmenter = self.segmenter.fresh(**changed)
 
     def _check_segmenter_setting(self, name: str, value: Any) -> Apply:
         checked = validate_segmenter_settings({name: _parameter_value(value)},
@@ -163,7 +155,7 @@ class SegmentationNode(Node):
                                               SegmentationConfigError)[name]
 
         def apply() -> None:
-            self.segmenter = self._segmenter_with({name: checked})
+            self.segmenter = self.segmenter.fresh(**{name: checked})
         return apply
 
     # ------------------------------------------------------------------ frames
