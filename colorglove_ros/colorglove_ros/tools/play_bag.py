@@ -38,7 +38,8 @@ PLAYBACK_OPTIONS: dict[str, tuple[type, object, str]] = {
                    'hand) whose messages release the next frame'),
     'pace-timeout': (float, 1.0, 'longest wait for an output before going on, seconds'),
     'wait-subscribers': (float, 10.0,
-                         'wait this long for a subscriber on --pace-on before starting'),
+                         'wait this long for subscribers on --pace-on (and on the CameraInfo '
+                         'topic beside it, if the bag has one) before starting'),
     'min-subscribers': (int, 1, 'subscribers on --pace-on to wait for before starting'),
     'loop': (bool, False, 'play again from the start until Ctrl-C'),
     'clock': (bool, False, "publish the bag's time on /clock (rosgraph_msgs/Clock)"),
@@ -102,6 +103,14 @@ class BagPlayer(Node):
             time.sleep(0.05)
         return False
 
+    def camera_info_beside(self, image_topic: str) -> str | None:
+        """The bag's CameraInfo topic in ``image_topic``'s namespace (``/cam/image_raw`` or
+        ``/cam/image_raw/compressed`` -> ``/cam/camera_info``), or None."""
+        namespace = image_topic.removesuffix('/compressed').rsplit('/', 1)[0]
+        topic = f'{namespace}/camera_info'
+        types = {c.topic: c.msgtype for c in self.connections}
+        return topic if types.get(topic) == 'sensor_msgs/msg/CameraInfo' else None
+
     def play(self, rate: float, pace_topic: str | None, pace_on: str | None,
              pace_timeout_s: float, restamp: bool = False) -> int:
         """Publish all messages; return how many were published."""
@@ -162,8 +171,13 @@ def main(argv: list[str] | None = None) -> int:
                                        lambda _msg: player.output_event.set(), 10)
         spinner.start()
         if args.pace_on in player.publishers_by_topic:
+            # the image's subscribers and its CameraInfo's: a node that gets images before it
+            # is matched to their CameraInfo answers them 'waiting for CameraInfo'
             player.wait_for_subscribers(args.pace_on, args.wait_subscribers,
                                         args.min_subscribers)
+            camera_info = player.camera_info_beside(args.pace_on)
+            if camera_info is not None:
+                player.wait_for_subscribers(camera_info, args.wait_subscribers)
         if args.clock:
             player.publish_clock()
         while True:

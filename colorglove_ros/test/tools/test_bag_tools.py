@@ -163,3 +163,33 @@ def test_restamp_sets_publish_time_and_keeps_frames_together(tmp_path: Path) -> 
     assert [list(m.position) for m in decoded] == [[float(i), -float(i)] for i in range(20)]
     assert all(new[12:] == old[12:] for new, old in zip(joints, sent['/test/joints'],
                                                          strict=True))
+
+
+def test_player_finds_the_camera_info_beside_the_image(tmp_path: Path) -> None:
+    """--paced waits for a subscriber on the image's CameraInfo too (a node matched to the
+    images before their CameraInfo answers them 'waiting for CameraInfo'): the player finds the
+    CameraInfo topic in the image's namespace, raw or compressed, and none where there is none."""
+    import rclpy
+    from sensor_msgs.msg import CameraInfo, Image
+
+    from colorglove_ros.tools.play_bag import BagPlayer
+
+    store = colorglove_typestore()
+    with Writer(tmp_path / 'bag', version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        for topic, kind, message in (
+                ('/cam/image_raw', 'sensor_msgs/msg/Image', Image()),
+                ('/cam/camera_info', 'sensor_msgs/msg/CameraInfo', CameraInfo()),
+                ('/other/image_raw', 'sensor_msgs/msg/Image', Image())):
+            connection = writer.add_connection(topic, kind, typestore=store)
+            writer.write(connection, 1_000_000_000, serialize_message(message))
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        player = BagPlayer(tmp_path / 'bag', context=context)
+        found = [player.camera_info_beside(topic) for topic in (
+            '/cam/image_raw', '/cam/image_raw/compressed', '/other/image_raw')]
+        player.close()
+        player.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    assert found == ['/cam/camera_info', '/cam/camera_info', None]
