@@ -139,3 +139,18 @@ def test_eval_left_glove_cli_prints_and_writes_json(small_database_path, tmp_pat
     assert len(data['targets']) == 2
     # truth labels: the mirrored query is exact, so the two gloves measure the same
     assert abs(data['rows'][2]['fingertip_mm']) < 0.1
+
+
+def test_exported_left_glove_is_the_mirror_image(tmp_path, synths):
+    import trimesh
+
+    from colorglove_ros.core.hand.glove import export_glove_mesh
+
+    s = synths['right']
+    paths = {hand: export_glove_mesh(s.mesh, s.glove, s.model, tmp_path / f'{hand}.ply',
+                                     hand=hand) for hand in ('right', 'left')}
+    right, left = (trimesh.load(paths[h], process=False) for h in ('right', 'left'))
+    assert np.allclose(left.vertices, right.vertices * [-1.0, 1.0, 1.0], atol=1e-6)
+    assert np.array_equal(left.faces, right.faces[:, ::-1])
+    assert np.array_equal(left.visual.face_colors, right.visual.face_colors)
+    assert np.allclose(left.face_normals, right.face_normals * [-1.0, 1.0, 1.0], atol=1e-6)
