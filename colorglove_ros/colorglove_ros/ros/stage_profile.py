@@ -2,7 +2,8 @@
 one process on their own context, fed a bag's frames one at a time by calling their callbacks,
 each stage's output serialised and deserialised as DDS would carry it to the next.
 
-A stage's time is the deserialisation of its input plus its callback (decoding, the core's
+A stage's time is the deserialisation of its input (none for the segmentation, which takes its
+images serialized) plus its callback (decoding, the core's
 work, message conversion and the publish that serialises its output); the core's own compute
 time (what the stage reports in its messages) is kept beside it. With a profiler per stage
 (``cProfile``) the same run says where the time goes. No executor spins: nothing is queued or
@@ -117,15 +118,16 @@ def profile_stages(frames: Iterable[tuple[int, np.ndarray]], parameters: dict[st
             header = Header(frame_id=frame_id)
             header.stamp.sec, header.stamp.nanosec = divmod(int(stamp_ns), 10**9)
             wire = serialize_message(array_to_image(rgb, 'rgb8', header))
-            steps = ((segmentation.on_image, observation), (lookup.on_observation, candidates),
-                     (ik.on_candidates, None))
-            message_type = type(array_to_image(rgb[:1, :1], 'rgb8'))
+            # segmentation_node takes its images serialized (a raw subscription)
+            steps = ((segmentation.on_serialized_image, observation),
+                     (lookup.on_observation, candidates), (ik.on_candidates, None))
+            message_type = None
             for name, (callback, output) in zip(STAGE_NAMES, steps, strict=True):
                 prof = profilers.get(name)
                 started, cpu = time.perf_counter(), time.thread_time()
                 if prof is not None:
                     prof.enable()
-                callback(deserialize_message(wire, message_type))
+                callback(wire if message_type is None else deserialize_message(wire, message_type))
                 if prof is not None:
                     prof.disable()
                 times.node_ms[name].append(1e3 * (time.perf_counter() - started))
