@@ -7,6 +7,7 @@ time) and two cameras at 30 Hz. The four-process graph always; with ``--single-p
 every node in one process (``colorglove_single_process``)."""
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -30,7 +31,7 @@ from colorglove_ros.ros.pipeline_run import (
 from colorglove_ros.tools._cli import add_pipeline_arguments, tool_error, tool_parser
 
 __all__ = ['TARGETS', 'BAG_RATE_HZ', 'STEREO_CALIBRATION', 'ensure_bag', 'check_targets',
-           'main']
+           'isolate_domain', 'main']
 
 BAG_RATE_HZ = 30.0     # the bags' own frame rate; offered rates are multiples of it
 STEREO_CALIBRATION = 'config/calibration_stereo.yaml'
@@ -44,6 +45,15 @@ TARGETS = {
     'two cameras, 30 Hz: >= 29 JointStates/s': ('dds_2cam_30hz_rate_hz', '>=', 29.0),
     'two cameras, 30 Hz: latency p95 <= 35 ms': ('dds_2cam_30hz_latency_p95_ms', '<=', 35.0),
 }
+
+
+def isolate_domain(domain: int | None) -> int:
+    """Run this process and the graph it starts on ROS domain ``domain`` (default: one of its
+    own, 200 + pid % 32), so that another graph on the machine (someone's demo on the default
+    domain) neither feeds the latency probe nor takes these frames."""
+    chosen = 200 + os.getpid() % 32 if domain is None else int(domain)
+    os.environ['ROS_DOMAIN_ID'] = str(chosen)
+    return chosen
 
 
 def ensure_bag(seed: int, frames: int, calibration: str | None = None) -> Path:
@@ -150,11 +160,14 @@ def main(argv: list[str] | None = None) -> int:
                         help='skip the two-camera pass')
     parser.add_argument('--single-process', action='store_true',
                         help='also run every DDS pass with all nodes in one process')
+    parser.add_argument('--domain-id', type=int,
+                        help='ROS domain of the measured graph (default: one of its own)')
     parser.add_argument('--overlay', action='store_true',
                         help='ik_node also draws and publishes the overlay image (it then '
                              'receives every camera image); off by default, as in '
                              'config/nodes.yaml')
     args = parser.parse_args(argv)
+    print(f'[benchmark] ROS domain {isolate_domain(args.domain_id)}', flush=True)
     try:
         database = prepare_assets(args.database)
     except ColorGloveError as exc:     # a missing or corrupt config, calibration or database
