@@ -359,7 +359,8 @@ def validate_database_arrays(db: Any, where: str, num_vertices: int | None = Non
     """The contents of a pose database (``core.lookup.database.PoseDatabase``) the lookup
     indexes with: finite poses, crops with a positive scale, patch colours 0..10, patch
     vertices -1 (none) or of the mesh (``num_vertices`` when given), finite patch areas,
-    glove pixel keys within the padded range and a finite, positive render camera."""
+    glove pixel keys within the padded range and a finite, positive render camera.
+    ``load_database`` remembers a pass (``CONTENTS_CHECK``): rename that when this changes."""
     check_array(f'{where}: poses', db.poses, shape=(None, NUM_DOFS), error=error)
     crop = check_array(f'{where}: crop', db.crop, shape=(None, 3), error=error)
     if len(crop) and crop[:, 0].min() <= 0.0:

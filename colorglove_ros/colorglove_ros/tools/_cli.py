@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -146,10 +148,23 @@ def tool_error(name: str, exc: Exception) -> int:
     return 1
 
 
+def _exit_on_signal(signum: int, _frame: Any) -> None:
+    raise SystemExit(128 + signum)
+
+
 def run_tool(name: str, body: Callable[[], int]) -> int:
     """Run a tool's body; any of the package's own errors becomes :func:`tool_error`'s one
-    line and exit code 1 instead of a traceback."""
+    line and exit code 1 instead of a traceback. SIGTERM and SIGHUP end the body like Ctrl-C
+    does, through its ``finally`` blocks, so a tool that started nodes stops them instead of
+    leaving them running (they run in sessions of their own and get no signal of the tool's)."""
+    handled = (signal.SIGTERM, signal.SIGHUP)
+    in_main_thread = threading.current_thread() is threading.main_thread()
+    previous = {sig: signal.signal(sig, _exit_on_signal) for sig in handled} \
+        if in_main_thread else {}
     try:
         return body()
     except ColorGloveError as exc:
         return tool_error(name, exc)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

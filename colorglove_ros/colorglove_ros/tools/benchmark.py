@@ -48,9 +48,12 @@ TARGETS = {
 
 
 def isolate_domain(domain: int | None) -> int:
-    """Run this process and the graph it starts on ROS domain ``domain`` (default: one of its
-    own, 200 + pid % 32), so that another graph on the machine (someone's demo on the default
-    domain) neither feeds the latency probe nor takes these frames."""
+    """Run this process and the graph it starts on ROS domain ``domain``, else the
+    environment's ``ROS_DOMAIN_ID``, else one of its own (200 + pid % 32) rather than the
+    default domain, where another graph on the machine (someone's demo) would feed the latency
+    probe and take these frames."""
+    if domain is None and os.environ.get('ROS_DOMAIN_ID'):
+        return int(os.environ['ROS_DOMAIN_ID'])
     chosen = 200 + os.getpid() % 32 if domain is None else int(domain)
     os.environ['ROS_DOMAIN_ID'] = str(chosen)
     return chosen
@@ -161,7 +164,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--single-process', action='store_true',
                         help='also run every DDS pass with all nodes in one process')
     parser.add_argument('--domain-id', type=int,
-                        help='ROS domain of the measured graph (default: one of its own)')
+                        help='ROS domain of the measured graph (default: $ROS_DOMAIN_ID, else '
+                             'one of its own)')
     parser.add_argument('--overlay', action='store_true',
                         help='ik_node also draws and publishes the overlay image (it then '
                              'receives every camera image); off by default, as in '

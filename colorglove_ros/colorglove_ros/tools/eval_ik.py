@@ -30,7 +30,7 @@ from colorglove_ros.core.lookup.database import DatabaseBuild, check_hand_length
 from colorglove_ros.core.pipeline import TemporalPrior
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.tracking.config import TRACKER_MODES, load_covariances, load_ik_config
-from colorglove_ros.paths import share_dir
+from colorglove_ros.paths import data_dir, share_dir
 from colorglove_ros.tools._cli import sequence_tool_parser, tool_error
 
 __all__ = ['main', 'TARGETS', 'REFERENCE_FIGURES', 'evaluate_targets', 'reference_figures',
@@ -175,13 +175,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--no-finger-evidence', action='store_true', help='blend every DOF '
                         "with the neighbours' image weights (the paper) instead of each "
                         'finger by its patch evidence (core.lookup.finger_evidence)')
-    parser.add_argument('--plot', default=str(PACKAGE_ROOT / 'data' / 'eval_ik' /
+    parser.add_argument('--plot', default=str(data_dir() / 'eval_ik' /
                                               'eval_ik.png'), help="PNG path ('' = none)")
     args = parser.parse_args(argv)
     from colorglove_ros.core.lookup.search import PoseLookup
 
     try:
-        db_path, db = open_database(args.database, PACKAGE_ROOT / 'data')
+        db_path, db = open_database(args.database, data_dir())
         config = load_ik_config(args.ik_config)
         if args.covariances:
             config = dataclasses.replace(config, covariances=load_covariances(args.covariances))

@@ -193,7 +193,6 @@ def _timing(lookup: PoseLookup, tiny: np.ndarray, crop: np.ndarray, nn: np.ndarr
     found = 0
     nearest, blended, finger_blended = [], [], []
     blobs = [_tiny_blobs(tiny[i], crop[i]) for i in range(len(tiny))]
-    lookup.patch_digit_table()          # built once, outside the timed lookups
     for rep in range(repeats):
         for i in range(len(tiny)):
             res = lookup.lookup(tiny[i], crop[i], camera)

@@ -30,7 +30,7 @@ from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.lookup.database import check_hand_length
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.tracking.config import load_ik_config
-from colorglove_ros.paths import share_dir
+from colorglove_ros.paths import data_dir, share_dir
 from colorglove_ros.tools._cli import tool_error, tool_parser
 
 __all__ = ['main', 'evaluate_targets', 'TABLE_COLUMNS']
@@ -101,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     from colorglove_ros.core.tracking.tracker import HandTracker
 
     try:
-        db_path, db = open_database(args.database, PACKAGE_ROOT / 'data')
+        db_path, db = open_database(args.database, data_dir())
         build = db.build
         calibration = load_calibration(args.calibration)
         check_hand_length(build, calibration.hand_length_m, str(args.calibration), str(db_path))

@@ -8,6 +8,7 @@ import numpy as np
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, NUM_PATCHES
 from colorglove_ros.core.geometry import rotvec_to_matrix
 from colorglove_ros.core.hand.glove import GLOVE_COLOR_NAMES, Glove, default_hand, export_glove_mesh
+from colorglove_ros.core.hand.handedness import HANDS, hand_faces, hand_vertices
 from colorglove_ros.core.hand.mesh import HandMesh
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.hand.poses import NAMED_SHAPES, full_pose
@@ -28,15 +29,19 @@ _VIEWS = (
 
 
 def draw_glove(ax, model: HandModel, mesh: HandMesh, glove: Glove, q: np.ndarray,
-               view_rotvec: np.ndarray, title: str = '') -> None:
-    """Painter's-algorithm orthographic drawing of the glove on a matplotlib axis, as the
-    camera would see it (x right, y down) after rotating the hand by ``view_rotvec``."""
+               view_rotvec: np.ndarray, title: str = '', hand: str = 'right') -> None:
+    """Painter's-algorithm orthographic drawing of the ``hand``'s glove on a matplotlib axis,
+    as the camera would see it (x right, y down) after rotating the hand by ``view_rotvec``
+    (a left hand's view is the mirror image of the right hand's)."""
     from matplotlib.collections import PolyCollection
 
     q = q.copy()
     q[:3] = 0.0
-    v = mesh.skin(model, q) @ rotvec_to_matrix(np.asarray(view_rotvec, float)).T
-    tri = v[mesh.faces]
+    view = np.asarray(view_rotvec, float)
+    if hand != 'right':   # the mirrored view of the mirror-image hand: the mirror picture
+        view = view * [1.0, -1.0, -1.0]
+    v = hand_vertices(mesh, model, q, hand) @ rotvec_to_matrix(view).T
+    tri = v[hand_faces(mesh.faces, hand)]
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     normal /= np.linalg.norm(normal, axis=1, keepdims=True) + 1e-18
     visible = normal[:, 2] < 0.0  # facing the viewer (camera looks along +z)
@@ -57,12 +62,15 @@ def draw_glove(ax, model: HandModel, mesh: HandMesh, glove: Glove, q: np.ndarray
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Export data/glove/glove.ply, glove.glb and glove.png."""
+    """Export data/glove/glove.ply, glove.glb and glove.png (``--hand left``: left_glove.*,
+    the mirror-image glove a left hand wears)."""
     parser = tool_parser(__doc__)
     parser.add_argument('--out', type=Path, default=Path('data/glove'), help='output folder')
     parser.add_argument('--hand-length', type=float, default=DEFAULT_HAND_LENGTH_M,
                         help='wrist to middle tip, m')
     parser.add_argument('--seed', type=int, default=0, help='glove pattern seed')
+    parser.add_argument('--hand', choices=HANDS, default='right',
+                        help="which hand's glove: 'left' is the mirror image of the right one")
     parser.add_argument('--shapes', action='store_true',
                         help='also draw every named hand shape into shapes.png')
     args = parser.parse_args(argv)
@@ -73,16 +81,17 @@ def main(argv: list[str] | None = None) -> int:
 
     model, mesh, glove = default_hand(args.hand_length, args.seed)
     args.out.mkdir(parents=True, exist_ok=True)
-    ply = export_glove_mesh(mesh, glove, model, args.out / 'glove.ply')
-    glb = export_glove_mesh(mesh, glove, model, args.out / 'glove.glb')
+    stem = 'glove' if args.hand == 'right' else f'{args.hand}_glove'
+    ply = export_glove_mesh(mesh, glove, model, args.out / f'{stem}.ply', hand=args.hand)
+    glb = export_glove_mesh(mesh, glove, model, args.out / f'{stem}.glb', hand=args.hand)
     fig, axes = plt.subplots(2, 3, figsize=(12, 8.5))
     for ax, (title, rv, shape) in zip(axes.ravel(), _VIEWS, strict=True):
         draw_glove(ax, model, mesh, glove, full_pose(model, NAMED_SHAPES[shape]),
-                   np.array(rv), title)
-    fig.suptitle(f'colour glove: {NUM_PATCHES} patches, seed {args.seed}, '
+                   np.array(rv), title, args.hand)
+    fig.suptitle(f'colour glove ({args.hand} hand): {NUM_PATCHES} patches, seed {args.seed}, '
                  f'hand length {args.hand_length:.3f} m')
     fig.tight_layout()
-    png = args.out / 'glove.png'
+    png = args.out / f'{stem}.png'
     fig.savefig(png, dpi=110)
     plt.close(fig)
 

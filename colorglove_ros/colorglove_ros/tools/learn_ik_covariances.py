@@ -36,7 +36,7 @@ from colorglove_ros.core.tracking.config import (
     save_covariances,
 )
 from colorglove_ros.core.tracking.covariance_learning import learn_covariances
-from colorglove_ros.paths import share_dir
+from colorglove_ros.paths import data_dir, share_dir
 from colorglove_ros.tools._cli import sequence_tool_parser, tool_error
 
 __all__ = ['main', 'covariance_rows', 'PACKAGE_ROOT', 'DEFAULT_OUTPUT']
@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
 
     t0 = time.perf_counter()
     try:
-        db_path, db = open_database(args.database, PACKAGE_ROOT / 'data')
+        db_path, db = open_database(args.database, data_dir())
         config = load_ik_config(args.ik_config)
         cal = load_calibration(args.calibration)
         observer = make_observer(args.labels, args.color_config, config.min_blob_pixels)

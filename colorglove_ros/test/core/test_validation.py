@@ -13,7 +13,12 @@ import yaml
 from repo_paths import PKG_DIR
 
 from colorglove_ros.core.camera import CalibrationError, load_calibration
-from colorglove_ros.core.file_checksums import STAMP_NAME, crc32_matches, crc32_of_file
+from colorglove_ros.core.file_checksums import (
+    STAMP_NAME,
+    check_unless_passed,
+    crc32_matches,
+    crc32_of_file,
+)
 from colorglove_ros.core.segmentation.segmenter import SegmentationConfigError, load_segmenter
 from colorglove_ros.core.validation import (
     InvalidConfigError,
@@ -236,3 +241,40 @@ def test_crc32_remembered_until_the_file_changes(tmp_path: Path) -> None:
     file.write_bytes(b'y' * 1000)
     os.utime(file, ns=(stat.st_atime_ns, stat.st_mtime_ns))
     assert not crc32_matches(file, crc)
+
+
+def test_a_passed_check_is_remembered_until_a_file_changes(tmp_path: Path) -> None:
+    """The database's contents check runs once per unchanged set of files; a failing check
+    is never remembered; a changed file, another check name or another file set runs it again,
+    and the CRC records kept in the same stamp survive."""
+    files = [tmp_path / 'a.npy', tmp_path / 'b.npy']
+    for file in files:
+        file.write_bytes(b'x' * 100)
+    crc = crc32_of_file(files[0])
+    assert crc32_matches(files[0], crc)
+    runs: list[str] = []
+
+    def passing() -> None:
+        runs.append('pass')
+
+    def failing() -> None:
+        runs.append('fail')
+        raise InvalidInputError('bad contents')
+
+    with pytest.raises(InvalidInputError):
+        check_unless_passed(files, 'contents v1', failing)
+    with pytest.raises(InvalidInputError):
+        check_unless_passed(files, 'contents v1', failing)      # a failure is not remembered
+    assert check_unless_passed(files, 'contents v1', passing)
+    assert not check_unless_passed(files, 'contents v1', passing)      # remembered
+    assert check_unless_passed(files, 'contents v2', passing)          # another check
+    assert check_unless_passed(files[:1], 'contents v1', passing)      # another file set
+    stat = files[1].stat()
+    files[1].write_bytes(b'y' * 100)
+    os.utime(files[1], ns=(stat.st_atime_ns, stat.st_mtime_ns))
+    with pytest.raises(InvalidInputError):
+        check_unless_passed(files, 'contents v1', failing)      # changed: checked again
+    assert runs == ['fail', 'fail', 'pass', 'pass', 'pass', 'fail']
+    assert crc32_matches(files[0], crc)
+    with pytest.raises(ValueError, match='one folder'):
+        check_unless_passed([files[0], tmp_path.parent / 'c.npy'], 'x', passing)

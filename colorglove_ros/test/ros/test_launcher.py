@@ -123,9 +123,6 @@ class _NoLookup:
     def __init__(self, *args) -> None:
         pass
 
-    def patch_digit_table(self) -> None:
-        pass
-
 
 @contextlib.contextmanager
 def _launched(spec: NodeSpec) -> Iterator[Node]:

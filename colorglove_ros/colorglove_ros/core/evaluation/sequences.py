@@ -5,7 +5,7 @@ import json
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +19,14 @@ from colorglove_ros.core.evaluation.metrics import (
     jitter_runs_mm,
     latency_summary_ms,
     pose_accuracy,
+)
+from colorglove_ros.core.hand.handedness import (
+    DEFAULT_HAND,
+    check_hand,
+    from_right_frame,
+    mirror_points,
+    mirrored_observer,
+    to_right_frame,
 )
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
 from colorglove_ros.core.pipeline import (
@@ -91,13 +99,19 @@ class EvaluationSequence:
     def make(cls, seed: int, num_frames: int, camera: PinholeCamera, synthesizer: Any,
              split: str = 'test', fps: float = 30.0) -> EvaluationSequence:
         """Sequence ``seed`` (``core.synthetic.sequences.generate_sequence``) with ``split``
-        conditions."""
+        conditions. For a left-hand synthesiser it is the mirrored sequence: every pose and
+        the light direction mirrored (``core.hand.handedness``), the background not."""
         from colorglove_ros.core.synthetic.conditions import sample_conditions
         from colorglove_ros.core.synthetic.sequences import generate_sequence
 
         poses = generate_sequence(seed, num_frames, fps, camera=camera, model=synthesizer.model)
-        return cls(seed, poses, sample_conditions(np.random.default_rng([seed, 7]), split),
-                   synthesizer)
+        conditions = sample_conditions(np.random.default_rng([seed, 7]), split)
+        hand = getattr(synthesizer, 'handedness', DEFAULT_HAND)
+        if hand != DEFAULT_HAND:
+            poses = from_right_frame(poses, hand)
+            conditions = replace(conditions, light_dir=tuple(
+                float(v) for v in mirror_points(np.asarray(conditions.light_dir, float))))
+        return cls(seed, poses, conditions, synthesizer)
 
     def render(self, index: int, cameras: Sequence[PinholeCamera]) -> list[Any]:
         """Frame ``index`` as every camera sees it (primary first)."""
@@ -168,6 +182,7 @@ class TrackedSequence:
     iterations: np.ndarray                   # (N,)
     constraints: np.ndarray                  # (N,)
     results: list[IKResult | None] = field(default_factory=list)
+    hand: str = DEFAULT_HAND                 # whose poses q_true and q_est are
 
 
 def same_camera(a: PinholeCamera, b: PinholeCamera) -> bool:
@@ -187,15 +202,21 @@ class SequenceEvaluator:
     blends each finger by its own patch evidence (``core.lookup.finger_evidence``). ``limits``
     are the pipeline's gates (default ``UNGATED``: every output of the tracker counts). Every
     rig must be a prefix of the largest one (same primary camera), so all rows of a table see
-    identical frames and lookups."""
+    identical frames and lookups.
+
+    ``hand`` 'left': the mirrored sequences rendered with the left glove, tracked by the
+    right-hand lookup and trackers on the mirrored query (``handedness.mirrored_observer``;
+    one camera) and the poses mirrored back."""
 
     def __init__(self, lookup: Any, rigs: Mapping[str, Sequence[PinholeCamera]],
                  modes: Sequence[str] = TRACKER_MODES, ik_config: IKConfig | None = None,
                  observer: Observer | None = None, synthesizer: Any = None,
                  fps: float = 30.0, keep_results: bool = False,
                  temporal: TemporalPrior | None = None, finger_evidence: bool = True,
-                 limits: StageLimits = UNGATED) -> None:
+                 limits: StageLimits = UNGATED, hand: str = DEFAULT_HAND) -> None:
         from colorglove_ros.core.synthetic.frames import Synthesizer
+
+        self.hand = check_hand(hand)
 
         if not rigs:
             raise EvaluationError('need at least one camera rig')
@@ -213,7 +234,11 @@ class SequenceEvaluator:
         self.config = ik_config or IKConfig()
         if synthesizer is None:      # the hand and glove the lookup's database was built with
             build = lookup.db.build
-            synthesizer = Synthesizer(build.hand_length_m, build.glove_seed)
+            synthesizer = Synthesizer(build.hand_length_m, build.glove_seed,
+                                      handedness=self.hand)
+        if getattr(synthesizer, 'handedness', DEFAULT_HAND) != self.hand:
+            raise EvaluationError(f'the synthesiser renders a {synthesizer.handedness} hand, '
+                                  f'the evaluation is of a {self.hand} hand')
         self.synth = synthesizer
         self.fps = float(fps)
         self.keep_results = keep_results
@@ -221,7 +246,13 @@ class SequenceEvaluator:
             # reweight_by_previous re-blends every DOF with one weight per neighbour
             raise EvaluationError('temporal reweighting re-blends the fingers with one weight '
                                   'per neighbour: use it without the per-finger blend')
-        self.pipeline = FramePipeline(observer or truth_observer(self.config.min_blob_pixels),
+        observer = observer or truth_observer(self.config.min_blob_pixels)
+        if self.hand != DEFAULT_HAND:
+            if len(self.cameras) != 1:
+                raise EvaluationError('a left hand is evaluated with one camera (its mirrored '
+                                      'query is defined for one camera)')
+            observer = mirrored_observer(observer, self.cameras[0].cx)
+        self.pipeline = FramePipeline(observer,
                                       lookup, self.cameras[0], limits=limits,
                                       finger_evidence=finger_evidence, temporal=temporal)
         self.trackers = {(r, m): HandTracker(self.synth.model, self.synth.mesh, cams,
@@ -248,7 +279,8 @@ class SequenceEvaluator:
                                     np.full((n, NUM_DOFS), np.nan), np.zeros(n, bool),
                                     np.full(n, np.nan), np.full(n, np.nan),
                                     np.full(n, np.nan), np.zeros(n),
-                                    np.zeros(n, np.int64), np.zeros(n, np.int64))
+                                    np.zeros(n, np.int64), np.zeros(n, np.int64),
+                                    hand=self.hand)
                for key in self.trackers}
         for tr in self.trackers.values():
             tr.reset()
@@ -267,7 +299,7 @@ class SequenceEvaluator:
                     ts.results.append(res)
                 if tracked:
                     ts.found[i] = True
-                    ts.q_est[i] = res.q
+                    ts.q_est[i] = from_right_frame(res.q, self.hand)
                     ts.reprojection_px[i] = res.reprojection_error_px
                     ts.ik_ms[i] = res.time_ms
                     ts.ik_cpu_ms[i] = cpu_ms
@@ -290,9 +322,12 @@ def summarize(model: HandModel, runs: Sequence[TrackedSequence]) -> dict[str, fl
     (and the same for the true motion), mean reprojection error of the matched constraints
     (px), the fingertip error split (``metrics.fingertip_error_split_mm``: in the hand frame,
     and from the wrist rotation alone), tracker time per frame (wall and thread CPU, mean and
-    p95 ms) and the tracked fraction."""
+    p95 ms) and the tracked fraction. A left hand's figures are those of its mirror image
+    (the right model at the mirrored poses): mirroring keeps every distance and angle."""
     if not runs:
         raise EvaluationError('no sequence to summarise')
+    runs = [replace(r, q_est=to_right_frame(r.q_est, r.hand),
+                    q_true=to_right_frame(r.q_true, r.hand), hand=DEFAULT_HAND) for r in runs]
     est = np.concatenate([r.q_est[r.found] for r in runs])
     truth = np.concatenate([r.q_true[r.found] for r in runs])
     frames = int(sum(len(r.found) for r in runs))

@@ -174,8 +174,9 @@ def make_glove(mesh: HandMesh, seed: int = DEFAULT_GLOVE_SEED,
 
 
 def export_glove_mesh(mesh: HandMesh, glove: Glove, model: HandModel, path: str | Path,
-                      q: np.ndarray | None = None) -> Path:
-    """Write the coloured glove mesh (pose q, rest pose by default).
+                      q: np.ndarray | None = None, hand: str = 'right') -> Path:
+    """Write the coloured glove mesh (pose q, rest pose by default) of the ``hand`` ('left':
+    the mirror-image glove, ``core.hand.handedness``).
 
     ``.ply``: shared vertices, per-face RGBA colour plus face attributes ``patch`` and
     ``label``. ``.glb``/``.obj``: faces unmerged so per-vertex colours reproduce the patches.
@@ -185,16 +186,19 @@ def export_glove_mesh(mesh: HandMesh, glove: Glove, model: HandModel, path: str 
     path = Path(path)
     if len(glove.face_patch) != mesh.num_faces:
         raise GloveError(f'glove has {len(glove.face_patch)} faces, mesh {mesh.num_faces}')
-    verts = mesh.skin(model, model.rest_pose() if q is None else q)
+    from colorglove_ros.core.hand.handedness import hand_faces, hand_vertices
+
+    verts = hand_vertices(mesh, model, model.rest_pose() if q is None else q, hand)
+    faces = hand_faces(mesh.faces, hand)
     rgba = np.concatenate([glove.face_rgb, np.full((mesh.num_faces, 1), 255, np.uint8)], axis=1)
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix.lower() == '.ply':
-        tm = trimesh.Trimesh(verts, mesh.faces, face_colors=rgba, process=False)
+        tm = trimesh.Trimesh(verts, faces, face_colors=rgba, process=False)
         tm.face_attributes['patch'] = glove.face_patch.astype(np.int32)
         tm.face_attributes['label'] = glove.face_labels.astype(np.int32)
         path.write_bytes(trimesh.exchange.ply.export_ply(tm, encoding='binary'))
     else:
-        flat_v = verts[mesh.faces].reshape(-1, 3)
+        flat_v = verts[faces].reshape(-1, 3)
         flat_f = np.arange(len(flat_v)).reshape(-1, 3)
         tm = trimesh.Trimesh(flat_v, flat_f, vertex_colors=np.repeat(rgba, 3, axis=0),
                              process=False)

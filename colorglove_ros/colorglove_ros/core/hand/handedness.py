@@ -20,18 +20,40 @@ tangential ``p1`` term, not for ``p2``.
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from colorglove_ros.core.hand.model import NUM_DOFS, HandModelError
-from colorglove_ros.core.segmentation.crop import TINY_SIZE, CropTransform
-from colorglove_ros.core.segmentation.segmenter import Blob, Observation
+from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, HandModelError
+from colorglove_ros.core.pipeline import Observer
+from colorglove_ros.core.segmentation.crop import TINY_SIZE, CropTransform, TinyCrop
+from colorglove_ros.core.segmentation.types import Blob, Observation
+from colorglove_ros.core.tracking.types import Blobs, CameraObservation
 
-__all__ = ['HANDS', 'MIRROR', 'mirror_pose', 'mirror_points', 'mirror_pixels_x',
-           'mirror_tiny_labels', 'mirror_crop', 'mirror_blobs', 'mirror_observation']
+if TYPE_CHECKING:
+    from colorglove_ros.core.hand.mesh import HandMesh
+
+__all__ = ['HANDS', 'DEFAULT_HAND', 'MIRROR', 'HandednessError', 'check_hand', 'mirror_pose',
+           'mirror_points', 'mirror_pixels_x', 'mirror_tiny_labels', 'mirror_crop',
+           'mirror_blobs', 'mirror_observation', 'mirror_camera_observation',
+           'mirror_tiny_crop', 'mirrored_observer', 'to_right_frame', 'from_right_frame',
+           'hand_keypoints', 'hand_vertices', 'hand_faces']
 
 HANDS: tuple[str, ...] = ('right', 'left')
+DEFAULT_HAND = 'right'
+"""The hand the pose database and the tracker's model are (the left one is served mirrored)."""
 MIRROR = np.diag([-1.0, 1.0, 1.0])
+
+
+class HandednessError(HandModelError, ValueError):
+    """A hand name that is neither 'right' nor 'left'."""
+
+
+def check_hand(hand: str) -> str:
+    """Return ``hand`` if it is one of :data:`HANDS`, else raise :class:`HandednessError`."""
+    if hand not in HANDS:
+        raise HandednessError(f'hand must be one of {HANDS}, got {hand!r}')
+    return hand
 
 
 def mirror_pose(q: np.ndarray) -> np.ndarray:
@@ -91,3 +113,69 @@ def mirror_observation(observation: Observation, cx: float) -> Observation:
     if observation.label_image is not None:
         out.label_image = np.ascontiguousarray(observation.label_image[:, ::-1])
     return out
+
+
+def mirror_camera_observation(observation: CameraObservation, cx: float) -> CameraObservation:
+    """A tracker's camera observation as the mirrored image gives it (blob centroids and the
+    crop window mirrored about ``cx``; colours, pixel counts and flags unchanged)."""
+    blobs = observation.blobs
+    if len(blobs):
+        centroids = np.array(blobs.centroid_px, dtype=float, copy=True)
+        centroids[:, 0] = mirror_pixels_x(centroids[:, 0], cx)
+        blobs = Blobs(blobs.color, centroids, blobs.pixel_count)
+    crop = None if observation.crop is None else mirror_crop(observation.crop, cx)
+    return replace(observation, blobs=blobs, crop=crop)
+
+
+def mirror_tiny_crop(tiny: TinyCrop, cx: float) -> TinyCrop:
+    """A lookup query (tiny image and its crop) as the mirrored image gives it."""
+    return TinyCrop(mirror_tiny_labels(tiny.labels), mirror_crop(tiny.transform, cx))
+
+
+def mirrored_observer(observer: Observer, cx: float) -> Observer:
+    """An observer (``core.pipeline.Observer``) whose observations and lookup query are those
+    of the mirrored image: a left hand seen through it is a right hand at
+    :func:`mirror_pose` of its pose (one camera: a second camera's extrinsics would have to
+    be mirrored too)."""
+    def observe(view: Any, primary: bool) -> tuple[CameraObservation, TinyCrop | None]:
+        if not primary:
+            raise HandednessError('a mirrored (left-hand) query is defined for one camera')
+        seen, tiny = observer(view, primary)
+        return (mirror_camera_observation(seen, cx),
+                None if tiny is None else mirror_tiny_crop(tiny, cx))
+    return observe
+
+
+def to_right_frame(q: np.ndarray, hand: str) -> np.ndarray:
+    """The right-hand pose a ``hand`` pose is tracked as (the mirrored pose of a left hand,
+    a right hand's pose as it is)."""
+    return mirror_pose(q) if check_hand(hand) == 'left' else np.asarray(q, dtype=float)
+
+
+from_right_frame = to_right_frame
+"""The ``hand`` pose of a pose tracked as a right hand (the mirror is its own inverse)."""
+
+
+def hand_keypoints(model: HandModel, q: np.ndarray, hand: str = DEFAULT_HAND) -> np.ndarray:
+    """(..., 21, 3) camera-frame keypoints of a ``hand`` at pose(s) ``q`` (a left hand is the
+    right model mirrored in its hand frame)."""
+    q = np.asarray(q, dtype=float)
+    keypoints = model.keypoints_batch if q.ndim == 2 else model.keypoints
+    if check_hand(hand) == 'right':
+        return keypoints(q)
+    return mirror_points(keypoints(mirror_pose(q)))
+
+
+def hand_vertices(mesh: HandMesh, model: HandModel, q: np.ndarray,
+                  hand: str = DEFAULT_HAND) -> np.ndarray:
+    """(V, 3) camera-frame vertices of the gloved ``hand`` mesh at pose ``q``."""
+    if check_hand(hand) == 'right':
+        return mesh.skin(model, q)
+    return mirror_points(mesh.skin(model, mirror_pose(q)))
+
+
+def hand_faces(faces: np.ndarray, hand: str = DEFAULT_HAND) -> np.ndarray:
+    """The triangles of a ``hand`` mesh: a mirrored (left) mesh reverses their winding so
+    they keep facing outward."""
+    faces = np.asarray(faces)
+    return faces if check_hand(hand) == 'right' else np.ascontiguousarray(faces[:, ::-1])

@@ -140,11 +140,16 @@ def write_urdf(path: str | Path = URDF_PATH, model: HandModel | None = None) -> 
 
 
 def calibrated_hand_urdf(calibration_path: str | Path,
-                         frame_prefix: str = DEFAULT_FRAME_PREFIX) -> str:
-    """URDF of the user's hand: the hand length and finger length factors of the calibration
-    file ``calibration_path`` (``core.camera.load_calibration``,
-    ``core.hand.model.calibrated_hand_model``), names with ``frame_prefix``. What the
-    ``robot_description`` topic carries (hand_description_node, the native launch file's
-    robot_state_publisher)."""
+                         frame_prefix: str = DEFAULT_FRAME_PREFIX, hand: str = 'right') -> str:
+    """URDF of the user's ``hand`` ('right' or 'left', ``core.hand.urdf_variants``): the hand
+    length and finger length factors of the calibration file ``calibration_path``
+    (``core.camera.load_calibration``, ``core.hand.model.calibrated_hand_model``), names with
+    ``frame_prefix``. What the ``robot_description`` topic carries (hand_description_node,
+    the native launch file's robot_state_publisher)."""
+    from colorglove_ros.core.hand.urdf_variants import hand_urdf_string
+
     calibration = load_calibration(calibration_path)
-    return urdf_string(calibrated_hand_model(calibration), frame_prefix=frame_prefix)
+    model = calibrated_hand_model(calibration)
+    if hand == 'right':     # the plain robot name, as before hands had names
+        return urdf_string(model, frame_prefix=frame_prefix)
+    return hand_urdf_string(hand, frame_prefix, model)

@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from colorglove_ros.core.hand.frames import prefixed_joint_names
-from colorglove_ros.core.hand.handedness import HANDS
+from colorglove_ros.core.hand.handedness import HandednessError, check_hand
 from colorglove_ros.core.hand.model import HandModel, JointSpec
 from colorglove_ros.core.hand.urdf import URDF_NAME, UrdfError, urdf_string
 
@@ -47,8 +47,10 @@ def hand_urdf_string(hand: str = 'right', prefix: str | None = None,
                      model: HandModel | None = None) -> str:
     """URDF of a ``hand`` ('right' or 'left') whose link and joint names start with ``prefix``
     (default ``'<hand>_'``; '' keeps the plain names)."""
-    if hand not in HANDS:
-        raise UrdfError(f'hand must be one of {HANDS}, got {hand!r}')
+    try:
+        check_hand(hand)
+    except HandednessError as exc:
+        raise UrdfError(str(exc)) from exc
     prefix = f'{hand}_' if prefix is None else prefix
     model = HandModel() if model is None else model
     source = model if hand == 'right' else _MirroredModel(model)

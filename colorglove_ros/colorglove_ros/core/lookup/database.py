@@ -21,7 +21,7 @@ from colorglove_ros.core.conventions import (
     TINY_SIZE,
 )
 from colorglove_ros.core.errors import ColorGloveError
-from colorglove_ros.core.file_checksums import crc32_matches, crc32_of_file
+from colorglove_ros.core.file_checksums import check_unless_passed, crc32_matches, crc32_of_file
 from colorglove_ros.core.lookup.codes import BinaryEncoder, encoder_from_arrays
 from colorglove_ros.core.lookup.distance import DT_SCALE
 from colorglove_ros.core.segmentation.crop import crop_signature
@@ -54,6 +54,11 @@ ENTRY_ARRAYS: dict[str, tuple[str, tuple]] = {
 }
 """Entry arrays of a database: name -> (dtype, shape with 'N' for the entry count, 'W' code
 words, 'K' max glove pixels)."""
+
+
+CONTENTS_CHECK = 'database contents v1'
+"""Name of the remembered contents check (``validate_database_arrays``); change it when what
+that check accepts changes, so every database is checked again."""
 
 
 class DatabaseError(ColorGloveError):
@@ -295,6 +300,9 @@ def load_database(path: str | Path, verify: bool = True) -> PoseDatabase:
     from colorglove_ros.core.hand.model import HandModel
 
     num_vertices = build_hand_mesh(HandModel(db.build.hand_length_m)).num_vertices
-    validate_database_arrays(db, str(path), num_vertices,
-                             error=DatabaseError)
+    # reading every entry takes seconds: done once, then again only when a file changes
+    files = [path / MANIFEST_NAME] + [path / str(info['file']) for info in listed.values()]
+    check_unless_passed(files, f'{CONTENTS_CHECK} {num_vertices} vertices',
+                        lambda: validate_database_arrays(db, str(path), num_vertices,
+                                                         error=DatabaseError))
     return db

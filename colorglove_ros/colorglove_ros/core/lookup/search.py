@@ -65,6 +65,15 @@ def top_k_with_ties(values: np.ndarray, k: int) -> np.ndarray:
     return np.flatnonzero(values <= cut)
 
 
+def _standard_vertex_link(database: PoseDatabase) -> np.ndarray:
+    """Vertex -> link table of the standard mesh of ``database``'s hand length."""
+    from colorglove_ros.core.hand.mesh import build_hand_mesh
+    from colorglove_ros.core.hand.model import HandModel
+
+    length = float(database.meta.get('build', {}).get('hand_length_m', DEFAULT_HAND_LENGTH_M))
+    return build_hand_mesh(HandModel(length)).vertex_link
+
+
 def _entry_place_terms(entry_global: np.ndarray, entry_crop: np.ndarray,
                        render_camera: dict, anchor_local: np.ndarray | None) -> np.ndarray:
     """The query-independent part of :func:`estimate_global_pose`, (k, 10) per entry: the
@@ -160,8 +169,8 @@ class PoseLookup:
         self.num_candidates = int(num_candidates)
         self.num_blend = int(num_blend)
         self.finger_evidence = finger_evidence or FingerEvidenceConfig()
-        self._vertex_link = None if vertex_link is None else np.asarray(vertex_link)
-        self._patch_digit: np.ndarray | None = None      # built on first use (needs the mesh)
+        self._vertex_link = (_standard_vertex_link(database) if vertex_link is None
+                             else np.asarray(vertex_link))
         n = len(database)
         self._columns = np.ascontiguousarray(database.codes)
         # Hamming distances fit a byte up to 255 bits: uint8 accumulation halves the traffic.
@@ -354,7 +363,8 @@ class PoseLookup:
         try:
             scores = finger_scores(self._a['patch_xy'][entries],
                                    self._a['patch_pixels'][entries],
-                                   self.patch_digit_table()[entries], self._a['patch_color'],
+                                   patch_digits(self._a['patch_vertex'][entries],
+                                                self._vertex_link), self._a['patch_color'],
                                    color[usable], (xy[usable] - (ox, oy)) / scale,
                                    pixels[usable] / scale ** 2, self.finger_evidence)
             fingers, spread, seen = finger_blend(self._a['poses'][entries], scores,
@@ -362,21 +372,6 @@ class PoseLookup:
         except FingerEvidenceError as exc:
             raise SearchError(f'per-finger blend: {exc}') from exc
         return fingers, spread, entries[np.argmin(scores, axis=0)], seen
-
-    def patch_digit_table(self) -> np.ndarray:
-        """(N, P) digit of each entry's visible patches (built once, from the standard mesh
-        of the database's hand length unless a vertex -> link table was given)."""
-        if self._patch_digit is None:
-            link = self._vertex_link
-            if link is None:
-                from colorglove_ros.core.hand.mesh import build_hand_mesh
-                from colorglove_ros.core.hand.model import HandModel
-
-                length = float(self.db.meta.get('build', {}).get('hand_length_m',
-                                                                 DEFAULT_HAND_LENGTH_M))
-                link = build_hand_mesh(HandModel(length)).vertex_link
-            self._patch_digit = patch_digits(self._a['patch_vertex'], link)
-        return self._patch_digit
 
     @property
     def anchor_local(self) -> np.ndarray | None:
@@ -401,12 +396,14 @@ class PoseLookup:
         that best explains that finger) instead."""
         source = np.where(self._a['patch_vertex'][entry] >= 0, entry, -1)
         if finger_entries is not None:
-            digits = self.patch_digit_table()
-            for g, e in enumerate(np.asarray(finger_entries, np.int64)):
+            entries = np.asarray(finger_entries, np.int64)
+            digits = patch_digits(self._a['patch_vertex'][np.append(entries, entry)],
+                                  self._vertex_link)
+            for g, e in enumerate(entries):
                 if e != entry:
                     # the finger's patches all come from entry e, none from the nearest
-                    source[(digits[entry] == g) & (source == entry)] = -1
-                    source[digits[e] == g] = e
+                    source[(digits[-1] == g) & (source == entry)] = -1
+                    source[digits[g] == g] = e
         vis = np.flatnonzero(source >= 0)
         src = source[vis]
         tiny_xy = self._a['patch_xy'][src, vis].astype(np.float64)

@@ -37,9 +37,17 @@ from colorglove_ros.core.colorimetry import (
     linear_to_srgb,
     srgb_to_linear,
 )
-from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M
+from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, NUM_PATCHES
 from colorglove_ros.core.geometry import matrix_to_rotvec, rotvec_to_matrix
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB, Glove, default_hand
+from colorglove_ros.core.hand.handedness import (
+    DEFAULT_HAND,
+    check_hand,
+    hand_faces,
+    hand_keypoints,
+    mirror_points,
+    to_right_frame,
+)
 from colorglove_ros.core.hand.mesh import HandMesh
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
 from colorglove_ros.core.hand.poses import pose_collection, sample_global_rotations
@@ -161,12 +169,16 @@ def sample_pose(rng: np.random.Generator, camera: PinholeCamera | None = None, *
 # ----------------------------------------------------------------------------- synthesiser
 class Synthesizer:
     """Renders :class:`SyntheticFrame` s of one glove (hand model, mesh, glove from
-    ``default_hand``) plus a forearm sleeve; keeps a :class:`Renderer` per image size."""
+    ``default_hand``) plus a forearm sleeve; keeps a :class:`Renderer` per image size.
+    ``hand`` 'left' renders the left hand wearing the mirror-image glove: the right mesh and
+    pattern mirrored in the hand frame (``core.hand.handedness``), so a pose means the same
+    finger angles for either hand; :meth:`render_hands` puts several hands in one frame."""
 
     def __init__(self, hand_length_m: float = DEFAULT_HAND_LENGTH_M, glove_seed: int = 0,
-                 supersample: int = 2, hand: tuple[HandModel, HandMesh, Glove] | None = None
-                 ) -> None:
+                 supersample: int = 2, hand: tuple[HandModel, HandMesh, Glove] | None = None,
+                 handedness: str = DEFAULT_HAND) -> None:
         self.model, self.mesh, self.glove = hand or default_hand(hand_length_m, glove_seed)
+        self.handedness = check_hand(handedness)
         self.supersample = int(supersample)
         arm_v, arm_f = forearm_mesh(self.model)
         nv = self.mesh.num_vertices
@@ -188,32 +200,57 @@ class Synthesizer:
                                             supersample=self.supersample)
         return self._renderers[key]
 
-    def vertices(self, q: np.ndarray) -> np.ndarray:
-        """(V, 3) camera-frame vertices of hand + forearm for pose q."""
+    def vertices(self, q: np.ndarray, hand: str | None = None) -> np.ndarray:
+        """(V, 3) camera-frame vertices of hand + forearm for pose q (of ``hand``, default
+        the synthesiser's)."""
         q = np.asarray(q, dtype=float)
         if q.shape != (NUM_DOFS,):
             raise SynthError(f'pose must have shape (26,), got {q.shape}')
-        hand = self.mesh.skin(self.model, q)
-        R = rotvec_to_matrix(q[3:6])
-        arm = self._arm_local @ R.T + q[0:3]
-        return np.concatenate([hand, arm]).astype(np.float32)
+        hand = self.handedness if hand is None else check_hand(hand)
+        right = to_right_frame(q, hand)
+        skin = self.mesh.skin(self.model, right)
+        R = rotvec_to_matrix(right[3:6])
+        verts = np.concatenate([skin, self._arm_local @ R.T + right[0:3]])
+        return (verts if hand == 'right' else mirror_points(verts)).astype(np.float32)
+
+    def keypoints(self, q: np.ndarray, hand: str | None = None) -> np.ndarray:
+        """(..., 21, 3) camera-frame keypoints of pose(s) q (of ``hand``, default the
+        synthesiser's)."""
+        return hand_keypoints(self.model, q, self.handedness if hand is None else hand)
 
     def render_frame(self, q: np.ndarray, camera: PinholeCamera, rng: np.random.Generator,
                      conditions: FrameConditions | None = None) -> SyntheticFrame:
         """One synthetic frame of pose q (camera frame) seen by ``camera``; ``rng`` draws
         the sensor noise (and the conditions when ``conditions`` is None)."""
+        return self.render_hands([(q, self.handedness)], camera, rng, conditions)[0]
+
+    def render_hands(self, hands: Sequence[tuple[np.ndarray, str]], camera: PinholeCamera,
+                     rng: np.random.Generator, conditions: FrameConditions | None = None
+                     ) -> tuple[SyntheticFrame, np.ndarray]:
+        """One frame showing every (pose, 'right' or 'left') of ``hands``, each with its
+        sleeve; the frame's pose and keypoints are the first hand's. Also returns the
+        (H, W) uint8 image of which hand's glove is visible at each pixel centre (0 none,
+        k + 1 for ``hands[k]``)."""
+        if not 1 <= len(hands) <= 254 // NUM_PATCHES:
+            raise SynthError(f'need 1..{254 // NUM_PATCHES} hands, got {len(hands)}')
         conditions = sample_conditions(rng, 'train') if conditions is None else conditions
-        q = np.asarray(q, dtype=float)
-        verts = self.vertices(q)
+        nv = self.mesh.num_vertices + len(self._arm_local)
+        parts = [(self.vertices(q, hand), hand) for q, hand in hands]
+        verts = np.concatenate([v for v, _ in parts])
+        faces = np.concatenate([hand_faces(self.faces, hand) + k * nv
+                                for k, (_, hand) in enumerate(parts)]).astype(np.int32)
+        face_patch = np.concatenate([np.where(self.face_patch >= 0,
+                                              self.face_patch + k * NUM_PATCHES, -1)
+                                     for k in range(len(parts))])
         w, h = camera.width, camera.height
         ideal = PinholeCamera(w, h, camera.fx, camera.fy, camera.cx, camera.cy)
         sleeve = np.tile(np.asarray(conditions.sleeve_rgb, np.float32), (self._num_arm_faces, 1))
-        face_rgb = np.concatenate([self._glove_rgb, sleeve])
+        face_rgb = np.tile(np.concatenate([self._glove_rgb, sleeve]), (len(parts), 1))
         light = illuminant_rgb(conditions.color_temperature_k) * conditions.gain
         shaded = self.renderer(w, h).render_shaded(
-            verts, self.faces, face_rgb, ideal, light_dir=conditions.light_dir,
-            ambient=conditions.ambient, light_rgb=light, face_patch=self.face_patch,
-            normals=vertex_normals(verts, self.faces))
+            verts, faces, face_rgb, ideal, light_dir=conditions.light_dir,
+            ambient=conditions.ambient, light_rgb=light, face_patch=face_patch,
+            normals=vertex_normals(verts, faces))
         ids, rgb, alpha = shaded.patch_ids, shaded.rgb, shaded.alpha
         if conditions.blur_px >= 1.0:
             kernel = _motion_kernel(conditions.blur_px, conditions.blur_angle)
@@ -242,10 +279,14 @@ class Synthesizer:
             if not ok:
                 raise SynthError('JPEG encoding failed')
             out = cv2.imdecode(enc, cv2.IMREAD_COLOR)[..., ::-1].copy()
-        kp3 = self.model.keypoints(q)
+        which = np.where(ids > 0, (ids.astype(np.int64) - 1) // NUM_PATCHES + 1, 0)
+        ids = np.where(ids > 0, (ids.astype(np.int64) - 1) % NUM_PATCHES + 1, 0).astype(np.uint8)
+        q, hand = np.asarray(hands[0][0], dtype=float), hands[0][1]
+        kp3 = self.keypoints(q, hand)
         kp2 = _project_distorted(camera, kp3)
-        return SyntheticFrame(out, patch_ids_to_labels(ids, self.glove.patch_color), ids, q,
-                              kp3, kp2, camera, conditions)
+        frame = SyntheticFrame(out, patch_ids_to_labels(ids, self.glove.patch_color), ids, q,
+                               kp3, kp2, camera, conditions)
+        return frame, which.astype(np.uint8)
 
     def _distort(self, camera: PinholeCamera, img: np.ndarray, ids: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray]:

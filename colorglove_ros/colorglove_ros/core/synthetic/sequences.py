@@ -143,7 +143,7 @@ class SyntheticSequenceRenderer:
         self.shutter = float(shutter)
         self.fps = float(fps)
         # hand centres (primary camera frame), whose image velocity sets each view's blur
-        self._centres = self.synth.model.keypoints_batch(self.poses).mean(axis=1)
+        self._centres = self.synth.keypoints(self.poses).mean(axis=1)
 
     def __len__(self) -> int:
         return len(self.poses)

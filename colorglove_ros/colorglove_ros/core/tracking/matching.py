@@ -7,11 +7,11 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.lookup.types import ProjectionConstraints
 from colorglove_ros.core.segmentation.crop import tiny_to_full
+from colorglove_ros.core.tracking.assignment import linear_sum_assignment
 from colorglove_ros.core.tracking.types import Blobs, Correspondences, IKError, MeshLike
 
 __all__ = ['match_by_color', 'match_primary', 'match_extra_camera', 'explained_blob_share']

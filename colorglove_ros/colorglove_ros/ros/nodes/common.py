@@ -51,7 +51,8 @@ from colorglove_ros.ros.shm_cleanup import clean_stale_fastdds_segments
 __all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'run_node',
            'DEFAULT_CALIBRATION_FILE', 'DEFAULT_DATABASE_CONFIG', 'declare_database',
            'HAND_LENGTH_RANGE_M', 'startup_errors',
-           'declare_calibration_file', 'declare_hand_length', 'declare_frame_prefix',
+           'declare_calibration_file', 'declare_hand_length', 'declare_hand',
+           'declare_frame_prefix',
            'CAMERA_INFO_TOPIC', 'OBSERVATION_TOPIC', 'declare_frame_camera',
            'declare_topic_list', 'extra_camera_info_topic', 'extra_frame_cameras',
            'declare_camera_index', 'calibrated_camera',
@@ -166,6 +167,18 @@ def declare_hand_length(node: Node, description: str) -> float:
     """Declare the ``hand_length_m`` parameter (default: the standard hand); return its value."""
     return declare(node, 'hand_length_m', DEFAULT_HAND_LENGTH_M, description,
                    *HAND_LENGTH_RANGE_M)
+
+
+def declare_hand(node: Node, executable: str) -> str:
+    """Declare the ``hand`` parameter ('right' or 'left', ``core.hand.handedness``); return
+    it, or stop the start if it is neither."""
+    from colorglove_ros.core.hand.handedness import DEFAULT_HAND, HANDS, check_hand
+
+    hand = declare(node, 'hand', DEFAULT_HAND,
+                   f'which hand wears the glove, one of {", ".join(HANDS)}: a left hand (the '
+                   'mirror-image glove) is looked up and tracked as the mirrored right hand')
+    with startup_errors(executable, ValueError):
+        return check_hand(hand)
 
 
 def declare_frame_prefix(node: Node, executable: str) -> str:

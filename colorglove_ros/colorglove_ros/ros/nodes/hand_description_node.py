@@ -21,6 +21,7 @@ from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.nodes.common import (
     declare_calibration_file,
     declare_frame_prefix,
+    declare_hand,
     run_node,
     startup_errors,
 )
@@ -45,8 +46,9 @@ class HandDescriptionNode(Node):
         calibration_file = declare_calibration_file(
             self, 'calibration YAML whose hand_length_m and finger_length_factors size the URDF')
         frame_prefix = declare_frame_prefix(self, EXECUTABLE)
+        hand = declare_hand(self, EXECUTABLE)
         with startup_errors(EXECUTABLE, ValueError):
-            self.urdf = calibrated_hand_urdf(resolve_path(calibration_file), frame_prefix)
+            self.urdf = calibrated_hand_urdf(resolve_path(calibration_file), frame_prefix, hand)
         # the generated URDF, never a value given from outside (a params file's '/**' section
         # meant for robot_state_publisher must not replace it)
         self.declare_parameter(

@@ -8,7 +8,9 @@ does not match are refused ('no hand: camera: ...'). Each extra camera's intrins
 come from its own CameraInfo (``NS/camera/camera_info`` for observations on
 ``NS/hand/observation``) or from ``calibration_file``, and an observation that does not match
 is ignored; the extra cameras' extrinsics and the user's hand (length and finger length
-factors) come from ``calibration_file``."""
+factors) come from ``calibration_file``. With ``hand: left`` the candidates come from a
+left-hand segmentation_node's mirrored observation: the hand is tracked as the mirrored right
+hand and its pose mirrored back before it is published (one camera)."""
 from __future__ import annotations
 
 import sys
@@ -24,6 +26,7 @@ from sensor_msgs.msg import Image
 from colorglove_ros.core.camera import PinholeCamera, load_calibration
 from colorglove_ros.core.hand.frames import hand_root_frame
 from colorglove_ros.core.hand.glove import calibrated_hand
+from colorglove_ros.core.hand.handedness import DEFAULT_HAND, from_right_frame, mirror_points
 from colorglove_ros.core.hand.overlay import draw_skeleton
 from colorglove_ros.core.lookup.database import check_hand_length, read_database_build
 from colorglove_ros.core.pipeline import (
@@ -57,6 +60,7 @@ from colorglove_ros.ros.nodes.common import (
     declare_database,
     declare_frame_camera,
     declare_frame_prefix,
+    declare_hand,
     declare_topic_list,
     extra_frame_cameras,
     run_node,
@@ -107,6 +111,7 @@ class IKNode(Node):
                          'longest wait for the extra cameras\' observations of a frame, seconds',
                          0.0, 1.0)
         frame_prefix = declare_frame_prefix(self, 'ik_node')
+        self.hand = declare_hand(self, 'ik_node')
         self.hand_frame = hand_root_frame(frame_prefix)
         with startup_errors('ik_node', ValueError):
             calibration = load_calibration(resolve_path(calibration_file))
@@ -132,6 +137,9 @@ class IKNode(Node):
         self.num_vertices = mesh.num_vertices
         self.cameras = calibration.cameras
         self.frame_camera = declare_frame_camera(self, calibration.primary)
+        if self.hand != DEFAULT_HAND and len(self.cameras) > 1:
+            raise StartupError(f'ik_node cannot start: a {self.hand} hand is tracked on its '
+                               'mirrored observation, with one camera only')
         if len(topics) != len(self.cameras) - 1:
             raise StartupError(
                 f'ik_node cannot start: {len(self.cameras)} cameras calibrated but '
@@ -337,7 +345,10 @@ class IKNode(Node):
         """Publish a tracked frame: joint state, wrist pose (and TF), markers, status line and
         the overlay."""
         result, keypoints = tracked.result, tracked.keypoints
-        wrist = self.outputs.publish_pose(result.q, keypoints, msg.header)
+        q = from_right_frame(result.q, self.hand)
+        if self.hand != DEFAULT_HAND:     # tracked as the mirrored right hand
+            keypoints = mirror_points(keypoints)
+        wrist = self.outputs.publish_pose(q, keypoints, msg.header)
         if self.tf_pub is not None:
             self.tf_pub.publish(wrist_pose_to_tf_msg(wrist, child_frame_id=self.hand_frame))
         per_camera = ', '.join(f'{camera.name} {count}' for camera, count in

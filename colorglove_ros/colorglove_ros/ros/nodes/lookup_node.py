@@ -70,8 +70,6 @@ class LookupNode(Node):
             database = load_database(path)
             check_hand_length(database.build, calibration.hand_length_m, calibration_file, path)
             self.lookup = PoseLookup(database, num_candidates, num_neighbors)
-            if self.finger_evidence:
-                self.lookup.patch_digit_table()      # built now, not on the first frame
         self.frame_camera = declare_frame_camera(self, calibration.primary)
         self.stats = FrameStats({'camera': self.frame_camera.refused})
         self.diagnostics = DiagnosticsPublisher(self, 'lookup', calibration.primary.frame_id,

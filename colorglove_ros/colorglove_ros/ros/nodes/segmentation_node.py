@@ -5,7 +5,10 @@ compressed``) -> ``HandObservation`` (per-pixel glove colour classification, mea
 A frame is segmented only when its camera model is known: with ``use_camera_info`` (default)
 the newest ``camera/camera_info`` must have the image's size and frame_id, else camera
 ``camera_index`` of ``calibration_file`` its size; other frames give 'camera: ...'
-observations without a hand. An extra camera's segmentation_node runs in the camera's
+observations without a hand. With ``hand: left`` (a left hand in the mirror-image glove) the
+published observation is that of the mirrored image (``core.hand.handedness``), the query the
+right-hand database and tracker serve; ik_node with the same ``hand`` mirrors the pose back.
+An extra camera's segmentation_node runs in the camera's
 namespace ``NS`` (``NS/camera/image_raw``, ``NS/camera/camera_info`` -> ``NS/hand/observation``,
 which ik_node's ``extra_observation_topics`` names). The segmenter's settings
 (``segmenter.<name>``) and ``publish_debug_image`` can be changed at run time; health goes to
@@ -27,6 +30,7 @@ from std_msgs.msg import Header
 
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
+from colorglove_ros.core.hand.handedness import DEFAULT_HAND, mirror_observation
 from colorglove_ros.core.pipeline import NoHand, bad_image, segment_frame
 from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
 from colorglove_ros.core.segmentation.segmenter import (
@@ -58,6 +62,7 @@ from colorglove_ros.ros.nodes.common import (
     declare_calibration_file,
     declare_camera_index,
     declare_frame_camera,
+    declare_hand,
     run_node,
     startup_errors,
 )
@@ -112,6 +117,7 @@ class SegmentationNode(Node):
             'also publish the per-pixel classification as an image on hand/segmentation_debug',
             self._check_publish_debug)
         self._declare_segmenter_settings()
+        self.hand = declare_hand(self, 'segmentation_node')
         self.frame_camera = declare_frame_camera(self, camera)
         self.stats = FrameStats({'camera': self.frame_camera.refused})
         self.diagnostics = DiagnosticsPublisher(self, 'segmentation', camera.frame_id,
@@ -170,7 +176,13 @@ class SegmentationNode(Node):
         camera = self.frame_camera.camera_for(width, height, header.frame_id)
         if isinstance(camera, NoHand):
             return camera
-        return segment_frame(self.segmenter, rgb, keep_labels=self.publish_debug)
+        observation = segment_frame(self.segmenter, rgb, keep_labels=self.publish_debug)
+        if self.hand == DEFAULT_HAND or isinstance(observation, NoHand):
+            return observation
+        # a left hand's query is the mirrored image's (the debug image stays as seen)
+        mirrored = mirror_observation(observation, camera.cx)
+        mirrored.label_image = observation.label_image
+        return mirrored
 
     def on_image(self, image: Image) -> None:
         """Segment one raw frame."""

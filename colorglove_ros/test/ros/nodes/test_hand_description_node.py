@@ -17,7 +17,10 @@ from rclpy.qos import (
 from repo_paths import CONFIG_DIR
 from std_msgs.msg import String
 
+from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.hand.model import calibrated_hand_model
 from colorglove_ros.core.hand.urdf import calibrated_hand_urdf
+from colorglove_ros.core.hand.urdf_variants import hand_urdf_string
 from colorglove_ros.ros.nodes.common import StartupError
 from colorglove_ros.ros.nodes.hand_description_node import HandDescriptionNode
 
@@ -73,8 +76,21 @@ def test_robot_description_override_is_ignored() -> None:
     ({'frame_prefix': '/right'}, 'frame prefix'),
     ({'frame_prefix': 'right hand'}, 'frame prefix'),
     ({'calibration_file': '/no/such/calibration.yaml'}, 'not found'),
+    ({'hand': 'middle'}, 'hand must be one of'),
 ])
 def test_bad_settings_stop_the_start(overrides: dict, message: str) -> None:
     with pytest.raises(StartupError, match=f'hand_description_node cannot start: .*{message}'):
         with running(_node(**overrides)):
             pass
+
+
+def test_left_hand_description(tmp_path: Path) -> None:
+    """hand:=left publishes the mirrored (left) hand's URDF with the left_ names."""
+    calibration = calibration_with_hand_length(tmp_path, 0.18)
+    with running(_node(calibration_file=str(calibration), frame_prefix='left_',
+                       hand='left')) as h:
+        value = h.nodes[0].get_parameter('robot_description').value
+    model = calibrated_hand_model(load_calibration(calibration))
+    assert value == hand_urdf_string('left', 'left_', model)
+    assert value != calibrated_hand_urdf(calibration, 'left_')      # not the right hand renamed
+    assert 'name="left_palm"' in value and 'name="left_index_pip_flex"' in value

@@ -1,0 +1,298 @@
+"""Two gloved hands at once: a layer over the one-hand stages of ``core.pipeline``.
+
+Per frame: :func:`find_glove_regions` finds up to two glove regions on a coarse frame (the
+segmenter's colour table and glove-region test, ``core.segmentation.detection``); each region
+is segmented on its own by the existing segmenter with the other regions painted out
+(:func:`mask_regions`), and its query is looked up twice in the right-hand database, as seen
+and mirrored (``core.hand.handedness``). Which region is which hand is decided from the
+evidence (:func:`assign_hands`): the nearest database image of the mirrored against the
+unmirrored query (a right glove matches unmirrored, a left one mirrored), and continuity (each
+hand's previous crop centre); with two regions they are a left and a right hand. Each hand
+has its own tracker (a left hand tracked as the mirrored right hand, its pose mirrored back),
+so losing one hand never resets the other. A frame in which a region's hand cannot be told
+with enough evidence gives that hand no pose (``NoHand``). No rclpy import.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+
+from colorglove_ros.core.hand.handedness import (
+    HANDS,
+    from_right_frame,
+    mirror_camera_observation,
+    mirror_tiny_crop,
+)
+from colorglove_ros.core.lookup.types import LookupResult
+from colorglove_ros.core.pipeline import NODE_LIMITS, NoHand, StageLimits, Tracked, look_up, track
+from colorglove_ros.core.segmentation.crop import TinyCrop
+from colorglove_ros.core.segmentation.detection import (
+    drop_oversized_components,
+    glove_region_mask,
+)
+from colorglove_ros.core.segmentation.segmenter import keep_multicolor_components
+from colorglove_ros.core.tracking.types import CameraObservation
+
+__all__ = ['MAX_HANDS', 'HandsSettings', 'GloveRegion', 'HandCandidate', 'HandOutcome',
+           'find_glove_regions', 'mask_regions', 'assign_hands', 'TwoHandPipeline']
+
+MAX_HANDS = 2
+
+
+@dataclass(frozen=True)
+class HandsSettings:
+    """Settings of the two-hand layer. Regions: coarse ``coarse_factor`` downsampling, glove
+    pixels joined within ``join_px`` coarse pixels, at least ``min_region_pixels`` coarse glove
+    pixels; a region is painted out of the other's image with ``mask_margin`` times its box
+    size around it. Handedness: a region's evidence is ``(d_left - d_right) /
+    evidence_scale_px`` (nearest database images of the mirrored and unmirrored query, tiny
+    px; positive: a right hand); continuity costs ``(distance / (continuity_scale * crop half
+    size))^2`` from the hand's previous crop centre; an assignment whose score beats the other
+    by less than ``min_margin`` is not decided (no pose for that frame)."""
+
+    coarse_factor: int = 4
+    join_px: int = 2
+    min_region_pixels: int = 40
+    mask_margin: float = 0.1
+    evidence_scale_px: float = 0.5
+    continuity_scale: float = 1.0
+    min_margin: float = 1.0
+    max_gap_frames: int = 15
+
+
+@dataclass(frozen=True)
+class GloveRegion:
+    """One glove region: its box (x0, y0, x1, y1 in full-image pixels, end exclusive) and
+    coarse glove pixel count."""
+
+    box: tuple[int, int, int, int]
+    pixels: int
+
+
+@dataclass
+class HandCandidate:
+    """One region's observation and its two lookups (as seen: right hand; mirrored: left)."""
+
+    region: GloveRegion
+    observation: CameraObservation
+    tiny: TinyCrop | None
+    lookups: dict[str, LookupResult | NoHand] = field(default_factory=dict)
+
+    def distance(self, hand: str) -> float:
+        """Nearest database image distance of the query as ``hand`` (inf when none)."""
+        found = self.lookups.get(hand)
+        if found is None or isinstance(found, NoHand) or not len(found.distances):
+            return math.inf
+        return float(found.distances[0])
+
+    @property
+    def center(self) -> np.ndarray:
+        """The crop window's centre (x, y), full pixels (the box centre without a crop)."""
+        crop = self.observation.crop
+        if crop is not None:
+            return np.array(crop.center_xy, float)
+        x0, y0, x1, y1 = self.region.box
+        return np.array([(x0 + x1) / 2.0, (y0 + y1) / 2.0])
+
+    @property
+    def half_size(self) -> float:
+        """The crop window's half size (full pixels)."""
+        crop = self.observation.crop
+        if crop is not None:
+            return float(crop.half_size)
+        x0, y0, x1, y1 = self.region.box
+        return max(x1 - x0, y1 - y0) / 2.0
+
+
+@dataclass(frozen=True)
+class HandOutcome:
+    """One hand's result in a frame: the tracked pose (in that hand's terms) or why not,
+    the region it was given (None: none) and the handedness evidence of that region."""
+
+    hand: str
+    outcome: Tracked | NoHand
+    region: GloveRegion | None = None
+    evidence: float = math.nan
+    q: np.ndarray | None = None
+
+
+def find_glove_regions(segmenter: Any, image_rgb: np.ndarray,
+                       settings: HandsSettings = HandsSettings(),
+                       max_regions: int = MAX_HANDS) -> list[GloveRegion]:
+    """Up to ``max_regions`` glove regions of an RGB image, largest first: on the frame
+    downsampled by ``settings.coarse_factor``, pixels the ``segmenter``'s colour calibration
+    labels glove that lie in a colourful neighbourhood (its glove-region settings), joined within
+    ``join_px``; a region needs ``min_region_pixels`` coarse glove pixels."""
+    f = int(settings.coarse_factor)
+    h, w = image_rgb.shape[:2]
+    small = cv2.resize(image_rgb, (w // f, h // f), interpolation=cv2.INTER_AREA)
+    calibration = segmenter.calibration
+    labels = cv2.medianBlur(calibration.classify(small), 3)
+    labels = drop_oversized_components(labels, segmenter.max_patch_fraction * labels.size)
+    window = max(int(round(segmenter.diversity_window * segmenter.coarse_factor / f)), 1)
+    labels = labels * glove_region_mask(labels, calibration.num_colors, window,
+                                        segmenter.min_region_colors,
+                                        segmenter.diversity_density).view(np.uint8)
+    labels = keep_multicolor_components(labels, 3, min_pixels=2)
+    glove = (labels > 0).view(np.uint8)
+    size = 2 * int(settings.join_px) + 1
+    joined = cv2.dilate(glove, cv2.getStructuringElement(cv2.MORPH_RECT, (size, size)))
+    n, comp, stats, _ = cv2.connectedComponentsWithStats(joined, connectivity=8)
+    counts = np.bincount(comp[glove > 0], minlength=n)
+    regions = []
+    for k in range(1, n):
+        if counts[k] < settings.min_region_pixels:
+            continue
+        x, y, bw, bh = stats[k, :4]
+        regions.append(GloveRegion((int(x * f), int(y * f), int(min((x + bw) * f, w)),
+                                    int(min((y + bh) * f, h))), int(counts[k])))
+    regions.sort(key=lambda r: -r.pixels)
+    return regions[:max_regions]
+
+
+def mask_regions(image_rgb: np.ndarray, regions: Sequence[GloveRegion],
+                 margin: float = 0.1) -> np.ndarray:
+    """A copy of the image with every region's box (grown by ``margin`` of its size) painted
+    a neutral grey, which no glove colour classifies as."""
+    out = np.array(image_rgb, copy=True)
+    h, w = out.shape[:2]
+    for r in regions:
+        x0, y0, x1, y1 = r.box
+        mx, my = int(margin * (x1 - x0)), int(margin * (y1 - y0))
+        out[max(y0 - my, 0):min(y1 + my, h), max(x0 - mx, 0):min(x1 + mx, w)] = 128
+    return out
+
+
+def assign_hands(candidates: Sequence[HandCandidate],
+                 previous: dict[str, np.ndarray | None],
+                 settings: HandsSettings = HandsSettings()
+                 ) -> tuple[dict[str, int], float]:
+    """Which candidate is which hand: ({hand: candidate index}, the winning assignment's
+    score margin over the best other). Every assignment of distinct hands to the candidates
+    is scored: the sum of each candidate's evidence for its hand (``+-(d_left - d_right) /
+    evidence_scale_px``) minus the continuity cost from the hand's previous crop centre
+    (``previous[hand]``, None when it was not tracked)."""
+    def evidence(c: HandCandidate) -> float:
+        e = (c.distance('left') - c.distance('right')) / settings.evidence_scale_px
+        return float(np.clip(e, -20.0, 20.0)) if math.isfinite(e) else (
+            20.0 if c.distance('right') < math.inf else
+            -20.0 if c.distance('left') < math.inf else 0.0)
+
+    def score(assignment: dict[str, int]) -> float:
+        total = 0.0
+        for hand, i in assignment.items():
+            c = candidates[i]
+            total += evidence(c) if hand == 'right' else -evidence(c)
+            prev = previous.get(hand)
+            if prev is not None:
+                d = np.linalg.norm(c.center - prev) / (settings.continuity_scale
+                                                        * max(c.half_size, 1.0))
+                total -= float(d * d)
+        return total
+
+    if not candidates:
+        return {}, math.inf
+    if len(candidates) == 1:
+        options = [{'right': 0}, {'left': 0}]
+    else:
+        options = [{'right': 0, 'left': 1}, {'right': 1, 'left': 0}]
+    scored = sorted(((score(o), o) for o in options), key=lambda t: -t[0])
+    return scored[0][1], scored[0][0] - scored[1][0]
+
+
+class TwoHandPipeline:
+    """Segment -> look up -> track for up to two hands (a right and a left glove) in one
+    camera's frames. ``segmenter`` is copied once per region slot (``fresh``, no learnt
+    background: each sees frames with the other hand painted out); ``trackers`` maps 'right'
+    and 'left' to a :class:`HandTracker` of the right-hand model each (the left hand is
+    tracked mirrored)."""
+
+    def __init__(self, segmenter: Any, lookup: Any, camera: Any, trackers: dict[str, Any], *,
+                 limits: StageLimits = NODE_LIMITS, settings: HandsSettings = HandsSettings(),
+                 finger_evidence: bool = True) -> None:
+        self.segmenter = segmenter
+        self.segmenters = [segmenter.fresh(background_frames=0) for _ in range(MAX_HANDS)]
+        self.lookup = lookup
+        self.camera = camera
+        self.trackers = trackers
+        self.limits = limits
+        self.settings = settings
+        self.finger_evidence = finger_evidence
+        self.previous: dict[str, np.ndarray | None] = {hand: None for hand in HANDS}
+        self._missing = {hand: 0 for hand in HANDS}
+
+    def reset(self) -> None:
+        """Forget both hands."""
+        for tracker in self.trackers.values():
+            tracker.reset()
+        self.previous = {hand: None for hand in HANDS}
+
+    def candidates(self, image_rgb: np.ndarray) -> list[HandCandidate]:
+        """Every glove region's observation and its lookups as a right and as a left hand."""
+        from colorglove_ros.core.pipeline import observe_image
+
+        regions = find_glove_regions(self.segmenter, image_rgb, self.settings)
+        out = []
+        for k, region in enumerate(regions):
+            others = [r for j, r in enumerate(regions) if j != k]
+            image = mask_regions(image_rgb, others, self.settings.mask_margin) if others \
+                else image_rgb
+            seen, tiny = observe_image(self.segmenters[k], image, True)
+            candidate = HandCandidate(region, seen, tiny)
+            if tiny is not None and seen.hand_found:
+                cx = self.camera.cx
+                queries = {'right': (tiny, seen),
+                           'left': (mirror_tiny_crop(tiny, cx),
+                                    mirror_camera_observation(seen, cx))}
+                for hand, (query, obs) in queries.items():
+                    candidate.lookups[hand] = look_up(
+                        self.lookup, query, self.camera,
+                        obs.blobs if self.finger_evidence else None, self.limits)
+                out.append(candidate)
+        return out
+
+    def process(self, image_rgb: np.ndarray, stamp: float) -> dict[str, HandOutcome]:
+        """One frame: each hand's outcome (its own tracker; a hand without a region, or
+        whose region's handedness is not decided, is 'no hand' and its tracker starts again
+        when it comes back)."""
+        candidates = self.candidates(image_rgb)
+        assignment, margin = assign_hands(candidates, self.previous, self.settings)
+        decided = margin >= self.settings.min_margin
+        out = {}
+        for hand in HANDS:
+            tracker = self.trackers[hand]
+            i = assignment.get(hand)
+            if i is None or not decided:
+                reason = ('no glove region' if i is None else
+                          f'handedness not decided (score margin {margin:.2f} < '
+                          f'{self.settings.min_margin:g})')
+                tracker.reset()
+                self._forget(hand)
+                out[hand] = HandOutcome(hand, NoHand(reason))
+                continue
+            c = candidates[i]
+            found = c.lookups[hand]
+            obs = c.observation if hand == 'right' else mirror_camera_observation(
+                c.observation, self.camera.cx)
+            prior = None if isinstance(found, NoHand) else found
+            outcome = track(tracker, prior, [obs], stamp, self.limits,
+                            upstream_reason=found.reason if isinstance(found, NoHand) else '')
+            evidence = c.distance('left') - c.distance('right')
+            q = from_right_frame(outcome.result.q, hand) if isinstance(outcome, Tracked) \
+                else None
+            self.previous[hand] = c.center
+            self._missing[hand] = 0
+            out[hand] = HandOutcome(hand, outcome, c.region, evidence, q)
+        return out
+
+    def _forget(self, hand: str) -> None:
+        """Keep a lost hand's last position for ``max_gap_frames`` frames (continuity through
+        a short loss or a crossing), then forget it."""
+        self._missing[hand] += 1
+        if self._missing[hand] > self.settings.max_gap_frames:
+            self.previous[hand] = None
