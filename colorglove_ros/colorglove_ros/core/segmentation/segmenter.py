@@ -464,10 +464,10 @@ class GloveSegmenter:
     def _detect(self, small: np.ndarray, region: tuple[int, int, int, int], reduction: float,
                 pixels: int, static: np.ndarray | None, min_px: int
                 ) -> tuple[tuple[tuple[float, float], float] | None, np.ndarray | None,
-                           np.ndarray | None, np.ndarray]:
+                           np.ndarray]:
         """The coarse search within ``region`` (coarse-pixel bounds) of the coarse frame
         ``small``: the hand's window ((cx, cy), half) in coarse pixels or None, the light
-        correction table, the scene colours and the region's labels (``pixels``: the full
+        correction table and the region's labels (``pixels``: the full
         frame's pixel count; ``min_px``: the fewest glove pixels of a hand, coarse)."""
         x0, x1, y0, y1 = region
         part = small[y0:y1, x0:x1]
@@ -483,17 +483,25 @@ class GloveSegmenter:
             gains = gains * estimate_light_gains(cv2.LUT(seen, _LINEAR_RGB), labels,
                                                  self.calibration.reference_linear_rgb)
             table = gain_table(gains)
-        scene = None
-        if self.scene_colour_min_share > 0:
-            rejected = (self.calibration.classify(part, table) > 0) & (labels == 0)
-            scene = scene_colour_table(part[rejected], SCENE_COLOUR_BITS,
-                                       self.scene_colour_min_share * small.shape[0]
-                                       * small.shape[1])
         found = mean_shift_crop(labels, min_pixels=min_px)
         if found is not None:
             (cx, cy), half = found
             found = ((cx + x0, cy + y0), half)
-        return found, table, scene, labels
+        return found, table, labels
+
+    def _scene_colours(self, small: np.ndarray, table: np.ndarray | None,
+                       region: tuple[int, int, int, int], labels: np.ndarray
+                       ) -> np.ndarray | None:
+        """The frame's scene colours (:func:`scene_colour_table`): those of the coarse pixels
+        classified glove but not kept as glove by the search, whose ``labels`` cover
+        ``region``; outside it (a followed hand) every pixel classified glove counts."""
+        if self.scene_colour_min_share <= 0:
+            return None
+        x0, x1, y0, y1 = region
+        rejected = self.calibration.classify(small, table) > 0
+        rejected[y0:y1, x0:x1] &= labels == 0
+        return scene_colour_table(small[rejected], SCENE_COLOUR_BITS,
+                                  self.scene_colour_min_share * rejected.size)
 
     def _coarse(self, image: np.ndarray, learn: bool = False
                 ) -> tuple[tuple[tuple[float, float], float] | None, np.ndarray | None,
@@ -522,7 +530,8 @@ class GloveSegmenter:
         if detected is None:
             region = (0, small.shape[1], 0, small.shape[0])
             detected = self._detect(small, region, reduction, h * w, static, min_px)
-        found, table, scene, labels = detected
+        found, table, labels = detected
+        scene = self._scene_colours(small, table, region, labels)
         self._found = None if found is None else (found, small.shape[:2])
         if learn and self.background.enabled:   # (the glove-like mask costs a few loops)
             rx0, rx1, ry0, ry1 = region

@@ -104,3 +104,20 @@ def test_following_gives_the_same_observations_on_a_slow_motion(calibration, glo
         assert a.hand_found and b.hand_found
         assert np.array_equal(a.tiny_labels, b.tiny_labels)
         assert a.crop == b.crop and a.blobs == b.blobs
+
+
+def test_the_scene_colours_are_the_whole_frames_while_following(calibration, glove) -> None:
+    """A large surface far from the hand in the glove's commonest colour is background, and
+    its colour a scene colour the region of interest drops: following the hand, the surface
+    outside the followed region still counts, and the observation is the whole-frame one."""
+    pixels, mask = glove
+    colours, counts = np.unique(pixels[mask].reshape(-1, 3), axis=0, return_counts=True)
+    surface = _frame(glove, (LEFT, 1.0))
+    surface[40:440, 420:630] = colours[np.argmax(counts)]
+    following = GloveSegmenter(calibration, follow_margin=2.5)
+    whole = GloveSegmenter(calibration, follow_margin=0.0)
+    for frame in (_frame(glove, (LEFT, 1.0)), surface):
+        a, b = following.process(frame), whole.process(frame)
+    assert b.hand_found and a.hand_found
+    assert np.array_equal(a.tiny_labels, b.tiny_labels)
+    assert a.crop == b.crop and a.blobs == b.blobs
