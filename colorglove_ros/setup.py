@@ -12,7 +12,8 @@ NODE_SCRIPTS = {
     for path in sorted(glob('colorglove_ros/ros/nodes/*_node.py'))
 }
 
-TOOL_SCRIPTS = {'colorglove_launch': 'colorglove_ros.ros.launcher:main'}
+TOOL_SCRIPTS = {'colorglove_launch': 'colorglove_ros.ros.launcher:main',
+                'colorglove_single_process': 'colorglove_ros.ros.single_process:main'}
 # Every command-line tool colorglove_ros/tools/<name>.py becomes colorglove_<name>.
 TOOL_SCRIPTS.update({
     f'colorglove_{Path(path).stem}': f'colorglove_ros.tools.{Path(path).stem}:main'

@@ -244,8 +244,13 @@ def bad_prior(tracker: Any, exc: Exception) -> NoHand:
 def hand_keypoints_at_plausible_depth(tracker: Any, q: np.ndarray) -> np.ndarray:
     """The hand keypoints of pose ``q`` (primary camera frame), refused with
     ``InvalidPriorError`` when any is at an implausible depth from any of the tracker's
-    cameras (behind or just in front of its plane, or far away)."""
-    keypoints = tracker.model.keypoints(q)
+    cameras (behind or just in front of its plane, or far away). With the tracker's own
+    kinematics (``kin``), which remembers the poses its fit just visited, the keypoints come
+    from there."""
+    model = tracker.model
+    kin = getattr(tracker, 'kin', None)
+    keypoints = model.keypoints(q) if kin is None else \
+        kin.points(np.asarray(q, float), model.keypoint_link, model.keypoint_local)[0]
     for camera in tracker.cameras:
         validate_hand_depth(camera.world_to_camera(keypoints), camera.name)
     return keypoints

@@ -3,6 +3,7 @@ message classes work without ``rclpy.init`` so all of this is unit-testable in o
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Sequence
 
 import numpy as np
@@ -147,13 +148,13 @@ def candidates_to_msg(observation: HandObservation, result: LookupResult | None,
         return msg
     msg.hand_found = True
     msg.candidates = [
-        PoseCandidate(database_index=int(index), pose=[float(v) for v in pose],
+        PoseCandidate(database_index=int(index), pose=np.asarray(pose, float).tolist(),
                       image_distance=float(distance), weight=float(weight))
         for index, pose, distance, weight in zip(result.indices, result.poses, result.distances,
                                                  result.weights, strict=True)]
-    msg.blended_pose = [float(v) for v in result.blended]
+    msg.blended_pose = np.asarray(result.blended, float).tolist()
     if result.finger_std is not None:
-        msg.finger_std = [float(v) for v in result.finger_std]
+        msg.finger_std = np.asarray(result.finger_std, float).tolist()
     c = result.constraints
     msg.constraints = [
         PatchConstraint(patch_id=int(p), color_label=int(col), vertex_index=int(v),
@@ -227,7 +228,9 @@ def observation_to_msg(observation: Observation, header: Header) -> HandObservat
         msg.crop_offset_x = float(observation.crop.offset_x)
         msg.crop_offset_y = float(observation.crop.offset_y)
     if observation.hand_found and observation.tiny_labels is not None:
-        msg.tiny_labels = np.ascontiguousarray(observation.tiny_labels, np.uint8).ravel().tolist()
+        # uint8[] takes an array.array('B') as it is: no list of Python ints
+        msg.tiny_labels = array('B', np.ascontiguousarray(observation.tiny_labels,
+                                                          np.uint8).tobytes())
     blobs = sorted(observation.blobs, key=lambda b: -b.pixel_count)
     msg.blobs = [PatchBlob(color_label=int(b.color_label), x=float(b.centroid_x),
                            y=float(b.centroid_y), pixel_count=int(b.pixel_count)) for b in blobs]

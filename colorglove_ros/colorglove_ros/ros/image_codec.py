@@ -9,6 +9,7 @@ byte orders (``yuv422`` = UYVY, ``yuv422_yuy2`` = YUYV, what usb_cam's yuyv mode
 pattern names count from the second row: ``bayer_rggb8`` is OpenCV's ``BayerBG``)."""
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,7 +20,7 @@ from colorglove_ros.core.errors import ColorGloveError
 
 __all__ = ['COMPRESSED_FORMATS', 'ENCODINGS', 'ImageEncodingError', 'ImageFormat',
            'compressed_image_to_rgb8', 'image_format', 'image_to_array', 'image_to_rgb8',
-           'RGB8_ENCODERS', 'rgb8_to_encoding']
+           'RGB8_ENCODERS', 'rgb8_to_encoding', 'SerializedImage', 'image_from_cdr']
 
 
 class ImageEncodingError(ColorGloveError, ValueError):
@@ -135,11 +136,13 @@ def image_to_array(msg: Any) -> np.ndarray:
     return pixels[:, :, 0] if fmt.channels == 1 else pixels
 
 
-def image_to_rgb8(msg: Any, *, allow_mono: bool = False) -> np.ndarray:
+def image_to_rgb8(msg: Any, *, allow_mono: bool = False, read_only: bool = False
+                  ) -> np.ndarray:
     """Return a colour image as contiguous (H, W, 3) uint8 RGB (alpha dropped; 16-bit
     channels keep their high byte). Mono images are refused (glove segmentation needs colour)
     unless ``allow_mono``, which replicates the grey level into three channels. YUV, NV21 and
-    Bayer images are converted as cv_bridge does."""
+    Bayer images are converted as cv_bridge does. With ``read_only`` an rgb8 image whose data
+    is read-only (a serialized message's bytes) comes back as a view of it, not a copy."""
     encoding = str(msg.encoding)
     fmt = image_format(encoding)
     if not fmt.is_colour and not (allow_mono and encoding in _MONO):
@@ -158,7 +161,7 @@ def image_to_rgb8(msg: Any, *, allow_mono: bool = False) -> np.ndarray:
         return cv2.cvtColor(pixels, cv2.COLOR_GRAY2RGB)
     conversion = _TO_RGB[(fmt.channels, fmt.rgb)]
     if conversion is None:
-        return pixels if pixels.flags.writeable else pixels.copy()
+        return pixels if pixels.flags.writeable or read_only else pixels.copy()
     return cv2.cvtColor(pixels, conversion)
 
 
@@ -206,3 +209,73 @@ def rgb8_to_encoding(rgb: np.ndarray, encoding: str) -> np.ndarray:
     if image_format(encoding).channels == 2 and rgb.shape[1] % 2:
         raise ImageEncodingError(f'{encoding} needs an even width, got {rgb.shape[1]}')
     return np.ascontiguousarray(cv2.cvtColor(np.ascontiguousarray(rgb), conversion))
+
+
+@dataclass(frozen=True)
+class SerializedImage:
+    """The fields of a serialized ``sensor_msgs/Image`` (:func:`image_from_cdr`); ``data`` is
+    a read-only view of the serialized bytes, so :func:`image_to_rgb8` reads it in place."""
+
+    stamp_sec: int
+    stamp_nanosec: int
+    frame_id: str
+    height: int
+    width: int
+    encoding: str
+    is_bigendian: int
+    step: int
+    data: np.ndarray
+
+
+class _CdrReader:
+    """Plain CDR (XCDR1) reading of one serialized message: 4 bytes of encapsulation (byte 1
+    is 1 for little endian), then fields aligned to their size from the end of it."""
+
+    def __init__(self, data: bytes | memoryview) -> None:
+        self.data = memoryview(data).cast('B')
+        if len(self.data) < 4 or self.data[1] not in (0, 1):
+            raise ImageEncodingError('not a CDR-serialized message')
+        self.order = '<' if self.data[1] == 1 else '>'
+        self.at = 4
+
+    def _take(self, size: int, align: int) -> int:
+        self.at += -(self.at - 4) % align
+        start, self.at = self.at, self.at + size
+        if self.at > len(self.data):
+            raise ImageEncodingError(f'serialized image truncated at byte {start}')
+        return start
+
+    def uint32(self) -> int:
+        return struct.unpack_from(f'{self.order}I', self.data, self._take(4, 4))[0]
+
+    def int32(self) -> int:
+        return struct.unpack_from(f'{self.order}i', self.data, self._take(4, 4))[0]
+
+    def uint8(self) -> int:
+        return self.data[self._take(1, 1)]
+
+    def string(self) -> str:
+        size = self.uint32()
+        start = self._take(size, 1)
+        return bytes(self.data[start:start + max(size - 1, 0)]).decode('utf-8', 'replace')
+
+    def uint8_sequence(self) -> np.ndarray:
+        size = self.uint32()
+        start = self._take(size, 1)
+        view = np.frombuffer(self.data, np.uint8, size, start)
+        view.flags.writeable = False
+        return view
+
+
+def image_from_cdr(data: bytes | memoryview) -> SerializedImage:
+    """The fields of a CDR-serialized ``sensor_msgs/Image`` (a raw subscription's message)
+    without deserializing it: the pixels stay in ``data``, as a read-only view."""
+    cdr = _CdrReader(data)
+    sec, nanosec = cdr.int32(), cdr.uint32()
+    frame_id = cdr.string()
+    height, width = cdr.uint32(), cdr.uint32()
+    encoding = cdr.string()
+    is_bigendian = cdr.uint8()
+    step = cdr.uint32()
+    return SerializedImage(sec, nanosec, frame_id, height, width, encoding, is_bigendian, step,
+                           cdr.uint8_sequence())

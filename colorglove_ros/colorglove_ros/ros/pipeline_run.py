@@ -235,8 +235,13 @@ def pipeline_parameters(database: Path, seed: int, frames: int, rate_hz: float,
     }
 
 
-def node_specs(params_file: Path, with_camera: bool) -> list[NodeSpec]:
-    """The tracker's node processes, all reading ``params_file``."""
+def node_specs(params_file: Path, with_camera: bool, single_process: bool = False
+               ) -> list[NodeSpec]:
+    """The tracker's node processes, all reading ``params_file``; with ``single_process`` one
+    process running every node (``colorglove_single_process``)."""
+    if single_process:
+        return [NodeSpec('colorglove_single_process', '', [params_file],
+                         arguments=[] if with_camera else ['--no-camera'])]
     names = [('segmentation_node', 'segmentation'), ('lookup_node', 'lookup'), ('ik_node', 'ik')]
     if with_camera:
         names.insert(0, ('camera_node', 'camera'))
@@ -270,12 +275,14 @@ def write_params(parameters: dict[str, dict[str, Any]], folder: Path) -> Path:
 def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
                  feed: Any = None, timeout_s: float = 600.0, startup_s: float = 60.0,
                  keep_overlays: int = 8, extra_nodes: Sequence[NodeSpec] = (),
-                 extra_inputs: dict[str, str] | None = None) -> PipelineRun:
+                 extra_inputs: dict[str, str] | None = None,
+                 single_process: bool = False) -> PipelineRun:
     """Start the nodes with ``parameters`` (camera_node too unless ``feed`` is given: a
     callable started once the graph is up, e.g. a bag player), monitor until
     ``expected_frames`` frames passed, stop everything, and return the measurements.
     ``extra_nodes`` (e.g. a second camera's segmentation_node) also read the parameter file;
-    ``extra_inputs`` maps their input topics to their node names, awaited like the stages'."""
+    ``extra_inputs`` maps their input topics to their node names, awaited like the stages'.
+    With ``single_process`` the tracker's nodes run in one process (:func:`node_specs`)."""
     use_fastdds_profile()
     with tempfile.TemporaryDirectory() as folder:
         params_file = write_params(parameters, Path(folder))
@@ -288,7 +295,7 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
         executor.add_node(monitor)
         spinner = threading.Thread(target=executor.spin, daemon=True)
         spinner.start()
-        launcher = Launcher(node_specs(params_file, with_camera=feed is None) + [
+        launcher = Launcher(node_specs(params_file, feed is None, single_process) + [
             replace(spec, parameters=[params_file, *spec.parameters]) for spec in extra_nodes])
         probe = LatencyProbe()
         record = None

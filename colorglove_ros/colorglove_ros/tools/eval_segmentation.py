@@ -160,6 +160,7 @@ def evaluate(seg: GloveSegmenter,
     glove_timings: dict[str, list[float]] = {k: [] for k in timings}
     detect = {'tp': 0, 'fn': 0, 'fp': 0, 'tn': 0}
     for image, truth, _ in frames:
+        seg.lose_track()   # independent frames: nothing to follow from the last one
         obs = seg.process(image, keep_labels=True)
         for _ in range(repeats):
             o = seg.process(image)

@@ -21,6 +21,7 @@ from colorglove_ros.core.pipeline import (
     StageLimits,
     TemporalPrior,
     Tracked,
+    hand_keypoints_at_plausible_depth,
     image_observer,
     look_up,
     segment_frame,
@@ -37,6 +38,7 @@ from colorglove_ros.core.synthetic import frames as synth
 from colorglove_ros.core.synthetic.conditions import sample_conditions
 from colorglove_ros.core.tracking.tracker import HandTracker, IKResult
 from colorglove_ros.core.tracking.types import Blobs, CameraObservation, PosePrior
+from colorglove_ros.core.validation import InvalidInputError
 
 CAMERA = synth.default_camera()
 FAST_FIT = dict(max_per_class=1500, bits=5, augment_copies=1, background_components=6)
@@ -278,3 +280,13 @@ def test_a_rendered_glove_frame_goes_through(segmenter, glove_rgb, lookup, track
     blank = pipeline.process(tracker, [np.full((480, 640, 3), 128, np.uint8)], 1 / 30)
     assert isinstance(blank, NoHand) and blank.reason == 'no crop'
     assert tracker.previous_pose is None
+
+
+def test_depth_gate_keypoints_from_the_trackers_kinematics_equal_the_models(tracker) -> None:
+    q = np.zeros(26)
+    q[2], q[3:6], q[6:] = 0.5, (0.3, -0.4, 0.2), 0.3
+    keypoints = hand_keypoints_at_plausible_depth(tracker, q)
+    np.testing.assert_allclose(keypoints, tracker.model.keypoints(q), atol=1e-12)
+    q[2] = 0.05                                  # closer than any hand can be
+    with pytest.raises(InvalidInputError):
+        hand_keypoints_at_plausible_depth(tracker, q)

@@ -640,10 +640,14 @@ def scene_figures(calibration: ColorCalibration, empty_frames: Sequence[np.ndarr
     labelled, pipeline, empty_found = [], [], 0
     for frame in empty_frames:
         labelled.append(float(np.mean(segmenter.classify_full(frame) > 0)))
+        segmenter.lose_track()   # frames of a scene, not of one motion: none follows another
         obs = segmenter.process(frame, keep_labels=True)
         pipeline.append(0.0 if obs.label_image is None else float(np.mean(obs.label_image > 0)))
         empty_found += int(obs.hand_found)
-    glove_found = sum(int(segmenter.process(f).hand_found) for f in glove_frames)
+    glove_found = 0
+    for frame in glove_frames:
+        segmenter.lose_track()
+        glove_found += int(segmenter.process(frame).hand_found)
     nan = float('nan')
     return {'empty_labelled_glove': float(np.mean(labelled)) if labelled else nan,
             'empty_pipeline_glove': float(np.mean(pipeline)) if pipeline else nan,

@@ -323,6 +323,14 @@ class GloveSegmenter:
     small clutter) are the scene's own colours in this frame: the region of interest labels
     them background (0 disables).
 
+    Crop following (``follow_margin`` > 0): a segmenter is fed one camera's frames in order.
+    After a frame with a hand, the next frame's coarse search looks only within
+    ``follow_margin`` times the hand's coarse window around where it was, and the static
+    background learns its glove-like mask there; when the hand is not found there, or its
+    region of interest reaches past that region's edge inside the image, the whole coarse
+    frame is searched again (as after a frame without a hand). :meth:`lose_track` forgets
+    the hand for frames that do not follow each other.
+
     Every setting is checked (ranges, odd median kernel, finite numbers) by
     ``core.validation.validate_segmenter_settings`` however the segmenter is built; a bad one
     raises :class:`SegmentationConfigError` naming ``source`` (the settings' file, if any)
@@ -342,7 +350,7 @@ class GloveSegmenter:
                  min_region_colors: int = 6, diversity_density: float = 0.01,
                  max_patch_fraction: float = 0.1, scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
-                 source: str = 'GloveSegmenter') -> None:
+                 follow_margin: float = 0.0, source: str = 'GloveSegmenter') -> None:
         # every keyword argument but ``source`` is a setting named in SEGMENTER_RULES: checked
         # and converted (int, float, tuple of ints) in one place, kept as the attribute of
         # the same name
@@ -353,6 +361,15 @@ class GloveSegmenter:
             setattr(self, name, value)
         self.source = source
         self.background = StaticBackground(self.background_frames, self.background_tolerance)
+        # the hand's coarse window of the last frame with a hand ((cx, cy), half in coarse
+        # pixels, and the coarse frame's shape), which the next frame's search follows
+        self._followed: tuple[tuple[tuple[float, float], float], tuple[int, int]] | None = None
+        self._found: tuple[tuple[tuple[float, float], float], tuple[int, int]] | None = None
+
+    def lose_track(self) -> None:
+        """Forget the followed hand: the next frame is searched whole (for frames that do not
+        follow each other, such as a set of independent test images)."""
+        self._followed = self._found = None
 
     def settings(self) -> dict[str, object]:
         """The segmenter's settings (the keyword arguments it was built with, checked)."""
@@ -423,6 +440,69 @@ class GloveSegmenter:
             labels = keep_multicolor_components(labels, self.min_component_colors, min_pixels=2)
         return labels
 
+    def _follow_region(self, shape: tuple[int, int]) -> tuple[int, int, int, int] | None:
+        """Coarse-pixel bounds (x0, x1, y0, y1) of the region the search follows the last
+        frame's hand in, or None (nothing to follow, following off, another frame size)."""
+        if self.follow_margin <= 0.0 or self._followed is None or self._followed[1] != shape:
+            return None
+        (cx, cy), half = self._followed[0]
+        reach = self.follow_margin * half
+        x0, x1 = max(int(np.floor(cx - reach)), 0), min(int(np.ceil(cx + reach)) + 1, shape[1])
+        y0, y1 = max(int(np.floor(cy - reach)), 0), min(int(np.ceil(cy + reach)) + 1, shape[0])
+        return (x0, x1, y0, y1) if x1 - x0 >= 2 and y1 - y0 >= 2 else None
+
+    def _inside(self, found: tuple[tuple[float, float], float],
+                region: tuple[int, int, int, int], shape: tuple[int, int]) -> bool:
+        """Whether the region of interest of coarse window ``found`` (``roi_margin`` times
+        it) stays inside ``region``, except where ``region`` reaches the frame's edge."""
+        (cx, cy), half = found
+        reach = self.roi_margin * half
+        x0, x1, y0, y1 = region
+        return ((x0 == 0 or cx - reach >= x0) and (x1 == shape[1] or cx + reach <= x1 - 1)
+                and (y0 == 0 or cy - reach >= y0) and (y1 == shape[0] or cy + reach <= y1 - 1))
+
+    def _detect(self, small: np.ndarray, region: tuple[int, int, int, int], reduction: float,
+                pixels: int, static: np.ndarray | None, min_px: int
+                ) -> tuple[tuple[tuple[float, float], float] | None, np.ndarray | None,
+                           np.ndarray]:
+        """The coarse search within ``region`` (coarse-pixel bounds) of the coarse frame
+        ``small``: the hand's window ((cx, cy), half) in coarse pixels or None, the light
+        correction table and the region's labels (``pixels``: the full
+        frame's pixel count; ``min_px``: the fewest glove pixels of a hand, coarse)."""
+        x0, x1, y0, y1 = region
+        part = small[y0:y1, x0:x1]
+        static_part = None if static is None else static[y0:y1, x0:x1]
+        labels = self._coarse_labels(part, None, reduction, pixels, static_part)
+        table = None
+        gains = np.ones(3)
+        seen = part
+        for k in range(self.light_passes):
+            if k:   # refine: classify the corrected coarse frame, estimate what is left
+                seen = cv2.LUT(part, table)
+                labels = self._coarse_labels(part, table, reduction, pixels, static_part)
+            gains = gains * estimate_light_gains(cv2.LUT(seen, _LINEAR_RGB), labels,
+                                                 self.calibration.reference_linear_rgb)
+            table = gain_table(gains)
+        found = mean_shift_crop(labels, min_pixels=min_px)
+        if found is not None:
+            (cx, cy), half = found
+            found = ((cx + x0, cy + y0), half)
+        return found, table, labels
+
+    def _scene_colours(self, small: np.ndarray, table: np.ndarray | None,
+                       region: tuple[int, int, int, int], labels: np.ndarray
+                       ) -> np.ndarray | None:
+        """The frame's scene colours (:func:`scene_colour_table`): those of the coarse pixels
+        classified glove but not kept as glove by the search, whose ``labels`` cover
+        ``region``; outside it (a followed hand) every pixel classified glove counts."""
+        if self.scene_colour_min_share <= 0:
+            return None
+        x0, x1, y0, y1 = region
+        rejected = self.calibration.classify(small, table) > 0
+        rejected[y0:y1, x0:x1] &= labels == 0
+        return scene_colour_table(small[rejected], SCENE_COLOUR_BITS,
+                                  self.scene_colour_min_share * rejected.size)
+
     def _coarse(self, image: np.ndarray, learn: bool = False
                 ) -> tuple[tuple[tuple[float, float], float] | None, np.ndarray | None,
                            np.ndarray | None, np.ndarray | None]:
@@ -440,26 +520,26 @@ class GloveSegmenter:
             small, sx, sy = image, 1.0, 1.0
         reduction = float(np.sqrt(sx * sy))
         static = self.background.match(small) if learn else None
-        labels = self._coarse_labels(small, None, reduction, h * w, static)
-        table = None
-        gains = np.ones(3)
-        seen = small
-        for k in range(self.light_passes):
-            if k:   # refine: classify the corrected coarse frame, estimate what is left
-                seen = cv2.LUT(small, table)
-                labels = self._coarse_labels(small, table, reduction, h * w, static)
-            gains = gains * estimate_light_gains(cv2.LUT(seen, _LINEAR_RGB), labels,
-                                                 self.calibration.reference_linear_rgb)
-            table = gain_table(gains)
-        scene = None
-        if self.scene_colour_min_share > 0:
-            rejected = (self.calibration.classify(small, table) > 0) & (labels == 0)
-            scene = scene_colour_table(small[rejected], SCENE_COLOUR_BITS,
-                                       self.scene_colour_min_share * labels.size)
+        region = self._follow_region(small.shape[:2]) if learn else None
         min_px = max(int(self.min_glove_pixels / (sx * sy)), 1)
-        found = mean_shift_crop(labels, min_pixels=min_px)
+        detected = None
+        if region is not None:
+            detected = self._detect(small, region, reduction, h * w, static, min_px)
+            if detected[0] is None or not self._inside(detected[0], region, small.shape[:2]):
+                detected = None     # lost, or leaving the followed region: search it all
+        if detected is None:
+            region = (0, small.shape[1], 0, small.shape[0])
+            detected = self._detect(small, region, reduction, h * w, static, min_px)
+        found, table, labels = detected
+        scene = self._scene_colours(small, table, region, labels)
+        self._found = None if found is None else (found, small.shape[:2])
         if learn and self.background.enabled:   # (the glove-like mask costs a few loops)
-            self.background.update(small, self._glove_like(labels, found))
+            rx0, rx1, ry0, ry1 = region
+            glove = np.zeros(small.shape[:2], bool)
+            glove[ry0:ry1, rx0:rx1] = self._glove_like(
+                labels, None if found is None else ((found[0][0] - rx0, found[0][1] - ry0),
+                                                    found[1]))
+            self.background.update(small, glove)
         if found is None:
             return None, table, scene, static
         (cx, cy), half = found
@@ -518,6 +598,8 @@ class GloveSegmenter:
             return now
 
         coarse, table, scene, static = self._coarse(image, learn=True)
+        # follow this frame's hand in the next frame only if it is found (set at the end)
+        found, self._found, self._followed = self._found, None, None
         t = tick('coarse', t0)
         if coarse is None:
             timings['total'] = (time.perf_counter() - t0) * 1e3
@@ -595,6 +677,7 @@ class GloveSegmenter:
         else:
             obs.status = STATUS_OK
             obs.hand_found = True
+            self._followed = found
         timings['total'] = (time.perf_counter() - t0) * 1e3
         return obs
 

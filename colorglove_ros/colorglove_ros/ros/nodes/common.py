@@ -338,16 +338,18 @@ class TrackerOutputs:
         self.hand_was_found = False
 
     def publish_pose(self, q: np.ndarray, keypoints: np.ndarray, header: Header) -> PoseStamped:
-        """Publish a tracked frame's pose and skeleton (``keypoints`` of ``q``); return the
-        wrist message. The status line is the caller's (:meth:`publish_status`)."""
+        """Publish a tracked frame's pose and skeleton (``keypoints`` of ``q``; built only
+        while something subscribes to the markers); return the wrist message. The status line
+        is the caller's (:meth:`publish_status`)."""
         self.hand_was_found = True
         wrist = self.pose.publish(q, header)
-        self.markers.publish(skeleton_to_markers_msg(keypoints, header))
+        if self.markers.get_subscription_count():
+            self.markers.publish(skeleton_to_markers_msg(keypoints, header))
         return wrist
 
     def publish_no_hand(self, header: Header, reason: str) -> None:
         """Report a frame without a pose: ``no hand: <reason>``; clear a shown skeleton."""
-        if self.hand_was_found:
+        if self.hand_was_found and self.markers.get_subscription_count():
             self.markers.publish(skeleton_to_markers_msg(None, header))
         self.hand_was_found = False
         self.publish_status(f'no hand: {reason}')

@@ -22,6 +22,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from colorglove_msgs.msg import HandObservation
 from rclpy.node import Node
 from sensor_msgs.msg import CompressedImage, Image
@@ -51,6 +52,7 @@ from colorglove_ros.ros.image import (
     compressed_image_to_rgb8,
     image_to_rgb8,
 )
+from colorglove_ros.ros.image_codec import image_from_cdr
 from colorglove_ros.ros.nodes.common import (
     LATEST_IMAGE,
     OBSERVATION_TOPIC,
@@ -128,7 +130,9 @@ class SegmentationNode(Node):
                                      LATEST_IMAGE)
         else:
             topic = IMAGE_TOPIC
-            self.create_subscription(Image, topic, self.on_image, LATEST_IMAGE)
+            # serialized: the pixels are read in place, not converted to a Python message
+            self.create_subscription(Image, topic, self.on_serialized_image, LATEST_IMAGE,
+                                     raw=True)
         self.get_logger().info(f'colour calibration from {config}; {transport} images on {topic}')
 
     # ------------------------------------------------------------------ run-time parameters
@@ -186,6 +190,23 @@ class SegmentationNode(Node):
             validate_image_size(image.width, image.height, error=ImageEncodingError)
             return image_to_rgb8(image)
         self._process(image.header, (image.width, image.height), decode)
+
+    def on_serialized_image(self, data: bytes) -> None:
+        """Segment one raw frame received serialized (``ros.image_codec.image_from_cdr``: its
+        pixels are a view of the received bytes)."""
+        try:
+            image = image_from_cdr(data)
+        except ImageEncodingError as exc:   # no header to answer with: counted and logged
+            self.get_logger().error(f'bad image: {exc}', throttle_duration_sec=1.0)
+            self.stats.no_hand(bad_image(exc).reason, error=True)
+            return
+        header = Header(frame_id=image.frame_id,
+                        stamp=Time(sec=image.stamp_sec, nanosec=image.stamp_nanosec))
+
+        def decode() -> np.ndarray:
+            validate_image_size(image.width, image.height, error=ImageEncodingError)
+            return image_to_rgb8(image, read_only=True)
+        self._process(header, (image.width, image.height), decode)
 
     def on_compressed_image(self, image: CompressedImage) -> None:
         """Decode and segment one compressed frame."""

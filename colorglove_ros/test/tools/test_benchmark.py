@@ -1,0 +1,44 @@
+"""colorglove_benchmark's judging of issue 19's targets from its rows, and its ROS domain."""
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from colorglove_ros.tools import benchmark
+
+
+def _run(graph: str, cameras: int, hz: float, rate: float, p95: float) -> dict:
+    return {'graph': graph, 'cameras': cameras, 'offered_hz': hz, 'joint_states_per_s': rate,
+            'latency_p95_ms': p95}
+
+
+def test_targets_are_judged_on_the_four_process_graph() -> None:
+    stages = [{'stage': 'segmentation', 'node_p50_ms': 3.0}, {'stage': 'frame', 'node_p50_ms': 7.5}]
+    runs = [_run('separate processes', 1, 30.0, 30.0, 19.0),
+            _run('separate processes', 1, 60.0, 56.0, 30.0),
+            _run('separate processes', 2, 30.0, 29.5, 40.0),
+            _run('single process', 1, 60.0, 60.0, 10.0)]       # not judged
+    rows = {row['target']: row['result']
+            for row in benchmark.check_targets(benchmark._target_figures(stages, runs))}
+    assert rows == {
+        'in one process: segmentation + lookup + IK median <= 8 ms': 'PASS',
+        '60 Hz offered: >= 57 JointStates/s': 'FAIL',
+        '60 Hz offered: latency p95 <= 33 ms': 'PASS',
+        '30 Hz offered: latency p95 <= 20 ms': 'PASS',
+        'two cameras, 30 Hz: >= 29 JointStates/s': 'PASS',
+        'two cameras, 30 Hz: latency p95 <= 35 ms': 'FAIL'}
+
+
+def test_targets_not_measured_are_left_out() -> None:
+    assert benchmark.check_targets({}) == []
+
+
+def test_domain_given_set_or_its_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv('ROS_DOMAIN_ID', raising=False)
+    own = benchmark.isolate_domain(None)
+    assert 200 <= own < 232
+    monkeypatch.setenv('ROS_DOMAIN_ID', '57')
+    assert benchmark.isolate_domain(None) == 57
+    assert benchmark.isolate_domain(12) == 12
+    assert os.environ['ROS_DOMAIN_ID'] == '12'
