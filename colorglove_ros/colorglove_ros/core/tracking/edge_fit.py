@@ -75,7 +75,7 @@ class EdgeTrackerConfig:
     tracked_links: tuple[str, ...] = DEFAULT_TRACKED_LINKS
     use_tips: bool = True
     polarity: int = 0
-    measurement_rounds: int = 2
+    measurement_rounds: int = 1
     gn_iterations: int = 3
     stabilizer: tuple[float, float, float] = (4.0e4, 1.0e3, 200.0)
     tip_weight: float = 1.0
