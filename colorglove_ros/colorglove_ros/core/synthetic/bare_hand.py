@@ -161,14 +161,16 @@ class BareHandSequence(SyntheticSequenceRenderer):
     renderer's per-view motion blur (``shutter`` fraction of the frame interval) and
     deterministic per-frame noise. ``render(i)`` / ``render_views(i, cameras)`` as there;
     ``skin_tone`` None draws one of ``SKIN_TONES_SRGB`` from the seed; ``min_contrast``
-    holds for the backgrounds of the first ``views`` cameras of a rig."""
+    holds for the backgrounds of the first ``views`` cameras of a rig; ``poses`` (N, 26), if
+    given, replaces the generated motion (e.g. a scripted 3-D mouse sequence)."""
 
     def __init__(self, camera: PinholeCamera, *, seed: int = 1, num_frames: int = 330,
                  fps: float = 30.0, speed: float = 1.0, hold_frames: int = 15,
                  hand_length_m: float = DEFAULT_HAND_LENGTH_M,
                  split: str = 'test', shutter: float = 0.5,
                  skin_tone: int | None = None, min_contrast: float = 0.25, views: int = 2,
-                 init_wrist: Sequence[float] = DEFAULT_INIT_WRIST) -> None:
+                 init_wrist: Sequence[float] = DEFAULT_INIT_WRIST,
+                 poses: np.ndarray | None = None) -> None:
         rng = np.random.default_rng([int(seed), 23])
         tone = int(rng.integers(len(SKIN_TONES_SRGB))) if skin_tone is None else skin_tone
         skin = skin_albedo(tone)
@@ -181,7 +183,11 @@ class BareHandSequence(SyntheticSequenceRenderer):
         self.skin_tone = tone
         self.speed = float(speed)
         self.hold_frames = int(hold_frames)
-        self.poses = bare_hand_motion(seed, num_frames, self.synth.model, fps=fps, speed=speed,
-                                      hold_frames=hold_frames, init_wrist=init_wrist)
+        if poses is None:
+            poses = bare_hand_motion(seed, num_frames, self.synth.model, fps=fps, speed=speed,
+                                     hold_frames=hold_frames, init_wrist=init_wrist)
+        elif np.shape(poses)[1:] != (NUM_DOFS,) or len(poses) < 1:
+            raise BareHandError(f'poses must be (N, {NUM_DOFS}), got {np.shape(poses)}')
+        self.poses = np.asarray(poses, dtype=float)
         # the parent's blur follows these hand centres
         self._centres = self.synth.model.keypoints_batch(self.poses).mean(axis=1)
