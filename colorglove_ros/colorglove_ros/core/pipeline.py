@@ -22,6 +22,7 @@ import numpy as np
 from colorglove_ros.core.lookup.types import LookupResult
 from colorglove_ros.core.segmentation.crop import TinyCrop
 from colorglove_ros.core.segmentation.types import Observation
+from colorglove_ros.core.tracking.line_constraints import glove_edge_image
 from colorglove_ros.core.tracking.types import Blobs, CameraObservation, IKError, PosePrior
 from colorglove_ros.core.validation import (
     InvalidInputError,
@@ -187,8 +188,8 @@ def observe_image(segmenter: Any, image_rgb: np.ndarray, primary: bool
                       np.array([b.pixel_count for b in observation.blobs], float))
     found = bool(observation.hand_found) and len(blobs) > 0
     tiny = TinyCrop(observation.tiny_labels, observation.crop) if found and primary else None
-    return CameraObservation(found, blobs, observation.crop,
-                             bool(observation.cut_by_border)), tiny
+    return CameraObservation(found, blobs, observation.crop, bool(observation.cut_by_border),
+                             glove_edge_image(observation.label_image)), tiny
 
 
 def image_observer(segmenter: Any, image_of: Callable[[Any], np.ndarray] = np.asarray

@@ -42,6 +42,7 @@ from colorglove_ros.core.segmentation.blobs import extract_blobs
 from colorglove_ros.core.segmentation.crop import TinyCrop, crop_to_tiny
 from colorglove_ros.core.tracking.config import TRACKER_MODES, IKConfig
 from colorglove_ros.core.tracking.covariance_learning import TrainingFrame, training_frame
+from colorglove_ros.core.tracking.line_constraints import glove_edge_image
 from colorglove_ros.core.tracking.tracker import HandTracker, IKResult
 from colorglove_ros.core.tracking.types import CameraObservation
 
@@ -125,13 +126,15 @@ class EvaluationSequence:
 # ---------------------------------------------------------------------------- observations
 def observe_camera(labels: np.ndarray, primary: bool, min_blob_pixels: int = 4
                    ) -> tuple[CameraObservation, TinyCrop | None]:
-    """A camera's observation from its label image: blobs, and for the primary camera the
+    """A camera's observation from its label image: blobs, the glove mask (the edge image of
+    the IK's optional line features), and for the primary camera the
     mean-shift crop (``crop_to_tiny``) whose transform the IK needs. Not found when the
     crop fails (primary) or no blob is large enough."""
     blobs = extract_blobs(labels, min_blob_pixels)
     tiny = crop_to_tiny(labels) if primary else None
     found = len(blobs) > 0 and (tiny is not None or not primary)
-    return CameraObservation(found, blobs, tiny.transform if tiny is not None else None), tiny
+    return CameraObservation(found, blobs, tiny.transform if tiny is not None else None,
+                             edge_image=glove_edge_image(labels)), tiny
 
 
 def truth_observer(min_blob_pixels: int = 4) -> Observer:

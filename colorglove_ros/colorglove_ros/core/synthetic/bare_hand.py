@@ -20,7 +20,8 @@ tracking at 30 Hz breaks.
 
 Backgrounds: with ``min_contrast`` > 0 the background seed is redrawn (deterministically)
 until the background's mean grey level differs from the lit skin's by at least that
-fraction of the skin's, the analogue of DigitEyes' dark backdrop; 0 keeps any background.
+fraction of the skin's in every one of the rig's ``views`` cameras (each camera sees its own
+background), the analogue of DigitEyes' dark backdrop; 0 keeps any background.
 """
 from __future__ import annotations
 
@@ -37,7 +38,7 @@ from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
 from colorglove_ros.core.synthetic.backgrounds import make_background
 from colorglove_ros.core.synthetic.conditions import FrameConditions, sample_conditions
-from colorglove_ros.core.synthetic.frames import Synthesizer
+from colorglove_ros.core.synthetic.frames import Synthesizer, view_background_seed
 from colorglove_ros.core.synthetic.sequences import SyntheticSequenceRenderer
 from colorglove_ros.core.tracking.edge_tracker import initialisation_pose
 
@@ -85,10 +86,14 @@ class BareHandSynthesizer(Synthesizer):
 
 def bare_hand_conditions(rng: np.random.Generator, skin_rgb: Sequence[float],
                          split: str = 'test', min_contrast: float = 0.0,
-                         width: int = 640, height: int = 480) -> FrameConditions:
+                         width: int = 640, height: int = 480, views: int = 1) -> FrameConditions:
     """Frame conditions for a bare hand: ``sample_conditions`` with a bare forearm (skin),
-    and, with ``min_contrast``, a background whose mean grey level differs from the lit
-    skin's by at least that fraction (up to 64 seeds are tried, the best one is kept)."""
+    and, with ``min_contrast``, backgrounds whose mean grey level differs from the lit skin's
+    by at least that fraction in each of the first ``views`` cameras of a rig (each view has
+    its own background, :func:`view_background_seed`; up to 64 seeds are tried, the one with
+    the best worst view is kept)."""
+    if views < 1:
+        raise BareHandError(f'views must be >= 1, got {views}')
     cond = sample_conditions(rng, split)
     skin = np.asarray(skin_rgb, dtype=float)
     cond = replace(cond, sleeve_rgb=tuple(float(v) for v in skin))
@@ -97,9 +102,10 @@ def bare_hand_conditions(rng: np.random.Generator, skin_rgb: Sequence[float],
     skin_grey = float(skin @ _LUMA) * (cond.ambient + (1.0 - cond.ambient) * 0.8)
     best, best_score = cond, -1.0
     for _ in range(64):
-        grey = float(make_background(cond.background_kind, cond.background_seed, width,
-                                     height).mean(axis=(0, 1)) @ _LUMA)
-        score = abs(grey - skin_grey) / skin_grey
+        score = min(abs(float(make_background(cond.background_kind,
+                                              view_background_seed(cond.background_seed, k),
+                                              width, height).mean(axis=(0, 1)) @ _LUMA)
+                        - skin_grey) / skin_grey for k in range(views))
         if score > best_score:
             best, best_score = cond, score
         if score >= min_contrast:
@@ -154,18 +160,22 @@ class BareHandSequence(SyntheticSequenceRenderer):
     (``bare_hand_conditions`` for ``split``, drawn from the seed), with the glove sequence
     renderer's per-view motion blur (``shutter`` fraction of the frame interval) and
     deterministic per-frame noise. ``render(i)`` / ``render_views(i, cameras)`` as there;
-    ``skin_tone`` None draws one of ``SKIN_TONES_SRGB`` from the seed."""
+    ``skin_tone`` None draws one of ``SKIN_TONES_SRGB`` from the seed; ``min_contrast``
+    holds for the backgrounds of the first ``views`` cameras of a rig; ``poses`` (N, 26), if
+    given, replaces the generated motion (e.g. a scripted 3-D mouse sequence)."""
 
     def __init__(self, camera: PinholeCamera, *, seed: int = 1, num_frames: int = 330,
                  fps: float = 30.0, speed: float = 1.0, hold_frames: int = 15,
                  hand_length_m: float = DEFAULT_HAND_LENGTH_M,
                  split: str = 'test', shutter: float = 0.5,
-                 skin_tone: int | None = None, min_contrast: float = 0.25,
-                 init_wrist: Sequence[float] = DEFAULT_INIT_WRIST) -> None:
+                 skin_tone: int | None = None, min_contrast: float = 0.25, views: int = 2,
+                 init_wrist: Sequence[float] = DEFAULT_INIT_WRIST,
+                 poses: np.ndarray | None = None) -> None:
         rng = np.random.default_rng([int(seed), 23])
         tone = int(rng.integers(len(SKIN_TONES_SRGB))) if skin_tone is None else skin_tone
         skin = skin_albedo(tone)
-        cond = bare_hand_conditions(rng, skin, split, min_contrast, camera.width, camera.height)
+        cond = bare_hand_conditions(rng, skin, split, min_contrast, camera.width, camera.height,
+                                    views)
         super().__init__(camera, seed=seed, num_frames=1, fps=fps, hand_length_m=hand_length_m,
                          split=split, shutter=shutter, conditions=cond)
         self.synth.release()
@@ -173,7 +183,11 @@ class BareHandSequence(SyntheticSequenceRenderer):
         self.skin_tone = tone
         self.speed = float(speed)
         self.hold_frames = int(hold_frames)
-        self.poses = bare_hand_motion(seed, num_frames, self.synth.model, fps=fps, speed=speed,
-                                      hold_frames=hold_frames, init_wrist=init_wrist)
+        if poses is None:
+            poses = bare_hand_motion(seed, num_frames, self.synth.model, fps=fps, speed=speed,
+                                     hold_frames=hold_frames, init_wrist=init_wrist)
+        elif np.shape(poses)[1:] != (NUM_DOFS,) or len(poses) < 1:
+            raise BareHandError(f'poses must be (N, {NUM_DOFS}), got {np.shape(poses)}')
+        self.poses = np.asarray(poses, dtype=float)
         # the parent's blur follows these hand centres
         self._centres = self.synth.model.keypoints_batch(self.poses).mean(axis=1)

@@ -65,7 +65,7 @@ from colorglove_ros.core.synthetic.render import Renderer
 __all__ = [
     'SyntheticFrame', 'Synthesizer', 'render_frame', 'render_frames_multi', 'sample_pose',
     'default_camera', 'transform_pose', 'natural_finger_shapes', 'primary_to_camera',
-    'view_of_scene', 'camera_encode',
+    'view_of_scene', 'view_background_seed', 'camera_encode',
 ]
 
 @dataclass
@@ -353,6 +353,11 @@ def primary_to_camera(cameras: Sequence[PinholeCamera], k: int
     return R, cameras[k].translation - R @ cameras[0].translation
 
 
+def view_background_seed(seed: int, k: int) -> int:
+    """Background seed of camera ``k`` in a scene whose first camera's seed is ``seed``."""
+    return (int(seed) + 7919 * int(k)) % (1 << 31)
+
+
 def view_of_scene(q: np.ndarray, conditions: FrameConditions, cameras: Sequence[PinholeCamera],
           k: int) -> tuple[np.ndarray, FrameConditions]:
     """Camera ``k``'s pose and conditions of a scene given in the first camera's terms: the
@@ -365,7 +370,7 @@ def view_of_scene(q: np.ndarray, conditions: FrameConditions, cameras: Sequence[
     light = R @ np.asarray(conditions.light_dir, float)
     return transform_pose(q, R, t), replace(
         conditions, light_dir=tuple(float(v) for v in light),
-        background_seed=(conditions.background_seed + 7919 * k) % (1 << 31))
+        background_seed=view_background_seed(conditions.background_seed, k))
 
 
 def render_frames_multi(q: np.ndarray, cameras: Sequence[PinholeCamera],

@@ -163,6 +163,8 @@ class IKConfig:
     reference_focal_px: float = 600.0
     finger_spread_gain: float = 1.0
     finger_spread_floor_rad: float = 0.13
+    line_features: bool = False
+    line_std_px: float = 2.0
     covariances: IKCovariances = field(default_factory=default_covariances)
 
     def with_mode(self, mode: str) -> IKConfig:
@@ -206,9 +208,11 @@ class IKConfig:
 # Tracker switches set by the caller (ik_node parameters, the tools' --modes), never by the file:
 # two homes for one switch let one silently win.
 _CALLER_SWITCHES = ('enable_ik', 'enable_smoothing')
-_SWITCHES = ('enable_ik', 'enable_smoothing', 'init_translation', 'extra_rematch')
+_SWITCHES = ('enable_ik', 'enable_smoothing', 'init_translation', 'extra_rematch',
+             'line_features')
 _NUMBER_LIMITS: dict[str, tuple[type, float, float, bool]] = {
     # name: (int or float, lowest, highest, lowest excluded)
+    'line_std_px': (float, 0.0, 1e3, True),
     'max_iterations': (int, 1, 100, False), 'multi_camera_iterations': (int, 0, 100, False),
     'refine_iterations': (int, 0, 100, False), 'lambda_init': (float, 0.0, 1e6, True),
     'step_tol': (float, 0.0, 1.0, True), 'cost_tol': (float, 0.0, 1.0, True),

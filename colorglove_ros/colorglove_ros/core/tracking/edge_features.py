@@ -11,8 +11,9 @@ Everything here works on many links at once (one ``cv2.remap`` samples every sli
 link) and knows nothing of the hand model: the caller gives predicted segments in pixels.
 
 ``polarity`` says which way the link's brightness differs from what surrounds it: +1 the link
-is brighter (a hand before a dark backdrop, as in DigitEyes), -1 darker, 0 either (each slice
-takes the better of the two, but both of its edges must agree).
+is brighter (a hand before a dark backdrop, as in DigitEyes), -1 darker, 0 either (each edge
+of a slice's pair may have either sign: a shaded finger before a mid-grey background is
+often brighter than it on the lit side and darker on the other).
 """
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from colorglove_ros.core.errors import ColorGloveError
 
@@ -27,6 +29,9 @@ __all__ = [
     'EdgeFeatureError', 'EdgeSearchConfig', 'LinkAxes', 'TipPoints', 'measure_link_axes',
     'measure_tips', 'to_grey', 'segment_distances',
 ]
+
+
+_NO_EDGE = -1.0e9   # strength of a sample that is no edge: any pair using it scores < 0
 
 
 class EdgeFeatureError(ColorGloveError):
@@ -49,6 +54,7 @@ class EdgeSearchConfig:
     search_px: float = 8.0
     min_gradient: float = 3.0
     width_ratio: tuple[float, float] = (0.5, 1.6)
+    width_sigma: float = 0.15
     min_slices: int = 3
     fit_outlier_px: float = 2.0
     tip_search_px: float = 10.0
@@ -170,38 +176,48 @@ def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
     xy = centres[:, :, None, :] + offsets[:, None, :, None] * n[:, None, None, :]
     profile = _sample(grey, xy)                                                # (L, S, W)
     d = _derivative(profile, np.broadcast_to(step[:, None], (L, S)))
-    # pair (i, j), i < j: entering edge at i, leaving edge at j, width within the ratio
-    width = (offsets[:, None, :] - offsets[:, :, None])                        # (L, Wi, Wj)
+    pol = np.broadcast_to(np.asarray(polarity, dtype=np.int64), (L,))[:, None, None]
+    # edge strengths: a link brighter than its surroundings rises then falls (+1), a darker
+    # one falls then rises (-1); with polarity 0 each edge may have either sign, since a
+    # shaded cylinder before a mid-grey background can be brighter on one side and darker
+    # on the other
+    if np.all(pol == 0):
+        enter = leave = np.abs(d)
+    else:
+        enter = np.where(pol == 0, np.abs(d), pol * d)                        # (L, S, W)
+        leave = np.where(pol == 0, np.abs(d), -pol * d)
+    enter = np.where(enter > cfg.min_gradient, enter, _NO_EDGE)
+    leave = np.where(leave > cfg.min_gradient, leave, _NO_EDGE)
+    # pairs: entering edge at sample i, leaving edge at i + g for the gaps g that give a
+    # width within the ratio for some link, scored by their strength discounted by how far
+    # the width is from the predicted one (a shaded finger's inner brightness ramp must not
+    # beat its true, slightly weaker rim)
     lo, hi = cfg.width_ratio
-    ok_width = (width >= 2.0 * hw[:, None, None] * lo) & (width <= 2.0 * hw[:, None, None] * hi)
-    pol = np.broadcast_to(np.asarray(polarity, dtype=np.int64), (L,))
-    best_score = np.full((L, S), -np.inf)
-    best_i = np.zeros((L, S), np.int64)
-    best_j = np.zeros((L, S), np.int64)
-    best_sign = np.zeros((L, S), np.int64)
-    for sign in (1, -1):
-        allowed = (pol == 0) | (pol == sign)
-        if not allowed.any():
-            continue
-        enter = np.where(sign * d > cfg.min_gradient, sign * d, -np.inf)      # (L, S, W)
-        leave = np.where(-sign * d > cfg.min_gradient, -sign * d, -np.inf)
-        pair = enter[:, :, :, None] + leave[:, :, None, :]                     # (L, S, W, W)
-        pair = np.where(ok_width[:, None], pair, -np.inf)
-        flat = pair.reshape(L, S, W * W)
-        k = np.argmax(flat, axis=2)
-        score = np.take_along_axis(flat, k[..., None], 2)[..., 0]
-        score = np.where(allowed[:, None], score, -np.inf)
-        better = score > best_score
-        best_score = np.where(better, score, best_score)
-        best_i = np.where(better, k // W, best_i)
-        best_j = np.where(better, k % W, best_j)
-        best_sign = np.where(better, sign, best_sign)
+    g_lo = max(1, int(np.floor((2.0 * hw * lo / step).min())))
+    g_hi = max(g_lo, min(W - 1, int(np.ceil((2.0 * hw * hi / step).max()))))
+    gaps = np.arange(g_lo, g_hi + 1)                                           # (G,)
+    padded = np.concatenate([leave[..., g_lo:], np.full((L, S, g_hi), _NO_EDGE)], axis=2)
+    later = sliding_window_view(padded, len(gaps), axis=2)[:, :, :W]          # (L, S, W, G)
+    width = gaps[None, :] * step[:, None]                                      # (L, G)
+    ok_width = (width >= 2.0 * hw[:, None] * lo) & (width <= 2.0 * hw[:, None] * hi)
+    agree = np.where(ok_width, np.exp(-0.5 * ((width - 2.0 * hw[:, None])
+                                              / (cfg.width_sigma * 2.0 * hw[:, None])) ** 2),
+                     0.0)
+    pair = (enter[..., None] + later) * agree[:, None, None, :]               # (L, S, W, G)
+    flat = pair.reshape(L, S, -1)
+    k = np.argmax(flat, axis=2)
+    best_score = np.take_along_axis(flat, k[..., None], 2)[..., 0]
+    best_i = k // len(gaps)
+    best_j = best_i + gaps[k % len(gaps)]
+    best_score = np.where((best_score > 0) & (best_j < W), best_score, -np.inf)
     valid = np.isfinite(best_score)
     if slice_valid is not None:
         valid &= np.asarray(slice_valid, dtype=bool).reshape(L, S)
-    sd = best_sign[..., None] * d
-    ei = _subpixel(sd, best_i)
-    ej = _subpixel(-sd, best_j)
+    sign_i = np.sign(np.take_along_axis(d, best_i[..., None], 2)[..., 0]).astype(np.int64)
+    sign_j = np.sign(np.take_along_axis(d, best_j[..., None], 2)[..., 0]).astype(np.int64)
+    best_sign = np.where(sign_i == -sign_j, sign_i, 0)
+    ei = _subpixel(np.where(sign_i[..., None] >= 0, d, -d), best_i)
+    ej = _subpixel(np.where(sign_j[..., None] >= 0, d, -d), best_j)
     mid_t = (ei + ej) / (W - 1) - 1.0            # mean of the two sample positions in [-1, 1]
     mid_off = mid_t * reach[:, None]                                           # (L, S)
     # line through the midpoints: offset along n as a linear function of the position

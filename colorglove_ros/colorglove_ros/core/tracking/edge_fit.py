@@ -51,7 +51,7 @@ from colorglove_ros.core.tracking.kinematics import FastKinematics
 __all__ = [
     'EdgeTrackerError', 'EdgeTrackerConfig', 'DEFAULT_TRACKED_LINKS', 'FeaturePoints',
     'feature_points', 'EdgePrediction', 'EdgeMeasurement', 'EdgeFit', 'link_axis_residuals',
-    'tip_residuals', 'predict_features', 'measure_features', 'fit_pose',
+    'tip_residuals', 'predict_features', 'measure_features', 'stack_residuals', 'fit_pose',
 ]
 
 # every phalanx except the thumb metacarpal, which lies inside the palm's outline
@@ -75,7 +75,7 @@ class EdgeTrackerConfig:
     tracked_links: tuple[str, ...] = DEFAULT_TRACKED_LINKS
     use_tips: bool = True
     polarity: int = 0
-    measurement_rounds: int = 2
+    measurement_rounds: int = 1
     gn_iterations: int = 3
     stabilizer: tuple[float, float, float] = (4.0e4, 1.0e3, 200.0)
     tip_weight: float = 1.0
@@ -321,7 +321,7 @@ def _huber(r: np.ndarray, k: float) -> np.ndarray:
     return np.where(a <= k, 1.0, k / np.maximum(a, 1e-12))
 
 
-def _stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
+def stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
                      measured: Sequence[EdgeMeasurement | None],
                      world: tuple[np.ndarray, np.ndarray | None], config: EdgeTrackerConfig,
                      jacobian: bool = True
@@ -415,7 +415,7 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
         for it in range(config.gn_iterations):
             if it > 0:
                 world = kin.points(q, points.point_link, points.point_local, True)
-            r, J, w = _stack_residuals(points, cameras, measured, world, config)
+            r, J, w = stack_residuals(points, cameras, measured, world, config)
             WJ = J.T * w
             H = WJ @ J + S
             g = WJ @ r + S @ (q - q_anchor)
@@ -433,6 +433,6 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
             q = kin.clamp(q + dq)
             iterations += 1
         world = kin.points(q, points.point_link, points.point_local, False)
-        r, _, w = _stack_residuals(points, cameras, measured, world, config, jacobian=False)
+        r, _, w = stack_residuals(points, cameras, measured, world, config, jacobian=False)
         rms = float(np.sqrt(np.mean(w * r**2))) if len(r) else math.nan
     return EdgeFit(q, rms, found, usable, tips, iterations)

@@ -56,13 +56,15 @@ def initialisation_pose(model: HandModel, wrist_position: Sequence[float],
 class EdgeTrackResult:
     """One frame's output. ``q`` is the pose to publish, None when the frame gives none
     (``reason`` says why); ``state`` is the tracker's state after the frame ('waiting' for
-    an initialisation or 'tracking'); ``fit`` the frame's fit (None if none was made)."""
+    an initialisation or 'tracking'); ``fit`` the frame's fit (None if none was made);
+    ``time_ms`` and ``cpu_ms`` the wall-clock and CPU (this process) time it took."""
 
     state: str
     q: np.ndarray | None
     reason: str
     fit: EdgeFit | None = None
     time_ms: float = 0.0
+    cpu_ms: float = 0.0
     lost: bool = False
     initialised: bool = False
     hold_frames: int = 0
@@ -159,8 +161,13 @@ class EdgeTracker:
     def update(self, images: Sequence[np.ndarray | None]) -> EdgeTrackResult:
         """Process one frame: one image per camera (grey or RGB; None if a camera has no
         frame). Returns the pose to publish or the reason there is none."""
-        t0 = time.perf_counter()
-        greys = self._greys(images)
+        t0, c0 = time.perf_counter(), time.process_time()
+        result = self._step(self._greys(images))
+        return replace(result, time_ms=1e3 * (time.perf_counter() - t0),
+                       cpu_ms=1e3 * (time.process_time() - c0))
+
+    def _step(self, greys: list[np.ndarray | None]) -> EdgeTrackResult:
+        """One frame's state machine (initialisation, fit, loss), untimed."""
         cfg = self.config
         if self._q is None:
             fit = fit_pose(self.kin, self.points, self.cameras, greys, self.init_pose, cfg,
@@ -180,32 +187,26 @@ class EdgeTracker:
             if held >= cfg.init_hold_frames:
                 self.initialize(fit.q)
                 return EdgeTrackResult('tracking', fit.q.copy(), 'initialised', fit,
-                                       1e3 * (time.perf_counter() - t0), initialised=True,
-                                       hold_frames=held)
+                                       initialised=True, hold_frames=held)
             why = reason or f'holding still {held}/{cfg.init_hold_frames} frames'
             return EdgeTrackResult(
                 'waiting', None, 'waiting for the initialisation pose (flat hand, palm to the '
-                f'camera, at the marked spot): {why}', fit, 1e3 * (time.perf_counter() - t0),
-                hold_frames=held)
+                f'camera, at the marked spot): {why}', fit, hold_frames=held)
         fit = fit_pose(self.kin, self.points, self.cameras, greys, self._q, cfg,
                        cfg.measurement_rounds)
         reason = self._fit_ok(fit)
         if not np.all(np.isfinite(fit.q)):
             self.reset()
-            return EdgeTrackResult('waiting', None, 'lost: non-finite pose', fit,
-                                   1e3 * (time.perf_counter() - t0), lost=True)
+            return EdgeTrackResult('waiting', None, 'lost: non-finite pose', fit, lost=True)
         self._q = fit.q
         if reason:
             self._bad_frames += 1
             if self._bad_frames >= cfg.loss_patience:
                 self.reset()
-                return EdgeTrackResult('waiting', None, f'lost: {reason}', fit,
-                                       1e3 * (time.perf_counter() - t0), lost=True)
-            return EdgeTrackResult('tracking', None, f'poor fit: {reason}', fit,
-                                   1e3 * (time.perf_counter() - t0))
+                return EdgeTrackResult('waiting', None, f'lost: {reason}', fit, lost=True)
+            return EdgeTrackResult('tracking', None, f'poor fit: {reason}', fit)
         self._bad_frames = 0
-        return EdgeTrackResult('tracking', fit.q.copy(), 'tracking', fit,
-                               1e3 * (time.perf_counter() - t0))
+        return EdgeTrackResult('tracking', fit.q.copy(), 'tracking', fit)
 
     def with_config(self, **changes: object) -> EdgeTracker:
         """A fresh tracker on the same model and cameras with some settings changed."""

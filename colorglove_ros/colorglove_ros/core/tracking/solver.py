@@ -12,6 +12,7 @@ from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.hand.model import NUM_DOFS
 from colorglove_ros.core.tracking.config import IKCovariances
 from colorglove_ros.core.tracking.kinematics import FastKinematics
+from colorglove_ros.core.tracking.line_constraints import ExtraConstraints
 from colorglove_ros.core.tracking.projection import (
     per_point_cameras,
     project_correspondences,
@@ -55,7 +56,8 @@ def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Corres
              q_prev: np.ndarray | None = None, max_iterations: int = 6,
              lambda_init: float = 1e-3, step_tol: float = 1e-5,
              min_depth_m: float = 0.05, cost_tol: float = 1e-4,
-             reference_focal_px: float | None = None) -> IKSolution:
+             reference_focal_px: float | None = None,
+             extra: ExtraConstraints | None = None) -> IKSolution:
     """Minimise |f(q) - c|^2_{R^-1} + |q - q_b|^2_{Q^-1} (+ |q - q_prev|^2_{P^-1}) by
     Levenberg-damped Gauss-Newton steps
     dq = (J^T R^-1 J + Q^-1 + P^-1 + lambda diag)^-1 (J^T R^-1 (c - f) + Q^-1 (q_b - q)
@@ -64,7 +66,8 @@ def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Corres
     the largest DOF change is below ``step_tol`` or the cost falls by less than the
     fraction ``cost_tol``. R is in pixels of a camera of focal length ``reference_focal_px``
     (each residual divided by its camera's ``pixel_scale`` per axis; None: each camera's own
-    pixels), so the pose does not depend on the image resolution."""
+    pixels), so the pose does not depend on the image resolution. ``extra`` adds residual
+    rows of other kinds (the line features, :mod:`line_constraints`) with their own weights."""
     q = kin.clamp(np.asarray(q_init, dtype=float))
     q_blend = np.asarray(q_blend, dtype=float)
     q_inv = 1.0 / cov.q_var
@@ -72,12 +75,19 @@ def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Corres
     per_point = per_point_cameras(cameras, corr)
     w = (1.0 / cov.r_var_px2 / per_point.axis_scale(reference_focal_px) ** 2).reshape(-1)
     target = corr.target_px.reshape(-1)
+    rows = len(target)
+    if extra is not None:
+        w = np.concatenate([w, extra.weights])
 
     def evaluate(qq: np.ndarray, jacobian: bool) -> tuple[float, np.ndarray, np.ndarray | None]:
         pix, J, depth = project_correspondences(kin, cameras, corr, qq, jacobian, per_point)
         if len(depth) and depth.min() <= min_depth_m:
             return math.inf, np.zeros(0), np.zeros((0, NUM_DOFS))
         r = target - pix.reshape(-1)
+        if extra is not None:
+            r_extra, J_extra = extra.residuals(qq, jacobian)
+            r = np.concatenate([r, r_extra])
+            J = None if J is None else np.concatenate([J, J_extra])
         return _cost(r, w, qq, q_blend, q_inv, q_prev, p_inv), r, J
 
     cost, r, J = evaluate(q, max_iterations > 0)
@@ -126,4 +136,4 @@ def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Corres
         if not accepted or converged:
             converged = converged or not accepted and lam > 1e6
             break
-    return IKSolution(q, it, cost, initial, converged, r.reshape(-1, 2))
+    return IKSolution(q, it, cost, initial, converged, r[:rows].reshape(-1, 2))

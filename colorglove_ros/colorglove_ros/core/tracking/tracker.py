@@ -16,6 +16,7 @@ from colorglove_ros.core.hand.mesh import build_hand_mesh
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, calibrated_hand_model
 from colorglove_ros.core.tracking.config import IKConfig, IKCovariances
 from colorglove_ros.core.tracking.kinematics import FastKinematics
+from colorglove_ros.core.tracking.line_constraints import ExtraConstraints, line_constraints
 from colorglove_ros.core.tracking.matching import (
     explained_blob_share,
     match_extra_camera,
@@ -95,6 +96,7 @@ class _FramePriors:
     q_b: np.ndarray
     q_prev: np.ndarray | None
     covariances: IKCovariances
+    lines: ExtraConstraints | None = None   # line features (IKConfig.line_features)
 
 
 @dataclass
@@ -256,7 +258,7 @@ class HandTracker:
         cfg = self.config
         return solve_ik(self.kin, self.cameras, corr, q_init, priors.q_b, priors.covariances,
                         priors.q_prev, iterations, cfg.lambda_init, cfg.step_tol,
-                        cfg.min_depth_m, cfg.cost_tol, cfg.reference_focal_px)
+                        cfg.min_depth_m, cfg.cost_tol, cfg.reference_focal_px, priors.lines)
 
     def _solve_into(self, fit: _FrameFit, corr: Correspondences, q_init: np.ndarray,
                     iterations: int, priors: _FramePriors) -> None:
@@ -283,7 +285,12 @@ class HandTracker:
         corr0, tracked = self._match_start(prior, observations, q_blend)
         q_b = self._fit_translation(corr0, q_blend)
         q_prev = self._q_prev if (cfg.enable_smoothing and self._q_prev is not None) else None
-        priors = _FramePriors(q_b, q_prev, cfg.prior_covariances(prior.finger_std))
+        lines = line_constraints(
+            self.kin, self.cameras, [o.edge_image if o is not None and o.hand_found else None
+                                     for o in observations[:len(self.cameras)]],
+            q_b if self._q_prev is None else self._q_prev, cfg.line_std_px) \
+            if cfg.line_features and cfg.enable_ik else None
+        priors = _FramePriors(q_b, q_prev, cfg.prior_covariances(prior.finger_std), lines)
         fit = self._fit_frame(prior, observations, corr0, tracked, priors)
         return self._finish(fit, stamp, t0, q_blend, priors, was_reset, primary.blobs)
 

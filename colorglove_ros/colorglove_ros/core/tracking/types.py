@@ -63,6 +63,8 @@ class CameraObservation:
     crop: Any = None    # core.segmentation.crop.CropTransform (scale, offset_x, offset_y)
     cut_by_border: bool = False   # the glove reaches the image border (depth from the crop
     #                               size is unreliable)
+    edge_image: Any = None   # (H, W) image the optional line features are measured on (the
+    #                          glove mask), None without
 
 
 @dataclass(frozen=True)

@@ -5,13 +5,15 @@ import numpy as np
 import pytest
 
 from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.synthetic.backgrounds import make_background
 from colorglove_ros.core.synthetic.bare_hand import (
     BareHandError,
     BareHandSequence,
+    bare_hand_conditions,
     bare_hand_motion,
     skin_albedo,
 )
-from colorglove_ros.core.synthetic.frames import default_camera
+from colorglove_ros.core.synthetic.frames import default_camera, view_background_seed
 from colorglove_ros.core.tracking.edge_tracker import initialisation_pose
 
 MODEL = HandModel()
@@ -56,3 +58,20 @@ def test_frame_is_a_skin_coloured_hand_with_its_mask() -> None:
     assert np.all(skin_albedo(0) > skin_albedo(5))
     with pytest.raises(BareHandError):
         skin_albedo(9)
+
+
+def test_min_contrast_holds_in_every_view_of_the_rig() -> None:
+    luma = np.array([0.2126, 0.7152, 0.0722])
+    skin = skin_albedo(1)
+    # this generator's first background passes in view 0 but not in view 1
+    picks = {views: bare_hand_conditions(np.random.default_rng([5, 23, 1]), skin, 'test',
+                                         0.25, 160, 120, views) for views in (1, 2)}
+    for views, cond in picks.items():
+        skin_grey = float(skin @ luma) * (cond.ambient + (1.0 - cond.ambient) * 0.8)
+        contrast = [abs(float(make_background(cond.background_kind,
+                                              view_background_seed(cond.background_seed, k),
+                                              160, 120).mean(axis=(0, 1)) @ luma) - skin_grey)
+                    / skin_grey for k in range(2)]
+        assert min(contrast[:views]) >= 0.25
+        if views == 1:
+            assert contrast[1] < 0.25     # the case the rig-wide check exists for

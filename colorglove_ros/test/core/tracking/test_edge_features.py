@@ -66,6 +66,31 @@ def test_wrong_polarity_finds_nothing_and_either_finds_the_dark_bar() -> None:
     assert _line_error(either, 0, A, B) < 0.5
 
 
+def _shaded_bar_image(radius: float, bright_ramp: bool = True) -> np.ndarray:
+    """A vertical finger at x = 160 shaded across its width (light from the right: 90 at its
+    left rim rising to 220 at the right one, or a softer inner ramp) before a mid-grey 150
+    background: darker than the background on the left edge, brighter on the right."""
+    x = np.arange(320, dtype=np.float32)[None, :].repeat(240, axis=0)
+    u = np.clip((x - (160.0 - radius)) / (2.0 * radius), 0.0, 1.0)
+    shade = 90.0 + 130.0 * (u if bright_ramp else np.sqrt(u))
+    inside = np.abs(x - 160.0) <= radius
+    img = np.where(inside, shade, 150.0).astype(np.float32)
+    img = cv2.GaussianBlur(img, (0, 0), 0.7)
+    return img + np.random.default_rng(3).normal(0, 1.0, img.shape).astype(np.float32)
+
+
+@pytest.mark.parametrize('bright_ramp', [True, False])
+def test_shaded_finger_on_mid_grey_is_measured_at_its_rims(bright_ramp: bool) -> None:
+    # one rim darker than the background, the other brighter: the two edges have opposite
+    # signs of 'entering' and 'leaving', and the inner shading ramp is an edge too
+    r = 10.0
+    grey = _shaded_bar_image(r, bright_ramp)
+    a, b = np.array([160.0, 200.0]), np.array([160.0, 60.0])
+    axes = measure_link_axes(grey, a[None], b[None], np.array([r]), polarity=0)
+    assert axes.found[0] and axes.num_points[0] >= 5
+    assert _line_error(axes, 0, a, b) < 0.5
+
+
 def test_width_far_from_the_prediction_is_rejected() -> None:
     grey = _bar_image(A, B, R, noise=0.5)
     axes = measure_link_axes(grey, A[None], B[None], np.array([R * 4.0]),
