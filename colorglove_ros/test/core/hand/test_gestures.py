@@ -83,11 +83,11 @@ def test_event_text_round_trip() -> None:
 
 
 def test_evaluation_without_noise_is_perfect_and_with_noise_is_not() -> None:
-    clean = eval_gestures.evaluate([7], episodes=16, noise=TrackingNoise(0.0, 0.0))
+    clean = eval_gestures.evaluate([7], episodes=16, source=TrackingNoise(0.0, 0.0))
     overall = clean['rows'][-1]
     assert overall['episodes'] >= 8
     assert overall['precision'] == 1.0 and overall['recall'] == 1.0
     assert clean['joint_mae_deg_realised'] == pytest.approx(0.0, abs=1e-12)
-    noisy = eval_gestures.evaluate([7], episodes=16, noise=TrackingNoise(25.0, 5.0))
+    noisy = eval_gestures.evaluate([7], episodes=16, source=TrackingNoise(25.0, 5.0))
     assert noisy['joint_mae_deg_realised'] == pytest.approx(25.0, rel=0.02)
     assert min(noisy['rows'][-1]['precision'], noisy['rows'][-1]['recall']) < 0.95

@@ -89,11 +89,11 @@ def test_edit_distance() -> None:
 
 
 def test_evaluation_clean_is_near_perfect_and_heavy_noise_is_not() -> None:
-    clean = eval_spelling.evaluate([11], words_per_sequence=4, noise=TrackingNoise(0.0, 0.0))
+    clean = eval_spelling.evaluate([11], words_per_sequence=4, source=TrackingNoise(0.0, 0.0))
     assert clean['letters'] >= 10
     assert clean['letter_accuracy'] == 1.0 and clean['insertions'] == 0
     assert clean['text_accuracy'] == 1.0
-    noisy = eval_spelling.evaluate([11], words_per_sequence=4, noise=TrackingNoise(25.0, 10.0))
+    noisy = eval_spelling.evaluate([11], words_per_sequence=4, source=TrackingNoise(25.0, 10.0))
     assert noisy['letter_accuracy'] < 0.9
     rows = {row['scripted']: row for row in noisy['thumb_confusion']}
     assert set(rows) == {'E', 'M', 'N', 'S', 'T'}
