@@ -60,13 +60,15 @@ def sequence_tool_parser(description: str | None, sequences_help: str
 class ScriptedSettings:
     """An evaluation on scripted poses with a tracking-noise model (eval_gestures,
     eval_spelling): the sequence seeds its settings were tuned on, the held-out seeds it
-    reports on by default, and what its sequences are made of (``unit``, e.g. 'words', and
-    how many per sequence by default)."""
+    reports on by default, what its sequences are made of (``unit``, e.g. 'words', and
+    how many per sequence by default), and its trained classifier."""
 
     tuning_seeds: tuple[int, ...]
     default_seeds: tuple[int, ...]
     unit: str
     default_count: int
+    classifier: str               # default trained classifier, relative to the package root
+    feature_set: str              # its feature set (core.hand.pose_classifier)
 
 
 @dataclass(frozen=True)
@@ -97,7 +99,8 @@ class ScriptedEvaluation:
             seen = (f'noise model {self.source_settings["noise_file"] or "(built-in)"}, '
                     f'joint MAE {self.source.joint_mae_deg:.2f} deg (realised {realised:.2f})')
         return (f'{what}, seeds {seeds[0]}..{seeds[-1]} ({len(seeds)} sequences x '
-                f'{self.count} {self.settings.unit}), {seen}')
+                f'{self.count} {self.settings.unit}), {seen}, classifier '
+                f'{Path(self.source_settings["classifier"]).name}')
 
     def finish(self, targets: list[dict[str, Any]]) -> int:
         """Print the time; with ``--json`` write the settings (seeds, units per sequence, the
@@ -114,12 +117,13 @@ class ScriptedEvaluation:
 
 def run_scripted_evaluation(argv: list[str] | None, description: str | None,
                             settings: ScriptedSettings,
-                            evaluate: Callable[[list[int], int, Any], dict[str, Any]]
+                            evaluate: Callable[[list[int], int, Any, Any], dict[str, Any]]
                             ) -> ScriptedEvaluation:
     """Parse the arguments of an evaluation on scripted poses (held-out ``--seeds``, ``--UNIT``
     per sequence, and what the consumers see: the noise model of ``--noise-config`` at its own
     or ``--noise-mae-deg``'s level, or with ``--tracker`` the tracker's output on the rendered
-    sequences) and run ``evaluate(seeds, count, source)``, timed."""
+    sequences) and run ``evaluate(seeds, count, source, classifier)``, timed (classifier: the
+    trained one of ``--classifier``, or None with ``--rules``)."""
     from dataclasses import asdict
 
     from colorglove_ros.core.evaluation.scripted_hands import load_tracking_noise
@@ -147,7 +151,15 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
                         "rendered images) or 'truth' (the renderer's labels)")
     parser.add_argument('--database', type=Path,
                         help='with --tracker: pose database (default: the largest under data/)')
+    parser.add_argument('--classifier', type=Path, default=share_dir() / settings.classifier,
+                        help='trained classifier (colorglove_train_hand_classifiers)')
+    parser.add_argument('--rules', action='store_true',
+                        help='score with the hand-written rules / templates, no classifier')
     args = parser.parse_args(argv)
+    from colorglove_ros.core.hand.pose_classifier import load_pose_classifier
+
+    classifier = None if args.rules else load_pose_classifier(args.classifier,
+                                                              settings.feature_set)
     if args.tracker:
         database = args.database or find_database(data_dir())
         source: Any = ScriptedTracker(database, config / 'ik.yaml', config / 'calibration.yaml',
@@ -161,9 +173,10 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
         source, source_settings = noise, {'source': 'noise model',
                                           'noise_file': str(args.noise_config),
                                           'noise': asdict(noise)}
+    source_settings['classifier'] = 'rules' if classifier is None else str(args.classifier)
     started = time.perf_counter()
     try:
-        result = evaluate(args.seeds, getattr(args, unit), source)
+        result = evaluate(args.seeds, getattr(args, unit), source, classifier)
     finally:
         if args.tracker:
             source.close()

@@ -40,6 +40,8 @@ from colorglove_ros.core.evaluation.scripted_hands import (
 )
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.gestures import (
+    DEFAULT_GESTURE_CLASSIFIER,
+    GESTURE_FEATURES,
     GESTURE_NAMES,
     PINCH_FINGERS,
     GestureConfig,
@@ -48,6 +50,7 @@ from colorglove_ros.core.hand.gestures import (
     gesture_features,
 )
 from colorglove_ros.core.hand.model import DIP_PIP_RATIO, HandModel
+from colorglove_ros.core.hand.pose_classifier import PoseClassifier
 from colorglove_ros.core.hand.poses import (
     GESTURE_SHAPES,
     LETTER_SHAPES,
@@ -63,7 +66,8 @@ __all__ = ['SETTINGS', 'GESTURE_EXEMPLARS', 'NEUTRAL_SHAPES', 'pinch_shape',
 
 TARGET = 0.95
 SETTINGS = ScriptedSettings(tuning_seeds=tuple(range(5)), default_seeds=tuple(range(100, 110)),
-                            unit='episodes', default_count=60)
+                            unit='episodes', default_count=60,
+                            classifier=DEFAULT_GESTURE_CLASSIFIER, feature_set=GESTURE_FEATURES)
 MATCH_GRACE_S = 0.3
 HOLD_SETTLE_S = 0.2
 VARIATION_DEG = 3.0
@@ -216,13 +220,14 @@ def _frame_counts(truth: ScriptedSequence, active: np.ndarray) -> dict[str, int]
 
 
 def run_sequence(model: HandModel, seed: int, episodes: int, source: PoseSource,
-                 config: GestureConfig, fps: float = 30.0
+                 config: GestureConfig, classifier: PoseClassifier | None = None,
+                 fps: float = 30.0
                  ) -> tuple[dict[str, dict[str, int]], dict[str, int], float]:
     """Script, observe (noise model or tracker), detect: event counts, frame counts and the
     realised joint MAE. Frames the tracker lost reach the detector as 'no hand'."""
     truth = script_poses(gesture_script(model, seed, episodes), fps)
     seen, found = source.observe('gestures', seed, truth, model)
-    detector = GestureDetector(model, config)
+    detector = GestureDetector(model, config, classifier)
     events: list[GestureEvent] = []
     active = np.zeros((len(seen), len(GESTURE_NAMES)), dtype=bool)
     for i, (q, ok, t) in enumerate(zip(seen, found, truth.times, strict=True)):
@@ -234,9 +239,11 @@ def run_sequence(model: HandModel, seed: int, episodes: int, source: PoseSource,
 
 
 def evaluate(seeds: Sequence[int], episodes: int = 60, source: PoseSource | None = None,
-             config: GestureConfig | None = None) -> dict:
+             classifier: PoseClassifier | None = None, config: GestureConfig | None = None
+             ) -> dict:
     """Precision and recall per gesture over the sequences of ``seeds``, as seen through
-    ``source`` (default: the built-in ``TrackingNoise``)."""
+    ``source`` (default: the built-in ``TrackingNoise``), scored by ``classifier`` (None: the
+    rules)."""
     model = HandModel()
     source = TrackingNoise() if source is None else source
     config = GestureConfig() if config is None else config
@@ -245,7 +252,8 @@ def evaluate(seeds: Sequence[int], episodes: int = 60, source: PoseSource | None
     frames = {'gesture_frames': 0, 'held_active': 0, 'settled_frames': 0, 'other_active': 0}
     maes = []
     for seed in seeds:
-        counts, frame_counts, mae = run_sequence(model, seed, episodes, source, config)
+        counts, frame_counts, mae = run_sequence(model, seed, episodes, source, config,
+                                                 classifier)
         for g in GESTURE_NAMES:
             for key in totals[g]:
                 totals[g][key] += counts[g][key]

@@ -35,8 +35,11 @@ from colorglove_ros.core.evaluation.scripted_hands import (
 )
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.hand.pose_classifier import PoseClassifier
 from colorglove_ros.core.hand.poses import LETTER_SHAPES, finger_limits
 from colorglove_ros.core.hand.spelling import (
+    DEFAULT_LETTER_CLASSIFIER,
+    LETTER_FEATURES,
     LETTERS,
     THUMB_LETTERS,
     Speller,
@@ -51,7 +54,8 @@ __all__ = ['SETTINGS', 'WORDS', 'spelling_script', 'score_letters', 'edit_distan
 
 TARGET = 0.90
 SETTINGS = ScriptedSettings(tuning_seeds=tuple(range(5)), default_seeds=tuple(range(100, 120)),
-                            unit='words', default_count=8)
+                            unit='words', default_count=8,
+                            classifier=DEFAULT_LETTER_CLASSIFIER, feature_set=LETTER_FEATURES)
 WORDS: tuple[str, ...] = (
     'THE', 'QUICK', 'BROWN', 'FOX', 'JUMPS', 'OVER', 'LAZY', 'DOG', 'MENTION', 'SENSE', 'STEM',
     'MEET', 'TEST', 'NEST', 'MUST', 'MEAN', 'TENSE', 'NAMES', 'HELLO', 'ROBOT', 'GLOVE', 'HAND',
@@ -124,11 +128,11 @@ def score_letters(truth: ScriptedSequence, commits: Sequence[tuple[float, str]]
 
 
 def evaluate(seeds: Sequence[int], words_per_sequence: int = 8,
-             source: PoseSource | None = None, config: SpellingConfig | None = None,
-             fps: float = 30.0) -> dict:
+             source: PoseSource | None = None, classifier: PoseClassifier | None = None,
+             config: SpellingConfig | None = None, fps: float = 30.0) -> dict:
     """Letter accuracy, thumb-letter confusion and text accuracy over ``seeds``, as seen
     through ``source`` (default: the built-in ``TrackingNoise``; frames the tracker lost reach
-    the speller as 'no hand')."""
+    the speller as 'no hand'), classified by ``classifier`` (None: the templates)."""
     model = HandModel()
     source = TrackingNoise() if source is None else source
     pairs: list[tuple[str, str]] = []
@@ -141,7 +145,7 @@ def evaluate(seeds: Sequence[int], words_per_sequence: int = 8,
         truth = script_poses(segments, fps)
         seen, found = source.observe('spelling', seed, truth, model)
         maes.append(realised_joint_mae_deg(truth.poses, seen, found))
-        speller = Speller(config, model)
+        speller = Speller(config, model, classifier)
         commits = []
         for q, ok, stamp in zip(seen, found, truth.times, strict=True):
             letter = speller.update(q if ok else None, float(stamp))

@@ -17,6 +17,7 @@ from colorglove_ros.core.hand.gestures import (
     gesture_scores,
     parse_event,
 )
+from colorglove_ros.core.hand.hysteresis import HoldConfig
 from colorglove_ros.core.hand.poses import GESTURE_SHAPES, full_pose
 from colorglove_ros.tools import eval_gestures
 
@@ -49,7 +50,8 @@ def test_pinch_shapes_of_every_finger() -> None:
 
 
 def test_hysteresis_and_loss() -> None:
-    config = GestureConfig(min_on_frames=3, min_off_frames=5)
+    config = GestureConfig(hold=HoldConfig(smoothing=0.25, on_score=0.7, off_score=0.3,
+                                           hold_on_s=2 / 30, hold_off_s=4 / 30))
     detector = GestureDetector(MODEL, config)
     flat, fist = _pose('flat'), _pose('fist')
     events = [e for k in range(10) for e in detector.update(flat, k / 30)]
@@ -79,7 +81,7 @@ def test_event_text_round_trip() -> None:
         with pytest.raises(GestureError):
             parse_event(bad)
     with pytest.raises(GestureError):
-        GestureConfig(on_score=0.2, off_score=0.4)
+        GestureConfig(extended=0.6, curled=0.5)
 
 
 def test_evaluation_without_noise_is_perfect_and_with_noise_is_not() -> None:

@@ -63,10 +63,10 @@ def test_hold_to_commit_and_double_letters() -> None:
     # each letter commits at least hold_s after its move began
     starts = np.cumsum([0.0] + [s.move_s + s.hold_s for s in word[:-1]])
     for (stamp, _), start in zip(commits, starts, strict=True):
-        assert stamp >= start + SpellingConfig().hold_s
+        assert stamp >= start + SpellingConfig().hold.hold_on_s
     # the same letter held in one place is committed once
     assert ''.join(x for _, x in _spell([_segment('L', hold_s=3.0)])) == 'L'
-    # a hold shorter than hold_s commits nothing
+    # a hold shorter than hold_on_s commits nothing
     assert _spell([_segment('A', hold_s=0.1)]) == []          # 0.4 s in all
 
 
@@ -78,7 +78,7 @@ def test_lost_hand_resets() -> None:
     with pytest.raises(SpellingError):
         speller.update(np.zeros(20), 6.0)
     with pytest.raises(SpellingError):
-        SpellingConfig(vote_share=0.3)
+        SpellingConfig(rearm_motion_m=0.0)
 
 
 def test_edit_distance() -> None:
