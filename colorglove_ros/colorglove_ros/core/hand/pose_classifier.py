@@ -98,8 +98,9 @@ class PoseClassifier:
 
 def train_pose_classifier(features: np.ndarray, labels: np.ndarray, feature_set: str,
                           hidden: int = 64, alpha: float = 1e-3, seed: int = 0,
-                          source: str = '') -> PoseClassifier:
-    """Fit the classifier to labelled feature rows (seeded; deterministic for a seed)."""
+                          source: str = '', max_iter: int = 200) -> PoseClassifier:
+    """Fit the classifier to labelled feature rows (seeded; deterministic for a seed; stops
+    when a tenth of the rows held out for validation stops improving)."""
     from sklearn.neural_network import MLPClassifier
 
     features = np.asarray(features, dtype=float)
@@ -110,8 +111,8 @@ def train_pose_classifier(features: np.ndarray, labels: np.ndarray, feature_set:
     mean = features.mean(axis=0)
     scale = features.std(axis=0)
     scale[scale < 1e-9] = 1.0
-    mlp = MLPClassifier((hidden,), alpha=alpha, max_iter=400, random_state=seed,
-                        early_stopping=False)
+    mlp = MLPClassifier((hidden,), alpha=alpha, max_iter=max_iter, random_state=seed,
+                        early_stopping=True, validation_fraction=0.1, n_iter_no_change=8)
     mlp.fit((features - mean) / scale, labels)
     return PoseClassifier(tuple(str(c) for c in mlp.classes_), feature_set, mean, scale,
                           tuple(np.asarray(w) for w in mlp.coefs_),

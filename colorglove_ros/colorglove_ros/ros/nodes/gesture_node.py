@@ -12,7 +12,13 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header, String
 
 from colorglove_ros.core.hand.frames import finger_joint_names, hand_root_frame
-from colorglove_ros.core.hand.gestures import GestureDetector, GestureEvent, format_event
+from colorglove_ros.core.hand.gestures import (
+    DEFAULT_GESTURE_CLASSIFIER,
+    GESTURE_FEATURES,
+    GestureDetector,
+    GestureEvent,
+    format_event,
+)
 from colorglove_ros.core.hand.poses import full_pose
 from colorglove_ros.ros.conversions import (
     gesture_event_to_msg,
@@ -24,6 +30,7 @@ from colorglove_ros.ros.nodes.common import (
     TRACKING_STATUS_TOPIC,
     StartupError,
     declare,
+    declare_classifier,
     declare_frame_prefix,
     hand_model_from_calibration,
     run_node,
@@ -52,7 +59,9 @@ class GestureNode(Node):
         self.publish_text = declare(self, 'publish_text_events', True,
                                     'also publish each event as a text line on '
                                     'hand/gesture_events (std_msgs/String)')
-        self.detector = GestureDetector(self.model)
+        classifier = declare_classifier(self, 'gesture_node', DEFAULT_GESTURE_CLASSIFIER,
+                                        GESTURE_FEATURES, 'rules on the finger geometry')
+        self.detector = GestureDetector(self.model, classifier=classifier)
         self.event_pub = self.create_publisher(GestureEventMsg, 'hand/gestures', 10)
         self.text_pub = self.create_publisher(String, 'hand/gesture_events', 10) \
             if self.publish_text else None
