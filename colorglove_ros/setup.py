@@ -27,7 +27,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE_NAME}']),
         (f'share/{PACKAGE_NAME}', ['package.xml']),
-        (f'share/{PACKAGE_NAME}/config', glob('config/*.yaml') + glob('config/*.xml')),
+        (f'share/{PACKAGE_NAME}/config',
+         glob('config/*.yaml') + glob('config/*.xml') + glob('config/*.npz')),
         (f'share/{PACKAGE_NAME}/config/visualization', glob('config/visualization/*')),
         (f'share/{PACKAGE_NAME}/launch', glob('launch/*.launch.py')),
         (f'share/{PACKAGE_NAME}/urdf', glob('urdf/*.urdf')),

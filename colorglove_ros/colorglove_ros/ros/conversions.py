@@ -8,6 +8,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
+from colorglove_msgs.msg import GestureEvent as GestureEventMsg
 from colorglove_msgs.msg import (
     HandObservation,
     HandPoseCandidates,
@@ -22,6 +23,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from colorglove_ros.core.camera import PinholeCamera, camera_from_camera_info
 from colorglove_ros.core.conventions import TINY_SIZE
+from colorglove_ros.core.hand.gestures import EVENT_STATES, GestureError, GestureEvent
 from colorglove_ros.core.hand.model import DOF_NAMES, FINGER_DOF_NAMES
 from colorglove_ros.core.hand.overlay import SKELETON_BONES
 from colorglove_ros.core.hand.pose_fields import pose_from_fields, wrist_quaternion
@@ -37,13 +39,19 @@ __all__ = [
     'crop_from_observation_msg',
     'tiny_labels_from_observation_msg', 'blobs_from_observation_msg', 'camera_observation_from_msg',
     'candidates_to_msg', 'pose_prior_from_candidates_msg', 'skeleton_to_markers_msg',
-    'observation_to_msg', 'wrist_pose_to_tf_msg',
+    'observation_to_msg', 'wrist_pose_to_tf_msg', 'gesture_event_to_msg',
+    'gesture_event_from_msg',
 ]
 
 
 def stamp_to_seconds(stamp: Time) -> float:
     """A header stamp as float seconds."""
     return stamp.sec + stamp.nanosec * 1e-9
+
+
+# GestureEvent.event constants by core event state ('start', 'end'), and back
+_EVENT_CODES = {'start': GestureEventMsg.START, 'end': GestureEventMsg.END}
+assert set(_EVENT_CODES) == set(EVENT_STATES)
 
 
 def camera_to_camera_info_msg(camera: PinholeCamera, header: Header) -> CameraInfo:
@@ -249,3 +257,21 @@ def wrist_pose_to_tf_msg(pose: PoseStamped, child_frame_id: str):
     return TFMessage(transforms=[TransformStamped(header=pose.header,
                                                   child_frame_id=child_frame_id,
                                                   transform=transform)])
+
+
+def gesture_event_to_msg(event: GestureEvent, header: Header, hand: str) -> GestureEventMsg:
+    """A core gesture event as ``colorglove_msgs/GestureEvent`` (the header is the caller's:
+    the deciding frame's stamp and the hand frame)."""
+    return GestureEventMsg(header=header, hand=hand, gesture=event.name,
+                           event=_EVENT_CODES[event.state],
+                           confidence=float(event.confidence))
+
+
+def gesture_event_from_msg(msg: GestureEventMsg) -> GestureEvent:
+    """The core event of a ``GestureEvent`` message (stamp from its header); raises
+    ``GestureError`` for an unknown event code."""
+    states = {code: state for state, code in _EVENT_CODES.items()}
+    if msg.event not in states:
+        raise GestureError(f'unknown gesture event code {msg.event}')
+    return GestureEvent(str(msg.gesture), states[msg.event], float(msg.confidence),
+                        stamp_to_seconds(msg.header.stamp))

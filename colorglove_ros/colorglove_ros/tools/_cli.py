@@ -62,22 +62,26 @@ def sequence_tool_parser(description: str | None, sequences_help: str
 class ScriptedSettings:
     """An evaluation on scripted poses with a tracking-noise model (eval_gestures,
     eval_spelling): the sequence seeds its settings were tuned on, the held-out seeds it
-    reports on by default, and what its sequences are made of (``unit``, e.g. 'words', and
-    how many per sequence by default)."""
+    reports on by default, what its sequences are made of (``unit``, e.g. 'words', and
+    how many per sequence by default), and its trained classifier."""
 
     tuning_seeds: tuple[int, ...]
     default_seeds: tuple[int, ...]
     unit: str
     default_count: int
+    classifier: str               # default trained classifier, relative to the package root
+    feature_set: str              # its feature set (core.hand.pose_classifier)
 
 
 @dataclass(frozen=True)
 class ScriptedEvaluation:
-    """A run of such an evaluation: its arguments, settings, noise model, result and time."""
+    """A run of such an evaluation: its arguments, settings, what the consumers saw (the noise
+    model or the tracker, ``source``; ``source_settings`` describes it), result and time."""
 
     args: argparse.Namespace
     settings: ScriptedSettings
-    noise: Any                     # core.evaluation.scripted_hands.TrackingNoise
+    source: Any                   # TrackingNoise or ScriptedTracker
+    source_settings: dict[str, Any]
     result: dict[str, Any]
     seconds: float
 
@@ -87,20 +91,27 @@ class ScriptedEvaluation:
         return getattr(self.args, self.settings.unit)
 
     def title(self, what: str) -> str:
-        """``what``, then the seeds, sequence size and noise level (set and realised)."""
+        """``what``, then the seeds, sequence size and the pose source (noise model with its
+        set and realised joint error, or the tracker with its realised error)."""
         seeds = self.args.seeds
+        realised = self.result['joint_mae_deg_realised']
+        if self.args.tracker:
+            seen = f'tracker output ({self.args.labels} labels), joint MAE {realised:.2f} deg'
+        else:
+            seen = (f'noise model {self.source_settings["noise_file"] or "(built-in)"}, '
+                    f'joint MAE {self.source.joint_mae_deg:.2f} deg (realised {realised:.2f})')
         return (f'{what}, seeds {seeds[0]}..{seeds[-1]} ({len(seeds)} sequences x '
-                f'{self.count} {self.settings.unit}), noise MAE {self.args.noise_mae_deg} deg '
-                f'(realised {self.result["joint_mae_deg_realised"]:.2f})')
+                f'{self.count} {self.settings.unit}), {seen}, classifier '
+                f'{Path(self.source_settings["classifier"]).name}')
 
-    def finish(self, targets: list[dict[str, Any]], noise_settings: dict[str, Any]) -> int:
-        """Print the time; with ``--json`` write the settings (seeds, units per sequence,
-        ``noise_settings``, tuning seeds), the result, ``targets`` and the time. Returns 0."""
+    def finish(self, targets: list[dict[str, Any]]) -> int:
+        """Print the time; with ``--json`` write the settings (seeds, units per sequence, the
+        pose source, tuning seeds), the result, ``targets`` and the time. Returns 0."""
         print(f'{self.seconds:.1f} s')
         if self.args.json:
             write_json(self.args.json, {
                 'settings': {'seeds': self.args.seeds, self.settings.unit: self.count,
-                             **noise_settings,
+                             **self.source_settings,
                              'tuning_seeds': list(self.settings.tuning_seeds)},
                 **self.result, 'targets': targets, 'seconds': self.seconds})
         return 0
@@ -108,26 +119,71 @@ class ScriptedEvaluation:
 
 def run_scripted_evaluation(argv: list[str] | None, description: str | None,
                             settings: ScriptedSettings,
-                            evaluate: Callable[[list[int], int, Any], dict[str, Any]]
+                            evaluate: Callable[[list[int], int, Any, Any], dict[str, Any]]
                             ) -> ScriptedEvaluation:
-    """Parse the arguments of an evaluation on scripted poses (held-out ``--seeds``,
-    ``--noise-mae-deg``, ``--UNIT`` per sequence) and run ``evaluate(seeds, count, noise)``
-    with that noise level (``TrackingNoise``), timed."""
-    from colorglove_ros.core.evaluation.scripted_hands import TrackingNoise
+    """Parse the arguments of an evaluation on scripted poses (held-out ``--seeds``, ``--UNIT``
+    per sequence, and what the consumers see: the noise model of ``--noise-config`` at its own
+    or ``--noise-mae-deg``'s level, or with ``--tracker`` the tracker's output on the rendered
+    sequences) and run ``evaluate(seeds, count, source, classifier)``, timed (classifier: the
+    trained one of ``--classifier``, or None with ``--rules``)."""
+    from dataclasses import asdict
 
+    from colorglove_ros.core.evaluation.scripted_hands import load_tracking_noise
+    from colorglove_ros.core.evaluation.scripted_tracking import ScriptedTracker
+    from colorglove_ros.core.evaluation.sequences import LABEL_SOURCES, find_database
+    from colorglove_ros.paths import data_dir, share_dir
+
+    config = share_dir() / 'config'
     tuning, unit = settings.tuning_seeds, settings.unit
     parser = tool_parser(description, raw_description=True)
     parser.add_argument('--seeds', type=int, nargs='+', default=list(settings.default_seeds),
                         help=f'sequence seeds (tuning used {tuning[0]}-{tuning[-1]})')
-    parser.add_argument('--noise-mae-deg', type=float, default=7.0,
-                        help='mean absolute finger-joint error of the noise model, degrees')
     parser.add_argument(f'--{unit}', type=int, default=settings.default_count,
                         help=f'{unit} per sequence')
+    parser.add_argument('--noise-config', type=Path, default=config / 'tracking_noise.yaml',
+                        help='tracking-noise model fitted to the tracker (versioned YAML)')
+    parser.add_argument('--noise-mae-deg', type=float,
+                        help="overall mean absolute finger-joint error of the noise model, "
+                        "degrees (default: the noise config's)")
+    parser.add_argument('--tracker', action='store_true',
+                        help='run the tracker on the rendered sequences instead of the noise '
+                        'model (slow; tracked poses cached in data/scripted_tracking/)')
+    parser.add_argument('--labels', choices=LABEL_SOURCES, default='segmented',
+                        help="with --tracker: 'segmented' (colour segmentation of the "
+                        "rendered images) or 'truth' (the renderer's labels)")
+    parser.add_argument('--database', type=Path,
+                        help='with --tracker: pose database (default: the largest under data/)')
+    parser.add_argument('--classifier', type=Path, default=share_dir() / settings.classifier,
+                        help='trained classifier (colorglove_train_hand_classifiers)')
+    parser.add_argument('--rules', action='store_true',
+                        help='score with the hand-written rules / templates, no classifier')
     args = parser.parse_args(argv)
+    from colorglove_ros.core.hand.pose_classifier import load_pose_classifier
+
+    classifier = None if args.rules else load_pose_classifier(args.classifier,
+                                                              settings.feature_set)
+    if args.tracker:
+        database = args.database or find_database(data_dir())
+        source: Any = ScriptedTracker(database, config / 'ik.yaml', config / 'calibration.yaml',
+                                      data_dir() / 'scripted_tracking', args.labels)
+        source_settings: dict[str, Any] = {'source': 'tracker', 'labels': args.labels,
+                                           'database': str(database)}
+    else:
+        noise = load_tracking_noise(args.noise_config)
+        if args.noise_mae_deg is not None:
+            noise = noise.with_joint_mae(args.noise_mae_deg)
+        source, source_settings = noise, {'source': 'noise model',
+                                          'noise_file': str(args.noise_config),
+                                          'noise': asdict(noise)}
+    source_settings['classifier'] = 'rules' if classifier is None else str(args.classifier)
     started = time.perf_counter()
-    noise = TrackingNoise(joint_mae_deg=args.noise_mae_deg)
-    result = evaluate(args.seeds, getattr(args, unit), noise)
-    return ScriptedEvaluation(args, settings, noise, result, time.perf_counter() - started)
+    try:
+        result = evaluate(args.seeds, getattr(args, unit), source, classifier)
+    finally:
+        if args.tracker:
+            source.close()
+    return ScriptedEvaluation(args, settings, source, source_settings, result,
+                              time.perf_counter() - started)
 
 
 def add_pipeline_arguments(parser: argparse.ArgumentParser, *, frames: int, seed: int,

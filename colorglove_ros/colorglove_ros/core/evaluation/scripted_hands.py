@@ -4,20 +4,29 @@ evaluations (no rendering: these test what consumes the tracked pose, not the tr
 A script is a list of segments: move from the previous segment's pose to this one with a
 minimum-jerk profile (fingers and wrist position) and a slerp (wrist orientation), then hold
 it. ``TrackingNoise`` then stands in for the tracker's errors: it is a MODEL, not errors
-measured frame by frame. Each finger DOF gets zero-mean Gaussian noise whose mean absolute
-value is ``joint_mae_deg`` (default: the order of the tracker's mean joint-angle error, see
-the README's measured results), split
-into a slowly varying part (an AR(1) process with ``correlation_s``; the tracker's errors
-come mostly from the lookup's bias, which persists over frames) and white per-frame jitter;
-each axis of the wrist orientation (a small rotation applied on the camera side) gets
-the same kind of noise with mean absolute value ``rotation_mae_deg``. Noisy joints are clipped
-into the model's limits, as the IK's are, with the scale set so the error after clipping
-has the stated mean.
+measured frame by frame. Each finger DOF gets a constant bias ``joint_bias_deg`` (none when
+empty) plus Gaussian noise, its scale relative to the others set by ``joint_weights`` (equal
+when empty), scaled so that the mean absolute error over all finger DOFs is
+``joint_mae_deg``; the noise is split into a slowly varying part (an AR(1) process with
+``correlation_s``; the tracker's errors come mostly from the lookup's bias, which persists
+over frames) and white per-frame jitter; each axis of the wrist orientation (a small rotation
+applied on the camera side) gets the same kind of noise with mean absolute value
+``rotation_mae_deg``. Noisy joints are clipped into the model's limits, as the IK's are, with
+the scale set so the error after clipping has the stated mean.
+
+:func:`fit_tracking_noise` fits these settings to the tracker's measured errors (the tracker
+run on rendered scripted sequences, ``core/evaluation/scripted_tracking.py``), and
+:func:`save_tracking_noise` / :func:`load_tracking_noise` keep them in a versioned YAML file
+(``config/tracking_noise.yaml``). What the model cannot hold: the tracker's errors depend on
+the pose (a bias per hand shape), which is why the evaluations can also run on the tracker's
+own output.
 """
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -25,9 +34,17 @@ from scipy.spatial.transform import Rotation, Slerp
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import NUM_DOFS, NUM_FINGER_DOFS, HandModel
 from colorglove_ros.core.synthetic.sequences import min_jerk
+from colorglove_ros.core.yaml_io import load_yaml_mapping
 
 __all__ = ['ScriptError', 'Segment', 'ScriptedSequence', 'TrackingNoise', 'script_poses',
-           'ar1_noise']
+           'ar1_noise', 'PoseSource', 'fit_tracking_noise', 'save_tracking_noise',
+           'load_tracking_noise',
+           'NOISE_FORMAT', 'NOISE_FORMAT_VERSION', 'NOISE_SEED_OFFSET', 'realised_joint_mae_deg']
+
+NOISE_FORMAT = 'colorglove_tracking_noise'
+NOISE_FORMAT_VERSION = 1
+_MAX_FIT_LAG_S = 1.0      # autocorrelation lags the correlation time is fitted on
+NOISE_SEED_OFFSET = 7919  # a sequence's noise is drawn with seed (sequence seed + this)
 
 
 class ScriptError(ColorGloveError, ValueError):
@@ -108,6 +125,16 @@ def ar1_noise(rng: np.random.Generator, shape: tuple[int, int], fps: float,
     return out
 
 
+class PoseSource(Protocol):
+    """What the gesture and spelling evaluations see of a scripted sequence: the noise model
+    (:class:`TrackingNoise`) or the tracker (``scripted_tracking.ScriptedTracker``)."""
+
+    def observe(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Observed poses (N, 26) and found flags (N,) of sequence ``name`` / ``seed``."""
+        ...
+
+
 @dataclass(frozen=True)
 class TrackingNoise:
     """Tracking-error model (see the module docstring); ``slow_share`` is the slow part's
@@ -117,11 +144,34 @@ class TrackingNoise:
     rotation_mae_deg: float = 5.0
     slow_share: float = 0.8
     correlation_s: float = 0.4
+    joint_weights: tuple[float, ...] = ()
+    joint_bias_deg: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
+        weights = np.asarray(self.joint_weights, dtype=float)
+        bias = np.asarray(self.joint_bias_deg, dtype=float)
         if self.joint_mae_deg < 0 or self.rotation_mae_deg < 0 or \
-                not 0.0 <= self.slow_share <= 1.0 or self.correlation_s < 0:
+                not 0.0 <= self.slow_share <= 1.0 or self.correlation_s < 0 or \
+                weights.size not in (0, NUM_FINGER_DOFS) or np.any(~(weights >= 0)) or \
+                bias.size not in (0, NUM_FINGER_DOFS) or not np.all(np.isfinite(bias)):
             raise ScriptError(f'bad tracking noise settings {self}')
+        object.__setattr__(self, 'joint_weights', tuple(float(w) for w in weights))
+        object.__setattr__(self, 'joint_bias_deg', tuple(float(b) for b in bias))
+
+    def with_joint_mae(self, joint_mae_deg: float) -> TrackingNoise:
+        """The same model at another overall finger-joint error (the bias scaled alike)."""
+        ratio = joint_mae_deg / self.joint_mae_deg if self.joint_mae_deg > 0 else 0.0
+        return TrackingNoise(joint_mae_deg, self.rotation_mae_deg, self.slow_share,
+                             self.correlation_s, self.joint_weights,
+                             tuple(ratio * b for b in self.joint_bias_deg))
+
+    def observe(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """What the consumers see of sequence ``seed`` (``name`` is unused here; the same
+        interface as ``ScriptedTracker.observe``): noisy poses (N, 26), all found."""
+        noisy = self.apply(np.random.default_rng(seed + NOISE_SEED_OFFSET), truth.poses,
+                           truth.fps, model)
+        return noisy, np.ones(len(noisy), dtype=bool)
 
     def _unit(self, rng: np.random.Generator, shape: tuple[int, int], fps: float
               ) -> np.ndarray:
@@ -139,18 +189,115 @@ class TrackingNoise:
         n = len(poses)
         out = poses.copy()
         unit = self._unit(rng, (n, NUM_FINGER_DOFS), fps)
+        if self.joint_weights:
+            unit = unit * np.asarray(self.joint_weights)
+        bias = np.deg2rad(np.asarray(self.joint_bias_deg)) if self.joint_bias_deg else 0.0
         lo, hi = model.lower_limits[6:], model.upper_limits[6:]
         target = np.deg2rad(self.joint_mae_deg)
         scale = target * np.sqrt(np.pi / 2.0)        # Gaussian: MAE = sigma sqrt(2 / pi)
-        for _ in range(8):
-            fingers = np.clip(poses[:, 6:] + scale * unit, lo, hi)
+        for _ in range(12):
+            fingers = np.clip(poses[:, 6:] + bias + scale * unit, lo, hi)
             realised = float(np.abs(fingers - poses[:, 6:]).mean())
             if target == 0.0 or realised == 0.0:
                 break
             scale *= target / realised
-        out[:, 6:] = np.clip(poses[:, 6:] + scale * unit, lo, hi)
+        out[:, 6:] = np.clip(poses[:, 6:] + bias + scale * unit, lo, hi)
         sigma = np.deg2rad(self.rotation_mae_deg) * np.sqrt(np.pi / 2.0)
         turn = sigma * self._unit(rng, (n, 3), fps)
         out[:, 3:6] = (Rotation.from_rotvec(turn) * Rotation.from_rotvec(poses[:, 3:6])
                        ).as_rotvec()
         return out
+
+
+def _runs(found: np.ndarray) -> list[slice]:
+    """Slices of the runs of consecutive True frames."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], found.astype(np.int8), [0]])))
+    return [slice(a, b) for a, b in zip(edges[0::2], edges[1::2], strict=True)]
+
+
+def fit_tracking_noise(true_poses: Sequence[np.ndarray], tracked_poses: Sequence[np.ndarray],
+                       found: Sequence[np.ndarray], fps: float) -> TrackingNoise:
+    """Noise settings fitted to a tracker's errors over sequences (true and tracked poses
+    (N, 26), found (N,)): the finger DOFs' overall mean absolute error and each DOF's share
+    (``joint_weights``, the DOF's RMS error over the mean RMS), the wrist orientation's mean
+    absolute error per axis, each finger DOF's mean error (``joint_bias_deg``; the RMS is
+    about it), and from the errors' autocorrelation over runs of tracked frames
+    (lags up to 1 s, fitted as ``slow_share * exp(-lag / correlation_s)``) the slow part."""
+    from scipy.spatial.transform import Rotation
+
+    fingers, turns, runs = [], [], []
+    for q_true, q_est, ok in zip(true_poses, tracked_poses, found, strict=True):
+        ok = np.asarray(ok, dtype=bool)
+        error = np.asarray(q_est, dtype=float)[:, 6:] - np.asarray(q_true, dtype=float)[:, 6:]
+        for run in _runs(ok):
+            fingers.append(error[run])
+            runs.append(error[run])
+        turn = Rotation.from_rotvec(np.asarray(q_est)[ok, 3:6]) * \
+            Rotation.from_rotvec(np.asarray(q_true)[ok, 3:6]).inv()
+        turns.append(turn.as_rotvec())
+    if not fingers:
+        raise ScriptError('no tracked frame to fit the noise to')
+    errors = np.concatenate(fingers)
+    bias = errors.mean(axis=0)
+    rms = np.sqrt(np.mean((errors - bias) ** 2, axis=0))
+    lags = np.arange(1, max(2, int(round(_MAX_FIT_LAG_S * fps))) + 1)
+    runs = [r - bias for r in runs]
+    power = float(np.mean((errors - bias) ** 2))
+    rho = []
+    for lag in lags:
+        pairs = [(r[:-lag] * r[lag:]).ravel() for r in runs if len(r) > lag]
+        rho.append(float(np.mean(np.concatenate(pairs))) / power if pairs else np.nan)
+    rho_arr = np.asarray(rho)
+    usable = np.isfinite(rho_arr) & (rho_arr > 0.02)
+    if usable.sum() >= 2:
+        slope, intercept = np.polyfit(lags[usable], np.log(rho_arr[usable]), 1)
+        slow_share = float(np.clip(np.exp(intercept), 0.0, 1.0))
+        correlation_s = float(-1.0 / (slope * fps)) if slope < 0 else float(lags[-1] / fps)
+    else:
+        slow_share, correlation_s = 0.0, 0.0
+    return TrackingNoise(joint_mae_deg=float(np.degrees(np.abs(errors).mean())),
+                         rotation_mae_deg=float(np.degrees(np.abs(np.concatenate(turns)).mean())),
+                         slow_share=slow_share, correlation_s=correlation_s,
+                         joint_weights=tuple(rms / rms.mean()),
+                         joint_bias_deg=tuple(np.degrees(bias)))
+
+
+def save_tracking_noise(path: str | Path, noise: TrackingNoise, source: str) -> Path:
+    """Write the settings as versioned YAML; ``source`` says what they were fitted to."""
+    import yaml
+
+    path = Path(path)
+    data = {'format': NOISE_FORMAT, 'version': NOISE_FORMAT_VERSION, 'source': source,
+            **{k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(noise).items()}}
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def load_tracking_noise(path: str | Path) -> TrackingNoise:
+    """Settings written by :func:`save_tracking_noise`; ``ScriptError`` for another format,
+    version or bad settings."""
+    data = load_yaml_mapping(path, ScriptError, 'tracking noise file')
+    if data.get('format') != NOISE_FORMAT or data.get('version') != NOISE_FORMAT_VERSION:
+        raise ScriptError(f'{path} is not a {NOISE_FORMAT} file of version '
+                          f'{NOISE_FORMAT_VERSION} (format {data.get("format")!r}, version '
+                          f'{data.get("version")!r})')
+    keys = ('joint_mae_deg', 'rotation_mae_deg', 'slow_share', 'correlation_s', 'joint_weights',
+            'joint_bias_deg')
+    missing = [k for k in keys if k not in data]
+    if missing:
+        raise ScriptError(f'{path} lacks {", ".join(missing)}')
+    try:
+        return TrackingNoise(float(data['joint_mae_deg']), float(data['rotation_mae_deg']),
+                             float(data['slow_share']), float(data['correlation_s']),
+                             tuple(float(w) for w in data['joint_weights']),
+                             tuple(float(b) for b in data['joint_bias_deg']))
+    except (TypeError, ValueError) as exc:
+        raise ScriptError(f'{path}: bad tracking noise settings: {exc}') from exc
+
+
+def realised_joint_mae_deg(truth: np.ndarray, seen: np.ndarray, found: np.ndarray) -> float:
+    """Mean absolute finger-joint error (deg) of the poses the consumers saw, found frames."""
+    found = np.asarray(found, dtype=bool)
+    if not found.any():
+        return float('nan')
+    return float(np.degrees(np.abs(seen[found, 6:] - truth[found, 6:])).mean())

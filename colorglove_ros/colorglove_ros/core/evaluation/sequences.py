@@ -1,6 +1,7 @@
 """Per-frame tracking pipeline on synthetic sequences (labels, crop, lookup, IK) and its figures."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -268,14 +269,17 @@ class SequenceEvaluator:
         return self.synth.model
 
     def run(self, seed: int, num_frames: int, split: str = 'test',
-            progress: Callable[[int], None] | None = None
+            progress: Callable[[int], None] | None = None, poses: np.ndarray | None = None
             ) -> dict[tuple[str, str], TrackedSequence]:
-        """Track sequence ``seed`` (``generate_sequence``; conditions from ``split``, fixed per
-        sequence; noise per frame) with every (rig, mode)."""
+        """Track sequence ``seed`` (``generate_sequence``, or the given true ``poses`` (N, 26)
+        in the primary camera's frame, e.g. a scripted sequence; conditions from ``split``,
+        fixed per sequence; noise per frame) with every (rig, mode)."""
         if num_frames < 1:
             raise EvaluationError(f'need at least one frame, got {num_frames}')
         sequence = EvaluationSequence.make(seed, num_frames, self.cameras[0], self.synth,
                                            split, self.fps)
+        if poses is not None:
+            sequence = dataclasses.replace(sequence, poses=np.asarray(poses, dtype=float))
         Q = sequence.poses
         n = len(Q)
         out = {key: TrackedSequence(seed, key[0], key[1], Q.copy(),

@@ -1,7 +1,11 @@
 """Gesture events from the tracked pose: pinches, grab, point, open hand, with hysteresis.
 
-Every frame each gesture gets a score in [0, 1] from the pose's finger geometry (scale-free:
-distances are divided by the hand length), made of logistic ramps around thresholds:
+Every frame each gesture gets a score in [0, 1]. With a trained classifier
+(``core/hand/pose_classifier.py``, feature set ``hand_shape``, classes the gestures and
+:data:`NO_GESTURE`; ``colorglove_train_hand_classifiers`` fits it on synthetic training
+sequences) the score is the gesture's class probability. Without one, it comes from rules on
+the pose's finger geometry (scale-free: distances are divided by the hand length), made of
+logistic ramps around thresholds:
 
 * ``pinch_<finger>`` (index, middle, ring, little): the thumb tip is near that fingertip,
   that fingertip is the nearest one to the thumb tip, and the finger is not folded into the
@@ -11,11 +15,10 @@ distances are divided by the hand length), made of logistic ramps around thresho
 * ``open_hand``: all four fingers extended and no pinch.
 
 A finger's curl is its MCP + PIP + DIP flexion over the sum of their upper limits (0 straight,
-1 fully bent). Scores are smoothed over time (exponential moving average, weight
-``score_smoothing`` on the newest frame). A gesture starts once its smoothed score has stayed
-at or above ``on_score`` for ``min_on_frames`` frames, and ends once it has stayed below
-``off_score`` for ``min_off_frames`` frames (hysteresis), or at once when the hand is lost. The
-confidence of an event is the gesture's score on the frame that decided it (for a loss: 0).
+1 fully bent). The scores go through the shared hold-and-release hysteresis
+(``core/hand/hysteresis.py``: smoothing, on / off thresholds and hold times); a lost hand
+ends every active gesture at once. The confidence of an event is the gesture's smoothed score
+on the frame that decided it (for a loss: 0).
 """
 from __future__ import annotations
 
@@ -24,12 +27,16 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.hysteresis import HoldConfig, ScoreHysteresis
 from colorglove_ros.core.hand.keypoints import FINGERTIP_INDICES, hand_keypoints
 from colorglove_ros.core.hand.model import DOF_NAMES, HandModel
+from colorglove_ros.core.hand.pose_classifier import PoseClassifier
 from colorglove_ros.core.validation import check_number
 
 __all__ = [
-    'GESTURE_NAMES', 'PINCH_FINGERS', 'EVENT_STATES', 'GestureError', 'GestureConfig',
+    'GESTURE_NAMES', 'PINCH_FINGERS', 'EVENT_STATES', 'NO_GESTURE', 'GESTURE_FEATURES',
+    'DEFAULT_GESTURE_CLASSIFIER',
+    'GestureError', 'GestureConfig',
     'GestureFeatures', 'GestureEvent', 'gesture_features', 'gesture_scores',
     'GestureDetector', 'format_event', 'parse_event',
 ]
@@ -38,6 +45,10 @@ PINCH_FINGERS: tuple[str, ...] = ('index', 'middle', 'ring', 'little')
 GESTURE_NAMES: tuple[str, ...] = (
     *(f'pinch_{f}' for f in PINCH_FINGERS), 'grab', 'point', 'open_hand')
 EVENT_STATES: tuple[str, ...] = ('start', 'end')
+NO_GESTURE = 'none'               # the classifier's class for a hand doing none of them
+GESTURE_FEATURES = 'hand_shape'   # the classifier's feature set (pose_classifier.py)
+# the trained classifier, relative to the package root (the nodes' and tools' default)
+DEFAULT_GESTURE_CLASSIFIER = 'config/gesture_classifier.npz'
 _CURL_DOFS = np.array([[DOF_NAMES.index(f'{f}_{j}') for j in ('mcp_flex', 'pip_flex', 'dip_flex')]
                        for f in PINCH_FINGERS])
 
@@ -48,8 +59,8 @@ class GestureError(ColorGloveError, ValueError):
 
 @dataclass(frozen=True)
 class GestureConfig:
-    """Thresholds (pinch distances as a fraction of the hand length, curls in [0, 1]), the
-    width of each logistic ramp, the score smoothing and the hysteresis."""
+    """Rule thresholds (pinch distances as a fraction of the hand length, curls in [0, 1]) and
+    the width of each logistic ramp, used without a classifier; the hysteresis (``hold``)."""
 
     pinch_distance: float = 0.21
     pinch_width: float = 0.025
@@ -58,19 +69,14 @@ class GestureConfig:
     curled: float = 0.55
     extended: float = 0.18
     curl_width: float = 0.04
-    score_smoothing: float = 0.25
-    on_score: float = 0.7
-    off_score: float = 0.3
-    min_on_frames: int = 2
-    min_off_frames: int = 5
+    hold: HoldConfig = field(default_factory=lambda: HoldConfig(
+        smoothing=0.25, on_score=0.7, off_score=0.3, hold_on_s=1 / 30, hold_off_s=4 / 30))
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            check_number(f.name, getattr(self, f.name), low=0.0, low_open=True,
-                         high=1.0 if f.name == 'score_smoothing' else None, error=GestureError)
-        if not 0.0 < self.off_score < self.on_score < 1.0:
-            raise GestureError(f'need 0 < off_score < on_score < 1, got {self.off_score}, '
-                               f'{self.on_score}')
+            if f.name != 'hold':
+                check_number(f.name, getattr(self, f.name), low=0.0, low_open=True,
+                             error=GestureError)
         if self.extended >= self.curled:
             raise GestureError(f'extended ({self.extended}) must be below curled '
                                f'({self.curled})')
@@ -129,58 +135,56 @@ def gesture_scores(features: GestureFeatures, config: GestureConfig | None = Non
 
 
 @dataclass
-class _GestureState:
-    active: bool = False
-    run: int = 0          # consecutive frames on the other side of the active threshold
-
-
-@dataclass
 class GestureDetector:
-    """Turns per-frame scores into start / end events with hysteresis (one per hand)."""
+    """Turns per-frame scores into start / end events with hysteresis (one per hand); scores
+    from ``classifier`` when given, else from the rules (module docstring)."""
 
     model: HandModel
     config: GestureConfig = field(default_factory=GestureConfig)
+    classifier: PoseClassifier | None = None
 
     def __post_init__(self) -> None:
-        self._states: dict[str, _GestureState] = {}
-        self.scores: dict[str, float] = {}
-        self.reset()
+        if self.classifier is not None:
+            expected = {*GESTURE_NAMES, NO_GESTURE}
+            if set(self.classifier.classes) != expected or \
+                    self.classifier.feature_set != GESTURE_FEATURES:
+                raise GestureError(f'a gesture classifier must classify {GESTURE_FEATURES!r} '
+                                   f'features into {sorted(expected)}, got '
+                                   f'{self.classifier.feature_set!r} {self.classifier.classes}')
+        self._hysteresis = ScoreHysteresis(GESTURE_NAMES, self.config.hold)
 
     @property
     def active(self) -> tuple[str, ...]:
         """The gestures currently on."""
-        return tuple(name for name, s in self._states.items() if s.active)
+        return self._hysteresis.active
+
+    @property
+    def scores(self) -> dict[str, float]:
+        """The smoothed score of every gesture after the last frame (empty before one)."""
+        return dict(self._hysteresis.smoothed)
 
     def reset(self) -> None:
         """Forget the history without events (:meth:`update` with None ends the active ones)."""
-        self._states = {name: _GestureState() for name in GESTURE_NAMES}
-        self.scores = {}
+        self._hysteresis.reset()
+
+    def frame_scores(self, q: np.ndarray) -> dict[str, float]:
+        """One frame's raw score of every gesture."""
+        if self.classifier is None:
+            return gesture_scores(gesture_features(self.model, q), self.config)
+        p = np.exp(self.classifier.pose_log_proba(self.model, q))
+        return {c: float(v) for c, v in zip(self.classifier.classes, p, strict=True)
+                if c != NO_GESTURE}
 
     def update(self, q: np.ndarray | None, stamp: float = 0.0) -> list[GestureEvent]:
         """Feed one frame's pose (None: no hand); returns the events it decided."""
         if q is None:
-            events = [GestureEvent(name, 'end', 0.0, stamp) for name in self.active]
-            self.reset()
-            return events
-        q = np.asarray(q, dtype=float)
-        if not np.all(np.isfinite(q)):
-            raise GestureError('pose must be finite')
-        c = self.config
-        raw = gesture_scores(gesture_features(self.model, q), c)
-        a = c.score_smoothing
-        self.scores = {name: s if name not in self.scores else a * s + (1 - a) * self.scores[name]
-                       for name, s in raw.items()}
-        events = []
-        for name, score in self.scores.items():
-            state = self._states[name]
-            crossing = score < c.off_score if state.active else score >= c.on_score
-            state.run = state.run + 1 if crossing else 0
-            needed = c.min_off_frames if state.active else c.min_on_frames
-            if state.run >= needed:
-                state.active, state.run = not state.active, 0
-                events.append(GestureEvent(name, 'start' if state.active else 'end',
-                                           float(score), stamp))
-        return events
+            changes = self._hysteresis.lose(stamp)
+        else:
+            q = np.asarray(q, dtype=float)
+            if not np.all(np.isfinite(q)):
+                raise GestureError('pose must be finite')
+            changes = self._hysteresis.update(self.frame_scores(q), stamp)
+        return [GestureEvent(t.name, t.state, t.score, t.stamp) for t in changes]
 
 
 def format_event(event: GestureEvent) -> str:

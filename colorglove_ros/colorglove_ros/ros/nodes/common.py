@@ -38,6 +38,7 @@ from colorglove_ros.core.hand.frames import (
     finger_joint_names,
 )
 from colorglove_ros.core.hand.model import HandModel, calibrated_hand_model
+from colorglove_ros.core.hand.pose_classifier import PoseClassifier, load_pose_classifier
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
     pose_to_joint_state_msg,
@@ -121,7 +122,7 @@ class StartupError(ColorGloveError):
     """A node cannot start: missing device, file, database or bad configuration."""
 
 
-__all__ += ['StartupError']
+__all__ += ['StartupError', 'declare_classifier']
 
 
 # ------------------------------------------------------------------ start-up
@@ -189,6 +190,20 @@ def declare_frame_prefix(node: Node, executable: str) -> str:
                      'gives right_palm); "" keeps the plain names')
     with startup_errors(executable):
         return check_frame_prefix(prefix)
+
+
+def declare_classifier(node: Node, executable: str, default: str, feature_set: str,
+                       what: str) -> PoseClassifier | None:
+    """Declare ``classifier_file`` (a trained ``core.hand.pose_classifier`` file, ``default``
+    relative to the package root; '' = the hand-written ``what``); return it loaded, or stop
+    the start if it cannot be read or classifies other features."""
+    path = declare(node, 'classifier_file', default,
+                   f'trained classifier file (colorglove_train_hand_classifiers); "" uses the '
+                   f'{what}')
+    if not path:
+        return None
+    with startup_errors(executable):
+        return load_pose_classifier(resolve_path(path), feature_set)
 
 
 CAMERA_INFO_TOPIC = 'camera/camera_info'

@@ -1,28 +1,45 @@
-"""gesture_node: gesture events (pinches, grab, point, open hand) from ``hand/joint_states`` as
-``std_msgs/String`` lines ``name:state:confidence`` on ``hand/gesture_events`` (e.g.
+"""gesture_node: gesture events (pinches, grab, point, open hand) from ``hand/joint_states``,
+each as a ``colorglove_msgs/GestureEvent`` on ``hand/gestures`` and, as before, as a
+``std_msgs/String`` line ``name:state:confidence`` on ``hand/gesture_events`` (e.g.
 ``pinch_index:start:0.93``); a ``no hand`` on ``hand/tracking_status`` ends the active ones."""
 from __future__ import annotations
 
 import sys
 
+from colorglove_msgs.msg import GestureEvent as GestureEventMsg
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import String
+from std_msgs.msg import Header, String
 
-from colorglove_ros.core.hand.frames import finger_joint_names
-from colorglove_ros.core.hand.gestures import GestureDetector, GestureEvent, format_event
+from colorglove_ros.core.hand.frames import finger_joint_names, hand_root_frame
+from colorglove_ros.core.hand.gestures import (
+    DEFAULT_GESTURE_CLASSIFIER,
+    GESTURE_FEATURES,
+    GestureDetector,
+    GestureEvent,
+    format_event,
+)
 from colorglove_ros.core.hand.poses import full_pose
-from colorglove_ros.ros.conversions import pose_from_joint_state_msg, stamp_to_seconds
+from colorglove_ros.ros.conversions import (
+    gesture_event_to_msg,
+    pose_from_joint_state_msg,
+    stamp_to_seconds,
+)
 from colorglove_ros.ros.nodes.common import (
     JOINT_STATES_TOPIC,
     TRACKING_STATUS_TOPIC,
+    StartupError,
+    declare,
+    declare_classifier,
     declare_frame_prefix,
     hand_model_from_calibration,
     run_node,
 )
 from colorglove_ros.ros.pose_pairing import is_no_hand_status
 
-__all__ = ['GestureNode', 'main']
+__all__ = ['GestureNode', 'main', 'HANDS']
+
+HANDS = ('right', 'left')
 
 
 class GestureNode(Node):
@@ -31,15 +48,31 @@ class GestureNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('gestures', **kwargs)
         self.model = hand_model_from_calibration(self, 'gesture_node')
-        self.joint_names = finger_joint_names(declare_frame_prefix(self, 'gesture_node'))
-        self.detector = GestureDetector(self.model)
-        self.event_pub = self.create_publisher(String, 'hand/gesture_events', 10)
+        frame_prefix = declare_frame_prefix(self, 'gesture_node')
+        self.joint_names = finger_joint_names(frame_prefix)
+        self.hand = declare(self, 'hand', HANDS[0],
+                            "which hand the events are of, 'right' or 'left' (GestureEvent.hand)")
+        if self.hand not in HANDS:
+            raise StartupError(f'gesture_node cannot start: hand must be one of {HANDS}, '
+                               f'got {self.hand!r}')
+        self.hand_frame = hand_root_frame(frame_prefix)
+        self.publish_text = declare(self, 'publish_text_events', True,
+                                    'also publish each event as a text line on '
+                                    'hand/gesture_events (std_msgs/String)')
+        classifier = declare_classifier(self, 'gesture_node', DEFAULT_GESTURE_CLASSIFIER,
+                                        GESTURE_FEATURES, 'rules on the finger geometry')
+        self.detector = GestureDetector(self.model, classifier=classifier)
+        self.event_pub = self.create_publisher(GestureEventMsg, 'hand/gestures', 10)
+        self.text_pub = self.create_publisher(String, 'hand/gesture_events', 10) \
+            if self.publish_text else None
         self.create_subscription(JointState, JOINT_STATES_TOPIC, self.on_joints, 10)
         self.create_subscription(String, TRACKING_STATUS_TOPIC, self.on_status, 10)
 
-    def _publish(self, events: list[GestureEvent]) -> None:
+    def _publish(self, events: list[GestureEvent], header: Header) -> None:
         for event in events:
-            self.event_pub.publish(String(data=format_event(event)))
+            self.event_pub.publish(gesture_event_to_msg(event, header, self.hand))
+            if self.text_pub is not None:
+                self.text_pub.publish(String(data=format_event(event)))
 
     def on_joints(self, msg: JointState) -> None:
         """Detect on one frame's finger joints (the wrist pose does not matter)."""
@@ -49,12 +82,14 @@ class GestureNode(Node):
         except (KeyError, ValueError) as exc:
             self.get_logger().warn(f'bad JointState: {exc}', throttle_duration_sec=1.0)
             return
-        self._publish(events)
+        self._publish(events, Header(stamp=msg.header.stamp, frame_id=self.hand_frame))
 
     def on_status(self, msg: String) -> None:
         """End the active gestures when the tracker loses the hand."""
         if is_no_hand_status(msg.data):
-            self._publish(self.detector.update(None))
+            now = self.get_clock().now()
+            self._publish(self.detector.update(None, now.nanoseconds * 1e-9),
+                          Header(stamp=now.to_msg(), frame_id=self.hand_frame))
 
 
 def main(args: list[str] | None = None) -> int:

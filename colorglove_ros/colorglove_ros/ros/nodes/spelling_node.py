@@ -10,11 +10,17 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from colorglove_ros.core.hand.spelling import Speller, SpellingError
+from colorglove_ros.core.hand.spelling import (
+    DEFAULT_LETTER_CLASSIFIER,
+    LETTER_FEATURES,
+    Speller,
+    SpellingError,
+)
 from colorglove_ros.ros.conversions import stamp_to_seconds
 from colorglove_ros.ros.nodes.common import (
     TRACKING_STATUS_TOPIC,
     declare,
+    declare_classifier,
     declare_frame_prefix,
     hand_model_from_calibration,
     run_node,
@@ -35,7 +41,9 @@ class SpellingNode(Node):
                                 'longest text kept on hand/spelled_text (oldest letters dropped)',
                                 1, 100000)
         frame_prefix = declare_frame_prefix(self, 'spelling_node')
-        self.speller = Speller(model=model)
+        classifier = declare_classifier(self, 'spelling_node', DEFAULT_LETTER_CLASSIFIER,
+                                        LETTER_FEATURES, 'letter templates')
+        self.speller = Speller(model=model, classifier=classifier)
         self.text = ''
         self.letter_pub = self.create_publisher(String, 'hand/spelled_letters', 10)
         self.text_pub = self.create_publisher(String, 'hand/spelled_text', 10)

@@ -8,6 +8,9 @@ from pose_samples import MODEL, hand_pose
 
 from colorglove_ros.core.evaluation.scripted_hands import TrackingNoise
 from colorglove_ros.core.hand.gestures import (
+    DEFAULT_GESTURE_CLASSIFIER,
+    GESTURE_FEATURES,
+    NO_GESTURE,
     GestureConfig,
     GestureDetector,
     GestureError,
@@ -17,7 +20,11 @@ from colorglove_ros.core.hand.gestures import (
     gesture_scores,
     parse_event,
 )
-from colorglove_ros.core.hand.poses import GESTURE_SHAPES, full_pose
+from colorglove_ros.core.hand.hysteresis import HoldConfig
+from colorglove_ros.core.hand.pose_classifier import PoseClassifier, load_pose_classifier
+from colorglove_ros.core.hand.poses import GESTURE_SHAPES, LETTER_SHAPES, full_pose
+from colorglove_ros.core.hand.spelling import DEFAULT_LETTER_CLASSIFIER
+from colorglove_ros.paths import share_dir
 from colorglove_ros.tools import eval_gestures
 
 
@@ -49,7 +56,8 @@ def test_pinch_shapes_of_every_finger() -> None:
 
 
 def test_hysteresis_and_loss() -> None:
-    config = GestureConfig(min_on_frames=3, min_off_frames=5)
+    config = GestureConfig(hold=HoldConfig(smoothing=0.25, on_score=0.7, off_score=0.3,
+                                           hold_on_s=2 / 30, hold_off_s=4 / 30))
     detector = GestureDetector(MODEL, config)
     flat, fist = _pose('flat'), _pose('fist')
     events = [e for k in range(10) for e in detector.update(flat, k / 30)]
@@ -79,15 +87,37 @@ def test_event_text_round_trip() -> None:
         with pytest.raises(GestureError):
             parse_event(bad)
     with pytest.raises(GestureError):
-        GestureConfig(on_score=0.2, off_score=0.4)
+        GestureConfig(extended=0.6, curled=0.5)
+
+
+def _shipped() -> PoseClassifier:
+    return load_pose_classifier(share_dir() / DEFAULT_GESTURE_CLASSIFIER, GESTURE_FEATURES)
+
+
+@pytest.mark.parametrize('shape, gesture', [
+    ('fist', 'grab'), ('point', 'point'), ('flat', 'open_hand'), ('spread', 'open_hand'),
+    ('pinch', 'pinch_index'), ('relaxed', NO_GESTURE), ('letter_V', NO_GESTURE)])
+def test_shipped_classifier_on_named_shapes(shape: str, gesture: str) -> None:
+    classifier = _shipped()
+    fingers = {**GESTURE_SHAPES, **{f'letter_{k}': v for k, v in LETTER_SHAPES.items()}}[shape]
+    p = np.exp(classifier.pose_log_proba(MODEL, hand_pose(fingers)))
+    assert classifier.classes[int(np.argmax(p))] == gesture
+
+
+def test_detector_refuses_a_letter_classifier() -> None:
+    letters = load_pose_classifier(share_dir() / DEFAULT_LETTER_CLASSIFIER)
+    with pytest.raises(GestureError):
+        GestureDetector(MODEL, classifier=letters)
 
 
 def test_evaluation_without_noise_is_perfect_and_with_noise_is_not() -> None:
-    clean = eval_gestures.evaluate([7], episodes=16, noise=TrackingNoise(0.0, 0.0))
+    clean = eval_gestures.evaluate([7], episodes=16, source=TrackingNoise(0.0, 0.0),
+                                   classifier=_shipped())
     overall = clean['rows'][-1]
     assert overall['episodes'] >= 8
     assert overall['precision'] == 1.0 and overall['recall'] == 1.0
     assert clean['joint_mae_deg_realised'] == pytest.approx(0.0, abs=1e-12)
-    noisy = eval_gestures.evaluate([7], episodes=16, noise=TrackingNoise(25.0, 5.0))
+    noisy = eval_gestures.evaluate([7], episodes=16, source=TrackingNoise(25.0, 5.0),
+                                   classifier=_shipped())
     assert noisy['joint_mae_deg_realised'] == pytest.approx(25.0, rel=0.02)
     assert min(noisy['rows'][-1]['precision'], noisy['rows'][-1]['recall']) < 0.95

@@ -7,8 +7,11 @@ import pytest
 from pose_samples import MODEL, allowed_fingers
 
 from colorglove_ros.core.evaluation.scripted_hands import Segment, TrackingNoise, script_poses
+from colorglove_ros.core.hand.pose_classifier import load_pose_classifier
 from colorglove_ros.core.hand.poses import LETTER_SHAPES
 from colorglove_ros.core.hand.spelling import (
+    DEFAULT_LETTER_CLASSIFIER,
+    LETTER_FEATURES,
     LETTERS,
     LetterClassifier,
     Speller,
@@ -17,6 +20,7 @@ from colorglove_ros.core.hand.spelling import (
     letter_rotation,
     pointing_direction,
 )
+from colorglove_ros.paths import share_dir
 from colorglove_ros.tools import eval_spelling
 
 
@@ -63,10 +67,10 @@ def test_hold_to_commit_and_double_letters() -> None:
     # each letter commits at least hold_s after its move began
     starts = np.cumsum([0.0] + [s.move_s + s.hold_s for s in word[:-1]])
     for (stamp, _), start in zip(commits, starts, strict=True):
-        assert stamp >= start + SpellingConfig().hold_s
+        assert stamp >= start + SpellingConfig().hold.hold_on_s
     # the same letter held in one place is committed once
     assert ''.join(x for _, x in _spell([_segment('L', hold_s=3.0)])) == 'L'
-    # a hold shorter than hold_s commits nothing
+    # a hold shorter than hold_on_s commits nothing
     assert _spell([_segment('A', hold_s=0.1)]) == []          # 0.4 s in all
 
 
@@ -78,7 +82,7 @@ def test_lost_hand_resets() -> None:
     with pytest.raises(SpellingError):
         speller.update(np.zeros(20), 6.0)
     with pytest.raises(SpellingError):
-        SpellingConfig(vote_share=0.3)
+        SpellingConfig(rearm_motion_m=0.0)
 
 
 def test_edit_distance() -> None:
@@ -88,12 +92,15 @@ def test_edit_distance() -> None:
     assert eval_spelling.edit_distance('', 'ABC') == 3
 
 
-def test_evaluation_clean_is_near_perfect_and_heavy_noise_is_not() -> None:
-    clean = eval_spelling.evaluate([11], words_per_sequence=4, noise=TrackingNoise(0.0, 0.0))
+def test_shipped_classifier_spells_clean_poses_and_heavy_noise_breaks_it() -> None:
+    classifier = load_pose_classifier(share_dir() / DEFAULT_LETTER_CLASSIFIER, LETTER_FEATURES)
+    clean = eval_spelling.evaluate([11], words_per_sequence=4, source=TrackingNoise(0.0, 0.0),
+                                   classifier=classifier)
     assert clean['letters'] >= 10
     assert clean['letter_accuracy'] == 1.0 and clean['insertions'] == 0
     assert clean['text_accuracy'] == 1.0
-    noisy = eval_spelling.evaluate([11], words_per_sequence=4, noise=TrackingNoise(25.0, 10.0))
+    noisy = eval_spelling.evaluate([11], words_per_sequence=4, source=TrackingNoise(25.0, 10.0),
+                                   classifier=classifier)
     assert noisy['letter_accuracy'] < 0.9
     rows = {row['scripted']: row for row in noisy['thumb_confusion']}
     assert set(rows) == {'E', 'M', 'N', 'S', 'T'}

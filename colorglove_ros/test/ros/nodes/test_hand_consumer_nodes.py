@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from colorglove_msgs.msg import GestureEvent as GestureEventMsg
 from geometry_msgs.msg import PoseArray, PoseStamped
 from node_fixtures import header, params, running
 from pose_samples import MODEL, hand_pose
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
+from colorglove_ros.core.hand.frames import finger_joint_names
 from colorglove_ros.core.hand.keypoints import hand_keypoints
 from colorglove_ros.core.hand.poses import GESTURE_SHAPES, LETTER_SHAPES
 from colorglove_ros.core.hand.spelling import letter_rotation
@@ -55,18 +57,44 @@ def test_keypoints_node_publishes_both_frames() -> None:
 
 
 def test_gesture_node_events_and_loss() -> None:
-    with running(lambda ctx: GestureNode(context=ctx)) as h:
+    with running(lambda ctx: GestureNode(context=ctx, parameter_overrides=params(
+            frame_prefix='left_', hand='left'))) as h:
         events = h.collect(String, 'hand/gesture_events')
+        messages = h.collect(GestureEventMsg, 'hand/gestures')
         joints_pub = h.publisher(JointState, 'hand/joint_states')
         status_pub = h.publisher(String, 'hand/tracking_status')
         for k in range(10):
-            joints_pub.publish(pose_to_joint_state_msg(_pose(GESTURE_SHAPES['flat']), _frame(k)))
-        assert h.spin_until(lambda: len(events) >= 1, 10.0)
+            joints_pub.publish(pose_to_joint_state_msg(_pose(GESTURE_SHAPES['flat']), _frame(k),
+                                                       finger_joint_names('left_')))
+        assert h.spin_until(lambda: len(events) >= 1 and len(messages) >= 1, 10.0)
         status_pub.publish(String(data='no hand: lost'))
-        assert h.spin_until(lambda: len(events) >= 2, 10.0)
+        assert h.spin_until(lambda: len(events) >= 2 and len(messages) >= 2, 10.0)
     name, state, confidence = events[0].data.split(':')
     assert (name, state) == ('open_hand', 'start') and float(confidence) >= 0.7
     assert events[1].data == 'open_hand:end:0.00'
+    start, end = messages[0], messages[1]
+    assert (start.hand, start.gesture, start.event) == ('left', GestureEventMsg.OPEN_HAND,
+                                                        GestureEventMsg.START)
+    assert start.header.frame_id == 'left_palm'
+    assert start.confidence == pytest.approx(float(confidence), abs=0.005)
+    # the start was decided on one of the published frames, and carries its stamp
+    assert start.header.stamp.sec == 100 and start.header.stamp.nanosec in {
+        int(k * 1e9 / 30) for k in range(10)}
+    assert (end.gesture, end.event, end.confidence) == ('open_hand', GestureEventMsg.END, 0.0)
+
+
+def test_gesture_node_text_events_can_be_turned_off() -> None:
+    with running(lambda ctx: GestureNode(context=ctx, parameter_overrides=params(
+            publish_text_events=False))) as h:
+        events = h.collect(String, 'hand/gesture_events')
+        messages = h.collect(GestureEventMsg, 'hand/gestures')
+        joints_pub = h.publisher(JointState, 'hand/joint_states')
+        for k in range(10):
+            joints_pub.publish(pose_to_joint_state_msg(_pose(GESTURE_SHAPES['fist']), _frame(k)))
+        assert h.spin_until(lambda: len(messages) >= 1, 10.0)
+        h.settle(0.3)
+    assert messages[0].gesture == 'grab' and messages[0].hand == 'right'
+    assert events == []
 
 
 def test_spelling_node_commits_held_letters() -> None:

@@ -1,0 +1,93 @@
+"""The tracker itself on rendered scripted sequences: what the gesture and spelling evaluations
+see when they run on the tracker's output instead of the noise model (cached per sequence)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from colorglove_ros.core.evaluation.scripted_hands import ScriptedSequence, ScriptError
+from colorglove_ros.core.hand.model import HandModel
+
+__all__ = ['TRACKED_FORMAT_VERSION', 'TRACKER_MODE', 'ScriptedTracker']
+
+TRACKED_FORMAT_VERSION = 1
+TRACKER_MODE = 'ik_smooth'        # the mode ik_node runs (IK and smoothing on)
+
+
+@dataclass
+class ScriptedTracker:
+    """Renders a scripted sequence's true poses (the glove, test-split imaging conditions from
+    the seed, the primary camera of ``calibration``), runs the per-frame recipe (segmentation
+    with ``labels='segmented'``, lookup, IK with smoothing) and returns the tracked poses and
+    the found flags. Results are cached in ``cache_dir`` as ``<name>_<seed>_<frames>_<labels>
+    .npz`` (versioned, with the true poses, so a changed script is tracked anew)."""
+
+    database: Path
+    ik_config: Path
+    calibration: Path
+    cache_dir: Path
+    labels: str = 'segmented'
+
+    def __post_init__(self) -> None:
+        self._evaluator: Any = None
+        self.frames_tracked = 0       # frames run through the tracker (not from the cache)
+
+    def _cache_path(self, name: str, seed: int, frames: int) -> Path:
+        return Path(self.cache_dir) / f'{name}_{seed}_{frames}_{self.labels}.npz'
+
+    def _load(self, path: Path, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        try:
+            with np.load(path) as data:
+                if int(data['version']) != TRACKED_FORMAT_VERSION or \
+                        data['q_true'].shape != truth.shape or \
+                        not np.allclose(data['q_true'], truth, atol=1e-9):
+                    return None
+                return data['q_est'], data['found'].astype(bool)
+        except (OSError, KeyError, ValueError):
+            return None
+
+    def _make_evaluator(self) -> Any:
+        from colorglove_ros.core.camera import load_calibration
+        from colorglove_ros.core.evaluation.sequences import (
+            SequenceEvaluator,
+            make_observer,
+            open_database,
+        )
+        from colorglove_ros.core.lookup.search import PoseLookup
+        from colorglove_ros.core.tracking.config import load_ik_config
+
+        _, db = open_database(self.database, self.database)
+        config = load_ik_config(str(self.ik_config))
+        cameras = load_calibration(str(self.calibration)).cameras
+        return SequenceEvaluator(PoseLookup(db), {'1 camera': cameras[:1]}, [TRACKER_MODE],
+                                 config, make_observer(self.labels, None,
+                                                       config.min_blob_pixels))
+
+    def observe(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Tracked poses (N, 26; NaN where not found) and found flags (N,) of sequence
+        ``name`` / ``seed`` with true poses ``truth`` (``model`` must be the database's hand)."""
+        path = self._cache_path(name, seed, len(truth.poses))
+        cached = self._load(path, truth.poses)
+        if cached is not None:
+            return cached
+        if self._evaluator is None:
+            self._evaluator = self._make_evaluator()
+        if not np.isclose(self._evaluator.model.hand_length_m, model.hand_length_m):
+            raise ScriptError('the scripted hand is not the pose database\'s hand')
+        run = self._evaluator.run(seed, len(truth.poses), poses=truth.poses,
+                                  )[('1 camera', TRACKER_MODE)]
+        self.frames_tracked += len(truth.poses)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(path, version=TRACKED_FORMAT_VERSION, q_true=truth.poses,
+                            q_est=run.q_est, found=run.found)
+        return run.q_est, run.found
+
+    def close(self) -> None:
+        """Free the renderer."""
+        if self._evaluator is not None:
+            self._evaluator.close()
+            self._evaluator = None

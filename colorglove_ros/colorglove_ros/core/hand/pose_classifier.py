@@ -1,0 +1,165 @@
+"""A small classifier of hand shapes from the tracked pose, trained on synthetic data.
+
+Features (:func:`pose_features`), all in the hand's wrist frame and scale-free: the 20 finger
+joint angles (rad); the 10 distances between the five fingertips (thumb tip to each fingertip
+first) over the hand length; the 20 keypoints after the wrist (MediaPipe order,
+``core/hand/keypoints.py``) over the hand length, which place the thumb relative to the
+fingers; and, for letters (``with_direction``), the direction the fingers point in the camera
+frame (``core/hand/spelling.py`` ``pointing_direction``: G, H, P, Q differ from other letters
+by it).
+
+Model: the features standardised, one hidden layer of ReLU units and a softmax over the
+classes (a multi-layer perceptron fitted by scikit-learn with a seeded initialisation, then
+kept as plain arrays, so running it needs numpy only). Files are ``.npz`` with a format name
+and version (:data:`CLASSIFIER_FORMAT`, :data:`CLASSIFIER_FORMAT_VERSION`), the classes,
+the feature set and a line saying how the model was trained.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, rotvec_to_matrix
+
+__all__ = ['CLASSIFIER_FORMAT', 'CLASSIFIER_FORMAT_VERSION', 'FEATURE_SETS',
+           'ClassifierError', 'PoseClassifier', 'pose_features', 'train_pose_classifier',
+           'save_pose_classifier', 'load_pose_classifier']
+
+CLASSIFIER_FORMAT = 'colorglove_pose_classifier'
+CLASSIFIER_FORMAT_VERSION = 1
+# feature set name -> whether it includes the pointing direction
+FEATURE_SETS: dict[str, bool] = {'hand_shape': False, 'hand_shape_direction': True}
+_TIPS = np.array([4, 8, 12, 16, 20])
+_PAIRS = np.triu_indices(5, 1)
+
+
+class ClassifierError(ColorGloveError, ValueError):
+    """A bad classifier file, feature set or input."""
+
+
+def _pointing(Q: np.ndarray) -> np.ndarray:
+    """(N, 3) directions the fingers point in the camera frame (the hand frame's -y axis)."""
+    return -np.stack([rotvec_to_matrix(q[3:6])[:, 1] for q in Q])
+
+
+def pose_features(model: HandModel, poses: np.ndarray, feature_set: str) -> np.ndarray:
+    """(N, F) features (module docstring) of poses (N, 26) or (F,) of one pose (26,)."""
+    if feature_set not in FEATURE_SETS:
+        raise ClassifierError(f'unknown feature set {feature_set!r}, expected one of '
+                              f'{tuple(FEATURE_SETS)}')
+    Q = np.asarray(poses, dtype=float)
+    single = Q.ndim == 1
+    Q = np.atleast_2d(Q)
+    if Q.shape[1] != NUM_DOFS or not np.all(np.isfinite(Q)):
+        raise ClassifierError(f'poses must be finite (N, 26), got shape {Q.shape}')
+    local = Q.copy()
+    local[:, 0:6] = 0.0                      # the hand frame at the camera origin: wrist frame
+    points = model.keypoints_batch(local) / model.hand_length_m
+    tips = points[:, _TIPS]
+    distances = np.linalg.norm(tips[:, _PAIRS[0]] - tips[:, _PAIRS[1]], axis=-1)
+    parts = [Q[:, 6:], distances, points[:, 1:].reshape(len(Q), -1)]
+    if FEATURE_SETS[feature_set]:
+        parts.append(_pointing(Q))
+    out = np.concatenate(parts, axis=1)
+    return out[0] if single else out
+
+
+@dataclass(frozen=True)
+class PoseClassifier:
+    """A trained classifier (module docstring): ``classes``, the ``feature_set``, the
+    standardisation (``mean``, ``scale``), the layers' weights and biases, and ``source``
+    (how it was trained)."""
+
+    classes: tuple[str, ...]
+    feature_set: str
+    mean: np.ndarray
+    scale: np.ndarray
+    weights: tuple[np.ndarray, ...]
+    biases: tuple[np.ndarray, ...]
+    source: str = ''
+
+    def log_proba(self, features: np.ndarray) -> np.ndarray:
+        """Log class probabilities, (C,) for features (F,) or (N, C) for (N, F)."""
+        x = (np.asarray(features, dtype=float) - self.mean) / self.scale
+        for k, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            x = x @ w + b
+            if k < len(self.weights) - 1:
+                x = np.maximum(x, 0.0)
+        x = x - x.max(axis=-1, keepdims=True)
+        return x - np.log(np.exp(x).sum(axis=-1, keepdims=True))
+
+    def pose_log_proba(self, model: HandModel, q: np.ndarray) -> np.ndarray:
+        """Log class probabilities (C,) of one pose (26,)."""
+        return self.log_proba(pose_features(model, q, self.feature_set))
+
+
+def train_pose_classifier(features: np.ndarray, labels: np.ndarray, feature_set: str,
+                          hidden: int = 64, alpha: float = 1e-3, seed: int = 0,
+                          source: str = '', max_iter: int = 200) -> PoseClassifier:
+    """Fit the classifier to labelled feature rows (seeded; deterministic for a seed; stops
+    when a tenth of the rows held out for validation stops improving)."""
+    from sklearn.neural_network import MLPClassifier
+
+    features = np.asarray(features, dtype=float)
+    labels = np.asarray(labels).astype(str)
+    classes = np.unique(labels)
+    if len(classes) < 3:
+        raise ClassifierError(f'need at least 3 classes, got {len(classes)}')
+    mean = features.mean(axis=0)
+    scale = features.std(axis=0)
+    scale[scale < 1e-9] = 1.0
+    mlp = MLPClassifier((hidden,), alpha=alpha, max_iter=max_iter, random_state=seed,
+                        early_stopping=True, validation_fraction=0.1, n_iter_no_change=8)
+    mlp.fit((features - mean) / scale, labels)
+    return PoseClassifier(tuple(str(c) for c in mlp.classes_), feature_set, mean, scale,
+                          tuple(np.asarray(w) for w in mlp.coefs_),
+                          tuple(np.asarray(b) for b in mlp.intercepts_), source)
+
+
+def save_pose_classifier(path: str | Path, classifier: PoseClassifier) -> Path:
+    """Write the classifier as a versioned ``.npz``."""
+    path = Path(path)
+    arrays = {f'weights_{k}': w for k, w in enumerate(classifier.weights)}
+    arrays.update({f'biases_{k}': b for k, b in enumerate(classifier.biases)})
+    with path.open('wb') as f:
+        np.savez_compressed(f, format=np.array(CLASSIFIER_FORMAT),
+                            version=np.array(CLASSIFIER_FORMAT_VERSION),
+                            classes=np.array(classifier.classes),
+                            feature_set=np.array(classifier.feature_set),
+                            source=np.array(classifier.source), mean=classifier.mean,
+                            scale=classifier.scale, layers=np.array(len(classifier.weights)),
+                            **arrays)
+    return path
+
+
+def load_pose_classifier(path: str | Path, feature_set: str | None = None) -> PoseClassifier:
+    """Read a classifier file; :class:`ClassifierError` if it is missing, of another format
+    or version, inconsistent, or (given ``feature_set``) made for other features."""
+    try:
+        with np.load(Path(path), allow_pickle=False) as data:
+            if str(data['format']) != CLASSIFIER_FORMAT or \
+                    int(data['version']) != CLASSIFIER_FORMAT_VERSION:
+                raise ClassifierError(f'{path} is not a {CLASSIFIER_FORMAT} file of version '
+                                      f'{CLASSIFIER_FORMAT_VERSION}')
+            layers = int(data['layers'])
+            clf = PoseClassifier(tuple(str(c) for c in data['classes']),
+                                 str(data['feature_set']), data['mean'], data['scale'],
+                                 tuple(data[f'weights_{k}'] for k in range(layers)),
+                                 tuple(data[f'biases_{k}'] for k in range(layers)),
+                                 str(data['source']))
+    except FileNotFoundError as exc:
+        raise ClassifierError(f'classifier file not found: {path}') from exc
+    except (OSError, KeyError, ValueError) as exc:
+        raise ClassifierError(f'cannot read classifier file {path}: {exc}') from exc
+    sizes = [clf.mean.shape[0]] + [w.shape[1] for w in clf.weights]
+    if clf.feature_set not in FEATURE_SETS or sizes[-1] != len(clf.classes) or \
+            any(w.shape[0] != n for w, n in zip(clf.weights, sizes, strict=False)):
+        raise ClassifierError(f'{path}: inconsistent classifier (feature set '
+                              f'{clf.feature_set!r}, layer sizes {sizes})')
+    if feature_set is not None and clf.feature_set != feature_set:
+        raise ClassifierError(f'{path} classifies {clf.feature_set!r} features, expected '
+                              f'{feature_set!r}')
+    return clf

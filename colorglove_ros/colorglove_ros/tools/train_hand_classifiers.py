@@ -1,0 +1,113 @@
+"""Train the gesture and finger-spelling classifiers on synthetic data.
+
+Training sequences are the evaluations' own scripts (``eval_gestures.gesture_script``,
+``eval_spelling.spelling_script``) on TRAINING seeds (default 1000 onwards: neither the
+hold-time tuning seeds 0-4 nor the report seeds 100-119), each seen ``--noise-draws`` times
+through the tracking-noise model fitted to the tracker (``config/tracking_noise.yaml``, each
+draw seeded). Every frame of a hold is a sample labelled with what is held (a gesture,
+``none`` for the neutral shapes, or a letter). The classifiers (``core/hand/pose_classifier.py``)
+are written as versioned ``.npz`` files, by default ``config/gesture_classifier.npz`` and
+``config/letter_classifier.npz``, which the nodes and the evaluations read.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from colorglove_ros.core.evaluation.scripted_hands import load_tracking_noise, script_poses
+from colorglove_ros.core.hand.gestures import (
+    DEFAULT_GESTURE_CLASSIFIER,
+    GESTURE_FEATURES,
+    NO_GESTURE,
+)
+from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.hand.pose_classifier import (
+    pose_features,
+    save_pose_classifier,
+    train_pose_classifier,
+)
+from colorglove_ros.core.hand.spelling import DEFAULT_LETTER_CLASSIFIER, LETTER_FEATURES
+from colorglove_ros.core.report import print_table
+from colorglove_ros.paths import share_dir
+from colorglove_ros.tools import eval_gestures, eval_spelling
+from colorglove_ros.tools._cli import run_tool, tool_parser
+
+__all__ = ['main', 'training_samples']
+
+
+def training_samples(model: HandModel, scripts: list, noise, draws: int, feature_set: str,
+                     none_label: str = NO_GESTURE) -> tuple[np.ndarray, np.ndarray]:
+    """Features and labels of the hold frames of ``(seed, segments)`` scripts, each seen
+    through ``draws`` seeded draws of ``noise``."""
+    features, labels = [], []
+    for seed, segments in scripts:
+        truth = script_poses(segments)
+        hold = truth.holding
+        for draw in range(draws):
+            noisy = noise.apply(np.random.default_rng([seed, draw, 31]), truth.poses,
+                                truth.fps, model)
+            features.append(pose_features(model, noisy[hold], feature_set))
+            labels += [x or none_label for x in truth.label[hold]]
+    return np.concatenate(features), np.asarray(labels)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``colorglove_train_hand_classifiers``."""
+    config = share_dir() / 'config'
+    parser = tool_parser(__doc__, raw_description=True, json_help=None)
+    parser.add_argument('--what', choices=('gestures', 'letters', 'both'), default='both')
+    parser.add_argument('--first-seed', type=int, default=1000)
+    parser.add_argument('--gesture-sequences', type=int, default=12)
+    parser.add_argument('--episodes', type=int, default=40)
+    parser.add_argument('--spelling-sequences', type=int, default=40)
+    parser.add_argument('--words', type=int, default=8)
+    parser.add_argument('--noise-draws', type=int, default=2)
+    parser.add_argument('--noise-config', type=Path, default=config / 'tracking_noise.yaml')
+    parser.add_argument('--hidden', type=int, default=64, help='hidden units')
+    parser.add_argument('--seed', type=int, default=0, help='initialisation seed')
+    parser.add_argument('--gesture-output', type=Path,
+                        default=share_dir() / DEFAULT_GESTURE_CLASSIFIER)
+    parser.add_argument('--letter-output', type=Path,
+                        default=share_dir() / DEFAULT_LETTER_CLASSIFIER)
+    args = parser.parse_args(argv)
+
+    def body() -> int:
+        model = HandModel()
+        noise = load_tracking_noise(args.noise_config)
+        seeds = lambda n: range(args.first_seed, args.first_seed + n)  # noqa: E731
+        jobs = []
+        if args.what in ('gestures', 'both'):
+            jobs.append(('gestures', GESTURE_FEATURES, args.gesture_output,
+                         [(s, eval_gestures.gesture_script(model, s, args.episodes))
+                          for s in seeds(args.gesture_sequences)],
+                         f'--gesture-sequences {args.gesture_sequences} --episodes '
+                         f'{args.episodes}'))
+        if args.what in ('letters', 'both'):
+            jobs.append(('letters', LETTER_FEATURES, args.letter_output,
+                         [(s, eval_spelling.spelling_script(model, s, args.words)[0])
+                          for s in seeds(args.spelling_sequences)],
+                         f'--spelling-sequences {args.spelling_sequences} --words {args.words}'))
+        rows = []
+        for what, feature_set, output, scripts, sizes in jobs:
+            x, y = training_samples(model, scripts, noise, args.noise_draws, feature_set)
+            source = (f'colorglove_train_hand_classifiers --what {what} --first-seed '
+                      f'{args.first_seed} {sizes} --noise-draws {args.noise_draws} '
+                      f'--hidden {args.hidden} --seed {args.seed}; noise '
+                      f'{args.noise_config.name}')
+            clf = train_pose_classifier(x, y, feature_set, hidden=args.hidden, seed=args.seed,
+                                        source=source)
+            save_pose_classifier(output, clf)
+            accuracy = float(np.mean(np.asarray(clf.classes)[
+                np.argmax(clf.log_proba(x), axis=1)] == y))
+            rows.append({'classifier': what, 'samples': len(y), 'classes': len(clf.classes),
+                         'training frame accuracy': accuracy, 'file': str(output)})
+            print(f'[train_hand_classifiers] {what}: {len(y)} samples', flush=True)
+        print_table(rows, 'Trained classifiers')
+        return 0
+
+    return run_tool('colorglove_train_hand_classifiers', body)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

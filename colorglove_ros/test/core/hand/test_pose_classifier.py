@@ -1,0 +1,81 @@
+"""The pose classifier: scale-free wrist-frame features, seeded training, the versioned file."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pose_samples import MODEL, hand_pose
+
+from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.hand.pose_classifier import (
+    ClassifierError,
+    load_pose_classifier,
+    pose_features,
+    save_pose_classifier,
+    train_pose_classifier,
+)
+from colorglove_ros.core.hand.poses import GESTURE_SHAPES
+
+SHAPES = ('fist', 'flat', 'point', 'pinch')
+
+
+def _samples(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
+    poses, labels = [], []
+    for _ in range(n):
+        name = SHAPES[rng.integers(len(SHAPES))]
+        fingers = GESTURE_SHAPES[name] + rng.normal(0.0, np.deg2rad(4.0), 20)
+        poses.append(hand_pose(fingers))
+        labels.append(name)
+    return pose_features(MODEL, np.array(poses), 'hand_shape'), np.array(labels)
+
+
+def test_features_are_in_the_wrist_frame_and_scale_free() -> None:
+    q = hand_pose(GESTURE_SHAPES['pinch'])
+    moved = q.copy()
+    moved[0:6] = [0.1, -0.05, 0.7, 0.4, -0.3, 1.2]
+    big = HandModel(hand_length_m=1.2 * MODEL.hand_length_m)
+    np.testing.assert_allclose(pose_features(MODEL, q, 'hand_shape'),
+                               pose_features(MODEL, moved, 'hand_shape'), atol=1e-9)
+    np.testing.assert_allclose(pose_features(MODEL, q, 'hand_shape'),
+                               pose_features(big, q, 'hand_shape'), atol=1e-9)
+    with_direction = pose_features(MODEL, q, 'hand_shape_direction')
+    assert with_direction.shape == (pose_features(MODEL, q, 'hand_shape').shape[0] + 3,)
+    np.testing.assert_allclose(with_direction[-3:], [0.0, -1.0, 0.0], atol=1e-9)
+    with pytest.raises(ClassifierError):
+        pose_features(MODEL, q, 'colour')
+
+
+def test_training_is_seeded_and_the_file_round_trips(tmp_path) -> None:
+    x, y = _samples(np.random.default_rng(0), 400)
+    test_x, test_y = _samples(np.random.default_rng(1), 200)
+    clf = train_pose_classifier(x, y, 'hand_shape', hidden=16, seed=3, source='test')
+    again = train_pose_classifier(x, y, 'hand_shape', hidden=16, seed=3)
+    np.testing.assert_allclose(clf.log_proba(test_x), again.log_proba(test_x))
+    predicted = np.asarray(clf.classes)[np.argmax(clf.log_proba(test_x), axis=1)]
+    assert np.mean(predicted == test_y) > 0.95
+    np.testing.assert_allclose(np.exp(clf.log_proba(test_x)).sum(axis=1), 1.0)
+    path = save_pose_classifier(tmp_path / 'c.npz', clf)
+    loaded = load_pose_classifier(path, 'hand_shape')
+    assert loaded.classes == clf.classes and loaded.source == 'test'
+    np.testing.assert_allclose(loaded.log_proba(test_x), clf.log_proba(test_x))
+    q = hand_pose(GESTURE_SHAPES['fist'])
+    assert loaded.classes[int(np.argmax(loaded.pose_log_proba(MODEL, q)))] == 'fist'
+    with pytest.raises(ClassifierError, match='expected'):
+        load_pose_classifier(path, 'hand_shape_direction')
+
+
+def test_bad_files(tmp_path) -> None:
+    with pytest.raises(ClassifierError, match='not found'):
+        load_pose_classifier(tmp_path / 'missing.npz')
+    x, y = _samples(np.random.default_rng(0), 120)
+    clf = train_pose_classifier(x, y, 'hand_shape', hidden=4, seed=0)
+    path = save_pose_classifier(tmp_path / 'c.npz', clf)
+    data = dict(np.load(path))
+    np.savez(tmp_path / 'old.npz', **{**data, 'version': np.array(0)})
+    with pytest.raises(ClassifierError, match='version'):
+        load_pose_classifier(tmp_path / 'old.npz')
+    np.savez(tmp_path / 'cut.npz', **{**data, 'classes': np.array(['a', 'b'])})
+    with pytest.raises(ClassifierError, match='inconsistent'):
+        load_pose_classifier(tmp_path / 'cut.npz')
+    (tmp_path / 'text.npz').write_text('not a zip')
+    with pytest.raises(ClassifierError):
+        load_pose_classifier(tmp_path / 'text.npz')
