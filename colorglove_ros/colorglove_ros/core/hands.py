@@ -7,7 +7,9 @@ is segmented on its own by the existing segmenter with the other regions painted
 and mirrored (``core.hand.handedness``). Which region is which hand is decided from the
 evidence (:func:`assign_hands`): the nearest database image of the mirrored against the
 unmirrored query (a right glove matches unmirrored, a left one mirrored), and continuity (each
-hand's previous crop centre); with two regions they are a left and a right hand. Each hand
+hand's previous crop centre); with two regions they are a left and a right hand. While both
+hands are tracked, a region that plainly continues one hand is looked up as that hand only,
+with both lookups again every few frames (``HandsSettings.recheck_frames``). Each hand
 has its own tracker (a left hand tracked as the mirrored right hand, its pose mirrored back),
 so losing one hand never resets the other. A frame in which a region's hand cannot be told
 with enough evidence gives that hand no pose (``NoHand``). No rclpy import.
@@ -53,7 +55,12 @@ class HandsSettings:
     evidence_scale_px`` (nearest database images of the mirrored and unmirrored query, tiny
     px; positive: a right hand); continuity costs ``(distance / (continuity_scale * crop half
     size))^2`` from the hand's previous crop centre; an assignment whose score beats the other
-    by less than ``min_margin`` is not decided (no pose for that frame)."""
+    by less than ``min_margin`` is not decided (no pose for that frame). While both hands are
+    tracked, a region whose crop centre lies within ``continuity_scale`` crop half sizes of one
+    hand's previous centre and at most ``settled_ratio`` times as far from it as from the other
+    hand's is looked up as that hand only (continuity is its evidence), except on every
+    ``recheck_frames``-th frame, when every region is looked up both ways again (0: always
+    both ways)."""
 
     coarse_factor: int = 4
     join_px: int = 2
@@ -63,6 +70,8 @@ class HandsSettings:
     continuity_scale: float = 1.0
     min_margin: float = 1.0
     max_gap_frames: int = 15
+    settled_ratio: float = 0.5
+    recheck_frames: int = 5
 
 
 @dataclass(frozen=True)
@@ -112,7 +121,9 @@ class HandCandidate:
 @dataclass(frozen=True)
 class HandOutcome:
     """One hand's result in a frame: the tracked pose (in that hand's terms) or why not,
-    the region it was given (None: none) and the handedness evidence of that region."""
+    the region it was given (None: none) and the handedness evidence of that region (nearest
+    database image of the mirrored minus that of the unmirrored query, tiny px; NaN when the
+    region was looked up as one hand only, its hand then following from continuity)."""
 
     hand: str
     outcome: Tracked | NoHand
@@ -178,6 +189,8 @@ def assign_hands(candidates: Sequence[HandCandidate],
     evidence_scale_px``) minus the continuity cost from the hand's previous crop centre
     (``previous[hand]``, None when it was not tracked)."""
     def evidence(c: HandCandidate) -> float:
+        if len(c.lookups) < len(HANDS):      # looked up as one hand only: no lookup evidence
+            return 0.0
         e = (c.distance('left') - c.distance('right')) / settings.evidence_scale_px
         return float(np.clip(e, -20.0, 20.0)) if math.isfinite(e) else (
             20.0 if c.distance('right') < math.inf else
@@ -225,12 +238,42 @@ class TwoHandPipeline:
         self.finger_evidence = finger_evidence
         self.previous: dict[str, np.ndarray | None] = {hand: None for hand in HANDS}
         self._missing = {hand: 0 for hand in HANDS}
+        self._settled_frames = 0
 
     def reset(self) -> None:
         """Forget both hands."""
         for tracker in self.trackers.values():
             tracker.reset()
         self.previous = {hand: None for hand in HANDS}
+        self._settled_frames = 0
+
+    def _settled_hand(self, center: np.ndarray, half_size: float) -> str | None:
+        """The hand a region at ``center`` continues without doubt (both hands tracked in the
+        previous frame, not a recheck frame; :class:`HandsSettings`), else None."""
+        every = self.settings.recheck_frames
+        if every <= 0 or self._settled_frames == 0 or self._settled_frames % every == 0:
+            return None
+        d = {h: float(np.linalg.norm(center - p)) for h, p in self.previous.items()
+             if p is not None}
+        if len(d) < len(HANDS):
+            return None
+        own, other = sorted(d, key=d.get)
+        if d[own] <= self.settings.continuity_scale * max(half_size, 1.0) \
+                and d[own] <= self.settings.settled_ratio * d[other]:
+            return own
+        return None
+
+    def _look_up(self, candidate: HandCandidate, hand: str) -> LookupResult | NoHand:
+        """``candidate``'s query looked up as ``hand`` (a left hand's mirrored), kept."""
+        if hand not in candidate.lookups:
+            obs, tiny = candidate.observation, candidate.tiny
+            if hand != 'right':
+                cx = self.camera.cx
+                obs, tiny = mirror_camera_observation(obs, cx), mirror_tiny_crop(tiny, cx)
+            candidate.lookups[hand] = look_up(self.lookup, tiny, self.camera,
+                                              obs.blobs if self.finger_evidence else None,
+                                              self.limits)
+        return candidate.lookups[hand]
 
     def candidates(self, image_rgb: np.ndarray) -> list[HandCandidate]:
         """Every glove region's observation and its lookups as a right and as a left hand."""
@@ -245,14 +288,9 @@ class TwoHandPipeline:
             seen, tiny = observe_image(self.segmenters[k], image, True)
             candidate = HandCandidate(region, seen, tiny)
             if tiny is not None and seen.hand_found:
-                cx = self.camera.cx
-                queries = {'right': (tiny, seen),
-                           'left': (mirror_tiny_crop(tiny, cx),
-                                    mirror_camera_observation(seen, cx))}
-                for hand, (query, obs) in queries.items():
-                    candidate.lookups[hand] = look_up(
-                        self.lookup, query, self.camera,
-                        obs.blobs if self.finger_evidence else None, self.limits)
+                settled = self._settled_hand(candidate.center, candidate.half_size)
+                for hand in HANDS if settled is None else (settled,):
+                    self._look_up(candidate, hand)
                 out.append(candidate)
         return out
 
@@ -276,18 +314,21 @@ class TwoHandPipeline:
                 out[hand] = HandOutcome(hand, NoHand(reason))
                 continue
             c = candidates[i]
-            found = c.lookups[hand]
+            found = self._look_up(c, hand)
             obs = c.observation if hand == 'right' else mirror_camera_observation(
                 c.observation, self.camera.cx)
             prior = None if isinstance(found, NoHand) else found
             outcome = track(tracker, prior, [obs], stamp, self.limits,
                             upstream_reason=found.reason if isinstance(found, NoHand) else '')
-            evidence = c.distance('left') - c.distance('right')
+            evidence = c.distance('left') - c.distance('right') \
+                if len(c.lookups) == len(HANDS) else math.nan
             q = from_right_frame(outcome.result.q, hand) if isinstance(outcome, Tracked) \
                 else None
             self.previous[hand] = c.center
             self._missing[hand] = 0
             out[hand] = HandOutcome(hand, outcome, c.region, evidence, q)
+        both = all(isinstance(o.outcome, Tracked) for o in out.values())
+        self._settled_frames = self._settled_frames + 1 if both else 0
         return out
 
     def _forget(self, hand: str) -> None:

@@ -68,3 +68,13 @@ def test_two_rendered_gloves_are_two_regions():
         inside = [np.mean((xs >= r.box[0]) & (xs < r.box[2]) & (ys >= r.box[1])
                           & (ys < r.box[3])) for r in regions]
         assert max(inside) == pytest.approx(1.0, abs=0.05)
+
+
+def test_a_region_looked_up_as_one_hand_only_is_decided_by_continuity():
+    # each region looked up only as the hand continuity gave it last: no lookup evidence, so
+    # the nearer previous centre decides, however small the one distance is
+    a, b = _candidate(1.0, 3.0, 100.0), _candidate(3.0, 1.0, 300.0)
+    del a.lookups['left'], b.lookups['right']
+    assignment, margin = assign_hands([a, b], {'right': np.array([300.0, 240.0]),
+                                               'left': np.array([100.0, 240.0])})
+    assert assignment == {'right': 1, 'left': 0} and margin > 1.0

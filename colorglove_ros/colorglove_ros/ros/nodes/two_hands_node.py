@@ -116,8 +116,9 @@ class TwoHandsNode(Node):
             if self.tf_pub is not None:
                 self.tf_pub.publish(wrist_pose_to_tf_msg(wrist,
                                                          child_frame_id=self.frames[hand]))
-            self.status[hand].publish(String(
-                data=f'tracking: handedness evidence {outcome.evidence:+.2f}'))
+            how = (f'handedness evidence {outcome.evidence:+.2f}' if np.isfinite(outcome.evidence)
+                   else 'handedness from continuity')
+            self.status[hand].publish(String(data=f'tracking: {how}'))
         else:
             self.status[hand].publish(String(data=f'no hand: {outcome.outcome.reason}'))
 
