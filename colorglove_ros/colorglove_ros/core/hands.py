@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import cv2
@@ -32,16 +32,17 @@ from colorglove_ros.core.hand.handedness import (
 )
 from colorglove_ros.core.lookup.types import LookupResult
 from colorglove_ros.core.pipeline import NODE_LIMITS, NoHand, StageLimits, Tracked, look_up, track
-from colorglove_ros.core.segmentation.crop import TinyCrop
+from colorglove_ros.core.segmentation.crop import CropTransform, TinyCrop
 from colorglove_ros.core.segmentation.detection import (
     drop_oversized_components,
     glove_region_mask,
 )
 from colorglove_ros.core.segmentation.segmenter import keep_multicolor_components
-from colorglove_ros.core.tracking.types import CameraObservation
+from colorglove_ros.core.tracking.types import Blobs, CameraObservation
 
 __all__ = ['MAX_HANDS', 'HandsSettings', 'GloveRegion', 'HandCandidate', 'HandOutcome',
-           'find_glove_regions', 'mask_regions', 'assign_hands', 'TwoHandPipeline']
+           'find_glove_regions', 'mask_regions', 'region_window', 'shift_observation',
+           'assign_hands', 'TwoHandPipeline']
 
 MAX_HANDS = 2
 
@@ -50,16 +51,17 @@ MAX_HANDS = 2
 class HandsSettings:
     """Settings of the two-hand layer. Regions: coarse ``coarse_factor`` downsampling, glove
     pixels joined within ``join_px`` coarse pixels, at least ``min_region_pixels`` coarse glove
-    pixels; a region is painted out of the other's image with ``mask_margin`` times its box
-    size around it. Handedness: a region's evidence is ``(d_left - d_right) /
-    evidence_scale_px`` (nearest database images of the mirrored and unmirrored query, tiny
-    px; positive: a right hand); continuity costs ``(distance / (continuity_scale * crop half
-    size))^2`` from the hand's previous crop centre; an assignment whose score beats the other
-    by less than ``min_margin`` is not decided (no pose for that frame). While both hands are
-    tracked, a region whose crop centre lies within ``continuity_scale`` crop half sizes of one
-    hand's previous centre and at most ``settled_ratio`` times as far from it as from the other
-    hand's is looked up as that hand only (continuity is its evidence), except on every
-    ``recheck_frames``-th frame, when every region is looked up both ways again (0: always
+    pixels; a region is painted out of the other's image with ``mask_margin`` times its box size
+    around it, and each region is segmented in its window: its box grown on every side by
+    ``window_margin`` times the box's larger side. Handedness: a region's evidence is ``(d_left
+    - d_right) / evidence_scale_px`` (nearest database images of the mirrored and unmirrored
+    query, tiny px; positive: a right hand); continuity costs ``(distance / (continuity_scale *
+    crop half size))^2`` from the hand's previous crop centre; an assignment whose score beats
+    the other by less than ``min_margin`` is not decided (no pose for that frame). While both
+    hands are tracked, a region whose crop centre lies within ``continuity_scale`` crop half
+    sizes of one hand's previous centre and at most ``settled_ratio`` times as far from it as
+    from the other hand's is looked up as that hand only (continuity is its evidence), except on
+    every ``recheck_frames``-th frame, when every region is looked up both ways again (0: always
     both ways)."""
 
     coarse_factor: int = 4
@@ -70,6 +72,7 @@ class HandsSettings:
     continuity_scale: float = 1.0
     min_margin: float = 1.0
     max_gap_frames: int = 15
+    window_margin: float = 0.5
     settled_ratio: float = 0.5
     recheck_frames: int = 5
 
@@ -170,13 +173,44 @@ def mask_regions(image_rgb: np.ndarray, regions: Sequence[GloveRegion],
                  margin: float = 0.1) -> np.ndarray:
     """A copy of the image with every region's box (grown by ``margin`` of its size) painted
     a neutral grey, which no glove colour classifies as."""
-    out = np.array(image_rgb, copy=True)
+    out = np.array(image_rgb, copy=True)   # contiguous, whatever the input's strides
     h, w = out.shape[:2]
     for r in regions:
         x0, y0, x1, y1 = r.box
         mx, my = int(margin * (x1 - x0)), int(margin * (y1 - y0))
-        out[max(y0 - my, 0):min(y1 + my, h), max(x0 - mx, 0):min(x1 + mx, w)] = 128
+        out[max(y0 - my, 0):max(min(y1 + my, h), 0), max(x0 - mx, 0):max(min(x1 + mx, w), 0)] \
+            = 128
     return out
+
+
+def region_window(region: GloveRegion, shape: tuple[int, ...], margin: float
+                  ) -> tuple[int, int, int, int]:
+    """The part of an image of ``shape`` a region is segmented in: its box grown on every
+    side by ``margin`` times the box's larger side, clipped to the image (x0, y0, x1, y1, end
+    exclusive)."""
+    x0, y0, x1, y1 = region.box
+    grow = int(math.ceil(margin * max(x1 - x0, y1 - y0)))
+    h, w = shape[:2]
+    return max(x0 - grow, 0), max(y0 - grow, 0), min(x1 + grow, w), min(y1 + grow, h)
+
+
+def shift_observation(observation: CameraObservation, tiny: TinyCrop | None, dx: float,
+                      dy: float) -> tuple[CameraObservation, TinyCrop | None]:
+    """An observation (and lookup query) made on a window whose top-left pixel is image pixel
+    ``(dx, dy)``, in the whole image's pixels: blob centroids and crops moved."""
+    if dx == 0 and dy == 0:
+        return observation, tiny
+
+    def moved(crop: CropTransform | None) -> CropTransform | None:
+        return None if crop is None else CropTransform(
+            scale=crop.scale, offset_x=crop.offset_x + dx, offset_y=crop.offset_y + dy)
+
+    blobs = observation.blobs
+    if len(blobs):
+        blobs = Blobs(blobs.color, np.asarray(blobs.centroid_px, float) + [dx, dy],
+                      blobs.pixel_count)
+    shifted = replace(observation, blobs=blobs, crop=moved(observation.crop))
+    return shifted, None if tiny is None else TinyCrop(tiny.labels, moved(tiny.transform))
 
 
 def assign_hands(candidates: Sequence[HandCandidate],
@@ -282,10 +316,12 @@ class TwoHandPipeline:
         regions = find_glove_regions(self.segmenter, image_rgb, self.settings)
         out = []
         for k, region in enumerate(regions):
-            others = [r for j, r in enumerate(regions) if j != k]
-            image = mask_regions(image_rgb, others, self.settings.mask_margin) if others \
-                else image_rgb
-            seen, tiny = observe_image(self.segmenters[k], image, True)
+            x0, y0, x1, y1 = region_window(region, image_rgb.shape, self.settings.window_margin)
+            others = [GloveRegion((r.box[0] - x0, r.box[1] - y0, r.box[2] - x0, r.box[3] - y0),
+                                  r.pixels) for j, r in enumerate(regions) if j != k]
+            window = mask_regions(image_rgb[y0:y1, x0:x1], others, self.settings.mask_margin)
+            seen, tiny = shift_observation(*observe_image(self.segmenters[k], window, True),
+                                           x0, y0)
             candidate = HandCandidate(region, seen, tiny)
             if tiny is not None and seen.hand_found:
                 settled = self._settled_hand(candidate.center, candidate.half_size)

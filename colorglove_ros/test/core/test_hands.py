@@ -9,7 +9,16 @@ import pytest
 from repo_paths import CONFIG_DIR
 
 from colorglove_ros.core.hand.handedness import mirror_pose
-from colorglove_ros.core.hands import GloveRegion, HandCandidate, assign_hands, find_glove_regions
+from colorglove_ros.core.hands import (
+    GloveRegion,
+    HandCandidate,
+    assign_hands,
+    find_glove_regions,
+    mask_regions,
+    region_window,
+    shift_observation,
+)
+from colorglove_ros.core.pipeline import observe_image
 from colorglove_ros.core.segmentation.crop import CropTransform
 from colorglove_ros.core.synthetic.conditions import sample_conditions
 from colorglove_ros.core.synthetic.frames import Synthesizer, default_camera, sample_pose
@@ -68,6 +77,25 @@ def test_two_rendered_gloves_are_two_regions():
         inside = [np.mean((xs >= r.box[0]) & (xs < r.box[2]) & (ys >= r.box[1])
                           & (ys < r.box[3])) for r in regions]
         assert max(inside) == pytest.approx(1.0, abs=0.05)
+    # a region segmented in its window, moved back, is what the image with the other hand
+    # painted out gives
+    for k, region in enumerate(regions):
+        other = regions[1 - k]
+        whole, whole_tiny = observe_image(segmenter.fresh(background_frames=0),
+                                          mask_regions(frame.image_rgb, [other]), True)
+        x0, y0, x1, y1 = region_window(region, frame.image_rgb.shape, 0.5)
+        assert (x1 - x0) * (y1 - y0) < 0.6 * frame.image_rgb.shape[0] * frame.image_rgb.shape[1]
+        moved = GloveRegion((other.box[0] - x0, other.box[1] - y0, other.box[2] - x0,
+                             other.box[3] - y0), other.pixels)
+        part, part_tiny = shift_observation(*observe_image(
+            segmenter.fresh(background_frames=0),
+            mask_regions(frame.image_rgb[y0:y1, x0:x1], [moved]), True), x0, y0)
+        assert whole.hand_found and part.hand_found
+        np.testing.assert_allclose(part.crop.center_xy, whole.crop.center_xy, atol=2.0)
+        assert part.crop.scale == pytest.approx(whole.crop.scale, rel=0.05)
+        np.testing.assert_allclose(np.sort(part.blobs.centroid_px, axis=0),
+                                   np.sort(whole.blobs.centroid_px, axis=0), atol=2.0)
+        assert np.mean(part_tiny.labels == whole_tiny.labels) > 0.95
 
 
 def test_a_region_looked_up_as_one_hand_only_is_decided_by_continuity():
