@@ -17,6 +17,7 @@ seeds >= 1000; the reported figures use O = 0.
 """
 from __future__ import annotations
 
+import re
 import time
 from collections import Counter
 from typing import Any
@@ -134,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
                 st['alone_tracked'] += isinstance(one, Tracked)
                 if not isinstance(out.outcome, Tracked):
                     if visible:
-                        st['why'][out.outcome.reason.split(' (')[0][:60]] += 1
+                        st['why'][re.sub(r'\d+(\.\d+)?', 'N', out.outcome.reason)[:70]] += 1
                     continue
                 x0, y0, x1, y1 = out.region.box
                 inside = which[y0:y1, x0:x1]
