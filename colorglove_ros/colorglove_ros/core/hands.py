@@ -51,18 +51,18 @@ MAX_HANDS = 2
 class HandsSettings:
     """Settings of the two-hand layer. Regions: coarse ``coarse_factor`` downsampling, glove
     pixels joined within ``join_px`` coarse pixels, at least ``min_region_pixels`` coarse glove
-    pixels; a region is painted out of the other's image with ``mask_margin`` times its box size
-    around it, and each region is segmented in its window: its box grown on every side by
-    ``window_margin`` times the box's larger side. Handedness: a region's evidence is ``(d_left
-    - d_right) / evidence_scale_px`` (nearest database images of the mirrored and unmirrored
-    query, tiny px; positive: a right hand); continuity costs ``(distance / (continuity_scale *
-    crop half size))^2`` from the hand's previous crop centre; an assignment whose score beats
-    the other by less than ``min_margin`` is not decided (no pose for that frame). While both
-    hands are tracked, a region whose crop centre lies within ``continuity_scale`` crop half
-    sizes of one hand's previous centre and at most ``settled_ratio`` times as far from it as
-    from the other hand's is looked up as that hand only (continuity is its evidence), except on
-    every ``recheck_frames``-th frame, when every region is looked up both ways again (0: always
-    both ways)."""
+    pixels; a region is painted out of the other's image (its joined glove cells; without cells,
+    its box grown by ``mask_margin`` times its size), and each region is segmented in its
+    window: its box grown on every side by ``window_margin`` times the box's larger side.
+    Handedness: a region's evidence is ``(d_left - d_right) / evidence_scale_px`` (nearest
+    database images of the mirrored and unmirrored query, tiny px; positive: a right hand);
+    continuity costs ``(distance / (continuity_scale * crop half size))^2`` from the hand's
+    previous crop centre; an assignment whose score beats the other by less than ``min_margin``
+    is not decided (no pose for that frame). While both hands are tracked, a region whose crop
+    centre lies within ``continuity_scale`` crop half sizes of one hand's previous centre and at
+    most ``settled_ratio`` times as far from it as from the other hand's is looked up as that
+    hand only (continuity is its evidence), except on every ``recheck_frames``-th frame, when
+    every region is looked up both ways again (0: always both ways)."""
 
     coarse_factor: int = 4
     join_px: int = 2
@@ -79,11 +79,14 @@ class HandsSettings:
 
 @dataclass(frozen=True)
 class GloveRegion:
-    """One glove region: its box (x0, y0, x1, y1 in full-image pixels, end exclusive) and
-    coarse glove pixel count."""
+    """One glove region: its box (x0, y0, x1, y1 in full-image pixels, end exclusive), coarse
+    glove pixel count and, when known, its cells: the coarse image (``cell_px`` full pixels a
+    cell) true where the region's glove pixels, joined, lie."""
 
     box: tuple[int, int, int, int]
     pixels: int
+    cells: np.ndarray | None = field(default=None, compare=False, repr=False)
+    cell_px: int = 1
 
 
 @dataclass
@@ -164,22 +167,32 @@ def find_glove_regions(segmenter: Any, image_rgb: np.ndarray,
             continue
         x, y, bw, bh = stats[k, :4]
         regions.append(GloveRegion((int(x * f), int(y * f), int(min((x + bw) * f, w)),
-                                    int(min((y + bh) * f, h))), int(counts[k])))
+                                    int(min((y + bh) * f, h))), int(counts[k]), comp == k, f))
     regions.sort(key=lambda r: -r.pixels)
     return regions[:max_regions]
 
 
 def mask_regions(image_rgb: np.ndarray, regions: Sequence[GloveRegion],
-                 margin: float = 0.1) -> np.ndarray:
-    """A copy of the image with every region's box (grown by ``margin`` of its size) painted
-    a neutral grey, which no glove colour classifies as."""
+                 margin: float = 0.1, origin: tuple[int, int] = (0, 0)) -> np.ndarray:
+    """A copy of the image (whose top-left pixel is image pixel ``origin``: a window of it)
+    with every region painted a neutral grey, which no glove colour classifies as: its cells
+    where it has them (so a hand next to it keeps its own pixels), else its box grown by
+    ``margin`` of its size."""
     out = np.array(image_rgb, copy=True)   # contiguous, whatever the input's strides
     h, w = out.shape[:2]
+    ox, oy = origin
     for r in regions:
+        if r.cells is not None:
+            ys, xs = (oy + np.arange(h)) // r.cell_px, (ox + np.arange(w)) // r.cell_px
+            inside = np.zeros((h, w), bool)
+            ry, rx = ys < r.cells.shape[0], xs < r.cells.shape[1]
+            inside[np.ix_(ry, rx)] = r.cells[np.ix_(ys[ry], xs[rx])]
+            out[inside] = 128
+            continue
         x0, y0, x1, y1 = r.box
         mx, my = int(margin * (x1 - x0)), int(margin * (y1 - y0))
-        out[max(y0 - my, 0):max(min(y1 + my, h), 0), max(x0 - mx, 0):max(min(x1 + mx, w), 0)] \
-            = 128
+        x0, x1, y0, y1 = x0 - mx - ox, x1 + mx - ox, y0 - my - oy, y1 + my - oy
+        out[max(y0, 0):max(min(y1, h), 0), max(x0, 0):max(min(x1, w), 0)] = 128
     return out
 
 
@@ -317,9 +330,9 @@ class TwoHandPipeline:
         out = []
         for k, region in enumerate(regions):
             x0, y0, x1, y1 = region_window(region, image_rgb.shape, self.settings.window_margin)
-            others = [GloveRegion((r.box[0] - x0, r.box[1] - y0, r.box[2] - x0, r.box[3] - y0),
-                                  r.pixels) for j, r in enumerate(regions) if j != k]
-            window = mask_regions(image_rgb[y0:y1, x0:x1], others, self.settings.mask_margin)
+            others = [r for j, r in enumerate(regions) if j != k]
+            window = mask_regions(image_rgb[y0:y1, x0:x1], others, self.settings.mask_margin,
+                                  (x0, y0))
             seen, tiny = shift_observation(*observe_image(self.segmenters[k], window, True),
                                            x0, y0)
             candidate = HandCandidate(region, seen, tiny)
