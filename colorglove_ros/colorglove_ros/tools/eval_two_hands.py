@@ -64,7 +64,8 @@ def both_visible(kp2: dict[str, np.ndarray], width: int, height: int,
 
 def _new_stats() -> dict[str, Any]:
     return {'both': 0, 'tracked_both': 0, 'tracked': 0, 'correct': 0, 'swaps': 0,
-            'est': [], 'alone': [], 'true': [], 'alone_tracked': 0, 'why': Counter()}
+            'est': [], 'alone': [], 'true': [], 'alone_tracked': 0, 'alone_both': 0,
+            'why': Counter()}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -133,6 +134,7 @@ def main(argv: list[str] | None = None) -> int:
                 out = outcomes[h]
                 st['both'] += visible
                 st['alone_tracked'] += isinstance(one, Tracked)
+                st['alone_both'] += visible and isinstance(one, Tracked)
                 if not isinstance(out.outcome, Tracked):
                     if visible:
                         st['why'][re.sub(r'\d+(\.\d+)?', 'N', out.outcome.reason)[:70]] += 1
@@ -168,6 +170,7 @@ def main(argv: list[str] | None = None) -> int:
         total = args.frames * len(seeds)
         rows.append({'hand': h, 'frames_both_visible': st['both'],
                      'tracked_when_both_visible': st['tracked_both'] / max(st['both'], 1),
+                     'alone_tracked_when_both_visible': st['alone_both'] / max(st['both'], 1),
                      'tracked_share': st['tracked'] / total,
                      'alone_tracked_share': st['alone_tracked'] / total,
                      'handedness_correct': st['correct'] / max(st['tracked'], 1),
