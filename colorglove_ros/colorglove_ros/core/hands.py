@@ -7,7 +7,9 @@ is segmented on its own by the existing segmenter with the other regions painted
 and mirrored (``core.hand.handedness``). Which region is which hand is decided from the
 evidence (:func:`assign_hands`): the nearest database image of the mirrored against the
 unmirrored query (a right glove matches unmirrored, a left one mirrored), and continuity (each
-hand's previous crop centre); with two regions they are a left and a right hand. Each hand
+hand's previous crop centre); with two regions they are a left and a right hand. While both
+hands are tracked, a region that plainly continues one hand is looked up as that hand only,
+with both lookups again every few frames (``HandsSettings.recheck_frames``). Each hand
 has its own tracker (a left hand tracked as the mirrored right hand, its pose mirrored back),
 so losing one hand never resets the other. A frame in which a region's hand cannot be told
 with enough evidence gives that hand no pose (``NoHand``). No rclpy import.
@@ -16,7 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import cv2
@@ -30,16 +32,17 @@ from colorglove_ros.core.hand.handedness import (
 )
 from colorglove_ros.core.lookup.types import LookupResult
 from colorglove_ros.core.pipeline import NODE_LIMITS, NoHand, StageLimits, Tracked, look_up, track
-from colorglove_ros.core.segmentation.crop import TinyCrop
+from colorglove_ros.core.segmentation.crop import CropTransform, TinyCrop
 from colorglove_ros.core.segmentation.detection import (
     drop_oversized_components,
     glove_region_mask,
 )
 from colorglove_ros.core.segmentation.segmenter import keep_multicolor_components
-from colorglove_ros.core.tracking.types import CameraObservation
+from colorglove_ros.core.tracking.types import Blobs, CameraObservation
 
 __all__ = ['MAX_HANDS', 'HandsSettings', 'GloveRegion', 'HandCandidate', 'HandOutcome',
-           'find_glove_regions', 'mask_regions', 'assign_hands', 'TwoHandPipeline']
+           'find_glove_regions', 'mask_regions', 'region_window', 'shift_observation',
+           'assign_hands', 'TwoHandPipeline']
 
 MAX_HANDS = 2
 
@@ -48,12 +51,18 @@ MAX_HANDS = 2
 class HandsSettings:
     """Settings of the two-hand layer. Regions: coarse ``coarse_factor`` downsampling, glove
     pixels joined within ``join_px`` coarse pixels, at least ``min_region_pixels`` coarse glove
-    pixels; a region is painted out of the other's image with ``mask_margin`` times its box
-    size around it. Handedness: a region's evidence is ``(d_left - d_right) /
-    evidence_scale_px`` (nearest database images of the mirrored and unmirrored query, tiny
-    px; positive: a right hand); continuity costs ``(distance / (continuity_scale * crop half
-    size))^2`` from the hand's previous crop centre; an assignment whose score beats the other
-    by less than ``min_margin`` is not decided (no pose for that frame)."""
+    pixels; a region is painted out of the other's image (its joined glove cells; without cells,
+    its box grown by ``mask_margin`` times its size), and each region is segmented in its
+    window: its box grown on every side by ``window_margin`` times the box's larger side.
+    Handedness: a region's evidence is ``(d_left - d_right) / evidence_scale_px`` (nearest
+    database images of the mirrored and unmirrored query, tiny px; positive: a right hand);
+    continuity costs ``(distance / (continuity_scale * crop half size))^2`` from the hand's
+    previous crop centre; an assignment whose score beats the other by less than ``min_margin``
+    is not decided (no pose for that frame). While both hands are tracked, a region whose crop
+    centre lies within ``continuity_scale`` crop half sizes of one hand's previous centre and at
+    most ``settled_ratio`` times as far from it as from the other hand's is looked up as that
+    hand only (continuity is its evidence), except on every ``recheck_frames``-th frame, when
+    every region is looked up both ways again (0: always both ways)."""
 
     coarse_factor: int = 4
     join_px: int = 2
@@ -63,15 +72,21 @@ class HandsSettings:
     continuity_scale: float = 1.0
     min_margin: float = 1.0
     max_gap_frames: int = 15
+    window_margin: float = 0.5
+    settled_ratio: float = 0.5
+    recheck_frames: int = 5
 
 
 @dataclass(frozen=True)
 class GloveRegion:
-    """One glove region: its box (x0, y0, x1, y1 in full-image pixels, end exclusive) and
-    coarse glove pixel count."""
+    """One glove region: its box (x0, y0, x1, y1 in full-image pixels, end exclusive), coarse
+    glove pixel count and, when known, its cells: the coarse image (``cell_px`` full pixels a
+    cell) true where the region's glove pixels, joined, lie."""
 
     box: tuple[int, int, int, int]
     pixels: int
+    cells: np.ndarray | None = field(default=None, compare=False, repr=False)
+    cell_px: int = 1
 
 
 @dataclass
@@ -112,7 +127,9 @@ class HandCandidate:
 @dataclass(frozen=True)
 class HandOutcome:
     """One hand's result in a frame: the tracked pose (in that hand's terms) or why not,
-    the region it was given (None: none) and the handedness evidence of that region."""
+    the region it was given (None: none) and the handedness evidence of that region (nearest
+    database image of the mirrored minus that of the unmirrored query, tiny px; NaN when the
+    region was looked up as one hand only, its hand then following from continuity)."""
 
     hand: str
     outcome: Tracked | NoHand
@@ -150,22 +167,63 @@ def find_glove_regions(segmenter: Any, image_rgb: np.ndarray,
             continue
         x, y, bw, bh = stats[k, :4]
         regions.append(GloveRegion((int(x * f), int(y * f), int(min((x + bw) * f, w)),
-                                    int(min((y + bh) * f, h))), int(counts[k])))
+                                    int(min((y + bh) * f, h))), int(counts[k]), comp == k, f))
     regions.sort(key=lambda r: -r.pixels)
     return regions[:max_regions]
 
 
 def mask_regions(image_rgb: np.ndarray, regions: Sequence[GloveRegion],
-                 margin: float = 0.1) -> np.ndarray:
-    """A copy of the image with every region's box (grown by ``margin`` of its size) painted
-    a neutral grey, which no glove colour classifies as."""
-    out = np.array(image_rgb, copy=True)
+                 margin: float = 0.1, origin: tuple[int, int] = (0, 0)) -> np.ndarray:
+    """A copy of the image (whose top-left pixel is image pixel ``origin``: a window of it)
+    with every region painted a neutral grey, which no glove colour classifies as: its cells
+    where it has them (so a hand next to it keeps its own pixels), else its box grown by
+    ``margin`` of its size."""
+    out = np.array(image_rgb, copy=True)   # contiguous, whatever the input's strides
     h, w = out.shape[:2]
+    ox, oy = origin
     for r in regions:
+        if r.cells is not None:
+            ys, xs = (oy + np.arange(h)) // r.cell_px, (ox + np.arange(w)) // r.cell_px
+            inside = np.zeros((h, w), bool)
+            ry, rx = ys < r.cells.shape[0], xs < r.cells.shape[1]
+            inside[np.ix_(ry, rx)] = r.cells[np.ix_(ys[ry], xs[rx])]
+            out[inside] = 128
+            continue
         x0, y0, x1, y1 = r.box
         mx, my = int(margin * (x1 - x0)), int(margin * (y1 - y0))
-        out[max(y0 - my, 0):min(y1 + my, h), max(x0 - mx, 0):min(x1 + mx, w)] = 128
+        x0, x1, y0, y1 = x0 - mx - ox, x1 + mx - ox, y0 - my - oy, y1 + my - oy
+        out[max(y0, 0):max(min(y1, h), 0), max(x0, 0):max(min(x1, w), 0)] = 128
     return out
+
+
+def region_window(region: GloveRegion, shape: tuple[int, ...], margin: float
+                  ) -> tuple[int, int, int, int]:
+    """The part of an image of ``shape`` a region is segmented in: its box grown on every
+    side by ``margin`` times the box's larger side, clipped to the image (x0, y0, x1, y1, end
+    exclusive)."""
+    x0, y0, x1, y1 = region.box
+    grow = int(math.ceil(margin * max(x1 - x0, y1 - y0)))
+    h, w = shape[:2]
+    return max(x0 - grow, 0), max(y0 - grow, 0), min(x1 + grow, w), min(y1 + grow, h)
+
+
+def shift_observation(observation: CameraObservation, tiny: TinyCrop | None, dx: float,
+                      dy: float) -> tuple[CameraObservation, TinyCrop | None]:
+    """An observation (and lookup query) made on a window whose top-left pixel is image pixel
+    ``(dx, dy)``, in the whole image's pixels: blob centroids and crops moved."""
+    if dx == 0 and dy == 0:
+        return observation, tiny
+
+    def moved(crop: CropTransform | None) -> CropTransform | None:
+        return None if crop is None else CropTransform(
+            scale=crop.scale, offset_x=crop.offset_x + dx, offset_y=crop.offset_y + dy)
+
+    blobs = observation.blobs
+    if len(blobs):
+        blobs = Blobs(blobs.color, np.asarray(blobs.centroid_px, float) + [dx, dy],
+                      blobs.pixel_count)
+    shifted = replace(observation, blobs=blobs, crop=moved(observation.crop))
+    return shifted, None if tiny is None else TinyCrop(tiny.labels, moved(tiny.transform))
 
 
 def assign_hands(candidates: Sequence[HandCandidate],
@@ -178,6 +236,8 @@ def assign_hands(candidates: Sequence[HandCandidate],
     evidence_scale_px``) minus the continuity cost from the hand's previous crop centre
     (``previous[hand]``, None when it was not tracked)."""
     def evidence(c: HandCandidate) -> float:
+        if len(c.lookups) < len(HANDS):      # looked up as one hand only: no lookup evidence
+            return 0.0
         e = (c.distance('left') - c.distance('right')) / settings.evidence_scale_px
         return float(np.clip(e, -20.0, 20.0)) if math.isfinite(e) else (
             20.0 if c.distance('right') < math.inf else
@@ -225,12 +285,42 @@ class TwoHandPipeline:
         self.finger_evidence = finger_evidence
         self.previous: dict[str, np.ndarray | None] = {hand: None for hand in HANDS}
         self._missing = {hand: 0 for hand in HANDS}
+        self._settled_frames = 0
 
     def reset(self) -> None:
         """Forget both hands."""
         for tracker in self.trackers.values():
             tracker.reset()
         self.previous = {hand: None for hand in HANDS}
+        self._settled_frames = 0
+
+    def _settled_hand(self, center: np.ndarray, half_size: float) -> str | None:
+        """The hand a region at ``center`` continues without doubt (both hands tracked in the
+        previous frame, not a recheck frame; :class:`HandsSettings`), else None."""
+        every = self.settings.recheck_frames
+        if every <= 0 or self._settled_frames == 0 or self._settled_frames % every == 0:
+            return None
+        d = {h: float(np.linalg.norm(center - p)) for h, p in self.previous.items()
+             if p is not None}
+        if len(d) < len(HANDS):
+            return None
+        own, other = sorted(d, key=d.get)
+        if d[own] <= self.settings.continuity_scale * max(half_size, 1.0) \
+                and d[own] <= self.settings.settled_ratio * d[other]:
+            return own
+        return None
+
+    def _look_up(self, candidate: HandCandidate, hand: str) -> LookupResult | NoHand:
+        """``candidate``'s query looked up as ``hand`` (a left hand's mirrored), kept."""
+        if hand not in candidate.lookups:
+            obs, tiny = candidate.observation, candidate.tiny
+            if hand != 'right':
+                cx = self.camera.cx
+                obs, tiny = mirror_camera_observation(obs, cx), mirror_tiny_crop(tiny, cx)
+            candidate.lookups[hand] = look_up(self.lookup, tiny, self.camera,
+                                              obs.blobs if self.finger_evidence else None,
+                                              self.limits)
+        return candidate.lookups[hand]
 
     def candidates(self, image_rgb: np.ndarray) -> list[HandCandidate]:
         """Every glove region's observation and its lookups as a right and as a left hand."""
@@ -239,20 +329,17 @@ class TwoHandPipeline:
         regions = find_glove_regions(self.segmenter, image_rgb, self.settings)
         out = []
         for k, region in enumerate(regions):
+            x0, y0, x1, y1 = region_window(region, image_rgb.shape, self.settings.window_margin)
             others = [r for j, r in enumerate(regions) if j != k]
-            image = mask_regions(image_rgb, others, self.settings.mask_margin) if others \
-                else image_rgb
-            seen, tiny = observe_image(self.segmenters[k], image, True)
+            window = mask_regions(image_rgb[y0:y1, x0:x1], others, self.settings.mask_margin,
+                                  (x0, y0))
+            seen, tiny = shift_observation(*observe_image(self.segmenters[k], window, True),
+                                           x0, y0)
             candidate = HandCandidate(region, seen, tiny)
             if tiny is not None and seen.hand_found:
-                cx = self.camera.cx
-                queries = {'right': (tiny, seen),
-                           'left': (mirror_tiny_crop(tiny, cx),
-                                    mirror_camera_observation(seen, cx))}
-                for hand, (query, obs) in queries.items():
-                    candidate.lookups[hand] = look_up(
-                        self.lookup, query, self.camera,
-                        obs.blobs if self.finger_evidence else None, self.limits)
+                settled = self._settled_hand(candidate.center, candidate.half_size)
+                for hand in HANDS if settled is None else (settled,):
+                    self._look_up(candidate, hand)
                 out.append(candidate)
         return out
 
@@ -276,18 +363,21 @@ class TwoHandPipeline:
                 out[hand] = HandOutcome(hand, NoHand(reason))
                 continue
             c = candidates[i]
-            found = c.lookups[hand]
+            found = self._look_up(c, hand)
             obs = c.observation if hand == 'right' else mirror_camera_observation(
                 c.observation, self.camera.cx)
             prior = None if isinstance(found, NoHand) else found
             outcome = track(tracker, prior, [obs], stamp, self.limits,
                             upstream_reason=found.reason if isinstance(found, NoHand) else '')
-            evidence = c.distance('left') - c.distance('right')
+            evidence = c.distance('left') - c.distance('right') \
+                if len(c.lookups) == len(HANDS) else math.nan
             q = from_right_frame(outcome.result.q, hand) if isinstance(outcome, Tracked) \
                 else None
             self.previous[hand] = c.center
             self._missing[hand] = 0
             out[hand] = HandOutcome(hand, outcome, c.region, evidence, q)
+        both = all(isinstance(o.outcome, Tracked) for o in out.values())
+        self._settled_frames = self._settled_frames + 1 if both else 0
         return out
 
     def _forget(self, hand: str) -> None:

@@ -9,7 +9,16 @@ import pytest
 from repo_paths import CONFIG_DIR
 
 from colorglove_ros.core.hand.handedness import mirror_pose
-from colorglove_ros.core.hands import GloveRegion, HandCandidate, assign_hands, find_glove_regions
+from colorglove_ros.core.hands import (
+    GloveRegion,
+    HandCandidate,
+    assign_hands,
+    find_glove_regions,
+    mask_regions,
+    region_window,
+    shift_observation,
+)
+from colorglove_ros.core.pipeline import observe_image
 from colorglove_ros.core.segmentation.crop import CropTransform
 from colorglove_ros.core.synthetic.conditions import sample_conditions
 from colorglove_ros.core.synthetic.frames import Synthesizer, default_camera, sample_pose
@@ -68,3 +77,46 @@ def test_two_rendered_gloves_are_two_regions():
         inside = [np.mean((xs >= r.box[0]) & (xs < r.box[2]) & (ys >= r.box[1])
                           & (ys < r.box[3])) for r in regions]
         assert max(inside) == pytest.approx(1.0, abs=0.05)
+    # a region segmented in its window, moved back, is what the image with the other hand
+    # painted out gives
+    for k, region in enumerate(regions):
+        other = regions[1 - k]
+        whole, whole_tiny = observe_image(segmenter.fresh(background_frames=0),
+                                          mask_regions(frame.image_rgb, [other]), True)
+        x0, y0, x1, y1 = region_window(region, frame.image_rgb.shape, 0.5)
+        assert (x1 - x0) * (y1 - y0) < 0.6 * frame.image_rgb.shape[0] * frame.image_rgb.shape[1]
+        part, part_tiny = shift_observation(*observe_image(
+            segmenter.fresh(background_frames=0),
+            mask_regions(frame.image_rgb[y0:y1, x0:x1], [other], origin=(x0, y0)), True),
+            x0, y0)
+        assert whole.hand_found and part.hand_found
+        np.testing.assert_allclose(part.crop.center_xy, whole.crop.center_xy, atol=2.0)
+        assert part.crop.scale == pytest.approx(whole.crop.scale, rel=0.05)
+        np.testing.assert_allclose(np.sort(part.blobs.centroid_px, axis=0),
+                                   np.sort(whole.blobs.centroid_px, axis=0), atol=2.0)
+        assert np.mean(part_tiny.labels == whole_tiny.labels) > 0.95
+
+
+def test_a_region_looked_up_as_one_hand_only_is_decided_by_continuity():
+    # each region looked up only as the hand continuity gave it last: no lookup evidence, so
+    # the nearer previous centre decides, however small the one distance is
+    a, b = _candidate(1.0, 3.0, 100.0), _candidate(3.0, 1.0, 300.0)
+    del a.lookups['left'], b.lookups['right']
+    assignment, margin = assign_hands([a, b], {'right': np.array([300.0, 240.0]),
+                                               'left': np.array([100.0, 240.0])})
+    assert assignment == {'right': 1, 'left': 0} and margin > 1.0
+
+
+@pytest.mark.parametrize('origin', [(0, 0), (6, 3)])
+def test_a_region_with_cells_is_painted_cell_by_cell(origin):
+    cells = np.zeros((6, 8), bool)
+    cells[1:3, 2:4] = True                      # full pixels x 8..15, y 4..11 (4 px a cell)
+    region = GloveRegion((8, 4, 16, 12), 4, cells, 4)
+    image = np.full((24, 32, 3), 7, np.uint8)
+    ox, oy = origin
+    out = mask_regions(image[oy:, ox:], [region], origin=origin)
+    painted = np.zeros((24, 32), bool)
+    painted[4:12, 8:16] = True
+    np.testing.assert_array_equal(out[..., 0] == 128, painted[oy:, ox:])
+    boxed = mask_regions(image, [GloveRegion((8, 4, 16, 12), 4)], margin=0.5)
+    assert np.count_nonzero(boxed[..., 0] == 128) > np.count_nonzero(painted)

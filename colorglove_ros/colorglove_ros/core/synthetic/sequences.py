@@ -29,10 +29,13 @@ from colorglove_ros.core.synthetic.frames import (
 __all__ = [
     'CAPTURE_VOLUME_CENTER', 'CAPTURE_VOLUME_SIZE', 'min_jerk', 'generate_sequence',
     'SyntheticSequenceRenderer', 'BORDERS', 'border_crossing_sequence',
+    'LEFT_SEED_OFFSET', 'two_hand_sequences',
 ]
 
 CAPTURE_VOLUME_CENTER = np.array([0.0, 0.02, 0.55])   # metres, camera frame
 CAPTURE_VOLUME_SIZE = np.array([0.60, 0.50, 0.30])    # x, y, z extent of the desk volume
+LEFT_SEED_OFFSET = 50_000
+"""The left hand of two-hand sequence ``S`` moves as the mirrored sequence ``S + 50000``."""
 
 
 def min_jerk(s: np.ndarray) -> np.ndarray:
@@ -118,6 +121,39 @@ def generate_sequence(seed: int, num_frames: int, fps: float = 30.0, *,
     Q[:, 3:6] = rot
     Q[:, 6:] = fingers
     return Q
+
+
+def two_hand_sequences(seed: int, num_frames: int, fps: float = 30.0, *,
+                       camera: PinholeCamera | None = None, model: HandModel | None = None,
+                       apart: bool = True, squeeze: float = 0.35, offset: float = 0.22
+                       ) -> dict[str, np.ndarray]:
+    """Two hands moving together: {'right': poses, 'left': poses} (each ``(num_frames, 26)``
+    in its own hand's terms). The right hand moves as ``generate_sequence(seed)``, the left as
+    the mirror image (``core.hand.handedness.mirror_pose``) of sequence ``seed +
+    LEFT_SEED_OFFSET``. ``apart``: each hand keeps to its own side, as a user facing the camera
+    holds them (right hand on the image's left): the image point ``(u, v)`` of the hand centre
+    becomes ``(cx + squeeze (u - cx) -+ offset * width, cy + squeeze (v - cy))`` by moving the
+    wrist parallel to the image plane at its depth, so the hands meet only at a sequence's
+    extremes. Without
+    ``apart`` the two move independently over the whole image (crossing and occluding
+    often)."""
+    from colorglove_ros.core.hand.handedness import mirror_pose
+
+    camera = default_camera() if camera is None else camera
+    model = default_hand()[0] if model is None else model
+    out = {}
+    for hand, s in (('right', seed), ('left', seed + LEFT_SEED_OFFSET)):
+        q = generate_sequence(s, num_frames, fps, camera=camera, model=model)
+        if apart:       # the right-hand poses to the image left; the mirror moves a left one
+            centre_local = np.array([0.0, -0.45 * model.hand_length_m, 0.0])
+            c = q[:, 0:3] + np.einsum('nij,j->ni', rotvec_to_matrix(q[:, 3:6]), centre_local)
+            u = camera.fx * c[:, 0] / c[:, 2] + camera.cx
+            v = camera.fy * c[:, 1] / c[:, 2] + camera.cy
+            q[:, 0] += ((squeeze - 1.0) * (u - camera.cx) - offset * camera.width) \
+                * c[:, 2] / camera.fx
+            q[:, 1] += (squeeze - 1.0) * (v - camera.cy) * c[:, 2] / camera.fy
+        out[hand] = np.stack([mirror_pose(p) for p in q]) if hand == 'left' else q
+    return out
 
 
 class SyntheticSequenceRenderer:

@@ -1,0 +1,72 @@
+"""two_hands_node in one process over DDS on loopback: a frame with a left and a right glove in,
+each hand's joint states (prefixed names), wrist pose and status out under hand/<hand>/; a frame
+of the wrong size gives both hands a 'no hand' status and no pose."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseStamped
+from node_fixtures import header, params, running
+from sensor_msgs.msg import Image, JointState
+from std_msgs.msg import String
+
+from colorglove_ros.core.hand.frames import finger_joint_names
+from colorglove_ros.core.hand.handedness import HANDS
+from colorglove_ros.core.synthetic.conditions import sample_conditions
+from colorglove_ros.core.synthetic.frames import Synthesizer, default_camera
+from colorglove_ros.core.synthetic.sequences import two_hand_sequences
+from colorglove_ros.ros.image import array_to_image
+from colorglove_ros.ros.nodes.two_hands_node import TwoHandsNode, hand_topic
+
+pytestmark = [pytest.mark.dds, pytest.mark.usefixtures('isolated_ros_domain')]
+
+
+def _two_hand_frame() -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    camera = default_camera()
+    synth = Synthesizer()
+    try:
+        poses = {h: q[0] for h, q in two_hand_sequences(3, 1, camera=camera,
+                                                         model=synth.model).items()}
+        frame, _ = synth.render_hands([(poses[h], h) for h in HANDS], camera,
+                                      np.random.default_rng(5),
+                                      sample_conditions(np.random.default_rng(5), 'test'))
+    finally:
+        synth.release()
+    return frame.image_rgb, poses
+
+
+def test_two_hands_node_publishes_each_hand_under_its_namespace(node_assets) -> None:
+    rgb, truth = _two_hand_frame()
+    with running(lambda ctx: TwoHandsNode(context=ctx, parameter_overrides=params(
+            color_calibration_file=str(node_assets.color_config),
+            database_path=str(node_assets.database)))) as h:
+        joints = {hand: h.collect(JointState, hand_topic(hand, 'joint_states')) for hand in HANDS}
+        wrists = {hand: h.collect(PoseStamped, hand_topic(hand, 'wrist_pose')) for hand in HANDS}
+        status = {hand: h.collect(String, hand_topic(hand, 'tracking_status')) for hand in HANDS}
+        pub = h.publisher(Image, 'camera/image_raw')
+        pub.publish(array_to_image(rgb, 'rgb8', header(7, 5)))
+        assert h.spin_until(lambda: all(status.values()), 60.0)
+        h.settle(0.3)
+        tracked = [hand for hand in HANDS if status[hand][0].data.startswith('tracking')]
+        for hand in HANDS:       # a pose, or no pose and the reason: never both, never neither
+            assert len(status[hand]) == 1
+            assert len(joints[hand]) == len(wrists[hand]) == (hand in tracked), \
+                status[hand][0].data
+        for hand in tracked:
+            msg, wrist = joints[hand][0], wrists[hand][0]
+            assert list(msg.name) == finger_joint_names(f'{hand}_')
+            assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (7, 5)
+            # each pose is its own hand's: the wrist nearer its own hand's than the other's
+            p = np.array([wrist.pose.position.x, wrist.pose.position.y, wrist.pose.position.z])
+            other = 'left' if hand == 'right' else 'right'
+            assert np.linalg.norm(p - truth[hand][:3]) < np.linalg.norm(p - truth[other][:3])
+        for hand in HANDS:
+            if hand not in tracked:
+                assert status[hand][0].data.startswith('no hand: ')
+        # a frame of another size: both hands say why, neither gets a pose
+        pub.publish(array_to_image(rgb[:240, :320].copy(), 'rgb8', header(8)))
+        assert h.spin_until(lambda: all(len(s) == 2 for s in status.values()), 20.0)
+        h.settle(0.3)
+        for hand in HANDS:
+            assert status[hand][1].data.startswith('no hand: camera: image 320x240')
+            assert len(joints[hand]) == (hand in tracked)
