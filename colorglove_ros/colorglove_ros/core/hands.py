@@ -65,7 +65,7 @@ class HandsSettings:
     every region is looked up both ways again (0: always both ways)."""
 
     coarse_factor: int = 4
-    join_px: int = 2
+    join_px: int = 1
     min_region_pixels: int = 40
     mask_margin: float = 0.1
     evidence_scale_px: float = 0.5

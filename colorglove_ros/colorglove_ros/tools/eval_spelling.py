@@ -187,7 +187,11 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``colorglove_eval_spelling``."""
     run = run_scripted_evaluation(argv, __doc__, SETTINGS, evaluate)
     result = run.result
-    print_table(result['per_letter'], run.title('Finger-spelling per letter'))
+    rows = result['per_letter']
+    print_table([r for r in rows if r['letter'] not in THUMB_LETTERS],
+                run.title('Finger-spelling per letter (all but E M N S T)'))
+    print_table([r for r in rows if r['letter'] in THUMB_LETTERS],
+                'The thumb letters E, M, N, S, T')
     print_table(result['thumb_confusion'], 'E, M, N, S, T: what was committed (- = nothing)')
     summary = {k: result[k] for k in ('letters', 'letter_accuracy', 'thumb_letter_accuracy',
                                       'other_letter_accuracy', 'insertions', 'text_accuracy')}

@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--first-seed', type=int, default=1000)
     parser.add_argument('--gesture-sequences', type=int, default=12)
     parser.add_argument('--episodes', type=int, default=40)
-    parser.add_argument('--spelling-sequences', type=int, default=40)
+    parser.add_argument('--spelling-sequences', type=int, default=20)
     parser.add_argument('--words', type=int, default=8)
     parser.add_argument('--noise-draws', type=int, default=2)
     parser.add_argument('--noise-config', type=Path, default=config / 'tracking_noise.yaml')

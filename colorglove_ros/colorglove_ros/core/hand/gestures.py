@@ -70,7 +70,7 @@ class GestureConfig:
     extended: float = 0.18
     curl_width: float = 0.04
     hold: HoldConfig = field(default_factory=lambda: HoldConfig(
-        smoothing=0.25, on_score=0.7, off_score=0.3, hold_on_s=1 / 30, hold_off_s=4 / 30))
+        smoothing=0.25, on_score=0.75, off_score=0.3, hold_on_s=0.1, hold_off_s=0.1))
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -81,6 +81,8 @@ class TwoHandsNode(Node):
                        for h in HANDS}
         self.tf_pub = self._tf_publisher()
         self.create_subscription(Image, IMAGE_TOPIC, self.on_image, LATEST_IMAGE)
+        self.get_logger().info(f'two hands: database {database_path} ({len(database)} entries); '
+                               f'images on {self.resolve_topic_name(IMAGE_TOPIC)}')
 
     def _tf_publisher(self):
         """A /tf publisher for camera -> ``<hand>_palm``, when tf2_msgs is installed."""
