@@ -1,0 +1,54 @@
+"""colorglove_eval_mouse: the mouse scored on given pose streams (true, noisy, none, tracked)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.tracking.mouse import MouseConfig
+from colorglove_ros.paths import resolve_path
+from colorglove_ros.tools.eval_mouse import (
+    edge_tracked_poses,
+    evaluate_seed,
+    noisy_poses,
+    scripted_sequence,
+)
+
+MODEL = HandModel()
+CONFIG = MouseConfig()
+
+
+def test_true_poses_detect_every_scripted_click_and_no_pose_detects_none() -> None:
+    Q, spans = scripted_sequence(MODEL, CONFIG, seed=3, seconds=12.0, clicks=4)
+    perfect = evaluate_seed(MODEL, CONFIG, 3, list(Q), 0, Q, spans)
+    assert perfect['scripted_clicks'] == 8 and perfect['correct'] == 8
+    assert perfect['precision'] == 1.0 and perfect['recall'] == 1.0
+    assert perfect['cursor_error_mm'] < 5.0            # only the smoothing's lag
+    blind = evaluate_seed(MODEL, CONFIG, 3, [None] * len(Q), 0, Q, spans)
+    assert blind['detected'] == 0 and blind['recall'] == 0.0
+    assert math.isnan(blind['cursor_error_mm'])
+
+
+def test_noise_model_drops_frames_and_perturbs_the_rest() -> None:
+    Q, _ = scripted_sequence(MODEL, CONFIG, seed=1, seconds=4.0, clicks=2)
+    noise = {'joint_deg': 3.0, 'position_mm': 3.0, 'rotation_deg': 1.5, 'drop': 0.2}
+    poses = noisy_poses(MODEL, Q, 1, noise)
+    kept = [(p, q) for p, q in zip(poses, Q, strict=True) if p is not None]
+    assert 0.6 * len(Q) < len(kept) < len(Q)
+    err = np.degrees(np.abs(np.stack([p[6:] - q[6:] for p, q in kept])))
+    assert 1.0 < err.mean() < 4.0
+    assert all(np.array_equal(a, b) for a, b in zip(poses, noisy_poses(MODEL, Q, 1, noise),
+                                                    strict=True) if a is not None)
+
+
+@pytest.mark.slow
+def test_edge_tracker_output_is_one_pose_or_none_per_frame() -> None:
+    calibration = load_calibration(resolve_path('config/calibration.yaml'))
+    Q, _ = scripted_sequence(MODEL, CONFIG, seed=0, seconds=3.0, clicks=1)
+    poses, restarts = edge_tracked_poses(Q, 0, calibration.cameras[0],
+                                         calibration.hand_length_m)
+    assert len(poses) == len(Q) and restarts >= 0
+    assert all(p is None or (p.shape == (26,) and np.all(np.isfinite(p))) for p in poses)
