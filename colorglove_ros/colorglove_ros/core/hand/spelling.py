@@ -44,10 +44,9 @@ __all__ = [
 LETTERS: tuple[str, ...] = tuple(sorted(LETTER_SHAPES))
 THUMB_LETTERS: tuple[str, ...] = ('E', 'M', 'N', 'S', 'T')
 LETTER_FEATURES = 'hand_shape_direction'   # the classifier's feature set (pose_classifier.py)
-# the default classifier, relative to the package root ('': the templates, which spell better
-# than the trained config/letter_classifier.npz through the fitted noise; docs/RESULTS.md)
-DEFAULT_LETTER_CLASSIFIER = ''
+# the trained classifier, relative to the package root (the nodes' and tools' default)
 TRAINED_LETTER_CLASSIFIER = 'config/letter_classifier.npz'
+DEFAULT_LETTER_CLASSIFIER = TRAINED_LETTER_CLASSIFIER
 # (roll about the camera z, then pitch toward the camera) of each letter's pointing direction,
 # degrees; letters not listed point up
 LETTER_ROLL_PITCH: dict[str, tuple[float, float]] = {
