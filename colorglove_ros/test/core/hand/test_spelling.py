@@ -97,7 +97,7 @@ def test_shipped_classifier_spells_clean_poses_and_heavy_noise_breaks_it() -> No
     clean = eval_spelling.evaluate([11], words_per_sequence=4, source=TrackingNoise(0.0, 0.0),
                                    classifier=classifier)
     assert clean['letters'] >= 10
-    assert clean['letter_accuracy'] >= 0.85 and clean['insertions'] <= 1
+    assert clean['letter_accuracy'] >= 0.85 and clean['insertions'] <= 3
     noisy = eval_spelling.evaluate([11], words_per_sequence=4, source=TrackingNoise(25.0, 10.0),
                                    classifier=classifier)
     assert noisy['letter_accuracy'] < clean['letter_accuracy'] - 0.1
