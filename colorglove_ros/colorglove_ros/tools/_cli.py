@@ -69,7 +69,7 @@ class ScriptedSettings:
     default_seeds: tuple[int, ...]
     unit: str
     default_count: int
-    classifier: str               # default trained classifier, relative to the package root
+    classifier: str               # default trained classifier (package-relative; '': none)
     feature_set: str              # its feature set (core.hand.pose_classifier)
 
 
@@ -153,15 +153,17 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
                         "rendered images) or 'truth' (the renderer's labels)")
     parser.add_argument('--database', type=Path,
                         help='with --tracker: pose database (default: the largest under data/)')
-    parser.add_argument('--classifier', type=Path, default=share_dir() / settings.classifier,
-                        help='trained classifier (colorglove_train_hand_classifiers)')
+    parser.add_argument('--classifier', type=Path,
+                        default=share_dir() / settings.classifier if settings.classifier
+                        else None, help='trained classifier (colorglove_train_hand_classifiers; '
+                        f'default: {settings.classifier or "none, the templates"})')
     parser.add_argument('--rules', action='store_true',
                         help='score with the hand-written rules / templates, no classifier')
     args = parser.parse_args(argv)
     from colorglove_ros.core.hand.pose_classifier import load_pose_classifier
 
-    classifier = None if args.rules else load_pose_classifier(args.classifier,
-                                                              settings.feature_set)
+    classifier = None if args.rules or args.classifier is None else load_pose_classifier(
+        args.classifier, settings.feature_set)
     if args.tracker:
         database = args.database or find_database(data_dir())
         source: Any = ScriptedTracker(database, config / 'ik.yaml', config / 'calibration.yaml',

@@ -27,7 +27,7 @@ from colorglove_ros.core.hand.pose_classifier import (
     save_pose_classifier,
     train_pose_classifier,
 )
-from colorglove_ros.core.hand.spelling import DEFAULT_LETTER_CLASSIFIER, LETTER_FEATURES
+from colorglove_ros.core.hand.spelling import LETTER_FEATURES, TRAINED_LETTER_CLASSIFIER
 from colorglove_ros.core.report import print_table
 from colorglove_ros.paths import share_dir
 from colorglove_ros.tools import eval_gestures, eval_spelling
@@ -65,11 +65,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--noise-draws', type=int, default=2)
     parser.add_argument('--noise-config', type=Path, default=config / 'tracking_noise.yaml')
     parser.add_argument('--hidden', type=int, default=64, help='hidden units')
+    parser.add_argument('--alpha', type=float, default=1e-3, help='L2 penalty')
     parser.add_argument('--seed', type=int, default=0, help='initialisation seed')
     parser.add_argument('--gesture-output', type=Path,
                         default=share_dir() / DEFAULT_GESTURE_CLASSIFIER)
     parser.add_argument('--letter-output', type=Path,
-                        default=share_dir() / DEFAULT_LETTER_CLASSIFIER)
+                        default=share_dir() / TRAINED_LETTER_CLASSIFIER)
     args = parser.parse_args(argv)
 
     def body() -> int:
@@ -93,10 +94,10 @@ def main(argv: list[str] | None = None) -> int:
             x, y = training_samples(model, scripts, noise, args.noise_draws, feature_set)
             source = (f'colorglove_train_hand_classifiers --what {what} --first-seed '
                       f'{args.first_seed} {sizes} --noise-draws {args.noise_draws} '
-                      f'--hidden {args.hidden} --seed {args.seed}; noise '
+                      f'--hidden {args.hidden} --alpha {args.alpha} --seed {args.seed}; noise '
                       f'{args.noise_config.name}')
             clf = train_pose_classifier(x, y, feature_set, hidden=args.hidden, seed=args.seed,
-                                        source=source)
+                                        alpha=args.alpha, source=source)
             save_pose_classifier(output, clf)
             accuracy = float(np.mean(np.asarray(clf.classes)[
                 np.argmax(clf.log_proba(x), axis=1)] == y))

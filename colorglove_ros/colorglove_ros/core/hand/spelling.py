@@ -36,7 +36,7 @@ from colorglove_ros.core.validation import check_number
 
 __all__ = [
     'LETTERS', 'THUMB_LETTERS', 'LETTER_ROLL_PITCH', 'LETTER_FEATURES',
-    'DEFAULT_LETTER_CLASSIFIER', 'SpellingError',
+    'DEFAULT_LETTER_CLASSIFIER', 'TRAINED_LETTER_CLASSIFIER', 'SpellingError',
     'SpellingConfig',
     'letter_rotation', 'pointing_direction', 'LetterClassifier', 'Speller',
 ]
@@ -45,7 +45,8 @@ LETTERS: tuple[str, ...] = tuple(sorted(LETTER_SHAPES))
 THUMB_LETTERS: tuple[str, ...] = ('E', 'M', 'N', 'S', 'T')
 LETTER_FEATURES = 'hand_shape_direction'   # the classifier's feature set (pose_classifier.py)
 # the trained classifier, relative to the package root (the nodes' and tools' default)
-DEFAULT_LETTER_CLASSIFIER = 'config/letter_classifier.npz'
+TRAINED_LETTER_CLASSIFIER = 'config/letter_classifier.npz'
+DEFAULT_LETTER_CLASSIFIER = TRAINED_LETTER_CLASSIFIER
 # (roll about the camera z, then pitch toward the camera) of each letter's pointing direction,
 # degrees; letters not listed point up
 LETTER_ROLL_PITCH: dict[str, tuple[float, float]] = {
@@ -69,7 +70,7 @@ class SpellingConfig:
     joint_sigma_deg: float = 12.0
     direction_sigma: float = 0.3
     hold: HoldConfig = field(default_factory=lambda: HoldConfig(
-        smoothing=0.4, on_score=0.6, off_score=0.3, hold_on_s=0.4, hold_off_s=0.15))
+        smoothing=0.25, on_score=0.4, off_score=0.2, hold_on_s=0.3, hold_off_s=0.15))
     rearm_motion_m: float = 0.03
 
     def __post_init__(self) -> None:

@@ -23,7 +23,7 @@ from colorglove_ros.core.hand.gestures import (
 from colorglove_ros.core.hand.hysteresis import HoldConfig
 from colorglove_ros.core.hand.pose_classifier import PoseClassifier, load_pose_classifier
 from colorglove_ros.core.hand.poses import GESTURE_SHAPES, LETTER_SHAPES, full_pose
-from colorglove_ros.core.hand.spelling import DEFAULT_LETTER_CLASSIFIER
+from colorglove_ros.core.hand.spelling import TRAINED_LETTER_CLASSIFIER
 from colorglove_ros.paths import share_dir
 from colorglove_ros.tools import eval_gestures
 
@@ -105,7 +105,7 @@ def test_shipped_classifier_on_named_shapes(shape: str, gesture: str) -> None:
 
 
 def test_detector_refuses_a_letter_classifier() -> None:
-    letters = load_pose_classifier(share_dir() / DEFAULT_LETTER_CLASSIFIER)
+    letters = load_pose_classifier(share_dir() / TRAINED_LETTER_CLASSIFIER)
     with pytest.raises(GestureError):
         GestureDetector(MODEL, classifier=letters)
 
