@@ -6,7 +6,6 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from repo_paths import CONFIG_DIR
 
 from colorglove_ros.core.hand.handedness import mirror_pose
 from colorglove_ros.core.hands import (
@@ -53,7 +52,7 @@ def test_one_region_is_the_hand_its_evidence_says():
     assert assignment == {'left': 0}
 
 
-def test_two_rendered_gloves_are_two_regions():
+def test_two_rendered_gloves_are_two_regions(node_assets):
     from colorglove_ros.core.segmentation.segmenter import load_segmenter
 
     camera = default_camera()
@@ -69,7 +68,7 @@ def test_two_rendered_gloves_are_two_regions():
                                           sample_conditions(np.random.default_rng(4), 'test'))
     finally:
         synth.release()
-    segmenter = load_segmenter(str(CONFIG_DIR / 'color_calibration.yaml'))
+    segmenter = load_segmenter(str(node_assets.color_config))
     regions = find_glove_regions(segmenter, frame.image_rgb)
     assert len(regions) == 2
     for k in (1, 2):      # each hand's glove lies (mostly) inside one region
