@@ -22,11 +22,10 @@ from colorglove_ros.core.evaluation.sequences import (
     SequenceEvaluator,
     eval_seeds,
     make_observer,
-    open_database,
+    open_database_for_calibration,
     summarize,
 )
 from colorglove_ros.core.evaluation.targets import target_row
-from colorglove_ros.core.lookup.database import DatabaseBuild, check_hand_length
 from colorglove_ros.core.pipeline import TemporalPrior
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.tracking.config import TRACKER_MODES, load_covariances, load_ik_config
@@ -181,14 +180,12 @@ def main(argv: list[str] | None = None) -> int:
     from colorglove_ros.core.lookup.search import PoseLookup
 
     try:
-        db_path, db = open_database(args.database, data_dir())
+        db_path, db, mono = open_database_for_calibration(args.database, data_dir(),
+                                                          args.calibration)
         config = load_ik_config(args.ik_config)
         if args.covariances:
             config = dataclasses.replace(config, covariances=load_covariances(args.covariances))
-        mono = load_calibration(args.calibration)
         stereo = load_calibration(args.stereo_calibration)
-        build = DatabaseBuild.from_meta(db.meta, str(db_path))
-        check_hand_length(build, mono.hand_length_m, str(args.calibration), str(db_path))
         observer = make_observer(args.labels, args.color_config, config.min_blob_pixels)
         temporal = None
         if args.temporal_tau is not None:

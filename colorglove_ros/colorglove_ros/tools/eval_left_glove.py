@@ -13,18 +13,16 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.evaluation.sequences import (
     SequenceEvaluator,
     eval_seeds,
     make_observer,
-    open_database,
+    open_database_for_calibration,
     summarize,
 )
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.handedness import HANDS
-from colorglove_ros.core.lookup.database import DatabaseBuild, check_hand_length
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.tracking.config import load_ik_config
 from colorglove_ros.paths import data_dir
@@ -60,11 +58,9 @@ def main(argv: list[str] | None = None) -> int:
 
     t0 = time.perf_counter()
     try:
-        db_path, db = open_database(args.database, data_dir())
+        db_path, db, mono = open_database_for_calibration(args.database, data_dir(),
+                                                          args.calibration)
         config = load_ik_config(args.ik_config)
-        mono = load_calibration(args.calibration)
-        build = DatabaseBuild.from_meta(db.meta, str(db_path))
-        check_hand_length(build, mono.hand_length_m, str(args.calibration), str(db_path))
         seeds = eval_seeds(args.sequences, args.seed_offset)
         lookup = PoseLookup(db)
         evaluators = {hand: SequenceEvaluator(

@@ -16,7 +16,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.evaluation.scenes import (
     BORDER_DEPTH_MM,
@@ -25,9 +24,8 @@ from colorglove_ros.core.evaluation.scenes import (
     run_scene,
     summarize_scene,
 )
-from colorglove_ros.core.evaluation.sequences import eval_seeds, open_database
+from colorglove_ros.core.evaluation.sequences import eval_seeds, open_database_for_calibration
 from colorglove_ros.core.evaluation.targets import target_row
-from colorglove_ros.core.lookup.database import check_hand_length
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.tracking.config import load_ik_config
 from colorglove_ros.paths import data_dir, share_dir
@@ -101,10 +99,9 @@ def main(argv: list[str] | None = None) -> int:
     from colorglove_ros.core.tracking.tracker import HandTracker
 
     try:
-        db_path, db = open_database(args.database, data_dir())
+        db_path, db, calibration = open_database_for_calibration(args.database, data_dir(),
+                                                                 args.calibration)
         build = db.build
-        calibration = load_calibration(args.calibration)
-        check_hand_length(build, calibration.hand_length_m, str(args.calibration), str(db_path))
         ik_config = load_ik_config(args.ik_config)
         load_segmenter(args.color_config)          # refuse a bad colour config up front
         lookup = PoseLookup(db)

@@ -24,14 +24,12 @@ from typing import Any
 
 import numpy as np
 
-from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.evaluation.metrics import fingertip_errors_mm
-from colorglove_ros.core.evaluation.sequences import eval_seeds, open_database
+from colorglove_ros.core.evaluation.sequences import eval_seeds, open_database_for_calibration
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.handedness import HANDS, mirrored_observer, to_right_frame
 from colorglove_ros.core.hands import TwoHandPipeline
-from colorglove_ros.core.lookup.database import DatabaseBuild, check_hand_length
 from colorglove_ros.core.pipeline import FramePipeline, Tracked, image_observer
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.synthetic.sequences import LEFT_SEED_OFFSET, two_hand_sequences
@@ -83,11 +81,10 @@ def main(argv: list[str] | None = None) -> int:
 
     t0 = time.perf_counter()
     try:
-        db_path, db = open_database(args.database, data_dir())
+        db_path, db, mono = open_database_for_calibration(args.database, data_dir(),
+                                                          args.calibration)
+        build = db.build
         config = load_ik_config(args.ik_config)
-        mono = load_calibration(args.calibration)
-        build = DatabaseBuild.from_meta(db.meta, str(db_path))
-        check_hand_length(build, mono.hand_length_m, str(args.calibration), str(db_path))
         segmenter = load_segmenter(str(args.color_config or share_dir() / 'config' /
                                        'color_calibration.yaml'))
         seeds = eval_seeds(args.sequences, args.seed_offset)

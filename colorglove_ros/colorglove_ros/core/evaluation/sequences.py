@@ -48,6 +48,7 @@ from colorglove_ros.core.tracking.tracker import HandTracker, IKResult
 from colorglove_ros.core.tracking.types import CameraObservation
 
 __all__ = [
+    'open_database_for_calibration',
     'LABEL_SOURCES', 'EVAL_SEED_BASE', 'TRAIN_SEED_BASE', 'SEED_SPAN', 'EvaluationError',
     'eval_seeds', 'train_seeds', 'observe_camera', 'truth_observer',
     'segmenter_observer', 'make_observer', 'TrackedSequence',
@@ -418,3 +419,18 @@ def open_database(path: str | Path | None, root: str | Path) -> tuple[Path, Any]
         raise EvaluationError(f'no pose database under {root}: build one with '
                               'colorglove_build_database')
     return db_path, load_database(db_path)
+
+
+def open_database_for_calibration(path: str | Path | None, root: str | Path,
+                                  calibration_file: str | Path) -> tuple[Path, Any, Any]:
+    """:func:`open_database` and the camera calibration at ``calibration_file``: (database
+    path, database, calibration); :class:`DatabaseError` when they disagree on the hand
+    length."""
+    from colorglove_ros.core.camera import load_calibration
+    from colorglove_ros.core.lookup.database import DatabaseBuild, check_hand_length
+
+    db_path, db = open_database(path, root)
+    calibration = load_calibration(calibration_file)
+    build = DatabaseBuild.from_meta(db.meta, str(db_path))
+    check_hand_length(build, calibration.hand_length_m, str(calibration_file), str(db_path))
+    return db_path, db, calibration

@@ -278,7 +278,9 @@ def test_eval_ik_cli_writes_documented_json(small_database_path, tmp_path, capsy
 
 def test_eval_ik_cli_refuses_a_database_without_its_hand_length(tmp_path, capsys, monkeypatch):
     db = SimpleNamespace(meta={'build': {'glove_seed': 0}})
-    monkeypatch.setattr(eval_ik, 'open_database', lambda path, root: (tmp_path, db))
+    from colorglove_ros.core.evaluation import sequences
+
+    monkeypatch.setattr(sequences, 'open_database', lambda path, root: (tmp_path, db))
     assert eval_ik.main(['--plot', '']) == 1
     assert 'hand length' in capsys.readouterr().err
 
