@@ -426,10 +426,12 @@ def bag_feed(bag: Path, rate: float = 1.0, paced: bool = False) -> Any:
     player = shutil.which('colorglove_play_bag')
     if player is None:
         raise FileNotFoundError('colorglove_play_bag not on PATH (is the venv active?)')
-    # two image subscribers before the first frame: segmentation_node and the monitor
-    # restamped at publish time: the latency probe takes arrival minus header stamp
-    command = [player, str(bag), '--rate', str(rate), '--min-subscribers', '2', '--restamp'] + \
-        (['--paced'] if paced else [])
+    # two image subscribers before the first frame (segmentation_node and the monitor) and
+    # three CameraInfo subscribers (segmentation, lookup and IK each read it: one matched late
+    # answers the whole short bag 'waiting for CameraInfo'); restamped at publish time: the
+    # latency probe takes arrival minus header stamp
+    command = [player, str(bag), '--rate', str(rate), '--min-subscribers', '2',
+               '--min-info-subscribers', '3', '--restamp'] + (['--paced'] if paced else [])
 
     def feed() -> None:
         subprocess.run(command, check=True, stdout=subprocess.DEVNULL)

@@ -41,6 +41,8 @@ PLAYBACK_OPTIONS: dict[str, tuple[type, object, str]] = {
                          'wait this long for subscribers on --pace-on (and on the CameraInfo '
                          'topic beside it, if the bag has one) before starting'),
     'min-subscribers': (int, 1, 'subscribers on --pace-on to wait for before starting'),
+    'min-info-subscribers': (int, 1, 'subscribers on the CameraInfo topic beside --pace-on to '
+                             'wait for before starting (every node that reads CameraInfo)'),
     'loop': (bool, False, 'play again from the start until Ctrl-C'),
     'clock': (bool, False, "publish the bag's time on /clock (rosgraph_msgs/Clock)"),
     'restamp': (bool, False, 'stamp each message with its publish time (wall clock) instead of '
@@ -177,7 +179,8 @@ def main(argv: list[str] | None = None) -> int:
                                         args.min_subscribers)
             camera_info = player.camera_info_beside(args.pace_on)
             if camera_info is not None:
-                player.wait_for_subscribers(camera_info, args.wait_subscribers)
+                player.wait_for_subscribers(camera_info, args.wait_subscribers,
+                                            args.min_info_subscribers)
         if args.clock:
             player.publish_clock()
         while True:

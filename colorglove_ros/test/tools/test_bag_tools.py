@@ -193,3 +193,35 @@ def test_player_finds_the_camera_info_beside_the_image(tmp_path: Path) -> None:
     finally:
         rclpy.try_shutdown(context=context)
     assert found == ['/cam/camera_info', '/cam/camera_info', None]
+
+
+def test_player_waits_for_every_camera_info_subscriber(tmp_path: Path) -> None:
+    """--min-info-subscribers: with one CameraInfo reader matched, a wait for two times out
+    (a second node still unmatched would answer the first frames 'waiting for CameraInfo')."""
+    import rclpy
+    from sensor_msgs.msg import CameraInfo, Image
+
+    from colorglove_ros.tools.play_bag import PLAYBACK_OPTIONS, BagPlayer
+
+    assert PLAYBACK_OPTIONS['min-info-subscribers'][1] == 1
+    store = colorglove_typestore()
+    with Writer(tmp_path / 'bag', version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        for topic, kind, message in (('/cam/image_raw', 'sensor_msgs/msg/Image', Image()),
+                                     ('/cam/camera_info', 'sensor_msgs/msg/CameraInfo',
+                                      CameraInfo())):
+            connection = writer.add_connection(topic, kind, typestore=store)
+            writer.write(connection, 1_000_000_000, serialize_message(message))
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        player = BagPlayer(tmp_path / 'bag', context=context)
+        reader = rclpy.create_node('info_reader', context=context)
+        reader.create_subscription(CameraInfo, '/cam/camera_info', lambda _msg: None, 10)
+        one = player.wait_for_subscribers('/cam/camera_info', 5.0, 1)
+        two = player.wait_for_subscribers('/cam/camera_info', 0.3, 2)
+        reader.destroy_node()
+        player.close()
+        player.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    assert (one, two) == (True, False)
