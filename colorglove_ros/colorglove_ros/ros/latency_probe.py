@@ -119,6 +119,14 @@ class LatencyProbe:
         return ProbeRecord(np.asarray(data['stamp_ns'], np.int64),
                            np.asarray(data['arrival_ns'], np.int64))
 
+    def close(self) -> None:
+        """End the process without reading its record (a run that failed or was stopped):
+        nothing is left running, and the folder is removed."""
+        if self.process is not None and self.process.poll() is None:
+            self.process.kill()
+            self.process.wait()
+        self.folder.cleanup()
+
 
 def main(argv: list[str] | None = None) -> int:
     """Subscribe to /hand/joint_states and record stamp and arrival of each message."""

@@ -14,10 +14,10 @@ import argparse
 import sys
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 
-from colorglove_ros.ros.nodes.common import StartupError
+from colorglove_ros.ros.nodes.common import StartupError, ending_on_shutdown
 from colorglove_ros.ros.shm_cleanup import clean_stale_fastdds_segments
 
 __all__ = ['DEFAULT_THREADS', 'node_classes', 'main']
@@ -50,12 +50,11 @@ def main(argv: list[str] | None = None) -> int:
     nodes: list[Node] = []
     executor = MultiThreadedExecutor(num_threads=max(1, args.threads))
     try:
-        for cls in node_classes(not args.no_camera):
-            nodes.append(cls())
-            executor.add_node(nodes[-1])
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        with ending_on_shutdown():
+            for cls in node_classes(not args.no_camera):
+                nodes.append(cls())
+                executor.add_node(nodes[-1])
+            executor.spin()
     except StartupError as exc:
         print(f'[FATAL] {exc}', flush=True)
         return 1

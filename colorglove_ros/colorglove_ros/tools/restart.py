@@ -66,8 +66,8 @@ def _measure(args) -> int:
         launcher, database = looping_pipeline(args.database, args.seed, args.frames, args.rate,
                                               Path(folder))
         outputs = _OutputTimes()
-        launcher.start()
-        try:
+        try:                     # started inside the try: a SIGTERM must stop what runs
+            launcher.start()
             if np.isnan(outputs.first_after('ik', 0.0, args.startup_timeout)):
                 print(f'[restart] no JointState within {args.startup_timeout:g} s of start-up',
                       flush=True)

@@ -81,10 +81,14 @@ def _soak(args) -> int:
         launcher, _ = looping_pipeline(args.database, args.seed, args.frames, args.rate,
                                        Path(folder))
         probe = LatencyProbe()
-        probe.start()
-        stages = _StageTimes()
-        launcher.start()
+        stages = None
+        record = None
+        # everything started inside the try: a SIGTERM (SystemExit, see run_tool) landing
+        # between two starts must still stop what already runs
         try:
+            probe.start()
+            stages = _StageTimes()
+            launcher.start()
             if not probe.wait_for_first(args.startup_timeout):
                 print(f'[soak] no JointState within {args.startup_timeout:g} s of start-up',
                       flush=True)
@@ -105,10 +109,13 @@ def _soak(args) -> int:
                 memory_rows.append(row)
             exited = [name for name, p in zip(NODE_NAMES, launcher.processes, strict=True)
                       if p is None or p.poll() is not None]
-        finally:
             record = probe.stop()
+        finally:
             launcher.stop()
-            stages.close()
+            if stages is not None:
+                stages.close()
+            if record is None:
+                probe.close()
     keep = record.arrival_ns >= measure_start_ns
     measured = ProbeRecord(record.stamp_ns[keep], record.arrival_ns[keep])
     rows = window_summaries(measured, args.window)[:windows]

@@ -15,6 +15,7 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     ParameterType,
 )
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -49,7 +50,7 @@ from colorglove_ros.ros.frame_camera import FrameCamera
 from colorglove_ros.ros.pose_pairing import PosePairer
 from colorglove_ros.ros.shm_cleanup import clean_stale_fastdds_segments
 
-__all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'run_node',
+__all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'ending_on_shutdown', 'run_node',
            'DEFAULT_CALIBRATION_FILE', 'DEFAULT_DATABASE_CONFIG', 'declare_database',
            'HAND_LENGTH_RANGE_M', 'startup_errors',
            'declare_calibration_file', 'declare_hand_length', 'declare_hand',
@@ -93,6 +94,21 @@ def declare(node: Node, name: str, default: Any, description: str,
     return node.declare_parameter(name, default, descriptor).value
 
 
+@contextmanager
+def ending_on_shutdown(context: rclpy.context.Context | None = None) -> Iterator[None]:
+    """End a spin quietly when ROS is shut down: Ctrl-C, SIGTERM (rclpy's handlers shut the
+    context down), an external shutdown, and the ``RCLError`` that the executor's wait set or a
+    callback's publish raises when the shutdown lands while it runs. An ``RCLError`` while
+    ``context`` (default: the global one) is still valid is a real failure and propagates."""
+    try:
+        yield
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except RCLError:
+        if rclpy.ok(context=context):
+            raise
+
+
 def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Init rclpy, spin the node made by ``factory`` until shutdown, and clean up (Jazzy style).
 
@@ -104,10 +120,9 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     rclpy.init(args=args)
     node = None
     try:
-        node = factory()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        with ending_on_shutdown():
+            node = factory()
+            rclpy.spin(node)
     except StartupError as exc:
         print(f'[FATAL] {exc}', flush=True)
         return 1
