@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.dds
+pytestmark = [pytest.mark.dds, pytest.mark.slow]
 
 STARTED = re.compile(r'\[launch\] started \S+ \(pid (\d+)\)')
 
