@@ -68,7 +68,6 @@ class BagRecorder(Node):
             if topic not in self.pending or not types:
                 continue
             msgtype = types[0]
-            self.pending.discard(topic)
             publishers = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
             offered = [offered_qos(profile) for profile in publishers]
             with self.lock:
@@ -78,6 +77,7 @@ class BagRecorder(Node):
             qos = subscription_qos_for_offers(publishers)
             self.create_subscription(msg_class, topic,
                                      lambda data, t=topic: self.write(t, data), qos, raw=True)
+            self.pending.discard(topic)          # only once subscribed: others poll it
             self.get_logger().info(f'recording {topic} [{msgtype}] '
                                    f'({qos.reliability.name.lower()})')
 
