@@ -1,8 +1,9 @@
 """The package's Fast DDS profile: Fast DDS loads it without an XML error (an invalid profile is
 ignored with only a log line, which would silently bring back the small shared-memory
-segments), and its participants announce themselves often enough that a respawned node
-is discovered quickly (at the default 3 s period a restarted node waited up to one period for
-the running nodes' next announcement before it matched them)."""
+segments), and a respawned node finds the running ones quickly: participants announce
+themselves often (at the default 3 s period a restarted node waited up to one period for the
+running nodes' next announcement before it matched them) and a killed node's shared-memory port
+is given up after a short health check (default one second)."""
 from __future__ import annotations
 
 import subprocess
@@ -17,6 +18,7 @@ from colorglove_ros.ros.launcher import FASTDDS_PROFILE_VARIABLE
 PROFILE = CONFIG_DIR / 'fastdds_profile.xml'
 NS = {'f': 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'}
 MAX_ANNOUNCEMENT_PERIOD_S = 0.5
+MAX_PORT_HEALTH_CHECK_MS = 500
 
 
 def test_announcement_period_is_short() -> None:
@@ -27,6 +29,17 @@ def test_announcement_period_is_short() -> None:
     period = float(lease.findtext('f:sec', '0', NS)) + \
         float(lease.findtext('f:nanosec', '0', NS)) * 1e-9
     assert 0.0 < period <= MAX_ANNOUNCEMENT_PERIOD_S
+
+
+def test_a_dead_port_is_given_up_quickly() -> None:
+    """A respawned node reopening the shared-memory port of the node it replaces waits at most
+    the health-check timeout for the dead owner."""
+    root = ET.parse(PROFILE).getroot()
+    shm = [d for d in root.findall('f:transport_descriptors/f:transport_descriptor', NS)
+           if d.findtext('f:type', '', NS) == 'SHM']
+    assert len(shm) == 1
+    timeout = shm[0].findtext('f:healthy_check_timeout_ms', None, NS)
+    assert timeout is not None and 0 < int(timeout) <= MAX_PORT_HEALTH_CHECK_MS
 
 
 @pytest.mark.dds
