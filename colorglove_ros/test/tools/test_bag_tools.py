@@ -165,6 +165,15 @@ def test_restamp_sets_publish_time_and_keeps_frames_together(tmp_path: Path) -> 
                                                          strict=True))
 
 
+def _write_camera_bag(path: Path, messages: tuple[tuple[str, str, object], ...]) -> None:
+    """A bag with one message on each (topic, type, message)."""
+    store = colorglove_typestore()
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        for topic, kind, message in messages:
+            connection = writer.add_connection(topic, kind, typestore=store)
+            writer.write(connection, 1_000_000_000, serialize_message(message))
+
+
 def test_player_finds_the_camera_info_beside_the_image(tmp_path: Path) -> None:
     """--paced waits for a subscriber on the image's CameraInfo too (a node matched to the
     images before their CameraInfo answers them 'waiting for CameraInfo'): the player finds the
@@ -174,14 +183,10 @@ def test_player_finds_the_camera_info_beside_the_image(tmp_path: Path) -> None:
 
     from colorglove_ros.tools.play_bag import BagPlayer
 
-    store = colorglove_typestore()
-    with Writer(tmp_path / 'bag', version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        for topic, kind, message in (
-                ('/cam/image_raw', 'sensor_msgs/msg/Image', Image()),
-                ('/cam/camera_info', 'sensor_msgs/msg/CameraInfo', CameraInfo()),
-                ('/other/image_raw', 'sensor_msgs/msg/Image', Image())):
-            connection = writer.add_connection(topic, kind, typestore=store)
-            writer.write(connection, 1_000_000_000, serialize_message(message))
+    _write_camera_bag(tmp_path / 'bag', (
+        ('/cam/image_raw', 'sensor_msgs/msg/Image', Image()),
+        ('/cam/camera_info', 'sensor_msgs/msg/CameraInfo', CameraInfo()),
+        ('/other/image_raw', 'sensor_msgs/msg/Image', Image())))
     context = rclpy.Context()
     rclpy.init(context=context)
     try:
@@ -204,13 +209,9 @@ def test_player_waits_for_every_camera_info_subscriber(tmp_path: Path) -> None:
     from colorglove_ros.tools.play_bag import PLAYBACK_OPTIONS, BagPlayer
 
     assert PLAYBACK_OPTIONS['min-info-subscribers'][1] == 1
-    store = colorglove_typestore()
-    with Writer(tmp_path / 'bag', version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        for topic, kind, message in (('/cam/image_raw', 'sensor_msgs/msg/Image', Image()),
-                                     ('/cam/camera_info', 'sensor_msgs/msg/CameraInfo',
-                                      CameraInfo())):
-            connection = writer.add_connection(topic, kind, typestore=store)
-            writer.write(connection, 1_000_000_000, serialize_message(message))
+    _write_camera_bag(tmp_path / 'bag', (
+        ('/cam/image_raw', 'sensor_msgs/msg/Image', Image()),
+        ('/cam/camera_info', 'sensor_msgs/msg/CameraInfo', CameraInfo())))
     context = rclpy.Context()
     rclpy.init(context=context)
     try:
