@@ -2,13 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
-from colorglove_msgs.msg import (
-    HandObservation,
-    HandPoseCandidates,
-    PatchBlob,
-    PatchConstraint,
-    PoseCandidate,
-)
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates, PatchBlob
 
 
 def sample_observation(seq: int) -> HandObservation:
@@ -37,13 +31,16 @@ def sample_candidates(seq: int) -> HandPoseCandidates:
     msg.header = sample_observation(seq).header
     msg.hand_found = True
     msg.dof_names = [f'dof_{i}' for i in range(26)]
-    msg.candidates = [
-        PoseCandidate(database_index=int(i * 97 + seq), pose=rng.standard_normal(26).tolist(),
-                      image_distance=float(i) * 0.5, weight=0.1) for i in range(10)]
+    msg.candidate_indices = [i * 97 + seq for i in range(10)]
+    msg.candidate_poses = rng.standard_normal(10 * 26).tolist()
+    msg.candidate_distances = [float(i) * 0.5 for i in range(10)]
+    msg.candidate_weights = [0.1] * 10
     msg.blended_pose = rng.standard_normal(26).tolist()
-    msg.constraints = [PatchConstraint(patch_id=p, color_label=p % 10 + 1, vertex_index=37 * p,
-                                       tiny_x=float(p), tiny_y=39.0 - p, pixel_count=5 + p)
-                       for p in range(20)]
+    msg.constraint_patch_ids = list(range(20))
+    msg.constraint_colors = [p % 10 + 1 for p in range(20)]
+    msg.constraint_vertices = [37 * p for p in range(20)]
+    msg.constraint_tiny_xy = [v for p in range(20) for v in (float(p), 39.0 - p)]
+    msg.constraint_pixel_counts = [5 + p for p in range(20)]
     msg.observation = sample_observation(seq)
     msg.lookup_time_ms = 1.25
     return msg

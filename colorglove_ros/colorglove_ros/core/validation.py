@@ -24,7 +24,8 @@ __all__ = [
     'MAX_BLOBS', 'MAX_IMAGE_SIDE', 'MIN_HAND_DEPTH_M', 'MAX_HAND_DEPTH_M',
     'check_number', 'check_array', 'as_rows', 'check_settings', 'SettingRule',
     'validate_image_size', 'validate_crop', 'validate_blobs', 'validate_tiny_labels',
-    'validate_observation', 'validate_pose', 'validate_constraints', 'validate_prior',
+    'validate_observation', 'validate_pose', 'validate_poses', 'validate_constraints',
+    'validate_prior',
     'validate_hand_depth', 'validate_segmenter_settings', 'SEGMENTER_RULES',
     'validate_database_arrays',
 ]
@@ -287,12 +288,33 @@ def validate_observation(*, image_width: Any, image_height: Any, tiny_labels: An
 def validate_pose(name: str, pose: Any, error: ErrorType = InvalidPriorError) -> np.ndarray:
     """A 26-DOF pose of finite values (metres, radians) with a plausible rotation vector."""
     q = check_array(name, pose, shape=(NUM_DOFS,), kind='fiu', error=error).astype(float)
-    angle = float(np.linalg.norm(q[3:6]))
-    if angle > 1e3:
-        raise error(f'{name}: wrist rotation vector of norm {angle:g} rad is not a rotation')
-    if np.abs(q[6:]).max() > 2 * math.pi:
-        raise error(f'{name}: finger angle {np.abs(q[6:]).max():g} rad beyond a full turn')
+    _check_pose_values(name, q[None], error)
     return q
+
+
+def validate_poses(name: str, poses: Any, error: ErrorType = InvalidPriorError) -> np.ndarray:
+    """Poses (K, 26), each as :func:`validate_pose`, checked all at once."""
+    q = check_array(name, poses, shape=(None, NUM_DOFS), kind='fiu', error=error
+                    ).astype(float)
+    _check_pose_values(name, q, error)
+    return q
+
+
+def _check_pose_values(name: str, q: np.ndarray, error: ErrorType) -> None:
+    """Finite poses (K, 26) with plausible rotation vectors and finger angles; the message
+    names the first bad pose (``name[k]``, or ``name`` alone for one pose)."""
+    if not len(q):
+        return
+    angle = np.linalg.norm(q[:, 3:6], axis=1)
+    finger = np.abs(q[:, 6:]).max(axis=1)
+    bad = np.flatnonzero((angle > 1e3) | (finger > 2 * math.pi))
+    if not len(bad):
+        return
+    k = int(bad[0])
+    where = name if len(q) == 1 else f'{name}[{k}]'
+    if angle[k] > 1e3:
+        raise error(f'{where}: wrist rotation vector of norm {angle[k]:g} rad is not a rotation')
+    raise error(f'{where}: finger angle {finger[k]:g} rad beyond a full turn')
 
 
 def validate_constraints(patch_id: Any, color: Any, vertex: Any, tiny_xy: Any,
@@ -313,20 +335,19 @@ def validate_constraints(patch_id: Any, color: Any, vertex: Any, tiny_xy: Any,
                 high=TINY_SIZE ** 2, error=error)
 
 
-def validate_prior(*, blended_pose: Any, candidate_poses: Sequence[Any],
+def validate_prior(*, blended_pose: Any, candidate_poses: Any,
                    candidate_weights: Any, candidate_distances: Any,
                    constraints: tuple[Any, Any, Any, Any, Any], num_vertices: int,
                    finger_std: Any = None) -> np.ndarray:
     """A lookup result as the IK receives it: a finite 26-DOF blended pose, at least one
-    candidate (finite poses, weights and distances >= 0), at least one constraint pointing at
+    candidate (``candidate_poses`` (K, 26) or K poses; finite poses, weights and distances
+    >= 0), at least one constraint pointing at
     existing patches and mesh vertices, and ``finger_std`` empty or 20 finite values >= 0.
     Returns the blended pose; raises :class:`InvalidPriorError` naming the field."""
     q = validate_pose('blended_pose', blended_pose)
     if len(candidate_poses) == 0:
         raise InvalidPriorError('hand_found with no candidates')
-    for index, pose in enumerate(candidate_poses):
-        validate_pose(f'candidates[{index}].pose', pose)
-    k = len(candidate_poses)
+    k = len(validate_poses('candidate poses', candidate_poses))
     check_array('candidate weight', candidate_weights, shape=(k,), low=0.0, high=1.0 + 1e-6,
                 error=InvalidPriorError)
     check_array('candidate image_distance', candidate_distances, shape=(k,), low=0.0,

@@ -9,13 +9,7 @@ from collections.abc import Sequence
 import numpy as np
 from builtin_interfaces.msg import Time
 from colorglove_msgs.msg import GestureEvent as GestureEventMsg
-from colorglove_msgs.msg import (
-    HandObservation,
-    HandPoseCandidates,
-    PatchBlob,
-    PatchConstraint,
-    PoseCandidate,
-)
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates, PatchBlob
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
 from sensor_msgs.msg import CameraInfo, JointState
 from std_msgs.msg import ColorRGBA, Header
@@ -38,7 +32,8 @@ __all__ = [
     'pose_to_wrist_pose_msg', 'pose_from_joint_state_msg', 'pose_from_msgs',
     'crop_from_observation_msg',
     'tiny_labels_from_observation_msg', 'blobs_from_observation_msg', 'camera_observation_from_msg',
-    'candidates_to_msg', 'pose_prior_from_candidates_msg', 'skeleton_to_markers_msg',
+    'candidates_to_msg', 'candidate_arrays_from_msg', 'constraint_arrays_from_msg',
+    'pose_prior_from_candidates_msg', 'skeleton_to_markers_msg',
     'observation_to_msg', 'wrist_pose_to_tf_msg', 'gesture_event_to_msg',
     'gesture_event_from_msg',
 ]
@@ -144,6 +139,24 @@ def camera_observation_from_msg(msg: HandObservation) -> CameraObservation:
                              cut_by_border=bool(msg.cut_by_border))
 
 
+def _packed(typecode: str, values: np.ndarray, dtype: type) -> array:
+    """``values`` as the ``array.array`` a message array field takes as it is (one copy of the
+    bytes, no Python number per element)."""
+    return array(typecode, np.ascontiguousarray(values, dtype).tobytes())
+
+
+# HandPoseCandidates' per-candidate and per-constraint arrays: (field, array typecode, dtype)
+_CANDIDATE_FIELDS = {'indices': ('candidate_indices', 'I', np.uint32),
+                     'poses': ('candidate_poses', 'd', np.float64),
+                     'distances': ('candidate_distances', 'd', np.float64),
+                     'weights': ('candidate_weights', 'd', np.float64)}
+_CONSTRAINT_FIELDS = {'patch_ids': ('constraint_patch_ids', 'H', np.uint16),
+                      'colors': ('constraint_colors', 'B', np.uint8),
+                      'vertices': ('constraint_vertices', 'I', np.uint32),
+                      'tiny_xy': ('constraint_tiny_xy', 'f', np.float32),
+                      'pixel_counts': ('constraint_pixel_counts', 'I', np.uint32)}
+
+
 def candidates_to_msg(observation: HandObservation, result: LookupResult | None,
                    status: str = '', lookup_time_ms: float = 0.0) -> HandPoseCandidates:
     """The lookup node's output: neighbours, blend and the nearest entry's constraints, with
@@ -155,21 +168,40 @@ def candidates_to_msg(observation: HandObservation, result: LookupResult | None,
         msg.status = status or observation.status or 'no hand'
         return msg
     msg.hand_found = True
-    msg.candidates = [
-        PoseCandidate(database_index=int(index), pose=np.asarray(pose, float).tolist(),
-                      image_distance=float(distance), weight=float(weight))
-        for index, pose, distance, weight in zip(result.indices, result.poses, result.distances,
-                                                 result.weights, strict=True)]
-    msg.blended_pose = np.asarray(result.blended, float).tolist()
+    for name, (field, typecode, dtype) in _CANDIDATE_FIELDS.items():
+        setattr(msg, field, _packed(typecode, getattr(result, name), dtype))
+    msg.blended_pose = _packed('d', result.blended, np.float64)
     if result.finger_std is not None:
-        msg.finger_std = np.asarray(result.finger_std, float).tolist()
+        msg.finger_std = _packed('d', result.finger_std, np.float64)
     c = result.constraints
-    msg.constraints = [
-        PatchConstraint(patch_id=int(p), color_label=int(col), vertex_index=int(v),
-                        tiny_x=float(xy[0]), tiny_y=float(xy[1]), pixel_count=int(round(n)))
-        for p, col, v, xy, n in zip(c.patch_ids, c.colors, c.vertices, c.tiny_xy,
-                                    c.pixel_counts, strict=True)]
+    for name, (field, typecode, dtype) in _CONSTRAINT_FIELDS.items():
+        values = getattr(c, name)
+        if name == 'pixel_counts':
+            values = np.rint(values)
+        setattr(msg, field, _packed(typecode, values, dtype))
     return msg
+
+
+def candidate_arrays_from_msg(msg: HandPoseCandidates) -> dict[str, np.ndarray]:
+    """The candidates of a candidates message as numpy arrays (views of the message's
+    arrays): ``indices`` (K,), ``poses`` (K, 26) (as many rows as whole poses the array
+    holds), ``distances`` (K,), ``weights`` (K,)."""
+    out = {name: np.frombuffer(getattr(msg, field), dtype)
+           for name, (field, _, dtype) in _CANDIDATE_FIELDS.items()}
+    poses = out['poses']
+    out['poses'] = poses[:len(poses) - len(poses) % len(DOF_NAMES)].reshape(-1, len(DOF_NAMES))
+    return out
+
+
+def constraint_arrays_from_msg(msg: HandPoseCandidates) -> dict[str, np.ndarray]:
+    """The projection constraints of a candidates message as numpy arrays (views of the
+    message's arrays), keyed as :class:`ProjectionConstraints`' fields; ``tiny_xy`` (C, 2)
+    holds as many rows as whole pairs the array holds."""
+    out = {name: np.frombuffer(getattr(msg, field), dtype)
+           for name, (field, _, dtype) in _CONSTRAINT_FIELDS.items()}
+    xy = out['tiny_xy']
+    out['tiny_xy'] = xy[:len(xy) - len(xy) % 2].reshape(-1, 2)
+    return out
 
 
 def pose_prior_from_candidates_msg(msg: HandPoseCandidates) -> PosePrior:
@@ -178,28 +210,24 @@ def pose_prior_from_candidates_msg(msg: HandPoseCandidates) -> PosePrior:
     if list(msg.dof_names) != list(DOF_NAMES):
         raise ValueError(f'candidates carry DOFs {list(msg.dof_names)[:3]}..., '
                          f'expected {list(DOF_NAMES)[:3]}...')
-    if len(msg.blended_pose) != len(DOF_NAMES) or not np.all(np.isfinite(msg.blended_pose)):
+    blended = np.frombuffer(msg.blended_pose, np.float64)
+    if len(blended) != len(DOF_NAMES) or not np.all(np.isfinite(blended)):
         raise ValueError('blended_pose must hold 26 finite values')
-    constraints = msg.constraints
-    if not all(np.isfinite([c.tiny_x, c.tiny_y]).all() for c in constraints):
-        raise ValueError('constraint centroids must be finite')
+    c = constraint_arrays_from_msg(msg)
+    if len(c['tiny_xy']) != len(c['patch_ids']) or not np.isfinite(c['tiny_xy']).all():
+        raise ValueError('constraint centroids must be finite, one (x, y) per constraint')
     finger_std = None
     if len(msg.finger_std):
-        finger_std = np.asarray(msg.finger_std, dtype=float)
+        finger_std = np.array(msg.finger_std, dtype=float)
         if finger_std.shape != (len(DOF_NAMES) - 6,) or not np.all(np.isfinite(finger_std)) \
                 or np.any(finger_std < 0):
             raise ValueError('finger_std must be empty or hold 20 finite values >= 0')
-    nearest = msg.candidates[0].image_distance if len(msg.candidates) else math.nan
+    distances = msg.candidate_distances
+    nearest = float(distances[0]) if len(distances) else math.nan
     return PosePrior(
         finger_std=finger_std,
-        image_distance=float(nearest) if math.isfinite(nearest) and nearest >= 0 else math.nan,
-        q_blend=np.asarray(msg.blended_pose, dtype=float),
-        constraints=ProjectionConstraints(
-            patch_ids=np.array([c.patch_id for c in constraints], dtype=np.int64),
-            colors=np.array([c.color_label for c in constraints], dtype=np.int64),
-            vertices=np.array([c.vertex_index for c in constraints], dtype=np.int64),
-            tiny_xy=np.array([[c.tiny_x, c.tiny_y] for c in constraints], dtype=float),
-            pixel_counts=np.array([c.pixel_count for c in constraints], dtype=float)))
+        image_distance=nearest if math.isfinite(nearest) and nearest >= 0 else math.nan,
+        q_blend=blended.copy(), constraints=ProjectionConstraints(**c))
 
 
 def skeleton_to_markers_msg(keypoints_camera: np.ndarray | None, header: Header,

@@ -13,10 +13,12 @@ from colorglove_ros.core.validation import (
     validate_observation,
     validate_prior,
 )
+from colorglove_ros.ros.conversions import candidate_arrays_from_msg, constraint_arrays_from_msg
 
 __all__ = ['check_observation_msg', 'check_candidates_msg']
 
 _DOFS = 26
+MAX_CANDIDATES = 10_000   # candidates per message
 
 
 def check_observation_msg(msg: HandObservation, camera_size: tuple[int, int] | None = None
@@ -47,8 +49,9 @@ def check_observation_msg(msg: HandObservation, camera_size: tuple[int, int] | N
 def check_candidates_msg(msg: HandPoseCandidates, num_vertices: int,
                          camera_size: tuple[int, int] | None = None) -> np.ndarray:
     """Check candidates with ``hand_found``: the observation they carry, then the blended
-    pose, candidates, constraints (patches and vertices of a mesh of ``num_vertices``) and
-    finger spread; return the blended pose. Raises ``InvalidObservationError`` or
+    pose, candidates (one pose per index, one distance and weight each), constraints (patches
+    and vertices of a mesh of ``num_vertices``) and finger spread; return the blended pose.
+    Raises ``InvalidObservationError`` or
     :class:`~colorglove_ros.core.validation.InvalidPriorError` naming the field."""
     if not msg.hand_found:
         raise InvalidPriorError('hand_found is false')
@@ -56,25 +59,22 @@ def check_candidates_msg(msg: HandPoseCandidates, num_vertices: int,
         raise InvalidPriorError(f'blended_pose holds {len(msg.blended_pose)} values, '
                                 f'expected {_DOFS}')
     check_observation_msg(msg.observation, camera_size)
-    if len(msg.candidates) > 10_000:
-        raise InvalidPriorError(f'{len(msg.candidates)} candidates, at most 10000 allowed')
-    candidates = msg.candidates
-    poses = []
-    for index, candidate in enumerate(candidates):
-        if len(candidate.pose) != _DOFS:
-            raise InvalidPriorError(f'candidates[{index}].pose holds {len(candidate.pose)} '
-                                    f'values, expected {_DOFS}')
-        poses.append(np.asarray(candidate.pose, dtype=float))
-    c = msg.constraints
+    count = len(msg.candidate_indices)
+    if count > MAX_CANDIDATES:
+        raise InvalidPriorError(f'{count} candidates, at most {MAX_CANDIDATES} allowed')
+    if len(msg.candidate_poses) != count * _DOFS:
+        raise InvalidPriorError(f'candidate_poses holds {len(msg.candidate_poses)} values for '
+                                f'{count} candidates, expected {count * _DOFS}')
+    if len(msg.constraint_tiny_xy) != 2 * len(msg.constraint_patch_ids):
+        raise InvalidPriorError(f'constraint_tiny_xy holds {len(msg.constraint_tiny_xy)} '
+                                f'values for {len(msg.constraint_patch_ids)} constraints')
+    candidates = candidate_arrays_from_msg(msg)
+    c = constraint_arrays_from_msg(msg)
     return validate_prior(
-        blended_pose=np.asarray(msg.blended_pose, dtype=float),
-        candidate_poses=poses,
-        candidate_weights=np.array([k.weight for k in candidates], dtype=float),
-        candidate_distances=np.array([k.image_distance for k in candidates], dtype=float),
-        constraints=(np.array([k.patch_id for k in c], dtype=np.int64),
-                     np.array([k.color_label for k in c], dtype=np.int64),
-                     np.array([k.vertex_index for k in c], dtype=np.int64),
-                     np.array([[k.tiny_x, k.tiny_y] for k in c], dtype=float).reshape(-1, 2),
-                     np.array([k.pixel_count for k in c], dtype=np.int64)),
+        blended_pose=np.frombuffer(msg.blended_pose, np.float64),
+        candidate_poses=candidates['poses'], candidate_weights=candidates['weights'],
+        candidate_distances=candidates['distances'],
+        constraints=(c['patch_ids'], c['colors'], c['vertices'], c['tiny_xy'],
+                     c['pixel_counts']),
         num_vertices=num_vertices,
-        finger_std=np.asarray(msg.finger_std, dtype=float))
+        finger_std=np.frombuffer(msg.finger_std, np.float64))

@@ -19,6 +19,7 @@ from colorglove_ros.ros.conversions import (
     camera_from_camera_info_msg,
     camera_observation_from_msg,
     camera_to_camera_info_msg,
+    candidate_arrays_from_msg,
     candidates_to_msg,
     crop_from_observation_msg,
     observation_to_msg,
@@ -81,23 +82,69 @@ def test_observation_round_trips() -> None:
     assert camera_observation_from_msg(observation_to_msg(observation, HEADER)).cut_by_border
 
 
-def test_candidates_round_trip_into_the_ik_prior() -> None:
+def _lookup_result(k: int = 3, m: int = 5) -> LookupResult:
     rng = np.random.default_rng(2)
-    k, m = 3, 5
     constraints = ProjectionConstraints(
         patch_ids=np.arange(m), colors=np.arange(1, m + 1), vertices=np.arange(m) * 7,
-        tiny_xy=rng.uniform(0, 39, (m, 2)), pixel_counts=np.arange(m) + 3.0)
-    result = LookupResult(indices=np.arange(k), distances=np.linspace(1, 2, k),
-                          weights=np.full(k, 1 / k), poses=np.stack([random_pose(i)
-                                                                     for i in range(k)]),
-                          blended=random_pose(9), constraints=constraints, num_candidates=300,
-                          finger_std=np.full(20, 0.05))
+        tiny_xy=rng.uniform(0, 39, (m, 2)).astype(np.float32),
+        pixel_counts=np.arange(m) + 3.0)
+    return LookupResult(indices=np.arange(k) * 1000 + 7, distances=np.linspace(1, 2, k),
+                        weights=np.full(k, 1 / k),
+                        poses=np.stack([random_pose(i) for i in range(k)]),
+                        blended=random_pose(9), constraints=constraints, num_candidates=300,
+                        finger_std=np.full(20, 0.05))
+
+
+def test_candidates_round_trip_into_the_ik_prior() -> None:
+    result = _lookup_result()
+    constraints = result.constraints
     observation = observation_to_msg(Observation(True, '', 640, 480), HEADER)
-    prior = pose_prior_from_candidates_msg(candidates_to_msg(observation, result))
-    np.testing.assert_allclose(prior.q_blend, result.blended)
-    np.testing.assert_allclose(prior.finger_std, result.finger_std)
+    msg = serialized_round_trip(candidates_to_msg(observation, result))
+    prior = pose_prior_from_candidates_msg(msg)
+    np.testing.assert_array_equal(prior.q_blend, result.blended)
+    np.testing.assert_array_equal(prior.finger_std, result.finger_std)
+    assert prior.image_distance == result.distances[0]
     for name in ('patch_ids', 'colors', 'vertices', 'tiny_xy', 'pixel_counts'):
-        np.testing.assert_allclose(getattr(prior.constraints, name), getattr(constraints, name))
+        np.testing.assert_array_equal(getattr(prior.constraints, name),
+                                      getattr(constraints, name))
+    # the candidates travel as parallel arrays, read back with no loss
+    back = candidate_arrays_from_msg(msg)
+    for name in ('indices', 'poses', 'distances', 'weights'):
+        np.testing.assert_array_equal(back[name], getattr(result, name))
+    assert back['poses'].shape == (3, NUM_DOFS)
+
+
+def serialized_round_trip(msg):
+    """``msg`` through CDR serialisation, as a subscriber receives it."""
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    return deserialize_message(serialize_message(msg), type(msg))
+
+
+@pytest.mark.parametrize('spoil, message', [
+    (lambda m: setattr(m, 'candidate_poses', m.candidate_poses[:-1]), 'candidate_poses'),
+    (lambda m: setattr(m, 'candidate_weights', m.candidate_weights[:-1]), 'weight'),
+    (lambda m: setattr(m, 'constraint_tiny_xy', m.constraint_tiny_xy[:-1]),
+     'constraint_tiny_xy'),
+    (lambda m: setattr(m, 'constraint_vertices', m.constraint_vertices[:-1]), 'vertex_index'),
+    (lambda m: m.candidate_poses.__setitem__(30, float('nan')), 'candidate poses'),
+    (lambda m: m.candidate_poses.__setitem__(26 + 3, 1e4), r'candidate poses\[1\].*rotation'),
+])
+def test_check_candidates_msg_refuses_arrays_out_of_step(spoil, message) -> None:
+    """The parallel arrays must hold one value (or pose, or (x, y)) per candidate or
+    constraint; a spoiled array is refused naming it."""
+    from colorglove_ros.core.validation import InvalidInputError
+    from colorglove_ros.ros.message_checks import check_candidates_msg
+
+    observation = observation_to_msg(Observation(
+        True, '', 640, 480, np.ones((40, 40), np.uint8), CropTransform(4.5, 220.0, 120.0),
+        [Blob(3, 310.5, 200.25, 90)], glove_pixel_count=90), HEADER)
+    good = candidates_to_msg(observation, _lookup_result())
+    np.testing.assert_array_equal(check_candidates_msg(good, 100), good.blended_pose)
+    bad = serialized_round_trip(good)
+    spoil(bad)
+    with pytest.raises(InvalidInputError, match=message):
+        check_candidates_msg(bad, 100)
 
 
 def test_importing_the_adapters_is_light() -> None:

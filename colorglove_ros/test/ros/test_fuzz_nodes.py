@@ -5,6 +5,7 @@ may carry the stamp of an invalid input, and valid frames are tracked again with
 from __future__ import annotations
 
 import copy
+from array import array
 from collections.abc import Callable
 
 import numpy as np
@@ -130,21 +131,23 @@ def bad_candidates(rng: np.random.Generator, good: HandPoseCandidates, count: in
                    ) -> list[HandPoseCandidates]:
     """The good candidates spoiled in one field each (as reported in issue 16)."""
     def spoil(msg: HandPoseCandidates) -> None:
-        kind = int(rng.integers(0, 16))
+        kind = int(rng.integers(0, 18))
         if kind == 0:
             msg.blended_pose[int(rng.integers(26))] = float(rng.choice([np.nan, np.inf]))
         elif kind == 1:
             msg.blended_pose = list(msg.blended_pose)[:int(rng.integers(0, 26))]
         elif kind == 2:
-            msg.constraints[0].patch_id = int(rng.integers(20, 65535))
+            msg.constraint_patch_ids[0] = int(rng.integers(20, 65535))
         elif kind == 3:
-            msg.constraints[0].vertex_index = int(rng.integers(10_000, 2 ** 32))
+            msg.constraint_vertices[0] = int(rng.integers(10_000, 2 ** 32))
         elif kind == 4:
-            msg.constraints[0].tiny_x = float(rng.choice([np.nan, np.inf, 1e30]))
+            msg.constraint_tiny_xy[0] = float(rng.choice([np.nan, np.inf, 1e30]))
         elif kind == 5:
-            msg.candidates = []
+            msg.candidate_indices, msg.candidate_poses = [], []
+            msg.candidate_distances, msg.candidate_weights = [], []
         elif kind == 6:
-            msg.constraints = []
+            for field in ('patch_ids', 'colors', 'vertices', 'tiny_xy', 'pixel_counts'):
+                setattr(msg, f'constraint_{field}', [])
         elif kind == 7:
             msg.observation.crop_scale = float('nan')
         elif kind == 8:      # part of the hand just in front of the camera plane
@@ -154,13 +157,17 @@ def bad_candidates(rng: np.random.Generator, good: HandPoseCandidates, count: in
         elif kind == 10:
             msg.finger_std = [float(v) for v in rng.normal(0, 1, int(rng.integers(1, 30)))]
         elif kind == 11:
-            msg.candidates[0].pose = [float('nan')] * 26
+            msg.candidate_poses[:26] = array('d', [float('nan')] * 26)
         elif kind == 12:
-            msg.candidates[0].weight = float('nan')
+            msg.candidate_weights[0] = float('nan')
         elif kind == 13:
             msg.observation.hand_found = False
         elif kind == 14:
-            msg.constraints[0].color_label = int(rng.choice([0, 11, 255]))
+            msg.constraint_colors[0] = int(rng.choice([0, 11, 255]))
+        elif kind == 15:     # arrays of one candidate or constraint out of step
+            msg.candidate_poses = msg.candidate_poses[:-int(rng.integers(1, 26))]
+        elif kind == 16:
+            msg.constraint_tiny_xy = msg.constraint_tiny_xy[:-1]
         else:
             msg.blended_pose[2] = float(rng.uniform(20.0, 1e6))
 

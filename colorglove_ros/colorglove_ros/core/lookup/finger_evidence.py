@@ -98,26 +98,30 @@ def finger_scores(patch_xy: np.ndarray, patch_pixels: np.ndarray, patch_digit: n
     if digit.shape != (k, p) or np.shape(patch_pixels) != (k, p) or np.shape(patch_color) != (p,):
         raise FingerEvidenceError('entry patch arrays disagree in shape')
     residual = np.full((k, p), cap)
-    bcol = np.asarray(blob_color)
+    bcol = np.asarray(blob_color).reshape(-1)
     if len(bcol):
         bxy = np.asarray(blob_xy, np.float64).reshape(-1, 2)
+        # each patch against its same-colour blobs only (in blob order, so the first of equal
+        # distances wins), padded with masked slots to the most blobs any patch colour has
         same = np.asarray(patch_color)[:, None] == bcol[None, :]             # (P, B)
-        dist = np.linalg.norm(xy[:, :, None, :] - bxy[None, None], axis=3)   # (K, P, B)
-        dist = np.where(same[None], dist, np.inf)
+        slots = max(1, int(same.sum(axis=1).max()))
+        blob = np.argsort(~same, axis=1, kind='stable')[:, :slots]          # (P, S)
+        dx = xy[:, :, 0, None] - bxy[blob, 0]                               # (K, P, S)
+        dy = xy[:, :, 1, None] - bxy[blob, 1]
+        dist = np.where(np.take_along_axis(same, blob, axis=1)[None],
+                        np.sqrt(dx * dx + dy * dy), np.inf)
         nearest = np.argmin(dist, axis=2)                                   # (K, P)
         d = np.take_along_axis(dist, nearest[..., None], axis=2)[..., 0]
-        area = np.asarray(blob_pixels, np.float64)[nearest]
+        area = np.asarray(blob_pixels, np.float64).reshape(-1)[blob[np.arange(p), nearest]]
         area_term = np.abs(np.log((np.asarray(patch_pixels, np.float64) + 1.0) / (area + 1.0)))
         with np.errstate(invalid='ignore'):
             residual = np.minimum(cap, d + config.area_weight * area_term)
         residual[~np.isfinite(residual)] = cap
-    scores = np.full((k, NUM_DIGITS), cap)
-    for g in range(NUM_DIGITS):
-        mask = digit == g
-        count = mask.sum(axis=1)
-        total = np.where(mask, residual, 0.0).sum(axis=1)
-        scores[:, g] = np.where(count > 0, total / np.maximum(count, 1), cap)
-    return scores
+    # per digit: the mean residual of its patches (cap without any), every digit at once
+    member = digit[:, None, :] == np.arange(NUM_DIGITS)[None, :, None]     # (K, 5, P)
+    count = member.sum(axis=2)
+    total = np.where(member, residual[:, None, :], 0.0).sum(axis=2)
+    return np.where(count > 0, total / np.maximum(count, 1), cap)
 
 
 def weighted_fingers(poses: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -70,6 +70,54 @@ def test_area_mismatch_and_missing_colour_cost() -> None:
     np.testing.assert_allclose(empty, CONFIG.cap_tiny_px)
 
 
+def _reference_scores(xy, pixels, digit, color, bcol, bxy, bpix, config) -> np.ndarray:
+    """finger_scores written out patch by patch (each patch against every same-colour blob,
+    the first of equal distances winning; its digit's mean residual)."""
+    cap = config.cap_tiny_px
+    scores = np.full((len(xy), 5), cap)
+    for k in range(len(xy)):
+        residual = np.full(len(color), cap)
+        for p in range(len(color)):
+            best = None
+            for b in range(len(bcol)):
+                d = np.hypot(*(xy[k, p] - bxy[b]))
+                if bcol[b] == color[p] and (best is None or d < best[0]):
+                    best = (d, b)
+            if best is not None and np.isfinite(best[0]):
+                term = abs(np.log((pixels[k, p] + 1.0) / (bpix[best[1]] + 1.0)))
+                residual[p] = min(cap, best[0] + config.area_weight * term)
+        for g in range(5):
+            if (digit[k] == g).any():
+                scores[k, g] = residual[digit[k] == g].mean()
+    return scores
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_scores_match_a_patch_by_patch_reference(seed: int) -> None:
+    """Against every blob of the patch's colour only, ties and hidden (NaN) patches
+    included."""
+    rng = np.random.default_rng(seed)
+    k, p, b = 7, 20, int(rng.integers(1, 25))
+    xy = np.round(rng.uniform(0, 40, (k, p, 2)))           # integer grid: equal distances
+    xy[rng.random((k, p)) < 0.1] = np.nan
+    args = (xy, rng.uniform(0, 50, (k, p)), rng.integers(-1, 6, (k, p)),
+            rng.integers(1, 11, p), rng.integers(1, 11, b), np.round(rng.uniform(0, 40, (b, 2))),
+            rng.uniform(1, 80, b))
+    np.testing.assert_allclose(finger_scores(*args, CONFIG),
+                               _reference_scores(*args, CONFIG), rtol=1e-12, atol=1e-12)
+
+
+def test_scores_take_the_first_of_equally_near_blobs() -> None:
+    """Two blobs of the patch's colour at the same distance: the first one's area counts."""
+    xy, pixels, digit = np.array([[[10.0, 10.0]]]), np.array([[10.0]]), np.array([[1]])
+    bxy = np.array([[13.0, 10.0], [0.0, 0.0], [7.0, 10.0]])       # blobs 0 and 2: 3 px away
+    config = FingerEvidenceConfig(area_weight=0.5)
+    for areas in ([10.0, 5.0, 30.0], [30.0, 5.0, 10.0]):
+        s = finger_scores(xy, pixels, digit, np.array([2]), np.array([2, 1, 2]), bxy,
+                          np.array(areas), config)
+        assert s[0, 1] == pytest.approx(3.0 + 0.5 * abs(np.log(11.0 / (areas[0] + 1.0))))
+
+
 def test_blend_takes_each_finger_from_the_entry_that_explains_it() -> None:
     poses = np.zeros((2, 26))
     poses[0, 6:10], poses[1, 6:10] = 0.2, 1.0         # thumb

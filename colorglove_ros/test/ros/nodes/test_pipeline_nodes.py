@@ -184,18 +184,24 @@ def test_lookup_node_candidates(node_assets: NodeAssets, good_observation: HandO
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (200, 500)
     assert msg.header.frame_id == 'camera_optical_frame'
     assert list(msg.dof_names) == list(DOF_NAMES) and len(msg.dof_names) == 26
-    assert len(msg.candidates) == 10
-    distances = [c.image_distance for c in msg.candidates]
-    assert distances == sorted(distances)
-    assert sum(c.weight for c in msg.candidates) == pytest.approx(1.0, abs=1e-9)
-    assert all(len(c.pose) == 26 for c in msg.candidates)
-    assert [c.database_index for c in msg.candidates] == [int(i) for i in expected.indices]
+    assert len(msg.candidate_indices) == 10
+    distances = list(msg.candidate_distances)
+    assert len(distances) == 10 and distances == sorted(distances)
+    assert sum(msg.candidate_weights) == pytest.approx(1.0, abs=1e-9)
+    assert len(msg.candidate_weights) == 10 and len(msg.candidate_poses) == 10 * 26
+    np.testing.assert_allclose(np.reshape(msg.candidate_poses, (10, 26)), expected.poses,
+                               atol=1e-12)
+    assert list(msg.candidate_indices) == [int(i) for i in expected.indices]
     np.testing.assert_allclose(msg.blended_pose, expected.blended, atol=1e-9)
     assert len(msg.blended_pose) == 26
     np.testing.assert_allclose(msg.finger_std, expected.finger_std, atol=1e-12)
     assert len(msg.finger_std) == 20
-    assert len(msg.constraints) > 0
-    assert all(1 <= c.color_label <= 10 and 0 <= c.patch_id < 20 for c in msg.constraints)
+    count = len(msg.constraint_patch_ids)
+    assert count > 0 and len(msg.constraint_tiny_xy) == 2 * count
+    assert all(len(getattr(msg, f'constraint_{name}')) == count
+               for name in ('colors', 'vertices', 'pixel_counts'))
+    assert all(1 <= c <= 10 for c in msg.constraint_colors)
+    assert all(0 <= p < 20 for p in msg.constraint_patch_ids)
     assert list(msg.observation.tiny_labels) == list(good_observation.tiny_labels)
     assert msg.observation.crop_scale == good_observation.crop_scale
     assert len(msg.observation.blobs) == len(good_observation.blobs)
@@ -214,7 +220,7 @@ def test_lookup_node_passes_no_hand_through(node_assets: NodeAssets) -> None:
         bad = h.exchange(pub, bad_size, out)
     assert not msg.hand_found and msg.status == 'out_of_frame'
     assert msg.header.stamp.sec == 300 and msg.header.frame_id == 'cam'
-    assert len(msg.candidates) == 0 and len(msg.blended_pose) == 0
+    assert len(msg.candidate_indices) == 0 and len(msg.blended_pose) == 0
     assert msg.observation.status == 'out_of_frame'
     assert not bad.hand_found and 'tiny_labels must have shape (1600)' in bad.status, bad.status
 
@@ -228,7 +234,7 @@ def test_lookup_node_rejects_non_finite_crop(node_assets: NodeAssets,
         pub = h.publisher(HandObservation, 'hand/observation')
         msg = h.exchange(pub, bad, out)
     assert not msg.hand_found and msg.status.startswith('lookup:'), msg.status
-    assert len(msg.blended_pose) == 0 and len(msg.candidates) == 0
+    assert len(msg.blended_pose) == 0 and len(msg.candidate_indices) == 0
 
 
 # ------------------------------------------------------------------------------ ik_node
@@ -355,7 +361,7 @@ def _with_clutter_blobs(good: HandPoseCandidates, nearest_distance: float
     along the image's top edge (clutter no fitted hand explains)."""
     msg = copy.deepcopy(good)
     msg.header = header(200, 400_000_000, 'camera_optical_frame')
-    msg.candidates[0].image_distance = nearest_distance
+    msg.candidate_distances[0] = nearest_distance
     seen = msg.observation
     count = 3 * len(seen.blobs)
     seen.blobs = list(seen.blobs) + [
@@ -386,8 +392,7 @@ def _short_pose(msg: HandPoseCandidates) -> None:
 
 
 def _vertex_out_of_range(msg: HandPoseCandidates) -> None:
-    for constraint in msg.constraints:
-        constraint.vertex_index = 1_000_000
+    msg.constraint_vertices = [1_000_000] * len(msg.constraint_vertices)
 
 
 def _nan_pose(msg: HandPoseCandidates) -> None:
