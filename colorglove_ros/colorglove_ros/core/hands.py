@@ -43,9 +43,11 @@ from colorglove_ros.core.tracking.types import Blobs, CameraObservation
 
 __all__ = ['MAX_HANDS', 'HandsSettings', 'GloveRegion', 'HandCandidate', 'HandOutcome',
            'find_glove_regions', 'mask_regions', 'region_window', 'shift_observation',
-           'assign_hands', 'TwoHandPipeline']
+           'assign_hands', 'slot_lookups', 'TwoHandPipeline', 'DEFAULT_THREADS']
 
 MAX_HANDS = 2
+#: Threads of the two-hand layer by default (:func:`slot_lookups`): one per region slot.
+DEFAULT_THREADS = 2
 
 
 @dataclass(frozen=True)
@@ -267,6 +269,20 @@ def assign_hands(candidates: Sequence[HandCandidate],
         options = [{'right': 0, 'left': 1}, {'right': 1, 'left': 0}]
     scored = sorted(((score(o), o) for o in options), key=lambda t: -t[0])
     return scored[0][1], scored[0][0] - scored[1][0]
+
+
+def slot_lookups(database: Any, threads: int = DEFAULT_THREADS) -> Any:
+    """The pose lookup(s) of a :class:`TwoHandPipeline` on ``database``: with ``threads`` 2,
+    one single-threaded lookup per region slot (the pipeline then runs the two slots on two
+    threads); with 1, one lookup shared by the slots, which then run one after the other in
+    the caller's thread (the lookup keeps its own default threading)."""
+    from colorglove_ros.core.lookup.search import PoseLookup
+
+    if threads not in (1, 2):
+        raise ValueError(f'threads must be 1 or 2, got {threads}')
+    if threads == 1:
+        return PoseLookup(database)
+    return [PoseLookup(database, threads=1) for _ in range(MAX_HANDS)]
 
 
 class TwoHandPipeline:
