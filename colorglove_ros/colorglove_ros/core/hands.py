@@ -12,7 +12,13 @@ hands are tracked, a region that plainly continues one hand is looked up as that
 with both lookups again every few frames (``HandsSettings.recheck_frames``). Each hand
 has its own tracker (a left hand tracked as the mirrored right hand, its pose mirrored back),
 so losing one hand never resets the other. A frame in which a region's hand cannot be told
-with enough evidence gives that hand no pose (``NoHand``). No rclpy import.
+with enough evidence gives that hand no pose (``NoHand``). With one pose lookup per region slot
+(:func:`slot_lookups`) the two slots, and then the two hands, run on two threads.
+
+Limitations: two gloves within ``join_px`` coarse pixels of each other (touching) are one
+region, whose lookups match neither hand well: neither hand gets a pose until they part. A glove
+partly hidden by the other hand's forearm is looked up as what is left of it: lost, or tracked
+less well than alone. No rclpy import.
 """
 from __future__ import annotations
 
