@@ -12,12 +12,19 @@ hands are tracked, a region that plainly continues one hand is looked up as that
 with both lookups again every few frames (``HandsSettings.recheck_frames``). Each hand
 has its own tracker (a left hand tracked as the mirrored right hand, its pose mirrored back),
 so losing one hand never resets the other. A frame in which a region's hand cannot be told
-with enough evidence gives that hand no pose (``NoHand``). No rclpy import.
+with enough evidence gives that hand no pose (``NoHand``). With one pose lookup per region slot
+(:func:`slot_lookups`) the two slots, and then the two hands, run on two threads.
+
+Limitations: two gloves within ``join_px`` coarse pixels of each other (touching) are one
+region, whose lookups match neither hand well: neither hand gets a pose until they part. A glove
+partly hidden by the other hand's forearm is looked up as what is left of it: lost, or tracked
+less well than alone. No rclpy import.
 """
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -42,9 +49,11 @@ from colorglove_ros.core.tracking.types import Blobs, CameraObservation
 
 __all__ = ['MAX_HANDS', 'HandsSettings', 'GloveRegion', 'HandCandidate', 'HandOutcome',
            'find_glove_regions', 'mask_regions', 'region_window', 'shift_observation',
-           'assign_hands', 'TwoHandPipeline']
+           'assign_hands', 'slot_lookups', 'TwoHandPipeline', 'DEFAULT_THREADS']
 
 MAX_HANDS = 2
+#: Threads of the two-hand layer by default (:func:`slot_lookups`): one per region slot.
+DEFAULT_THREADS = 2
 
 
 @dataclass(frozen=True)
@@ -183,11 +192,14 @@ def mask_regions(image_rgb: np.ndarray, regions: Sequence[GloveRegion],
     ox, oy = origin
     for r in regions:
         if r.cells is not None:
-            ys, xs = (oy + np.arange(h)) // r.cell_px, (ox + np.arange(w)) // r.cell_px
-            inside = np.zeros((h, w), bool)
-            ry, rx = ys < r.cells.shape[0], xs < r.cells.shape[1]
-            inside[np.ix_(ry, rx)] = r.cells[np.ix_(ys[ry], xs[rx])]
-            out[inside] = 128
+            c = r.cell_px
+            cy0, cx0 = oy // c, ox // c        # the cells the window overlaps
+            block = r.cells[cy0:(oy + h - 1) // c + 1, cx0:(ox + w - 1) // c + 1]
+            if not block.any():
+                continue
+            up = np.repeat(np.repeat(block, c, 0), c, 1)[oy - cy0 * c:, ox - cx0 * c:]
+            up = up[:h, :w]
+            out[:up.shape[0], :up.shape[1]][up] = 128
             continue
         x0, y0, x1, y1 = r.box
         mx, my = int(margin * (x1 - x0)), int(margin * (y1 - y0))
@@ -265,19 +277,42 @@ def assign_hands(candidates: Sequence[HandCandidate],
     return scored[0][1], scored[0][0] - scored[1][0]
 
 
+def slot_lookups(database: Any, threads: int = DEFAULT_THREADS) -> Any:
+    """The pose lookup(s) of a :class:`TwoHandPipeline` on ``database``: with ``threads`` 2,
+    one single-threaded lookup per region slot (the pipeline then runs the two slots on two
+    threads); with 1, one lookup shared by the slots, which then run one after the other in
+    the caller's thread (the lookup keeps its own default threading)."""
+    from colorglove_ros.core.lookup.search import PoseLookup
+
+    if threads not in (1, 2):
+        raise ValueError(f'threads must be 1 or 2, got {threads}')
+    if threads == 1:
+        return PoseLookup(database)
+    return [PoseLookup(database, threads=1) for _ in range(MAX_HANDS)]
+
+
 class TwoHandPipeline:
     """Segment -> look up -> track for up to two hands (a right and a left glove) in one
     camera's frames. ``segmenter`` is copied once per region slot (``fresh``, no learnt
     background: each sees frames with the other hand painted out); ``trackers`` maps 'right'
     and 'left' to a :class:`HandTracker` of the right-hand model each (the left hand is
-    tracked mirrored)."""
+    tracked mirrored).
+
+    ``lookup`` is one pose lookup, or one per region slot (``MAX_HANDS`` of the same database;
+    a lookup is not thread-safe): with one per slot the two regions are segmented and looked
+    up, and then the two hands tracked, on two threads (the caller's and one worker; OpenCV
+    and most of numpy's array work release the GIL). Results do not depend on it."""
 
     def __init__(self, segmenter: Any, lookup: Any, camera: Any, trackers: dict[str, Any], *,
                  limits: StageLimits = NODE_LIMITS, settings: HandsSettings = HandsSettings(),
                  finger_evidence: bool = True) -> None:
         self.segmenter = segmenter
         self.segmenters = [segmenter.fresh(background_frames=0) for _ in range(MAX_HANDS)]
-        self.lookup = lookup
+        lookups = list(lookup) if isinstance(lookup, (list, tuple)) else [lookup]
+        if len(lookups) not in (1, MAX_HANDS):
+            raise ValueError(f'need 1 or {MAX_HANDS} lookups, got {len(lookups)}')
+        self.lookups = lookups
+        self._pool = ThreadPoolExecutor(1, 'two-hands') if len(lookups) > 1 else None
         self.camera = camera
         self.trackers = trackers
         self.limits = limits
@@ -287,12 +322,35 @@ class TwoHandPipeline:
         self._missing = {hand: 0 for hand in HANDS}
         self._settled_frames = 0
 
+    @property
+    def parallel(self) -> bool:
+        """Whether the two slots run on two threads (one lookup per slot)."""
+        return self._pool is not None
+
+    def close(self) -> None:
+        """Stop the worker thread (if any); the pipeline then runs in the caller only."""
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
     def reset(self) -> None:
         """Forget both hands."""
         for tracker in self.trackers.values():
             tracker.reset()
         self.previous = {hand: None for hand in HANDS}
         self._settled_frames = 0
+
+    def _both(self, job: Any, args: Sequence[tuple[Any, ...]]) -> list[Any]:
+        """``[job(*a) for a in args]``, the second on the worker thread when there is one (the
+        job of item k uses slot k's lookup and segmenter only)."""
+        if self._pool is None or len(args) < 2:
+            return [job(*a) for a in args]
+        pending = self._pool.submit(job, *args[1])
+        try:
+            first = job(*args[0])
+        finally:
+            second = pending.result()
+        return [first, second]
 
     def _settled_hand(self, center: np.ndarray, half_size: float) -> str | None:
         """The hand a region at ``center`` continues without doubt (both hands tracked in the
@@ -310,38 +368,60 @@ class TwoHandPipeline:
             return own
         return None
 
-    def _look_up(self, candidate: HandCandidate, hand: str) -> LookupResult | NoHand:
-        """``candidate``'s query looked up as ``hand`` (a left hand's mirrored), kept."""
+    def _look_up(self, candidate: HandCandidate, hand: str, slot: int
+                 ) -> LookupResult | NoHand:
+        """``candidate``'s query looked up as ``hand`` (a left hand's mirrored) with slot
+        ``slot``'s lookup, kept."""
         if hand not in candidate.lookups:
             obs, tiny = candidate.observation, candidate.tiny
             if hand != 'right':
                 cx = self.camera.cx
                 obs, tiny = mirror_camera_observation(obs, cx), mirror_tiny_crop(tiny, cx)
-            candidate.lookups[hand] = look_up(self.lookup, tiny, self.camera,
+            lookup = self.lookups[slot % len(self.lookups)]
+            candidate.lookups[hand] = look_up(lookup, tiny, self.camera,
                                               obs.blobs if self.finger_evidence else None,
                                               self.limits)
         return candidate.lookups[hand]
 
-    def candidates(self, image_rgb: np.ndarray) -> list[HandCandidate]:
-        """Every glove region's observation and its lookups as a right and as a left hand."""
+    def _candidate(self, image_rgb: np.ndarray, regions: Sequence[GloveRegion], k: int
+                   ) -> HandCandidate | None:
+        """Region ``k`` segmented in its window with the other regions painted out, and
+        looked up (both ways, or as the hand it plainly continues); None without a hand."""
         from colorglove_ros.core.pipeline import observe_image
 
+        region = regions[k]
+        x0, y0, x1, y1 = region_window(region, image_rgb.shape, self.settings.window_margin)
+        others = [r for j, r in enumerate(regions) if j != k]
+        window = mask_regions(image_rgb[y0:y1, x0:x1], others, self.settings.mask_margin,
+                              (x0, y0))
+        seen, tiny = shift_observation(*observe_image(self.segmenters[k], window, True), x0, y0)
+        if tiny is None or not seen.hand_found:
+            return None
+        candidate = HandCandidate(region, seen, tiny)
+        settled = self._settled_hand(candidate.center, candidate.half_size)
+        for hand in HANDS if settled is None else (settled,):
+            self._look_up(candidate, hand, k)
+        return candidate
+
+    def candidates(self, image_rgb: np.ndarray) -> list[HandCandidate]:
+        """Every glove region's observation and its lookups as a right and as a left hand."""
         regions = find_glove_regions(self.segmenter, image_rgb, self.settings)
-        out = []
-        for k, region in enumerate(regions):
-            x0, y0, x1, y1 = region_window(region, image_rgb.shape, self.settings.window_margin)
-            others = [r for j, r in enumerate(regions) if j != k]
-            window = mask_regions(image_rgb[y0:y1, x0:x1], others, self.settings.mask_margin,
-                                  (x0, y0))
-            seen, tiny = shift_observation(*observe_image(self.segmenters[k], window, True),
-                                           x0, y0)
-            candidate = HandCandidate(region, seen, tiny)
-            if tiny is not None and seen.hand_found:
-                settled = self._settled_hand(candidate.center, candidate.half_size)
-                for hand in HANDS if settled is None else (settled,):
-                    self._look_up(candidate, hand)
-                out.append(candidate)
-        return out
+        found = self._both(self._candidate, [(image_rgb, regions, k)
+                                             for k in range(len(regions))])
+        return [c for c in found if c is not None]
+
+    def _track(self, hand: str, candidate: HandCandidate, stamp: float) -> HandOutcome:
+        """``hand``'s outcome from its candidate (its lookup as that hand, then its tracker)."""
+        found = self._look_up(candidate, hand, HANDS.index(hand))
+        obs = candidate.observation if hand == 'right' else mirror_camera_observation(
+            candidate.observation, self.camera.cx)
+        prior = None if isinstance(found, NoHand) else found
+        outcome = track(self.trackers[hand], prior, [obs], stamp, self.limits,
+                        upstream_reason=found.reason if isinstance(found, NoHand) else '')
+        evidence = candidate.distance('left') - candidate.distance('right') \
+            if len(candidate.lookups) == len(HANDS) else math.nan
+        q = from_right_frame(outcome.result.q, hand) if isinstance(outcome, Tracked) else None
+        return HandOutcome(hand, outcome, candidate.region, evidence, q)
 
     def process(self, image_rgb: np.ndarray, stamp: float) -> dict[str, HandOutcome]:
         """One frame: each hand's outcome (its own tracker; a hand without a region, or
@@ -351,34 +431,26 @@ class TwoHandPipeline:
         assignment, margin = assign_hands(candidates, self.previous, self.settings)
         decided = margin >= self.settings.min_margin
         out = {}
+        given = []
         for hand in HANDS:
-            tracker = self.trackers[hand]
             i = assignment.get(hand)
             if i is None or not decided:
                 reason = ('no glove region' if i is None else
                           f'handedness not decided (score margin {margin:.2f} < '
                           f'{self.settings.min_margin:g})')
-                tracker.reset()
+                self.trackers[hand].reset()
                 self._forget(hand)
                 out[hand] = HandOutcome(hand, NoHand(reason))
-                continue
-            c = candidates[i]
-            found = self._look_up(c, hand)
-            obs = c.observation if hand == 'right' else mirror_camera_observation(
-                c.observation, self.camera.cx)
-            prior = None if isinstance(found, NoHand) else found
-            outcome = track(tracker, prior, [obs], stamp, self.limits,
-                            upstream_reason=found.reason if isinstance(found, NoHand) else '')
-            evidence = c.distance('left') - c.distance('right') \
-                if len(c.lookups) == len(HANDS) else math.nan
-            q = from_right_frame(outcome.result.q, hand) if isinstance(outcome, Tracked) \
-                else None
-            self.previous[hand] = c.center
+            else:
+                given.append((hand, candidates[i], stamp))
+        for hand, candidate, _ in given:
+            self.previous[hand] = candidate.center
             self._missing[hand] = 0
-            out[hand] = HandOutcome(hand, outcome, c.region, evidence, q)
-        both = all(isinstance(o.outcome, Tracked) for o in out.values())
+        for outcome in self._both(self._track, given):
+            out[outcome.hand] = outcome
+        both = all(isinstance(out[h].outcome, Tracked) for h in HANDS)
         self._settled_frames = self._settled_frames + 1 if both else 0
-        return out
+        return {h: out[h] for h in HANDS}
 
     def _forget(self, hand: str) -> None:
         """Keep a lost hand's last position for ``max_gap_frames`` frames (continuity through

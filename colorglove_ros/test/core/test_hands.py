@@ -1,26 +1,32 @@
-"""The two-hand layer (core/hands.py): glove regions of a frame with two rendered hands, and
-the handedness assignment from the lookup evidence and continuity."""
+"""The two-hand layer (core/hands.py): glove regions of a frame with two rendered hands, the
+handedness assignment from the lookup evidence and continuity, the painting of the other
+regions, and the two-thread run (the same outcomes as one thread)."""
 from __future__ import annotations
 
+import threading
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from colorglove_ros.core.hand.handedness import mirror_pose
+from colorglove_ros.core.hand.handedness import HANDS, mirror_pose
 from colorglove_ros.core.hands import (
+    MAX_HANDS,
     GloveRegion,
     HandCandidate,
+    TwoHandPipeline,
     assign_hands,
     find_glove_regions,
     mask_regions,
     region_window,
     shift_observation,
+    slot_lookups,
 )
-from colorglove_ros.core.pipeline import observe_image
+from colorglove_ros.core.pipeline import UNGATED, Tracked, observe_image
 from colorglove_ros.core.segmentation.crop import CropTransform
 from colorglove_ros.core.synthetic.conditions import sample_conditions
 from colorglove_ros.core.synthetic.frames import Synthesizer, default_camera, sample_pose
+from colorglove_ros.core.synthetic.sequences import two_hand_sequences
 from colorglove_ros.core.tracking.types import CameraObservation
 
 
@@ -119,3 +125,85 @@ def test_a_region_with_cells_is_painted_cell_by_cell(origin):
     np.testing.assert_array_equal(out[..., 0] == 128, painted[oy:, ox:])
     boxed = mask_regions(image, [GloveRegion((8, 4, 16, 12), 4)], margin=0.5)
     assert np.count_nonzero(boxed[..., 0] == 128) > np.count_nonzero(painted)
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_painting_cells_marks_exactly_the_pixels_of_glove_cells(seed):
+    rng = np.random.default_rng(seed)
+    cell_px = int(rng.integers(1, 6))
+    cells = rng.random((int(rng.integers(3, 12)), int(rng.integers(3, 12)))) < 0.4
+    region = GloveRegion((0, 0, 1, 1), 1, cells, cell_px)
+    h, w = int(rng.integers(5, 60)), int(rng.integers(5, 60))
+    origin = (int(rng.integers(0, 40)), int(rng.integers(0, 40)))
+    out = mask_regions(np.zeros((h, w, 3), np.uint8), [region], origin=origin)
+    ys, xs = np.mgrid[0:h, 0:w]
+    cy, cx = (ys + origin[1]) // cell_px, (xs + origin[0]) // cell_px
+    inside = (cy < cells.shape[0]) & (cx < cells.shape[1])
+    expected = np.zeros((h, w), bool)
+    expected[inside] = cells[cy[inside], cx[inside]]
+    np.testing.assert_array_equal(out[..., 1] == 128, expected)
+
+
+class _Segmenter:
+    def fresh(self, **_: object) -> _Segmenter:
+        return self
+
+
+def test_the_second_slot_runs_on_the_worker_thread_and_errors_reach_the_caller():
+    pipeline = TwoHandPipeline(_Segmenter(), [object(), object()], default_camera(), {})
+    assert pipeline.parallel
+
+    def job(k: int) -> tuple[int, str]:
+        if k == 9:
+            raise RuntimeError('slot failed')
+        return k, threading.current_thread().name
+    (a, first), (b, second) = pipeline._both(job, [(0,), (1,)])
+    assert (a, b) == (0, 1) and first == threading.current_thread().name != second
+    with pytest.raises(RuntimeError, match='slot failed'):
+        pipeline._both(job, [(0,), (9,)])
+    pipeline.close()
+    assert not pipeline.parallel and pipeline._both(job, [(0,), (1,)])[1][1] == first
+    with pytest.raises(ValueError, match='lookups'):
+        TwoHandPipeline(_Segmenter(), [object()] * 3, default_camera(), {})
+
+
+def test_two_threads_track_as_one_does(node_assets, small_database):
+    from repo_paths import CONFIG_DIR
+
+    from colorglove_ros.core.segmentation.segmenter import load_segmenter
+    from colorglove_ros.core.tracking.config import load_ik_config
+    from colorglove_ros.core.tracking.tracker import HandTracker
+
+    camera = default_camera()
+    synth = Synthesizer()
+    try:
+        poses = two_hand_sequences(1003, 4, camera=camera, model=synth.model)
+        conditions = sample_conditions(np.random.default_rng(2), 'test')
+        frames = [synth.render_hands([(poses[h][i], h) for h in HANDS], camera,
+                                     np.random.default_rng(i), conditions)[0].image_rgb
+                  for i in range(4)]
+    finally:
+        synth.release()
+    segmenter = load_segmenter(str(node_assets.color_config))
+    config = load_ik_config(CONFIG_DIR / 'ik.yaml')
+    runs = {}
+    for threads in (1, 2):
+        lookups = slot_lookups(small_database, threads)
+        assert isinstance(lookups, list) == (threads == 2)
+        pipeline = TwoHandPipeline(segmenter, lookups, camera, {
+            h: HandTracker(synth.model, synth.mesh, [camera], config, glove=synth.glove)
+            for h in HANDS}, limits=UNGATED)     # the small database's matches are far
+        assert pipeline.parallel == (threads == 2) and len(pipeline.lookups) == threads
+        runs[threads] = [pipeline.process(f, i / 30.0) for i, f in enumerate(frames)]
+        pipeline.close()
+    assert any(isinstance(o.outcome, Tracked) for out in runs[1] for o in out.values())
+    for one, two in zip(runs[1], runs[2], strict=True):
+        for h in HANDS:
+            a, b = one[h], two[h]
+            assert getattr(a.outcome, 'reason', None) == getattr(b.outcome, 'reason', None)
+            assert (a.q is None) == (b.q is None) and a.region == b.region
+            if a.q is not None:
+                np.testing.assert_array_equal(a.q, b.q)
+    with pytest.raises(ValueError, match='threads'):
+        slot_lookups(small_database, 3)
+    assert MAX_HANDS == len(HANDS)

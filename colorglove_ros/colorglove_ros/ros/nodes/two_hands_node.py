@@ -22,9 +22,13 @@ from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.hand.frames import hand_root_frame
 from colorglove_ros.core.hand.glove import calibrated_hand
 from colorglove_ros.core.hand.handedness import HANDS
-from colorglove_ros.core.hands import HandOutcome, TwoHandPipeline
+from colorglove_ros.core.hands import (
+    DEFAULT_THREADS,
+    HandOutcome,
+    TwoHandPipeline,
+    slot_lookups,
+)
 from colorglove_ros.core.lookup.database import check_hand_length, load_database
-from colorglove_ros.core.lookup.search import PoseLookup
 from colorglove_ros.core.pipeline import Tracked
 from colorglove_ros.core.segmentation.segmenter import load_segmenter
 from colorglove_ros.core.tracking.config import load_ik_config
@@ -62,6 +66,9 @@ class TwoHandsNode(Node):
         calibration_file = declare_calibration_file(
             self, 'camera calibration YAML (camera 0: the camera; the hand\'s measurements)')
         ik_config = declare(self, 'ik_config', 'config/ik.yaml', 'IK settings and covariances')
+        threads = declare(self, 'threads', DEFAULT_THREADS,
+                          '2: the two glove regions segmented and looked up, and the two hands '
+                          'tracked, on two threads; 1: one after the other', 1, 2)
         with startup_errors('two_hands_node', ValueError):
             calibration = load_calibration(resolve_path(calibration_file))
             database_path = declare_database(self)
@@ -71,9 +78,10 @@ class TwoHandsNode(Node):
             segmenter = load_segmenter(color_config)
             config = load_ik_config(resolve_path(ik_config))
             model, mesh, glove = calibrated_hand(calibration, database.build.glove_seed)
+            lookups = slot_lookups(database, threads)
         self.camera = calibration.primary
         trackers = {h: HandTracker(model, mesh, [self.camera], config, glove) for h in HANDS}
-        self.pipeline = TwoHandPipeline(segmenter, PoseLookup(database), self.camera, trackers)
+        self.pipeline = TwoHandPipeline(segmenter, lookups, self.camera, trackers)
         self.frames = {h: hand_root_frame(f'{h}_') for h in HANDS}
         self.poses = {h: PosePublishers(self, hand_topic(h, 'joint_states'),
                                         hand_topic(h, 'wrist_pose'), f'{h}_') for h in HANDS}
@@ -83,6 +91,11 @@ class TwoHandsNode(Node):
         self.create_subscription(Image, IMAGE_TOPIC, self.on_image, LATEST_IMAGE)
         self.get_logger().info(f'two hands: database {database_path} ({len(database)} entries); '
                                f'images on {self.resolve_topic_name(IMAGE_TOPIC)}')
+
+    def destroy_node(self) -> None:
+        """Stop the pipeline's worker thread, then the node."""
+        self.pipeline.close()
+        super().destroy_node()
 
     def _tf_publisher(self):
         """A /tf publisher for camera -> ``<hand>_palm``, when tf2_msgs is installed."""

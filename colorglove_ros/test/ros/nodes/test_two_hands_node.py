@@ -35,11 +35,13 @@ def _two_hand_frame() -> tuple[np.ndarray, dict[str, np.ndarray]]:
     return frame.image_rgb, poses
 
 
-def test_two_hands_node_publishes_each_hand_under_its_namespace(node_assets) -> None:
+@pytest.mark.parametrize('threads', [2, 1])
+def test_two_hands_node_publishes_each_hand_under_its_namespace(node_assets, threads) -> None:
     rgb, truth = _two_hand_frame()
     with running(lambda ctx: TwoHandsNode(context=ctx, parameter_overrides=params(
             color_calibration_file=str(node_assets.color_config),
-            database_path=str(node_assets.database)))) as h:
+            database_path=str(node_assets.database), threads=threads))) as h:
+        assert h.nodes[0].pipeline.parallel == (threads == 2)
         joints = {hand: h.collect(JointState, hand_topic(hand, 'joint_states')) for hand in HANDS}
         wrists = {hand: h.collect(PoseStamped, hand_topic(hand, 'wrist_pose')) for hand in HANDS}
         status = {hand: h.collect(String, hand_topic(hand, 'tracking_status')) for hand in HANDS}
