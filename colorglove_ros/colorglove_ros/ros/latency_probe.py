@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from colorglove_ros import signal_exit
+
 __all__ = ['ProbeRecord', 'LatencyProbe', 'window_summaries', 'main']
 
 JOINT_STATES_TOPIC = '/hand/joint_states'
@@ -82,10 +84,11 @@ class LatencyProbe:
     def start(self, ready_timeout_s: float = 30.0) -> None:
         """Start the process and wait until it has subscribed."""
         ready = Path(self.folder.name) / 'ready'
-        self.process = subprocess.Popen(
-            [sys.executable, '-m', 'colorglove_ros.ros.latency_probe', '--output',
-             str(self.output), '--ready-file', str(ready), '--first-file',
-             str(self.first_file)], env=self.env)
+        with signal_exit.deferred():       # a started probe is always recorded
+            self.process = subprocess.Popen(
+                [sys.executable, '-m', 'colorglove_ros.ros.latency_probe', '--output',
+                 str(self.output), '--ready-file', str(ready), '--first-file',
+                 str(self.first_file)], env=self.env)
         deadline = time.monotonic() + ready_timeout_s
         while not ready.exists():
             if self.process.poll() is not None or time.monotonic() > deadline:

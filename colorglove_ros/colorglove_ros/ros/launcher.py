@@ -34,6 +34,7 @@ import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from colorglove_ros import signal_exit
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.yaml_io import load_yaml_mapping
 
@@ -169,11 +170,12 @@ class Launcher:
         return self.specs[index].name or self.specs[index].executable
 
     def _start(self, index: int) -> None:
-        process = subprocess.Popen(self.commands[index], stdout=subprocess.PIPE,
-                                   stderr=subprocess.STDOUT, text=True, errors='replace',
-                                   bufsize=1,
-                                   start_new_session=True)
-        self.processes[index] = process
+        with signal_exit.deferred():       # a started process is always recorded
+            process = subprocess.Popen(self.commands[index], stdout=subprocess.PIPE,
+                                       stderr=subprocess.STDOUT, text=True, errors='replace',
+                                       bufsize=1,
+                                       start_new_session=True)
+            self.processes[index] = process
         label = self._label(index)
         threading.Thread(target=_relay, args=(process, label), daemon=True).start()
         print(f'[launch] started {label} (pid {process.pid})', flush=True)

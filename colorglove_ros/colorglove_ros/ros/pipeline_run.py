@@ -317,8 +317,8 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
             duration = monitor.active_duration() or time.monotonic() - started
             record = probe.stop()
         finally:
-            if record is None and probe.process is not None:
-                probe.process.kill()
+            if record is None:
+                probe.close()
             launcher.stop()
             executor.shutdown()
             spinner.join(timeout=5.0)

@@ -2,9 +2,7 @@
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -13,6 +11,7 @@ from typing import Any
 
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.report import write_json
+from colorglove_ros.signal_exit import exit_on_signals
 
 __all__ = ['tool_parser', 'sequence_tool_parser', 'ScriptedSettings', 'ScriptedEvaluation',
            'run_scripted_evaluation', 'add_pipeline_arguments', 'tool_error', 'run_tool']
@@ -206,23 +205,14 @@ def tool_error(name: str, exc: Exception) -> int:
     return 1
 
 
-def _exit_on_signal(signum: int, _frame: Any) -> None:
-    raise SystemExit(128 + signum)
-
-
 def run_tool(name: str, body: Callable[[], int]) -> int:
     """Run a tool's body; any of the package's own errors becomes :func:`tool_error`'s one
     line and exit code 1 instead of a traceback. SIGTERM and SIGHUP end the body like Ctrl-C
     does, through its ``finally`` blocks, so a tool that started nodes stops them instead of
-    leaving them running (they run in sessions of their own and get no signal of the tool's)."""
-    handled = (signal.SIGTERM, signal.SIGHUP)
-    in_main_thread = threading.current_thread() is threading.main_thread()
-    previous = {sig: signal.signal(sig, _exit_on_signal) for sig in handled} \
-        if in_main_thread else {}
-    try:
-        return body()
-    except ColorGloveError as exc:
-        return tool_error(name, exc)
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+    leaving them running (they run in sessions of their own and get no signal of the tool's;
+    see :mod:`colorglove_ros.signal_exit`)."""
+    with exit_on_signals():
+        try:
+            return body()
+        except ColorGloveError as exc:
+            return tool_error(name, exc)

@@ -7,6 +7,7 @@ time) and two cameras at 30 Hz. The four-process graph always; with ``--single-p
 every node in one process (``colorglove_single_process``)."""
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 from pathlib import Path
@@ -28,7 +29,7 @@ from colorglove_ros.ros.pipeline_run import (
     run_pipeline,
     summarize,
 )
-from colorglove_ros.tools._cli import add_pipeline_arguments, tool_error, tool_parser
+from colorglove_ros.tools._cli import add_pipeline_arguments, run_tool, tool_error, tool_parser
 
 __all__ = ['TARGETS', 'BAG_RATE_HZ', 'STEREO_CALIBRATION', 'ensure_bag', 'check_targets',
            'isolate_domain', 'main']
@@ -171,6 +172,11 @@ def main(argv: list[str] | None = None) -> int:
                              'receives every camera image); off by default, as in '
                              'config/nodes.yaml')
     args = parser.parse_args(argv)
+    return run_tool('colorglove_benchmark', lambda: _benchmark(args))
+
+
+def _benchmark(args: argparse.Namespace) -> int:
+    """The benchmark itself (SIGTERM and the package's errors handled by run_tool)."""
     print(f'[benchmark] ROS domain {isolate_domain(args.domain_id)}', flush=True)
     try:
         database = prepare_assets(args.database)

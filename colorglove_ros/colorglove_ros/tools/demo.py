@@ -5,6 +5,7 @@ ground truth, with an overlay strip (PNG) a person can look at. Missing assets (
 calibration, pose database) are made first, once."""
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 from pathlib import Path
@@ -21,7 +22,7 @@ from colorglove_ros.ros.pipeline_run import (
     run_pipeline,
     summarize,
 )
-from colorglove_ros.tools._cli import add_pipeline_arguments, tool_error, tool_parser
+from colorglove_ros.tools._cli import add_pipeline_arguments, run_tool, tool_error, tool_parser
 
 __all__ = ['overlay_strip', 'main']
 
@@ -45,6 +46,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--output', type=Path, default=Path('out/demo'),
                         help='folder for the overlay strip')
     args = parser.parse_args(argv)
+    return run_tool('colorglove_demo', lambda: _demo(args))
+
+
+def _demo(args: argparse.Namespace) -> int:
+    """The demo itself (SIGTERM and the package's errors handled by run_tool)."""
     started = time.perf_counter()
     try:
         database = prepare_assets(args.database)

@@ -175,12 +175,16 @@ def main(argv: list[str] | None = None) -> int:
         if args.pace_on in player.publishers_by_topic:
             # the image's subscribers and its CameraInfo's: a node that gets images before it
             # is matched to their CameraInfo answers them 'waiting for CameraInfo'
-            player.wait_for_subscribers(args.pace_on, args.wait_subscribers,
-                                        args.min_subscribers)
+            waits = [(args.pace_on, args.min_subscribers)]
             camera_info = player.camera_info_beside(args.pace_on)
             if camera_info is not None:
-                player.wait_for_subscribers(camera_info, args.wait_subscribers,
-                                            args.min_info_subscribers)
+                waits.append((camera_info, args.min_info_subscribers))
+            for topic, wanted in waits:
+                if not player.wait_for_subscribers(topic, args.wait_subscribers, wanted):
+                    seen = player.publishers_by_topic[topic].get_subscription_count()
+                    print(f'colorglove_play_bag: warning: {topic} has {seen} of {wanted} '
+                          f'subscribers after {args.wait_subscribers:g} s; playing anyway',
+                          file=sys.stderr, flush=True)
         if args.clock:
             player.publish_clock()
         while True:

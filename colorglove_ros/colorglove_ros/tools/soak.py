@@ -111,11 +111,13 @@ def _soak(args) -> int:
                       if p is None or p.poll() is not None]
             record = probe.stop()
         finally:
-            launcher.stop()
-            if stages is not None:
-                stages.close()
-            if record is None:
-                probe.close()
+            try:
+                launcher.stop()
+            finally:
+                if record is None:
+                    probe.close()
+                if stages is not None:
+                    stages.close()
     keep = record.arrival_ns >= measure_start_ns
     measured = ProbeRecord(record.stamp_ns[keep], record.arrival_ns[keep])
     rows = window_summaries(measured, args.window)[:windows]

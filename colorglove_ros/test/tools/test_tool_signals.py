@@ -1,7 +1,8 @@
 """A tool that started the nodes (soak, restart, benchmark, ...) stops them when it is itself
 stopped with SIGTERM: the nodes run in sessions of their own, so nothing else would. The
 signal is sent as soon as the first node has started, while the tool is still starting the
-rest: whatever had started by then must be stopped too, the latency probe included."""
+rest: whatever had started by then must be stopped too, the latency probe included, and
+so must a node whose start the signal interrupted (no process of the test's ROS domain is left)."""
 from __future__ import annotations
 
 import os
@@ -28,19 +29,19 @@ def _running(pid: int) -> bool:
     return state != 'Z'
 
 
-def _probe_pids(env: dict) -> list[int]:
-    """Latency probes running in this test's ROS domain."""
+def _domain_pids(env: dict) -> list[int]:
+    """Live processes in this test's ROS domain (the tool's nodes and probe inherit it), also
+    ones started but never announced."""
     found = []
+    domain = f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}".encode()
     for entry in Path('/proc').iterdir():
-        if not entry.name.isdigit():
+        if not entry.name.isdigit() or int(entry.name) == os.getpid():
             continue
         try:
-            command = (entry / 'cmdline').read_bytes()
             environ = (entry / 'environ').read_bytes()
         except OSError:
             continue
-        domain = f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}".encode()
-        if b'colorglove_ros.ros.latency_probe' in command and domain in environ.split(b'\0'):
+        if domain in environ.split(b'\0') and _running(int(entry.name)):
             found.append(int(entry.name))
     return found
 
@@ -61,15 +62,17 @@ def test_sigterm_while_starting_stops_everything_started(node_assets,
                 break
         assert pids, 'the soak started no node'
         rest, _ = tool.communicate(timeout=60.0)
+        # the tool waits for what it stops: anything of its domain alive now was never stopped
+        left = _domain_pids(isolated_ros_domain)
         pids += [int(pid) for pid in STARTED.findall(rest)]
         assert tool.returncode != 0
+        assert left == [], rest
         deadline = time.monotonic() + 10.0
         while any(_running(pid) for pid in pids) and time.monotonic() < deadline:
             time.sleep(0.1)
         assert not [pid for pid in pids if _running(pid)], rest
-        assert _probe_pids(isolated_ros_domain) == []
     finally:
-        for pid in pids + _probe_pids(isolated_ros_domain):
+        for pid in pids + _domain_pids(isolated_ros_domain):
             if _running(pid):
                 os.kill(pid, signal.SIGKILL)
         if tool.poll() is None:
