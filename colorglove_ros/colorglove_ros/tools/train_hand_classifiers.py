@@ -4,18 +4,31 @@ Training sequences are the evaluations' own scripts (``eval_gestures.gesture_scr
 ``eval_spelling.spelling_script``) on TRAINING seeds (default 1000 onwards: neither the
 hold-time tuning seeds 0-4 nor the report seeds 100-119), each seen ``--noise-draws`` times
 through the tracking-noise model fitted to the tracker (``config/tracking_noise.yaml``, each
-draw seeded). Every frame of a hold is a sample labelled with what is held (a gesture,
-``none`` for the neutral shapes, or a letter). The classifiers (``core/hand/pose_classifier.py``)
-are written as versioned ``.npz`` files, by default ``config/gesture_classifier.npz`` and
+draw seeded). With ``--tracker-seeds``, the tracker's own output on the rendered scripted
+sequences of those training seeds (``core/evaluation/scripted_tracking.py``, the sequences the
+evaluations' ``--tracker`` runs, of ``--tracker-words`` words or ``--tracker-episodes``
+episodes; cached in ``data/scripted_tracking/``, tracked there when missing, which is slow)
+is added, each tracked frame ``--tracker-repeats`` times: the noise model has one bias per
+joint, the tracker a bias that depends on the hand shape, which the classifier then learns.
+Every frame of a hold is a sample labelled with what is held (a gesture, ``none`` for the
+neutral shapes, or a letter); lost frames are left out. ``--model`` picks the classifier
+(``core/hand/pose_classifier.py``: ``mlp`` or ``lda``). The classifiers are written as
+versioned ``.npz`` files, by default ``config/gesture_classifier.npz`` and
 ``config/letter_classifier.npz``, which the nodes and the evaluations read.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from colorglove_ros.core.evaluation.scripted_hands import load_tracking_noise, script_poses
+from colorglove_ros.core.evaluation.scripted_hands import (
+    PoseSource,
+    load_tracking_noise,
+    script_poses,
+)
+from colorglove_ros.core.evaluation.sequences import LABEL_SOURCES, find_database
 from colorglove_ros.core.hand.gestures import (
     DEFAULT_GESTURE_CLASSIFIER,
     GESTURE_FEATURES,
@@ -23,13 +36,15 @@ from colorglove_ros.core.hand.gestures import (
 )
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.hand.pose_classifier import (
+    MODEL_KINDS,
+    ClassifierError,
     pose_features,
     save_pose_classifier,
     train_pose_classifier,
 )
 from colorglove_ros.core.hand.spelling import LETTER_FEATURES, TRAINED_LETTER_CLASSIFIER
 from colorglove_ros.core.report import print_table
-from colorglove_ros.paths import share_dir
+from colorglove_ros.paths import data_dir, share_dir
 from colorglove_ros.tools import eval_gestures, eval_spelling
 from colorglove_ros.tools._cli import run_tool, tool_parser
 
@@ -37,9 +52,13 @@ __all__ = ['main', 'training_samples']
 
 
 def training_samples(model: HandModel, scripts: list, noise, draws: int, feature_set: str,
-                     none_label: str = NO_GESTURE) -> tuple[np.ndarray, np.ndarray]:
+                     none_label: str = NO_GESTURE, tracked: Sequence[tuple[int, list]] = (),
+                     tracker: PoseSource | None = None, name: str = '', repeats: int = 1
+                     ) -> tuple[np.ndarray, np.ndarray]:
     """Features and labels of the hold frames of ``(seed, segments)`` scripts, each seen
-    through ``draws`` seeded draws of ``noise``."""
+    through ``draws`` seeded draws of ``noise``, and of the ``tracked`` scripts as ``tracker``
+    sees them (sequences ``name`` / seed; found frames only), each such frame ``repeats``
+    times."""
     features, labels = [], []
     for seed, segments in scripts:
         truth = script_poses(segments)
@@ -49,6 +68,16 @@ def training_samples(model: HandModel, scripts: list, noise, draws: int, feature
                                 truth.fps, model)
             features.append(pose_features(model, noisy[hold], feature_set))
             labels += [x or none_label for x in truth.label[hold]]
+    if tracked and tracker is None:
+        raise ValueError('tracked scripts need a tracker')
+    for seed, segments in tracked:
+        truth = script_poses(segments)
+        seen, found = tracker.observe(name, seed, truth, model)
+        hold = truth.holding & found
+        if hold.any():
+            x = pose_features(model, seen[hold], feature_set)
+            features += [x] * repeats
+            labels += [y or none_label for y in truth.label[hold]] * repeats
     return np.concatenate(features), np.asarray(labels)
 
 
@@ -64,6 +93,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--words', type=int, default=8)
     parser.add_argument('--noise-draws', type=int, default=2)
     parser.add_argument('--noise-config', type=Path, default=config / 'tracking_noise.yaml')
+    parser.add_argument('--tracker-seeds', type=int, nargs='*', default=[],
+                        help='training seeds whose tracked sequences are added (default none)')
+    parser.add_argument('--tracker-words', type=int, default=4,
+                        help='words per tracked spelling sequence')
+    parser.add_argument('--tracker-episodes', type=int, default=30,
+                        help='episodes per tracked gesture sequence')
+    parser.add_argument('--tracker-repeats', type=int, default=3,
+                        help='times each tracked frame counts')
+    parser.add_argument('--labels', choices=LABEL_SOURCES, default='segmented',
+                        help="the tracker's labels (as the evaluations' --labels)")
+    parser.add_argument('--model', choices=MODEL_KINDS, default='mlp', help='classifier kind')
     parser.add_argument('--hidden', type=int, default=64, help='hidden units')
     parser.add_argument('--alpha', type=float, default=1e-3, help='L2 penalty')
     parser.add_argument('--seed', type=int, default=0, help='initialisation seed')
@@ -77,33 +117,60 @@ def main(argv: list[str] | None = None) -> int:
         model = HandModel()
         noise = load_tracking_noise(args.noise_config)
         seeds = lambda n: range(args.first_seed, args.first_seed + n)  # noqa: E731
+        if any(s < args.first_seed for s in args.tracker_seeds):
+            raise ClassifierError(f'tracker seeds must be training seeds (>= '
+                                  f'{args.first_seed}), got {args.tracker_seeds}')
         jobs = []
         if args.what in ('gestures', 'both'):
             jobs.append(('gestures', GESTURE_FEATURES, args.gesture_output,
                          [(s, eval_gestures.gesture_script(model, s, args.episodes))
                           for s in seeds(args.gesture_sequences)],
+                         [(s, eval_gestures.gesture_script(model, s, args.tracker_episodes))
+                          for s in args.tracker_seeds],
                          f'--gesture-sequences {args.gesture_sequences} --episodes '
-                         f'{args.episodes}'))
+                         f'{args.episodes} --tracker-episodes {args.tracker_episodes}'))
         if args.what in ('letters', 'both'):
             jobs.append(('letters', LETTER_FEATURES, args.letter_output,
                          [(s, eval_spelling.spelling_script(model, s, args.words)[0])
                           for s in seeds(args.spelling_sequences)],
-                         f'--spelling-sequences {args.spelling_sequences} --words {args.words}'))
+                         [(s, eval_spelling.spelling_script(model, s, args.tracker_words)[0])
+                          for s in args.tracker_seeds],
+                         f'--spelling-sequences {args.spelling_sequences} --words {args.words} '
+                         f'--tracker-words {args.tracker_words}'))
+        tracker = None
+        if args.tracker_seeds:
+            from colorglove_ros.core.evaluation.scripted_tracking import ScriptedTracker
+
+            tracker = ScriptedTracker(find_database(data_dir()), config / 'ik.yaml',
+                                      config / 'calibration.yaml',
+                                      data_dir() / 'scripted_tracking', args.labels)
         rows = []
-        for what, feature_set, output, scripts, sizes in jobs:
-            x, y = training_samples(model, scripts, noise, args.noise_draws, feature_set)
-            source = (f'colorglove_train_hand_classifiers --what {what} --first-seed '
-                      f'{args.first_seed} {sizes} --noise-draws {args.noise_draws} '
-                      f'--hidden {args.hidden} --alpha {args.alpha} --seed {args.seed}; noise '
-                      f'{args.noise_config.name}')
-            clf = train_pose_classifier(x, y, feature_set, hidden=args.hidden, seed=args.seed,
-                                        alpha=args.alpha, source=source)
-            save_pose_classifier(output, clf)
-            accuracy = float(np.mean(np.asarray(clf.classes)[
-                np.argmax(clf.log_proba(x), axis=1)] == y))
-            rows.append({'classifier': what, 'samples': len(y), 'classes': len(clf.classes),
-                         'training frame accuracy': accuracy, 'file': str(output)})
-            print(f'[train_hand_classifiers] {what}: {len(y)} samples', flush=True)
+        try:
+            for what, feature_set, output, scripts, tracked, sizes in jobs:
+                x, y = training_samples(model, scripts, noise, args.noise_draws, feature_set,
+                                        tracked=tracked, tracker=tracker,
+                                        name='gestures' if what == 'gestures' else 'spelling',
+                                        repeats=args.tracker_repeats)
+                tracked_seeds = ' '.join(str(s) for s in args.tracker_seeds)
+                source = (f'colorglove_train_hand_classifiers --what {what} --first-seed '
+                          f'{args.first_seed} {sizes} --noise-draws {args.noise_draws} '
+                          f'--tracker-seeds {tracked_seeds} --tracker-repeats '
+                          f'{args.tracker_repeats} --labels {args.labels} --model {args.model} '
+                          f'--hidden {args.hidden} --alpha {args.alpha} --seed {args.seed}; '
+                          f'noise {args.noise_config.name}')
+                clf = train_pose_classifier(x, y, feature_set, hidden=args.hidden,
+                                            seed=args.seed, alpha=args.alpha, source=source,
+                                            kind=args.model)
+                save_pose_classifier(output, clf)
+                accuracy = float(np.mean(np.asarray(clf.classes)[
+                    np.argmax(clf.log_proba(x), axis=1)] == y))
+                rows.append({'classifier': what, 'samples': len(y),
+                             'classes': len(clf.classes), 'training frame accuracy': accuracy,
+                             'file': str(output)})
+                print(f'[train_hand_classifiers] {what}: {len(y)} samples', flush=True)
+        finally:
+            if tracker is not None:
+                tracker.close()
         print_table(rows, 'Trained classifiers')
         return 0
 

@@ -8,9 +8,12 @@ fingers; and, for letters (``with_direction``), the direction the fingers point 
 frame (``core/hand/spelling.py`` ``pointing_direction``: G, H, P, Q differ from other letters
 by it).
 
-Model: the features standardised, one hidden layer of ReLU units and a softmax over the
-classes (a multi-layer perceptron fitted by scikit-learn with a seeded initialisation, then
-kept as plain arrays, so running it needs numpy only). Files are ``.npz`` with a format name
+Model (:data:`MODEL_KINDS`): the features standardised, then either one hidden layer of ReLU
+units and a softmax over the classes (``mlp``: a multi-layer perceptron fitted by scikit-learn
+with a seeded initialisation) or a linear layer and a softmax (``lda``: linear discriminant
+analysis, each class a Gaussian with a covariance shared by all classes, shrunk by the
+Ledoit-Wolf estimate, so few and correlated samples still give a stable fit), kept as plain
+arrays, so running it needs numpy only. Files are ``.npz`` with a format name
 and version (:data:`CLASSIFIER_FORMAT`, :data:`CLASSIFIER_FORMAT_VERSION`), the classes,
 the feature set and a line saying how the model was trained.
 """
@@ -24,7 +27,7 @@ import numpy as np
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, rotvec_to_matrix
 
-__all__ = ['CLASSIFIER_FORMAT', 'CLASSIFIER_FORMAT_VERSION', 'FEATURE_SETS',
+__all__ = ['CLASSIFIER_FORMAT', 'CLASSIFIER_FORMAT_VERSION', 'FEATURE_SETS', 'MODEL_KINDS',
            'ClassifierError', 'PoseClassifier', 'pose_features', 'train_pose_classifier',
            'save_pose_classifier', 'load_pose_classifier']
 
@@ -32,6 +35,7 @@ CLASSIFIER_FORMAT = 'colorglove_pose_classifier'
 CLASSIFIER_FORMAT_VERSION = 1
 # feature set name -> whether it includes the pointing direction
 FEATURE_SETS: dict[str, bool] = {'hand_shape': False, 'hand_shape_direction': True}
+MODEL_KINDS: tuple[str, ...] = ('mlp', 'lda')
 _TIPS = np.array([4, 8, 12, 16, 20])
 _PAIRS = np.triu_indices(5, 1)
 
@@ -98,22 +102,34 @@ class PoseClassifier:
 
 def train_pose_classifier(features: np.ndarray, labels: np.ndarray, feature_set: str,
                           hidden: int = 64, alpha: float = 1e-3, seed: int = 0,
-                          source: str = '', max_iter: int = 200) -> PoseClassifier:
-    """Fit the classifier to labelled feature rows (seeded; deterministic for a seed; stops
-    when a tenth of the rows held out for validation stops improving)."""
-    from sklearn.neural_network import MLPClassifier
-
+                          source: str = '', max_iter: int = 200, kind: str = 'mlp'
+                          ) -> PoseClassifier:
+    """Fit the classifier of ``kind`` (:data:`MODEL_KINDS`) to labelled feature rows. ``mlp``:
+    ``hidden`` units, L2 penalty ``alpha``, seeded (deterministic for a seed), stops when a
+    tenth of the rows held out for validation stops improving; ``lda``: deterministic, the
+    other settings unused."""
     features = np.asarray(features, dtype=float)
     labels = np.asarray(labels).astype(str)
     classes = np.unique(labels)
     if len(classes) < 3:
         raise ClassifierError(f'need at least 3 classes, got {len(classes)}')
+    if kind not in MODEL_KINDS:
+        raise ClassifierError(f'unknown classifier kind {kind!r}, expected one of {MODEL_KINDS}')
     mean = features.mean(axis=0)
     scale = features.std(axis=0)
     scale[scale < 1e-9] = 1.0
+    x = (features - mean) / scale
+    if kind == 'lda':
+        from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
+
+        lda = LinearDiscriminantAnalysis(solver='lsqr', shrinkage='auto').fit(x, labels)
+        return PoseClassifier(tuple(str(c) for c in lda.classes_), feature_set, mean, scale,
+                              (np.asarray(lda.coef_.T),), (np.asarray(lda.intercept_),), source)
+    from sklearn.neural_network import MLPClassifier
+
     mlp = MLPClassifier((hidden,), alpha=alpha, max_iter=max_iter, random_state=seed,
                         early_stopping=True, validation_fraction=0.1, n_iter_no_change=8)
-    mlp.fit((features - mean) / scale, labels)
+    mlp.fit(x, labels)
     return PoseClassifier(tuple(str(c) for c in mlp.classes_), feature_set, mean, scale,
                           tuple(np.asarray(w) for w in mlp.coefs_),
                           tuple(np.asarray(b) for b in mlp.intercepts_), source)

@@ -30,7 +30,7 @@ import numpy as np
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.hysteresis import HoldConfig, ScoreHysteresis
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, rotvec_to_matrix
-from colorglove_ros.core.hand.pose_classifier import PoseClassifier
+from colorglove_ros.core.hand.pose_classifier import PoseClassifier, pose_features
 from colorglove_ros.core.hand.poses import LETTER_SHAPES
 from colorglove_ros.core.validation import check_number
 
@@ -122,13 +122,23 @@ class LetterClassifier:
         """(26,) log-probability of each letter in ``LETTERS`` order (the templates': up to a
         constant)."""
         q = np.asarray(q, dtype=float)
-        if q.shape != (NUM_DOFS,) or not np.all(np.isfinite(q)):
+        if q.shape != (NUM_DOFS,):
             raise SpellingError(f'pose must be 26 finite values, got shape {q.shape}')
+        return self.log_likelihoods_batch(q[None])[0]
+
+    def log_likelihoods_batch(self, poses: np.ndarray) -> np.ndarray:
+        """(N, 26) :meth:`log_likelihoods` of poses (N, 26)."""
+        poses = np.asarray(poses, dtype=float)
+        if poses.ndim != 2 or poses.shape[1] != NUM_DOFS or not np.all(np.isfinite(poses)):
+            raise SpellingError(f'poses must be finite (N, 26), got shape {poses.shape}')
         if self.classifier is not None:
-            return self.classifier.pose_log_proba(self.model, q)[self._order]
+            features = pose_features(self.model, poses, self.classifier.feature_set)
+            return np.atleast_2d(self.classifier.log_proba(features))[:, self._order]
         c = self.config
-        joint = np.sum((q[6:] - self._joints) ** 2, axis=1) / np.deg2rad(c.joint_sigma_deg) ** 2
-        direction = np.sum((pointing_direction(q) - self._directions) ** 2, axis=1) \
+        joint = np.sum((poses[:, None, 6:] - self._joints) ** 2, axis=2) \
+            / np.deg2rad(c.joint_sigma_deg) ** 2
+        pointing = np.stack([pointing_direction(q) for q in poses])
+        direction = np.sum((pointing[:, None] - self._directions) ** 2, axis=2) \
             / c.direction_sigma ** 2
         return -0.5 * (joint + direction)
 

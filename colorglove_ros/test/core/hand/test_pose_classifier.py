@@ -79,3 +79,17 @@ def test_bad_files(tmp_path) -> None:
     (tmp_path / 'text.npz').write_text('not a zip')
     with pytest.raises(ClassifierError):
         load_pose_classifier(tmp_path / 'text.npz')
+
+
+def test_linear_discriminant_is_one_layer_and_round_trips(tmp_path) -> None:
+    x, y = _samples(np.random.default_rng(0), 400)
+    test_x, test_y = _samples(np.random.default_rng(1), 200)
+    clf = train_pose_classifier(x, y, 'hand_shape', kind='lda', source='lda test')
+    assert len(clf.weights) == 1 and clf.weights[0].shape == (x.shape[1], len(clf.classes))
+    predicted = np.asarray(clf.classes)[np.argmax(clf.log_proba(test_x), axis=1)]
+    assert np.mean(predicted == test_y) > 0.95
+    np.testing.assert_allclose(np.exp(clf.log_proba(test_x)).sum(axis=1), 1.0)
+    loaded = load_pose_classifier(save_pose_classifier(tmp_path / 'l.npz', clf), 'hand_shape')
+    np.testing.assert_allclose(loaded.log_proba(test_x), clf.log_proba(test_x))
+    with pytest.raises(ClassifierError, match='kind'):
+        train_pose_classifier(x, y, 'hand_shape', kind='forest')

@@ -103,3 +103,38 @@ def test_shipped_classifier_spells_clean_poses_and_heavy_noise_breaks_it() -> No
     assert noisy['letter_accuracy'] < clean['letter_accuracy'] - 0.1
     rows = {row['scripted']: row for row in noisy['thumb_confusion']}
     assert set(rows) == {'E', 'M', 'N', 'S', 'T'}
+
+
+def test_batch_log_likelihoods_match_one_pose_at_a_time() -> None:
+    classifier = load_pose_classifier(share_dir() / TRAINED_LETTER_CLASSIFIER, LETTER_FEATURES)
+    poses = []
+    for letter in ('A', 'M', 'H'):
+        q = MODEL.rest_pose()
+        q[3:6] = letter_rotation(letter)
+        q[6:] = allowed_fingers(LETTER_SHAPES[letter])
+        poses.append(q)
+    for letters in (LetterClassifier(model=MODEL),
+                    LetterClassifier(model=MODEL, classifier=classifier)):
+        batch = letters.log_likelihoods_batch(np.stack(poses))
+        assert batch.shape == (3, 26)
+        for q, row in zip(poses, batch, strict=True):
+            np.testing.assert_allclose(row, letters.log_likelihoods(q), atol=1e-9)
+    with pytest.raises(SpellingError):
+        LetterClassifier(model=MODEL).log_likelihoods_batch(np.full((1, 26), np.nan))
+
+
+def test_holds_are_classified_whole_and_lost_holds_give_nothing() -> None:
+    truth = script_poses([_segment('M'), _segment('N'), _segment('S')], 30.0)
+    log_likelihoods = np.full((len(truth.poses), 26), -10.0)
+    hold = [np.flatnonzero((truth.segment == k) & truth.holding) for k in range(3)]
+    # the M hold: N wins its first frame, M all the others: the sum says M
+    log_likelihoods[hold[0], LETTERS.index('M')] = -1.0
+    log_likelihoods[hold[0][0], LETTERS.index('N')] = 0.0
+    log_likelihoods[hold[1], LETTERS.index('S')] = -1.0      # N held, S classified
+    log_likelihoods[hold[2]] = np.nan                         # S lost
+    pairs = eval_spelling.classify_holds(truth, log_likelihoods)
+    assert pairs == [('M', 'M'), ('N', 'S'), ('S', '-')]
+    rows = {r['scripted']: r for r in eval_spelling.thumb_confusion(pairs)}
+    assert rows['M']['M'] == 1 and rows['N']['S'] == 1 and rows['S']['-'] == 1
+    assert rows['E'] == {'scripted': 'E', 'E': 0, 'M': 0, 'N': 0, 'S': 0, 'T': 0, 'other': 0,
+                         '-': 0}
