@@ -85,7 +85,8 @@ class EdgeTracker:
         self.kin = FastKinematics(model)
         self.cameras = tuple(cameras)
         self.config = config or EdgeTrackerConfig()
-        self.points = feature_points(model, self.config.tracked_links, self.config.use_tips)
+        self.points = feature_points(model, self.config.tracked_links, self.config.use_tips,
+                                     self.config.palm_sides)
         self.init_pose = initialisation_pose(model, self.config.init_wrist_position,
                                              self.config.init_rotation_vector)
         self._names = tuple(c.name for c in self.cameras)

@@ -7,10 +7,14 @@ import pytest
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
 from colorglove_ros.core.synthetic.bare_hand import BareHandSequence
+from colorglove_ros.core.tracking.edge_features import to_grey
 from colorglove_ros.core.tracking.edge_fit import (
     EdgeTrackerConfig,
     EdgeTrackerError,
     link_axis_residuals,
+    measure_features,
+    predict_features,
+    stack_residuals,
     tip_residuals,
 )
 from colorglove_ros.core.tracking.edge_tracker import EdgeTracker, initialisation_pose
@@ -105,3 +109,40 @@ def test_bad_inputs_are_refused(rig) -> None:
         EdgeTrackerConfig(tracked_links=('palm',))
     q = initialisation_pose(seq.synth.model, (0.0, 0.1, 0.5))
     assert q[2] == 0.5 and q[seq.synth.model.dof_names.index('index_mcp_abd')] > 0
+
+
+def test_palm_outline_is_measured_where_the_true_pose_puts_it(rig) -> None:
+    # the ulnar palm side's silhouette generator (chosen per camera from its view of the
+    # palm: face-on and at 45 degrees) projects onto the measured outline at the true pose
+    cameras, seq, frames = rig
+    tracker = EdgeTracker(seq.synth.model, cameras)
+    truth = seq.poses[20]
+    for cam, image in zip(cameras, frames[20], strict=True):
+        pred = predict_features(tracker.kin, tracker.points, cam, truth, tracker.config)
+        meas = measure_features(to_grey(image), pred, tracker.config, tracker.points.tip_row)
+        assert meas.palm_found.all()
+        n, rho = meas.palm.normal[0], meas.palm.offset[0]
+        assert abs(n @ pred.palm_base_px[0] - rho) < 2.0
+        assert abs(n @ pred.palm_end_px[0] - rho) < 2.0
+        # the palm rows come after the links and tips and move the wrist
+        world = tracker.kin.points(truth, tracker.points.point_link, tracker.points.point_local,
+                                   True)
+        r, J, _ = stack_residuals(tracker.points, [cam], [meas], world, tracker.config)
+        assert np.abs(J[-2:, 0:3]).sum() > 0
+
+
+def test_palm_sides_hold_the_wrist_tilt(rig) -> None:
+    # without the palm, tilting the hand about its width while flexing the fingers at their
+    # bases the other way changes few edges; with it, the fit comes back toward the truth
+    cameras, seq, frames = rig
+    truth = seq.poses[20]
+    start = truth.copy()
+    start[3] += 0.12
+    for digit in ('index', 'middle', 'ring', 'little'):
+        start[seq.synth.model.dof_names.index(f'{digit}_mcp_flex')] += 0.12
+    errors = {}
+    for sides in ((), ('ulnar',)):
+        tracker = EdgeTracker(seq.synth.model, cameras, EdgeTrackerConfig(palm_sides=sides))
+        fit = tracker.fit(frames[20], start, rounds=3)
+        errors[sides] = abs(fit.q[3] - truth[3])
+    assert errors[('ulnar',)] < 0.5 * errors[()]
