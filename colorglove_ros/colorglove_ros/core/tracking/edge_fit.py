@@ -20,9 +20,11 @@ the paper's:
 All cameras' residuals are concatenated (a link seen by one camera still counts) and the
 pose is corrected by Gauss-Newton with a constant diagonal stabiliser ``S``,
 ``q <- q - (J^T W J + S)^-1 J^T W R``, projected onto the joint limits (a DOF at a bound
-whose step points outward is frozen). ``W`` is 1 for plain least squares (the paper) or
-Huber weights with ``huber_px > 0``. The pose and the Jacobians come from the existing
-26-DOF :class:`HandModel` through :class:`FastKinematics` (same numbers, faster).
+whose step points outward is frozen). ``W`` is 1 for plain least squares (the paper) or,
+with ``huber_px > 0``, robust weights at that scale (Cauchy by default: an edge taken from
+a neighbouring finger, many pixels off, barely pulls; Huber as an option). The pose and the
+Jacobians come from the existing 26-DOF :class:`HandModel` through :class:`FastKinematics`
+(same numbers, faster).
 
 The residual functions (:func:`link_axis_residuals`, :func:`tip_residuals`) take predicted
 pixels and their Jacobians, so other trackers (the glove IK) can add the same constraints.
@@ -69,6 +71,7 @@ DEFAULT_TRACKED_LINKS: tuple[str, ...] = tuple(
 
 
 PALM_SIDES = ('ulnar', 'radial')
+ROBUST_LOSSES = ('huber', 'cauchy')
 # viewing angles of the palm-side silhouette generators (see palm_outline)
 PALM_ANGLES = np.deg2rad(np.linspace(-75.0, 75.0, 7))
 
@@ -83,6 +86,9 @@ class EdgeTrackerConfig:
 
     ``stabilizer`` is the diagonal of ``S`` for (translation, rotation, finger) DOFs in
     px^2 per unit^2: the larger, the smaller and steadier each Gauss-Newton step.
+    ``robust_loss`` with ``huber_px`` sets the residual weights (:func:`_robust`).
+    ``min_found_fraction`` of the usable links must be found over all cameras together and
+    ``min_camera_found_fraction`` in each camera for a fit to count as good.
     ``palm_sides`` are the palm outline sides measured (``PALM_SIDES``; empty: the paper's
     link and tip features only), on ``palm_slice_range`` of each side, weighted
     ``palm_weight``.
@@ -100,11 +106,13 @@ class EdgeTrackerConfig:
     stabilizer: tuple[float, float, float] = (4.0e4, 1.0e3, 200.0)
     tip_weight: float = 1.0
     huber_px: float = 3.0
+    robust_loss: str = 'cauchy'
     coupling_weight: float = 2000.0
     min_link_px: float = 10.0
     min_depth_m: float = 0.1
     occlusion_margin_px: float = 2.0
     min_found_fraction: float = 0.6
+    min_camera_found_fraction: float = 0.6
     max_rms_px: float = 3.0
     loss_patience: int = 3
     init_wrist_position: tuple[float, float, float] = (0.0, 0.095, 0.5)
@@ -121,14 +129,19 @@ class EdgeTrackerConfig:
         unknown_sides = [n for n in self.palm_sides if n not in PALM_SIDES]
         if unknown_sides:
             raise EdgeTrackerError(f'palm_sides must be among {PALM_SIDES}, got {unknown_sides}')
+        if self.robust_loss not in ROBUST_LOSSES:
+            raise EdgeTrackerError(f'robust_loss must be one of {ROBUST_LOSSES}, got '
+                                   f'{self.robust_loss!r}')
         if self.polarity not in (-1, 0, 1):
             raise EdgeTrackerError(f'polarity must be -1, 0 or 1, got {self.polarity}')
         if self.measurement_rounds < 1 or self.gn_iterations < 1 or self.init_rounds < 1:
             raise EdgeTrackerError('measurement_rounds, gn_iterations, init_rounds must be >= 1')
         if len(self.stabilizer) != 3 or min(self.stabilizer) < 0:
             raise EdgeTrackerError(f'stabilizer needs 3 values >= 0, got {self.stabilizer}')
-        if not 0.0 < self.min_found_fraction <= 1.0 or self.max_rms_px <= 0:
-            raise EdgeTrackerError('min_found_fraction must be in (0, 1], max_rms_px > 0')
+        if not 0.0 < self.min_found_fraction <= 1.0 or self.max_rms_px <= 0 \
+                or not 0.0 <= self.min_camera_found_fraction <= 1.0:
+            raise EdgeTrackerError('min_found_fraction must be in (0, 1], '
+                                   'min_camera_found_fraction in [0, 1], max_rms_px > 0')
         if self.loss_patience < 1 or self.init_hold_frames < 1:
             raise EdgeTrackerError('loss_patience and init_hold_frames must be >= 1')
 
@@ -482,10 +495,15 @@ def measure_features(grey: np.ndarray, prediction: EdgePrediction, config: EdgeT
     return EdgeMeasurement(pred, axes, link_found, tips, tip_found, palm, palm_found)
 
 
-def _huber(r: np.ndarray, k: float) -> np.ndarray:
+def _robust(r: np.ndarray, k: float, loss: str) -> np.ndarray:
+    """IRLS weights of residuals ``r`` (pixels) at scale ``k`` (all 1 for k <= 0): Huber
+    (1 within k, k / |r| beyond) or Cauchy (1 / (1 + (r / k)^2), which all but ignores a
+    measurement many times k off, e.g. a finger edge taken from its neighbour)."""
     if k <= 0:
         return np.ones_like(r)
     a = np.abs(r)
+    if loss == 'cauchy':
+        return 1.0 / (1.0 + (a / k) ** 2)
     return np.where(a <= k, 1.0, k / np.maximum(a, 1e-12))
 
 
@@ -512,14 +530,14 @@ def stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
                                        Jpix[0:2 * L:2][f], Jpix[1:2 * L:2][f])
             rs.append(r)
             Js.append(J)
-            ws.append(_huber(r, config.huber_px))
+            ws.append(_robust(r, config.huber_px, config.robust_loss))
         t = meas.tip_found
         if t.any():
             r, J = tip_residuals(pix[points.tip_slice][t], meas.tips.centre[t],
                                  Jpix[points.tip_slice][t])
             rs.append(r)
             Js.append(J)
-            ws.append(config.tip_weight * _huber(r, config.huber_px))
+            ws.append(config.tip_weight * _robust(r, config.huber_px, config.robust_loss))
         pf = meas.palm_found
         if meas.palm is not None and pf.any():
             rb, re, alpha = palm_rows(points, meas.prediction.palm_generator[pf])
@@ -528,7 +546,7 @@ def stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
                                        _blend(Jpix, rb, alpha), _blend(Jpix, re, alpha))
             rs.append(r)
             Js.append(J)
-            ws.append(config.palm_weight * _huber(r, config.huber_px))
+            ws.append(config.palm_weight * _robust(r, config.huber_px, config.robust_loss))
     if not rs:
         return np.zeros(0), np.zeros((0, NUM_DOFS)) if jacobian else None, np.zeros(0)
     return (np.concatenate(rs), np.concatenate(Js) if jacobian else None, np.concatenate(ws))
