@@ -27,7 +27,7 @@ from colorglove_ros.core.errors import ColorGloveError
 
 __all__ = [
     'EdgeFeatureError', 'EdgeSearchConfig', 'LinkAxes', 'TipPoints', 'measure_link_axes',
-    'measure_tips', 'to_grey', 'segment_distances',
+    'measure_outline_edges', 'measure_tips', 'to_grey', 'segment_distances',
 ]
 
 
@@ -153,6 +153,43 @@ def _check_segments(base: np.ndarray, end: np.ndarray, half_width: np.ndarray
     return base, end, half_width
 
 
+def _fit_lines(base: np.ndarray, end: np.ndarray, centres: np.ndarray, n: np.ndarray,
+               frac: np.ndarray, off: np.ndarray, valid: np.ndarray, cfg: EdgeSearchConfig
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Lines through measured points: per segment ``base -> end`` (L, 2) the points lie at
+    ``off`` (L, S) along the normal ``n`` (L, 2) from the slice ``centres`` (L, S, 2) placed
+    at fractions ``frac`` (S,); the offset along n is fitted as a linear function of the
+    position along the segment (least squares), then refitted without the points farther than
+    ``fit_outlier_px``. Returns the lines' unit normals (L, 2) and offsets (L,), the kept
+    points' weights (L, S) and the points (L, S, 2; NaN where not kept)."""
+    L = len(base)
+    axis = end - base
+    length = np.linalg.norm(axis, axis=1)
+    u = axis / np.maximum(length, 1e-9)[:, None]
+    s_along = (frac[None, :] - 0.5) * length[:, None]                          # (L, S)
+    w = valid.astype(float)
+    a = b = np.zeros(L)
+    for _ in range(2):
+        sw = w.sum(1)
+        safe = np.maximum(sw, 1e-9)
+        ms = (w * s_along).sum(1) / safe
+        mo = (w * off).sum(1) / safe
+        var = (w * (s_along - ms[:, None]) ** 2).sum(1)
+        cov = (w * (s_along - ms[:, None]) * (off - mo[:, None])).sum(1)
+        b = np.where(var > 1e-9, cov / np.maximum(var, 1e-9), 0.0)
+        a = mo - b * ms
+        resid = np.abs(off - (a[:, None] + b[:, None] * s_along))
+        w = (valid & (resid <= cfg.fit_outlier_px)).astype(float)
+    # the fitted line: point centre + n * a, direction u + b n
+    direction = u + b[:, None] * n
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
+    mid_point = 0.5 * (base + end) + a[:, None] * n
+    offset = np.einsum('ij,ij->i', normal, mid_point)
+    points = centres + off[..., None] * n[:, None, :]
+    return normal, offset, w, np.where((w > 0)[..., None], points, np.nan)
+
+
 def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
                       half_width_px: np.ndarray, config: EdgeSearchConfig | None = None,
                       polarity: np.ndarray | int = 0,
@@ -220,34 +257,57 @@ def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
     ej = _subpixel(np.where(sign_j[..., None] >= 0, d, -d), best_j)
     mid_t = (ei + ej) / (W - 1) - 1.0            # mean of the two sample positions in [-1, 1]
     mid_off = mid_t * reach[:, None]                                           # (L, S)
-    # line through the midpoints: offset along n as a linear function of the position
-    # along the predicted axis (least squares), refitted without outliers
-    s_along = (frac[None, :] - 0.5) * length[:, None]                          # (L, S)
-    w = valid.astype(float)
-    a = b = np.zeros(L)
-    for _ in range(2):
-        sw = w.sum(1)
-        safe = np.maximum(sw, 1e-9)
-        ms = (w * s_along).sum(1) / safe
-        mo = (w * mid_off).sum(1) / safe
-        var = (w * (s_along - ms[:, None]) ** 2).sum(1)
-        cov = (w * (s_along - ms[:, None]) * (mid_off - mo[:, None])).sum(1)
-        b = np.where(var > 1e-9, cov / np.maximum(var, 1e-9), 0.0)
-        a = mo - b * ms
-        resid = np.abs(mid_off - (a[:, None] + b[:, None] * s_along))
-        w = (valid & (resid <= cfg.fit_outlier_px)).astype(float)
-    count = w.sum(1).astype(np.int64)
-    found = count >= cfg.min_slices
-    # the fitted line: point centre + n * a, direction u + b n
-    direction = u + b[:, None] * n
-    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
-    mid_point = 0.5 * (base + end) + a[:, None] * n
-    offset = np.einsum('ij,ij->i', normal, mid_point)
-    midpoints = centres + mid_off[..., None] * n[:, None, :]
-    midpoints = np.where((w > 0)[..., None], midpoints, np.nan)
+    normal, offset, w, midpoints = _fit_lines(base, end, centres, n, frac, mid_off, valid, cfg)
+    found = w.sum(1) >= cfg.min_slices
     signs = np.where(w > 0, best_sign, 0).sum(1)
-    return LinkAxes(normal, offset, found, count, np.sign(signs).astype(np.int64), midpoints)
+    return LinkAxes(normal, offset, found, w.sum(1).astype(np.int64),
+                    np.sign(signs).astype(np.int64), midpoints)
+
+
+def measure_outline_edges(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
+                          outward_px: np.ndarray, config: EdgeSearchConfig | None = None,
+                          slice_valid: np.ndarray | None = None,
+                          slice_range: tuple[float, float] | None = None) -> LinkAxes:
+    """Measure L single silhouette edges (e.g. the sides of the palm) predicted as segments
+    ``base_px -> end_px``: on each slice across the segment (``slice_range`` of it, default
+    the config's) the strongest derivative peak within ``search_px`` of the prediction (either
+    sign, discounted by its distance from the prediction with a Gaussian of sigma
+    ``search_px / 2``) is the edge; a line is fitted through the edge points as for
+    :func:`measure_link_axes`. ``outward_px`` (L, 2) is any vector pointing out of the shape
+    (only its side matters): the returned normals point outward. Returns :class:`LinkAxes`
+    (polarity +1 where the shape is brighter than its surroundings)."""
+    cfg = config or EdgeSearchConfig()
+    base, end, _ = _check_segments(base_px, end_px, np.zeros(len(np.atleast_2d(base_px))))
+    out = np.asarray(outward_px, dtype=float).reshape(base.shape)
+    L, S, W = len(base), cfg.slices_per_link, cfg.samples_per_slice
+    axis = end - base
+    u = axis / np.maximum(np.linalg.norm(axis, axis=1), 1e-9)[:, None]
+    n = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    n *= np.where(np.einsum('ij,ij->i', n, out) < 0, -1.0, 1.0)[:, None]
+    frac = np.linspace(*(slice_range or cfg.slice_range), S)
+    centres = base[:, None, :] + frac[None, :, None] * axis[:, None, :]        # (L, S, 2)
+    t = np.linspace(-cfg.search_px, cfg.search_px, W)                          # (W,)
+    step = np.full((L, S), 2.0 * cfg.search_px / (W - 1))
+    xy = centres[:, :, None, :] + t[None, None, :, None] * n[:, None, None, :]
+    d = _derivative(_sample(grey, xy), step)                                   # (L, S, W)
+    score = np.abs(d) * np.exp(-0.5 * (t / (0.5 * cfg.search_px)) ** 2)[None, None, :]
+    score[..., 0] = score[..., -1] = 0.0
+    k = np.argmax(score, axis=2)
+    valid = np.take_along_axis(np.abs(d), k[..., None], 2)[..., 0] > cfg.min_gradient
+    if slice_valid is not None:
+        valid &= np.asarray(slice_valid, dtype=bool).reshape(L, S)
+    sign = np.sign(np.take_along_axis(d, k[..., None], 2)[..., 0])
+    refined = _subpixel(np.where(sign[..., None] >= 0, d, -d), k)
+    off = -cfg.search_px + refined * step
+    normal, offset, w, points = _fit_lines(base, end, centres, n, frac, off, valid, cfg)
+    # re-orient the fitted normals outward (they follow the direction of n)
+    flip = np.einsum('ij,ij->i', normal, n) < 0
+    normal = np.where(flip[:, None], -normal, normal)
+    offset = np.where(flip, -offset, offset)
+    # brighter inside: the grey level falls going outward
+    signs = np.where(w > 0, -sign, 0).sum(1)
+    return LinkAxes(normal, offset, w.sum(1) >= cfg.min_slices, w.sum(1).astype(np.int64),
+                    np.sign(signs).astype(np.int64), points)
 
 
 def measure_tips(grey: np.ndarray, axis_point_px: np.ndarray, direction_px: np.ndarray,

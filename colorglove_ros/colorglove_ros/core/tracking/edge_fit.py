@@ -9,14 +9,22 @@ the paper's:
 
 * link: the signed pixel distance of the predicted axis end points (base and end) from the
   measured line, ``n . x(q) - rho`` (two rows per link);
-* tip: predicted minus measured tip centre (two rows per tip).
+* tip: predicted minus measured tip centre (two rows per tip);
+* palm side (not in the paper): the palm's outline on its ulnar (and optionally radial) side,
+  measured as a single silhouette edge (:func:`measure_outline_edges`), with the same signed
+  distances for the end points of the palm surface's silhouette generator seen from that
+  camera (:func:`palm_outline`). Without it nothing measures the palm: tilting the hand about
+  its width while flexing the fingers at their bases the other way changes few finger edges,
+  and the tracks drifted that way.
 
 All cameras' residuals are concatenated (a link seen by one camera still counts) and the
 pose is corrected by Gauss-Newton with a constant diagonal stabiliser ``S``,
 ``q <- q - (J^T W J + S)^-1 J^T W R``, projected onto the joint limits (a DOF at a bound
-whose step points outward is frozen). ``W`` is 1 for plain least squares (the paper) or
-Huber weights with ``huber_px > 0``. The pose and the Jacobians come from the existing
-26-DOF :class:`HandModel` through :class:`FastKinematics` (same numbers, faster).
+whose step points outward is frozen). ``W`` is 1 for plain least squares (the paper) or,
+with ``huber_px > 0``, robust weights at that scale (Cauchy by default: an edge taken from
+a neighbouring finger, many pixels off, barely pulls; Huber as an option). The pose and the
+Jacobians come from the existing 26-DOF :class:`HandModel` through :class:`FastKinematics`
+(same numbers, faster).
 
 The residual functions (:func:`link_axis_residuals`, :func:`tip_residuals`) take predicted
 pixels and their Jacobians, so other trackers (the glove IK) can add the same constraints.
@@ -31,6 +39,8 @@ import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.geometry import rotvec_to_matrix
+from colorglove_ros.core.hand.mesh import build_hand_mesh
 from colorglove_ros.core.hand.model import (
     DIGITS,
     LINK_NAMES,
@@ -43,6 +53,7 @@ from colorglove_ros.core.tracking.edge_features import (
     LinkAxes,
     TipPoints,
     measure_link_axes,
+    measure_outline_edges,
     measure_tips,
     segment_distances,
 )
@@ -59,6 +70,12 @@ DEFAULT_TRACKED_LINKS: tuple[str, ...] = tuple(
     name for name in LINK_NAMES[1:] if name != 'thumb_metacarpal')
 
 
+PALM_SIDES = ('ulnar', 'radial')
+ROBUST_LOSSES = ('huber', 'cauchy')
+# viewing angles of the palm-side silhouette generators (see palm_outline)
+PALM_ANGLES = np.deg2rad(np.linspace(-75.0, 75.0, 7))
+
+
 class EdgeTrackerError(ColorGloveError):
     """Bad tracker input: cameras, images, configuration or pose shapes."""
 
@@ -69,22 +86,33 @@ class EdgeTrackerConfig:
 
     ``stabilizer`` is the diagonal of ``S`` for (translation, rotation, finger) DOFs in
     px^2 per unit^2: the larger, the smaller and steadier each Gauss-Newton step.
+    ``robust_loss`` with ``huber_px`` sets the residual weights (:func:`_robust`).
+    ``min_found_fraction`` of the usable links must be found over all cameras together and
+    ``min_camera_found_fraction`` in each camera for a fit to count as good.
+    ``palm_sides`` are the palm outline sides measured (``PALM_SIDES``; empty: the paper's
+    link and tip features only), on ``palm_slice_range`` of each side, weighted
+    ``palm_weight``.
     """
 
     search: EdgeSearchConfig = field(default_factory=EdgeSearchConfig)
     tracked_links: tuple[str, ...] = DEFAULT_TRACKED_LINKS
     use_tips: bool = True
+    palm_sides: tuple[str, ...] = ('ulnar',)
+    palm_slice_range: tuple[float, float] = (0.15, 0.95)
+    palm_weight: float = 1.0
     polarity: int = 0
     measurement_rounds: int = 1
     gn_iterations: int = 3
     stabilizer: tuple[float, float, float] = (4.0e4, 1.0e3, 200.0)
     tip_weight: float = 1.0
     huber_px: float = 3.0
+    robust_loss: str = 'cauchy'
     coupling_weight: float = 2000.0
     min_link_px: float = 10.0
     min_depth_m: float = 0.1
     occlusion_margin_px: float = 2.0
     min_found_fraction: float = 0.6
+    min_camera_found_fraction: float = 0.6
     max_rms_px: float = 3.0
     loss_patience: int = 3
     init_wrist_position: tuple[float, float, float] = (0.0, 0.095, 0.5)
@@ -98,14 +126,22 @@ class EdgeTrackerConfig:
         unknown = [n for n in self.tracked_links if n not in LINK_NAMES[1:]]
         if unknown or not self.tracked_links:
             raise EdgeTrackerError(f'tracked_links must be finger links, got {unknown or "none"}')
+        unknown_sides = [n for n in self.palm_sides if n not in PALM_SIDES]
+        if unknown_sides:
+            raise EdgeTrackerError(f'palm_sides must be among {PALM_SIDES}, got {unknown_sides}')
+        if self.robust_loss not in ROBUST_LOSSES:
+            raise EdgeTrackerError(f'robust_loss must be one of {ROBUST_LOSSES}, got '
+                                   f'{self.robust_loss!r}')
         if self.polarity not in (-1, 0, 1):
             raise EdgeTrackerError(f'polarity must be -1, 0 or 1, got {self.polarity}')
         if self.measurement_rounds < 1 or self.gn_iterations < 1 or self.init_rounds < 1:
             raise EdgeTrackerError('measurement_rounds, gn_iterations, init_rounds must be >= 1')
         if len(self.stabilizer) != 3 or min(self.stabilizer) < 0:
             raise EdgeTrackerError(f'stabilizer needs 3 values >= 0, got {self.stabilizer}')
-        if not 0.0 < self.min_found_fraction <= 1.0 or self.max_rms_px <= 0:
-            raise EdgeTrackerError('min_found_fraction must be in (0, 1], max_rms_px > 0')
+        if not 0.0 < self.min_found_fraction <= 1.0 or self.max_rms_px <= 0 \
+                or not 0.0 <= self.min_camera_found_fraction <= 1.0:
+            raise EdgeTrackerError('min_found_fraction must be in (0, 1], '
+                                   'min_camera_found_fraction in [0, 1], max_rms_px > 0')
         if self.loss_patience < 1 or self.init_hold_frames < 1:
             raise EdgeTrackerError('loss_patience and init_hold_frames must be >= 1')
 
@@ -146,13 +182,68 @@ class FeaturePoints:
     links: np.ndarray        # (L,) tracked link indices
     tip_links: np.ndarray    # (T,) distal link index of each tip
     tip_row: np.ndarray      # (T,) row of each tip's distal link in ``links`` (-1 if absent)
-    point_link: np.ndarray   # (2L + 2T,) link of each point
-    point_local: np.ndarray  # (2L + 2T, 3) base, end per link, then tip centre, tip end
+    point_link: np.ndarray   # (2L + 2T + P (2A + 1),) link of each point
+    point_local: np.ndarray  # (..., 3) base, end per link, tip centre, tip end per tip, then
+    #                          per palm side each generator's base and end, then the palm centre
     radius: np.ndarray       # (L,) link radius, m
     tip_radius: np.ndarray   # (T,) m
+    palm_sign: np.ndarray = field(default_factory=lambda: np.zeros(0))     # (P,) +1 radial
+
+    @property
+    def num_palm_sides(self) -> int:
+        """P, the number of palm sides."""
+        return len(self.palm_sign)
+
+    @property
+    def num_links(self) -> int:
+        """L, the number of tracked links."""
+        return len(self.links)
+
+    @property
+    def tip_slice(self) -> slice:
+        """Rows of the tip centres among the points (every second from 2L)."""
+        return slice(2 * len(self.links), 2 * len(self.links) + 2 * len(self.tip_links), 2)
+
+    @property
+    def palm_start(self) -> int:
+        """Row of the first palm side's first point."""
+        return 2 * len(self.links) + 2 * len(self.tip_links)
 
 
-def feature_points(model: HandModel, tracked: Sequence[str], use_tips: bool) -> FeaturePoints:
+def palm_outline(model: HandModel, sides: Sequence[str], angles: np.ndarray) -> np.ndarray:
+    """The palm's sides as silhouette generators in the palm frame, from the hand mesh's palm
+    (:func:`build_hand_mesh`): per side and per viewing angle ``angles[k]`` (radians; the
+    outward direction ``(cos a, 0, sin a)`` turned about the hand's long axis, 0 in the palm's
+    plane, + toward the back of the hand) the line through the palm vertices farthest out in
+    that direction in 5 mm bands along the side, from its wrist end to its knuckle end:
+    (P, A, 2, 3), m. A camera looking at the side across the direction ``a`` sees that line as
+    the palm's outline. 'ulnar' is the little-finger side from the wrist to the little
+    knuckle, 'radial' the index side from above the thumb's base to the index knuckle."""
+    mesh = build_hand_mesh(model)
+    palm = mesh.local_vertices[mesh.vertex_link == 0]
+    s = model.scale
+    out = np.zeros((len(sides), len(angles), 2, 3))
+    for i, side in enumerate(sides):
+        digit, sign, y_wrist = (4, -1.0, -0.005 * s) if side == 'ulnar' else (1, 1.0, -0.045 * s)
+        y_knuckle = model.finger_anchors[digit][1] + 0.01 * s
+        edges = np.arange(y_wrist, y_knuckle - 1e-9, -0.005 * s)
+        bands = [palm[(palm[:, 1] <= hi) & (palm[:, 1] > lo)]
+                 for hi, lo in zip(edges[:-1], edges[1:], strict=True)]
+        bands = [b for b in bands if len(b)]
+        for k, a in enumerate(angles):
+            d = np.array([sign * np.cos(a), 0.0, np.sin(a)])
+            far = np.array([b[np.argmax(b @ d)] for b in bands])
+            fx = np.polyfit(far[:, 1], far[:, 0], 1)
+            fz = np.polyfit(far[:, 1], far[:, 2], 1)
+            for j, y in enumerate((edges[0], edges[-1])):
+                out[i, k, j] = [np.polyval(fx, y), y, np.polyval(fz, y)]
+    return out
+
+
+def feature_points(model: HandModel, tracked: Sequence[str], use_tips: bool,
+                   palm_sides: Sequence[str] = ()) -> FeaturePoints:
+    """The feature points of the tracked links, the tips (if ``use_tips``) and the palm's
+    ``palm_sides`` (:func:`palm_outline`; the inner point is the palm's centre)."""
     links = np.array([LINK_NAMES.index(n) for n in tracked], dtype=np.int64)
     tip_links = np.array([digit_link_index(d, 2) for d in range(len(DIGITS))] if use_tips
                          else [], dtype=np.int64)
@@ -163,12 +254,19 @@ def feature_points(model: HandModel, tracked: Sequence[str], use_tips: bool) -> 
         local += [[0.0, 0.0, 0.0], [0.0, -length[li], 0.0]]
     for li in tip_links:
         local += [[0.0, -(length[li] - radius[li]), 0.0], [0.0, -length[li], 0.0]]
-    point_link = np.concatenate([np.repeat(links, 2), np.repeat(tip_links, 2)])
+    generators = palm_outline(model, palm_sides, PALM_ANGLES)
+    centre = np.array([0.0, 0.5 * model.finger_anchors[2][1], 0.0])
+    for side in generators:
+        local += [*side.reshape(-1, 3), centre]
+    point_link = np.concatenate([np.repeat(links, 2), np.repeat(tip_links, 2),
+                                 np.zeros(generators.shape[0] * (2 * len(PALM_ANGLES) + 1),
+                                          dtype=np.int64)])
+    palm_sign = np.array([1.0 if side == 'radial' else -1.0 for side in palm_sides])
     row = {int(li): k for k, li in enumerate(links)}
     tip_row = np.array([row.get(int(li), -1) for li in tip_links], dtype=np.int64)
     return FeaturePoints(links, tip_links, tip_row, point_link,
                           np.asarray(local, dtype=float).reshape(-1, 3), radius[links],
-                          radius[tip_links])
+                          radius[tip_links], palm_sign)
 
 
 @dataclass(frozen=True)
@@ -191,6 +289,12 @@ class EdgePrediction:
     tip_jacobian: np.ndarray
     tip_radius_px: np.ndarray
     tip_usable: np.ndarray
+    palm_base_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    palm_end_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    palm_outward_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    palm_generator: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    palm_slice_valid: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), bool))
+    palm_usable: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
 
 def _project(camera: PinholeCamera, p_world: np.ndarray, J_world: np.ndarray | None
@@ -248,10 +352,10 @@ def predict_features(kin: FastKinematics, points: FeaturePoints, camera: Pinhole
     slice_valid = usable[:, None] & inside & ~occluded
     link_usable = slice_valid.sum(1) >= config.search.min_slices
     T = len(points.tip_links)
-    tip = pix[2 * L::2]
-    tip_end = pix[2 * L + 1::2]
-    Jt = Jpix[2 * L::2] if T else np.zeros((0, 2, NUM_DOFS))
-    zt = depth[2 * L::2]
+    tip = pix[points.tip_slice]
+    tip_end = pix[2 * L + 1:points.palm_start:2]
+    Jt = Jpix[points.tip_slice] if T else np.zeros((0, 2, NUM_DOFS))
+    zt = depth[points.tip_slice]
     tip_r = points.tip_radius * focal / np.maximum(zt, 1e-6)
     rows = points.tip_row
     tip_ok = (rows >= 0) & (zt > config.min_depth_m)
@@ -267,8 +371,76 @@ def predict_features(kin: FastKinematics, points: FeaturePoints, camera: Pinhole
         tip_row_mask[np.arange(T)[rows >= 0], rows[rows >= 0]] = True
         over = (dt < hw[None, :] + tip_r[:, None]) & (zt_other < zt[:, None]) & ~tip_row_mask
         tip_ok &= ~np.any(over & usable[None, :], axis=1)
+    palm = _predict_palm(points, camera, config, q, p, pix, depth, base, end, zb, ze, hw,
+                         usable)
     return EdgePrediction(base, end, Jb, Je, hw, slice_valid, link_usable, tip, tip_end, Jt,
-                          tip_r, tip_ok)
+                          tip_r, tip_ok, *palm)
+
+
+def palm_rows(points: FeaturePoints, generator: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                                      np.ndarray]:
+    """Point rows and weights of the palm sides' chosen generators: ``generator`` (P, 2)
+    holds per side the index k of the first of the two generators and the weight of the
+    second; returns the rows of the k-th base (P,), of the k-th end (P,) and the weight
+    (P,); the (k+1)-th are 2 rows on."""
+    A = len(PALM_ANGLES)
+    k = generator[:, 0].astype(np.int64)
+    first = points.palm_start + np.arange(points.num_palm_sides) * (2 * A + 1) + 2 * k
+    return first, first + 1, generator[:, 1]
+
+
+def _blend(x: np.ndarray, rows: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    w = alpha.reshape((-1,) + (1,) * (x.ndim - 1))
+    return (1.0 - w) * x[rows] + w * x[rows + 2]
+
+
+def _predict_palm(points: FeaturePoints, camera: PinholeCamera, config: EdgeTrackerConfig,
+                  q: np.ndarray, world: np.ndarray, pix: np.ndarray, depth: np.ndarray,
+                  base: np.ndarray, end: np.ndarray, zb: np.ndarray, ze: np.ndarray,
+                  hw: np.ndarray, link_usable: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The palm sides' predicted outlines in the camera: the generator for the camera's view
+    of each side (interpolated between the two nearest of ``PALM_ANGLES``), its projected
+    base and end (P, 2), outward unit normals (P, 2), the generator choice (P, 2: index,
+    weight), usable slices (P, S: inside the image, not behind a nearer tracked link) and
+    which sides are usable."""
+    P, A = points.num_palm_sides, len(PALM_ANGLES)
+    S = config.search.slices_per_link
+    stride = 2 * A + 1
+    centre_rows = points.palm_start + np.arange(P) * stride + 2 * A
+    # the view direction in the palm frame picks the generator: the outline is where the
+    # surface's outward cross-section normal is perpendicular to the line of sight
+    R = rotvec_to_matrix(q[3:6])
+    eye = -camera.rotation.T @ camera.translation
+    view = (world[centre_rows] - eye) @ R                                    # (P, 3) palm frame
+    # the outward normal (sign cos a, 0, sin a) is perpendicular to the view (vx, vz):
+    # sign vx cos a + vz sin a = 0, the root with cos a > 0
+    vz = view[:, 2]
+    angle = np.arctan2(-points.palm_sign * view[:, 0] * np.where(vz < 0, -1.0, 1.0), np.abs(vz))
+    pos = np.clip(np.interp(angle, PALM_ANGLES, np.arange(A)), 0.0, A - 1 - 1e-9)
+    generator = np.stack([np.floor(pos), pos - np.floor(pos)], axis=1)
+    rb, re, alpha = palm_rows(points, generator)
+    pb, pe = _blend(pix, rb, alpha), _blend(pix, re, alpha)
+    zpb, zpe = _blend(depth, rb, alpha), _blend(depth, re, alpha)
+    pc = pix[centre_rows]
+    u = (pe - pb) / np.maximum(np.linalg.norm(pe - pb, axis=1, keepdims=True), 1e-9)
+    n = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    n *= np.where(np.einsum('ij,ij->i', n, pb - pc) < 0, -1.0, 1.0)[:, None]
+    in_front = (zpb > config.min_depth_m) & (zpe > config.min_depth_m)
+    long_enough = np.linalg.norm(pe - pb, axis=1) >= config.min_link_px
+    frac = np.linspace(*config.palm_slice_range, S)
+    centres = pb[:, None, :] + frac[None, :, None] * (pe - pb)[:, None, :]
+    margin = config.search.search_px
+    inside = ((centres[..., 0] >= margin) & (centres[..., 0] < camera.width - margin)
+              & (centres[..., 1] >= margin) & (centres[..., 1] < camera.height - margin))
+    dist, along = segment_distances(centres.reshape(-1, 2), base, end)
+    dist, along = dist.reshape(P, S, len(base)), along.reshape(P, S, len(base))
+    z_link = zb[None, None, :] + along * (ze - zb)[None, None, :]
+    z_self = (zpb[:, None] + frac[None, :] * (zpe - zpb)[:, None])[..., None]
+    covered = (dist < hw[None, None, :] + config.search.search_px) & (z_link < z_self) \
+        & link_usable[None, None, :]
+    slice_valid = (in_front & long_enough)[:, None] & inside & ~np.any(covered, axis=2)
+    usable = slice_valid.sum(1) >= config.search.min_slices
+    return pb, pe, n, generator, slice_valid, usable
 
 
 # ---------------------------------------------------------------------------- measurement
@@ -282,6 +454,8 @@ class EdgeMeasurement:
     link_found: np.ndarray   # (L,) bool
     tips: TipPoints
     tip_found: np.ndarray    # (T,) bool
+    palm: LinkAxes | None = None
+    palm_found: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
 
 def measure_features(grey: np.ndarray, prediction: EdgePrediction, config: EdgeTrackerConfig,
@@ -294,10 +468,17 @@ def measure_features(grey: np.ndarray, prediction: EdgePrediction, config: EdgeT
     axes = measure_link_axes(grey, pred.base_px, pred.end_px, pred.half_width_px,
                              config.search, pol, pred.slice_valid)
     link_found = axes.found & pred.link_usable
+    palm, palm_found = None, np.zeros(0, dtype=bool)
+    if len(pred.palm_generator):
+        palm = measure_outline_edges(grey, pred.palm_base_px, pred.palm_end_px,
+                                     pred.palm_outward_px, config.search, pred.palm_slice_valid,
+                                     config.palm_slice_range)
+        palm_found = palm.found & pred.palm_usable
     T = len(pred.tip_px)
     if T == 0:
         empty = TipPoints(np.zeros((0, 2)), np.zeros(0, dtype=bool))
-        return EdgeMeasurement(pred, axes, link_found, empty, np.zeros(0, dtype=bool))
+        return EdgeMeasurement(pred, axes, link_found, empty, np.zeros(0, dtype=bool), palm,
+                               palm_found)
     rows = np.maximum(tip_rows, 0)
     n = axes.normal[rows]
     rho = axes.offset[rows]
@@ -311,13 +492,18 @@ def measure_features(grey: np.ndarray, prediction: EdgePrediction, config: EdgeT
     tips = measure_tips(grey, foot, u, pred.tip_end_px, pred.tip_radius_px, config.search,
                         tip_pol)
     tip_found = tips.found & pred.tip_usable & (tip_rows >= 0) & link_found[rows]
-    return EdgeMeasurement(pred, axes, link_found, tips, tip_found)
+    return EdgeMeasurement(pred, axes, link_found, tips, tip_found, palm, palm_found)
 
 
-def _huber(r: np.ndarray, k: float) -> np.ndarray:
+def _robust(r: np.ndarray, k: float, loss: str) -> np.ndarray:
+    """IRLS weights of residuals ``r`` (pixels) at scale ``k`` (all 1 for k <= 0): Huber
+    (1 within k, k / |r| beyond) or Cauchy (1 / (1 + (r / k)^2), which all but ignores a
+    measurement many times k off, e.g. a finger edge taken from its neighbour)."""
     if k <= 0:
         return np.ones_like(r)
     a = np.abs(r)
+    if loss == 'cauchy':
+        return 1.0 / (1.0 + (a / k) ** 2)
     return np.where(a <= k, 1.0, k / np.maximum(a, 1e-12))
 
 
@@ -344,13 +530,23 @@ def stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
                                        Jpix[0:2 * L:2][f], Jpix[1:2 * L:2][f])
             rs.append(r)
             Js.append(J)
-            ws.append(_huber(r, config.huber_px))
+            ws.append(_robust(r, config.huber_px, config.robust_loss))
         t = meas.tip_found
         if t.any():
-            r, J = tip_residuals(pix[2 * L::2][t], meas.tips.centre[t], Jpix[2 * L::2][t])
+            r, J = tip_residuals(pix[points.tip_slice][t], meas.tips.centre[t],
+                                 Jpix[points.tip_slice][t])
             rs.append(r)
             Js.append(J)
-            ws.append(config.tip_weight * _huber(r, config.huber_px))
+            ws.append(config.tip_weight * _robust(r, config.huber_px, config.robust_loss))
+        pf = meas.palm_found
+        if meas.palm is not None and pf.any():
+            rb, re, alpha = palm_rows(points, meas.prediction.palm_generator[pf])
+            r, J = link_axis_residuals(meas.palm.normal[pf], meas.palm.offset[pf],
+                                       _blend(pix, rb, alpha), _blend(pix, re, alpha),
+                                       _blend(Jpix, rb, alpha), _blend(Jpix, re, alpha))
+            rs.append(r)
+            Js.append(J)
+            ws.append(config.palm_weight * _robust(r, config.huber_px, config.robust_loss))
     if not rs:
         return np.zeros(0), np.zeros((0, NUM_DOFS)) if jacobian else None, np.zeros(0)
     return (np.concatenate(rs), np.concatenate(Js) if jacobian else None, np.concatenate(ws))

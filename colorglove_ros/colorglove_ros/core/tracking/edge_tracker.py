@@ -85,7 +85,8 @@ class EdgeTracker:
         self.kin = FastKinematics(model)
         self.cameras = tuple(cameras)
         self.config = config or EdgeTrackerConfig()
-        self.points = feature_points(model, self.config.tracked_links, self.config.use_tips)
+        self.points = feature_points(model, self.config.tracked_links, self.config.use_tips,
+                                     self.config.palm_sides)
         self.init_pose = initialisation_pose(model, self.config.init_wrist_position,
                                              self.config.init_rotation_vector)
         self._names = tuple(c.name for c in self.cameras)
@@ -149,11 +150,14 @@ class EdgeTracker:
             return 'non-finite pose'
         for name, found, usable in zip(self._names, fit.links_found, fit.links_usable,
                                        strict=True):
-            if usable and found < cfg.min_found_fraction * usable:
+            if usable and found < cfg.min_camera_found_fraction * usable:
                 return (f'{found} of {usable} links found in {name} '
-                        f'(need {cfg.min_found_fraction:.0%})')
+                        f'(need {cfg.min_camera_found_fraction:.0%})')
         if fit.found_fraction == 0.0:
             return 'no link found'
+        if fit.found_fraction < cfg.min_found_fraction:
+            return (f'{sum(fit.links_found)} of {sum(fit.links_usable)} links found '
+                    f'(need {cfg.min_found_fraction:.0%})')
         if not fit.rms_px <= cfg.max_rms_px:
             return f'edge residual {fit.rms_px:.1f} px > {cfg.max_rms_px:.1f} px'
         return ''

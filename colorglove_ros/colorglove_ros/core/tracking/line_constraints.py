@@ -31,8 +31,8 @@ from colorglove_ros.core.tracking.kinematics import FastKinematics
 __all__ = ['ExtraConstraints', 'LINE_FEATURE_CONFIG', 'glove_edge_image', 'line_constraints']
 
 # the glove mask is brighter than the background; no Huber weights (the solver's weights
-# are constant over its iterations)
-LINE_FEATURE_CONFIG = EdgeTrackerConfig(polarity=1, huber_px=0.0)
+# are constant over its iterations); the link and tip features only
+LINE_FEATURE_CONFIG = EdgeTrackerConfig(polarity=1, huber_px=0.0, palm_sides=())
 
 
 def glove_edge_image(labels: np.ndarray | None) -> np.ndarray | None:

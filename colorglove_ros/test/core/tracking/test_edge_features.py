@@ -9,6 +9,7 @@ from colorglove_ros.core.tracking.edge_features import (
     EdgeFeatureError,
     EdgeSearchConfig,
     measure_link_axes,
+    measure_outline_edges,
     measure_tips,
     segment_distances,
     to_grey,
@@ -128,3 +129,18 @@ def test_segment_distances_and_grey_conversion() -> None:
         to_grey(np.zeros((2, 2, 2)))
     with pytest.raises(EdgeFeatureError):
         EdgeSearchConfig(width_ratio=(1.2, 2.0))
+
+
+@pytest.mark.parametrize('shift_px', [-4.0, 3.0])
+def test_outline_edge_found_from_an_offset_prediction_normal_outward(shift_px: float) -> None:
+    # a bright shape filling x < 200 (a vertical side at x = 200): predicted at 200 + shift
+    # with the outside toward +x
+    grey = np.full((240, 320), 40.0, dtype=np.float32)
+    grey[:, :200] = 180.0
+    grey = cv2.GaussianBlur(grey, (5, 5), 1.0)
+    axes = measure_outline_edges(grey, np.array([[200.0 + shift_px, 200.0]]),
+                                 np.array([[200.0 + shift_px, 60.0]]), np.array([[1.0, 0.0]]),
+                                 EdgeSearchConfig())
+    assert axes.found[0] and axes.polarity[0] == 1
+    assert np.allclose(axes.normal[0], [1.0, 0.0], atol=1e-3)
+    assert abs(axes.offset[0] - 199.5) < 0.3     # the step lies between pixels 199 and 200

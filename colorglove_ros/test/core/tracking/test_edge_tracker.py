@@ -7,10 +7,16 @@ import pytest
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
 from colorglove_ros.core.synthetic.bare_hand import BareHandSequence
+from colorglove_ros.core.tracking.edge_features import to_grey
 from colorglove_ros.core.tracking.edge_fit import (
+    EdgeFit,
     EdgeTrackerConfig,
     EdgeTrackerError,
+    _robust,
     link_axis_residuals,
+    measure_features,
+    predict_features,
+    stack_residuals,
     tip_residuals,
 )
 from colorglove_ros.core.tracking.edge_tracker import EdgeTracker, initialisation_pose
@@ -105,3 +111,62 @@ def test_bad_inputs_are_refused(rig) -> None:
         EdgeTrackerConfig(tracked_links=('palm',))
     q = initialisation_pose(seq.synth.model, (0.0, 0.1, 0.5))
     assert q[2] == 0.5 and q[seq.synth.model.dof_names.index('index_mcp_abd')] > 0
+
+
+def test_palm_outline_is_measured_where_the_true_pose_puts_it(rig) -> None:
+    # the ulnar palm side's silhouette generator (chosen per camera from its view of the
+    # palm: face-on and at 45 degrees) projects onto the measured outline at the true pose
+    cameras, seq, frames = rig
+    tracker = EdgeTracker(seq.synth.model, cameras)
+    truth = seq.poses[20]
+    for cam, image in zip(cameras, frames[20], strict=True):
+        pred = predict_features(tracker.kin, tracker.points, cam, truth, tracker.config)
+        meas = measure_features(to_grey(image), pred, tracker.config, tracker.points.tip_row)
+        assert meas.palm_found.all()
+        n, rho = meas.palm.normal[0], meas.palm.offset[0]
+        assert abs(n @ pred.palm_base_px[0] - rho) < 2.0
+        assert abs(n @ pred.palm_end_px[0] - rho) < 2.0
+        # the palm rows come after the links and tips and move the wrist
+        world = tracker.kin.points(truth, tracker.points.point_link, tracker.points.point_local,
+                                   True)
+        r, J, _ = stack_residuals(tracker.points, [cam], [meas], world, tracker.config)
+        assert np.abs(J[-2:, 0:3]).sum() > 0
+
+
+def test_palm_sides_hold_the_wrist_tilt(rig) -> None:
+    # without the palm, tilting the hand about its width while flexing the fingers at their
+    # bases the other way changes few edges; with it, the fit comes back toward the truth
+    cameras, seq, frames = rig
+    truth = seq.poses[20]
+    start = truth.copy()
+    start[3] += 0.04
+    for digit in ('index', 'middle', 'ring', 'little'):
+        start[seq.synth.model.dof_names.index(f'{digit}_mcp_flex')] += 0.04
+    errors = {}
+    for sides in ((), ('ulnar',)):
+        tracker = EdgeTracker(seq.synth.model, cameras, EdgeTrackerConfig(palm_sides=sides))
+        fit = tracker.fit(frames[20], start, rounds=3)
+        errors[sides] = abs(fit.q[3] - truth[3])
+    assert errors[('ulnar',)] < 0.005 < 0.5 * errors[()]
+
+
+def test_cauchy_weights_all_but_ignore_a_far_measurement() -> None:
+    r = np.array([0.5, 3.0, 12.0])
+    huber = _robust(r, 3.0, 'huber')
+    cauchy = _robust(r, 3.0, 'cauchy')
+    assert np.allclose(huber, [1.0, 1.0, 0.25])
+    assert np.allclose(cauchy, [1 / 1.0277777, 0.5, 1 / 17.0], atol=1e-6)
+    assert cauchy[2] * r[2] < 0.5 * huber[2] * r[2]     # its pull on the pose is much smaller
+    with pytest.raises(EdgeTrackerError):
+        EdgeTrackerConfig(robust_loss='tukey')
+
+
+def test_found_fractions_per_camera_and_over_all_cameras(rig) -> None:
+    cameras, seq, _ = rig
+    q = seq.poses[20]
+    fit = EdgeFit(q, 1.0, (14, 2), (14, 7), (5, 1), 3)       # 16 of 21 found, 2 of 7 in one
+    strict = EdgeTracker(seq.synth.model, cameras)
+    assert 'links found in camera2' in strict._fit_ok(fit)
+    lenient = strict.with_config(min_camera_found_fraction=0.25)
+    assert lenient._fit_ok(fit) == ''
+    assert '(need 80%)' in lenient.with_config(min_found_fraction=0.8)._fit_ok(fit)
