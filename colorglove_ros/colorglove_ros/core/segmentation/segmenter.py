@@ -23,7 +23,9 @@ from colorglove_ros.core.segmentation.detection import (
     colour_diversity,
     drop_oversized_components,
     glove_region_mask,
+    junction_window,
     scene_colour_table,
+    shed_oversized_patches,
 )
 from colorglove_ros.core.segmentation.light import estimate_light_gains, gain_table
 from colorglove_ros.core.segmentation.types import Blob, Observation
@@ -33,6 +35,7 @@ __all__ = [
     'SegmentationInputError', 'SegmentationConfigError', 'GloveSegmenter',
     'STATUS_OK',
     'STATUS_NO_GLOVE', 'STATUS_TOO_SMALL', 'STATUS_OUT_OF_FRAME', 'STATUS_FRAGMENTED',
+    'STATUS_FEW_COLOURS',
     'STAGES', 'load_segmenter',
     'keep_multicolor_components', 'relabel_borders', 'border_contact_px',
 ]
@@ -44,6 +47,9 @@ STATUS_OUT_OF_FRAME = 'out_of_frame'  # the crop window lies mostly outside the 
 # glove colours scattered in specks (noise, fine-grained clutter): too few of the window's
 # glove pixels lie in patch-sized blobs, where the printed glove's patches are solid
 STATUS_FRAGMENTED = 'fragmented'
+# fewer glove colours in the crop's blobs than a hand in view shows: colours the
+# classification missed (another camera's colour processing, overexposure) or clutter
+STATUS_FEW_COLOURS = 'few_colours'
 #: Timed stages, in pipeline order (``Observation.timings_ms`` also has ``'total'``);
 #: 'coarse' includes estimating the light colour.
 STAGES = ('coarse', 'filter', 'classify', 'cleanup', 'borders', 'crop', 'blobs')
@@ -51,9 +57,10 @@ STAGES = ('coarse', 'filter', 'classify', 'cleanup', 'borders', 'crop', 'blobs')
 # one whose neighbourhood (twice as wide) shows this many glove colours.
 GLOVE_MARGIN_COARSE_PX = 2
 GLOVE_LIKE_COLOURS = 3
-# ... and the glove's single-colour regions up to this share of the crop window's area (the
-# largest printed patch, the palm's, seen flat: about 0.12)
-MAX_PATCH_WINDOW_SHARE = 0.15
+# The hand's scale from patch junctions needs this many junction pixels (coarse).
+JUNCTION_MIN_PIXELS = 2
+# A colour counts towards ``min_crop_colors`` with this share of the crop's glove pixels.
+CROP_COLOUR_MIN_SHARE = 0.01
 
 
 class SegmentationInputError(ColorGloveError, ValueError):
@@ -285,6 +292,14 @@ def _coarse_cells(coarse: np.ndarray, origin: tuple[int, int], r: int, shape: tu
     return coarse[np.ix_(rows, cols)]
 
 
+def _blob_colours(blobs: list[Blob], min_pixels: float) -> int:
+    """How many colours the ``blobs`` show with at least ``min_pixels`` pixels each."""
+    per_colour: dict[int, int] = {}
+    for b in blobs:
+        per_colour[b.color_label] = per_colour.get(b.color_label, 0) + b.pixel_count
+    return sum(1 for count in per_colour.values() if count >= min_pixels)
+
+
 def _check_image(image: object) -> np.ndarray:
     if not isinstance(image, np.ndarray):
         raise SegmentationInputError(f'expected a numpy array, got {type(image).__name__}')
@@ -348,7 +363,9 @@ class GloveSegmenter:
                  light_passes: int = 1, min_blob_share: float = 0.85,
                  max_border_contact: float = 0.1, diversity_window: int = 24,
                  min_region_colors: int = 6, diversity_density: float = 0.01,
-                 max_patch_fraction: float = 0.1, scene_colour_min_share: float = 0.001,
+                 max_patch_fraction: float = 0.1, max_patch_window_share: float = 0.15,
+                 min_crop_colors: int = 0,
+                 scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
                  follow_margin: float = 0.0, source: str = 'GloveSegmenter') -> None:
         # every keyword argument but ``source`` is a setting named in SEGMENTER_RULES: checked
@@ -406,7 +423,7 @@ class GloveSegmenter:
         ``GLOVE_MARGIN_COARSE_PX`` of a pixel whose small neighbourhood shows at least
         ``GLOVE_LIKE_COLOURS`` glove colours, and the single-colour regions reaching such a
         pixel that are no larger than a printed patch can be in the coarse crop ``window``
-        (``MAX_PATCH_WINDOW_SHARE`` of its area). A uniform or two-coloured surface beside
+        (``max_patch_window_share`` of its area). A uniform or two-coloured surface beside
         the hand is not glove-like."""
         side = 2 * GLOVE_MARGIN_COARSE_PX + 1
         mixed = colour_diversity(labels, self.calibration.num_colors, 2 * side - 1,
@@ -415,7 +432,7 @@ class GloveSegmenter:
             cv2.MORPH_RECT, (side, side))).view(bool)
         if window is None or not mixed.any():
             return out
-        max_area = MAX_PATCH_WINDOW_SHARE * (2.0 * window[1]) ** 2
+        max_area = self.max_patch_window_share * (2.0 * window[1]) ** 2
         for colour in np.unique(labels[mixed]):
             if colour == 0:
                 continue
@@ -435,6 +452,9 @@ class GloveSegmenter:
         if static is not None:
             labels[static] = 0
         labels = self._glove_only(labels, reduction, image_pixels or labels.size)
+        labels = shed_oversized_patches(
+            labels, self.max_patch_window_share,
+            junction_window(labels, self.calibration.num_colors, JUNCTION_MIN_PIXELS))
         if self.min_component_colors > 1:
             # no re-attaching here: it changes neither the coarse window nor the light estimate
             labels = keep_multicolor_components(labels, self.min_component_colors, min_pixels=2)
@@ -630,7 +650,11 @@ class GloveSegmenter:
                                                 min_pixels=max(self.min_blob_pixels // (r * r), 2),
                                                 reattach_radius=self.reattach_radius,
                                                 reattach_max_share=self.reattach_max_share)
+        # single-colour surfaces larger than a patch at the (coarse) hand window's scale
+        labels = shed_oversized_patches(labels, self.max_patch_window_share,
+                                        ((0.0, 0.0), chalf / r))
         t = tick('cleanup', t)
+        min_px = max(int(self.min_glove_pixels / (r * r)), 1)
         labels = relabel_borders(roi, labels, self.border_passes, self.border_distances)
         t = tick('borders', t)
         if keep_labels:
@@ -638,7 +662,6 @@ class GloveSegmenter:
             up = labels if r == 1 else np.repeat(np.repeat(labels, r, 0), r, 1)
             full[y0:y0 + up.shape[0], x0:x0 + up.shape[1]] = up
             obs.label_image = full
-        min_px = max(int(self.min_glove_pixels / (r * r)), 1)
         tiny = crop_to_tiny(labels, min_pixels=min_px)
         t = tick('crop', t)
         if tiny is None:
@@ -674,6 +697,9 @@ class GloveSegmenter:
         elif (sum(b.pixel_count for b in obs.blobs)
               < self.min_blob_share * obs.glove_pixel_count):
             obs.status = STATUS_FRAGMENTED
+        elif self.min_crop_colors and _blob_colours(
+                obs.blobs, CROP_COLOUR_MIN_SHARE * obs.glove_pixel_count) < self.min_crop_colors:
+            obs.status = STATUS_FEW_COLOURS
         else:
             obs.status = STATUS_OK
             obs.hand_found = True

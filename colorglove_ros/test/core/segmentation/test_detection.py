@@ -12,12 +12,20 @@ from colorglove_ros.core.segmentation.calibration_fit import (
     render_training_frames,
 )
 from colorglove_ros.core.segmentation.detection import (
+    WINDOW_SAMPLES,
     colour_diversity,
     drop_oversized_components,
     glove_region_mask,
+    junction_window,
     scene_colour_table,
+    shed_oversized_patches,
 )
-from colorglove_ros.core.segmentation.segmenter import GloveSegmenter
+from colorglove_ros.core.segmentation.segmenter import (
+    CROP_COLOUR_MIN_SHARE,
+    STATUS_FEW_COLOURS,
+    GloveSegmenter,
+    _blob_colours,
+)
 from colorglove_ros.core.synthetic import frames as synth
 from colorglove_ros.core.synthetic.conditions import FrameConditions
 
@@ -58,6 +66,43 @@ def test_oversized_single_colour_regions_are_background() -> None:
     assert drop_oversized_components(labels, 0) is labels
 
 
+def test_a_surface_touching_the_glove_is_shed_at_the_hand_scale() -> None:
+    """A single-colour surface touching a glove patchwork, too small for the image-wide
+    limit but larger than any patch at the hand's scale (found from the patch junctions),
+    goes; the patchwork stays, and so does a large patch surrounded by other glove colours;
+    without any patch junction there is no window."""
+    labels = np.zeros((120, 160), np.uint8)
+    labels[40:64, 40:64] = _patchwork()
+    labels[30:90, 64:110] = 2                     # an orange petal touching the glove
+    window = junction_window(labels, 10, 2)
+    (cx, cy), half = window
+    assert abs(cx - 52) < 8 and abs(cy - 52) < 8 and half < 30
+    out = shed_oversized_patches(labels, 0.15, window)
+    assert not out[30:90, 66:110].any()
+    assert (out[40:64, 40:64] == labels[40:64, 40:64]).mean() > 0.9
+    surrounded = labels.copy()
+    surrounded[44:60, 44:60] = 5                  # as large as the petal's share, inside
+    surrounded[30:90, 64:110] = 0
+    assert (shed_oversized_patches(surrounded, 0.05, window)[44:60, 44:60] == 5).all()
+    assert not shed_oversized_patches(labels, 0.05, window)[30:90, 66:110].any()
+    plain = np.where(labels == 2, 2, 0).astype(np.uint8)
+    assert junction_window(plain, 10, 2) is None
+    assert shed_oversized_patches(plain, 0.15, None) is plain
+    assert shed_oversized_patches(labels, 0.0, window) is labels
+
+
+def test_sampled_region_mask_agrees_with_the_full_count_on_a_wide_window() -> None:
+    """A window wider than 2 x WINDOW_SAMPLES is counted on samples: the patchwork and its
+    margin are kept and a far two-colour texture is not, as with every pixel counted."""
+    labels = np.zeros((240, 320), np.uint8)
+    labels[40:136, 40:136] = np.kron(_patchwork(24, 24), np.ones((4, 4), np.uint8))
+    labels[150:230, 200:310] = np.where(np.arange(110)[None, :] % 16 < 8, 1, 2)
+    window = 3 * WINDOW_SAMPLES
+    mask = glove_region_mask(labels, 10, window, 6, 0.02)
+    assert mask[40:136, 40:136].all()
+    assert not mask[200:230, 280:310].any()
+
+
 def test_scene_colour_table_counts_quantised_colours() -> None:
     rgb = np.array([[200, 30, 30]] * 5 + [[30, 200, 30]] * 2, np.uint8)
     table = scene_colour_table(rgb, 5, 3)
@@ -92,3 +137,21 @@ def test_a_glove_in_front_of_a_warm_wood_like_surface_is_found(calibration) -> N
                          scene_colour_min_share=0.0).process(image)
     assert (not off.hand_found or np.hypot(*(np.array(off.crop.center_xy) - centre))
             > 0.25 * off.crop.half_size)
+
+
+def test_a_crop_showing_too_few_glove_colours_is_no_hand(calibration) -> None:
+    """``min_crop_colors``: a glove whose crop shows fewer colours than that (each on at
+    least CROP_COLOUR_MIN_SHARE of its glove pixels) is 'few_colours', not a hand."""
+    camera = synth.default_camera()
+    rng = np.random.default_rng(5)
+    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
+    q[0:3] = [0.0, 0.0, 0.6]
+    image = synth.render_frame(q, camera, rng, FrameConditions()).image_rgb
+    found = GloveSegmenter(calibration).process(image)
+    assert found.hand_found
+    shown = _blob_colours(found.blobs, CROP_COLOUR_MIN_SHARE * found.glove_pixel_count)
+    assert 3 <= shown <= 10
+    assert GloveSegmenter(calibration, min_crop_colors=shown).process(image).hand_found
+    if shown < 10:
+        refused = GloveSegmenter(calibration, min_crop_colors=shown + 1).process(image)
+        assert not refused.hand_found and refused.status == STATUS_FEW_COLOURS
