@@ -22,7 +22,8 @@ import numpy as np
 from colorglove_ros.core.segmentation.crop import mean_shift_crop
 
 __all__ = ['SCENE_COLOUR_BITS', 'WINDOW_SAMPLES', 'colour_diversity', 'glove_region_mask',
-           'drop_oversized_components', 'PATCH_OUTLINE_GLOVE_SHARE', 'junction_window', 'shed_oversized_patches', 'scene_colour_table']
+           'drop_oversized_components', 'PATCH_OUTLINE_GLOVE_SHARE', 'junction_window',
+           'shed_oversized_patches', 'scene_colour_table']
 
 #: Bits per channel of the quantised colours of :func:`scene_colour_table`.
 SCENE_COLOUR_BITS = 5
