@@ -172,7 +172,6 @@ SEGMENTER_RULES: dict[str, SettingRule] = {
     'diversity_density': ('float', 0.0, 1.0, False),
     'max_patch_fraction': ('float', 0.0, 1.0, False),
     'max_patch_window_share': ('float', 0.0, 1.0, False),
-    'min_crop_colors': ('int', 0, NUM_COLORS, False),
     'scene_colour_min_share': ('float', 0.0, 1.0, False),
     'background_frames': ('int', 0, 100000, False),
     'background_tolerance': ('float', 1.0, 255.0, False),

@@ -35,7 +35,6 @@ __all__ = [
     'SegmentationInputError', 'SegmentationConfigError', 'GloveSegmenter',
     'STATUS_OK',
     'STATUS_NO_GLOVE', 'STATUS_TOO_SMALL', 'STATUS_OUT_OF_FRAME', 'STATUS_FRAGMENTED',
-    'STATUS_FEW_COLOURS',
     'STAGES', 'load_segmenter',
     'keep_multicolor_components', 'relabel_borders', 'border_contact_px',
 ]
@@ -47,9 +46,6 @@ STATUS_OUT_OF_FRAME = 'out_of_frame'  # the crop window lies mostly outside the 
 # glove colours scattered in specks (noise, fine-grained clutter): too few of the window's
 # glove pixels lie in patch-sized blobs, where the printed glove's patches are solid
 STATUS_FRAGMENTED = 'fragmented'
-# fewer glove colours in the crop's blobs than a hand in view shows: colours the
-# classification missed (another camera's colour processing, overexposure) or clutter
-STATUS_FEW_COLOURS = 'few_colours'
 #: Timed stages, in pipeline order (``Observation.timings_ms`` also has ``'total'``);
 #: 'coarse' includes estimating the light colour.
 STAGES = ('coarse', 'filter', 'classify', 'cleanup', 'borders', 'crop', 'blobs')
@@ -59,8 +55,6 @@ GLOVE_MARGIN_COARSE_PX = 2
 GLOVE_LIKE_COLOURS = 3
 # The hand's scale from patch junctions needs this many junction pixels (coarse).
 JUNCTION_MIN_PIXELS = 2
-# A colour counts towards ``min_crop_colors`` with this share of the crop's glove pixels.
-CROP_COLOUR_MIN_SHARE = 0.01
 
 
 class SegmentationInputError(ColorGloveError, ValueError):
@@ -292,14 +286,6 @@ def _coarse_cells(coarse: np.ndarray, origin: tuple[int, int], r: int, shape: tu
     return coarse[np.ix_(rows, cols)]
 
 
-def _blob_colours(blobs: list[Blob], min_pixels: float) -> int:
-    """How many colours the ``blobs`` show with at least ``min_pixels`` pixels each."""
-    per_colour: dict[int, int] = {}
-    for b in blobs:
-        per_colour[b.color_label] = per_colour.get(b.color_label, 0) + b.pixel_count
-    return sum(1 for count in per_colour.values() if count >= min_pixels)
-
-
 def _check_image(image: object) -> np.ndarray:
     if not isinstance(image, np.ndarray):
         raise SegmentationInputError(f'expected a numpy array, got {type(image).__name__}')
@@ -332,7 +318,12 @@ class GloveSegmenter:
     Finding the glove, not its colours (``core.segmentation.detection``): on both passes,
     single-colour regions larger than ``max_patch_fraction`` of the image are background,
     and only pixels within ``diversity_window`` coarse pixels of a window showing
-    ``min_region_colors`` glove colours (each on ``diversity_density`` of it) count. Colours
+    ``min_region_colors`` glove colours (each on ``diversity_density`` of it) count; then a
+    single-colour region larger than ``max_patch_window_share`` of the hand's window whose
+    outline runs mostly along background (a petal, a sleeve, a wooden edge touching the
+    glove, which the filters above keep as part of its region) is background: on the coarse
+    pass with the window found where three glove colours meet (``junction_window``), in the
+    region of interest with the coarse window (``shed_oversized_patches``). Colours
     the coarse pass labelled glove but found to be background (at least
     ``scene_colour_min_share`` of the coarse frame in one quantised colour: surfaces, not
     small clutter) are the scene's own colours in this frame: the region of interest labels
@@ -364,7 +355,6 @@ class GloveSegmenter:
                  max_border_contact: float = 0.1, diversity_window: int = 24,
                  min_region_colors: int = 6, diversity_density: float = 0.01,
                  max_patch_fraction: float = 0.1, max_patch_window_share: float = 0.15,
-                 min_crop_colors: int = 0,
                  scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
                  follow_margin: float = 0.0, source: str = 'GloveSegmenter') -> None:
@@ -697,9 +687,6 @@ class GloveSegmenter:
         elif (sum(b.pixel_count for b in obs.blobs)
               < self.min_blob_share * obs.glove_pixel_count):
             obs.status = STATUS_FRAGMENTED
-        elif self.min_crop_colors and _blob_colours(
-                obs.blobs, CROP_COLOUR_MIN_SHARE * obs.glove_pixel_count) < self.min_crop_colors:
-            obs.status = STATUS_FEW_COLOURS
         else:
             obs.status = STATUS_OK
             obs.hand_found = True

@@ -20,12 +20,7 @@ from colorglove_ros.core.segmentation.detection import (
     scene_colour_table,
     shed_oversized_patches,
 )
-from colorglove_ros.core.segmentation.segmenter import (
-    CROP_COLOUR_MIN_SHARE,
-    STATUS_FEW_COLOURS,
-    GloveSegmenter,
-    _blob_colours,
-)
+from colorglove_ros.core.segmentation.segmenter import GloveSegmenter
 from colorglove_ros.core.synthetic import frames as synth
 from colorglove_ros.core.synthetic.conditions import FrameConditions
 
@@ -138,20 +133,3 @@ def test_a_glove_in_front_of_a_warm_wood_like_surface_is_found(calibration) -> N
     assert (not off.hand_found or np.hypot(*(np.array(off.crop.center_xy) - centre))
             > 0.25 * off.crop.half_size)
 
-
-def test_a_crop_showing_too_few_glove_colours_is_no_hand(calibration) -> None:
-    """``min_crop_colors``: a glove whose crop shows fewer colours than that (each on at
-    least CROP_COLOUR_MIN_SHARE of its glove pixels) is 'few_colours', not a hand."""
-    camera = synth.default_camera()
-    rng = np.random.default_rng(5)
-    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
-    q[0:3] = [0.0, 0.0, 0.6]
-    image = synth.render_frame(q, camera, rng, FrameConditions()).image_rgb
-    found = GloveSegmenter(calibration).process(image)
-    assert found.hand_found
-    shown = _blob_colours(found.blobs, CROP_COLOUR_MIN_SHARE * found.glove_pixel_count)
-    assert 3 <= shown <= 10
-    assert GloveSegmenter(calibration, min_crop_colors=shown).process(image).hand_found
-    if shown < 10:
-        refused = GloveSegmenter(calibration, min_crop_colors=shown + 1).process(image)
-        assert not refused.hand_found and refused.status == STATUS_FEW_COLOURS
