@@ -426,13 +426,16 @@ class GloveSegmenter:
         for colour in np.unique(labels[mixed]):
             if colour == 0:
                 continue
+            # each colour's components lie inside its bounding rectangle: label only that
+            same = cv2.compare(labels, int(colour), cv2.CMP_EQ)
+            x, y, w, h = cv2.boundingRect(same)
             n, comp, stats, _ = cv2.connectedComponentsWithStats(
-                (labels == colour).view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+                same[y:y + h, x:x + w], connectivity=8, ltype=cv2.CV_32S)
             patch = np.zeros(n, bool)
-            patch[comp[mixed]] = True
+            patch[comp[mixed[y:y + h, x:x + w]]] = True
             patch &= stats[:, cv2.CC_STAT_AREA] <= max_area
             patch[0] = False
-            out |= patch[comp]
+            out[y:y + h, x:x + w] |= patch[comp]
         return out
 
     def _coarse_labels(self, small: np.ndarray, table: np.ndarray | None = None,
