@@ -21,14 +21,12 @@ import numpy as np
 
 from colorglove_ros.core.segmentation.crop import mean_shift_crop
 
-__all__ = ['SCENE_COLOUR_BITS', 'WINDOW_SAMPLES', 'colour_diversity', 'glove_region_mask',
+__all__ = ['SCENE_COLOUR_BITS', 'colour_diversity', 'glove_region_mask',
            'drop_oversized_components', 'PATCH_OUTLINE_GLOVE_SHARE', 'junction_window',
            'shed_oversized_patches', 'scene_colour_table']
 
 #: Bits per channel of the quantised colours of :func:`scene_colour_table`.
 SCENE_COLOUR_BITS = 5
-#: :func:`glove_region_mask` counts colours on this many samples across a wider window.
-WINDOW_SAMPLES = 16
 
 
 def colour_diversity(labels: np.ndarray, num_colors: int, window: int,
@@ -56,26 +54,14 @@ def glove_region_mask(labels: np.ndarray, num_colors: int, window: int, min_colo
     """(H, W) bool: the pixels within ``window`` of a pixel whose window shows at least
     ``min_colors`` glove colours (:func:`colour_diversity`), and every glove-labelled
     8-connected region that reaches such a pixel: the hand, its fingers however long, and
-    a margin around it; empty where no window is that colourful.
-
-    A window wider than ``2 * WINDOW_SAMPLES`` pixels is sampled: the colours are counted on
-    every k-th pixel of every k-th row (``WINDOW_SAMPLES`` samples across the window), and
-    that coarser answer is spread back over the k x k pixels each sample stands for."""
-    labels = np.asarray(labels, np.uint8)
-    step = max(int(window) // WINDOW_SAMPLES, 1) if window > 2 * WINDOW_SAMPLES else 1
-    sampled = labels[step // 2::step, step // 2::step] if step > 1 else labels
-    reach = max(int(round(window / step)), 1)
-    rich = colour_diversity(sampled, num_colors, reach, min_density) >= min_colors
+    a margin around it; empty where no window is that colourful."""
+    rich = colour_diversity(labels, num_colors, window, min_density) >= min_colors
     if not rich.any():
-        return np.zeros(labels.shape, bool)
-    size = 2 * reach + 1
+        return rich
+    size = 2 * int(window) + 1
     near = cv2.dilate(rich.view(np.uint8),
                       cv2.getStructuringElement(cv2.MORPH_RECT, (size, size))).view(bool)
-    if step > 1:
-        rows = np.minimum(np.arange(labels.shape[0]) // step, rich.shape[0] - 1)
-        cols = np.minimum(np.arange(labels.shape[1]) // step, rich.shape[1] - 1)
-        rich, near = rich[np.ix_(rows, cols)], near[np.ix_(rows, cols)]
-    n, comp = cv2.connectedComponents((labels > 0).view(np.uint8), connectivity=8,
+    n, comp = cv2.connectedComponents((np.asarray(labels) > 0).view(np.uint8), connectivity=8,
                                       ltype=cv2.CV_32S)
     reached = np.zeros(n, bool)
     reached[comp[rich]] = True

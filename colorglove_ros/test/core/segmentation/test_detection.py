@@ -12,7 +12,6 @@ from colorglove_ros.core.segmentation.calibration_fit import (
     render_training_frames,
 )
 from colorglove_ros.core.segmentation.detection import (
-    WINDOW_SAMPLES,
     colour_diversity,
     drop_oversized_components,
     glove_region_mask,
@@ -84,18 +83,6 @@ def test_a_surface_touching_the_glove_is_shed_at_the_hand_scale() -> None:
     assert junction_window(plain, 10, 2) is None
     assert shed_oversized_patches(plain, 0.15, None) is plain
     assert shed_oversized_patches(labels, 0.0, window) is labels
-
-
-def test_sampled_region_mask_agrees_with_the_full_count_on_a_wide_window() -> None:
-    """A window wider than 2 x WINDOW_SAMPLES is counted on samples: the patchwork and its
-    margin are kept and a far two-colour texture is not, as with every pixel counted."""
-    labels = np.zeros((240, 320), np.uint8)
-    labels[40:136, 40:136] = np.kron(_patchwork(24, 24), np.ones((4, 4), np.uint8))
-    labels[150:230, 200:310] = np.where(np.arange(110)[None, :] % 16 < 8, 1, 2)
-    window = 3 * WINDOW_SAMPLES
-    mask = glove_region_mask(labels, 10, window, 6, 0.02)
-    assert mask[40:136, 40:136].all()
-    assert not mask[200:230, 280:310].any()
 
 
 def test_scene_colour_table_counts_quantised_colours() -> None:
