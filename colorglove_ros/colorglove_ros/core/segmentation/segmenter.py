@@ -53,6 +53,9 @@ STAGES = ('coarse', 'filter', 'classify', 'cleanup', 'borders', 'crop', 'blobs')
 # one whose neighbourhood (twice as wide) shows this many glove colours.
 GLOVE_MARGIN_COARSE_PX = 2
 GLOVE_LIKE_COLOURS = 3
+# ... and the glove's single-colour regions up to this share of the crop window's area (the
+# largest printed patch, the palm's, seen flat: about 0.12)
+GLOVE_LIKE_PATCH_SHARE = 0.15
 # The hand's scale from patch junctions needs this many junction pixels (coarse).
 JUNCTION_MIN_PIXELS = 2
 
@@ -413,7 +416,7 @@ class GloveSegmenter:
         ``GLOVE_MARGIN_COARSE_PX`` of a pixel whose small neighbourhood shows at least
         ``GLOVE_LIKE_COLOURS`` glove colours, and the single-colour regions reaching such a
         pixel that are no larger than a printed patch can be in the coarse crop ``window``
-        (``max_patch_window_share`` of its area). A uniform or two-coloured surface beside
+        (``GLOVE_LIKE_PATCH_SHARE`` of its area). A uniform or two-coloured surface beside
         the hand is not glove-like."""
         side = 2 * GLOVE_MARGIN_COARSE_PX + 1
         mixed = colour_diversity(labels, self.calibration.num_colors, 2 * side - 1,
@@ -422,7 +425,7 @@ class GloveSegmenter:
             cv2.MORPH_RECT, (side, side))).view(bool)
         if window is None or not mixed.any():
             return out
-        max_area = self.max_patch_window_share * (2.0 * window[1]) ** 2
+        max_area = GLOVE_LIKE_PATCH_SHARE * (2.0 * window[1]) ** 2
         for colour in np.unique(labels[mixed]):
             if colour == 0:
                 continue
