@@ -326,7 +326,8 @@ class GloveSegmenter:
     outline runs mostly along background (a petal, a sleeve, a wooden edge touching the
     glove, which the filters above keep as part of its region) is background: on the coarse
     pass with the window found where three glove colours meet (``junction_window``), in the
-    region of interest with the coarse window (``shed_oversized_patches``). Colours
+    region of interest with the coarse window (``shed_oversized_patches``); 0, the default,
+    turns this off (0.15: the palm's patch seen flat is about 0.12 of the window). Colours
     the coarse pass labelled glove but found to be background (at least
     ``scene_colour_min_share`` of the coarse frame in one quantised colour: surfaces, not
     small clutter) are the scene's own colours in this frame: the region of interest labels
@@ -357,7 +358,7 @@ class GloveSegmenter:
                  light_passes: int = 1, min_blob_share: float = 0.85,
                  max_border_contact: float = 0.1, diversity_window: int = 24,
                  min_region_colors: int = 6, diversity_density: float = 0.01,
-                 max_patch_fraction: float = 0.1, max_patch_window_share: float = 0.15,
+                 max_patch_fraction: float = 0.1, max_patch_window_share: float = 0.0,
                  scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
                  follow_margin: float = 0.0, source: str = 'GloveSegmenter') -> None:

@@ -120,3 +120,29 @@ def test_a_glove_in_front_of_a_warm_wood_like_surface_is_found(calibration) -> N
     assert (not off.hand_found or np.hypot(*(np.array(off.crop.center_xy) - centre))
             > 0.25 * off.crop.half_size)
 
+
+
+def test_an_orange_surface_touching_the_glove_is_shed_with_the_setting(calibration) -> None:
+    """A rendered glove with a plain orange surface (a petal, a sleeve) touching its side:
+    with ``max_patch_window_share`` the crop stays on the hand; off (the default) the surface
+    joins the glove's region and pulls the crop towards it."""
+    camera = synth.default_camera()
+    rng = np.random.default_rng(4)
+    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
+    q[0:3] = [0.0, 0.0, 0.6]
+    frame = synth.render_frame(q, camera, rng, FrameConditions())
+    ys, xs = np.nonzero(frame.labels)
+    image = frame.image_rgb.copy()
+    x0 = int(np.percentile(xs, 60))
+    surface = np.zeros(frame.labels.shape, bool)
+    surface[ys.min():ys.max(), x0:min(x0 + 2 * (xs.max() - xs.min()), 639)] = True
+    surface &= frame.labels == 0
+    image[surface] = GLOVE_PALETTE_RGB[6]
+    centre = np.array([xs.mean(), ys.mean()])
+    on = GloveSegmenter(calibration, max_patch_window_share=0.15).process(image)
+    off = GloveSegmenter(calibration).process(image)
+    assert on.hand_found
+    on_error = np.hypot(*(np.array(on.crop.center_xy) - centre))
+    assert on_error < 0.25 * on.crop.half_size
+    assert (not off.hand_found
+            or np.hypot(*(np.array(off.crop.center_xy) - centre)) > on_error + 10.0)
