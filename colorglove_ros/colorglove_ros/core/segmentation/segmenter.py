@@ -23,7 +23,9 @@ from colorglove_ros.core.segmentation.detection import (
     colour_diversity,
     drop_oversized_components,
     glove_region_mask,
+    junction_window,
     scene_colour_table,
+    shed_oversized_patches,
 )
 from colorglove_ros.core.segmentation.light import estimate_light_gains, gain_table
 from colorglove_ros.core.segmentation.types import Blob, Observation
@@ -53,7 +55,9 @@ GLOVE_MARGIN_COARSE_PX = 2
 GLOVE_LIKE_COLOURS = 3
 # ... and the glove's single-colour regions up to this share of the crop window's area (the
 # largest printed patch, the palm's, seen flat: about 0.12)
-MAX_PATCH_WINDOW_SHARE = 0.15
+GLOVE_LIKE_PATCH_SHARE = 0.15
+# The hand's scale from patch junctions needs this many junction pixels (coarse).
+JUNCTION_MIN_PIXELS = 2
 
 
 class SegmentationInputError(ColorGloveError, ValueError):
@@ -317,7 +321,13 @@ class GloveSegmenter:
     Finding the glove, not its colours (``core.segmentation.detection``): on both passes,
     single-colour regions larger than ``max_patch_fraction`` of the image are background,
     and only pixels within ``diversity_window`` coarse pixels of a window showing
-    ``min_region_colors`` glove colours (each on ``diversity_density`` of it) count. Colours
+    ``min_region_colors`` glove colours (each on ``diversity_density`` of it) count; then a
+    single-colour region larger than ``max_patch_window_share`` of the hand's window whose
+    outline runs mostly along background (a petal, a sleeve, a wooden edge touching the
+    glove, which the filters above keep as part of its region) is background: on the coarse
+    pass with the window found where three glove colours meet (``junction_window``), in the
+    region of interest with the coarse window (``shed_oversized_patches``); 0, the default,
+    turns this off (0.15: the palm's patch seen flat is about 0.12 of the window). Colours
     the coarse pass labelled glove but found to be background (at least
     ``scene_colour_min_share`` of the coarse frame in one quantised colour: surfaces, not
     small clutter) are the scene's own colours in this frame: the region of interest labels
@@ -348,7 +358,8 @@ class GloveSegmenter:
                  light_passes: int = 1, min_blob_share: float = 0.85,
                  max_border_contact: float = 0.1, diversity_window: int = 24,
                  min_region_colors: int = 6, diversity_density: float = 0.01,
-                 max_patch_fraction: float = 0.1, scene_colour_min_share: float = 0.001,
+                 max_patch_fraction: float = 0.1, max_patch_window_share: float = 0.0,
+                 scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
                  follow_margin: float = 0.0, source: str = 'GloveSegmenter') -> None:
         # every keyword argument but ``source`` is a setting named in SEGMENTER_RULES: checked
@@ -406,7 +417,7 @@ class GloveSegmenter:
         ``GLOVE_MARGIN_COARSE_PX`` of a pixel whose small neighbourhood shows at least
         ``GLOVE_LIKE_COLOURS`` glove colours, and the single-colour regions reaching such a
         pixel that are no larger than a printed patch can be in the coarse crop ``window``
-        (``MAX_PATCH_WINDOW_SHARE`` of its area). A uniform or two-coloured surface beside
+        (``GLOVE_LIKE_PATCH_SHARE`` of its area). A uniform or two-coloured surface beside
         the hand is not glove-like."""
         side = 2 * GLOVE_MARGIN_COARSE_PX + 1
         mixed = colour_diversity(labels, self.calibration.num_colors, 2 * side - 1,
@@ -415,17 +426,20 @@ class GloveSegmenter:
             cv2.MORPH_RECT, (side, side))).view(bool)
         if window is None or not mixed.any():
             return out
-        max_area = MAX_PATCH_WINDOW_SHARE * (2.0 * window[1]) ** 2
+        max_area = GLOVE_LIKE_PATCH_SHARE * (2.0 * window[1]) ** 2
         for colour in np.unique(labels[mixed]):
             if colour == 0:
                 continue
+            # each colour's components lie inside its bounding rectangle: label only that
+            same = cv2.compare(labels, int(colour), cv2.CMP_EQ)
+            x, y, w, h = cv2.boundingRect(same)
             n, comp, stats, _ = cv2.connectedComponentsWithStats(
-                (labels == colour).view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+                same[y:y + h, x:x + w], connectivity=8, ltype=cv2.CV_32S)
             patch = np.zeros(n, bool)
-            patch[comp[mixed]] = True
+            patch[comp[mixed[y:y + h, x:x + w]]] = True
             patch &= stats[:, cv2.CC_STAT_AREA] <= max_area
             patch[0] = False
-            out |= patch[comp]
+            out[y:y + h, x:x + w] |= patch[comp]
         return out
 
     def _coarse_labels(self, small: np.ndarray, table: np.ndarray | None = None,
@@ -435,6 +449,9 @@ class GloveSegmenter:
         if static is not None:
             labels[static] = 0
         labels = self._glove_only(labels, reduction, image_pixels or labels.size)
+        labels = shed_oversized_patches(
+            labels, self.max_patch_window_share,
+            junction_window(labels, self.calibration.num_colors, JUNCTION_MIN_PIXELS))
         if self.min_component_colors > 1:
             # no re-attaching here: it changes neither the coarse window nor the light estimate
             labels = keep_multicolor_components(labels, self.min_component_colors, min_pixels=2)
@@ -630,7 +647,11 @@ class GloveSegmenter:
                                                 min_pixels=max(self.min_blob_pixels // (r * r), 2),
                                                 reattach_radius=self.reattach_radius,
                                                 reattach_max_share=self.reattach_max_share)
+        # single-colour surfaces larger than a patch at the (coarse) hand window's scale
+        labels = shed_oversized_patches(labels, self.max_patch_window_share,
+                                        ((0.0, 0.0), chalf / r))
         t = tick('cleanup', t)
+        min_px = max(int(self.min_glove_pixels / (r * r)), 1)
         labels = relabel_borders(roi, labels, self.border_passes, self.border_distances)
         t = tick('borders', t)
         if keep_labels:
@@ -638,7 +659,6 @@ class GloveSegmenter:
             up = labels if r == 1 else np.repeat(np.repeat(labels, r, 0), r, 1)
             full[y0:y0 + up.shape[0], x0:x0 + up.shape[1]] = up
             obs.label_image = full
-        min_px = max(int(self.min_glove_pixels / (r * r)), 1)
         tiny = crop_to_tiny(labels, min_pixels=min_px)
         t = tick('crop', t)
         if tiny is None:

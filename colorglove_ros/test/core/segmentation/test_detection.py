@@ -15,7 +15,9 @@ from colorglove_ros.core.segmentation.detection import (
     colour_diversity,
     drop_oversized_components,
     glove_region_mask,
+    junction_window,
     scene_colour_table,
+    shed_oversized_patches,
 )
 from colorglove_ros.core.segmentation.segmenter import GloveSegmenter
 from colorglove_ros.core.synthetic import frames as synth
@@ -58,6 +60,31 @@ def test_oversized_single_colour_regions_are_background() -> None:
     assert drop_oversized_components(labels, 0) is labels
 
 
+def test_a_surface_touching_the_glove_is_shed_at_the_hand_scale() -> None:
+    """A single-colour surface touching a glove patchwork, too small for the image-wide
+    limit but larger than any patch at the hand's scale (found from the patch junctions),
+    goes; the patchwork stays, and so does a large patch surrounded by other glove colours;
+    without any patch junction there is no window."""
+    labels = np.zeros((120, 160), np.uint8)
+    labels[40:64, 40:64] = _patchwork()
+    labels[30:90, 64:110] = 2                     # an orange petal touching the glove
+    window = junction_window(labels, 10, 2)
+    (cx, cy), half = window
+    assert abs(cx - 52) < 8 and abs(cy - 52) < 8 and half < 30
+    out = shed_oversized_patches(labels, 0.15, window)
+    assert not out[30:90, 66:110].any()
+    assert (out[40:64, 40:64] == labels[40:64, 40:64]).mean() > 0.9
+    surrounded = labels.copy()
+    surrounded[44:60, 44:60] = 5                  # as large as the petal's share, inside
+    surrounded[30:90, 64:110] = 0
+    assert (shed_oversized_patches(surrounded, 0.05, window)[44:60, 44:60] == 5).all()
+    assert not shed_oversized_patches(labels, 0.05, window)[30:90, 66:110].any()
+    plain = np.where(labels == 2, 2, 0).astype(np.uint8)
+    assert junction_window(plain, 10, 2) is None
+    assert shed_oversized_patches(plain, 0.15, None) is plain
+    assert shed_oversized_patches(labels, 0.0, window) is labels
+
+
 def test_scene_colour_table_counts_quantised_colours() -> None:
     rgb = np.array([[200, 30, 30]] * 5 + [[30, 200, 30]] * 2, np.uint8)
     table = scene_colour_table(rgb, 5, 3)
@@ -92,3 +119,30 @@ def test_a_glove_in_front_of_a_warm_wood_like_surface_is_found(calibration) -> N
                          scene_colour_min_share=0.0).process(image)
     assert (not off.hand_found or np.hypot(*(np.array(off.crop.center_xy) - centre))
             > 0.25 * off.crop.half_size)
+
+
+
+def test_an_orange_surface_touching_the_glove_is_shed_with_the_setting(calibration) -> None:
+    """A rendered glove with a plain orange surface (a petal, a sleeve) touching its side:
+    with ``max_patch_window_share`` the crop stays on the hand; off (the default) the surface
+    joins the glove's region and pulls the crop towards it."""
+    camera = synth.default_camera()
+    rng = np.random.default_rng(4)
+    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
+    q[0:3] = [0.0, 0.0, 0.6]
+    frame = synth.render_frame(q, camera, rng, FrameConditions())
+    ys, xs = np.nonzero(frame.labels)
+    image = frame.image_rgb.copy()
+    x0 = int(np.percentile(xs, 60))
+    surface = np.zeros(frame.labels.shape, bool)
+    surface[ys.min():ys.max(), x0:min(x0 + 2 * (xs.max() - xs.min()), 639)] = True
+    surface &= frame.labels == 0
+    image[surface] = GLOVE_PALETTE_RGB[6]
+    centre = np.array([xs.mean(), ys.mean()])
+    on = GloveSegmenter(calibration, max_patch_window_share=0.15).process(image)
+    off = GloveSegmenter(calibration).process(image)
+    assert on.hand_found
+    on_error = np.hypot(*(np.array(on.crop.center_xy) - centre))
+    assert on_error < 0.25 * on.crop.half_size
+    assert (not off.hand_found
+            or np.hypot(*(np.array(off.crop.center_xy) - centre)) > on_error + 10.0)
