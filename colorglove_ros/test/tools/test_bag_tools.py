@@ -226,3 +226,22 @@ def test_player_waits_for_every_camera_info_subscriber(tmp_path: Path) -> None:
     finally:
         rclpy.try_shutdown(context=context)
     assert (one, two) == (True, False)
+
+
+def test_player_says_which_subscribers_did_not_come(tmp_path: Path,
+                                                    isolated_ros_domain: dict) -> None:
+    """The command line's --min-subscribers / --min-info-subscribers reach the waits, and a
+    wait that times out is a warning naming the topic and the counts, not silence."""
+    from sensor_msgs.msg import CameraInfo, Image
+
+    _write_camera_bag(tmp_path / 'bag', (
+        ('/camera/image_raw', 'sensor_msgs/msg/Image', Image()),
+        ('/camera/camera_info', 'sensor_msgs/msg/CameraInfo', CameraInfo())))
+    done = subprocess.run(
+        [sys.executable, '-m', 'colorglove_ros.tools.play_bag', str(tmp_path / 'bag'),
+         '--paced', '--pace-timeout', '0.1', '--wait-subscribers', '0.3', '--linger', '0',
+         '--min-subscribers', '1', '--min-info-subscribers', '2'],
+        env=isolated_ros_domain, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert '/camera/image_raw has 0 of 1 subscribers' in done.stderr
+    assert '/camera/camera_info has 0 of 2 subscribers' in done.stderr
