@@ -122,12 +122,17 @@ class LatencyProbe:
         return ProbeRecord(np.asarray(data['stamp_ns'], np.int64),
                            np.asarray(data['arrival_ns'], np.int64))
 
-    def close(self) -> None:
+    def close(self, timeout_s: float = 2.0) -> None:
         """End the process without reading its record (a run that failed or was stopped):
-        nothing is left running, and the folder is removed."""
+        SIGINT first, so it leaves DDS cleanly (no shared-memory segments left behind), SIGKILL
+        after ``timeout_s``; nothing is left running, and the folder is removed."""
         if self.process is not None and self.process.poll() is None:
-            self.process.kill()
-            self.process.wait()
+            self.process.send_signal(signal.SIGINT)
+            try:
+                self.process.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
         self.folder.cleanup()
 
 

@@ -62,3 +62,16 @@ def test_probe_process_records_stamp_and_arrival() -> None:
         rclpy.try_shutdown(context=context)
     assert list(record.stamp_ns) == sent
     assert np.all(record.latencies_s >= 0.030) and np.all(record.latencies_s < 1.0)
+
+
+@pytest.mark.dds
+@pytest.mark.usefixtures('isolated_ros_domain')
+def test_close_ends_a_running_probe_cleanly() -> None:
+    """close() (a run stopped before its record is read) stops the probe with SIGINT, as its
+    own shutdown path expects, not SIGKILL, and removes its folder."""
+    probe = LatencyProbe()
+    probe.start()
+    folder = probe.output.parent
+    probe.close()
+    assert probe.process.returncode == 0
+    assert not folder.exists()
