@@ -3,17 +3,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from segmentation_samples import blob_glove_calibration
 
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
 from colorglove_ros.core.pipeline import image_observer
 from colorglove_ros.core.segmentation.background import StaticBackground
-from colorglove_ros.core.segmentation.calibration_fit import fit_color_calibration
 from colorglove_ros.core.segmentation.crop import crop_to_tiny
 from colorglove_ros.core.segmentation.segmenter import GloveSegmenter, SegmentationConfigError
 from colorglove_ros.core.synthetic.blob_glove import (
     BlobConditions,
     render_blob_frame,
-    sample_blob_conditions,
 )
 
 
@@ -58,10 +57,7 @@ def test_the_glove_never_becomes_background_and_a_moved_camera_starts_again() ->
 
 @pytest.fixture(scope='module')
 def calibration():
-    rng = np.random.default_rng(11)
-    train = [render_blob_frame(rng, sample_blob_conditions(rng, 'train')) for _ in range(8)]
-    return fit_color_calibration(train, seed=0, max_per_class=1500, bits=5, augment_copies=1,
-                                 background_components=6)
+    return blob_glove_calibration()
 
 
 def _glove_clutter(image: np.ndarray, x0: int, y0: int, cell: int = 12) -> None:

@@ -6,6 +6,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from segmentation_samples import FAST_FIT
 
 from colorglove_ros.core.colorimetry import linear_rgb_to_xyz, linear_to_srgb, srgb_to_linear
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
@@ -34,8 +35,6 @@ from colorglove_ros.core.synthetic.blob_glove import (
     sample_blob_conditions,
 )
 
-FAST = dict(max_per_class=1500, bits=5, augment_copies=1, background_components=6)
-
 
 @pytest.fixture(scope='module')
 def frames() -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
@@ -49,7 +48,7 @@ def frames() -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
 
 @pytest.fixture(scope='module')
 def calibration(frames):
-    return fit_color_calibration(frames['train'], seed=0, **FAST)
+    return fit_color_calibration(frames['train'], seed=0, **FAST_FIT)
 
 
 def test_srgb_linear_xyz_reference_values() -> None:
@@ -152,7 +151,7 @@ def test_relighting_under_black_bodies_covers_tinted_light(frames) -> None:
     _, fp_tinted = _interior_accuracy_and_fp(tinted, frames['held'])
     assert fp_tinted < fp_plain + 0.005
     with pytest.raises(ColorCalibrationError, match='colour temperature'):
-        fit_color_calibration(frames['train'], augment_temperatures_k=(6500.0, 3000.0), **FAST)
+        fit_color_calibration(frames['train'], augment_temperatures_k=(6500.0, 3000.0), **FAST_FIT)
 
 
 def test_unseen_colours_fall_to_background(calibration) -> None:

@@ -5,16 +5,14 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from segmentation_samples import blob_glove_calibration
 
-from colorglove_ros.core.segmentation.calibration_fit import fit_color_calibration
 from colorglove_ros.core.segmentation.segmenter import GloveSegmenter
 from colorglove_ros.core.synthetic.blob_glove import (
     BlobConditions,
     render_blob_frame,
-    sample_blob_conditions,
 )
 
-FAST = dict(max_per_class=1500, bits=5, augment_copies=1, background_components=6)
 GREY = 110
 LEFT, RIGHT = (150, 240), (470, 240)      # glove centres (x, y) in a 640x480 frame
 # the whole-frame search's crop on the two-glove frame lies at least this far from LEFT
@@ -23,9 +21,7 @@ WHOLE_FRAME_SHIFT_PX = 60
 
 @pytest.fixture(scope='module')
 def calibration():
-    rng = np.random.default_rng(11)
-    train = [render_blob_frame(rng, sample_blob_conditions(rng, 'train')) for _ in range(8)]
-    return fit_color_calibration(train, seed=0, **FAST)
+    return blob_glove_calibration()
 
 
 @pytest.fixture(scope='module')

@@ -5,12 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from segmentation_samples import printed_glove_calibration
 
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
-from colorglove_ros.core.segmentation.calibration_fit import (
-    fit_color_calibration,
-    render_training_frames,
-)
 from colorglove_ros.core.segmentation.detection import (
     colour_diversity,
     drop_oversized_components,
@@ -22,8 +19,6 @@ from colorglove_ros.core.segmentation.detection import (
 from colorglove_ros.core.segmentation.segmenter import GloveSegmenter
 from colorglove_ros.core.synthetic import frames as synth
 from colorglove_ros.core.synthetic.conditions import FrameConditions
-
-FAST = dict(max_per_class=1500, bits=5, augment_copies=1, background_components=6)
 
 
 def _patchwork(h: int = 24, w: int = 24, colours: int = 8) -> np.ndarray:
@@ -94,7 +89,7 @@ def test_scene_colour_table_counts_quantised_colours() -> None:
 
 @pytest.fixture(scope='module')
 def calibration():
-    return fit_color_calibration(render_training_frames(8, 0), seed=0, **FAST)
+    return printed_glove_calibration()
 
 
 def test_a_glove_in_front_of_a_warm_wood_like_surface_is_found(calibration) -> None:

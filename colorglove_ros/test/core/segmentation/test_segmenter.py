@@ -8,12 +8,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from segmentation_samples import blob_glove_calibration, printed_glove_calibration
 
 from colorglove_ros.core.colorimetry import srgb_to_linear
 from colorglove_ros.core.conventions import TINY_SIZE
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
 from colorglove_ros.core.segmentation.calibration_fit import (
-    fit_color_calibration,
     read_labelled_frames,
     render_training_frames,
     write_labelled_frames,
@@ -45,15 +45,12 @@ from colorglove_ros.core.validation import SEGMENTER_RULES
 from colorglove_ros.tools import calibrate_colors, eval_segmentation
 from colorglove_ros.tools.eval_segmentation import frame_metrics
 
-FAST = dict(max_per_class=1500, bits=5, augment_copies=1, background_components=6)
 VALID = {STATUS_OK, STATUS_NO_GLOVE, STATUS_TOO_SMALL, STATUS_OUT_OF_FRAME, STATUS_FRAGMENTED}
 
 
 @pytest.fixture(scope='module')
 def calibration():
-    rng = np.random.default_rng(11)
-    train = [render_blob_frame(rng, sample_blob_conditions(rng, 'train')) for _ in range(8)]
-    return fit_color_calibration(train, seed=0, **FAST)
+    return blob_glove_calibration()
 
 
 @pytest.fixture(scope='module')
@@ -183,7 +180,7 @@ def _noise_patch_frames(seed: int, count: int) -> list[np.ndarray]:
 @pytest.fixture(scope='module')
 def glove_calibration():
     """A quick colour calibration on rendered frames of the printed glove."""
-    return fit_color_calibration(render_training_frames(8, 0), seed=0, **FAST)
+    return printed_glove_calibration()
 
 
 def test_noise_patches_are_fragmented_not_a_hand(glove_calibration) -> None:
