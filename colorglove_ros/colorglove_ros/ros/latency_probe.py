@@ -106,13 +106,7 @@ class LatencyProbe:
 
     def stop(self, timeout_s: float = 10.0) -> ProbeRecord:
         """Stop the process (SIGINT) and return what it recorded."""
-        if self.process is not None and self.process.poll() is None:
-            self.process.send_signal(signal.SIGINT)
-            try:
-                self.process.wait(timeout_s)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
+        self._end_process(timeout_s)
         try:
             data = json.loads(self.output.read_text())
         except (OSError, ValueError) as exc:
@@ -126,6 +120,12 @@ class LatencyProbe:
         """End the process without reading its record (a run that failed or was stopped):
         SIGINT first, so it leaves DDS cleanly (no shared-memory segments left behind), SIGKILL
         after ``timeout_s``; nothing is left running, and the folder is removed."""
+        self._end_process(timeout_s)
+        self.folder.cleanup()
+
+    def _end_process(self, timeout_s: float) -> None:
+        """SIGINT the running process (it then writes its record and leaves DDS cleanly);
+        SIGKILL it if it has not exited after ``timeout_s``."""
         if self.process is not None and self.process.poll() is None:
             self.process.send_signal(signal.SIGINT)
             try:
@@ -133,7 +133,6 @@ class LatencyProbe:
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()
-        self.folder.cleanup()
 
 
 def main(argv: list[str] | None = None) -> int:
