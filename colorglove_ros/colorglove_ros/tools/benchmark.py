@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import Any
 
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.report import print_table, write_json
@@ -29,7 +28,7 @@ from colorglove_ros.ros.pipeline_run import (
     run_pipeline,
     summarize,
 )
-from colorglove_ros.tools._cli import add_pipeline_arguments, run_tool, tool_error, tool_parser
+from colorglove_ros.tools._cli import add_pipeline_arguments, run_tool, tool_parser
 
 __all__ = ['TARGETS', 'BAG_RATE_HZ', 'STEREO_CALIBRATION', 'ensure_bag', 'check_targets',
            'isolate_domain', 'main']
@@ -178,10 +177,7 @@ def main(argv: list[str] | None = None) -> int:
 def _benchmark(args: argparse.Namespace) -> int:
     """The benchmark itself (SIGTERM and the package's errors handled by run_tool)."""
     print(f'[benchmark] ROS domain {isolate_domain(args.domain_id)}', flush=True)
-    try:
-        database = prepare_assets(args.database)
-    except ColorGloveError as exc:     # a missing or corrupt config, calibration or database
-        return tool_error('colorglove_benchmark', exc)
+    database = prepare_assets(args.database)  # a bad config or database: run_tool's error
     bag = ensure_bag(args.seed, args.frames)
     parameters = pipeline_parameters(database, args.seed, args.frames, BAG_RATE_HZ)
     del parameters['camera']

@@ -13,7 +13,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.ros.pipeline_run import (
@@ -22,7 +21,7 @@ from colorglove_ros.ros.pipeline_run import (
     run_pipeline,
     summarize,
 )
-from colorglove_ros.tools._cli import add_pipeline_arguments, run_tool, tool_error, tool_parser
+from colorglove_ros.tools._cli import add_pipeline_arguments, run_tool, tool_parser
 
 __all__ = ['overlay_strip', 'main']
 
@@ -52,10 +51,7 @@ def main(argv: list[str] | None = None) -> int:
 def _demo(args: argparse.Namespace) -> int:
     """The demo itself (SIGTERM and the package's errors handled by run_tool)."""
     started = time.perf_counter()
-    try:
-        database = prepare_assets(args.database)
-    except ColorGloveError as exc:     # a missing or corrupt config, calibration or database
-        return tool_error('colorglove_demo', exc)
+    database = prepare_assets(args.database)  # a bad config or database: run_tool's error
     print(f'[demo] running camera_node (synthetic seed {args.seed}, {args.frames} frames at '
           f'{args.rate:g} Hz), segmentation_node, lookup_node, ik_node', flush=True)
     run = run_pipeline(pipeline_parameters(database, args.seed, args.frames, args.rate),
