@@ -291,9 +291,11 @@ def write_params_file(path: Path, values: dict[str, object]) -> Path:
 
 def assert_run_tracked(run, figures: dict, frames: int, min_tracked: float = 0.9) -> None:
     """A four-node pipeline run (``ros.pipeline_run.PipelineRun``) finished, segmented every
-    one of its ``frames`` camera frames and tracked at least ``min_tracked`` of them with
-    ground truth (``figures``: its ``pipeline_run.summarize``)."""
+    one of its ``frames`` camera frames with a known camera model (none answered 'camera:
+    waiting for CameraInfo', as a frame played ahead of its CameraInfo is) and tracked at least
+    ``min_tracked`` of them with ground truth (``figures``: its ``pipeline_run.summarize``)."""
     assert not run.timed_out
     assert run.segmented == frames, 'segmentation_node missed camera frames'
+    assert not run.camera_refusals, run.camera_refusals
     assert figures['tracked_fraction'] >= min_tracked, figures
     assert figures['frames_with_truth'] >= min_tracked * frames

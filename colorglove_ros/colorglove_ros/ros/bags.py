@@ -232,12 +232,13 @@ class SequenceBagWriter:
             pixels = rgb8_to_encoding(image, self.encoding)
         except ImageEncodingError as exc:
             raise BagError(f'camera {index}: {exc}') from exc
+        # the CameraInfo first: a reader keeps the newest one and refuses images before it
         return {
+            info_topic: _camera_info(self._ts, header, camera),
             image_topic: t['sensor_msgs/msg/Image'](
                 header=header, height=camera.height, width=camera.width,
                 encoding=self.encoding, is_bigendian=0,
                 step=camera.width * pixels.shape[2], data=pixels.reshape(-1)),
-            info_topic: _camera_info(self._ts, header, camera),
         }
 
     def write(self, frame: object, stamp_ns: int | None = None,

@@ -14,10 +14,12 @@ from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.pipeline import NoHand
 from colorglove_ros.ros.conversions import camera_from_camera_info_msg
 
-__all__ = ['FrameCamera', 'REFUSAL_KINDS']
+__all__ = ['CAMERA_REFUSAL_PREFIX', 'FrameCamera', 'REFUSAL_KINDS']
 
 REFUSAL_KINDS = ('waiting for CameraInfo', 'unusable CameraInfo', 'size', 'frame_id')
 """Keys of :attr:`FrameCamera.refused` (why frames were refused, with their counts)."""
+CAMERA_REFUSAL_PREFIX = 'camera: '
+"""How the 'no hand' reason of every refusal starts."""
 
 
 class FrameCamera:
@@ -70,7 +72,7 @@ class FrameCamera:
 
     def _refuse(self, kind: str, detail: str) -> NoHand:
         self.refused[kind] += 1
-        return NoHand(f'camera: {detail}', warn=True)
+        return NoHand(f'{CAMERA_REFUSAL_PREFIX}{detail}', warn=True)
 
     def camera_for(self, width: int, height: int, frame_id: str) -> PinholeCamera | NoHand:
         """The camera model of a ``width`` x ``height`` frame in ``frame_id``, or the reason

@@ -32,6 +32,7 @@ from std_msgs.msg import String
 
 from colorglove_ros.core.evaluation.metrics import jitter_runs_mm, latency_summary_ms, pose_accuracy
 from colorglove_ros.ros.conversions import pose_from_msgs
+from colorglove_ros.ros.frame_camera import CAMERA_REFUSAL_PREFIX
 from colorglove_ros.ros.image import image_to_rgb8
 from colorglove_ros.ros.latency_probe import LatencyProbe, ProbeRecord
 from colorglove_ros.ros.launcher import Launcher, NodeSpec, use_fastdds_profile
@@ -81,6 +82,7 @@ class PipelineMonitor(Node):
         self.lookup_ms: dict[tuple[int, int], float] = {}
         self.segmentation_ms: dict[tuple[int, int], float] = {}
         self.observation_times: dict[tuple[int, int], float] = {}
+        self.camera_refusals: list[str] = []     # observations refused for their camera model
         self.candidate_times: dict[tuple[int, int], float] = {}
         self.overlays: list[np.ndarray] = []
         self.statuses: list[str] = []
@@ -126,6 +128,8 @@ class PipelineMonitor(Node):
     def _on_observation(self, msg: HandObservation) -> None:
         with self.lock:
             self.observation_times.setdefault(_key(msg), time.monotonic())
+            if not msg.hand_found and msg.status.startswith(CAMERA_REFUSAL_PREFIX):
+                self.camera_refusals.append(msg.status)
 
     def _on_candidates(self, msg: HandPoseCandidates) -> None:
         with self.lock:
@@ -184,6 +188,8 @@ class PipelineRun:
     timed_out: bool = False
     overlays: list[np.ndarray] = field(default_factory=list)
     statuses: list[str] = field(default_factory=list)      # ik_node's tracking status lines
+    # segmentation's 'camera: ...' answers (e.g. a frame ahead of its CameraInfo)
+    camera_refusals: list[str] = field(default_factory=list)
 
 
 def prepare_assets(database: Path | None = None) -> Path:
@@ -372,7 +378,8 @@ def _collect(monitor: PipelineMonitor, duration: float, published: int,
             segmentation_ms=list(monitor.segmentation_ms.values()),
             lookup_ms=list(monitor.lookup_ms.values()), probe=record,
             frame_index=frame_index,
-            overlays=list(monitor.overlays), statuses=list(monitor.statuses))
+            overlays=list(monitor.overlays), statuses=list(monitor.statuses),
+            camera_refusals=list(monitor.camera_refusals))
 
 
 def ik_times_ms(statuses: Sequence[str]) -> list[float]:
@@ -386,6 +393,7 @@ def summarize(run: PipelineRun, model) -> dict[str, float]:
     figures = {
         'frames_expected': run.frames_expected, 'frames_seen_by_monitor': run.frames,
         'frames_segmented': run.segmented, 'frames_tracked': run.tracked,
+        'frames_refused_for_camera': len(run.camera_refusals),
         'tracked_fraction': run.tracked / run.frames_expected if run.frames_expected else 0.0,
         # JointStates per second between the first and the last one the probe received
         'output_rate_hz': run.probe.rate_hz if run.probe is not None else 0.0,

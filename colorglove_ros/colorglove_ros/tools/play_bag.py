@@ -43,6 +43,9 @@ PLAYBACK_OPTIONS: dict[str, tuple[type, object, str]] = {
     'min-subscribers': (int, 1, 'subscribers on --pace-on to wait for before starting'),
     'min-info-subscribers': (int, 1, 'subscribers on the CameraInfo topic beside --pace-on to '
                              'wait for before starting (every node that reads CameraInfo)'),
+    'settle': (float, 0.5, 'seconds to wait after those subscribers are matched, before the '
+               'first message: a subscriber matches the player shortly after the player '
+               'matched it, and a message published in between is lost to it'),
     'loop': (bool, False, 'play again from the start until Ctrl-C'),
     'clock': (bool, False, "publish the bag's time on /clock (rosgraph_msgs/Clock)"),
     'restamp': (bool, False, 'stamp each message with its publish time (wall clock) instead of '
@@ -112,6 +115,21 @@ class BagPlayer(Node):
         topic = f'{namespace}/camera_info'
         types = {c.topic: c.msgtype for c in self.connections}
         return topic if types.get(topic) == 'sensor_msgs/msg/CameraInfo' else None
+
+    def prime_camera_infos(self) -> list[str]:
+        """Publish the first CameraInfo of every CameraInfo topic ahead of the playback (as
+        recorded, not restamped): a node keeps the newest CameraInfo and refuses the images
+        it gets before one, and a bag may hold a frame's image ahead of its CameraInfo (a
+        driver publishes the image first). Returns the topics primed."""
+        primed = []
+        for connection in self.connections:
+            if connection.msgtype != 'sensor_msgs/msg/CameraInfo':
+                continue
+            for _conn, _timestamp, rawdata in self.reader.messages(connections=[connection]):
+                self.publishers_by_topic[connection.topic].publish(bytes(rawdata))
+                primed.append(connection.topic)
+                break
+        return primed
 
     def play(self, rate: float, pace_topic: str | None, pace_on: str | None,
              pace_timeout_s: float, restamp: bool = False) -> int:
@@ -185,6 +203,8 @@ def main(argv: list[str] | None = None) -> int:
                     print(f'colorglove_play_bag: warning: {topic} has {seen} of {wanted} '
                           f'subscribers after {args.wait_subscribers:g} s; playing anyway',
                           file=sys.stderr, flush=True)
+            time.sleep(args.settle)
+        player.prime_camera_infos()
         if args.clock:
             player.publish_clock()
         while True:

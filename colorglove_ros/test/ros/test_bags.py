@@ -160,7 +160,8 @@ def test_make_bag_tool(tmp_path: Path, capsys) -> None:
 
 def test_stereo_bag_from_make_bag(tmp_path: Path) -> None:
     """A two-camera calibration gives both views at the same stamps, each with its frame_id and
-    intrinsics, the extra view written before the primary one within a frame."""
+    intrinsics, the extra view written before the primary one within a frame and each view's
+    CameraInfo before its image (a reader refuses images before their CameraInfo)."""
     calib_path = CONFIG_DIR / 'calibration_stereo.yaml'
     calibration = load_calibration(calib_path)
     out = tmp_path / 'stereo'
@@ -182,6 +183,8 @@ def test_stereo_bag_from_make_bag(tmp_path: Path) -> None:
     assert frame_ids['/camera2/camera/image_raw'] == second.frame_id == 'camera2_optical_frame'
     assert frame_ids[TOPIC_IMAGE] == FRAME_ID
     assert order.index('/camera2/camera/image_raw') < order.index(TOPIC_IMAGE)
+    assert order.index(TOPIC_CAMERA_INFO) < order.index(TOPIC_IMAGE)
+    assert order.index('/camera2/camera/camera_info') < order.index('/camera2/camera/image_raw')
     assert order[0] == TOPIC_TF_STATIC and order.count(TOPIC_TF_STATIC) == 1
     # the two views differ (another viewpoint) but both show the glove
     back = list(read_sequence_bag(out))

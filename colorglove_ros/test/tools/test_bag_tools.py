@@ -228,6 +228,50 @@ def test_player_waits_for_every_camera_info_subscriber(tmp_path: Path) -> None:
     assert (one, two) == (True, False)
 
 
+def test_player_primes_each_camera_info(tmp_path: Path) -> None:
+    """Before playing, the player publishes the first CameraInfo of each CameraInfo topic, so a
+    bag holding a frame's image ahead of its CameraInfo (as drivers publish them) does not
+    have its first frame refused 'waiting for CameraInfo'."""
+    import rclpy
+    from sensor_msgs.msg import CameraInfo, Image
+
+    from colorglove_ros.tools.play_bag import BagPlayer
+
+    _write_camera_bag(tmp_path / 'bag', (
+        ('/cam/image_raw', 'sensor_msgs/msg/Image', Image()),
+        ('/cam/camera_info', 'sensor_msgs/msg/CameraInfo', CameraInfo(width=640, height=480)),
+        ('/cam2/camera_info', 'sensor_msgs/msg/CameraInfo', CameraInfo(width=320))))
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    received: list[tuple[str, int]] = []
+    try:
+        player = BagPlayer(tmp_path / 'bag', context=context)
+        reader = rclpy.create_node('info_reader', context=context)
+        for topic in ('/cam/camera_info', '/cam2/camera_info'):
+            reader.create_subscription(CameraInfo, topic,
+                                       lambda msg, topic=topic: received.append((topic,
+                                                                                 msg.width)),
+                                       10)
+        reader.create_subscription(Image, '/cam/image_raw',
+                                   lambda _msg: received.append(('image', 0)), 10)
+        assert player.wait_for_subscribers('/cam2/camera_info', 5.0, 1)
+        time.sleep(0.5)
+        primed = player.prime_camera_infos()
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(reader)
+        deadline = time.monotonic() + 5.0
+        while len(received) < 2 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+        executor.shutdown()
+        reader.destroy_node()
+        player.close()
+        player.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    assert sorted(primed) == ['/cam/camera_info', '/cam2/camera_info']
+    assert sorted(received) == [('/cam/camera_info', 640), ('/cam2/camera_info', 320)]
+
+
 def test_player_says_which_subscribers_did_not_come(tmp_path: Path,
                                                     isolated_ros_domain: dict) -> None:
     """The command line's --min-subscribers / --min-info-subscribers reach the waits, and a
