@@ -194,9 +194,11 @@ class PipelineRun:
 
 def prepare_assets(database: Path | None = None) -> Path:
     """The pose database to run with (``database``, default the one ``config/database.yaml``
-    names), built first if missing, and the colour calibration ``config/color_calibration.yaml``
-    names, fitted first on rendered training frames if missing (each once)."""
-    from colorglove_ros.core.lookup.database import save_database
+    names, built first if missing; a ``database`` given that does not exist is a
+    :class:`DatabaseError`, not a build in a mistyped place), and the colour calibration
+    ``config/color_calibration.yaml`` names, fitted first on rendered training frames if missing
+    (each once)."""
+    from colorglove_ros.core.lookup.database import DatabaseError, save_database
     from colorglove_ros.core.lookup.database_build import build_database, read_database_config
     from colorglove_ros.core.segmentation.calibration_fit import (
         SYNTHETIC_FRAMES_DIR,
@@ -205,6 +207,11 @@ def prepare_assets(database: Path | None = None) -> Path:
     from colorglove_ros.core.segmentation.color_model import read_calibration_config
 
     config, default_database, _ = read_database_config(DATABASE_CONFIG)
+    if database and not (Path(database) / 'manifest.json').is_file():
+        raise DatabaseError(f'no pose database at {database} (no manifest.json): build one '
+                            f'with `colorglove_build_database --output {database}`, or leave '
+                            f'out --database to use the default {default_database} (built '
+                            'there on first use)')
     database = Path(database) if database else default_database
     calibration_file = read_calibration_config(COLOR_CONFIG)['calibration_file']
     if not Path(calibration_file).is_file():
