@@ -323,16 +323,16 @@ def validate_constraints(patch_id: Any, color: Any, vertex: Any, tiny_xy: Any,
                          error: ErrorType = InvalidPriorError) -> None:
     """Projection constraints: patch ids 0..19, colours 1..10, vertices of the mesh, tiny
     centroids finite within (a margin around) the tiny image, pixel counts 0..1600."""
-    patch_id = check_array('constraint patch_id', patch_id, shape=(None,), kind='iu', low=0,
+    patch_id = check_array('constraint_patch_ids', patch_id, shape=(None,), kind='iu', low=0,
                            high=NUM_PATCHES - 1, max_length=NUM_PATCHES * 4, error=error)
     n = len(patch_id)
-    check_array('constraint color_label', color, shape=(n,), kind='iu', low=1,
+    check_array('constraint_colors', color, shape=(n,), kind='iu', low=1,
                 high=NUM_COLORS, error=error)
-    check_array('constraint vertex_index', vertex, shape=(n,), kind='iu', low=0,
+    check_array('constraint_vertices', vertex, shape=(n,), kind='iu', low=0,
                 high=num_vertices - 1, error=error)
-    check_array('constraint tiny_xy', tiny_xy, shape=(n, 2), kind='fiu', low=-TINY_SIZE,
+    check_array('constraint_tiny_xy', tiny_xy, shape=(n, 2), kind='fiu', low=-TINY_SIZE,
                 high=2 * TINY_SIZE, error=error)
-    check_array('constraint pixel_count', pixel_count, shape=(n,), kind='fiu', low=0,
+    check_array('constraint_pixel_counts', pixel_count, shape=(n,), kind='fiu', low=0,
                 high=TINY_SIZE ** 2, error=error)
 
 
@@ -348,10 +348,10 @@ def validate_prior(*, blended_pose: Any, candidate_poses: Any,
     q = validate_pose('blended_pose', blended_pose)
     if len(candidate_poses) == 0:
         raise InvalidPriorError('hand_found with no candidates')
-    k = len(validate_poses('candidate poses', candidate_poses))
-    check_array('candidate weight', candidate_weights, shape=(k,), low=0.0, high=1.0 + 1e-6,
+    k = len(validate_poses('candidate_poses', candidate_poses))
+    check_array('candidate_weights', candidate_weights, shape=(k,), low=0.0, high=1.0 + 1e-6,
                 error=InvalidPriorError)
-    check_array('candidate image_distance', candidate_distances, shape=(k,), low=0.0,
+    check_array('candidate_distances', candidate_distances, shape=(k,), low=0.0,
                 error=InvalidPriorError)
     if len(constraints[0]) == 0:
         raise InvalidPriorError('hand_found with no projection constraints')

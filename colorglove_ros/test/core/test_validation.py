@@ -115,13 +115,13 @@ def _prior(**changes) -> dict:
     ({'blended_pose': np.full(26, np.nan)}, 'blended_pose'),
     ({'blended_pose': np.zeros(5)}, 'blended_pose'),
     ({'candidate_poses': []}, 'no candidates'),
-    ({'candidate_weights': np.array([np.nan])}, 'weight'),
+    ({'candidate_weights': np.array([np.nan])}, 'candidate_weights'),
     ({'constraints': (np.array([], int),) * 3 + (np.zeros((0, 2)), np.array([], int))},
      'no projection constraints'),
     ({'constraints': (np.array([25]), np.array([2]), np.array([10]), np.array([[1.0, 1.0]]),
-                      np.array([1]))}, 'patch_id'),
+                      np.array([1]))}, 'constraint_patch_ids'),
     ({'constraints': (np.array([3]), np.array([2]), np.array([100]), np.array([[1.0, 1.0]]),
-                      np.array([1]))}, 'vertex_index'),
+                      np.array([1]))}, 'constraint_vertices'),
     ({'finger_std': -np.ones(20)}, 'finger_std'),
 ])
 def test_validate_prior_refuses(changes, message) -> None:

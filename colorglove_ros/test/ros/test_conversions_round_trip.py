@@ -123,16 +123,22 @@ def serialized_round_trip(msg):
 
 @pytest.mark.parametrize('spoil, message', [
     (lambda m: setattr(m, 'candidate_poses', m.candidate_poses[:-1]), 'candidate_poses'),
-    (lambda m: setattr(m, 'candidate_weights', m.candidate_weights[:-1]), 'weight'),
+    (lambda m: setattr(m, 'candidate_weights', m.candidate_weights[:-1]), 'candidate_weights'),
+    (lambda m: m.candidate_distances.__setitem__(0, -1.0), 'candidate_distances'),
     (lambda m: setattr(m, 'constraint_tiny_xy', m.constraint_tiny_xy[:-1]),
      'constraint_tiny_xy'),
-    (lambda m: setattr(m, 'constraint_vertices', m.constraint_vertices[:-1]), 'vertex_index'),
-    (lambda m: m.candidate_poses.__setitem__(30, float('nan')), 'candidate poses'),
-    (lambda m: m.candidate_poses.__setitem__(26 + 3, 1e4), r'candidate poses\[1\].*rotation'),
+    (lambda m: setattr(m, 'constraint_vertices', m.constraint_vertices[:-1]),
+     'constraint_vertices'),
+    (lambda m: m.constraint_colors.__setitem__(0, 0), 'constraint_colors'),
+    (lambda m: m.constraint_patch_ids.__setitem__(0, 20), 'constraint_patch_ids'),
+    (lambda m: m.constraint_pixel_counts.__setitem__(0, 10**6), 'constraint_pixel_counts'),
+    (lambda m: m.candidate_poses.__setitem__(30, float('nan')), 'candidate_poses'),
+    (lambda m: m.candidate_poses.__setitem__(26 + 3, 1e4), r'candidate_poses\[1\].*rotation'),
 ])
 def test_check_candidates_msg_refuses_arrays_out_of_step(spoil, message) -> None:
     """The parallel arrays must hold one value (or pose, or (x, y)) per candidate or
-    constraint; a spoiled array is refused naming it."""
+    constraint, each within its range; a spoiled array is refused naming it as the message
+    does."""
     from colorglove_ros.core.validation import InvalidInputError
     from colorglove_ros.ros.message_checks import check_candidates_msg
 
