@@ -91,7 +91,12 @@ class EdgeTrackerConfig:
     ``min_camera_found_fraction`` in each camera for a fit to count as good.
     ``palm_sides`` are the palm outline sides measured (``PALM_SIDES``; empty: the paper's
     link and tip features only), on ``palm_slice_range`` of each side, weighted
-    ``palm_weight``.
+    ``palm_weight``. A tracked frame whose only fault is too few links found (the residual
+    of those found is small) is coasted through, up to ``coast_patience`` frames in a row
+    (no pose published, the track kept), and ``resume_frames`` good frames must follow before
+    the tracker publishes again; other bad frames count toward ``loss_patience``.
+    ``camera_weights`` scale each camera's residual weights in the fit
+    (camera i gets ``camera_weights[i]``, 1 beyond the tuple's end).
     """
 
     search: EdgeSearchConfig = field(default_factory=EdgeSearchConfig)
@@ -100,6 +105,7 @@ class EdgeTrackerConfig:
     palm_sides: tuple[str, ...] = ('ulnar',)
     palm_slice_range: tuple[float, float] = (0.15, 0.95)
     palm_weight: float = 1.0
+    camera_weights: tuple[float, ...] = ()
     polarity: int = 0
     measurement_rounds: int = 1
     gn_iterations: int = 3
@@ -115,6 +121,8 @@ class EdgeTrackerConfig:
     min_camera_found_fraction: float = 0.6
     max_rms_px: float = 3.0
     loss_patience: int = 3
+    coast_patience: int = 0
+    resume_frames: int = 0
     init_wrist_position: tuple[float, float, float] = (0.0, 0.095, 0.5)
     init_rotation_vector: tuple[float, float, float] = (0.0, 0.0, 0.0)
     init_rounds: int = 6
@@ -136,12 +144,16 @@ class EdgeTrackerConfig:
             raise EdgeTrackerError(f'polarity must be -1, 0 or 1, got {self.polarity}')
         if self.measurement_rounds < 1 or self.gn_iterations < 1 or self.init_rounds < 1:
             raise EdgeTrackerError('measurement_rounds, gn_iterations, init_rounds must be >= 1')
+        if any(not w >= 0 for w in self.camera_weights):
+            raise EdgeTrackerError(f'camera_weights must be >= 0, got {self.camera_weights}')
         if len(self.stabilizer) != 3 or min(self.stabilizer) < 0:
             raise EdgeTrackerError(f'stabilizer needs 3 values >= 0, got {self.stabilizer}')
         if not 0.0 < self.min_found_fraction <= 1.0 or self.max_rms_px <= 0 \
                 or not 0.0 <= self.min_camera_found_fraction <= 1.0:
             raise EdgeTrackerError('min_found_fraction must be in (0, 1], '
                                    'min_camera_found_fraction in [0, 1], max_rms_px > 0')
+        if self.coast_patience < 0 or self.resume_frames < 0:
+            raise EdgeTrackerError('coast_patience and resume_frames must be >= 0')
         if self.loss_patience < 1 or self.init_hold_frames < 1:
             raise EdgeTrackerError('loss_patience and init_hold_frames must be >= 1')
 
@@ -517,9 +529,10 @@ def stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
     p, Jw = world
     L = len(points.links)
     rs, Js, ws = [], [], []
-    for cam, meas in zip(cameras, measured, strict=True):
+    for index, (cam, meas) in enumerate(zip(cameras, measured, strict=True)):
         if meas is None:
             continue
+        start = len(ws)
         pix, Jpix, _ = _project(cam, p, Jw if jacobian else None)
         if Jpix is None:
             Jpix = np.zeros((len(pix), 2, 1))
@@ -547,6 +560,8 @@ def stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
             rs.append(r)
             Js.append(J)
             ws.append(config.palm_weight * _robust(r, config.huber_px, config.robust_loss))
+        if index < len(config.camera_weights):
+            ws[start:] = [config.camera_weights[index] * w for w in ws[start:]]
     if not rs:
         return np.zeros(0), np.zeros((0, NUM_DOFS)) if jacobian else None, np.zeros(0)
     return (np.concatenate(rs), np.concatenate(Js) if jacobian else None, np.concatenate(ws))
