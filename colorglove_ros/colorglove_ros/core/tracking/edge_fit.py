@@ -35,6 +35,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
@@ -74,6 +75,7 @@ PALM_SIDES = ('ulnar', 'radial')
 ROBUST_LOSSES = ('huber', 'cauchy')
 # viewing angles of the palm-side silhouette generators (see palm_outline)
 PALM_ANGLES = np.deg2rad(np.linspace(-75.0, 75.0, 7))
+_PALM_OCCLUDER_POINTS = 160       # palm mesh vertices kept as the palm occluder
 
 
 class EdgeTrackerError(ColorGloveError):
@@ -95,6 +97,8 @@ class EdgeTrackerConfig:
     of those found is small) is coasted through, up to ``coast_patience`` frames in a row
     (no pose published, the track kept), and ``resume_frames`` good frames must follow before
     the tracker publishes again; other bad frames count toward ``loss_patience``.
+    Link slices hidden behind the palm (:func:`_behind_palm`, points within
+    ``palm_occlusion_px``; 0 turns it off) are not searched nor counted as missing.
     ``camera_weights`` scale each camera's residual weights in the fit
     (camera i gets ``camera_weights[i]``, 1 beyond the tuple's end).
     """
@@ -117,6 +121,7 @@ class EdgeTrackerConfig:
     min_link_px: float = 10.0
     min_depth_m: float = 0.1
     occlusion_margin_px: float = 2.0
+    palm_occlusion_px: float = 10.0
     min_found_fraction: float = 0.6
     min_camera_found_fraction: float = 0.6
     max_rms_px: float = 3.0
@@ -200,6 +205,8 @@ class FeaturePoints:
     radius: np.ndarray       # (L,) link radius, m
     tip_radius: np.ndarray   # (T,) m
     palm_sign: np.ndarray = field(default_factory=lambda: np.zeros(0))     # (P,) +1 radial
+    palm_surface: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (V, 3) palm
+    #                          frame, a subsample of the palm mesh's vertices (occluder)
 
     @property
     def num_palm_sides(self) -> int:
@@ -276,9 +283,12 @@ def feature_points(model: HandModel, tracked: Sequence[str], use_tips: bool,
     palm_sign = np.array([1.0 if side == 'radial' else -1.0 for side in palm_sides])
     row = {int(li): k for k, li in enumerate(links)}
     tip_row = np.array([row.get(int(li), -1) for li in tip_links], dtype=np.int64)
+    mesh = build_hand_mesh(model)
+    palm = mesh.local_vertices[mesh.vertex_link == 0]
+    palm = palm[::max(1, len(palm) // _PALM_OCCLUDER_POINTS)]
     return FeaturePoints(links, tip_links, tip_row, point_link,
                           np.asarray(local, dtype=float).reshape(-1, 3), radius[links],
-                          radius[tip_links], palm_sign)
+                          radius[tip_links], palm_sign, np.asarray(palm, dtype=float))
 
 
 @dataclass(frozen=True)
@@ -361,6 +371,8 @@ def predict_features(kin: FastKinematics, points: FeaturePoints, camera: Pinhole
     related = ((parent[:, None] == points.links[None, :])
                | (parent[None, :] == points.links[:, None]))
     occluded = np.any(covered & nearer & usable[None, None, :] & ~same & ~related[:, None, :], 2)
+    if config.palm_occlusion_px > 0 and len(points.palm_surface):
+        occluded |= _behind_palm(points, camera, config, q, centres, z_self)
     slice_valid = usable[:, None] & inside & ~occluded
     link_usable = slice_valid.sum(1) >= config.search.min_slices
     T = len(points.tip_links)
@@ -387,6 +399,33 @@ def predict_features(kin: FastKinematics, points: FeaturePoints, camera: Pinhole
                          usable)
     return EdgePrediction(base, end, Jb, Je, hw, slice_valid, link_usable, tip, tip_end, Jt,
                           tip_r, tip_ok, *palm)
+
+
+def _behind_palm(points: FeaturePoints, camera: PinholeCamera, config: EdgeTrackerConfig,
+                 q: np.ndarray, centres: np.ndarray, z_self: np.ndarray) -> np.ndarray:
+    """(L, S) slices hidden by the palm: inside the convex hull of the projected palm
+    surface points and farther from the camera, by more than the link's radius, than the
+    nearest of those points within ``palm_occlusion_px`` (or the nearest one): e.g. fingers
+    curled behind the back of the hand."""
+    world = q[0:3] + points.palm_surface @ rotvec_to_matrix(q[3:6]).T
+    pix, _, depth = _project(camera, world, None)
+    ok = depth > config.min_depth_m
+    if ok.sum() < 3:
+        return np.zeros(centres.shape[:2], dtype=bool)
+    pix, depth = pix[ok], depth[ok]
+    hull = cv2.convexHull(pix.astype(np.float32))
+    flat = centres.reshape(-1, 2)
+    inside = np.array([cv2.pointPolygonTest(hull, (float(x), float(y)), False) >= 0
+                       for x, y in flat])
+    out = np.zeros(len(flat), dtype=bool)
+    if inside.any():
+        d2 = ((flat[inside, None, :] - pix[None, :, :]) ** 2).sum(-1)
+        near = d2 <= config.palm_occlusion_px ** 2
+        near[np.arange(len(d2)), np.argmin(d2, axis=1)] = True
+        z_palm = np.where(near, depth[None, :], np.inf).min(axis=1)
+        radius = np.repeat(points.radius, centres.shape[1])[inside]
+        out[inside] = z_self.reshape(-1)[inside] > z_palm + radius
+    return out.reshape(centres.shape[:2])
 
 
 def palm_rows(points: FeaturePoints, generator: np.ndarray) -> tuple[np.ndarray, np.ndarray,

@@ -227,3 +227,26 @@ def test_camera_weights_scale_each_cameras_residuals(rig) -> None:
         EdgeTrackerConfig(camera_weights=(1.0, -1.0))
     with pytest.raises(EdgeTrackerError):
         EdgeTrackerConfig(coast_patience=-1)
+
+
+def test_fingers_curled_behind_the_back_of_the_hand_are_not_searched() -> None:
+    from colorglove_ros.core.hand.model import LINK_NAMES
+    from colorglove_ros.core.tracking.mouse import MouseConfig
+    from colorglove_ros.tools.eval_mouse import scripted_sequence
+
+    calibration = load_calibration(resolve_path('config/calibration.yaml'))
+    camera = calibration.cameras[0]
+    model = HandModel(calibration.hand_length_m)
+    # the mouse's relaxed hand on the table seen from behind at 45 degrees: the curled
+    # fingers' middle and distal phalanges lie behind the knuckles
+    q = scripted_sequence(model, MouseConfig(), seed=0, seconds=2.0, clicks=1)[0][0]
+    seen = EdgeTracker(model, [camera])
+    blind = seen.with_config(palm_occlusion_px=0.0)
+    on = predict_features(seen.kin, seen.points, camera, q, seen.config)
+    off = predict_features(blind.kin, blind.points, camera, q, blind.config)
+    names = [LINK_NAMES[i] for i in seen.points.links]
+    hidden = {n for n, a, b in zip(names, on.link_usable, off.link_usable, strict=True)
+              if b and not a}
+    assert {'index_middle', 'middle_middle'} <= hidden
+    assert on.link_usable[names.index('thumb_distal')]          # the thumb stays in view
+    assert on.link_usable.sum() < off.link_usable.sum()
