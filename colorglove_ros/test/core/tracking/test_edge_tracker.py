@@ -144,7 +144,8 @@ def test_palm_sides_hold_the_wrist_tilt(rig) -> None:
         start[seq.synth.model.dof_names.index(f'{digit}_mcp_flex')] += 0.04
     errors = {}
     for sides in ((), ('ulnar',)):
-        tracker = EdgeTracker(seq.synth.model, cameras, EdgeTrackerConfig(palm_sides=sides))
+        tracker = EdgeTracker(seq.synth.model, cameras,
+                              EdgeTrackerConfig(palm_sides=sides, camera_weights=()))
         fit = tracker.fit(frames[20], start, rounds=3)
         errors[sides] = abs(fit.q[3] - truth[3])
     assert errors[('ulnar',)] < 0.005 < 0.5 * errors[()]
@@ -165,7 +166,8 @@ def test_found_fractions_per_camera_and_over_all_cameras(rig) -> None:
     cameras, seq, _ = rig
     q = seq.poses[20]
     fit = EdgeFit(q, 1.0, (14, 2), (14, 7), (5, 1), 3)       # 16 of 21 found, 2 of 7 in one
-    strict = EdgeTracker(seq.synth.model, cameras)
+    strict = EdgeTracker(seq.synth.model, cameras,
+                         EdgeTrackerConfig(min_camera_found_fraction=0.6))
     assert 'links found in camera2' in strict._fit_ok(fit)
     lenient = strict.with_config(min_camera_found_fraction=0.25)
     assert lenient._fit_ok(fit) == ''
@@ -174,7 +176,8 @@ def test_found_fractions_per_camera_and_over_all_cameras(rig) -> None:
 
 def test_fit_faults_are_told_apart_coverage_from_drift(rig) -> None:
     cameras, seq, _ = rig
-    tracker = EdgeTracker(seq.synth.model, cameras)
+    tracker = EdgeTracker(seq.synth.model, cameras,
+                          EdgeTrackerConfig(min_camera_found_fraction=0.6))
     q = seq.poses[20]
     assert tracker._check_fit(EdgeFit(q, 1.0, (14, 2), (14, 7), (5, 1), 3))[0] == 'coverage'
     assert tracker._check_fit(EdgeFit(q, 5.0, (14, 7), (14, 7), (5, 1), 3))[0] == 'drift'
@@ -209,7 +212,7 @@ def test_tracker_coasts_through_frames_with_too_few_features(rig) -> None:
 
 def test_camera_weights_scale_each_cameras_residuals(rig) -> None:
     cameras, seq, frames = rig
-    tracker = EdgeTracker(seq.synth.model, cameras)
+    tracker = EdgeTracker(seq.synth.model, cameras, EdgeTrackerConfig(camera_weights=()))
     q = seq.poses[20]
     greys = [to_grey(img) for img in frames[20]]
     world = tracker.kin.points(q, tracker.points.point_link, tracker.points.point_local, True)
@@ -219,6 +222,7 @@ def test_camera_weights_scale_each_cameras_residuals(rig) -> None:
                 for cam, g in zip(cameras, greys, strict=True)]
     _, _, w = stack_residuals(tracker.points, cameras, measured, world, tracker.config)
     weighted = EdgeTrackerConfig(camera_weights=(1.0, 0.25))
+    assert EdgeTrackerConfig().camera_weights == (1.0, 0.25)
     _, _, w2 = stack_residuals(tracker.points, cameras, measured, world, weighted)
     first = len(stack_residuals(tracker.points, cameras[:1], measured[:1], world,
                                 tracker.config)[0])
