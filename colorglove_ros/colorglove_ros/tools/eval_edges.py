@@ -195,6 +195,7 @@ def _run(args: Any) -> int:
           f'single-threaded in this process (time: wall clock, cpu: this process)', flush=True)
     if args.json:
         write_json(args.json, {'settings': {'seeds': args.seeds, 'tuning_seeds': TUNING_SEEDS,
+                                            'check_seeds': CHECK_SEEDS,
                                             'frames': args.frames, 'speeds': args.speeds,
                                             'cameras': args.cameras, 'init': args.init,
                                             'python_loop_s': loop_s, 'load_average': load},
