@@ -9,7 +9,9 @@ fingers slightly spread, palm to the primary camera, wrist at the marked spot
 or until :meth:`EdgeTracker.initialize` gives it a pose (e.g. the glove tracker's). While
 tracking, a frame whose fit leaves too few links found or too large a residual gives no
 pose; ``loss_patience`` such frames in a row declare the track lost and the tracker waits
-for re-initialisation.
+for re-initialisation. A frame whose only fault is coverage (too few links found, a small
+residual on those found) can instead be coasted through for ``coast_patience`` frames (off by
+default), publishing nothing and keeping the track.
 """
 from __future__ import annotations
 
