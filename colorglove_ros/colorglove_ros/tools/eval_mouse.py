@@ -18,15 +18,26 @@ the primary camera of ``--calibration`` looking down at the table at 45 degrees)
 tracker starts from the true first pose (a pose given to it, as from the glove tracker) and,
 after a loss, again from the true pose of the frame it was lost on (counted as
 ``reinitialisations``); frames without a published pose reach the mouse as gaps.
+
+``--source glove`` feeds it the colour-glove tracker's output (segmentation, lookup, IK with
+smoothing, as ``ik_node`` runs) on the same script rendered with the glove
+(``core.evaluation.scripted_tracking.ScriptedTracker``, the primary camera of
+``--calibration``, the largest pose database under data/ unless ``--database``; the tracked
+poses are cached in data/scripted_tracking/); frames it did not track reach the mouse as gaps.
 """
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera, load_calibration
+from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.evaluation.scripted_hands import ScriptedSequence
+from colorglove_ros.core.evaluation.scripted_tracking import ScriptedTracker
+from colorglove_ros.core.evaluation.sequences import find_database
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.geometry import matrix_to_rotvec
 from colorglove_ros.core.hand.model import DOF_NAMES, KEYPOINT_NAMES, HandModel
@@ -34,11 +45,11 @@ from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.synthetic.bare_hand import BareHandSequence
 from colorglove_ros.core.tracking.edge_tracker import EdgeTracker
 from colorglove_ros.core.tracking.mouse import Mouse3D, MouseConfig, raw_mouse_values
-from colorglove_ros.paths import resolve_path
+from colorglove_ros.paths import data_dir, resolve_path, share_dir
 from colorglove_ros.tools._cli import run_tool, tool_parser
 
 __all__ = ['main', 'scripted_sequence', 'evaluate_seed', 'noisy_poses', 'edge_tracked_poses',
-           'RELAXED_FINGERS_DEG']
+           'glove_tracked_poses', 'RELAXED_FINGERS_DEG']
 
 FPS = 30.0
 # relaxed hand on a table: (mcp, pip, dip) flexion of the four fingers, degrees
@@ -156,6 +167,17 @@ def edge_tracked_poses(Q: np.ndarray, seed: int, camera: PinholeCamera,
         seq.close()
 
 
+def glove_tracked_poses(model: HandModel, Q: np.ndarray, seed: int, tracker: ScriptedTracker
+                        ) -> list[np.ndarray | None]:
+    """The glove tracker's poses on the glove rendering of ``Q`` (None where it found no
+    hand), through ``tracker`` (cached as sequence 'mouse' of this seed)."""
+    n = len(Q)
+    truth = ScriptedSequence(np.asarray(Q, dtype=float), np.zeros(n, dtype=np.int64),
+                             np.full(n, ''), np.zeros(n, dtype=bool), FPS)
+    q_est, found = tracker.observe('mouse', seed, truth, model)
+    return [q.copy() if ok else None for q, ok in zip(q_est, found, strict=True)]
+
+
 def evaluate_seed(model: HandModel, config: MouseConfig, seed: int,
                   poses: list[np.ndarray | None], tolerance: int,
                   Q: np.ndarray, spans: list[list[tuple[int, int]]]) -> dict[str, Any]:
@@ -206,8 +228,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--rotation-noise-deg', type=float, default=1.5)
     parser.add_argument('--drop', type=float, default=0.05, help='fraction of frames lost')
     parser.add_argument('--tolerance-frames', type=int, default=3)
-    parser.add_argument('--source', choices=('noise', 'edges'), default='noise',
-                        help='poses from the noise model, or the edge tracker on rendered frames')
+    parser.add_argument('--source', choices=('noise', 'edges', 'glove'), default='noise',
+                        help='poses from the noise model, or the edge / glove tracker on '
+                        'rendered frames')
+    parser.add_argument('--database', type=Path,
+                        help='with --source glove: pose database (default: the largest under '
+                        'data/)')
     parser.add_argument('--seconds', type=float, default=30.0, help='length of each sequence')
     parser.add_argument('--calibration', default='config/calibration.yaml',
                         help='camera (its first) for --source edges')
@@ -218,17 +244,37 @@ def main(argv: list[str] | None = None) -> int:
 def _run(args: Any) -> int:
     calibration = load_calibration(resolve_path(args.calibration))
     camera = calibration.cameras[0]
-    model = HandModel(calibration.hand_length_m) if args.source == 'edges' else HandModel()
+    model = HandModel(calibration.hand_length_m) if args.source != 'noise' else HandModel()
     config = MouseConfig()
     noise = {'joint_deg': args.joint_noise_deg, 'position_mm': args.position_noise_mm,
              'rotation_deg': args.rotation_noise_deg, 'drop': args.drop}
+    glove: ScriptedTracker | None = None
+    if args.source == 'glove':
+        database = args.database or find_database(data_dir())
+        if database is None:
+            raise ColorGloveError(f'no pose database under {data_dir()}; pass --database')
+        glove = ScriptedTracker(database, share_dir() / 'config' / 'ik.yaml',
+                                resolve_path(args.calibration), data_dir() / 'scripted_tracking')
+    try:
+        return _evaluate_all(args, model, config, noise, camera, calibration.hand_length_m,
+                             glove)
+    finally:
+        if glove is not None:
+            glove.close()
+
+
+def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[str, float],
+                  camera: PinholeCamera, hand_length_m: float, glove: ScriptedTracker | None
+                  ) -> int:
     rows = []
     for seed in args.seeds:
         Q, spans = scripted_sequence(model, config, seed, args.seconds)
         extra: dict[str, Any] = {}
         if args.source == 'edges':
-            poses, restarts = edge_tracked_poses(Q, seed, camera, calibration.hand_length_m)
+            poses, restarts = edge_tracked_poses(Q, seed, camera, hand_length_m)
             extra['reinitialisations'] = restarts
+        elif glove is not None:
+            poses = glove_tracked_poses(model, Q, seed, glove)
         else:
             poses = noisy_poses(model, Q, seed, noise)
         rows.append({**evaluate_seed(model, config, seed, poses, args.tolerance_frames, Q,
@@ -239,7 +285,8 @@ def _run(args: Any) -> int:
     truth = sum(r['scripted_clicks'] for r in rows)
     total = {'precision': tp / det if det else 0.0, 'recall': tp / truth,
              'cursor_error_mm': float(np.mean([r['cursor_error_mm'] for r in rows]))}
-    source = f'noise {noise}' if args.source == 'noise' else 'the edge tracker (1 camera)'
+    source = {'noise': f'noise {noise}', 'edges': 'the edge tracker (1 camera)',
+              'glove': 'the glove tracker (1 camera)'}[args.source]
     print_table(rows, f'3-D mouse, scripted sequences, poses from {source}')
     targets = [target_row('click precision >= 95 %', 100 * total['precision'], 95.0, '>='),
                target_row('click recall >= 95 %', 100 * total['recall'], 95.0, '>=')]

@@ -13,6 +13,7 @@ from colorglove_ros.paths import resolve_path
 from colorglove_ros.tools.eval_mouse import (
     edge_tracked_poses,
     evaluate_seed,
+    glove_tracked_poses,
     noisy_poses,
     scripted_sequence,
 )
@@ -52,3 +53,23 @@ def test_edge_tracker_output_is_one_pose_or_none_per_frame() -> None:
                                          calibration.hand_length_m)
     assert len(poses) == len(Q) and restarts >= 0
     assert all(p is None or (p.shape == (26,) and np.all(np.isfinite(p))) for p in poses)
+
+
+class _FakeGloveTracker:
+    """Stands in for ScriptedTracker: returns the truth, every third frame not found."""
+
+    def observe(self, name, seed, truth, model):
+        self.seen = (name, seed, truth.poses.shape, truth.fps)
+        found = np.arange(len(truth.poses)) % 3 != 0
+        return np.where(found[:, None], truth.poses, np.nan), found
+
+
+def test_glove_tracker_output_reaches_the_mouse_with_gaps_where_it_found_no_hand() -> None:
+    Q, spans = scripted_sequence(MODEL, CONFIG, seed=2, seconds=6.0, clicks=2)
+    fake = _FakeGloveTracker()
+    poses = glove_tracked_poses(MODEL, Q, 2, fake)
+    assert fake.seen == ('mouse', 2, Q.shape, 30.0)
+    assert [p is None for p in poses] == [i % 3 == 0 for i in range(len(Q))]
+    assert all(np.array_equal(p, q) for p, q in zip(poses, Q, strict=True) if p is not None)
+    row = evaluate_seed(MODEL, CONFIG, 2, poses, 3, Q, spans)
+    assert row['frames_with_pose'] == len(Q) - len(range(0, len(Q), 3))

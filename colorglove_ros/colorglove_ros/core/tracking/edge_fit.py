@@ -35,6 +35,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
@@ -74,6 +75,7 @@ PALM_SIDES = ('ulnar', 'radial')
 ROBUST_LOSSES = ('huber', 'cauchy')
 # viewing angles of the palm-side silhouette generators (see palm_outline)
 PALM_ANGLES = np.deg2rad(np.linspace(-75.0, 75.0, 7))
+_PALM_OCCLUDER_POINTS = 160       # palm mesh vertices kept as the palm occluder
 
 
 class EdgeTrackerError(ColorGloveError):
@@ -91,7 +93,16 @@ class EdgeTrackerConfig:
     ``min_camera_found_fraction`` in each camera for a fit to count as good.
     ``palm_sides`` are the palm outline sides measured (``PALM_SIDES``; empty: the paper's
     link and tip features only), on ``palm_slice_range`` of each side, weighted
-    ``palm_weight``.
+    ``palm_weight``. A tracked frame whose only fault is too few links found (the residual
+    of those found is small) is coasted through, up to ``coast_patience`` frames in a row
+    (no pose published, the track kept), and ``resume_frames`` good frames must follow before
+    the tracker publishes again; other bad frames count toward ``loss_patience``.
+    Link slices hidden behind the palm (:func:`_behind_palm`, points within
+    ``palm_occlusion_px``; 0 turns it off) are not searched nor counted as missing.
+    ``camera_weights`` scale each camera's residual weights in the fit
+    (camera i gets ``camera_weights[i]``, 1 beyond the tuple's end): the second camera of
+    the stereo rig looks at the hand from 45 degrees, where fingers lie side by side and their
+    edges are often taken from a neighbour, so its residuals count a quarter.
     """
 
     search: EdgeSearchConfig = field(default_factory=EdgeSearchConfig)
@@ -100,6 +111,7 @@ class EdgeTrackerConfig:
     palm_sides: tuple[str, ...] = ('ulnar',)
     palm_slice_range: tuple[float, float] = (0.15, 0.95)
     palm_weight: float = 1.0
+    camera_weights: tuple[float, ...] = (1.0, 0.25)
     polarity: int = 0
     measurement_rounds: int = 1
     gn_iterations: int = 3
@@ -111,10 +123,13 @@ class EdgeTrackerConfig:
     min_link_px: float = 10.0
     min_depth_m: float = 0.1
     occlusion_margin_px: float = 2.0
+    palm_occlusion_px: float = 10.0
     min_found_fraction: float = 0.6
-    min_camera_found_fraction: float = 0.6
+    min_camera_found_fraction: float = 0.25
     max_rms_px: float = 3.0
     loss_patience: int = 3
+    coast_patience: int = 0
+    resume_frames: int = 0
     init_wrist_position: tuple[float, float, float] = (0.0, 0.095, 0.5)
     init_rotation_vector: tuple[float, float, float] = (0.0, 0.0, 0.0)
     init_rounds: int = 6
@@ -136,12 +151,16 @@ class EdgeTrackerConfig:
             raise EdgeTrackerError(f'polarity must be -1, 0 or 1, got {self.polarity}')
         if self.measurement_rounds < 1 or self.gn_iterations < 1 or self.init_rounds < 1:
             raise EdgeTrackerError('measurement_rounds, gn_iterations, init_rounds must be >= 1')
+        if any(not w >= 0 for w in self.camera_weights):
+            raise EdgeTrackerError(f'camera_weights must be >= 0, got {self.camera_weights}')
         if len(self.stabilizer) != 3 or min(self.stabilizer) < 0:
             raise EdgeTrackerError(f'stabilizer needs 3 values >= 0, got {self.stabilizer}')
         if not 0.0 < self.min_found_fraction <= 1.0 or self.max_rms_px <= 0 \
                 or not 0.0 <= self.min_camera_found_fraction <= 1.0:
             raise EdgeTrackerError('min_found_fraction must be in (0, 1], '
                                    'min_camera_found_fraction in [0, 1], max_rms_px > 0')
+        if self.coast_patience < 0 or self.resume_frames < 0:
+            raise EdgeTrackerError('coast_patience and resume_frames must be >= 0')
         if self.loss_patience < 1 or self.init_hold_frames < 1:
             raise EdgeTrackerError('loss_patience and init_hold_frames must be >= 1')
 
@@ -188,6 +207,8 @@ class FeaturePoints:
     radius: np.ndarray       # (L,) link radius, m
     tip_radius: np.ndarray   # (T,) m
     palm_sign: np.ndarray = field(default_factory=lambda: np.zeros(0))     # (P,) +1 radial
+    palm_surface: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (V, 3) palm
+    #                          frame, a subsample of the palm mesh's vertices (occluder)
 
     @property
     def num_palm_sides(self) -> int:
@@ -264,9 +285,12 @@ def feature_points(model: HandModel, tracked: Sequence[str], use_tips: bool,
     palm_sign = np.array([1.0 if side == 'radial' else -1.0 for side in palm_sides])
     row = {int(li): k for k, li in enumerate(links)}
     tip_row = np.array([row.get(int(li), -1) for li in tip_links], dtype=np.int64)
+    mesh = build_hand_mesh(model)
+    palm = mesh.local_vertices[mesh.vertex_link == 0]
+    palm = palm[::max(1, len(palm) // _PALM_OCCLUDER_POINTS)]
     return FeaturePoints(links, tip_links, tip_row, point_link,
                           np.asarray(local, dtype=float).reshape(-1, 3), radius[links],
-                          radius[tip_links], palm_sign)
+                          radius[tip_links], palm_sign, np.asarray(palm, dtype=float))
 
 
 @dataclass(frozen=True)
@@ -349,6 +373,8 @@ def predict_features(kin: FastKinematics, points: FeaturePoints, camera: Pinhole
     related = ((parent[:, None] == points.links[None, :])
                | (parent[None, :] == points.links[:, None]))
     occluded = np.any(covered & nearer & usable[None, None, :] & ~same & ~related[:, None, :], 2)
+    if config.palm_occlusion_px > 0 and len(points.palm_surface):
+        occluded |= _behind_palm(points, camera, config, q, centres, z_self)
     slice_valid = usable[:, None] & inside & ~occluded
     link_usable = slice_valid.sum(1) >= config.search.min_slices
     T = len(points.tip_links)
@@ -375,6 +401,33 @@ def predict_features(kin: FastKinematics, points: FeaturePoints, camera: Pinhole
                          usable)
     return EdgePrediction(base, end, Jb, Je, hw, slice_valid, link_usable, tip, tip_end, Jt,
                           tip_r, tip_ok, *palm)
+
+
+def _behind_palm(points: FeaturePoints, camera: PinholeCamera, config: EdgeTrackerConfig,
+                 q: np.ndarray, centres: np.ndarray, z_self: np.ndarray) -> np.ndarray:
+    """(L, S) slices hidden by the palm: inside the convex hull of the projected palm
+    surface points and farther from the camera, by more than the link's radius, than the
+    nearest of those points within ``palm_occlusion_px`` (or the nearest one): e.g. fingers
+    curled behind the back of the hand."""
+    world = q[0:3] + points.palm_surface @ rotvec_to_matrix(q[3:6]).T
+    pix, _, depth = _project(camera, world, None)
+    ok = depth > config.min_depth_m
+    if ok.sum() < 3:
+        return np.zeros(centres.shape[:2], dtype=bool)
+    pix, depth = pix[ok], depth[ok]
+    hull = cv2.convexHull(pix.astype(np.float32))
+    flat = centres.reshape(-1, 2)
+    inside = np.array([cv2.pointPolygonTest(hull, (float(x), float(y)), False) >= 0
+                       for x, y in flat])
+    out = np.zeros(len(flat), dtype=bool)
+    if inside.any():
+        d2 = ((flat[inside, None, :] - pix[None, :, :]) ** 2).sum(-1)
+        near = d2 <= config.palm_occlusion_px ** 2
+        near[np.arange(len(d2)), np.argmin(d2, axis=1)] = True
+        z_palm = np.where(near, depth[None, :], np.inf).min(axis=1)
+        radius = np.repeat(points.radius, centres.shape[1])[inside]
+        out[inside] = z_self.reshape(-1)[inside] > z_palm + radius
+    return out.reshape(centres.shape[:2])
 
 
 def palm_rows(points: FeaturePoints, generator: np.ndarray) -> tuple[np.ndarray, np.ndarray,
@@ -517,9 +570,10 @@ def stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
     p, Jw = world
     L = len(points.links)
     rs, Js, ws = [], [], []
-    for cam, meas in zip(cameras, measured, strict=True):
+    for index, (cam, meas) in enumerate(zip(cameras, measured, strict=True)):
         if meas is None:
             continue
+        start = len(ws)
         pix, Jpix, _ = _project(cam, p, Jw if jacobian else None)
         if Jpix is None:
             Jpix = np.zeros((len(pix), 2, 1))
@@ -547,6 +601,8 @@ def stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
             rs.append(r)
             Js.append(J)
             ws.append(config.palm_weight * _robust(r, config.huber_px, config.robust_loss))
+        if index < len(config.camera_weights):
+            ws[start:] = [config.camera_weights[index] * w for w in ws[start:]]
     if not rs:
         return np.zeros(0), np.zeros((0, NUM_DOFS)) if jacobian else None, np.zeros(0)
     return (np.concatenate(rs), np.concatenate(Js) if jacobian else None, np.concatenate(ws))

@@ -9,7 +9,9 @@ fingers slightly spread, palm to the primary camera, wrist at the marked spot
 or until :meth:`EdgeTracker.initialize` gives it a pose (e.g. the glove tracker's). While
 tracking, a frame whose fit leaves too few links found or too large a residual gives no
 pose; ``loss_patience`` such frames in a row declare the track lost and the tracker waits
-for re-initialisation.
+for re-initialisation. A frame whose only fault is coverage (too few links found, a small
+residual on those found) can instead be coasted through for ``coast_patience`` frames (off by
+default), publishing nothing and keeping the track.
 """
 from __future__ import annotations
 
@@ -92,6 +94,8 @@ class EdgeTracker:
         self._names = tuple(c.name for c in self.cameras)
         self._q: np.ndarray | None = None
         self._bad_frames = 0
+        self._coast_frames = 0
+        self._resume = 0
         self._hold: list[np.ndarray] = []
 
     @property
@@ -108,6 +112,8 @@ class EdgeTracker:
         """Drop the track and wait for an initialisation."""
         self._q = None
         self._bad_frames = 0
+        self._coast_frames = 0
+        self._resume = 0
         self._hold = []
 
     def initialize(self, q: np.ndarray) -> None:
@@ -117,6 +123,8 @@ class EdgeTracker:
             raise EdgeTrackerError(f'initial pose must be 26 finite numbers, got {q.shape}')
         self._q = self.kin.clamp(q)
         self._bad_frames = 0
+        self._coast_frames = 0
+        self._resume = 0
         self._hold = []
 
     def fit(self, images: Sequence[np.ndarray | None], q_start: np.ndarray,
@@ -145,22 +153,29 @@ class EdgeTracker:
 
     def _fit_ok(self, fit: EdgeFit) -> str:
         """'' if the fit explains the edges, else the reason it does not."""
+        return self._check_fit(fit)[1]
+
+    def _check_fit(self, fit: EdgeFit) -> tuple[str, str]:
+        """(kind, reason) of a fit that does not explain the edges, ('', '') if it does:
+        kind 'coverage' when too few links were found (in a camera or over all) but the
+        residual of those found is small, 'drift' when the residual is too large, nothing
+        was found or the pose is not finite."""
         cfg = self.config
         if not np.all(np.isfinite(fit.q)):
-            return 'non-finite pose'
+            return 'drift', 'non-finite pose'
+        if fit.found_fraction == 0.0:
+            return 'drift', 'no link found'
+        if not fit.rms_px <= cfg.max_rms_px:
+            return 'drift', f'edge residual {fit.rms_px:.1f} px > {cfg.max_rms_px:.1f} px'
         for name, found, usable in zip(self._names, fit.links_found, fit.links_usable,
                                        strict=True):
             if usable and found < cfg.min_camera_found_fraction * usable:
-                return (f'{found} of {usable} links found in {name} '
-                        f'(need {cfg.min_camera_found_fraction:.0%})')
-        if fit.found_fraction == 0.0:
-            return 'no link found'
+                return 'coverage', (f'{found} of {usable} links found in {name} '
+                                    f'(need {cfg.min_camera_found_fraction:.0%})')
         if fit.found_fraction < cfg.min_found_fraction:
-            return (f'{sum(fit.links_found)} of {sum(fit.links_usable)} links found '
-                    f'(need {cfg.min_found_fraction:.0%})')
-        if not fit.rms_px <= cfg.max_rms_px:
-            return f'edge residual {fit.rms_px:.1f} px > {cfg.max_rms_px:.1f} px'
-        return ''
+            return 'coverage', (f'{sum(fit.links_found)} of {sum(fit.links_usable)} links '
+                                f'found (need {cfg.min_found_fraction:.0%})')
+        return '', ''
 
     def update(self, images: Sequence[np.ndarray | None]) -> EdgeTrackResult:
         """Process one frame: one image per camera (grey or RGB; None if a camera has no
@@ -198,18 +213,29 @@ class EdgeTracker:
                 f'camera, at the marked spot): {why}', fit, hold_frames=held)
         fit = fit_pose(self.kin, self.points, self.cameras, greys, self._q, cfg,
                        cfg.measurement_rounds)
-        reason = self._fit_ok(fit)
+        kind, reason = self._check_fit(fit)
         if not np.all(np.isfinite(fit.q)):
             self.reset()
             return EdgeTrackResult('waiting', None, 'lost: non-finite pose', fit, lost=True)
         self._q = fit.q
-        if reason:
+        if kind == 'coverage' and self._coast_frames < cfg.coast_patience:
+            # too few features this frame, those found agree: keep the pose, publish nothing
+            self._coast_frames += 1
+            self._bad_frames = 0
+            self._resume = cfg.resume_frames
+            return EdgeTrackResult('tracking', None, f'coasting: {reason}', fit)
+        if kind:
             self._bad_frames += 1
             if self._bad_frames >= cfg.loss_patience:
                 self.reset()
                 return EdgeTrackResult('waiting', None, f'lost: {reason}', fit, lost=True)
             return EdgeTrackResult('tracking', None, f'poor fit: {reason}', fit)
         self._bad_frames = 0
+        self._coast_frames = 0
+        if self._resume > 0:
+            self._resume -= 1
+            return EdgeTrackResult('tracking', None, 'resuming after coasting: '
+                                   f'{self._resume + 1} more good frame(s) needed', fit)
         return EdgeTrackResult('tracking', fit.q.copy(), 'tracking', fit)
 
     def with_config(self, **changes: object) -> EdgeTracker:

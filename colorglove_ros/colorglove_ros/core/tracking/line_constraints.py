@@ -31,8 +31,10 @@ from colorglove_ros.core.tracking.kinematics import FastKinematics
 __all__ = ['ExtraConstraints', 'LINE_FEATURE_CONFIG', 'glove_edge_image', 'line_constraints']
 
 # the glove mask is brighter than the background; no Huber weights (the solver's weights
-# are constant over its iterations); the link and tip features only
-LINE_FEATURE_CONFIG = EdgeTrackerConfig(polarity=1, huber_px=0.0, palm_sides=())
+# are constant over its iterations); the link and tip features only, every camera weighted
+# alike, no palm occluder
+LINE_FEATURE_CONFIG = EdgeTrackerConfig(polarity=1, huber_px=0.0, palm_sides=(),
+                                        camera_weights=(), palm_occlusion_px=0.0)
 
 
 def glove_edge_image(labels: np.ndarray | None) -> np.ndarray | None:

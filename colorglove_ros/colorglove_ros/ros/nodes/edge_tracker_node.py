@@ -83,7 +83,11 @@ class EdgeTrackerNode(Node):
                           'largest edge residual (weighted RMS) of a published fit, px',
                           0.1, 50.0)
         min_found = declare(self, 'min_found_fraction', defaults.min_found_fraction,
-                            'fraction of the visible links each camera must find', 0.05, 1.0)
+                            'fraction of the visible links all cameras together must find',
+                            0.05, 1.0)
+        min_camera = declare(self, 'min_camera_found_fraction',
+                             defaults.min_camera_found_fraction,
+                             'fraction of its visible links each camera must find', 0.0, 1.0)
         patience = declare(self, 'loss_patience', defaults.loss_patience,
                            'bad frames in a row that declare the track lost', 1, 100)
         polarity = declare(self, 'polarity', defaults.polarity,
@@ -96,7 +100,8 @@ class EdgeTrackerNode(Node):
                                          min_gradient=float(min_gradient)),
                 init_wrist_position=tuple(float(v) for v in init_wrist),
                 init_hold_frames=int(hold), max_rms_px=float(max_rms),
-                min_found_fraction=float(min_found), loss_patience=int(patience),
+                min_found_fraction=float(min_found),
+                min_camera_found_fraction=float(min_camera), loss_patience=int(patience),
                 polarity=int(polarity))
             cameras: tuple[PinholeCamera, ...] = ()
             if calibration_file:

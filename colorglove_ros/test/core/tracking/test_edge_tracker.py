@@ -144,7 +144,8 @@ def test_palm_sides_hold_the_wrist_tilt(rig) -> None:
         start[seq.synth.model.dof_names.index(f'{digit}_mcp_flex')] += 0.04
     errors = {}
     for sides in ((), ('ulnar',)):
-        tracker = EdgeTracker(seq.synth.model, cameras, EdgeTrackerConfig(palm_sides=sides))
+        tracker = EdgeTracker(seq.synth.model, cameras,
+                              EdgeTrackerConfig(palm_sides=sides, camera_weights=()))
         fit = tracker.fit(frames[20], start, rounds=3)
         errors[sides] = abs(fit.q[3] - truth[3])
     assert errors[('ulnar',)] < 0.005 < 0.5 * errors[()]
@@ -165,8 +166,91 @@ def test_found_fractions_per_camera_and_over_all_cameras(rig) -> None:
     cameras, seq, _ = rig
     q = seq.poses[20]
     fit = EdgeFit(q, 1.0, (14, 2), (14, 7), (5, 1), 3)       # 16 of 21 found, 2 of 7 in one
-    strict = EdgeTracker(seq.synth.model, cameras)
+    strict = EdgeTracker(seq.synth.model, cameras,
+                         EdgeTrackerConfig(min_camera_found_fraction=0.6))
     assert 'links found in camera2' in strict._fit_ok(fit)
     lenient = strict.with_config(min_camera_found_fraction=0.25)
     assert lenient._fit_ok(fit) == ''
     assert '(need 80%)' in lenient.with_config(min_found_fraction=0.8)._fit_ok(fit)
+
+
+def test_fit_faults_are_told_apart_coverage_from_drift(rig) -> None:
+    cameras, seq, _ = rig
+    tracker = EdgeTracker(seq.synth.model, cameras,
+                          EdgeTrackerConfig(min_camera_found_fraction=0.6))
+    q = seq.poses[20]
+    assert tracker._check_fit(EdgeFit(q, 1.0, (14, 2), (14, 7), (5, 1), 3))[0] == 'coverage'
+    assert tracker._check_fit(EdgeFit(q, 5.0, (14, 7), (14, 7), (5, 1), 3))[0] == 'drift'
+    assert tracker._check_fit(EdgeFit(q, np.nan, (0, 0), (14, 7), (0, 0), 0))[0] == 'drift'
+    assert tracker._check_fit(EdgeFit(q, 1.0, (14, 7), (14, 7), (5, 1), 3)) == ('', '')
+
+
+def test_tracker_coasts_through_frames_with_too_few_features(rig) -> None:
+    cameras, seq, frames = rig
+    config = EdgeTrackerConfig(loss_patience=1, coast_patience=2, resume_frames=1)
+    tracker = EdgeTracker(seq.synth.model, cameras, config)
+    tracker.initialize(seq.poses[20])
+    # the second camera sees nothing: its links are missing, the first camera's agree
+    half_blind = [frames[20][0], np.full_like(frames[20][1], 90)]
+    coasted = [tracker.update(half_blind) for _ in range(2)]
+    assert all(r.q is None and not r.lost and r.reason.startswith('coasting') for r in coasted)
+    assert tracker.state == 'tracking'
+    resumed = tracker.update(frames[21])
+    assert resumed.q is None and 'resuming' in resumed.reason   # one good frame first
+    out = tracker.update(frames[22])
+    assert out.q is not None, out.reason
+    assert _tip_error_rel_wrist_mm(seq.synth.model, out.q, seq.poses[22]) < 10.0
+    # past coast_patience frames in a row the fault counts toward the loss
+    for _ in range(2):
+        tracker.update(half_blind)
+    assert tracker.update(half_blind).lost and tracker.state == 'waiting'
+    # without coasting the first such frame already counts toward the loss (patience 1)
+    strict = tracker.with_config(coast_patience=0)
+    strict.initialize(seq.poses[20])
+    assert strict.update(half_blind).lost
+
+
+def test_camera_weights_scale_each_cameras_residuals(rig) -> None:
+    cameras, seq, frames = rig
+    tracker = EdgeTracker(seq.synth.model, cameras, EdgeTrackerConfig(camera_weights=()))
+    q = seq.poses[20]
+    greys = [to_grey(img) for img in frames[20]]
+    world = tracker.kin.points(q, tracker.points.point_link, tracker.points.point_local, True)
+    measured = [measure_features(g, predict_features(tracker.kin, tracker.points, cam, q,
+                                                     tracker.config, world),
+                                 tracker.config, tracker.points.tip_row)
+                for cam, g in zip(cameras, greys, strict=True)]
+    _, _, w = stack_residuals(tracker.points, cameras, measured, world, tracker.config)
+    weighted = EdgeTrackerConfig(camera_weights=(1.0, 0.25))
+    assert EdgeTrackerConfig().camera_weights == (1.0, 0.25)
+    _, _, w2 = stack_residuals(tracker.points, cameras, measured, world, weighted)
+    first = len(stack_residuals(tracker.points, cameras[:1], measured[:1], world,
+                                tracker.config)[0])
+    assert np.allclose(w2[:first], w[:first]) and np.allclose(w2[first:], 0.25 * w[first:])
+    with pytest.raises(EdgeTrackerError):
+        EdgeTrackerConfig(camera_weights=(1.0, -1.0))
+    with pytest.raises(EdgeTrackerError):
+        EdgeTrackerConfig(coast_patience=-1)
+
+
+def test_fingers_curled_behind_the_back_of_the_hand_are_not_searched() -> None:
+    from colorglove_ros.core.hand.model import LINK_NAMES
+    from colorglove_ros.core.tracking.mouse import MouseConfig
+    from colorglove_ros.tools.eval_mouse import scripted_sequence
+
+    calibration = load_calibration(resolve_path('config/calibration.yaml'))
+    camera = calibration.cameras[0]
+    model = HandModel(calibration.hand_length_m)
+    # the mouse's relaxed hand on the table seen from behind at 45 degrees: the curled
+    # fingers' middle and distal phalanges lie behind the knuckles
+    q = scripted_sequence(model, MouseConfig(), seed=0, seconds=2.0, clicks=1)[0][0]
+    seen = EdgeTracker(model, [camera])
+    blind = seen.with_config(palm_occlusion_px=0.0)
+    on = predict_features(seen.kin, seen.points, camera, q, seen.config)
+    off = predict_features(blind.kin, blind.points, camera, q, blind.config)
+    names = [LINK_NAMES[i] for i in seen.points.links]
+    hidden = {n for n, a, b in zip(names, on.link_usable, off.link_usable, strict=True)
+              if b and not a}
+    assert {'index_middle', 'middle_middle'} <= hidden
+    assert on.link_usable[names.index('thumb_distal')]          # the thumb stays in view
+    assert on.link_usable.sum() < off.link_usable.sum()
