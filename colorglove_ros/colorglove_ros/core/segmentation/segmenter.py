@@ -488,9 +488,10 @@ class GloveSegmenter:
         if static is not None:
             labels[static] = 0
         labels = self._glove_only(labels, reduction, image_pixels or labels.size)
-        labels = shed_oversized_patches(
-            labels, self.max_patch_window_share,
-            junction_window(labels, self.calibration.num_colors, JUNCTION_MIN_PIXELS))
+        if self.max_patch_window_share > 0:   # (finding the junctions costs a few loops)
+            labels = shed_oversized_patches(
+                labels, self.max_patch_window_share,
+                junction_window(labels, self.calibration.num_colors, JUNCTION_MIN_PIXELS))
         if self.min_component_colors > 1:
             # no re-attaching here: it changes neither the coarse window nor the light estimate
             labels = keep_multicolor_components(labels, self.min_component_colors, min_pixels=2)
