@@ -37,7 +37,6 @@ __all__ = [
     'STATUS_NO_GLOVE', 'STATUS_TOO_SMALL', 'STATUS_OUT_OF_FRAME', 'STATUS_FRAGMENTED',
     'STAGES', 'load_segmenter',
     'keep_multicolor_components', 'relabel_borders', 'border_contact_px',
-    'sampled_glove_region_mask',
 ]
 
 STATUS_OK = 'ok'
@@ -290,42 +289,6 @@ def _coarse_cells(coarse: np.ndarray, origin: tuple[int, int], r: int, shape: tu
     return coarse[rows][:, cols]   # faster than coarse[np.ix_(rows, cols)]
 
 
-def _upsample(mask: np.ndarray, step: int, shape: tuple[int, int]) -> np.ndarray:
-    """(H, W) bool: each pixel of bool ``mask`` (sampled every ``step`` pixels from an image
-    of ``shape`` (H, W)) as its ``step`` x ``step`` block, cut or edge-padded to ``shape``."""
-    rows, cols = mask.shape
-    up = cv2.resize(mask.view(np.uint8), (cols * step, rows * step),
-                    interpolation=cv2.INTER_NEAREST)[:shape[0], :shape[1]]
-    if up.shape != shape:
-        up = np.pad(up, ((0, shape[0] - up.shape[0]), (0, shape[1] - up.shape[1])),
-                    mode='edge')
-    return up.view(bool)
-
-
-def sampled_glove_region_mask(labels: np.ndarray, num_colors: int, window: int,
-                              min_colors: int, min_density: float, step: int) -> np.ndarray:
-    """:func:`glove_region_mask` measured on every ``step``-th pixel of each row and column
-    (``window`` in ``labels``' pixels): the pixels near a colourful window and every glove
-    region reaching one of the sampled pixels of such a window, at about ``step``-pixel
-    precision and a ``step``-squared of the cost; ``step`` 1 is :func:`glove_region_mask`."""
-    if step <= 1:
-        return glove_region_mask(labels, num_colors, window, min_colors, min_density)
-    sub_window = max(int(round(window / step)), 1)
-    rich = colour_diversity(labels[step // 2::step, step // 2::step], num_colors, sub_window,
-                            min_density) >= min_colors
-    if not rich.any():
-        return np.zeros(labels.shape, bool)
-    size = 2 * sub_window + 1
-    near = cv2.dilate(rich.view(np.uint8),
-                      cv2.getStructuringElement(cv2.MORPH_RECT, (size, size))).view(bool)
-    n, comp = cv2.connectedComponents((labels > 0).view(np.uint8), connectivity=8,
-                                      ltype=cv2.CV_32S)
-    reached = np.zeros(n, bool)
-    reached[comp[step // 2::step, step // 2::step][rich]] = True
-    reached[0] = False
-    return _upsample(near, step, labels.shape) | reached.take(comp)
-
-
 def _check_image(image: object) -> np.ndarray:
     if not isinstance(image, np.ndarray):
         raise SegmentationInputError(f'expected a numpy array, got {type(image).__name__}')
@@ -441,12 +404,10 @@ class GloveSegmenter:
         labels = drop_oversized_components(
             labels, self.max_patch_fraction * image_pixels / reduction ** 2)
         if self.diversity_window > 0:
-            # measured at the coarse frame's scale, where diversity_window is set
-            step = max(int(round(self.coarse_factor / reduction)), 1)
             window = max(int(round(self.diversity_window * self.coarse_factor / reduction)), 1)
-            labels = labels * sampled_glove_region_mask(
-                labels, self.calibration.num_colors, window, self.min_region_colors,
-                self.diversity_density, step).view(np.uint8)
+            labels = labels * glove_region_mask(labels, self.calibration.num_colors, window,
+                                                self.min_region_colors,
+                                                self.diversity_density).view(np.uint8)
         return labels
 
     def _glove_like(self, labels: np.ndarray,
