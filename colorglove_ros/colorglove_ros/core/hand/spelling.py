@@ -14,15 +14,20 @@ on synthetic training sequences seen through the tracking-noise model) gives eac
 letter probabilities. Without one, the templates do: a Gaussian likelihood per letter with a
 shared isotropic spread per feature group (finger joints in radians over ``joint_sigma_deg``,
 pointing direction over ``direction_sigma``) and a softmax.
-Hold-to-commit: the letter probabilities go through the shared hold-and-release hysteresis
-(``core/hand/hysteresis.py``); a letter is emitted when it turns on (its smoothed probability
-held at or above ``on_score`` for ``hold_on_s``). The same letter again (a double letter) needs
-a re-arm: the letter turning off (another letter or no hand), or the wrist moving
-``rearm_motion_m`` since the commit, after which the letter must be held anew (double letters
-are signed with a small slide).
+Hold-to-commit: a letter is a hold, the hand still in one place (the wrist's speed over the last
+``still_window_s`` below ``still_speed_m_s``). Each frame of the hold adds its per-letter
+log-probabilities to the hold's sum, and once the hold has lasted ``commit_after_s`` the letter
+of the largest sum is emitted, once per hold. Summing over the hold rather than deciding on one
+frame keeps the move into a letter (whose passing shapes look like other letters) and a few
+frames of a confusable letter (M, N, S, T) from deciding alone. A hold ends when the hand
+moves (so a double letter, signed with a small slide, is two holds), when the hand is lost,
+or when the hand shape turns into another letter in place: the letter probabilities also go
+through the shared hold-and-release hysteresis (``core/hand/hysteresis.py``), and a letter
+other than the committed one turning on there starts a new hold.
 """
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -56,7 +61,8 @@ assert len(LETTERS) == 26 and set(THUMB_LETTERS) <= set(LETTERS)
 # (excluded lower, included upper) bound of the template settings
 _SETTING_BOUNDS: dict[str, tuple[float, float | None]] = {
     'joint_sigma_deg': (0.0, None), 'direction_sigma': (0.0, None),
-    'rearm_motion_m': (0.0, None)}
+    'still_speed_m_s': (0.0, None), 'still_window_s': (0.0, None),
+    'commit_after_s': (0.0, None)}
 
 
 class SpellingError(ColorGloveError, ValueError):
@@ -65,13 +71,18 @@ class SpellingError(ColorGloveError, ValueError):
 
 @dataclass(frozen=True)
 class SpellingConfig:
-    """Template spreads (without a classifier), hold-to-commit (``hold``) and re-arm motion."""
+    """Template spreads (without a classifier); what a hold is (the wrist slower than
+    ``still_speed_m_s`` over ``still_window_s``) and how long it lasts before its letter is
+    committed (``commit_after_s``); the hysteresis (``hold``) that tells a change of letter in
+    place."""
 
     joint_sigma_deg: float = 12.0
     direction_sigma: float = 0.3
     hold: HoldConfig = field(default_factory=lambda: HoldConfig(
         smoothing=0.25, on_score=0.4, off_score=0.2, hold_on_s=0.3, hold_off_s=0.15))
-    rearm_motion_m: float = 0.03
+    still_speed_m_s: float = 0.08
+    still_window_s: float = 0.3
+    commit_after_s: float = 0.2
 
     def __post_init__(self) -> None:
         for name, (low, high) in _SETTING_BOUNDS.items():
@@ -149,7 +160,7 @@ def _softmax(x: np.ndarray) -> np.ndarray:
 
 
 class Speller:
-    """Hold-to-commit letter stream from tracked poses (one per hand)."""
+    """Hold-to-commit letter stream from tracked poses (one per hand; module docstring)."""
 
     def __init__(self, config: SpellingConfig | None = None, model: HandModel | None = None,
                  classifier: PoseClassifier | None = None) -> None:
@@ -161,8 +172,14 @@ class Speller:
     def reset(self) -> None:
         """Forget the history (the next letter can be the last committed one)."""
         self._hysteresis.reset()
-        self._committed_at: np.ndarray | None = None
+        self._wrists: deque[tuple[float, np.ndarray]] = deque()
+        self._end_hold()
         self.posterior: np.ndarray | None = None
+
+    def _end_hold(self) -> None:
+        self._hold_sum: np.ndarray | None = None    # summed log-probabilities of the hold
+        self._hold_start = 0.0
+        self._committed: str | None = None          # the hold's letter, once committed
 
     @property
     def current(self) -> tuple[str | None, float]:
@@ -173,23 +190,39 @@ class Speller:
         i = int(np.argmax(self.posterior))
         return LETTERS[i], float(self.posterior[i])
 
+    def _moving(self, wrist: np.ndarray, stamp: float) -> bool:
+        """Whether the wrist moved at ``still_speed_m_s`` or faster over the last
+        ``still_window_s`` (a frame's own first stamp: not moving)."""
+        self._wrists.append((stamp, wrist))
+        while stamp - self._wrists[0][0] > self.config.still_window_s + 1e-9:
+            self._wrists.popleft()
+        since, start = self._wrists[0]
+        return stamp - since > 1e-9 and \
+            np.linalg.norm(wrist - start) >= self.config.still_speed_m_s * (stamp - since)
+
     def update(self, q: np.ndarray | None, stamp: float) -> str | None:
         """Feed one frame (None: no hand); returns the letter committed on it, if any."""
         if q is None:
             self.reset()
             return None
         q = np.asarray(q, dtype=float)
-        p = _softmax(self.classifier.log_likelihoods(q))
-        wrist = q[0:3]
-        for letter in self._hysteresis.active:
-            if self._committed_at is not None and \
-                    np.linalg.norm(wrist - self._committed_at) >= self.config.rearm_motion_m:
-                self._hysteresis.release(letter)      # a double letter: held anew here
-        changes = self._hysteresis.update(dict(zip(LETTERS, p, strict=True)), stamp)
+        log_p = self.classifier.log_likelihoods(q)
+        changes = self._hysteresis.update(dict(zip(LETTERS, _softmax(log_p), strict=True)),
+                                          stamp)
         smoothed = self._hysteresis.smoothed
         self.posterior = np.array([smoothed[k] for k in LETTERS])
-        started = [t.name for t in changes if t.state == 'start']
-        if not started:
+        if self._moving(q[0:3].copy(), stamp):
+            self._end_hold()
             return None
-        self._committed_at = wrist.copy()
-        return started[0]
+        if self._committed is not None and \
+                any(t.state == 'start' and t.name != self._committed for t in changes):
+            self._end_hold()                           # another letter, signed in place
+        if self._hold_sum is None:
+            self._hold_sum, self._hold_start = log_p.copy(), stamp
+        else:
+            self._hold_sum += log_p
+        if self._committed is not None or \
+                stamp - self._hold_start < self.config.commit_after_s - 1e-9:
+            return None
+        self._committed = LETTERS[int(np.argmax(self._hold_sum))]
+        return self._committed

@@ -59,19 +59,53 @@ def test_orientation_separates_h_from_u() -> None:
     assert LETTERS[int(np.argmax(classifier.log_likelihoods(q)))] == 'H'
 
 
+def _still_or_moving(letter: str, seconds: float, start: float, speed: float = 0.0,
+                     x0: float = 0.0) -> list[tuple[np.ndarray, float]]:
+    """(pose, stamp) frames at 30 Hz of ``letter`` held for ``seconds`` from ``start``, the wrist
+    moving sideways at ``speed`` (m/s) from ``x0``."""
+    q = MODEL.rest_pose()
+    q[3:6] = letter_rotation(letter)
+    q[6:] = allowed_fingers(LETTER_SHAPES[letter])
+    frames = []
+    for k in range(int(round(seconds * 30.0))):
+        p = q.copy()
+        p[0:3] = [x0 + speed * k / 30.0, 0.05, 0.5]
+        frames.append((p, start + k / 30.0))
+    return frames
+
+
 def test_hold_to_commit_and_double_letters() -> None:
     word = [_segment('H'), _segment('E'), _segment('L'),
             _segment('L', position=(0.05, 0.05, 0.5)), _segment('O')]
     commits = _spell(word)
     assert ''.join(letter for _, letter in commits) == 'HELLO'
-    # each letter commits at least hold_s after its move began
+    # each letter commits at least commit_after_s after its move began
     starts = np.cumsum([0.0] + [s.move_s + s.hold_s for s in word[:-1]])
     for (stamp, _), start in zip(commits, starts, strict=True):
-        assert stamp >= start + SpellingConfig().hold.hold_on_s
+        assert stamp >= start + SpellingConfig().commit_after_s
     # the same letter held in one place is committed once
     assert ''.join(x for _, x in _spell([_segment('L', hold_s=3.0)])) == 'L'
-    # a hold shorter than hold_on_s commits nothing
-    assert _spell([_segment('A', hold_s=0.0)]) == []          # 0.3 s in all, < hold_on_s
+
+
+def test_a_moving_hand_commits_nothing_and_a_hold_commits_its_own_letter() -> None:
+    speller = Speller(model=MODEL)
+    # a T passing by while the hand moves, then an S held still: only the S
+    frames = _still_or_moving('T', 0.6, 0.0, speed=0.3) + \
+        _still_or_moving('S', 0.8, 0.6, x0=0.18)
+    got = [speller.update(q, t) for q, t in frames]
+    assert [x for x in got if x] == ['S']
+    # still for less than commit_after_s, then lost: nothing
+    speller.reset()
+    short = _still_or_moving('A', SpellingConfig().commit_after_s - 0.05, 10.0)
+    assert not any(speller.update(q, t) for q, t in short)
+    assert speller.update(None, 10.5) is None
+
+
+def test_the_hold_sum_decides_not_a_few_frames_of_another_letter() -> None:
+    # templates: two frames of N, then M, in one place: the sum over the hold says M
+    speller = Speller(model=MODEL)
+    frames = _still_or_moving('N', 2 / 30.0, 0.0) + _still_or_moving('M', 0.5, 2 / 30.0)
+    assert [x for x in (speller.update(q, t) for q, t in frames) if x] == ['M']
 
 
 def test_lost_hand_resets() -> None:
@@ -82,7 +116,7 @@ def test_lost_hand_resets() -> None:
     with pytest.raises(SpellingError):
         speller.update(np.zeros(20), 6.0)
     with pytest.raises(SpellingError):
-        SpellingConfig(rearm_motion_m=0.0)
+        SpellingConfig(commit_after_s=0.0)
 
 
 def test_edit_distance() -> None:
