@@ -324,10 +324,10 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
     :class:`NoHand` when the prior is unusable or at an implausible depth ('bad candidates:
     ...'), the tracker found nothing (the upstream reason, or 'lost'), or the fit is refused:
     no constraint matched an observed blob (``limits.require_constraint``), a non-finite pose,
-    weak evidence (:func:`weak_evidence`), glove the image lacks (:func:`missing_glove`) or a hand at an implausible depth
-    (``limits.check_depth``); with
-    ``limits.refuse_cut_hands`` a hand cut by the primary image's border is not tracked
-    (:data:`CUT_BY_BORDER`). A refusal resets the tracker.
+    weak evidence (:func:`weak_evidence`), glove the image lacks (:func:`missing_glove`) or
+    a hand at an implausible depth (``limits.check_depth``); with ``limits.refuse_cut_hands``
+    a hand cut by the primary image's border is not tracked (:data:`CUT_BY_BORDER`). A
+    refusal resets the tracker.
     """
     if (limits.refuse_cut_hands and prior is not None and observations
             and observations[0].hand_found and observations[0].cut_by_border):
