@@ -84,7 +84,7 @@ class StageLimits:
     refuse_cut_hands: bool = True
     close_match_distance: float = 2.0
     min_explained_blob_share: float = 0.5
-    max_missing_glove_share: float = 0.15
+    max_missing_glove_share: float = 0.2
     min_shown_patch_px: float = 30.0
     near_patch_sizes: float = 1.5
     min_patch_blob_share: float = 0.1
