@@ -71,11 +71,18 @@ def main(argv: list[str] | None = None) -> int:
                         help='re-light the training pixels under black bodies of these colour '
                              'temperatures (default: calibration_fit.RESIDUAL_TEMPERATURES_K, '
                              "what the segmenter's per-frame light-colour correction leaves)")
+    parser.add_argument('--processed-copies', type=int, default=0, metavar='N',
+                        help="also train on N re-lit copies of the pixels seen through other "
+                             "cameras' colour processing (white balance, saturation, gamma, "
+                             'contrast; default 0: none)')
     args = parser.parse_args(argv)
+    if args.processed_copies < 0:
+        parser.error('--processed-copies needs N >= 0')
     if args.synthetic is not None and args.synthetic < 1:
         parser.error('--synthetic needs N >= 1')
     options = {'seed': args.seed, 'bits': args.bits, 'max_per_class': args.max_pixels,
-               'augment_temperatures_k': tuple(args.light_temperatures)}
+               'augment_temperatures_k': tuple(args.light_temperatures),
+               'augment_processed_copies': args.processed_copies}
     try:
         output = args.output or read_calibration_config(args.config)['calibration_file']
         if args.synthetic is not None:
