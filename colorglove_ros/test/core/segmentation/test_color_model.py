@@ -10,7 +10,7 @@ from segmentation_samples import FAST_FIT
 
 from colorglove_ros.core.colorimetry import linear_rgb_to_xyz, linear_to_srgb, srgb_to_linear
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
-from colorglove_ros.core.segmentation.calibration_fit import fit_color_calibration
+from colorglove_ros.core.segmentation.calibration_fit import fit_color_calibration, processed_copies
 from colorglove_ros.core.segmentation.color_model import (
     CALIBRATION_FORMAT_VERSION,
     CGZ_A,
@@ -34,6 +34,8 @@ from colorglove_ros.core.synthetic.blob_glove import (
     render_blob_frame,
     sample_blob_conditions,
 )
+from colorglove_ros.core.synthetic.conditions import FrameConditions
+from colorglove_ros.core.synthetic.frames import camera_encode
 
 
 @pytest.fixture(scope='module')
@@ -152,6 +154,44 @@ def test_relighting_under_black_bodies_covers_tinted_light(frames) -> None:
     assert fp_tinted < fp_plain + 0.005
     with pytest.raises(ColorCalibrationError, match='colour temperature'):
         fit_color_calibration(frames['train'], augment_temperatures_k=(6500.0, 3000.0), **FAST_FIT)
+
+
+WASHED_OUT = FrameConditions(saturation=0.6, gamma=1.2, contrast=0.4)
+"""Another camera's colour processing that washes the glove's colours out."""
+
+
+def _seen_by(look: FrameConditions, frames):
+    return [(camera_encode(srgb_to_linear(img / 255.0).astype(np.float32), look), lab)
+            for img, lab in frames]
+
+
+def test_processed_copies_are_seeded_and_cover_washed_out_colours() -> None:
+    """Processed copies: ``copies`` times the pixels, the same for the same seed, and some
+    with the palette's yellow washed out towards grey (less chroma)."""
+    yellow = np.tile(np.array(GLOVE_PALETTE_RGB[3], np.uint8), (400, 1))
+    args = ((0.8, 1.2), 0.1, None, 2.0)
+    a = processed_copies(yellow, np.random.default_rng(3), 2, *args)
+    b = processed_copies(yellow, np.random.default_rng(3), 2, *args)
+    assert a.shape == (800, 3) and a.dtype == np.uint8 and np.array_equal(a, b)
+    chroma = a.max(axis=1).astype(int) - a.min(axis=1)
+    assert chroma.min() < 0.75 * (int(yellow[0].max()) - int(yellow[0].min()))
+    assert processed_copies(yellow, np.random.default_rng(3), 0, *args).shape == (0, 3)
+
+
+def test_processed_copies_cover_washed_out_frames(frames) -> None:
+    """Trained with copies seen through other cameras' processing, the model must label more
+    of a washed-out camera's glove, without claiming more background of plain frames."""
+    plain, processed = (fit_color_calibration(frames['train'], seed=0, bits=5,
+                                              max_per_class=1000, background_components=6,
+                                              augment_processed_copies=n) for n in (0, 2))
+    washed = _seen_by(WASHED_OUT, frames['held'])
+    acc_plain, _ = _interior_accuracy_and_fp(plain, washed)
+    acc_processed, _ = _interior_accuracy_and_fp(processed, washed)
+    assert acc_processed > acc_plain + 0.05
+    _, fp_plain = _interior_accuracy_and_fp(plain, frames['held'])
+    _, fp_processed = _interior_accuracy_and_fp(processed, frames['held'])
+    assert fp_processed < fp_plain + 0.005
+    assert processed.metadata['augment_processed_copies'] == 2
 
 
 def test_unseen_colours_fall_to_background(calibration) -> None:
