@@ -17,6 +17,7 @@ from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.segmentation.calibration_fit import (
     DEFAULT_LUT_BITS,
     DEFAULT_MAX_PIXELS_PER_CLASS,
+    DEFAULT_PROCESSED_COPIES,
     RESIDUAL_TEMPERATURES_K,
     SYNTHETIC_FRAMES_DIR,
     CalibrationFit,
@@ -71,10 +72,11 @@ def main(argv: list[str] | None = None) -> int:
                         help='re-light the training pixels under black bodies of these colour '
                              'temperatures (default: calibration_fit.RESIDUAL_TEMPERATURES_K, '
                              "what the segmenter's per-frame light-colour correction leaves)")
-    parser.add_argument('--processed-copies', type=int, default=0, metavar='N',
+    parser.add_argument('--processed-copies', type=int, default=DEFAULT_PROCESSED_COPIES,
+                        metavar='N',
                         help="also train on N re-lit copies of the pixels seen through other "
                              "cameras' colour processing (white balance, saturation, gamma, "
-                             'contrast; default 0: none)')
+                             'contrast; default: calibration_fit.DEFAULT_PROCESSED_COPIES)')
     args = parser.parse_args(argv)
     if args.processed_copies < 0:
         parser.error('--processed-copies needs N >= 0')

@@ -314,3 +314,19 @@ def test_fit_input_errors(frames) -> None:
         fit_color_calibration([(img, lab[:-1])] * 8)
     with pytest.raises(ColorCalibrationError, match='uint8'):
         fit_color_calibration([(img.astype(np.float32), lab)] * 8)
+
+
+def test_calibrate_colors_processed_copies_option(frames, tmp_path: Path) -> None:
+    """``colorglove_calibrate_colors --processed-copies N`` fits with N processed copies (in
+    the file's metadata) and refuses a negative N."""
+    from colorglove_ros.core.segmentation.calibration_fit import write_labelled_frames
+    from colorglove_ros.tools import calibrate_colors
+
+    write_labelled_frames(tmp_path / 'frames', frames['train'])
+    out = tmp_path / 'cal.npz'
+    assert calibrate_colors.main(['--frames', str(tmp_path / 'frames'), '--output', str(out),
+                                  '--bits', '4', '--max-pixels', '300',
+                                  '--processed-copies', '1']) == 0
+    assert load_calibration(out).metadata['augment_processed_copies'] == 1
+    with pytest.raises(SystemExit):
+        calibrate_colors.main(['--frames', str(tmp_path / 'frames'), '--processed-copies', '-1'])
