@@ -77,6 +77,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="also train on N re-lit copies of the pixels seen through other "
                              "cameras' colour processing (white balance, saturation, gamma, "
                              'contrast; default: calibration_fit.DEFAULT_PROCESSED_COPIES)')
+    parser.add_argument('--processed-colors', nargs='+', choices=GLOVE_COLOR_NAMES,
+                        metavar='COLOR', help='only these glove colours (and the background) '
+                        'get the processed copies (default: every colour)')
     args = parser.parse_args(argv)
     if args.processed_copies < 0:
         parser.error('--processed-copies needs N >= 0')
@@ -84,7 +87,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.error('--synthetic needs N >= 1')
     options = {'seed': args.seed, 'bits': args.bits, 'max_per_class': args.max_pixels,
                'augment_temperatures_k': tuple(args.light_temperatures),
-               'augment_processed_copies': args.processed_copies}
+               'augment_processed_copies': args.processed_copies,
+               'augment_processed_colors': None if args.processed_colors is None
+               else [GLOVE_COLOR_NAMES.index(name) + 1 for name in args.processed_colors]}
     try:
         output = args.output or read_calibration_config(args.config)['calibration_file']
         if args.synthetic is not None:

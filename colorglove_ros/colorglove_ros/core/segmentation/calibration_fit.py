@@ -165,6 +165,7 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]],
                               RESIDUAL_TEMPERATURES_K),
                           augment_noise: float = 3.0,
                           augment_processed_copies: int = DEFAULT_PROCESSED_COPIES,
+                          augment_processed_colors: Sequence[int] | None = None,
                           seed: int = 0, min_frames: int = MIN_FRAMES,
                           metadata: Mapping[str, Any] | None = None) -> ColorCalibration:
     """Fit one Gaussian mixture per glove colour and one for the background, build the LUT.
@@ -176,7 +177,8 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]],
     ``exp(+-augment_white_balance)``, camera white-balance error; noise)
     so a few labelled frames cover other light levels and colour temperatures, plus
     ``augment_processed_copies`` re-lit copies seen through other cameras' colour processing
-    (:func:`processed_copies`: washed-out or over-saturated glove colours); the
+    (:func:`processed_copies`: washed-out or over-saturated glove colours) for the glove
+    colours ``augment_processed_colors`` (1-based classes; None: every colour); the
     background is augmented alike, or the widened glove classes would claim its pixels.
     Glove covariances get ``glove_covariance_floor`` added to their diagonal. A glove class
     is accepted only where its likelihood is above the ``reject_quantile`` quantile of its
@@ -199,11 +201,13 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]],
     mixtures: list[GaussianMixtureParams] = []
     thresholds = np.full(num_colors + 1, -np.inf)
     counts = []
+    processed = {c: augment_processed_copies for c in range(num_colors + 1)
+                 if c == 0 or augment_processed_colors is None or c in augment_processed_colors}
     for c, pix in enumerate(samples):
         counts.append(len(pix))
         augmented = (augment_light, augment_white_balance, illuminants, augment_noise)
         pix = np.concatenate([relit_copies(pix, rng, augment_copies, *augmented),
-                              processed_copies(pix, rng, augment_processed_copies, *augmented)])
+                              processed_copies(pix, rng, processed.get(c, 0), *augmented)])
         feats = rgb_features(pix, feature_kind, intensity_weight)
         k = background_components if c == 0 else components
         k = max(1, min(k, len(np.unique(pix, axis=0))))
@@ -220,6 +224,8 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]],
             'augment_temperatures_k': None if augment_temperatures_k is None
             else list(augment_temperatures_k),
             'augment_processed_copies': augment_processed_copies,
+            'augment_processed_colors': None if augment_processed_colors is None
+            else [int(c) for c in augment_processed_colors],
             'glove_covariance_floor': glove_covariance_floor, 'seed': seed,
             **dict(metadata or {})}
     cal = ColorCalibration(lut=np.zeros(0, np.uint8), bits=bits, num_colors=num_colors,

@@ -317,8 +317,8 @@ def test_fit_input_errors(frames) -> None:
 
 
 def test_calibrate_colors_processed_copies_option(frames, tmp_path: Path) -> None:
-    """``colorglove_calibrate_colors --processed-copies N`` fits with N processed copies (in
-    the file's metadata) and refuses a negative N."""
+    """``colorglove_calibrate_colors --processed-copies N --processed-colors ...`` fits with N
+    processed copies of those colours (in the file's metadata) and refuses a negative N."""
     from colorglove_ros.core.segmentation.calibration_fit import write_labelled_frames
     from colorglove_ros.tools import calibrate_colors
 
@@ -326,7 +326,32 @@ def test_calibrate_colors_processed_copies_option(frames, tmp_path: Path) -> Non
     out = tmp_path / 'cal.npz'
     assert calibrate_colors.main(['--frames', str(tmp_path / 'frames'), '--output', str(out),
                                   '--bits', '4', '--max-pixels', '300',
-                                  '--processed-copies', '1']) == 0
-    assert load_calibration(out).metadata['augment_processed_copies'] == 1
+                                  '--processed-copies', '1', '--processed-colors', 'yellow',
+                                  'lime']) == 0
+    meta = load_calibration(out).metadata
+    assert meta['augment_processed_copies'] == 1 and meta['augment_processed_colors'] == [4, 10]
     with pytest.raises(SystemExit):
         calibrate_colors.main(['--frames', str(tmp_path / 'frames'), '--processed-copies', '-1'])
+
+
+def test_processed_copies_only_for_the_colours_named(frames) -> None:
+    """With ``augment_processed_colors`` only those glove colours (and the background) are
+    widened: red alone recovers washed-out red, and washed-out green stays as the plain fit
+    labels it."""
+    fit = dict(seed=0, bits=5, max_per_class=1000, background_components=6)
+    plain = fit_color_calibration(frames['train'], **fit)
+    red = fit_color_calibration(frames['train'], augment_processed_copies=2,
+                                augment_processed_colors=[1], **fit)
+    washed = _seen_by(WASHED_OUT, frames['held'])
+    k3 = np.ones((3, 3), np.uint8)
+    for c, better in ((1, True), (2, False)):
+        hits = []
+        for cal in (plain, red):
+            correct = total = 0
+            for img, lab in washed:
+                pred = cal.classify(cv2.bilateralFilter(img, 5, 30, 3))
+                inside = (cv2.erode(lab, k3) == cv2.dilate(lab, k3)) & (lab == c)
+                correct += int((pred[inside] == c).sum())
+                total += int(inside.sum())
+            hits.append(correct / max(total, 1))
+        assert (hits[1] > hits[0] + 0.2) if better else (hits[1] <= hits[0] + 0.05), (c, hits)
