@@ -30,13 +30,18 @@ __all__ = ['RESIDUAL_TEMPERATURES_K', 'DEFAULT_LUT_BITS', 'DEFAULT_MAX_PIXELS_PE
            'MIN_FRAMES', 'MASK_SUFFIX', 'SYNTHETIC_FRAMES_DIR', 'fit_color_calibration',
            'read_labelled_frames', 'write_labelled_frames', 'render_training_frames',
            'CalibrationFit', 'calibrate_frames', 'calibrate_synthetic', 'relit_copies',
-           'processed_copies', 'PROCESSING_GROUPS', 'DEFAULT_PROCESSED_COPIES', 'fit_mixture']
+           'processed_copies', 'PROCESSING_GROUPS', 'DEFAULT_PROCESSED_COPIES',
+           'DEFAULT_PROCESSED_COLORS', 'fit_mixture']
 
 DEFAULT_LUT_BITS = 6                  # lookup table bits per RGB channel
 DEFAULT_MAX_PIXELS_PER_CLASS = 5000   # training pixels sampled per class
 PROCESSING_GROUPS = 16                # colour-processing draws per processed copy
-# re-lit copies of the training pixels seen through other cameras' colour processing
-DEFAULT_PROCESSED_COPIES = 0
+# re-lit copies of the training pixels seen through other cameras' colour processing, for the
+# background and these glove colours (1-based classes): yellow and lime, the colours other
+# cameras wash out past the plain model; every colour also takes warm photo backgrounds (wood)
+# as orange and red (docs/RESULTS.md, issue 14)
+DEFAULT_PROCESSED_COPIES = 2
+DEFAULT_PROCESSED_COLORS: tuple[int, ...] = (4, 10)
 MIN_FRAMES = 8                        # labelled frames a fit needs at least
 MASK_SUFFIX = '_mask'                 # NAME.png (RGB image) + NAME_mask.png (labels)
 # where rendered training frames are written by default (relative to the working folder)
@@ -165,7 +170,7 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]],
                               RESIDUAL_TEMPERATURES_K),
                           augment_noise: float = 3.0,
                           augment_processed_copies: int = DEFAULT_PROCESSED_COPIES,
-                          augment_processed_colors: Sequence[int] | None = None,
+                          augment_processed_colors: Sequence[int] | None = DEFAULT_PROCESSED_COLORS,
                           seed: int = 0, min_frames: int = MIN_FRAMES,
                           metadata: Mapping[str, Any] | None = None) -> ColorCalibration:
     """Fit one Gaussian mixture per glove colour and one for the background, build the LUT.

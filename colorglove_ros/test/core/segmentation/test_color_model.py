@@ -183,7 +183,8 @@ def test_processed_copies_cover_washed_out_frames(frames) -> None:
     of a washed-out camera's glove, without claiming more background of plain frames."""
     plain, processed = (fit_color_calibration(frames['train'], seed=0, bits=5,
                                               max_per_class=1000, background_components=6,
-                                              augment_processed_copies=n) for n in (0, 2))
+                                              augment_processed_copies=n,
+                                              augment_processed_colors=None) for n in (0, 2))
     washed = _seen_by(WASHED_OUT, frames['held'])
     acc_plain, _ = _interior_accuracy_and_fp(plain, washed)
     acc_processed, _ = _interior_accuracy_and_fp(processed, washed)
