@@ -35,8 +35,7 @@ WARM_SCENE = 8
 def start_calibration() -> ColorCalibration:
     """A quick colour calibration fitted on 8 rendered 'train' frames (5200-7200 K light)."""
     return fit_color_calibration(render_training_frames(8, 0), seed=0, max_per_class=1500,
-                                 bits=5, augment_copies=1, background_components=6,
-                                 augment_processed_copies=0)
+                                 bits=5, augment_copies=1, background_components=6)
 
 
 def start_calibration_file(folder: Path) -> Path:

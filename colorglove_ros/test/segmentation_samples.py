@@ -14,9 +14,8 @@ from colorglove_ros.core.segmentation.color_model import ColorCalibration
 from colorglove_ros.core.synthetic.blob_glove import render_blob_frame, sample_blob_conditions
 
 FAST_FIT: dict[str, Any] = dict(max_per_class=1500, bits=5, augment_copies=1,
-                                background_components=6, augment_processed_copies=0)
-"""Fitting settings that keep a test's calibration to about a second (no copies through
-other cameras' colour processing: the segmenter's tests were written on the plain model)."""
+                                background_components=6)
+"""Fitting settings that keep a test's calibration to about a second."""
 
 
 def blob_glove_calibration() -> ColorCalibration:

@@ -242,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f'note: {warning}')
         if 'scene_calibration' in start.metadata:
             print('note: the starting calibration was itself fitted to a scene; to calibrate '
-                  'afresh, start from the generic one (--start data/color_calibration_v2.npz)')
+                  'afresh, start from the generic one (--start data/color_calibration.npz)')
         args.pictures.mkdir(parents=True, exist_ok=True)
         written = []
         for name, picture in check_pictures(fitted, start, empty, glove,

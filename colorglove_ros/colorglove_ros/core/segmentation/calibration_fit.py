@@ -36,11 +36,11 @@ __all__ = ['RESIDUAL_TEMPERATURES_K', 'DEFAULT_LUT_BITS', 'DEFAULT_MAX_PIXELS_PE
 DEFAULT_LUT_BITS = 6                  # lookup table bits per RGB channel
 DEFAULT_MAX_PIXELS_PER_CLASS = 5000   # training pixels sampled per class
 PROCESSING_GROUPS = 16                # colour-processing draws per processed copy
-# re-lit copies of the training pixels seen through other cameras' colour processing, for the
-# background and these glove colours (1-based classes): yellow and lime, the colours other
-# cameras wash out past the plain model; every colour also takes warm photo backgrounds (wood)
-# as orange and red (docs/RESULTS.md, issue 14)
-DEFAULT_PROCESSED_COPIES = 2
+# re-lit copies of the training pixels seen through other cameras' colour processing (off: it
+# helps some camera looks and costs others, docs/RESULTS.md issue 14), for the background and
+# these glove colours (1-based classes): yellow and lime, the colours other cameras wash out
+# past the plain model (every colour also takes warm photo backgrounds, wood, as glove)
+DEFAULT_PROCESSED_COPIES = 0
 DEFAULT_PROCESSED_COLORS: tuple[int, ...] = (4, 10)
 MIN_FRAMES = 8                        # labelled frames a fit needs at least
 MASK_SUFFIX = '_mask'                 # NAME.png (RGB image) + NAME_mask.png (labels)
