@@ -243,9 +243,10 @@ def lookup_node(assets: NodeAssets, **overrides) -> Callable[[rclpy.Context], No
 
 
 # The small test databases match rendered frames only loosely (their nearest image is rarely a
-# close match), so the weak-evidence gate is off in the node tests that track with them; the
-# gate itself is tested in test/core/test_pipeline.py and by test_ik_node_refuses_weak_evidence.
-SMALL_DATABASE_EXPLAINED_SHARE = 0.0
+# close match, and the fit rarely shows the glove where it is), so the evidence gates (weak
+# evidence, missing glove) are off in the node tests that track with them; the gates
+# themselves are tested in test/core/test_pipeline.py and by test_ik_node_refuses_weak_evidence.
+SMALL_DATABASE_GATES = {'min_explained_blob_share': 0.0, 'max_missing_glove_share': 1.0}
 
 
 def ik_node(database: Path, **overrides) -> Callable[[rclpy.Context], Node]:
@@ -254,7 +255,8 @@ def ik_node(database: Path, **overrides) -> Callable[[rclpy.Context], Node]:
     from colorglove_ros.ros.nodes.ik_node import IKNode
 
     overrides.setdefault('use_camera_info', False)
-    overrides.setdefault('min_explained_blob_share', SMALL_DATABASE_EXPLAINED_SHARE)
+    for name, value in SMALL_DATABASE_GATES.items():
+        overrides.setdefault(name, value)
     return lambda ctx: IKNode(context=ctx, parameter_overrides=params(
         database_path=str(database), **overrides))
 

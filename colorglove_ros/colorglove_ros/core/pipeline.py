@@ -43,7 +43,7 @@ __all__ = [
     'NoHand', 'Tracked',
     'TemporalPrior', 'Observer', 'FrameObservations', 'FrameLookup', 'FramePipeline',
     'segment_frame', 'bad_image', 'observe_image', 'image_observer', 'look_up', 'track',
-    'bad_prior', 'hand_keypoints_at_plausible_depth', 'weak_evidence',
+    'bad_prior', 'hand_keypoints_at_plausible_depth', 'weak_evidence', 'missing_glove',
 ]
 
 # Nearest database image farther than this from the observation (tiny-image pixels): glove-
@@ -68,7 +68,15 @@ class StageLimits:
     than ``close_match_distance``, or unknown) and that explains less than
     ``min_explained_blob_share`` of the primary camera's glove blobs is refused. That is the
     signature of glove-coloured clutter inside the hand's crop: the lookup matched hand plus
-    clutter to some pose, and the fitted hand leaves the clutter's blobs unexplained."""
+    clutter to some pose, and the fitted hand leaves the clutter's blobs unexplained.
+
+    Missing glove: a fit that shows more than ``max_missing_glove_share`` of its visible glove
+    area on patches the image lacks is refused (:func:`missing_glove`; 1 turns this off). A
+    patch counts when at least ``min_shown_patch_px`` of it is visible (pixels at the IK's
+    reference focal length) and is found when a blob of its colour with at least
+    ``min_patch_blob_share`` of its visible area lies within ``near_patch_sizes`` patch sizes
+    of it. That is the signature of glove colours the segmentation missed: the rest of the
+    hand looks like a smaller hand farther away, and the lookup and the IK agree with it."""
 
     max_image_distance: float = DEFAULT_MAX_IMAGE_DISTANCE
     require_constraint: bool = True
@@ -76,6 +84,10 @@ class StageLimits:
     refuse_cut_hands: bool = True
     close_match_distance: float = 2.0
     min_explained_blob_share: float = 0.5
+    max_missing_glove_share: float = 0.2
+    min_shown_patch_px: float = 30.0
+    near_patch_sizes: float = 1.5
+    min_patch_blob_share: float = 0.1
 
 
 NODE_LIMITS = StageLimits()
@@ -83,7 +95,8 @@ NODE_LIMITS = StageLimits()
 # Every output of the tracker counts (a non-finite pose is still refused): the IK evaluation
 # measures the tracker itself, as its figures always have, not the nodes' refusals.
 UNGATED = StageLimits(max_image_distance=math.inf, require_constraint=False, check_depth=False,
-                      refuse_cut_hands=False, min_explained_blob_share=0.0)
+                      refuse_cut_hands=False, min_explained_blob_share=0.0,
+                      max_missing_glove_share=1.0)
 
 
 @dataclass(frozen=True)
@@ -271,6 +284,34 @@ def weak_evidence(prior: PosePrior, result: IKResult, limits: StageLimits) -> st
             f'{prior.image_distance:.2f} tiny px away (more than {limits.close_match_distance:g})')
 
 
+def missing_glove(tracker: Any, q: np.ndarray, observation: CameraObservation,
+                  limits: StageLimits) -> str:
+    """Why pose ``q`` shows glove the primary camera's ``observation`` lacks ('' when it
+    does not, or the gate is off): the share of its visible glove area on patches with no
+    same-colour blob near them (``core.tracking.evidence.glove_evidence``, the tracker's
+    ``patch_surface`` and ``patch_color``) is more than ``limits.max_missing_glove_share``.
+    A tracker without a ``patch_surface`` (a stand-in) is not gated."""
+    from colorglove_ros.core.hand.glove import GLOVE_COLOR_NAMES
+    from colorglove_ros.core.tracking.evidence import glove_evidence
+    from colorglove_ros.core.tracking.projection import pixel_scale
+
+    surface = getattr(tracker, 'patch_surface', None)
+    if limits.max_missing_glove_share >= 1.0 or surface is None:
+        return ''
+    camera = tracker.cameras[0]
+    scale = pixel_scale(camera, tracker.config.reference_focal_px)
+    seen = glove_evidence(surface, tracker.patch_color, q, camera,
+                          observation.blobs, min_patch_px=limits.min_shown_patch_px * scale**2,
+                          near_patch_sizes=limits.near_patch_sizes,
+                          min_blob_share=limits.min_patch_blob_share)
+    if not seen.missing_share > limits.max_missing_glove_share:
+        return ''
+    colors = ', '.join(GLOVE_COLOR_NAMES[c - 1] for c in seen.missing_colors)
+    return (f'missing glove: {seen.missing_share:.0%} of the glove the fitted hand shows (more '
+            f'than {limits.max_missing_glove_share:.0%}) has no blob of its colour near it '
+            f'({colors})')
+
+
 def track(tracker: Any, prior: PosePrior | LookupResult | None,
           observations: Sequence[CameraObservation], stamp: float,
           limits: StageLimits = NODE_LIMITS, *, temporal: TemporalPrior | None = None,
@@ -283,10 +324,10 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
     :class:`NoHand` when the prior is unusable or at an implausible depth ('bad candidates:
     ...'), the tracker found nothing (the upstream reason, or 'lost'), or the fit is refused:
     no constraint matched an observed blob (``limits.require_constraint``), a non-finite pose,
-    weak evidence (:func:`weak_evidence`) or a hand at an implausible depth
-    (``limits.check_depth``); with
-    ``limits.refuse_cut_hands`` a hand cut by the primary image's border is not tracked
-    (:data:`CUT_BY_BORDER`). A refusal resets the tracker.
+    weak evidence (:func:`weak_evidence`), glove the image lacks (:func:`missing_glove`) or
+    a hand at an implausible depth (``limits.check_depth``); with ``limits.refuse_cut_hands``
+    a hand cut by the primary image's border is not tracked (:data:`CUT_BY_BORDER`). A
+    refusal resets the tracker.
     """
     if (limits.refuse_cut_hands and prior is not None and observations
             and observations[0].hand_found and observations[0].cut_by_border):
@@ -315,6 +356,8 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
         reason = 'non-finite pose'
     elif weak := weak_evidence(prior, result, limits):
         reason = weak
+    elif missing := missing_glove(tracker, result.q, observations[0], limits):
+        reason = missing
     elif limits.check_depth:
         try:
             keypoints = hand_keypoints_at_plausible_depth(tracker, result.q)

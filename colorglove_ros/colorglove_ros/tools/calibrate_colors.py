@@ -17,6 +17,8 @@ from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.segmentation.calibration_fit import (
     DEFAULT_LUT_BITS,
     DEFAULT_MAX_PIXELS_PER_CLASS,
+    DEFAULT_PROCESSED_COLORS,
+    DEFAULT_PROCESSED_COPIES,
     RESIDUAL_TEMPERATURES_K,
     SYNTHETIC_FRAMES_DIR,
     CalibrationFit,
@@ -71,11 +73,28 @@ def main(argv: list[str] | None = None) -> int:
                         help='re-light the training pixels under black bodies of these colour '
                              'temperatures (default: calibration_fit.RESIDUAL_TEMPERATURES_K, '
                              "what the segmenter's per-frame light-colour correction leaves)")
+    parser.add_argument('--processed-copies', type=int, default=DEFAULT_PROCESSED_COPIES,
+                        metavar='N',
+                        help="also train on N re-lit copies of the pixels seen through other "
+                             "cameras' colour processing (white balance, saturation, gamma, "
+                             'contrast; default: calibration_fit.DEFAULT_PROCESSED_COPIES)')
+    parser.add_argument('--processed-colors', nargs='+', choices=(*GLOVE_COLOR_NAMES, 'all'),
+                        metavar='COLOR', help='only these glove colours (and the background) '
+                        "get the processed copies; 'all' for every colour (default: "
+                        + ' '.join(GLOVE_COLOR_NAMES[c - 1] for c in DEFAULT_PROCESSED_COLORS)
+                        + ')')
     args = parser.parse_args(argv)
+    if args.processed_copies < 0:
+        parser.error('--processed-copies needs N >= 0')
     if args.synthetic is not None and args.synthetic < 1:
         parser.error('--synthetic needs N >= 1')
     options = {'seed': args.seed, 'bits': args.bits, 'max_per_class': args.max_pixels,
-               'augment_temperatures_k': tuple(args.light_temperatures)}
+               'augment_temperatures_k': tuple(args.light_temperatures),
+               'augment_processed_copies': args.processed_copies,
+               'augment_processed_colors': (
+                   DEFAULT_PROCESSED_COLORS if args.processed_colors is None
+                   else None if 'all' in args.processed_colors
+                   else [GLOVE_COLOR_NAMES.index(name) + 1 for name in args.processed_colors])}
     try:
         output = args.output or read_calibration_config(args.config)['calibration_file']
         if args.synthetic is not None:

@@ -13,6 +13,7 @@ Targets are measured, not asserted.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +27,7 @@ from colorglove_ros.core.evaluation.scenes import (
 )
 from colorglove_ros.core.evaluation.sequences import eval_seeds, open_database_for_calibration
 from colorglove_ros.core.evaluation.targets import target_row
+from colorglove_ros.core.pipeline import NODE_LIMITS
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.tracking.config import load_ik_config
 from colorglove_ros.paths import data_dir, share_dir
@@ -91,6 +93,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--ik-config', default=str(config / 'ik.yaml'))
     parser.add_argument('--calibration', default=str(config / 'calibration.yaml'))
     parser.add_argument('--fps', type=float, default=30.0)
+    parser.add_argument('--max-missing-glove-share', type=float,
+                        default=NODE_LIMITS.max_missing_glove_share,
+                        help='the missing-glove gate (ik_node parameter of that name; 1: off)')
     args = parser.parse_args(argv)
     from colorglove_ros.core.hand.glove import default_hand
     from colorglove_ros.core.lookup.search import PoseLookup
@@ -109,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     except ColorGloveError as exc:
         return tool_error('colorglove_eval_scenes', exc)
     camera = calibration.primary
+    limits = replace(NODE_LIMITS, max_missing_glove_share=args.max_missing_glove_share)
 
     def hand_factory(factors: Any) -> Any:
         if factors is None:
@@ -135,7 +141,8 @@ def main(argv: list[str] | None = None) -> int:
                 runs.append(run_scene(condition, seed, args.frames, lookup=lookup,
                                       camera=camera, observer_factory=observer_factory,
                                       tracker_factory=tracker_factory,
-                                      hand_factory=hand_factory, fps=args.fps))
+                                      hand_factory=hand_factory, limits=limits,
+                                      fps=args.fps))
             except ColorGloveError as exc:
                 return tool_error('colorglove_eval_scenes', exc)
             print(f'[eval_scenes] {condition.name} sequence {seed}: {args.frames} frames in '
@@ -162,6 +169,7 @@ def main(argv: list[str] | None = None) -> int:
                 'seed_offset': args.seed_offset, 'frames_per_sequence': args.frames,
                 'color_config': args.color_config, 'ik_config': args.ik_config,
                 'calibration': args.calibration, 'fps': args.fps,
+                'max_missing_glove_share': args.max_missing_glove_share,
                 'wall_s': time.perf_counter() - started}
     if args.json:
         write_json(Path(args.json), {'settings': settings, 'rows': rows, 'targets': targets})

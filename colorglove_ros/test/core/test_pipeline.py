@@ -209,6 +209,46 @@ def test_track_refuses_a_fit_on_weak_evidence(hand, image_distance, share, refus
         assert isinstance(out, Tracked)
 
 
+class _GloveTracker(_FakeTracker):
+    """A stand-in tracker that also predicts the glove at a pose (a real tracker's patches)."""
+
+    def __init__(self, real: HandTracker, result: IKResult) -> None:
+        super().__init__(real.model, result)
+        self.patch_surface, self.patch_color = real.patch_surface, real.patch_color
+        self.config = real.config
+
+
+def test_track_refuses_a_fit_showing_glove_the_image_lacks(tracker) -> None:
+    q = synth.sample_pose(np.random.default_rng(3), CAMERA, out_of_frame_prob=0.0)
+    area, centroid = tracker.patch_surface.visible_patches(q, CAMERA)
+    color = tracker.patch_color
+    washed_out = (4, 7, 10)             # yellow, orange, lime
+    assert area[np.isin(color, washed_out)].sum() > NODE_LIMITS.max_missing_glove_share \
+        * area[area >= NODE_LIMITS.min_shown_patch_px].sum()
+
+    def seen(drop: tuple[int, ...]) -> list[CameraObservation]:
+        keep = np.flatnonzero((area > 0) & ~np.isin(color, drop))
+        return [CameraObservation(True, Blobs(color[keep], centroid[keep], area[keep]),
+                                  CropTransform(4.0, 240.0, 160.0))]
+
+    fake = _GloveTracker(tracker, IKResult(True, 0.0, q=q, num_constraints=6,
+                                           explained_blob_share=1.0))
+    assert isinstance(track(fake, _prior(), seen(()), 0.0), Tracked)
+    out = track(fake, _prior(), seen(washed_out), 0.0)
+    assert isinstance(out, NoHand) and out.warn and fake.resets == 1
+    assert out.reason.startswith('missing glove: ')
+    assert all(name in out.reason for name in ('yellow', 'orange', 'lime'))
+    for limits in (replace(NODE_LIMITS, max_missing_glove_share=1.0), UNGATED):
+        assert isinstance(track(fake, _prior(), seen(washed_out), 0.0, limits), Tracked)
+
+
+def test_tracker_knows_its_glove_without_being_given_it(hand) -> None:
+    model, mesh, glove = hand
+    plain = HandTracker(model, mesh, [CAMERA])
+    np.testing.assert_array_equal(plain.patch_color, glove.patch_color)
+    assert plain.patch_surface.num_patches == len(glove.patch_color)
+
+
 def test_pose_prior_keeps_the_nearest_image_distance(lookup, small_database) -> None:
     crop = CropTransform(4.0, 240.0, 160.0)
     result = lookup.lookup(np.roll(np.asarray(small_database.tiny[5]), 3, axis=1), crop, CAMERA)
@@ -263,11 +303,12 @@ def test_track_reweights_a_lookup_result_by_the_previous_pose(hand, lookup, smal
 def test_a_rendered_glove_frame_goes_through(segmenter, glove_rgb, lookup, tracker) -> None:
     observation = segment_frame(segmenter, glove_rgb)
     assert isinstance(observation, Observation) and observation.hand_found
-    # the small test database is far from every real frame: its distance gate and the weak-
-    # evidence gate are lifted
+    # the small test database is far from every real frame: its distance gate and the
+    # evidence gates (weak evidence, missing glove) are lifted
     pipeline = FramePipeline(image_observer(segmenter), lookup, CAMERA,
                              limits=StageLimits(max_image_distance=math.inf,
-                                                min_explained_blob_share=0.0))
+                                                min_explained_blob_share=0.0,
+                                                max_missing_glove_share=1.0))
     seen = pipeline.observe([glove_rgb])
     assert seen.cameras[0].hand_found and seen.tiny is not None
     found = pipeline.look_up(seen)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from node_fixtures import SMALL_DATABASE_EXPLAINED_SHARE, NodeAssets, assert_run_tracked
+from node_fixtures import SMALL_DATABASE_GATES, NodeAssets, assert_run_tracked
 
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.ros.pipeline_run import bag_feed, node_specs, run_pipeline, summarize
@@ -34,7 +34,7 @@ def test_one_process_tracks_a_bag(node_assets: NodeAssets, tmp_path: Path) -> No
         'segmentation': {'color_calibration_file': str(node_assets.color_config)},
         'lookup': {'database_path': str(node_assets.database)},
         'ik': {'publish_overlay': False, 'database_path': str(node_assets.database),
-               'min_explained_blob_share': SMALL_DATABASE_EXPLAINED_SHARE},
+               **SMALL_DATABASE_GATES},
     }
     run = run_pipeline(parameters, FRAMES, feed=bag_feed(bag, paced=True), timeout_s=300.0,
                        single_process=True)

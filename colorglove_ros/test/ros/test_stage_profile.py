@@ -7,7 +7,7 @@ import pytest
 from node_fixtures import (
     LOOKUP_BLEND,
     LOOKUP_CANDIDATES,
-    SMALL_DATABASE_EXPLAINED_SHARE,
+    SMALL_DATABASE_GATES,
     NodeAssets,
     glove_frame,
 )
@@ -26,7 +26,7 @@ def test_every_frame_passes_every_stage_and_a_hand_gives_a_joint_state(
         'lookup': {'database_path': str(node_assets.database),
                    'num_candidates': LOOKUP_CANDIDATES, 'num_neighbors': LOOKUP_BLEND},
         'ik': {'database_path': str(node_assets.database),
-               'min_explained_blob_share': SMALL_DATABASE_EXPLAINED_SHARE},
+               **SMALL_DATABASE_GATES},
     }
     times = profile_stages(frames, parameters, profile=True)
     for name in STAGE_NAMES:

@@ -30,10 +30,18 @@ __all__ = ['RESIDUAL_TEMPERATURES_K', 'DEFAULT_LUT_BITS', 'DEFAULT_MAX_PIXELS_PE
            'MIN_FRAMES', 'MASK_SUFFIX', 'SYNTHETIC_FRAMES_DIR', 'fit_color_calibration',
            'read_labelled_frames', 'write_labelled_frames', 'render_training_frames',
            'CalibrationFit', 'calibrate_frames', 'calibrate_synthetic', 'relit_copies',
-           'fit_mixture']
+           'processed_copies', 'PROCESSING_GROUPS', 'DEFAULT_PROCESSED_COPIES',
+           'DEFAULT_PROCESSED_COLORS', 'fit_mixture']
 
 DEFAULT_LUT_BITS = 6                  # lookup table bits per RGB channel
 DEFAULT_MAX_PIXELS_PER_CLASS = 5000   # training pixels sampled per class
+PROCESSING_GROUPS = 16                # colour-processing draws per processed copy
+# re-lit copies of the training pixels seen through other cameras' colour processing (off: it
+# helps some camera looks and costs others, docs/RESULTS.md issue 14), for the background and
+# these glove colours (1-based classes): yellow and lime, the colours other cameras wash out
+# past the plain model (every colour also takes warm photo backgrounds, wood, as glove)
+DEFAULT_PROCESSED_COPIES = 0
+DEFAULT_PROCESSED_COLORS: tuple[int, ...] = (4, 10)
 MIN_FRAMES = 8                        # labelled frames a fit needs at least
 MASK_SUFFIX = '_mask'                 # NAME.png (RGB image) + NAME_mask.png (labels)
 # where rendered training frames are written by default (relative to the working folder)
@@ -112,6 +120,30 @@ def relit_copies(pix: np.ndarray, rng: np.random.Generator, copies: int,
                                    for _ in range(copies)])
 
 
+def processed_copies(pix: np.ndarray, rng: np.random.Generator, copies: int,
+                     light: tuple[float, float], white_balance: float,
+                     illuminants: np.ndarray | None, noise: float,
+                     groups: int = PROCESSING_GROUPS) -> np.ndarray:
+    """``copies`` copies of sRGB pixels (N, 3) uint8, each re-lit as :func:`relit_copies` does
+    and then seen through another camera's colour processing (white-balance error, saturation,
+    gamma and contrast drawn by :func:`sample_color_processing`, applied by
+    :func:`camera_encode` as the evaluation's cameras do), ``groups`` draws per copy over
+    random groups of the pixels; (0, 3) for no copies."""
+    from colorglove_ros.core.synthetic.conditions import FrameConditions, sample_color_processing
+    from colorglove_ros.core.synthetic.frames import camera_encode
+
+    out = []
+    for _ in range(copies):
+        lin = srgb_to_linear(_augment(pix, rng, light, white_balance, illuminants, noise)
+                             / 255.0).astype(np.float32)
+        processed = np.empty_like(pix)
+        for idx in np.array_split(rng.permutation(len(pix)), groups):
+            look = FrameConditions(**sample_color_processing(rng))
+            processed[idx] = camera_encode(lin[idx][:, None, :], look)[:, 0, :]
+        out.append(processed)
+    return np.concatenate(out) if out else np.zeros((0, 3), np.uint8)
+
+
 def fit_mixture(features: np.ndarray, components: int, reg_covar: float,
                 seed: int) -> GaussianMixtureParams:
     """A Gaussian mixture of ``components`` full-covariance components fitted to ``features``
@@ -137,6 +169,8 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]],
                           augment_temperatures_k: tuple[float, float] | None = (
                               RESIDUAL_TEMPERATURES_K),
                           augment_noise: float = 3.0,
+                          augment_processed_copies: int = DEFAULT_PROCESSED_COPIES,
+                          augment_processed_colors: Sequence[int] | None = DEFAULT_PROCESSED_COLORS,
                           seed: int = 0, min_frames: int = MIN_FRAMES,
                           metadata: Mapping[str, Any] | None = None) -> ColorCalibration:
     """Fit one Gaussian mixture per glove colour and one for the background, build the LUT.
@@ -146,8 +180,11 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]],
     level in ``augment_light``; light colour a black body in ``augment_temperatures_k``, see
     :func:`planckian_illuminants`, None for none; residual per-channel gains
     ``exp(+-augment_white_balance)``, camera white-balance error; noise)
-    so a few labelled frames cover other light levels and colour temperatures; the
-    background is re-lit too, or the widened glove classes would claim re-lit background.
+    so a few labelled frames cover other light levels and colour temperatures, plus
+    ``augment_processed_copies`` re-lit copies seen through other cameras' colour processing
+    (:func:`processed_copies`: washed-out or over-saturated glove colours) for the glove
+    colours ``augment_processed_colors`` (1-based classes; None: every colour); the
+    background is augmented alike, or the widened glove classes would claim its pixels.
     Glove covariances get ``glove_covariance_floor`` added to their diagonal. A glove class
     is accepted only where its likelihood is above the ``reject_quantile`` quantile of its
     own training pixels, so unseen colours fall to background. The mean linear RGB of each
@@ -169,10 +206,13 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]],
     mixtures: list[GaussianMixtureParams] = []
     thresholds = np.full(num_colors + 1, -np.inf)
     counts = []
+    processed = {c: augment_processed_copies for c in range(num_colors + 1)
+                 if c == 0 or augment_processed_colors is None or c in augment_processed_colors}
     for c, pix in enumerate(samples):
         counts.append(len(pix))
-        pix = relit_copies(pix, rng, augment_copies, augment_light, augment_white_balance,
-                           illuminants, augment_noise)
+        augmented = (augment_light, augment_white_balance, illuminants, augment_noise)
+        pix = np.concatenate([relit_copies(pix, rng, augment_copies, *augmented),
+                              processed_copies(pix, rng, processed.get(c, 0), *augmented)])
         feats = rgb_features(pix, feature_kind, intensity_weight)
         k = background_components if c == 0 else components
         k = max(1, min(k, len(np.unique(pix, axis=0))))
@@ -188,6 +228,9 @@ def fit_color_calibration(frames: Sequence[tuple[np.ndarray, np.ndarray]],
             'augment_light': list(augment_light), 'augment_white_balance': augment_white_balance,
             'augment_temperatures_k': None if augment_temperatures_k is None
             else list(augment_temperatures_k),
+            'augment_processed_copies': augment_processed_copies,
+            'augment_processed_colors': None if augment_processed_colors is None
+            else [int(c) for c in augment_processed_colors],
             'glove_covariance_floor': glove_covariance_floor, 'seed': seed,
             **dict(metadata or {})}
     cal = ColorCalibration(lut=np.zeros(0, np.uint8), bits=bits, num_colors=num_colors,

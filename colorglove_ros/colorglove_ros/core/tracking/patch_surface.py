@@ -200,3 +200,26 @@ class PatchSurface:
         weight[weight < self.min_link_weight] = 0.0
         weight /= np.where(seen, weight.sum(axis=1), 1.0)[:, None]
         return self._group_link[g], mean[gc], weight, seen
+
+    def visible_patches(self, q: np.ndarray, camera: PinholeCamera
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """Every patch's visible area in ``camera``'s image at pose ``q`` (num_patches,
+        pixels; hidden and back-facing faces count nothing) and the undistorted pixel
+        centroid of that area (num_patches, 2; NaN where nothing is visible): what the
+        segmenter should see of the glove if the pose is right."""
+        pc, normal = self._posed(q)
+        _, w_vis = self._element_weights(pc, normal, camera)
+        if not (np.array_equal(camera.rotation, self._eye) and not camera.translation.any()):
+            pc = pc @ camera.rotation.T + camera.translation
+        n = self.num_patches
+        area = np.bincount(self._elem_patch, w_vis, n) * (camera.fx * camera.fy)
+        shown = w_vis > 0
+        uv = camera.project(pc[shown]) if shown.any() else np.zeros((0, 2))
+        weight = w_vis[shown]
+        total = np.bincount(self._elem_patch[shown], weight, n)
+        centroid = np.stack([np.bincount(self._elem_patch[shown], weight * uv[:, i], n)
+                             for i in range(2)], axis=1)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            centroid = centroid / total[:, None]
+        centroid[total <= 0] = np.nan
+        return area, centroid

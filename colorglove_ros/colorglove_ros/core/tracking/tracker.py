@@ -142,8 +142,24 @@ class HandTracker:
         self._q_prev: np.ndarray | None = None
         self._stamp_prev: float | None = None
         self._local_normals = _local_vertex_normals(mesh)
+        self._glove = glove
         self._patches = (PatchSurface(self.kin, mesh, self._face_patch(glove))
                          if self.config.constraint_model == 'patch' else None)
+
+    @property
+    def patch_surface(self) -> PatchSurface:
+        """The glove's patches on this tracker's mesh (the patch constraint model's, else made
+        on first use): what the evidence gates predict the image shows at a pose."""
+        if self._patches is None:
+            self._patches = PatchSurface(self.kin, self.mesh, self._face_patch(self._glove))
+        return self._patches
+
+    @property
+    def patch_color(self) -> np.ndarray:
+        """(num_patches,) colour label (1..10) of every glove patch."""
+        if self._glove is None:
+            self._face_patch(None)
+        return np.asarray(self._glove.patch_color)
 
     def _face_patch(self, glove: Any) -> np.ndarray:
         if glove is None:
@@ -153,6 +169,7 @@ class HandTracker:
             if faces is None or not np.array_equal(np.asarray(faces), std_mesh.faces):
                 raise IKError('constraint_model patch: pass the glove of this mesh (the '
                               'standard glove is made on another mesh)')
+            self._glove = glove
         return np.asarray(glove.face_patch)
 
     def _with_patch_points(self, corr: Correspondences, q: np.ndarray) -> Correspondences:

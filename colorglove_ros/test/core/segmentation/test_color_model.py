@@ -10,7 +10,7 @@ from segmentation_samples import FAST_FIT
 
 from colorglove_ros.core.colorimetry import linear_rgb_to_xyz, linear_to_srgb, srgb_to_linear
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
-from colorglove_ros.core.segmentation.calibration_fit import fit_color_calibration
+from colorglove_ros.core.segmentation.calibration_fit import fit_color_calibration, processed_copies
 from colorglove_ros.core.segmentation.color_model import (
     CALIBRATION_FORMAT_VERSION,
     CGZ_A,
@@ -34,6 +34,8 @@ from colorglove_ros.core.synthetic.blob_glove import (
     render_blob_frame,
     sample_blob_conditions,
 )
+from colorglove_ros.core.synthetic.conditions import FrameConditions
+from colorglove_ros.core.synthetic.frames import camera_encode
 
 
 @pytest.fixture(scope='module')
@@ -152,6 +154,45 @@ def test_relighting_under_black_bodies_covers_tinted_light(frames) -> None:
     assert fp_tinted < fp_plain + 0.005
     with pytest.raises(ColorCalibrationError, match='colour temperature'):
         fit_color_calibration(frames['train'], augment_temperatures_k=(6500.0, 3000.0), **FAST_FIT)
+
+
+WASHED_OUT = FrameConditions(saturation=0.6, gamma=1.2, contrast=0.4)
+"""Another camera's colour processing that washes the glove's colours out."""
+
+
+def _seen_by(look: FrameConditions, frames):
+    return [(camera_encode(srgb_to_linear(img / 255.0).astype(np.float32), look), lab)
+            for img, lab in frames]
+
+
+def test_processed_copies_are_seeded_and_cover_washed_out_colours() -> None:
+    """Processed copies: ``copies`` times the pixels, the same for the same seed, and some
+    with the palette's yellow washed out towards grey (less chroma)."""
+    yellow = np.tile(np.array(GLOVE_PALETTE_RGB[3], np.uint8), (400, 1))
+    args = ((0.8, 1.2), 0.1, None, 2.0)
+    a = processed_copies(yellow, np.random.default_rng(3), 2, *args)
+    b = processed_copies(yellow, np.random.default_rng(3), 2, *args)
+    assert a.shape == (800, 3) and a.dtype == np.uint8 and np.array_equal(a, b)
+    chroma = a.max(axis=1).astype(int) - a.min(axis=1)
+    assert chroma.min() < 0.75 * (int(yellow[0].max()) - int(yellow[0].min()))
+    assert processed_copies(yellow, np.random.default_rng(3), 0, *args).shape == (0, 3)
+
+
+def test_processed_copies_cover_washed_out_frames(frames) -> None:
+    """Trained with copies seen through other cameras' processing, the model must label more
+    of a washed-out camera's glove, without claiming more background of plain frames."""
+    plain, processed = (fit_color_calibration(frames['train'], seed=0, bits=5,
+                                              max_per_class=1000, background_components=6,
+                                              augment_processed_copies=n,
+                                              augment_processed_colors=None) for n in (0, 2))
+    washed = _seen_by(WASHED_OUT, frames['held'])
+    acc_plain, _ = _interior_accuracy_and_fp(plain, washed)
+    acc_processed, _ = _interior_accuracy_and_fp(processed, washed)
+    assert acc_processed > acc_plain + 0.05
+    _, fp_plain = _interior_accuracy_and_fp(plain, frames['held'])
+    _, fp_processed = _interior_accuracy_and_fp(processed, frames['held'])
+    assert fp_processed < fp_plain + 0.005
+    assert processed.metadata['augment_processed_copies'] == 2
 
 
 def test_unseen_colours_fall_to_background(calibration) -> None:
@@ -274,3 +315,44 @@ def test_fit_input_errors(frames) -> None:
         fit_color_calibration([(img, lab[:-1])] * 8)
     with pytest.raises(ColorCalibrationError, match='uint8'):
         fit_color_calibration([(img.astype(np.float32), lab)] * 8)
+
+
+def test_calibrate_colors_processed_copies_option(frames, tmp_path: Path) -> None:
+    """``colorglove_calibrate_colors --processed-copies N --processed-colors ...`` fits with N
+    processed copies of those colours (in the file's metadata) and refuses a negative N."""
+    from colorglove_ros.core.segmentation.calibration_fit import write_labelled_frames
+    from colorglove_ros.tools import calibrate_colors
+
+    write_labelled_frames(tmp_path / 'frames', frames['train'])
+    out = tmp_path / 'cal.npz'
+    assert calibrate_colors.main(['--frames', str(tmp_path / 'frames'), '--output', str(out),
+                                  '--bits', '4', '--max-pixels', '300',
+                                  '--processed-copies', '1', '--processed-colors', 'yellow',
+                                  'lime']) == 0
+    meta = load_calibration(out).metadata
+    assert meta['augment_processed_copies'] == 1 and meta['augment_processed_colors'] == [4, 10]
+    with pytest.raises(SystemExit):
+        calibrate_colors.main(['--frames', str(tmp_path / 'frames'), '--processed-copies', '-1'])
+
+
+def test_processed_copies_only_for_the_colours_named(frames) -> None:
+    """With ``augment_processed_colors`` only those glove colours (and the background) are
+    widened: red alone recovers washed-out red, and washed-out green stays as the plain fit
+    labels it."""
+    fit = dict(seed=0, bits=5, max_per_class=1000, background_components=6)
+    plain = fit_color_calibration(frames['train'], **fit)
+    red = fit_color_calibration(frames['train'], augment_processed_copies=2,
+                                augment_processed_colors=[1], **fit)
+    washed = _seen_by(WASHED_OUT, frames['held'])
+    k3 = np.ones((3, 3), np.uint8)
+    for c, better in ((1, True), (2, False)):
+        hits = []
+        for cal in (plain, red):
+            correct = total = 0
+            for img, lab in washed:
+                pred = cal.classify(cv2.bilateralFilter(img, 5, 30, 3))
+                inside = (cv2.erode(lab, k3) == cv2.dilate(lab, k3)) & (lab == c)
+                correct += int((pred[inside] == c).sum())
+                total += int(inside.sum())
+            hits.append(correct / max(total, 1))
+        assert (hits[1] > hits[0] + 0.2) if better else (hits[1] <= hits[0] + 0.05), (c, hits)

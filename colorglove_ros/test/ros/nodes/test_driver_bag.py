@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from node_fixtures import SMALL_DATABASE_EXPLAINED_SHARE, NodeAssets, assert_run_tracked
+from node_fixtures import SMALL_DATABASE_GATES, NodeAssets, assert_run_tracked
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.hand.glove import default_hand
@@ -61,7 +61,7 @@ def _run(assets: NodeAssets, bag: Path) -> PipelineRun:
         'segmentation': {'color_calibration_file': str(assets.color_config)},
         'lookup': {'database_path': str(assets.database)},
         'ik': {'publish_overlay': False, 'database_path': str(assets.database),
-               'min_explained_blob_share': SMALL_DATABASE_EXPLAINED_SHARE},
+               **SMALL_DATABASE_GATES},
     }
     return run_pipeline(parameters, FRAMES, feed=bag_feed(bag, paced=True), timeout_s=300.0)
 

@@ -16,7 +16,7 @@ import pytest
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from geometry_msgs.msg import PoseStamped
 from node_fixtures import (
-    SMALL_DATABASE_EXPLAINED_SHARE,
+    SMALL_DATABASE_GATES,
     NodeAssets,
     assert_run_tracked,
     candidates_msg,
@@ -198,7 +198,7 @@ def _run(assets: NodeAssets, bag: Path, two_cameras: bool) -> PipelineRun:
                'calibration_file': str(STEREO if two_cameras else MONO),
                **({'extra_observation_topics': [SECOND_OBSERVATION]} if two_cameras else {}),
                'extra_observation_wait_s': 0.3,
-               'min_explained_blob_share': SMALL_DATABASE_EXPLAINED_SHARE},
+               **SMALL_DATABASE_GATES},
     }
     extra_nodes, extra_inputs = [], {}
     if two_cameras:

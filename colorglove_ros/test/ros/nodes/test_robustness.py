@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from colorglove_msgs.msg import HandPoseCandidates
 from node_fixtures import (
-    SMALL_DATABASE_EXPLAINED_SHARE,
+    SMALL_DATABASE_GATES,
     NodeAssets,
     background_rgb,
     executable,
@@ -52,8 +52,7 @@ def _specs(assets: NodeAssets, folder: Path, with_ik: bool = False,
         ik = write_params_file(folder / 'ik.yaml', {'publish_overlay': False,
                                                     'database_path': str(assets.database),
                                                     'use_camera_info': False,
-                                                    'min_explained_blob_share':
-                                                        SMALL_DATABASE_EXPLAINED_SHARE})
+                                                    **SMALL_DATABASE_GATES})
         specs.append(NodeSpec(executable('ik_node'), parameters=[ik]))
     return specs
 

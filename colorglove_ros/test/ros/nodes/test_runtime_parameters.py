@@ -71,6 +71,9 @@ def test_ik_evidence_gate_is_settable_at_run_time(small_database_path: Path) -> 
         assert node.limits.close_match_distance == 1.5
         out_of_range = _set(node, min_explained_blob_share=1.5)
         assert not out_of_range.successful and node.limits.min_explained_blob_share == 0.7
+        assert _set(node, max_missing_glove_share=0.3).successful
+        assert node.limits.max_missing_glove_share == 0.3
+        assert not _set(node, max_missing_glove_share=-0.1).successful
 
 
 def test_ik_gate_given_at_start_up_is_checked(small_database_path: Path) -> None:
