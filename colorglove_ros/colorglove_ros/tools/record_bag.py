@@ -10,6 +10,7 @@ from pathlib import Path
 
 import rclpy
 from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rosbags.interfaces import (
@@ -111,8 +112,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         while not stop.is_set() and time.monotonic() < deadline and rclpy.ok():
             rclpy.spin_once(recorder, timeout_sec=0.1)
-    except KeyboardInterrupt:
-        pass
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass   # Ctrl-C: rclpy's own handler may have shut the context down mid-spin
     finally:
         recorder.close()
         for topic, count in sorted(recorder.counts.items()):

@@ -87,6 +87,27 @@ def test_play_then_record_round_trip(tmp_path: Path, isolated_ros_domain: dict) 
         [sample_observation(i).crop_offset_x for i in range(0, 20, 4)][-len(observations):]
 
 
+def test_recorder_ends_cleanly_when_ctrl_c_shuts_rclpy_down(tmp_path: Path,
+                                                            monkeypatch: pytest.MonkeyPatch,
+                                                            isolated_ros_domain: dict) -> None:
+    """Ctrl-C can reach the recorder as rclpy's own shutdown of the context in the middle of
+    a spin (ExternalShutdownException rather than KeyboardInterrupt): the recorder still
+    closes the bag, prints its counts and exits 0."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    from colorglove_ros.tools import record_bag
+
+    monkeypatch.setenv('ROS_DOMAIN_ID', isolated_ros_domain['ROS_DOMAIN_ID'])
+
+    def shut_down(*_args, **_kwargs) -> None:
+        raise ExternalShutdownException()
+
+    monkeypatch.setattr(rclpy, 'spin_once', shut_down)
+    assert record_bag.main([str(tmp_path / 'recorded'), '--topics', '/test/joints']) == 0
+    assert (tmp_path / 'recorded' / 'metadata.yaml').is_file()
+
+
 def test_missing_bag_is_a_clear_error(tmp_path: Path) -> None:
     result = subprocess.run([sys.executable, '-m', 'colorglove_ros.tools.play_bag',
                              str(tmp_path / 'nope')], capture_output=True, text=True, timeout=30)
