@@ -108,6 +108,16 @@ class BagPlayer(Node):
             time.sleep(0.05)
         return False
 
+    def wait_for_publisher(self, topic: str, timeout_s: float) -> bool:
+        """Wait until ``topic`` has a publisher (--paced: an output published before the
+        player hears it releases no frame, and the next frame waits --pace-timeout)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if self.count_publishers(topic) >= 1:
+                return True
+            time.sleep(0.05)
+        return False
+
     def camera_info_beside(self, image_topic: str) -> str | None:
         """The bag's CameraInfo topic in ``image_topic``'s namespace (``/cam/image_raw`` or
         ``/cam/image_raw/compressed`` -> ``/cam/camera_info``), or None."""
@@ -203,6 +213,11 @@ def main(argv: list[str] | None = None) -> int:
                     print(f'colorglove_play_bag: warning: {topic} has {seen} of {wanted} '
                           f'subscribers after {args.wait_subscribers:g} s; playing anyway',
                           file=sys.stderr, flush=True)
+            if args.paced and not player.wait_for_publisher(args.pace_topic,
+                                                            args.wait_subscribers):
+                print(f'colorglove_play_bag: warning: no publisher on {args.pace_topic} after '
+                      f'{args.wait_subscribers:g} s; each frame waits --pace-timeout',
+                      file=sys.stderr, flush=True)
             time.sleep(args.settle)
         player.prime_camera_infos()
         if args.clock:

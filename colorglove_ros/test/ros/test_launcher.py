@@ -95,13 +95,31 @@ nodes:
 """)), sigint_grace_s=10.0)
     launcher.start()
     try:
-        time.sleep(1.0)
+        # SIGINT only once both nodes are up: one sent while a child is still inside
+        # rclpy.init (its handler installed, no context yet) is lost, and the launcher rightly
+        # escalates after the grace period, which is not what this test measures
+        _wait_for_publishers(['/launch_test_a', '/launch_test_b'], timeout_s=30.0)
         assert all(p.poll() is None for p in launcher.processes)
     finally:
         started = time.monotonic()
         launcher.stop()
     assert all(p.poll() is not None for p in launcher.processes)
     assert time.monotonic() - started < 10.0, 'nodes needed more than SIGINT to stop'
+
+
+def _wait_for_publishers(topics: list[str], timeout_s: float) -> None:
+    """Wait until each of ``topics`` has a publisher in the ROS graph."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = rclpy.create_node('publisher_watch', context=context)
+        deadline = time.monotonic() + timeout_s
+        while any(node.count_publishers(t) < 1 for t in topics):
+            assert time.monotonic() < deadline, f'no publisher on one of {topics}'
+            time.sleep(0.1)
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
 
 
 def test_watch_returns_when_a_node_exits(tmp_path: Path) -> None:

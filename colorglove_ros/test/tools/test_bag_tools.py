@@ -310,3 +310,4 @@ def test_player_says_which_subscribers_did_not_come(tmp_path: Path,
     assert done.returncode == 0, done.stderr
     assert '/camera/image_raw has 0 of 1 subscribers' in done.stderr
     assert '/camera/camera_info has 0 of 2 subscribers' in done.stderr
+    assert 'no publisher on /hand/tracking_status' in done.stderr
