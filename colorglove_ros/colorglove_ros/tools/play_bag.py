@@ -37,6 +37,9 @@ PLAYBACK_OPTIONS: dict[str, tuple[type, object, str]] = {
                    'the output topic (std_msgs/String, one per processed frame, hand or no '
                    'hand) whose messages release the next frame'),
     'pace-timeout': (float, 1.0, 'longest wait for an output before going on, seconds'),
+    'pace-resends': (int, 1, 'with --paced, publish a frame again (same stamp) this many times '
+                     'when no output came within --pace-timeout (a best-effort image can be '
+                     'lost on the way; a frame that was only slow is then answered twice)'),
     'wait-subscribers': (float, 10.0,
                          'wait this long for subscribers on --pace-on (and on the CameraInfo '
                          'topic beside it, if the bag has one) before starting'),
@@ -80,6 +83,7 @@ class BagPlayer(Node):
                                and fielddefs[c.msgtype][1][0][0] == 'header'
                                and fielddefs[c.msgtype][1][0][1][1] == 'std_msgs/msg/Header'}
         self.new_stamps: dict[bytes, bytes] = {}
+        self.resent = 0                   # frames published again after a --pace-timeout
 
     def restamped(self, topic: str, data: bytes) -> bytes:
         """``data`` with its header stamp replaced by the publish time (the same new stamp for
@@ -142,7 +146,7 @@ class BagPlayer(Node):
         return primed
 
     def play(self, rate: float, pace_topic: str | None, pace_on: str | None,
-             pace_timeout_s: float, restamp: bool = False) -> int:
+             pace_timeout_s: float, restamp: bool = False, pace_resends: int = 0) -> int:
         """Publish all messages; return how many were published."""
         start_wall = time.monotonic()
         first_stamp = None
@@ -166,7 +170,12 @@ class BagPlayer(Node):
             self.publishers_by_topic[connection.topic].publish(data)
             count += 1
             if pace_on is not None and connection.topic == pace_on:
-                self.output_event.wait(pace_timeout_s)
+                for attempt in range(max(0, pace_resends) + 1):
+                    if self.output_event.wait(pace_timeout_s):
+                        break
+                    if attempt < pace_resends:
+                        self.publishers_by_topic[connection.topic].publish(data)
+                        self.resent += 1
         return count
 
     def close(self) -> None:
@@ -226,9 +235,10 @@ def main(argv: list[str] | None = None) -> int:
             started = time.monotonic()
             count = player.play(args.rate, args.pace_topic if args.paced else None,
                                 args.pace_on if args.paced else None, args.pace_timeout,
-                                args.restamp)
+                                args.restamp, args.pace_resends if args.paced else 0)
             elapsed = time.monotonic() - started
-            print(f'published {count} messages in {elapsed:.1f} s', flush=True)
+            resent = f' ({player.resent} frames resent)' if player.resent else ''
+            print(f'published {count} messages in {elapsed:.1f} s{resent}', flush=True)
             if not args.loop:
                 break
         time.sleep(args.linger)

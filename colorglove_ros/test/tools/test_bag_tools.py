@@ -293,6 +293,49 @@ def test_player_primes_each_camera_info(tmp_path: Path) -> None:
     assert sorted(received) == [('/cam/camera_info', 640), ('/cam2/camera_info', 320)]
 
 
+def test_paced_player_resends_a_frame_nobody_answered(tmp_path: Path) -> None:
+    """--paced with --pace-resends 1: a frame whose output did not come within the pace
+    timeout (a best-effort image lost on the way) is published once more, with the same
+    bytes; with 0 it is not."""
+    import rclpy
+    from sensor_msgs.msg import Image
+
+    from colorglove_ros.tools.play_bag import PLAYBACK_OPTIONS, BagPlayer
+
+    assert PLAYBACK_OPTIONS['pace-resends'][1] == 1
+    _write_camera_bag(tmp_path / 'bag', (('/cam/image_raw', 'sensor_msgs/msg/Image',
+                                          Image(width=3, height=2, encoding='mono8', step=3,
+                                                data=bytes(range(6)))),))
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    received: list[bytes] = []
+    try:
+        reader = rclpy.create_node('image_reader', context=context)
+        reader.create_subscription(Image, '/cam/image_raw',
+                                   lambda msg: received.append(bytes(msg.data)), 10)
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(reader)
+        counts = []
+        for resends in (1, 0):
+            player = BagPlayer(tmp_path / 'bag', context=context)
+            assert player.wait_for_subscribers('/cam/image_raw', 5.0, 1)
+            time.sleep(0.5)
+            player.play(0.0, '/hand/tracking_status', '/cam/image_raw', 0.2,
+                        pace_resends=resends)
+            deadline = time.monotonic() + 2.0
+            while time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
+            counts.append((player.resent, len(received)))
+            received.clear()
+            player.close()
+            player.destroy_node()
+        executor.shutdown()
+        reader.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    assert counts == [(1, 2), (0, 1)]
+
+
 def test_player_says_which_subscribers_did_not_come(tmp_path: Path,
                                                     isolated_ros_domain: dict) -> None:
     """The command line's --min-subscribers / --min-info-subscribers reach the waits, and a
