@@ -133,14 +133,25 @@ class PatchSurface:
         patch_id = np.asarray(patch_id, np.int64)
         return self.points_by_camera(q, [camera], np.zeros(len(patch_id), np.int64), patch_id)
 
-    def _element_weights(self, pc: np.ndarray, normal: np.ndarray, camera: PinholeCamera
-                         ) -> tuple[np.ndarray, np.ndarray]:
-        """Projected-area weight (E,) of every element facing ``camera``, and the same with
-        the elements hidden in the depth buffer set to 0."""
+    def _in_camera(self, pc: np.ndarray, normal: np.ndarray, camera: PinholeCamera
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """Element centres and normals in ``camera``'s optical frame (unchanged for the
+        reference camera)."""
         if not (np.array_equal(camera.rotation, self._eye) and not camera.translation.any()):
             Rt = np.ascontiguousarray(camera.rotation.T)     # the fast matmul path
             pc = pc @ Rt + camera.translation
             normal = normal @ Rt
+        return pc, normal
+
+    def _element_weights(self, pc: np.ndarray, normal: np.ndarray, camera: PinholeCamera
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """Projected-area weight (E,) of every element facing ``camera``, and the same with
+        the elements hidden in the depth buffer set to 0."""
+        return self._camera_frame_weights(*self._in_camera(pc, normal, camera), camera)
+
+    def _camera_frame_weights(self, pc: np.ndarray, normal: np.ndarray,
+                              camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_element_weights` of centres and normals already in ``camera``'s frame."""
         dist = np.sqrt(np.einsum('fi,fi->f', pc, pc))
         depth = np.maximum(pc[:, 2], 1e-3)
         w = np.maximum(-np.einsum('fi,fi->f', normal, pc), 0.0) / (dist * depth**2)
@@ -207,10 +218,8 @@ class PatchSurface:
         pixels; hidden and back-facing faces count nothing) and the undistorted pixel
         centroid of that area (num_patches, 2; NaN where nothing is visible): what the
         segmenter should see of the glove if the pose is right."""
-        pc, normal = self._posed(q)
-        _, w_vis = self._element_weights(pc, normal, camera)
-        if not (np.array_equal(camera.rotation, self._eye) and not camera.translation.any()):
-            pc = pc @ camera.rotation.T + camera.translation
+        pc, normal = self._in_camera(*self._posed(q), camera)
+        _, w_vis = self._camera_frame_weights(pc, normal, camera)
         n = self.num_patches
         area = np.bincount(self._elem_patch, w_vis, n) * (camera.fx * camera.fy)
         shown = w_vis > 0
