@@ -13,6 +13,7 @@ import struct
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import rclpy
@@ -55,6 +56,16 @@ PLAYBACK_OPTIONS: dict[str, tuple[type, object, str]] = {
                 'its recorded header stamp (for latency measurements)'),
     'linger': (float, 1.0, 'seconds to stay up after the last message, for late deliveries'),
 }
+
+
+def _wait_until(condition: Callable[[], bool], timeout_s: float) -> bool:
+    """Poll ``condition`` until it holds (True) or ``timeout_s`` passed (False)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.05)
+    return False
 
 
 class BagPlayer(Node):
@@ -105,22 +116,13 @@ class BagPlayer(Node):
 
     def wait_for_subscribers(self, topic: str, timeout_s: float, count: int = 1) -> bool:
         """Wait until ``topic`` has ``count`` subscribers (so the first frames are not lost)."""
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            if self.publishers_by_topic[topic].get_subscription_count() >= count:
-                return True
-            time.sleep(0.05)
-        return False
+        publisher = self.publishers_by_topic[topic]
+        return _wait_until(lambda: publisher.get_subscription_count() >= count, timeout_s)
 
     def wait_for_publisher(self, topic: str, timeout_s: float) -> bool:
         """Wait until ``topic`` has a publisher (--paced: an output published before the
         player hears it releases no frame, and the next frame waits --pace-timeout)."""
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            if self.count_publishers(topic) >= 1:
-                return True
-            time.sleep(0.05)
-        return False
+        return _wait_until(lambda: self.count_publishers(topic) >= 1, timeout_s)
 
     def camera_info_beside(self, image_topic: str) -> str | None:
         """The bag's CameraInfo topic in ``image_topic``'s namespace (``/cam/image_raw`` or

@@ -35,6 +35,7 @@ from colorglove_ros.core.tracking.config import load_ik_config
 from colorglove_ros.core.tracking.tracker import HandTracker
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import stamp_to_seconds, wrist_pose_to_tf_msg
+from colorglove_ros.ros.frame_camera import CAMERA_REFUSAL_PREFIX
 from colorglove_ros.ros.image import ImageEncodingError, image_to_rgb8
 from colorglove_ros.ros.nodes.common import (
     LATEST_IMAGE,
@@ -110,7 +111,7 @@ class TwoHandsNode(Node):
         try:
             if (image.width, image.height) != (self.camera.width, self.camera.height):
                 raise ImageEncodingError(
-                    f'camera: image {image.width}x{image.height}, calibrated '
+                    f'{CAMERA_REFUSAL_PREFIX}image {image.width}x{image.height}, calibrated '
                     f'{self.camera.width}x{self.camera.height}')
             rgb = image_to_rgb8(image)
             outcomes = self.pipeline.process(rgb, stamp_to_seconds(image.header.stamp))
