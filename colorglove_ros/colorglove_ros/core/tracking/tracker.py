@@ -143,7 +143,7 @@ class HandTracker:
         self._stamp_prev: float | None = None
         self._local_normals = _local_vertex_normals(mesh)
         self._glove = glove
-        self._patches = (PatchSurface(self.kin, mesh, self._face_patch(glove))
+        self._patches = (PatchSurface(self.kin, mesh, self._glove_or_default().face_patch)
                          if self.config.constraint_model == 'patch' else None)
 
     @property
@@ -151,26 +151,26 @@ class HandTracker:
         """The glove's patches on this tracker's mesh (the patch constraint model's, else made
         on first use): what the evidence gates predict the image shows at a pose."""
         if self._patches is None:
-            self._patches = PatchSurface(self.kin, self.mesh, self._face_patch(self._glove))
+            self._patches = PatchSurface(self.kin, self.mesh, self._glove_or_default().face_patch)
         return self._patches
 
     @property
     def patch_color(self) -> np.ndarray:
         """(num_patches,) colour label (1..10) of every glove patch."""
-        if self._glove is None:
-            self._face_patch(None)
-        return np.asarray(self._glove.patch_color)
+        return np.asarray(self._glove_or_default().patch_color)
 
-    def _face_patch(self, glove: Any) -> np.ndarray:
-        if glove is None:
+    def _glove_or_default(self) -> Any:
+        """The glove given at construction, else the standard glove of the standard mesh
+        (made once; :class:`IKError` when this tracker's mesh is another one)."""
+        if self._glove is None:
             _, std_mesh, glove = default_hand(
                 self.model.hand_length_m, finger_length_factors=self.model.finger_length_factors)
             faces = getattr(self.mesh, 'faces', None)
             if faces is None or not np.array_equal(np.asarray(faces), std_mesh.faces):
-                raise IKError('constraint_model patch: pass the glove of this mesh (the '
-                              'standard glove is made on another mesh)')
+                raise IKError('the patch model needs the glove of this mesh (the standard '
+                              'glove is made on another mesh): pass glove=')
             self._glove = glove
-        return np.asarray(glove.face_patch)
+        return self._glove
 
     def _with_patch_points(self, corr: Correspondences, q: np.ndarray) -> Correspondences:
         """``corr`` with each constraint moved from its vertex to the predicted centroid of

@@ -92,6 +92,16 @@ def test_patch_model_needs_the_glove_of_its_mesh(scene):
     HandTracker(synth.model, synth.mesh, [cam], IKConfig())     # the standard glove
 
 
+def test_patch_colours_come_from_the_standard_glove_without_the_patch_model(scene):
+    synth, cam, _, _ = scene
+    tracker = HandTracker(synth.model, synth.mesh, [cam], IKConfig(constraint_model='vertex'))
+    np.testing.assert_array_equal(tracker.patch_color, synth.glove.patch_color)
+    table = VertexTable(synth.mesh.vertex_link, synth.mesh.local_vertices)
+    other = HandTracker(synth.model, table, [cam], IKConfig(constraint_model='vertex'))
+    with pytest.raises(IKError, match='glove'):
+        _ = other.patch_color
+
+
 def test_cameras_sharing_a_pose_get_the_same_points_as_alone(scene):
     """The posed glove is reused by the next camera at the same pose, and the primary
     camera skips its identity transform: neither may change the points of any camera."""
