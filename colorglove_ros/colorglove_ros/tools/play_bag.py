@@ -22,11 +22,17 @@ from rclpy.node import Node
 from rosbags.highlevel import AnyReader
 from rosgraph_msgs.msg import Clock
 
+from colorglove_ros.ros.bag_definitions import DefinitionChange, convert_message, definition_changes
 from colorglove_ros.ros.bag_qos import publisher_qos_for_recorded
-from colorglove_ros.ros.typestore import colorglove_typestore, message_class
+from colorglove_ros.ros.typestore import colorglove_typestore, deserialize_cdr, message_class
 from colorglove_ros.tools._cli import tool_parser
 
-__all__ = ['BagPlayer', 'PLAYBACK_OPTIONS', 'main']
+__all__ = ['BagDefinitionError', 'BagPlayer', 'PLAYBACK_OPTIONS', 'main']
+
+
+class BagDefinitionError(ValueError):
+    """The bag holds topics recorded with another definition of their message type than the
+    installed one, and converting them was not asked for."""
 
 # The player's options: --NAME -> (type, default, help); bool options are flags.
 PLAYBACK_OPTIONS: dict[str, tuple[type, object, str]] = {
@@ -71,14 +77,28 @@ def _wait_until(condition: Callable[[], bool], timeout_s: float) -> bool:
 class BagPlayer(Node):
     """Publishes every message of a bag as raw CDR on its original topic and type."""
 
-    def __init__(self, bag: Path, topics: list[str] | None = None, **kwargs) -> None:
+    def __init__(self, bag: Path, topics: list[str] | None = None, *,
+                 convert_definitions: bool = False, **kwargs) -> None:
         super().__init__('bag_player', **kwargs)
         self.reader = AnyReader([bag], default_typestore=colorglove_typestore())
         self.reader.open()
         self.connections = [c for c in self.reader.connections
                             if not topics or c.topic in topics]
         if not self.connections:
+            self.reader.close()
             raise ValueError(f'bag {bag} has none of the topics {topics}')
+        # topics recorded with an older (or newer) definition of their type: their bytes are
+        # decoded with the recorded definition and re-encoded as the installed one
+        self.definition_changes: list[DefinitionChange] = definition_changes(
+            self.connections, self.reader.typestore, colorglove_typestore())
+        if self.definition_changes and not convert_definitions:
+            self.reader.close()
+            raise BagDefinitionError(
+                '; '.join(change.describe() for change in self.definition_changes)
+                + '. Play with --convert-definitions to convert them field by field, or '
+                'leave them out with --topics')
+        self.converted_types = {change.topic: change.msgtype
+                                for change in self.definition_changes}
         self.qos_by_topic = {c.topic: publisher_qos_for_recorded(
             getattr(c.ext, 'offered_qos_profiles', None) or []) for c in self.connections}
         self.publishers_by_topic = {
@@ -95,6 +115,17 @@ class BagPlayer(Node):
                                and fielddefs[c.msgtype][1][0][1][1] == 'std_msgs/msg/Header'}
         self.new_stamps: dict[bytes, bytes] = {}
         self.resent = 0                   # frames published again after a --pace-timeout
+
+    def installed_bytes(self, topic: str, rawdata: bytes | memoryview) -> bytes:
+        """``rawdata`` of ``topic`` laid out for the installed definition of its type
+        (converted when it was recorded with another one)."""
+        msgtype = self.converted_types.get(topic)
+        if msgtype is None:
+            return bytes(rawdata)
+        store = colorglove_typestore()
+        message = convert_message(deserialize_cdr(rawdata, msgtype, self.reader.typestore),
+                                  msgtype, store)
+        return bytes(store.serialize_cdr(message, msgtype))
 
     def restamped(self, topic: str, data: bytes) -> bytes:
         """``data`` with its header stamp replaced by the publish time (the same new stamp for
@@ -142,7 +173,8 @@ class BagPlayer(Node):
             if connection.msgtype != 'sensor_msgs/msg/CameraInfo':
                 continue
             for _conn, _timestamp, rawdata in self.reader.messages(connections=[connection]):
-                self.publishers_by_topic[connection.topic].publish(bytes(rawdata))
+                self.publishers_by_topic[connection.topic].publish(
+                    self.installed_bytes(connection.topic, rawdata))
                 primed.append(connection.topic)
                 break
         return primed
@@ -166,7 +198,7 @@ class BagPlayer(Node):
             if self.clock_publisher is not None:
                 sec, nanosec = divmod(int(timestamp), 10**9)
                 self.clock_publisher.publish(Clock(clock=Time(sec=sec, nanosec=nanosec)))
-            data = bytes(rawdata)
+            data = self.installed_bytes(connection.topic, rawdata)
             if restamp:
                 data = self.restamped(connection.topic, data)
             self.publishers_by_topic[connection.topic].publish(data)
@@ -190,6 +222,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = tool_parser(__doc__.splitlines()[0], json_help=None)
     parser.add_argument('bag', type=Path, help='rosbag2 folder (sqlite3 or MCAP)')
     parser.add_argument('--topics', nargs='*', help='only these topics (default: all)')
+    parser.add_argument('--convert-definitions', action='store_true',
+                        help='play topics recorded with another definition of their message '
+                        'type (an older colorglove_msgs) by converting each message field by '
+                        'field by name; without it such a bag is refused, naming the fields')
     for name, (kind, default, text) in PLAYBACK_OPTIONS.items():
         if kind is bool:
             parser.add_argument(f'--{name}', action='store_true', help=text)
@@ -204,7 +240,15 @@ def main(argv: list[str] | None = None) -> int:
     executor = rclpy.executors.SingleThreadedExecutor()
     spinner = threading.Thread(target=executor.spin, daemon=True)
     try:
-        player = BagPlayer(args.bag, args.topics)
+        try:
+            player = BagPlayer(args.bag, args.topics,
+                               convert_definitions=args.convert_definitions)
+        except ValueError as error:     # a bag this player cannot play as asked: say why
+            print(f'colorglove_play_bag: {error}', file=sys.stderr, flush=True)
+            return 2
+        for change in player.definition_changes:
+            print(f'colorglove_play_bag: converting {change.describe()}', file=sys.stderr,
+                  flush=True)
         executor.add_node(player)
         if args.paced:
             output_type = message_class('std_msgs/msg/String')

@@ -1,0 +1,130 @@
+"""Bags recorded with another definition of a message type than the installed one: found,
+refused with the differing fields named, or converted field by field by name."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from colorglove_msgs.msg import HandPoseCandidates
+from message_samples import sample_candidates
+from rclpy.serialization import deserialize_message, serialize_message
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from colorglove_ros.ros.bag_definitions import convert_message, definition_changes
+from colorglove_ros.ros.typestore import colorglove_msg_files, colorglove_typestore, deserialize_cdr
+
+CANDIDATES = 'colorglove_msgs/msg/HandPoseCandidates'
+TOPIC = '/hand/pose_candidates'
+
+
+def _old_store():
+    """The installed type store with an 'older' HandPoseCandidates: no finger_std, and a field
+    the installed type has dropped."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    for path in colorglove_msg_files():
+        text = path.read_text()
+        if path.stem == 'HandPoseCandidates':
+            text = '\n'.join(line for line in text.splitlines()
+                             if not line.startswith('float64[] finger_std'))
+            text += '\nfloat32[] retired_scores\n'
+        store.register(get_types_from_msg(text, f'colorglove_msgs/msg/{path.stem}'))
+    return store
+
+
+def _old_message(store, seq: int):
+    """sample_candidates(seq) as the old definition's message (its fields, finger_std gone)."""
+    installed = colorglove_typestore()
+    current = deserialize_cdr(serialize_message(sample_candidates(seq)), CANDIDATES, installed)
+    values = {name: getattr(current, name) for name, _ in store.fielddefs[CANDIDATES][1]
+              if name != 'retired_scores'}
+    values['header'] = store.types['std_msgs/msg/Header'](
+        stamp=store.types['builtin_interfaces/msg/Time'](sec=current.header.stamp.sec,
+                                                         nanosec=current.header.stamp.nanosec),
+        frame_id=current.header.frame_id)
+    return store.types[CANDIDATES](**values, retired_scores=np.array([0.5], np.float32))
+
+
+def _write_old_bag(path: Path) -> None:
+    store = _old_store()
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        connection = writer.add_connection(TOPIC, CANDIDATES, typestore=store)
+        for seq in range(3):
+            writer.write(connection, 1_000 + seq,
+                         bytes(store.serialize_cdr(_old_message(store, seq), CANDIDATES)))
+
+
+def test_changed_definition_is_found_with_its_fields(tmp_path: Path) -> None:
+    _write_old_bag(tmp_path / 'old')
+    with AnyReader([tmp_path / 'old'], default_typestore=colorglove_typestore()) as reader:
+        changes = definition_changes(reader.connections, reader.typestore,
+                                     colorglove_typestore())
+    assert len(changes) == 1
+    change = changes[0]
+    assert (change.topic, change.dropped, change.added) == (TOPIC, ('retired_scores',),
+                                                            ('finger_std',))
+    assert 'retired_scores' in change.describe() and 'finger_std' in change.describe()
+
+
+def test_same_definition_is_no_change(tmp_path: Path) -> None:
+    store = colorglove_typestore()
+    with Writer(tmp_path / 'new', version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        connection = writer.add_connection(TOPIC, CANDIDATES, typestore=store)
+        writer.write(connection, 1, serialize_message(sample_candidates(0)))
+    with AnyReader([tmp_path / 'new'], default_typestore=store) as reader:
+        assert definition_changes(reader.connections, reader.typestore, store) == []
+
+
+def test_converted_message_keeps_every_common_field() -> None:
+    store = _old_store()
+    old = _old_message(store, 4)
+    installed = colorglove_typestore()
+    converted = convert_message(old, CANDIDATES, installed)
+    message = deserialize_message(bytes(installed.serialize_cdr(converted, CANDIDATES)),
+                                  HandPoseCandidates)
+    expected = sample_candidates(4)
+    assert message.header.stamp == expected.header.stamp
+    assert message.header.frame_id == expected.header.frame_id
+    assert list(message.dof_names) == list(expected.dof_names)
+    np.testing.assert_array_equal(message.candidate_poses, expected.candidate_poses)
+    np.testing.assert_array_equal(message.constraint_colors, expected.constraint_colors)
+    assert len(message.finger_std) == 0          # new field: its default
+
+
+def test_player_refuses_an_old_bag_naming_the_fields(tmp_path: Path,
+                                                     isolated_ros_domain: dict) -> None:
+    _write_old_bag(tmp_path / 'old')
+    result = subprocess.run([sys.executable, '-m', 'colorglove_ros.tools.play_bag',
+                             str(tmp_path / 'old'), '--rate', '0', '--linger', '0'],
+                            env=isolated_ros_domain, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2, result.stderr
+    assert 'retired_scores' in result.stderr and '--convert-definitions' in result.stderr
+    assert 'Traceback' not in result.stderr
+
+
+@pytest.mark.dds
+def test_player_converts_an_old_bag_when_asked(tmp_path: Path) -> None:
+    import rclpy
+
+    from colorglove_ros.tools.play_bag import BagPlayer
+
+    _write_old_bag(tmp_path / 'old')
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        player = BagPlayer(tmp_path / 'old', convert_definitions=True, context=context)
+        published = [deserialize_message(player.installed_bytes(connection.topic, raw),
+                                         HandPoseCandidates)
+                     for connection, _, raw in player.reader.messages()]
+        player.close()
+        player.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    assert [m.header.stamp for m in published] == [sample_candidates(s).header.stamp
+                                                   for s in range(3)]
+    np.testing.assert_array_equal(published[2].candidate_weights,
+                                  sample_candidates(2).candidate_weights)
