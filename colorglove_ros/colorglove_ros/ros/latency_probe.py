@@ -1,12 +1,14 @@
-"""A lean latency subscriber: a process that only subscribes to ``/hand/joint_states`` and
-records, per JointState, its header stamp and its arrival time (system clock). The camera node
+"""A lean latency subscriber: a process that only subscribes to ``/hand/joint_states`` (or
+the JointState topics it is given, e.g. both hands') and records, per JointState, its header
+stamp and its arrival time (system clock). The camera node
 and the bag player stamp frames at publish time with the system clock, so arrival minus stamp
 is the camera-frame-to-JointState latency, free of the queueing a busy monitor adds (one that
 also deserialises every camera image).
 
-``python -m colorglove_ros.ros.latency_probe --output FILE`` runs it until SIGINT/SIGTERM (or
-``--duration``) and writes ``{"stamp_ns": [...], "arrival_ns": [...]}``; :class:`LatencyProbe`
-starts and stops such a process and reads what it recorded."""
+``python -m colorglove_ros.ros.latency_probe --output FILE [--topics T ...]`` runs it until
+SIGINT/SIGTERM (or ``--duration``) and writes ``{"stamp_ns": [...], "arrival_ns": [...],
+"topic_index": [...]}``; :class:`LatencyProbe` starts and stops such a process and reads what
+it recorded."""
 from __future__ import annotations
 
 import argparse
@@ -17,7 +19,8 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -32,10 +35,18 @@ JOINT_STATES_TOPIC = '/hand/joint_states'
 @dataclass(frozen=True)
 class ProbeRecord:
     """What the probe saw: header stamps and arrival times (ns, system clock), one per
-    JointState in arrival order."""
+    JointState in arrival order, and the index of the topic each came on (empty: one topic)."""
 
     stamp_ns: np.ndarray
     arrival_ns: np.ndarray
+    topic_index: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+    def of_topic(self, index: int) -> ProbeRecord:
+        """The JointStates that came on the probe's topic ``index`` only."""
+        if len(self.topic_index) != len(self.stamp_ns):
+            return self if index == 0 else ProbeRecord(self.stamp_ns[:0], self.arrival_ns[:0])
+        keep = self.topic_index == index
+        return ProbeRecord(self.stamp_ns[keep], self.arrival_ns[keep])
 
     @property
     def latencies_s(self) -> np.ndarray:
@@ -74,8 +85,10 @@ def window_summaries(record: ProbeRecord, window_s: float) -> list[dict[str, flo
 class LatencyProbe:
     """The probe as a separate process: ``start()``, run the pipeline, ``stop()`` -> record."""
 
-    def __init__(self, env: dict[str, str] | None = None) -> None:
+    def __init__(self, env: dict[str, str] | None = None,
+                 topics: Sequence[str] = (JOINT_STATES_TOPIC,)) -> None:
         self.env = env
+        self.topics = tuple(topics)
         self.folder = tempfile.TemporaryDirectory(prefix='latency_probe_')
         self.output = Path(self.folder.name) / 'record.json'
         self.process: subprocess.Popen | None = None
@@ -88,7 +101,7 @@ class LatencyProbe:
             self.process = subprocess.Popen(
                 [sys.executable, '-m', 'colorglove_ros.ros.latency_probe', '--output',
                  str(self.output), '--ready-file', str(ready), '--first-file',
-                 str(self.first_file)], env=self.env)
+                 str(self.first_file), '--topics', *self.topics], env=self.env)
         deadline = time.monotonic() + ready_timeout_s
         while not ready.exists():
             if self.process.poll() is not None or time.monotonic() > deadline:
@@ -114,7 +127,8 @@ class LatencyProbe:
         finally:
             self.folder.cleanup()
         return ProbeRecord(np.asarray(data['stamp_ns'], np.int64),
-                           np.asarray(data['arrival_ns'], np.int64))
+                           np.asarray(data['arrival_ns'], np.int64),
+                           np.asarray(data['topic_index'], np.int64))
 
     def close(self, timeout_s: float = 2.0) -> None:
         """End the process without reading its record (a run that failed or was stopped):
@@ -136,12 +150,15 @@ class LatencyProbe:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Subscribe to /hand/joint_states and record stamp and arrival of each message."""
+    """Subscribe to /hand/joint_states (or --topics) and record stamp and arrival of each
+    message."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--output', type=Path, required=True, help='JSON file written at exit')
     parser.add_argument('--duration', type=float, default=0.0, help='seconds (0: until SIGINT)')
     parser.add_argument('--ready-file', type=Path, help='touched once subscribed')
     parser.add_argument('--first-file', type=Path, help='touched on the first JointState')
+    parser.add_argument('--topics', nargs='+', default=[JOINT_STATES_TOPIC],
+                        help='JointState topics to record')
     args = parser.parse_args(argv)
 
     import rclpy
@@ -150,10 +167,12 @@ def main(argv: list[str] | None = None) -> int:
 
     stamps: list[int] = []
     arrivals: list[int] = []
+    topic_index: list[int] = []
 
-    def on_joints(msg: JointState) -> None:
+    def on_joints(msg: JointState, index: int) -> None:
         arrivals.append(time.time_ns())
         stamps.append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+        topic_index.append(index)
         if len(arrivals) == 1 and args.first_file is not None:
             args.first_file.touch()
 
@@ -162,9 +181,11 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, lambda *_: stop.append(True))
     rclpy.init(args=None, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     node = rclpy.create_node('latency_probe')
-    node.create_subscription(JointState, JOINT_STATES_TOPIC, on_joints, QoSProfile(
-        history=QoSHistoryPolicy.KEEP_LAST, depth=100,
-        reliability=QoSReliabilityPolicy.RELIABLE))
+    qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=100,
+                     reliability=QoSReliabilityPolicy.RELIABLE)
+    for index, topic in enumerate(args.topics):
+        node.create_subscription(JointState, topic,
+                                 lambda msg, index=index: on_joints(msg, index), qos)
     if args.ready_file is not None:
         args.ready_file.touch()
     deadline = time.monotonic() + args.duration if args.duration > 0 else float('inf')
@@ -175,7 +196,8 @@ def main(argv: list[str] | None = None) -> int:
         node.destroy_node()
         rclpy.try_shutdown()
     tmp = args.output.with_suffix('.tmp')
-    tmp.write_text(json.dumps({'stamp_ns': stamps, 'arrival_ns': arrivals}))
+    tmp.write_text(json.dumps({'stamp_ns': stamps, 'arrival_ns': arrivals,
+                               'topic_index': topic_index}))
     os.replace(tmp, args.output)
     return 0
 

@@ -75,3 +75,40 @@ def test_close_ends_a_running_probe_cleanly() -> None:
     probe.close()
     assert probe.process.returncode == 0
     assert not folder.exists()
+
+
+def test_record_of_one_topic() -> None:
+    record = ProbeRecord(np.array([1, 2, 3, 4]), np.array([11, 12, 13, 14]), np.array([0, 1, 1, 0]))
+    assert list(record.of_topic(1).stamp_ns) == [2, 3]
+    assert list(record.of_topic(0).arrival_ns) == [11, 14]
+    single = ProbeRecord(np.array([1, 2]), np.array([11, 12]))
+    assert single.of_topic(0) is single and len(single.of_topic(1).stamp_ns) == 0
+
+
+@pytest.mark.dds
+@pytest.mark.usefixtures('isolated_ros_domain')
+def test_probe_records_which_topic_each_joint_state_came_on() -> None:
+    """A probe of both hands' topics keeps their JointStates apart."""
+    topics = ('/hand/left/joint_states', '/hand/right/joint_states')
+    probe = LatencyProbe(topics=topics)
+    probe.start()
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = rclpy.create_node('probe_test', context=context)
+        qos = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE)
+        pubs = [node.create_publisher(JointState, topic, qos) for topic in topics]
+        deadline = time.monotonic() + 10.0
+        while (min(p.get_subscription_count() for p in pubs) == 0
+               and time.monotonic() < deadline):
+            time.sleep(0.05)
+        for k in range(6):
+            pubs[k % 3 == 0].publish(JointState(header=Header(stamp=Time(sec=k))))
+            time.sleep(0.02)
+        assert probe.wait_for_first(5.0)
+        time.sleep(0.5)
+    finally:
+        record = probe.stop()
+        rclpy.try_shutdown(context=context)
+    assert sorted(record.of_topic(1).stamp_ns // 10**9) == [0, 3]
+    assert sorted(record.of_topic(0).stamp_ns // 10**9) == [1, 2, 4, 5]
