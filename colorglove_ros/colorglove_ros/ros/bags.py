@@ -30,12 +30,13 @@ the calibrated extrinsics.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rosbags.highlevel import AnyReader
+from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.interfaces import (
     Qos,
     QosDurability,
@@ -62,7 +63,8 @@ from colorglove_ros.ros.image_codec import (
 )
 
 __all__ = [
-    'BagError', 'BagFrame', 'SequenceBagWriter', 'write_sequence_bag', 'read_sequence_bag',
+    'BagError', 'BagFrame', 'SequenceBagWriter', 'bag_messages', 'open_bag_reader',
+    'write_sequence_bag', 'read_sequence_bag',
     'bag_camera', 'camera_info_to_pinhole', 'camera_topics', 'TOPIC_IMAGE',
     'TOPIC_CAMERA_INFO', 'TOPIC_JOINTS', 'TOPIC_WRIST', 'TOPIC_KEYPOINTS', 'FRAME_ID',
     'DEFAULT_START_NS', 'SKELETON_BONES', 'bag_size_bytes', 'SyntheticBag', 'write_synthetic_bag',
@@ -126,6 +128,34 @@ class BagFrame:
 
 def _typestore():
     return get_typestore(Stores.ROS2_JAZZY)
+
+
+def open_bag_reader(path: str | Path, typestore: Any = None) -> AnyReader:
+    """An opened rosbags reader of the bag folder ``path`` (``typestore``: the types the bag
+    may not define itself, default Jazzy's); a bag whose metadata or files cannot be read is a
+    :class:`BagError` naming it. The caller closes the reader (``with closing(...)``; not
+    ``with`` the reader itself, which would open it again)."""
+    reader = AnyReader([Path(path)], default_typestore=typestore or _typestore())
+    try:
+        reader.open()
+    except AnyReaderError as error:
+        raise BagError(f'cannot read the bag {path}: ' + ' '.join(str(error).split())) from error
+    return reader
+
+
+def bag_messages(reader: AnyReader, connections: Sequence[Any], path: str | Path
+                 ) -> Iterator[tuple[Any, int, Any]]:
+    """``reader``'s messages on ``connections`` in time order; one the reader cannot read (a
+    damaged file) ends them with a :class:`BagError` naming the bag ``path``."""
+    messages = reader.messages(connections=list(connections))
+    while True:
+        try:
+            yield next(messages)
+        except StopIteration:
+            return
+        except Exception as error:     # whatever the damaged bytes made the reader raise
+            raise BagError(f'cannot read the bag {path} any further: '
+                           f'{type(error).__name__}: {error}') from error
 
 
 def camera_topics(camera: PinholeCamera, index: int) -> tuple[str, str]:
@@ -422,12 +452,12 @@ def read_sequence_bag(path: str | Path, *, with_images: bool = True,
     if not path.exists():
         raise BagError(f'bag not found: {path}')
     pending: dict[int, BagFrame] = {}
-    with AnyReader([path], default_typestore=_typestore()) as reader:
+    with closing(open_bag_reader(path)) as reader:
         topics = set(_TYPES) - {TOPIC_TF} - (set() if with_images else {TOPIC_IMAGE})
         conns = [c for c in reader.connections if c.topic in topics]
         if not conns:
             raise BagError(f'{path} holds none of the topics {sorted(_TYPES)}')
-        for conn, log_ns, raw in reader.messages(connections=conns):
+        for conn, log_ns, raw in bag_messages(reader, conns, path):
             msg = reader.deserialize(raw, conn.msgtype)
             stamp = _stamp(msg.markers[0]) if conn.topic == TOPIC_KEYPOINTS and msg.markers \
                 else (_stamp(msg) if hasattr(msg, 'header') else log_ns)

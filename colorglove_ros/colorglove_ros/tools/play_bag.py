@@ -19,11 +19,11 @@ from pathlib import Path
 import rclpy
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
-from rosbags.highlevel import AnyReader
 from rosgraph_msgs.msg import Clock
 
 from colorglove_ros.ros.bag_definitions import DefinitionChange, convert_message, definition_changes
 from colorglove_ros.ros.bag_qos import publisher_qos_for_recorded
+from colorglove_ros.ros.bags import BagError, bag_messages, open_bag_reader
 from colorglove_ros.ros.typestore import colorglove_typestore, deserialize_cdr, message_class
 from colorglove_ros.tools._cli import tool_parser
 
@@ -80,8 +80,8 @@ class BagPlayer(Node):
     def __init__(self, bag: Path, topics: list[str] | None = None, *,
                  convert_definitions: bool = False, **kwargs) -> None:
         super().__init__('bag_player', **kwargs)
-        self.reader = AnyReader([bag], default_typestore=colorglove_typestore())
-        self.reader.open()
+        self.bag = bag
+        self.reader = open_bag_reader(bag, colorglove_typestore())
         self.connections = [c for c in self.reader.connections
                             if not topics or c.topic in topics]
         if not self.connections:
@@ -115,6 +115,7 @@ class BagPlayer(Node):
                                and fielddefs[c.msgtype][1][0][1][1] == 'std_msgs/msg/Header'}
         self.new_stamps: dict[bytes, bytes] = {}
         self.resent = 0                   # frames published again after a --pace-timeout
+        self.published = 0                # messages published by play(), over every loop
 
     def installed_bytes(self, topic: str, rawdata: bytes | memoryview) -> bytes:
         """``rawdata`` of ``topic`` laid out for the installed definition of its type
@@ -172,7 +173,7 @@ class BagPlayer(Node):
         for connection in self.connections:
             if connection.msgtype != 'sensor_msgs/msg/CameraInfo':
                 continue
-            for _conn, _timestamp, rawdata in self.reader.messages(connections=[connection]):
+            for _conn, _timestamp, rawdata in bag_messages(self.reader, [connection], self.bag):
                 self.publishers_by_topic[connection.topic].publish(
                     self.installed_bytes(connection.topic, rawdata))
                 primed.append(connection.topic)
@@ -185,7 +186,7 @@ class BagPlayer(Node):
         start_wall = time.monotonic()
         first_stamp = None
         count = 0
-        for connection, timestamp, rawdata in self.reader.messages(connections=self.connections):
+        for connection, timestamp, rawdata in bag_messages(self.reader, self.connections, self.bag):
             if first_stamp is None:
                 first_stamp = timestamp
             if pace_on is None and rate > 0:
@@ -203,6 +204,7 @@ class BagPlayer(Node):
                 data = self.restamped(connection.topic, data)
             self.publishers_by_topic[connection.topic].publish(data)
             count += 1
+            self.published += 1
             if pace_on is not None and connection.topic == pace_on:
                 for attempt in range(max(0, pace_resends) + 1):
                     if self.output_event.wait(pace_timeout_s):
@@ -243,7 +245,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             player = BagPlayer(args.bag, args.topics,
                                convert_definitions=args.convert_definitions)
-        except ValueError as error:     # a bag this player cannot play as asked: say why
+        except (BagError, ValueError) as error:     # a bag it cannot play as asked: say why
             print(f'colorglove_play_bag: {error}', file=sys.stderr, flush=True)
             return 2
         for change in player.definition_changes:
@@ -290,6 +292,10 @@ def main(argv: list[str] | None = None) -> int:
         time.sleep(args.linger)
     except KeyboardInterrupt:
         pass
+    except BagError as error:       # a damaged bag: what was published stays published
+        print(f'colorglove_play_bag: {error} ({player.published} messages published before)',
+              file=sys.stderr, flush=True)
+        return 1
     finally:
         executor.shutdown()
         if spinner.is_alive():
