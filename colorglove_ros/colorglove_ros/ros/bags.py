@@ -498,9 +498,9 @@ def _fill(frame: BagFrame, topic: str, msg: object) -> None:
 
 def bag_camera(path: str | Path) -> PinholeCamera:
     """The camera of the first CameraInfo message in a bag."""
-    with AnyReader([Path(path)], default_typestore=_typestore()) as reader:
+    with closing(open_bag_reader(path)) as reader:
         conns = [c for c in reader.connections if c.topic == TOPIC_CAMERA_INFO]
-        for conn, _, raw in reader.messages(connections=conns):
+        for conn, _, raw in bag_messages(reader, conns, path):
             return camera_info_to_pinhole(reader.deserialize(raw, conn.msgtype))
     raise BagError(f'{path} has no {TOPIC_CAMERA_INFO} message')
 
@@ -526,9 +526,9 @@ class BagTransform:
 def read_transforms(path: str | Path, topic: str = TOPIC_TF) -> list[BagTransform]:
     """Every transform on ``topic`` (``/tf`` or ``/tf_static``) of a bag, in bag order."""
     out = []
-    with AnyReader([Path(path)], default_typestore=_typestore()) as reader:
+    with closing(open_bag_reader(path)) as reader:
         conns = [c for c in reader.connections if c.topic == topic]
-        for conn, _, raw in reader.messages(connections=conns):
+        for conn, _, raw in bag_messages(reader, conns, path):
             for tf in reader.deserialize(raw, conn.msgtype).transforms:
                 v, q = tf.transform.translation, tf.transform.rotation
                 out.append(BagTransform(_stamp(tf), str(tf.header.frame_id),
