@@ -30,6 +30,14 @@ def test_targets_are_judged_on_the_four_process_graph() -> None:
         'two cameras, 30 Hz: latency p95 <= 35 ms': 'FAIL'}
 
 
+def test_repeated_passes_are_judged_on_their_median() -> None:
+    runs = [_run('separate processes', 2, 30.0, rate, p95)
+            for rate, p95 in ((21.0, 178.0), (29.3, 34.0), (29.5, 36.0))]
+    figures = benchmark._target_figures([], runs)
+    assert figures['dds_2cam_30hz_rate_hz'] == 29.3
+    assert figures['dds_2cam_30hz_latency_p95_ms'] == 36.0
+
+
 def test_targets_not_measured_are_left_out() -> None:
     assert benchmark.check_targets({}) == []
 
