@@ -134,8 +134,8 @@ def _reference_steps(distances: tuple[int, ...], row_stride: int) -> np.ndarray:
 
 
 def _gather(colours: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """Colours (at.shape + (4,)) float32 of the pixels ``at`` (flat indices) of ``colours``."""
-    return colours.take(at).view(np.float32).reshape(*at.shape, 4)
+    """Colours (at.shape + (3,)) float32 of the pixels ``at`` (flat indices) of ``colours``."""
+    return colours.take(at).view(np.float32).reshape(*at.shape, 3)
 
 
 def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
@@ -172,11 +172,10 @@ def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
     # Work on the bounding box padded by the reach, as flat arrays: a step is an offset.
     box = cv2.copyMakeBorder(labels[y0:y1, x0:x1], pad, pad, pad, pad, cv2.BORDER_CONSTANT,
                              value=_UNSURE)
-    # Linear RGB plus an unused 4th channel: one 16-byte item per pixel, so one take gathers
-    # a pixel's whole colour.
-    rgba = cv2.cvtColor(cv2.copyMakeBorder(np.ascontiguousarray(image[y0:y1, x0:x1]), pad, pad,
-                                           pad, pad, cv2.BORDER_CONSTANT), cv2.COLOR_RGB2RGBA)
-    colours = cv2.LUT(rgba, _LINEAR_RGB).view(np.dtype((np.void, 16))).ravel()
+    # Linear RGB as one 12-byte item per pixel, so one take gathers a pixel's whole colour.
+    rgb = cv2.copyMakeBorder(np.ascontiguousarray(image[y0:y1, x0:x1]), pad, pad, pad, pad,
+                             cv2.BORDER_CONSTANT)
+    colours = cv2.LUT(rgb, _LINEAR_RGB).view(np.dtype((np.void, 12))).ravel()
     steps = _reference_steps(tuple(distances), box.shape[1])
     inner = box[pad:-pad, pad:-pad]   # a view of the box without the padding
     flat = box.ravel()

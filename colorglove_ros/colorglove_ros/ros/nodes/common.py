@@ -57,7 +57,7 @@ __all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'ending_on_shutdown', 'run_
            'declare_frame_prefix',
            'CAMERA_INFO_TOPIC', 'OBSERVATION_TOPIC', 'declare_frame_camera',
            'declare_topic_list', 'extra_camera_info_topic', 'extra_frame_cameras',
-           'declare_camera_index', 'calibrated_camera',
+           'declare_camera_index', 'calibrated_camera', 'OPENCV_THREADS', 'declare_opencv_threads',
            'hand_model_from_calibration', 'JOINT_STATES_TOPIC', 'WRIST_POSE_TOPIC',
            'MARKERS_TOPIC', 'TRACKING_STATUS_TOPIC',
            'PosePublishers', 'TrackerOutputs', 'subscribe_tracked_pose']
@@ -92,6 +92,25 @@ def declare(node: Node, name: str, default: Any, description: str,
             descriptor.floating_point_range = [FloatingPointRange(
                 from_value=float(minimum), to_value=float(maximum), step=0.0)]
     return node.declare_parameter(name, default, descriptor).value
+
+
+#: Default of the ``opencv_threads`` parameter of the nodes that run OpenCV per frame: one
+#: thread. Their images are small (a coarse frame, a region of interest, 40x40 tiny images),
+#: so OpenCV's worker threads cost the calling thread more in dispatch than they take off it,
+#: and the four processes of the graph share the machine's cores anyway.
+OPENCV_THREADS = 1
+
+
+def declare_opencv_threads(node: Node) -> int:
+    """Declare ``opencv_threads`` and apply it to the process (``cv2.setNumThreads``, which is
+    process-wide: in one process the last node started sets it); return it."""
+    import cv2
+
+    threads = declare(node, 'opencv_threads', OPENCV_THREADS,
+                      'OpenCV threads of this process (cv2.setNumThreads): 1 runs every OpenCV '
+                      'call in the calling thread; -1 OpenCV\'s own default (all cores)', -1, 64)
+    cv2.setNumThreads(threads)
+    return threads
 
 
 @contextmanager

@@ -61,6 +61,7 @@ from colorglove_ros.ros.nodes.common import (
     declare_frame_camera,
     declare_frame_prefix,
     declare_hand,
+    declare_opencv_threads,
     declare_topic_list,
     extra_frame_cameras,
     run_node,
@@ -105,6 +106,7 @@ class IKNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('ik', **kwargs)
+        declare_opencv_threads(self)
         calibration_file = declare_calibration_file(
             self, 'camera calibration YAML; camera 0 is the lookup camera')
         ik_config = declare(self, 'ik_config', 'config/ik.yaml', 'IK settings and covariances')

@@ -37,6 +37,7 @@ from colorglove_ros.ros.nodes.common import (
     declare_calibration_file,
     declare_database,
     declare_frame_camera,
+    declare_opencv_threads,
     run_node,
     startup_errors,
 )
@@ -49,6 +50,7 @@ class LookupNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('lookup', **kwargs)
+        declare_opencv_threads(self)
         calibration_file = declare_calibration_file(
             self, 'camera calibration YAML (camera 0 is the lookup camera)')
         num_candidates = declare(self, 'num_candidates', 300,

@@ -63,6 +63,7 @@ from colorglove_ros.ros.nodes.common import (
     declare_camera_index,
     declare_frame_camera,
     declare_hand,
+    declare_opencv_threads,
     run_node,
     startup_errors,
 )
@@ -89,6 +90,7 @@ class SegmentationNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('segmentation', **kwargs)
+        declare_opencv_threads(self)
         config = declare(self, 'color_calibration_file', 'config/color_calibration.yaml',
                          'colour calibration config YAML (calibration file + segmenter settings)')
         transport = declare(self, 'image_transport', 'raw',

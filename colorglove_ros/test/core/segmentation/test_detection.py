@@ -46,6 +46,39 @@ def test_region_mask_keeps_the_glove_and_its_long_finger_drops_far_texture() -> 
     assert not glove_region_mask(labels[40:], 10, 12, 6, 0.02).any()
 
 
+def _region_mask_by_dilation(labels: np.ndarray, window: int, min_colors: int,
+                             density: float) -> np.ndarray:
+    """glove_region_mask written out with a morphological dilation (the reference)."""
+    import cv2
+
+    rich = colour_diversity(labels, 10, window, density) >= min_colors
+    size = 2 * window + 1
+    near = cv2.dilate(rich.view(np.uint8),
+                      cv2.getStructuringElement(cv2.MORPH_RECT, (size, size))).view(bool)
+    n, comp = cv2.connectedComponents((labels > 0).view(np.uint8), connectivity=8)
+    reached = np.zeros(n, bool)
+    reached[comp[rich]] = True
+    reached[0] = False
+    return near | reached[comp]
+
+
+@pytest.mark.parametrize('seed', range(6))
+@pytest.mark.parametrize('window', [5, 12, 24, 40])
+def test_region_mask_margin_is_the_square_dilation(seed: int, window: int) -> None:
+    """The margin around colourful windows is exactly a (2 window + 1)-square dilation,
+    up to the image's edges, on random patchworks with noise and holes."""
+    rng = np.random.default_rng(seed)
+    h, w = 250, 300
+    labels = np.where(rng.random((h, w)) < 0.97, 0, rng.integers(1, 11, (h, w))).astype(np.uint8)
+    y, x = rng.integers(0, h - 30), rng.integers(0, w - 30)
+    labels[y:y + 30, x:x + 30] = _patchwork(30, 30, 10)
+    for min_colors in (3, 4):
+        mask = glove_region_mask(labels, 10, window, min_colors, 0.02)
+        np.testing.assert_array_equal(mask, _region_mask_by_dilation(labels, window, min_colors,
+                                                                     0.02))
+        assert mask.any() and not mask.all()   # a margin with an edge inside the image
+
+
 def test_oversized_single_colour_regions_are_background() -> None:
     labels = np.zeros((100, 100), np.uint8)
     labels[:, :60] = 1                                # a table top, 6000 px

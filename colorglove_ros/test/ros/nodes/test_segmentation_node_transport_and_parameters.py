@@ -136,3 +136,22 @@ def test_segmenter_setting_given_at_start_up_is_used(node_assets: NodeAssets) ->
         assert node.segmenter.median_size == 5 and node.segmenter.border_distances == (3,)
         assert node.get_parameter('segmenter.coarse_factor').value == 4
         assert not node.describe_parameter('segmenter.median_size').read_only
+
+
+@pytest.mark.parametrize('threads', [None, 3])
+def test_opencv_threads_parameter_sets_the_process_threads(node_assets: NodeAssets,
+                                                           threads: int | None) -> None:
+    """segmentation_node runs OpenCV in the calling thread by default (``OPENCV_THREADS``)
+    and with ``opencv_threads`` as many threads as asked; the setting is process-wide."""
+    from colorglove_ros.ros.nodes.common import OPENCV_THREADS
+
+    before = cv2.getNumThreads()
+    try:
+        cv2.setNumThreads(2)
+        overrides = {} if threads is None else {'opencv_threads': threads}
+        with running(segmentation_node(node_assets, **overrides)) as h:
+            assert h.nodes[0].get_parameter('opencv_threads').value == (threads or
+                                                                         OPENCV_THREADS)
+            assert cv2.getNumThreads() == (threads or OPENCV_THREADS)
+    finally:
+        cv2.setNumThreads(before)
