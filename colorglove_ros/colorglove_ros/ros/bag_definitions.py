@@ -6,23 +6,31 @@ the old definition; published as they are, every subscriber would decode them wi
 layout and read nonsense. :func:`definition_changes` finds such topics (comparing the recorded
 hash with the installed definition's) and says which fields differ; :func:`convert_message`
 rebuilds a message decoded with the recorded definition as the installed type, field by field
-by name (fields the installed type lacks are dropped, new fields get their defaults)."""
+by name (fields the installed type lacks are dropped, new fields get their defaults; a value
+the installed field cannot hold exactly is a :class:`DefinitionConversionError`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, is_dataclass
 from typing import Any
 
 import numpy as np
-from rosbags.interfaces import Nodetype
+from rosbags.interfaces import MessageDefinitionFormat, Nodetype
 from rosbags.typesys.store import Typestore
 
-__all__ = ['DefinitionChange', 'convert_message', 'definition_changes']
+__all__ = ['DefinitionChange', 'DefinitionConversionError', 'convert_message',
+           'definition_changes']
 
 _BASE, _NAME, _ARRAY, _SEQUENCE = Nodetype.BASE, Nodetype.NAME, Nodetype.ARRAY, Nodetype.SEQUENCE
-_NUMPY_TYPES = {'bool': np.bool_, 'byte': np.uint8, 'char': np.uint8, 'int8': np.int8,
+# (rosbags reads and writes a scalar ``byte`` as signed)
+_NUMPY_TYPES = {'bool': np.bool_, 'byte': np.int8, 'char': np.uint8, 'int8': np.int8,
                 'uint8': np.uint8, 'int16': np.int16, 'uint16': np.uint16,
                 'int32': np.int32, 'uint32': np.uint32, 'int64': np.int64,
                 'uint64': np.uint64, 'float32': np.float32, 'float64': np.float64}
+
+
+class DefinitionConversionError(ValueError):
+    """A recorded value the installed definition of its field cannot hold (named by its dotted
+    field path)."""
 
 
 @dataclass(frozen=True)
@@ -34,9 +42,14 @@ class DefinitionChange:
     dropped: tuple[str, ...]     # recorded fields the installed type lacks (dotted paths)
     added: tuple[str, ...]       # installed fields the recording lacks (get their defaults)
     retyped: tuple[str, ...]     # fields of both whose type differs
+    convertible: bool = True     # False: the bag does not hold the definition it was recorded with
 
     def describe(self) -> str:
         """One line for the user."""
+        if not self.convertible:
+            return (f'{self.topic}: recorded with another definition of {self.msgtype} than '
+                    'the installed one (its type hash differs), and the bag does not hold that '
+                    'definition, so its messages cannot be converted')
         parts = [f'{name} {", ".join(items)}' for name, items in
                  (('dropped:', self.dropped), ('new, at defaults:', self.added),
                   ('retyped:', self.retyped)) if items]
@@ -59,27 +72,38 @@ def _field_types(store: Typestore, msgtype: str, prefix: str = '') -> dict[str, 
             if inner_kind == _NAME:
                 out.update(_field_types(store, inner_spec, f'{path}[].'))
         else:
-            out[path] = spec[0]
+            out[path] = f'{spec[0]}<={spec[1]}' if spec[1] else spec[0]
     return out
 
 
 def definition_changes(connections: list[Any], recorded: Typestore, installed: Typestore
                        ) -> list[DefinitionChange]:
-    """The topics of ``connections`` (rosbags connections with ``digest``) whose recorded
-    type hash differs from the installed definition's (``recorded``: the reader's type store,
-    built from the bag's own definitions). Types the installed store does not know, and
-    recordings without a RIHS01 hash (older distributions), are not judged here."""
+    """The topics of ``connections`` (rosbags connections) recorded with another definition
+    of their type than the installed one. ``recorded``: the reader's type store, built from the
+    definitions the bag holds. With the definition in the bag its hash is compared (and the
+    change can be converted); without it, the recorded RIHS01 type hash (not convertible).
+    Types the installed store does not know, and recordings with neither, are not judged."""
     changes = []
     for connection in connections:
-        digest = getattr(connection, 'digest', '') or ''
-        if not digest.startswith('RIHS01_') or connection.msgtype not in installed.fielddefs:
+        msgtype = connection.msgtype
+        if msgtype not in installed.fielddefs:
             continue
-        if digest == installed.hash_rihs01(connection.msgtype):
+        installed_hash = installed.hash_rihs01(msgtype)
+        msgdef = getattr(connection, 'msgdef', None)
+        held = msgdef is not None and msgdef.format != MessageDefinitionFormat.NONE
+        if held:
+            if recorded.hash_rihs01(msgtype) == installed_hash:
+                continue
+        else:
+            digest = getattr(connection, 'digest', '') or ''
+            if not digest.startswith('RIHS01_') or digest == installed_hash:
+                continue
+            changes.append(DefinitionChange(connection.topic, msgtype, (), (), (), False))
             continue
-        old = _field_types(recorded, connection.msgtype)
-        new = _field_types(installed, connection.msgtype)
+        old = _field_types(recorded, msgtype)
+        new = _field_types(installed, msgtype)
         changes.append(DefinitionChange(
-            connection.topic, connection.msgtype,
+            connection.topic, msgtype,
             tuple(path for path in old if path not in new),
             tuple(path for path in new if path not in old),
             tuple(path for path in old if path in new and old[path] != new[path])))
@@ -92,35 +116,74 @@ def _default(store: Typestore, kind: int, spec: Any) -> Any:
     if kind == _NAME:
         return convert_message(None, spec, store)
     (inner_kind, inner_spec), count = spec
+    size = count if kind == _ARRAY else 0
     if inner_kind == _BASE and inner_spec[0] in _NUMPY_TYPES:
-        return np.zeros(count if kind == _ARRAY else 0, _NUMPY_TYPES[inner_spec[0]])
-    return [_default(store, inner_kind, inner_spec) for _ in range(count if kind == _ARRAY
-                                                                     else 0)]
+        return np.zeros(size, _NUMPY_TYPES[inner_spec[0]])
+    return [_default(store, inner_kind, inner_spec) for _ in range(size)]
 
 
-def _convert(value: Any, store: Typestore, kind: int, spec: Any) -> Any:
+def _exact_numbers(value: Any, dtype: type, path: str) -> np.ndarray:
+    """``value`` (number or array) as ``dtype``, refused unless every value is kept exactly."""
+    source = np.asarray(value)
+    if source.dtype.kind not in 'biuf':
+        raise DefinitionConversionError(f'{path}: recorded {source.dtype} values cannot become '
+                                        f'{np.dtype(dtype).name}')
+    with np.errstate(all='ignore'):
+        converted = source.astype(dtype)
+        kept = np.array_equal(converted.astype(np.float64), source.astype(np.float64),
+                              equal_nan=np.dtype(dtype).kind == 'f')
+    if not kept:
+        raise DefinitionConversionError(f'{path}: recorded values do not fit '
+                                        f'{np.dtype(dtype).name}')
+    return converted
+
+
+def _bounded(size: int, bound: int, path: str) -> None:
+    if bound and size > bound:
+        raise DefinitionConversionError(f'{path}: {size} recorded, at most {bound} installed')
+
+
+def _convert(value: Any, store: Typestore, kind: int, spec: Any, path: str) -> Any:
     if kind == _BASE:
         if spec[0] in ('string', 'wstring'):
-            return str(value)
-        return _NUMPY_TYPES[spec[0]](value).item()
+            if not isinstance(value, str):
+                raise DefinitionConversionError(f'{path}: a recorded {type(value).__name__} '
+                                                'cannot become a string')
+            _bounded(len(value), spec[1], path)
+            return value
+        if not np.isscalar(value) or isinstance(value, str):
+            raise DefinitionConversionError(f'{path}: a recorded {type(value).__name__} cannot '
+                                            f'become a {spec[0]}')
+        return _exact_numbers(value, _NUMPY_TYPES[spec[0]], path).item()
     if kind == _NAME:
-        return convert_message(value, spec, store)
+        if not is_dataclass(value):
+            raise DefinitionConversionError(f'{path}: a recorded {type(value).__name__} cannot '
+                                            f'become a {spec}')
+        return convert_message(value, spec, store, f'{path}.')
     (inner_kind, inner_spec), count = spec
+    if isinstance(value, (str, bytes)) or not hasattr(value, '__len__'):
+        raise DefinitionConversionError(f'{path}: a recorded {type(value).__name__} cannot '
+                                        'become an array')
+    if kind == _ARRAY and len(value) != count:
+        raise DefinitionConversionError(f'{path}: a fixed array of {count} recorded with '
+                                        f'{len(value)} values')
+    if kind == _SEQUENCE:
+        _bounded(len(value), count, path)
     if inner_kind == _BASE and inner_spec[0] in _NUMPY_TYPES:
-        array = np.asarray(value).astype(_NUMPY_TYPES[inner_spec[0]])
-        if kind == _ARRAY and array.size != count:
-            raise ValueError(f'a fixed array of {count} recorded with {array.size} values')
-        return array
-    return [_convert(item, store, inner_kind, inner_spec) for item in value]
+        return _exact_numbers(value, _NUMPY_TYPES[inner_spec[0]], f'{path}[]')
+    return [_convert(item, store, inner_kind, inner_spec, f'{path}[{k}]')
+            for k, item in enumerate(value)]
 
 
-def convert_message(message: Any, msgtype: str, store: Typestore) -> Any:
+def convert_message(message: Any, msgtype: str, store: Typestore, prefix: str = '') -> Any:
     """``message`` (decoded with any definition of ``msgtype``; None for all defaults) as an
-    instance of ``store``'s definition: fields matched by name, recursively."""
+    instance of ``store``'s definition: fields matched by name, recursively (``prefix``: the
+    dotted path of ``message`` in its parent, for errors). A value the installed field cannot
+    hold exactly is a :class:`DefinitionConversionError` naming the field."""
     present = ({f.name: getattr(message, f.name) for f in fields(message)}
                if is_dataclass(message) else {})
     values = {}
     for name, (kind, spec) in store.fielddefs[msgtype][1]:
-        values[name] = (_convert(present[name], store, kind, spec) if name in present
-                        else _default(store, kind, spec))
+        values[name] = (_convert(present[name], store, kind, spec, f'{prefix}{name}')
+                        if name in present else _default(store, kind, spec))
     return store.types[msgtype](**values)

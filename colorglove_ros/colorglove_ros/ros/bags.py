@@ -63,7 +63,8 @@ from colorglove_ros.ros.image_codec import (
 )
 
 __all__ = [
-    'BagError', 'BagFrame', 'SequenceBagWriter', 'bag_messages', 'open_bag_reader',
+    'BagError', 'BagFrame', 'SequenceBagWriter', 'bag_deserialize', 'bag_messages',
+    'open_bag_reader',
     'write_sequence_bag', 'read_sequence_bag',
     'bag_camera', 'camera_info_to_pinhole', 'camera_topics', 'TOPIC_IMAGE',
     'TOPIC_CAMERA_INFO', 'TOPIC_JOINTS', 'TOPIC_WRIST', 'TOPIC_KEYPOINTS', 'FRAME_ID',
@@ -135,12 +136,22 @@ def open_bag_reader(path: str | Path, typestore: Any = None) -> AnyReader:
     may not define itself, default Jazzy's); a bag whose metadata or files cannot be read is a
     :class:`BagError` naming it. The caller closes the reader (``with closing(...)``; not
     ``with`` the reader itself, which would open it again)."""
-    reader = AnyReader([Path(path)], default_typestore=typestore or _typestore())
     try:
+        reader = AnyReader([Path(path)], default_typestore=typestore or _typestore())
         reader.open()
-    except AnyReaderError as error:
+    except (AnyReaderError, OSError) as error:   # OSError: no metadata.yaml, unreadable files
         raise BagError(f'cannot read the bag {path}: ' + ' '.join(str(error).split())) from error
     return reader
+
+
+def bag_deserialize(reader: AnyReader, rawdata: Any, msgtype: str, path: str | Path) -> Any:
+    """One message of ``reader`` decoded; undecodable bytes are a :class:`BagError` naming
+    the bag ``path``."""
+    try:
+        return reader.deserialize(rawdata, msgtype)
+    except Exception as error:        # whatever the damaged bytes made the decoder raise
+        raise BagError(f'cannot decode a {msgtype} message of the bag {path}: '
+                       f'{type(error).__name__}: {error}') from error
 
 
 def bag_messages(reader: AnyReader, connections: Sequence[Any], path: str | Path
@@ -458,7 +469,7 @@ def read_sequence_bag(path: str | Path, *, with_images: bool = True,
         if not conns:
             raise BagError(f'{path} holds none of the topics {sorted(_TYPES)}')
         for conn, log_ns, raw in bag_messages(reader, conns, path):
-            msg = reader.deserialize(raw, conn.msgtype)
+            msg = bag_deserialize(reader, raw, conn.msgtype, path)
             stamp = _stamp(msg.markers[0]) if conn.topic == TOPIC_KEYPOINTS and msg.markers \
                 else (_stamp(msg) if hasattr(msg, 'header') else log_ns)
             frame = pending.setdefault(stamp, BagFrame(stamp))
@@ -501,7 +512,7 @@ def bag_camera(path: str | Path) -> PinholeCamera:
     with closing(open_bag_reader(path)) as reader:
         conns = [c for c in reader.connections if c.topic == TOPIC_CAMERA_INFO]
         for conn, _, raw in bag_messages(reader, conns, path):
-            return camera_info_to_pinhole(reader.deserialize(raw, conn.msgtype))
+            return camera_info_to_pinhole(bag_deserialize(reader, raw, conn.msgtype, path))
     raise BagError(f'{path} has no {TOPIC_CAMERA_INFO} message')
 
 
@@ -529,7 +540,7 @@ def read_transforms(path: str | Path, topic: str = TOPIC_TF) -> list[BagTransfor
     with closing(open_bag_reader(path)) as reader:
         conns = [c for c in reader.connections if c.topic == topic]
         for conn, _, raw in bag_messages(reader, conns, path):
-            for tf in reader.deserialize(raw, conn.msgtype).transforms:
+            for tf in bag_deserialize(reader, raw, conn.msgtype, path).transforms:
                 v, q = tf.transform.translation, tf.transform.rotation
                 out.append(BagTransform(_stamp(tf), str(tf.header.frame_id),
                                         str(tf.child_frame_id), np.array([v.x, v.y, v.z]),

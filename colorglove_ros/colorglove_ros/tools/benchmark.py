@@ -148,7 +148,10 @@ def _target_figures(stages: list[dict[str, Any]], runs: list[dict[str, Any]]
             continue
         key = f'dds_{"2cam_" if row["cameras"] == 2 else ""}{row["offered_hz"]:g}hz'
         repeats.setdefault(f'{key}_rate_hz', []).append(row['joint_states_per_s'])
-        repeats.setdefault(f'{key}_latency_p95_ms', []).append(row['latency_p95_ms'])
+        # a pass that got no JointState has no latency: the worst, not NaN, in the median
+        p95 = row['latency_p95_ms']
+        repeats.setdefault(f'{key}_latency_p95_ms', []).append(
+            float('inf') if np.isnan(p95) else p95)
     figures.update({key: float(np.median(values)) for key, values in repeats.items()})
     return figures
 

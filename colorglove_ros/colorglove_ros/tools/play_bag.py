@@ -15,13 +15,19 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import rclpy
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
-from colorglove_ros.ros.bag_definitions import DefinitionChange, convert_message, definition_changes
+from colorglove_ros.ros.bag_definitions import (
+    DefinitionChange,
+    DefinitionConversionError,
+    convert_message,
+    definition_changes,
+)
 from colorglove_ros.ros.bag_qos import publisher_qos_for_recorded
 from colorglove_ros.ros.bags import BagError, bag_messages, open_bag_reader
 from colorglove_ros.ros.typestore import colorglove_typestore, deserialize_cdr, message_class
@@ -74,6 +80,12 @@ def _wait_until(condition: Callable[[], bool], timeout_s: float) -> bool:
     return False
 
 
+def _starts_with_header(fielddef: Any) -> bool:
+    """Whether a type's fields (a rosbags ``fielddefs`` entry) start with a std_msgs/Header."""
+    return bool(fielddef and fielddef[1] and fielddef[1][0][0] == 'header'
+                and fielddef[1][0][1][1] == 'std_msgs/msg/Header')
+
+
 class BagPlayer(Node):
     """Publishes every message of a bag as raw CDR on its original topic and type."""
 
@@ -82,50 +94,88 @@ class BagPlayer(Node):
         super().__init__('bag_player', **kwargs)
         self.bag = bag
         self.reader = open_bag_reader(bag, colorglove_typestore())
+        try:
+            self._set_up(topics, convert_definitions)
+        except BaseException:
+            self.reader.close()
+            raise
+
+    def _set_up(self, topics: list[str] | None, convert_definitions: bool) -> None:
+        """The topics to play, their publishers and conversions (or a ValueError saying why
+        the bag cannot be played as asked)."""
+        bag = self.bag
+        held = sorted(c.topic for c in self.reader.connections)
+        if not held:
+            raise ValueError(f'bag {bag} holds no messages')
         self.connections = [c for c in self.reader.connections
                             if not topics or c.topic in topics]
         if not self.connections:
-            self.reader.close()
-            raise ValueError(f'bag {bag} has none of the topics {topics}')
+            raise ValueError(f'bag {bag} has none of the topics {topics}; it holds '
+                             f'{", ".join(held)}')
+        installed = colorglove_typestore()
         # topics recorded with an older (or newer) definition of their type: their bytes are
         # decoded with the recorded definition and re-encoded as the installed one
         self.definition_changes: list[DefinitionChange] = definition_changes(
-            self.connections, self.reader.typestore, colorglove_typestore())
-        if self.definition_changes and not convert_definitions:
-            self.reader.close()
+            self.connections, self.reader.typestore, installed)
+        unconvertible = [c for c in self.definition_changes if not c.convertible]
+        if unconvertible or (self.definition_changes and not convert_definitions):
             raise BagDefinitionError(
                 '; '.join(change.describe() for change in self.definition_changes)
-                + '. Play with --convert-definitions to convert them field by field, or '
-                'leave them out with --topics')
+                + ('. Leave them out with --topics' if unconvertible else
+                   '. Play with --convert-definitions to convert them field by field, or '
+                   'leave them out with --topics'))
         self.converted_types = {change.topic: change.msgtype
                                 for change in self.definition_changes}
+        self._check_conversions()
         self.qos_by_topic = {c.topic: publisher_qos_for_recorded(
             getattr(c.ext, 'offered_qos_profiles', None) or []) for c in self.connections}
-        self.publishers_by_topic = {
-            c.topic: self.create_publisher(message_class(c.msgtype), c.topic,
-                                           self.qos_by_topic[c.topic])
-            for c in self.connections}
+        self.publishers_by_topic = {}
+        for c in self.connections:
+            try:
+                message_type = message_class(c.msgtype)
+            except (ImportError, AttributeError) as error:
+                raise ValueError(f'{c.topic}: its type {c.msgtype} is not installed here '
+                                 '(leave the topic out with --topics)') from error
+            self.publishers_by_topic[c.topic] = self.create_publisher(
+                message_type, c.topic, self.qos_by_topic[c.topic])
         self.clock_publisher = None
         self.output_event = threading.Event()
-        fielddefs = self.reader.typestore.fielddefs
-        # topics whose messages start with a std_msgs/Header (stamp right after the CDR prefix)
-        self.stamped_topics = {c.topic for c in self.connections
-                               if fielddefs[c.msgtype][1]
-                               and fielddefs[c.msgtype][1][0][0] == 'header'
-                               and fielddefs[c.msgtype][1][0][1][1] == 'std_msgs/msg/Header'}
+        # topics whose messages, as published, start with a std_msgs/Header (the stamp right
+        # after the CDR prefix): the installed definition for converted topics
+        self.stamped_topics = {c.topic for c in self.connections if _starts_with_header(
+            (installed if c.topic in self.converted_types else self.reader.typestore)
+            .fielddefs.get(c.msgtype))}
         self.new_stamps: dict[bytes, bytes] = {}
         self.resent = 0                   # frames published again after a --pace-timeout
         self.published = 0                # messages published by play(), over every loop
 
+    def _check_conversions(self) -> None:
+        """Convert the first message of every converted topic now, so a value the installed
+        definition cannot hold is refused before anything is published."""
+        for connection in self.connections:
+            if connection.topic not in self.converted_types:
+                continue
+            for _conn, _timestamp, rawdata in bag_messages(self.reader, [connection], self.bag):
+                try:
+                    self.installed_bytes(connection.topic, rawdata)
+                except (DefinitionConversionError, ValueError, TypeError) as error:
+                    raise BagDefinitionError(f'{connection.topic}: its first message cannot be '
+                                             f'converted: {error}') from error
+                break
+
     def installed_bytes(self, topic: str, rawdata: bytes | memoryview) -> bytes:
         """``rawdata`` of ``topic`` laid out for the installed definition of its type
-        (converted when it was recorded with another one)."""
+        (converted when it was recorded with another one; :class:`BagDefinitionError` when a
+        value cannot be)."""
         msgtype = self.converted_types.get(topic)
         if msgtype is None:
             return bytes(rawdata)
         store = colorglove_typestore()
-        message = convert_message(deserialize_cdr(rawdata, msgtype, self.reader.typestore),
-                                  msgtype, store)
+        try:
+            message = convert_message(deserialize_cdr(rawdata, msgtype, self.reader.typestore),
+                                      msgtype, store)
+        except DefinitionConversionError as error:
+            raise BagDefinitionError(f'{topic}: {error}') from error
         return bytes(store.serialize_cdr(message, msgtype))
 
     def restamped(self, topic: str, data: bytes) -> bytes:
@@ -183,6 +233,7 @@ class BagPlayer(Node):
     def play(self, rate: float, pace_topic: str | None, pace_on: str | None,
              pace_timeout_s: float, restamp: bool = False, pace_resends: int = 0) -> int:
         """Publish all messages; return how many were published."""
+        self.new_stamps.clear()       # a loop played again gets new stamps, not the last loop's
         start_wall = time.monotonic()
         first_stamp = None
         count = 0
@@ -292,7 +343,7 @@ def main(argv: list[str] | None = None) -> int:
         time.sleep(args.linger)
     except KeyboardInterrupt:
         pass
-    except BagError as error:       # a damaged bag: what was published stays published
+    except (BagError, BagDefinitionError) as error:   # what was published stays published
         print(f'colorglove_play_bag: {error} ({player.published} messages published before)',
               file=sys.stderr, flush=True)
         return 1

@@ -5,6 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -22,14 +23,16 @@ CANDIDATES = 'colorglove_msgs/msg/HandPoseCandidates'
 TOPIC = '/hand/pose_candidates'
 
 
-def _old_store():
-    """The installed type store with an 'older' HandPoseCandidates: no finger_std, and a field
-    the installed type has dropped."""
+def _old_store(indices_type: str = 'uint32'):
+    """The installed type store with an 'older' HandPoseCandidates: no finger_std, a field
+    the installed type has dropped, and candidate_indices of ``indices_type``."""
     store = get_typestore(Stores.ROS2_JAZZY)
     for path in colorglove_msg_files():
         text = path.read_text()
         if path.stem == 'HandPoseCandidates':
-            text = '\n'.join(line for line in text.splitlines()
+            text = '\n'.join(line.replace('uint32[] candidate_indices',
+                                          f'{indices_type}[] candidate_indices')
+                             for line in text.splitlines()
                              if not line.startswith('float64[] finger_std'))
             text += '\nfloat32[] retired_scores\n'
         store.register(get_types_from_msg(text, f'colorglove_msgs/msg/{path.stem}'))
@@ -49,13 +52,18 @@ def _old_message(store, seq: int):
     return store.types[CANDIDATES](**values, retired_scores=np.array([0.5], np.float32))
 
 
-def _write_old_bag(path: Path) -> None:
-    store = _old_store()
+def _write_old_bag(path: Path, indices_type: str = 'uint32', first_index: int = 0) -> None:
+    store = _old_store(indices_type)
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         connection = writer.add_connection(TOPIC, CANDIDATES, typestore=store)
         for seq in range(3):
+            message = _old_message(store, seq)
+            if indices_type != 'uint32':
+                message.candidate_indices = np.asarray(message.candidate_indices,
+                                                       np.int64).astype(indices_type)
+                message.candidate_indices[0] = first_index
             writer.write(connection, 1_000 + seq,
-                         bytes(store.serialize_cdr(_old_message(store, seq), CANDIDATES)))
+                         bytes(store.serialize_cdr(message, CANDIDATES)))
 
 
 def test_changed_definition_is_found_with_its_fields(tmp_path: Path) -> None:
@@ -128,3 +136,76 @@ def test_player_converts_an_old_bag_when_asked(tmp_path: Path) -> None:
                                                    for s in range(3)]
     np.testing.assert_array_equal(published[2].candidate_weights,
                                   sample_candidates(2).candidate_weights)
+
+
+def _play(bag: Path, env: dict, *options: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, '-m', 'colorglove_ros.tools.play_bag', str(bag),
+                           '--rate', '0', '--settle', '0', '--linger', '0', *options],
+                          env=env, capture_output=True, text=True, timeout=60)
+
+
+@pytest.mark.dds
+def test_player_plays_an_old_bag_converted(tmp_path: Path, isolated_ros_domain: dict) -> None:
+    _write_old_bag(tmp_path / 'old')
+    result = _play(tmp_path / 'old', isolated_ros_domain, '--convert-definitions')
+    assert result.returncode == 0, result.stderr
+    assert 'converting /hand/pose_candidates' in result.stderr
+    assert 'published 3 messages' in result.stdout
+
+
+def test_retyped_values_that_fit_are_converted(tmp_path: Path) -> None:
+    _write_old_bag(tmp_path / 'old', indices_type='int64', first_index=7)
+    with AnyReader([tmp_path / 'old'], default_typestore=colorglove_typestore()) as reader:
+        (change,) = definition_changes(reader.connections, reader.typestore,
+                                       colorglove_typestore())
+        assert change.retyped == ('candidate_indices',)
+        _, _, raw = next(reader.messages())
+        old = reader.deserialize(raw, CANDIDATES)
+    converted = convert_message(old, CANDIDATES, colorglove_typestore())
+    assert converted.candidate_indices.dtype == np.uint32
+    assert converted.candidate_indices[0] == 7
+
+
+@pytest.mark.dds
+def test_player_refuses_values_the_installed_field_cannot_hold(
+        tmp_path: Path, isolated_ros_domain: dict) -> None:
+    """A recorded int64 -1 cannot become the installed uint32: refused before playing."""
+    _write_old_bag(tmp_path / 'old', indices_type='int64', first_index=-1)
+    result = _play(tmp_path / 'old', isolated_ros_domain, '--convert-definitions')
+    assert result.returncode == 2, result.stderr
+    assert 'candidate_indices' in result.stderr and 'do not fit uint32' in result.stderr
+    assert 'Traceback' not in result.stderr
+
+
+@pytest.mark.parametrize(('fields', 'value', 'message'), [
+    ('int32 x', 2.7, 'do not fit int32'),
+    ('string[2] x', ['a', 'b', 'c'], 'fixed array of 2 recorded with 3'),
+    ('float64 x', 'text', 'cannot become a float64'),
+    ('string<=3 x', 'toolong', 'at most 3'),
+])
+def test_conversion_refuses_what_the_field_cannot_hold(fields: str, value, message: str
+                                                       ) -> None:
+    from colorglove_ros.ros.bag_definitions import DefinitionConversionError
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.register(get_types_from_msg(fields, 'test_msgs/msg/One'))
+    recorded = SimpleNamespace(x=value)
+    with pytest.raises(DefinitionConversionError, match=message):
+        convert_message(_as_dataclass(recorded), 'test_msgs/msg/One', store)
+
+
+def test_signed_byte_values_convert() -> None:
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.register(get_types_from_msg('byte b', 'test_msgs/msg/Byte'))
+    converted = convert_message(_as_dataclass(SimpleNamespace(b=-56)), 'test_msgs/msg/Byte',
+                                store)
+    assert converted.b == -56
+    store.serialize_cdr(converted, 'test_msgs/msg/Byte')
+
+
+def _as_dataclass(values: SimpleNamespace):
+    """A recorded message with the fields of ``values`` (what the reader decodes)."""
+    from dataclasses import make_dataclass
+
+    names = list(vars(values))
+    return make_dataclass('Recorded', names)(**vars(values))

@@ -3,6 +3,7 @@ arrival of every JointState over DDS."""
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -33,33 +34,43 @@ def test_ik_times_from_status_lines() -> None:
     assert ik_times_ms(statuses) == [4.5, 11.0]
 
 
-@pytest.mark.dds
-@pytest.mark.usefixtures('isolated_ros_domain')
-def test_probe_process_records_stamp_and_arrival() -> None:
-    probe = LatencyProbe()
+def _probe_run(topics: tuple[str, ...], topic_of: list[int], stamp_of: Callable[[int], int]
+               ) -> tuple[ProbeRecord, list[int]]:
+    """Start a probe of ``topics``; publish JointState k on topic ``topic_of[k]``, stamped
+    ``stamp_of(k)`` (ns, taken as it is sent); return what the probe recorded and the stamps
+    sent."""
+    probe = LatencyProbe(topics=topics)
     probe.start()
     context = rclpy.Context()
     rclpy.init(context=context)
     try:
         node = rclpy.create_node('probe_test', context=context)
-        pub = node.create_publisher(JointState, '/hand/joint_states',
-                                    QoSProfile(depth=10,
-                                               reliability=QoSReliabilityPolicy.RELIABLE))
+        qos = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE)
+        pubs = [node.create_publisher(JointState, topic, qos) for topic in topics]
         deadline = time.monotonic() + 10.0
-        while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+        while (min(p.get_subscription_count() for p in pubs) == 0
+               and time.monotonic() < deadline):
             time.sleep(0.05)
         sent = []
-        for _ in range(20):
-            stamp = time.time_ns() - 30_000_000                  # a frame taken 30 ms ago
-            sec, nanosec = divmod(stamp, 10**9)
-            pub.publish(JointState(header=Header(stamp=Time(sec=sec, nanosec=nanosec))))
+        for k, index in enumerate(topic_of):
+            stamp = stamp_of(k)
             sent.append(stamp)
+            sec, nanosec = divmod(stamp, 10**9)
+            pubs[index].publish(JointState(header=Header(stamp=Time(sec=sec, nanosec=nanosec))))
             time.sleep(0.02)
         assert probe.wait_for_first(5.0)
         time.sleep(0.5)
     finally:
         record = probe.stop()
         rclpy.try_shutdown(context=context)
+    return record, sent
+
+
+@pytest.mark.dds
+@pytest.mark.usefixtures('isolated_ros_domain')
+def test_probe_process_records_stamp_and_arrival() -> None:
+    record, sent = _probe_run(('/hand/joint_states',), [0] * 20,
+                              lambda _k: time.time_ns() - 30_000_000)   # taken 30 ms ago
     assert list(record.stamp_ns) == sent
     assert np.all(record.latencies_s >= 0.030) and np.all(record.latencies_s < 1.0)
 
@@ -89,26 +100,8 @@ def test_record_of_one_topic() -> None:
 @pytest.mark.usefixtures('isolated_ros_domain')
 def test_probe_records_which_topic_each_joint_state_came_on() -> None:
     """A probe of both hands' topics keeps their JointStates apart."""
-    topics = ('/hand/left/joint_states', '/hand/right/joint_states')
-    probe = LatencyProbe(topics=topics)
-    probe.start()
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    try:
-        node = rclpy.create_node('probe_test', context=context)
-        qos = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE)
-        pubs = [node.create_publisher(JointState, topic, qos) for topic in topics]
-        deadline = time.monotonic() + 10.0
-        while (min(p.get_subscription_count() for p in pubs) == 0
-               and time.monotonic() < deadline):
-            time.sleep(0.05)
-        for k in range(6):
-            pubs[k % 3 == 0].publish(JointState(header=Header(stamp=Time(sec=k))))
-            time.sleep(0.02)
-        assert probe.wait_for_first(5.0)
-        time.sleep(0.5)
-    finally:
-        record = probe.stop()
-        rclpy.try_shutdown(context=context)
-    assert sorted(record.of_topic(1).stamp_ns // 10**9) == [0, 3]
+    topic_of = [1, 0, 0, 1, 0, 0]                     # message k (stamped k s) goes on this topic
+    record, _ = _probe_run(('/hand/right/joint_states', '/hand/left/joint_states'), topic_of,
+                           lambda k: k * 10**9)
     assert sorted(record.of_topic(0).stamp_ns // 10**9) == [1, 2, 4, 5]
+    assert sorted(record.of_topic(1).stamp_ns // 10**9) == [0, 3]

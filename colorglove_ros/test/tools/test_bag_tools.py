@@ -6,6 +6,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -184,6 +185,37 @@ def test_restamp_sets_publish_time_and_keeps_frames_together(tmp_path: Path) -> 
     assert [list(m.position) for m in decoded] == [[float(i), -float(i)] for i in range(20)]
     assert all(new[12:] == old[12:] for new, old in zip(joints, sent['/test/joints'],
                                                          strict=True))
+
+
+def test_each_loop_gets_new_stamps(tmp_path: Path) -> None:
+    """--loop --restamp: the bag played again is stamped at its new publication time, not
+    with the stamps of the loop before."""
+    import rclpy
+
+    from colorglove_ros.tools.play_bag import BagPlayer
+
+    _write_bag(tmp_path / 'input')
+    published: list[bytes] = []
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        player = BagPlayer(tmp_path / 'input', ['/test/joints'], context=context)
+        player.publishers_by_topic = {'/test/joints': SimpleNamespace(publish=published.append)}
+        loops = []
+        for _ in range(2):
+            player.play(0.0, None, None, 1.0, restamp=True)
+            loops.append(list(published))
+            published.clear()
+            time.sleep(0.01)
+        player.close()
+        player.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    first, second = ([deserialize_cdr(data, 'sensor_msgs/msg/JointState').header.stamp
+                      for data in loop] for loop in loops)
+    assert len(first) == len(second) == 20
+    assert all((b.sec, b.nanosec) > (a.sec, a.nanosec) for a, b in zip(first, second,
+                                                                       strict=True))
 
 
 def _write_camera_bag(path: Path, messages: tuple[tuple[str, str, object], ...]) -> None:

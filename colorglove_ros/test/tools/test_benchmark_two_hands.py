@@ -15,7 +15,8 @@ from colorglove_ros.tools import benchmark_two_hands
 def test_rows_count_each_hand_on_its_own_topic() -> None:
     stamps = np.arange(5, dtype=np.int64) * 10**9
     record = ProbeRecord(stamps, stamps + 20_000_000, np.array([0, 1, 0, 0, 1]))
-    rows = {row['hand']: row for row in benchmark_two_hands.hand_rows(record, 10, 30.0)}
+    rows = {row['hand']: row for row in benchmark_two_hands.hand_rows(record, ('right', 'left'),
+                                                                        10, 30.0)}
     assert (rows['right']['joint_states'], rows['left']['joint_states']) == (3, 2)
     assert rows['right']['joint_states_per_s'] == pytest.approx(9.0)
     assert rows['left']['answered_fraction'] == pytest.approx(0.2)

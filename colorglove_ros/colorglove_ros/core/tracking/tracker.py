@@ -167,8 +167,8 @@ class HandTracker:
                 self.model.hand_length_m, finger_length_factors=self.model.finger_length_factors)
             faces = getattr(self.mesh, 'faces', None)
             if faces is None or not np.array_equal(np.asarray(faces), std_mesh.faces):
-                raise IKError('the patch model needs the glove of this mesh (the standard '
-                              'glove is made on another mesh): pass glove=')
+                raise IKError("this tracker's mesh is not the standard mesh: pass glove= (the "
+                              'glove made on this mesh)')
             self._glove = glove
         return self._glove
 

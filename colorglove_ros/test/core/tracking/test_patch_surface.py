@@ -98,7 +98,7 @@ def test_patch_colours_come_from_the_standard_glove_without_the_patch_model(scen
     np.testing.assert_array_equal(tracker.patch_color, synth.glove.patch_color)
     table = VertexTable(synth.mesh.vertex_link, synth.mesh.local_vertices)
     other = HandTracker(synth.model, table, [cam], IKConfig(constraint_model='vertex'))
-    with pytest.raises(IKError, match='glove'):
+    with pytest.raises(IKError, match='not the standard mesh: pass glove='):
         _ = other.patch_color
 
 
