@@ -38,6 +38,7 @@ from colorglove_ros.core.evaluation.scripted_hands import (
     ScriptedSequence,
     Segment,
     TrackingNoise,
+    classify_holds,
     realised_joint_mae_deg,
     script_poses,
 )
@@ -57,7 +58,7 @@ from colorglove_ros.core.hand.spelling import (
 from colorglove_ros.core.report import print_table
 from colorglove_ros.tools._cli import ScriptedSettings, run_scripted_evaluation
 
-__all__ = ['SETTINGS', 'WORDS', 'spelling_script', 'score_letters', 'classify_holds',
+__all__ = ['SETTINGS', 'WORDS', 'spelling_script', 'score_letters',
            'thumb_confusion', 'edit_distance', 'evaluate',
            'main']
 
@@ -137,20 +138,6 @@ def score_letters(truth: ScriptedSequence, commits: Sequence[tuple[float, str]]
     return [(w[0], f or '-') for w, f in zip(windows, firsts, strict=True)], insertions
 
 
-def classify_holds(truth: ScriptedSequence, log_likelihoods: np.ndarray
-                   ) -> list[tuple[str, str]]:
-    """(scripted, classified or '-') per scripted hold: the letter of the largest sum of the
-    per-frame log-likelihoods (N, 26; NaN rows for lost frames) over the hold's frames."""
-    pairs = []
-    for k in np.unique(truth.segment):
-        frames = np.flatnonzero((truth.segment == k) & truth.holding)
-        seen = log_likelihoods[frames]
-        seen = seen[np.all(np.isfinite(seen), axis=1)]
-        label = truth.label[np.flatnonzero(truth.segment == k)[0]]
-        pairs.append((label, LETTERS[int(np.argmax(seen.sum(axis=0)))] if len(seen) else '-'))
-    return pairs
-
-
 def thumb_confusion(pairs: Sequence[tuple[str, str]]) -> list[dict]:
     """Per thumb letter: how often each thumb letter, another letter ('other') or nothing
     ('-') was given for it."""
@@ -195,7 +182,7 @@ def evaluate(seeds: Sequence[int], words_per_sequence: int = 8,
         speller = Speller(config, model, classifier)
         frame_log_likelihoods = np.full((len(seen), len(LETTERS)), np.nan)
         frame_log_likelihoods[found] = speller.classifier.log_likelihoods_batch(seen[found])
-        hold_pairs += classify_holds(truth, frame_log_likelihoods)
+        hold_pairs += classify_holds(truth, frame_log_likelihoods, LETTERS)
         commits = []
         for q, ok, stamp in zip(seen, found, truth.times, strict=True):
             letter = speller.update(q if ok else None, float(stamp))

@@ -38,7 +38,7 @@ from colorglove_ros.core.yaml_io import load_yaml_mapping
 
 __all__ = ['ScriptError', 'Segment', 'ScriptedSequence', 'TrackingNoise', 'script_poses',
            'ar1_noise', 'PoseSource', 'fit_tracking_noise', 'save_tracking_noise',
-           'load_tracking_noise',
+           'load_tracking_noise', 'classify_holds',
            'NOISE_FORMAT', 'NOISE_FORMAT_VERSION', 'NOISE_SEED_OFFSET', 'realised_joint_mae_deg']
 
 NOISE_FORMAT = 'colorglove_tracking_noise'
@@ -301,3 +301,23 @@ def realised_joint_mae_deg(truth: np.ndarray, seen: np.ndarray, found: np.ndarra
     if not found.any():
         return float('nan')
     return float(np.degrees(np.abs(seen[found, 6:] - truth[found, 6:])).mean())
+
+
+def classify_holds(truth: ScriptedSequence, log_likelihoods: np.ndarray,
+                   classes: Sequence[str], unlabelled: str = '') -> list[tuple[str, str]]:
+    """(scripted, classified or '-') per scripted segment: the class of ``classes`` with the
+    largest sum of the per-frame log-likelihoods (N, len(classes); NaN rows for lost frames)
+    over the segment's hold frames (the classifier alone, knowing when the hold starts and
+    ends); a segment labelled '' is reported as ``unlabelled``."""
+    log_likelihoods = np.asarray(log_likelihoods, dtype=float)
+    if log_likelihoods.shape != (len(truth.poses), len(classes)):
+        raise ScriptError(f'log-likelihoods must be ({len(truth.poses)}, {len(classes)}), '
+                          f'got {log_likelihoods.shape}')
+    pairs = []
+    for k in np.unique(truth.segment):
+        frames = np.flatnonzero((truth.segment == k) & truth.holding)
+        seen = log_likelihoods[frames]
+        seen = seen[np.all(np.isfinite(seen), axis=1)]
+        label = truth.label[np.flatnonzero(truth.segment == k)[0]] or unlabelled
+        pairs.append((label, classes[int(np.argmax(seen.sum(axis=0)))] if len(seen) else '-'))
+    return pairs

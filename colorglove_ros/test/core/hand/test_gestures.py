@@ -116,8 +116,16 @@ def test_evaluation_without_noise_is_perfect_and_with_noise_is_not() -> None:
     overall = clean['rows'][-1]
     assert overall['episodes'] >= 8
     assert overall['precision'] == 1.0 and overall['recall'] == 1.0
+    assert overall['hold_accuracy'] == 1.0 and clean['neutral_holds_as_gesture'] == 0.0
     assert clean['joint_mae_deg_realised'] == pytest.approx(0.0, abs=1e-12)
     noisy = eval_gestures.evaluate([7], episodes=16, source=TrackingNoise(25.0, 5.0),
                                    classifier=_shipped())
     assert noisy['joint_mae_deg_realised'] == pytest.approx(25.0, rel=0.02)
     assert min(noisy['rows'][-1]['precision'], noisy['rows'][-1]['recall']) < 0.95
+    assert noisy['rows'][-1]['hold_accuracy'] < 1.0
+
+
+def test_hold_accuracy_needs_a_classifier() -> None:
+    rules = eval_gestures.evaluate([7], episodes=6, source=TrackingNoise(0.0, 0.0))
+    assert all(np.isnan(row['hold_accuracy']) for row in rules['rows'])
+    assert np.isnan(rules['neutral_holds_as_gesture'])

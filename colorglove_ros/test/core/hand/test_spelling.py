@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 from pose_samples import MODEL, allowed_fingers
 
-from colorglove_ros.core.evaluation.scripted_hands import Segment, TrackingNoise, script_poses
+from colorglove_ros.core.evaluation.scripted_hands import (
+    ScriptError,
+    Segment,
+    TrackingNoise,
+    classify_holds,
+    script_poses,
+)
 from colorglove_ros.core.hand.pose_classifier import load_pose_classifier
 from colorglove_ros.core.hand.poses import LETTER_SHAPES
 from colorglove_ros.core.hand.spelling import (
@@ -166,8 +172,10 @@ def test_holds_are_classified_whole_and_lost_holds_give_nothing() -> None:
     log_likelihoods[hold[0][0], LETTERS.index('N')] = 0.0
     log_likelihoods[hold[1], LETTERS.index('S')] = -1.0      # N held, S classified
     log_likelihoods[hold[2]] = np.nan                         # S lost
-    pairs = eval_spelling.classify_holds(truth, log_likelihoods)
+    pairs = classify_holds(truth, log_likelihoods, LETTERS)
     assert pairs == [('M', 'M'), ('N', 'S'), ('S', '-')]
+    with pytest.raises(ScriptError):
+        classify_holds(truth, log_likelihoods[:, :25], LETTERS)
     rows = {r['scripted']: r for r in eval_spelling.thumb_confusion(pairs)}
     assert rows['M']['M'] == 1 and rows['N']['S'] == 1 and rows['S']['-'] == 1
     assert rows['E'] == {'scripted': 'E', 'E': 0, 'M': 0, 'N': 0, 'S': 0, 'T': 0, 'other': 0,
