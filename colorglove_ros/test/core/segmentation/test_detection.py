@@ -142,10 +142,8 @@ def test_a_glove_in_front_of_a_warm_wood_like_surface_is_found(calibration) -> N
 
 
 
-def test_an_orange_surface_touching_the_glove_is_shed_with_the_setting(calibration) -> None:
-    """A rendered glove with a plain orange surface (a petal, a sleeve) touching its side:
-    with ``max_patch_window_share`` the crop stays on the hand; off (the default) the surface
-    joins the glove's region and pulls the crop towards it."""
+def _glove_beside_a_surface() -> tuple[synth.SyntheticFrame, np.ndarray]:
+    """A rendered glove and its image with a plain orange surface touching its side."""
     camera = synth.default_camera()
     rng = np.random.default_rng(4)
     q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
@@ -158,6 +156,15 @@ def test_an_orange_surface_touching_the_glove_is_shed_with_the_setting(calibrati
     surface[ys.min():ys.max(), x0:min(x0 + 2 * (xs.max() - xs.min()), 639)] = True
     surface &= frame.labels == 0
     image[surface] = GLOVE_PALETTE_RGB[6]
+    return frame, image
+
+
+def test_an_orange_surface_touching_the_glove_is_shed_with_the_setting(calibration) -> None:
+    """A rendered glove with a plain orange surface (a petal, a sleeve) touching its side:
+    with ``max_patch_window_share`` the crop stays on the hand; off (the default) the surface
+    joins the glove's region and pulls the crop towards it."""
+    frame, image = _glove_beside_a_surface()
+    ys, xs = np.nonzero(frame.labels)
     centre = np.array([xs.mean(), ys.mean()])
     on = GloveSegmenter(calibration, max_patch_window_share=0.15).process(image)
     off = GloveSegmenter(calibration).process(image)
@@ -173,18 +180,7 @@ def test_an_orange_surface_touching_the_glove_is_trimmed_with_junction_reach(cal
     """The same rendered glove and touching orange surface: with ``junction_reach`` the crop
     keeps about the size it has without the surface; off (0) the surface's pixels join the
     glove and the crop grows. On the glove alone the setting changes nothing."""
-    camera = synth.default_camera()
-    rng = np.random.default_rng(4)
-    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
-    q[0:3] = [0.0, 0.0, 0.6]
-    frame = synth.render_frame(q, camera, rng, FrameConditions())
-    ys, xs = np.nonzero(frame.labels)
-    image = frame.image_rgb.copy()
-    x0 = int(np.percentile(xs, 60))
-    surface = np.zeros(frame.labels.shape, bool)
-    surface[ys.min():ys.max(), x0:min(x0 + 2 * (xs.max() - xs.min()), 639)] = True
-    surface &= frame.labels == 0
-    image[surface] = GLOVE_PALETTE_RGB[6]
+    frame, image = _glove_beside_a_surface()
     plain = GloveSegmenter(calibration).process(frame.image_rgb)
     plain_on = GloveSegmenter(calibration, junction_reach=0.35).process(frame.image_rgb)
     assert plain.hand_found and plain_on.hand_found
