@@ -11,6 +11,9 @@ at a hand's size. Two filters on a label image (0 = background, 1..N glove colou
   scale, found where many glove colours meet: a single-colour region larger than the glove's
   largest patch can be within the hand's window (a petal, a sleeve or a wooden edge touching
   the glove) is background, and so is glove colour well outside that window;
+* :func:`keep_near_junctions`: glove colour farther from every patch junction than the
+  glove's largest patch reaches (at the hand's scale, from the junctions' own window) is a
+  surface touching the glove, not the glove; the crop then holds the hand at its own size;
 * :func:`scene_colour_table`: the colours of glove-labelled pixels found to be background
   in a frame are the scene's; the same colours near the hand are background too.
 """
@@ -22,8 +25,10 @@ import numpy as np
 from colorglove_ros.core.segmentation.crop import mean_shift_crop
 
 __all__ = ['SCENE_COLOUR_BITS', 'colour_diversity', 'glove_region_mask',
-           'drop_oversized_components', 'PATCH_OUTLINE_GLOVE_SHARE', 'junction_window',
-           'shed_oversized_patches', 'scene_colour_table']
+           'drop_oversized_components', 'PATCH_OUTLINE_GLOVE_SHARE', 'JUNCTION_WINDOW_PX',
+           'JUNCTION_COLORS', 'JUNCTION_STEP', 'LARGEST_PATCH_WINDOW_SHARE', 'junction_mask',
+           'junction_window', 'shed_oversized_patches', 'keep_near_junctions',
+           'scene_colour_table']
 
 #: Bits per channel of the quantised colours of :func:`scene_colour_table`.
 SCENE_COLOUR_BITS = 5
@@ -123,8 +128,30 @@ def _drop_surfaces(labels: np.ndarray, max_pixels: float) -> np.ndarray:
     return out
 
 
+#: The glove's largest printed patch (the palm's, seen flat: about 0.12) is at most this share
+#: of the area of the hand's crop window.
+LARGEST_PATCH_WINDOW_SHARE = 0.15
+
+#: A patch junction: a pixel whose box this many pixels wide shows ``JUNCTION_COLORS`` glove
+#: colours (where three printed patches meet; a surface of one or two colours has none).
+JUNCTION_WINDOW_PX = 5
+JUNCTION_COLORS = 3
+#: :func:`keep_near_junctions` decides on every this many pixels of every this many rows.
+JUNCTION_STEP = 2
+
+
+def junction_mask(labels: np.ndarray, num_colors: int,
+                  junction_window_px: int = JUNCTION_WINDOW_PX,
+                  junction_colors: int = JUNCTION_COLORS) -> np.ndarray:
+    """(H, W) bool: the patch junctions, pixels whose ``junction_window_px`` box shows
+    ``junction_colors`` glove colours."""
+    return colour_diversity(labels, num_colors, junction_window_px,
+                            0.5 / junction_window_px ** 2) >= junction_colors
+
+
 def junction_window(labels: np.ndarray, num_colors: int, min_pixels: int,
-                    junction_window_px: int = 5, junction_colors: int = 3
+                    junction_window_px: int = JUNCTION_WINDOW_PX,
+                    junction_colors: int = JUNCTION_COLORS
                     ) -> tuple[tuple[float, float], float] | None:
     """The hand's window ((cx, cy), half) found from where glove colours meet: the window of
     :func:`mean_shift_crop` on the pixels whose ``junction_window_px`` box shows
@@ -132,9 +159,8 @@ def junction_window(labels: np.ndarray, num_colors: int, min_pixels: int,
     or two colours has none inside it, so glove-coloured surfaces touching the glove do not
     pull this window out as they pull one found on every glove pixel). None when fewer than
     ``min_pixels`` junction pixels are found."""
-    junctions = colour_diversity(labels, num_colors, junction_window_px,
-                                 0.5 / junction_window_px ** 2) >= junction_colors
-    return mean_shift_crop(junctions, min_pixels=min_pixels)
+    return mean_shift_crop(junction_mask(labels, num_colors, junction_window_px,
+                                         junction_colors), min_pixels=min_pixels)
 
 
 def shed_oversized_patches(labels: np.ndarray, max_window_share: float,
@@ -148,6 +174,58 @@ def shed_oversized_patches(labels: np.ndarray, max_window_share: float,
     if window is None or max_window_share <= 0:
         return labels
     return _drop_surfaces(labels, max_window_share * (2.0 * window[1]) ** 2)
+
+
+def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_pixels: int,
+                        max_patch_share: float = LARGEST_PATCH_WINDOW_SHARE,
+                        step: int = JUNCTION_STEP) -> np.ndarray:
+    """``labels`` with the glove pixels of oversized single-colour regions that lie farther
+    than ``reach`` times the hand's half window from every patch junction set to background.
+
+    The hand's window is :func:`junction_window`'s (the junctions' own, which single-colour
+    surfaces do not pull out); an oversized region is an 8-connected single-colour region
+    larger than ``max_patch_share`` of that window's area, more than any printed patch. A
+    petal, a sleeve or a wooden edge touching the glove is one: only its part near the hand's
+    junctions stays, so the crop holds the hand at about its own size; a finger (patches of
+    a patch's size, with junctions only where it meets the palm) stays whole. All of it is
+    decided on every ``step``-th pixel of every ``step``-th row (``min_pixels`` junctions
+    there at least; fewer: unchanged) and applied to the pixels each stands for. Unchanged
+    with ``reach`` 0."""
+    labels = np.asarray(labels, np.uint8)
+    if reach <= 0 or not labels.size:
+        return labels
+    step = max(int(step), 1)
+    small = np.ascontiguousarray(labels[::step, ::step])
+    junctions = junction_mask(small, num_colors)
+    window = mean_shift_crop(junctions, min_pixels=min_pixels)
+    if window is None:
+        return labels
+    max_pixels = max_patch_share * (2.0 * window[1]) ** 2
+    big_colours = np.flatnonzero(np.bincount(small.ravel(), minlength=num_colors + 1)[1:]
+                                 > max_pixels) + 1
+    if not len(big_colours):
+        return labels
+    far = cv2.distanceTransform((~junctions).view(np.uint8), cv2.DIST_L2, 3) > (
+        reach * window[1])
+    drop = np.zeros(small.shape, bool)
+    for colour in big_colours:
+        n, comp, stats, _ = cv2.connectedComponentsWithStats(
+            cv2.compare(small, int(colour), cv2.CMP_EQ), connectivity=8, ltype=cv2.CV_32S)
+        big = stats[:, cv2.CC_STAT_AREA] > max_pixels
+        big[0] = False
+        if big.any():
+            drop |= big[comp]
+    drop &= far
+    if not drop.any():
+        return labels
+    if step > 1:
+        h, w = labels.shape
+        drop = np.repeat(np.repeat(drop, step, 0), step, 1)[:h, :w]
+    oversized = np.zeros(256, bool)
+    oversized[big_colours] = True
+    out = labels.copy()
+    out[drop & oversized[labels]] = 0     # (a pixel of another colour in the cell stays)
+    return out
 
 
 def scene_colour_table(rgb: np.ndarray, bits: int, min_pixels: float) -> np.ndarray:

@@ -24,6 +24,7 @@ from colorglove_ros.core.segmentation.detection import (
     drop_oversized_components,
     glove_region_mask,
     junction_window,
+    keep_near_junctions,
     scene_colour_table,
     shed_oversized_patches,
 )
@@ -326,7 +327,11 @@ class GloveSegmenter:
     glove, which the filters above keep as part of its region) is background: on the coarse
     pass with the window found where three glove colours meet (``junction_window``), in the
     region of interest with the coarse window (``shed_oversized_patches``); 0, the default,
-    turns this off (0.15: the palm's patch seen flat is about 0.12 of the window). Colours
+    turns this off (0.15: the palm's patch seen flat is about 0.12 of the window). In the
+    region of interest, after the border relabelling, a single-colour region larger than any
+    printed patch keeps only its pixels within ``junction_reach`` times the hand's half window
+    of a patch junction (``keep_near_junctions``; 0 turns this off): the crop and the blobs
+    then hold the hand and not the surface it touches. Colours
     the coarse pass labelled glove but found to be background (at least
     ``scene_colour_min_share`` of the coarse frame in one quantised colour: surfaces, not
     small clutter) are the scene's own colours in this frame: the region of interest labels
@@ -358,6 +363,7 @@ class GloveSegmenter:
                  max_border_contact: float = 0.1, diversity_window: int = 24,
                  min_region_colors: int = 6, diversity_density: float = 0.01,
                  max_patch_fraction: float = 0.1, max_patch_window_share: float = 0.0,
+                 junction_reach: float = 0.0,
                  scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
                  follow_margin: float = 0.0, source: str = 'GloveSegmenter') -> None:
@@ -653,6 +659,9 @@ class GloveSegmenter:
         t = tick('cleanup', t)
         min_px = max(int(self.min_glove_pixels / (r * r)), 1)
         labels = relabel_borders(roi, labels, self.border_passes, self.border_distances)
+        # glove colour out of a patch's reach of every junction: a surface touching the glove
+        labels = keep_near_junctions(labels, self.calibration.num_colors, self.junction_reach,
+                                     JUNCTION_MIN_PIXELS)
         t = tick('borders', t)
         if keep_labels:
             full = np.zeros((h, w), np.uint8)

@@ -13,6 +13,7 @@ from colorglove_ros.core.segmentation.detection import (
     drop_oversized_components,
     glove_region_mask,
     junction_window,
+    keep_near_junctions,
     scene_colour_table,
     shed_oversized_patches,
 )
@@ -88,6 +89,30 @@ def test_oversized_single_colour_regions_are_background() -> None:
     assert drop_oversized_components(labels, 0) is labels
 
 
+def test_a_surface_touching_the_glove_is_trimmed_to_the_hand() -> None:
+    """A single-colour surface touching a glove patchwork keeps only its part within reach
+    of the patch junctions, so the crop's window shrinks to about the hand's; the patchwork
+    and a long one-colour finger (a patch-sized region) stay whole; reach 0 or no junction
+    changes nothing."""
+    from colorglove_ros.core.segmentation.crop import mean_shift_crop
+
+    labels = np.zeros((160, 200), np.uint8)
+    labels[60:84, 60:84] = _patchwork()
+    labels[70:74, 84:104] = 9                     # a finger: one colour, reaching out
+    labels[20:158, 20:60] = 2                     # an orange surface along the glove's side
+    out = keep_near_junctions(labels, 10, 0.5, 2)
+    assert (out[60:84, 60:84] == labels[60:84, 60:84]).all()
+    assert (out[70:74, 84:104] == 9).all()
+    assert not out[20:40, 20:60].any() and not out[130:158, 20:60].any()
+    assert out[64:80, 54:60].all()                # the surface's edge beside the hand stays
+    glove_half = mean_shift_crop(labels[60:84, 60:104] > 0)[1]
+    assert mean_shift_crop(labels)[1] > 3.0 * glove_half
+    assert mean_shift_crop(out)[1] < 1.5 * glove_half
+    assert keep_near_junctions(labels, 10, 0.0, 2) is labels
+    plain = np.where(labels == 2, 2, 0).astype(np.uint8)
+    assert keep_near_junctions(plain, 10, 0.5, 2) is plain
+
+
 def test_a_surface_touching_the_glove_is_shed_at_the_hand_scale() -> None:
     """A single-colour surface touching a glove patchwork, too small for the image-wide
     limit but larger than any patch at the hand's scale (found from the patch junctions),
@@ -150,10 +175,8 @@ def test_a_glove_in_front_of_a_warm_wood_like_surface_is_found(calibration) -> N
 
 
 
-def test_an_orange_surface_touching_the_glove_is_shed_with_the_setting(calibration) -> None:
-    """A rendered glove with a plain orange surface (a petal, a sleeve) touching its side:
-    with ``max_patch_window_share`` the crop stays on the hand; off (the default) the surface
-    joins the glove's region and pulls the crop towards it."""
+def _glove_beside_a_surface() -> tuple[synth.SyntheticFrame, np.ndarray]:
+    """A rendered glove and its image with a plain orange surface touching its side."""
     camera = synth.default_camera()
     rng = np.random.default_rng(4)
     q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
@@ -166,6 +189,15 @@ def test_an_orange_surface_touching_the_glove_is_shed_with_the_setting(calibrati
     surface[ys.min():ys.max(), x0:min(x0 + 2 * (xs.max() - xs.min()), 639)] = True
     surface &= frame.labels == 0
     image[surface] = GLOVE_PALETTE_RGB[6]
+    return frame, image
+
+
+def test_an_orange_surface_touching_the_glove_is_shed_with_the_setting(calibration) -> None:
+    """A rendered glove with a plain orange surface (a petal, a sleeve) touching its side:
+    with ``max_patch_window_share`` the crop stays on the hand; off (the default) the surface
+    joins the glove's region and pulls the crop towards it."""
+    frame, image = _glove_beside_a_surface()
+    ys, xs = np.nonzero(frame.labels)
     centre = np.array([xs.mean(), ys.mean()])
     on = GloveSegmenter(calibration, max_patch_window_share=0.15).process(image)
     off = GloveSegmenter(calibration).process(image)
@@ -174,3 +206,20 @@ def test_an_orange_surface_touching_the_glove_is_shed_with_the_setting(calibrati
     assert on_error < 0.25 * on.crop.half_size
     assert (not off.hand_found
             or np.hypot(*(np.array(off.crop.center_xy) - centre)) > on_error + 10.0)
+
+
+def test_an_orange_surface_touching_the_glove_is_trimmed_with_junction_reach(calibration
+                                                                           ) -> None:
+    """The same rendered glove and touching orange surface: with ``junction_reach`` the crop
+    keeps about the size it has without the surface; off (0) the surface's pixels join the
+    glove and the crop grows. On the glove alone the setting changes nothing."""
+    frame, image = _glove_beside_a_surface()
+    plain = GloveSegmenter(calibration).process(frame.image_rgb)
+    plain_on = GloveSegmenter(calibration, junction_reach=0.35).process(frame.image_rgb)
+    assert plain.hand_found and plain_on.hand_found
+    assert plain_on.crop.half_size == pytest.approx(plain.crop.half_size, rel=0.02)
+    on = GloveSegmenter(calibration, junction_reach=0.35).process(image)
+    off = GloveSegmenter(calibration).process(image)
+    assert on.hand_found
+    assert on.crop.half_size < 1.2 * plain.crop.half_size
+    assert not off.hand_found or off.crop.half_size > 1.3 * plain.crop.half_size
