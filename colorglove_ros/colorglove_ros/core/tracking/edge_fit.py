@@ -41,6 +41,7 @@ import numpy as np
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.geometry import rotvec_to_matrix
+from colorglove_ros.core.hand.keypoints import FINGERTIP_INDICES
 from colorglove_ros.core.hand.mesh import build_hand_mesh
 from colorglove_ros.core.hand.model import (
     DIGITS,
@@ -64,6 +65,7 @@ __all__ = [
     'EdgeTrackerError', 'EdgeTrackerConfig', 'DEFAULT_TRACKED_LINKS', 'FeaturePoints',
     'feature_points', 'EdgePrediction', 'EdgeMeasurement', 'EdgeFit', 'link_axis_residuals',
     'tip_residuals', 'predict_features', 'measure_features', 'stack_residuals', 'fit_pose',
+    'fingertip_disagreement',
 ]
 
 # every phalanx except the thumb metacarpal, which lies inside the palm's outline
@@ -103,6 +105,10 @@ class EdgeTrackerConfig:
     (camera i gets ``camera_weights[i]``, 1 beyond the tuple's end): the second camera of
     the stereo rig looks at the hand from 45 degrees, where fingers lie side by side and their
     edges are often taken from a neighbour, so its residuals count a quarter.
+    ``camera_check`` (two or more cameras): the primary camera's measurements are also fitted
+    alone, from the same start, and a fit whose fingertips (relative to the wrist) lie more
+    than ``max_camera_disagreement_mm`` from that fit's counts as drift: the cameras' edges
+    disagree, so at least one of them was taken from the wrong place.
     """
 
     search: EdgeSearchConfig = field(default_factory=EdgeSearchConfig)
@@ -127,6 +133,8 @@ class EdgeTrackerConfig:
     min_found_fraction: float = 0.6
     min_camera_found_fraction: float = 0.25
     max_rms_px: float = 3.0
+    camera_check: bool = False
+    max_camera_disagreement_mm: float = 10.0
     loss_patience: int = 3
     coast_patience: int = 0
     resume_frames: int = 0
@@ -614,7 +622,9 @@ class EdgeFit:
     """Result of :func:`fit_pose`: the pose, the weighted RMS (``sqrt(mean(w r^2))``, Huber
     weights) of the final residuals against the last round's measurements (pixels, NaN if
     none), per camera the links found, the links usable
-    and the tips found, and the number of Gauss-Newton iterations taken."""
+    and the tips found, the number of Gauss-Newton iterations taken and, with
+    ``camera_check``, how far the primary camera's fit alone puts the fingertips from the
+    joint fit's (:func:`fingertip_disagreement`, mm; NaN when not computed)."""
 
     q: np.ndarray
     rms_px: float
@@ -622,12 +632,53 @@ class EdgeFit:
     links_usable: tuple[int, ...]
     tips_found: tuple[int, ...]
     iterations: int
+    camera_disagreement_mm: float = math.nan
 
     @property
     def found_fraction(self) -> float:
         """Found over usable links, all cameras together (0 when none was usable)."""
         usable = sum(self.links_usable)
         return sum(self.links_found) / usable if usable else 0.0
+
+
+def _gauss_newton(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[PinholeCamera],
+                  measured: Sequence[EdgeMeasurement | None],
+                  world: tuple[np.ndarray, np.ndarray | None], q: np.ndarray,
+                  q_anchor: np.ndarray, S: np.ndarray, C: np.ndarray | None,
+                  config: EdgeTrackerConfig) -> tuple[np.ndarray, int]:
+    """``gn_iterations`` stabilised Gauss-Newton steps from ``q`` on fixed measurements
+    (``world``: the points and Jacobians at ``q``), joint limits enforced; (q, steps)."""
+    steps = 0
+    for it in range(config.gn_iterations):
+        if it > 0:
+            world = kin.points(q, points.point_link, points.point_local, True)
+        r, J, w = stack_residuals(points, cameras, measured, world, config)
+        WJ = J.T * w
+        H = WJ @ J + S
+        g = WJ @ r + S @ (q - q_anchor)
+        if C is not None:
+            H += config.coupling_weight * (C.T @ C)
+            g += config.coupling_weight * (C.T @ (C @ q))
+        at_lo = (q <= kin.lower + 1e-9) & (g > 0)
+        at_hi = (q >= kin.upper - 1e-9) & (g < 0)
+        free = ~(at_lo | at_hi)
+        dq = np.zeros(NUM_DOFS)
+        try:
+            dq[free] = -np.linalg.solve(H[np.ix_(free, free)], g[free])
+        except np.linalg.LinAlgError:
+            break
+        q = kin.clamp(q + dq)
+        steps += 1
+    return q, steps
+
+
+def fingertip_disagreement(kin: FastKinematics, q_a: np.ndarray, q_b: np.ndarray) -> float:
+    """Largest distance (mm) between the fingertips of two poses, each relative to its own
+    wrist (the wrist's translation removed, its rotation kept)."""
+    ka, kb = kin.model.keypoints(q_a), kin.model.keypoints(q_b)
+    tips = list(FINGERTIP_INDICES)
+    rel = (ka[tips] - ka[0]) - (kb[tips] - kb[0])
+    return float(1e3 * np.linalg.norm(rel, axis=1).max())
 
 
 def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[PinholeCamera],
@@ -664,27 +715,18 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
         tips = tuple(0 if m is None else int(m.tip_found.sum()) for m in measured)
         if sum(found) == 0:
             return EdgeFit(q, math.nan, found, usable, tips, iterations)
-        for it in range(config.gn_iterations):
-            if it > 0:
-                world = kin.points(q, points.point_link, points.point_local, True)
-            r, J, w = stack_residuals(points, cameras, measured, world, config)
-            WJ = J.T * w
-            H = WJ @ J + S
-            g = WJ @ r + S @ (q - q_anchor)
-            if C is not None:
-                H += config.coupling_weight * (C.T @ C)
-                g += config.coupling_weight * (C.T @ (C @ q))
-            at_lo = (q <= kin.lower + 1e-9) & (g > 0)
-            at_hi = (q >= kin.upper - 1e-9) & (g < 0)
-            free = ~(at_lo | at_hi)
-            dq = np.zeros(NUM_DOFS)
-            try:
-                dq[free] = -np.linalg.solve(H[np.ix_(free, free)], g[free])
-            except np.linalg.LinAlgError:
-                break
-            q = kin.clamp(q + dq)
-            iterations += 1
+        q, steps = _gauss_newton(kin, points, cameras, measured, world, q, q_anchor, S, C,
+                                 config)
+        iterations += steps
         world = kin.points(q, points.point_link, points.point_local, False)
         r, _, w = stack_residuals(points, cameras, measured, world, config, jacobian=False)
         rms = float(np.sqrt(np.mean(w * r**2))) if len(r) else math.nan
-    return EdgeFit(q, rms, found, usable, tips, iterations)
+    disagreement = math.nan
+    if config.camera_check and len(cameras) > 1 and measured[0] is not None \
+            and measured[0].link_found.any() and any(m is not None for m in measured[1:]):
+        alone = [measured[0]] + [None] * (len(cameras) - 1)
+        world0 = kin.points(q_anchor, points.point_link, points.point_local, True)
+        q0, _ = _gauss_newton(kin, points, cameras, alone, world0, q_anchor.copy(), q_anchor,
+                              S, C, config)
+        disagreement = fingertip_disagreement(kin, q, q0)
+    return EdgeFit(q, rms, found, usable, tips, iterations, disagreement)

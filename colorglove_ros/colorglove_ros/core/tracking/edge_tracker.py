@@ -167,6 +167,10 @@ class EdgeTracker:
             return 'drift', 'no link found'
         if not fit.rms_px <= cfg.max_rms_px:
             return 'drift', f'edge residual {fit.rms_px:.1f} px > {cfg.max_rms_px:.1f} px'
+        if cfg.camera_check and fit.camera_disagreement_mm > cfg.max_camera_disagreement_mm:
+            return 'drift', (f'the primary camera alone puts a fingertip '
+                             f'{fit.camera_disagreement_mm:.0f} mm from the joint fit (max '
+                             f'{cfg.max_camera_disagreement_mm:.0f} mm)')
         for name, found, usable in zip(self._names, fit.links_found, fit.links_usable,
                                        strict=True):
             if usable and found < cfg.min_camera_found_fraction * usable:

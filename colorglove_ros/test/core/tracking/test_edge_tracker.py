@@ -254,3 +254,39 @@ def test_fingers_curled_behind_the_back_of_the_hand_are_not_searched() -> None:
     assert {'index_middle', 'middle_middle'} <= hidden
     assert on.link_usable[names.index('thumb_distal')]          # the thumb stays in view
     assert on.link_usable.sum() < off.link_usable.sum()
+
+
+def test_fingertip_disagreement_ignores_the_wrist_translation(rig) -> None:
+    from colorglove_ros.core.tracking.edge_fit import fingertip_disagreement
+
+    _, seq, _ = rig
+    tracker = EdgeTracker(seq.synth.model, rig[0])
+    q = seq.poses[20]
+    moved = q.copy()
+    moved[0:3] += [0.03, -0.02, 0.05]
+    assert fingertip_disagreement(tracker.kin, q, moved) < 1e-6
+    bent = q.copy()
+    bent[seq.synth.model.dof_names.index('index_mcp_flex')] += 0.3
+    assert fingertip_disagreement(tracker.kin, q, bent) > 15.0
+
+
+def test_cameras_that_disagree_flag_drift(rig) -> None:
+    cameras, seq, frames = rig
+    config = EdgeTrackerConfig(camera_check=True, camera_weights=(1.0, 1.0))
+    tracker = EdgeTracker(seq.synth.model, cameras, config)
+    start = seq.poses[20]
+    agree = tracker.fit(frames[20], start)
+    assert agree.camera_disagreement_mm < config.max_camera_disagreement_mm
+    assert tracker._check_fit(agree) == ('', '')
+    # the second camera's image shifted by 12 px: its edges pull the joint fit away from
+    # where the first camera alone puts the hand
+    shifted = [frames[20][0], np.roll(frames[20][1], 12, axis=1)]
+    torn = tracker.fit(shifted, start)
+    assert torn.camera_disagreement_mm > agree.camera_disagreement_mm + 5.0
+    off = tracker.with_config(camera_check=False).fit(shifted, start)
+    assert np.isnan(off.camera_disagreement_mm)
+    kind, reason = tracker.with_config(
+        max_camera_disagreement_mm=0.5 * (agree.camera_disagreement_mm
+                                          + torn.camera_disagreement_mm))._check_fit(torn)
+    assert kind == 'drift' and 'primary camera alone' in reason
+
