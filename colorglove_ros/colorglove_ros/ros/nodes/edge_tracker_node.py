@@ -92,6 +92,13 @@ class EdgeTrackerNode(Node):
                            'bad frames in a row that declare the track lost', 1, 100)
         polarity = declare(self, 'polarity', defaults.polarity,
                            '+1 hand brighter than the background, -1 darker, 0 either', -1, 1)
+        camera_check = declare(self, 'camera_check', defaults.camera_check,
+                               'two or more cameras: also fit the primary camera alone and '
+                               'count a frame as drift when the fits disagree')
+        max_disagreement = declare(self, 'max_camera_disagreement_mm',
+                                   defaults.max_camera_disagreement_mm,
+                                   'camera_check: largest fingertip distance (relative to the '
+                                   'wrist) between the two fits, mm', 0.1, 1000.0)
         with startup_errors('edge_tracker_node', ValueError):
             if len(init_wrist) != 3:
                 raise ColorGloveError(f'init_wrist_position needs 3 values, got {init_wrist}')
@@ -102,7 +109,8 @@ class EdgeTrackerNode(Node):
                 init_hold_frames=int(hold), max_rms_px=float(max_rms),
                 min_found_fraction=float(min_found),
                 min_camera_found_fraction=float(min_camera), loss_patience=int(patience),
-                polarity=int(polarity))
+                polarity=int(polarity), camera_check=bool(camera_check),
+                max_camera_disagreement_mm=float(max_disagreement))
             cameras: tuple[PinholeCamera, ...] = ()
             if calibration_file:
                 calibration = load_calibration(resolve_path(calibration_file))

@@ -98,3 +98,11 @@ def test_two_topics_without_calibration_refuse_to_start() -> None:
     with pytest.raises(StartupError):
         with running(_node(calibration_file='config/calibration_stereo.yaml')):
             pass
+
+
+def test_camera_check_parameters_reach_the_tracker() -> None:
+    with running(_node(calibration_file='config/calibration_stereo.yaml',
+                       image_topics=['left/image_raw', 'right/image_raw'], camera_check=True,
+                       max_camera_disagreement_mm=15.0)) as h:
+        config = h.nodes[0].config
+    assert config.camera_check and config.max_camera_disagreement_mm == 15.0
