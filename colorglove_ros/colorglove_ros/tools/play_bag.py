@@ -52,7 +52,8 @@ PLAYBACK_OPTIONS: dict[str, tuple[type, object, str]] = {
     'pace-timeout': (float, 1.0, 'longest wait for an output before going on, seconds'),
     'pace-resends': (int, 1, 'with --paced, publish a frame again (same stamp) this many times '
                      'when no output came within --pace-timeout (a best-effort image can be '
-                     'lost on the way; a frame that was only slow is then answered twice)'),
+                     'lost on the way; a frame that was only slow is then answered once per '
+                     'copy, and the next frame waits for those answers)'),
     'wait-subscribers': (float, 10.0,
                          'wait this long for subscribers on --pace-on (and on the CameraInfo '
                          'topic beside it, if the bag has one) before starting'),
@@ -139,7 +140,8 @@ class BagPlayer(Node):
             self.publishers_by_topic[c.topic] = self.create_publisher(
                 message_type, c.topic, self.qos_by_topic[c.topic])
         self.clock_publisher = None
-        self.output_event = threading.Event()
+        self._answers = 0                 # outputs of the pace topic so far
+        self._answered = threading.Condition()
         # topics whose messages, as published, start with a std_msgs/Header (the stamp right
         # after the CDR prefix): the installed definition for converted topics
         self.stamped_topics = {c.topic for c in self.connections if _starts_with_header(
@@ -246,7 +248,8 @@ class BagPlayer(Node):
                 if delay > 0:
                     time.sleep(delay)
             if pace_on is not None and connection.topic == pace_on:
-                self.output_event.clear()
+                with self._answered:
+                    before = self._answers
             if self.clock_publisher is not None:
                 sec, nanosec = divmod(int(timestamp), 10**9)
                 self.clock_publisher.publish(Clock(clock=Time(sec=sec, nanosec=nanosec)))
@@ -257,13 +260,34 @@ class BagPlayer(Node):
             count += 1
             self.published += 1
             if pace_on is not None and connection.topic == pace_on:
-                for attempt in range(max(0, pace_resends) + 1):
-                    if self.output_event.wait(pace_timeout_s):
-                        break
-                    if attempt < pace_resends:
-                        self.publishers_by_topic[connection.topic].publish(data)
-                        self.resent += 1
+                first_sent = last_sent = time.monotonic()
+                copies = 1
+                while (not self._wait_for_answers(before + 1, pace_timeout_s)
+                       and copies <= pace_resends):
+                    self.publishers_by_topic[connection.topic].publish(data)
+                    last_sent = time.monotonic()
+                    self.resent += 1
+                    copies += 1
+                if copies > 1:
+                    # a frame that was only slow is answered once per copy: a late answer
+                    # must not release the next frame early (into an image queue of depth 1
+                    # whose frame is not taken yet, where it would replace that frame). The
+                    # last copy's answer is due as long after it as the first answer took.
+                    took = time.monotonic() - first_sent
+                    due = last_sent + took - time.monotonic()
+                    self._wait_for_answers(before + copies, max(due, 0.0) + pace_timeout_s)
         return count
+
+    def output_answered(self) -> None:
+        """An output of the pace topic arrived (the pace subscription's callback)."""
+        with self._answered:
+            self._answers += 1
+            self._answered.notify_all()
+
+    def _wait_for_answers(self, count: int, timeout_s: float) -> bool:
+        """Wait until ``count`` outputs have arrived in all; False after ``timeout_s``."""
+        with self._answered:
+            return self._answered.wait_for(lambda: self._answers >= count, timeout_s)
 
     def close(self) -> None:
         """Close the bag."""
@@ -306,7 +330,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.paced:
             output_type = message_class('std_msgs/msg/String')
             player.create_subscription(output_type, args.pace_topic,
-                                       lambda _msg: player.output_event.set(), 10)
+                                       lambda _msg: player.output_answered(), 10)
         spinner.start()
         if args.pace_on in player.publishers_by_topic:
             # the image's subscribers and its CameraInfo's: a node that gets images before it

@@ -368,6 +368,54 @@ def test_paced_player_resends_a_frame_nobody_answered(tmp_path: Path) -> None:
     assert counts == [(1, 2), (0, 1)]
 
 
+def test_a_slow_frame_answered_twice_does_not_release_the_next_frame_early(
+        tmp_path: Path) -> None:
+    """--paced with a resend: a frame that was only slow (each copy answered 0.3 s after it
+    was sent, past the 0.2 s pace timeout) releases the next frame only once both copies are
+    answered; released by the first answer, the next frame would be published while the
+    second copy is still being processed, and replace it in a depth-1 image queue."""
+    import threading
+
+    import rclpy
+    from sensor_msgs.msg import Image
+
+    from colorglove_ros.tools.play_bag import BagPlayer
+
+    store = colorglove_typestore()
+    with Writer(tmp_path / 'bag', version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        connection = writer.add_connection('/cam/image_raw', 'sensor_msgs/msg/Image',
+                                           typestore=store)
+        for k in range(2):
+            writer.write(connection, 1_000_000_000 + k, serialize_message(
+                Image(width=1, height=1, encoding='mono8', step=1, data=bytes([k]))))
+    sent: list[tuple[float, bytes]] = []
+    answers: list[float] = []
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        player = BagPlayer(tmp_path / 'bag', context=context)
+
+        def answer() -> None:
+            answers.append(time.monotonic())
+            player.output_answered()
+
+        def publish(data: bytes) -> None:
+            sent.append((time.monotonic(), data))
+            threading.Timer(0.3, answer).start()
+
+        player.publishers_by_topic = {'/cam/image_raw': SimpleNamespace(publish=publish)}
+        player.play(0.0, '/hand/tracking_status', '/cam/image_raw', 0.2, pace_resends=1)
+        time.sleep(0.7)
+        player.close()
+        player.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    first_frame = [t for t, data in sent if data == sent[0][1]]
+    second_frame = [t for t, data in sent if data != sent[0][1]]
+    assert len(first_frame) == 2 and player.resent == 2     # the second frame was slow too
+    assert second_frame[0] >= sorted(answers)[1]             # after both answers of the first
+
+
 def test_player_says_which_subscribers_did_not_come(tmp_path: Path,
                                                     isolated_ros_domain: dict) -> None:
     """The command line's --min-subscribers / --min-info-subscribers reach the waits, and a
