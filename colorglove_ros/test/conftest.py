@@ -2,6 +2,7 @@
 (the default hand, a small rendered pose database, the node assets)."""
 from __future__ import annotations
 
+import itertools
 import os
 import sys
 from pathlib import Path
@@ -28,12 +29,17 @@ if TYPE_CHECKING:
     from colorglove_ros.core.hand.model import HandModel
 
 
+_DOMAINS_USED = itertools.count()
+
+
 @pytest.fixture
 def isolated_ros_domain(monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
-    """A ROS domain of this test run's own, on loopback only, with the Fast DDS profile the
-    launcher uses (shared-memory segments large enough for 640x480 images, without which
-    best-effort images are lost between processes); returns the environment to pass on."""
-    domain = str(100 + os.getpid() % 100)
+    """A ROS domain of this test's own (the next of this test run's, so a participant an
+    earlier test left behind until its lease ends is never matched by this one), on loopback
+    only, with the Fast DDS profile the launcher uses (shared-memory segments large enough for
+    640x480 images, without which best-effort images are lost between processes); returns the
+    environment to pass on."""
+    domain = str(100 + (os.getpid() + next(_DOMAINS_USED)) % 100)
     monkeypatch.setenv('ROS_DOMAIN_ID', domain)
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     monkeypatch.setenv(FASTDDS_PROFILE_VARIABLE, str(PKG_DIR / 'config' / 'fastdds_profile.xml'))
