@@ -12,6 +12,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Sequence
+from contextlib import closing
 from pathlib import Path
 from typing import Any
 
@@ -22,14 +23,20 @@ from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.handedness import HANDS
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.paths import resolve_path
-from colorglove_ros.ros.bags import TOPIC_IMAGE, BagError, SequenceBagWriter, open_bag_reader
+from colorglove_ros.ros.bags import (
+    TOPIC_CAMERA_INFO,
+    TOPIC_IMAGE,
+    BagError,
+    SequenceBagWriter,
+    open_bag_reader,
+)
 from colorglove_ros.tools._cli import add_pipeline_arguments, run_tool, tool_parser
 from colorglove_ros.tools.benchmark import BAG_RATE_HZ, isolate_domain
 
 __all__ = ['TARGET_PER_HAND_HZ', 'hand_rows', 'two_hand_bag', 'main']
 
 TARGET_PER_HAND_HZ = 30.0      # issue 18: JointStates/s per hand with a 30 Hz camera
-IMAGE_TOPICS = ['/camera/image_raw', '/camera/camera_info']
+IMAGE_TOPICS = [TOPIC_IMAGE, TOPIC_CAMERA_INFO]
 
 
 def joint_states_topic(hand: str) -> str:
@@ -41,7 +48,8 @@ def joint_states_topic(hand: str) -> str:
 
 def two_hand_bag(path: Path, seed: int, frames: int) -> Path:
     """The bag at ``path``, written once: ``frames`` frames of two-hand sequence ``seed``
-    (test conditions) at :data:`BAG_RATE_HZ`; its ground-truth topics are the right hand's."""
+    (test conditions) at :data:`BAG_RATE_HZ`; its ground-truth topics are those of the first
+    hand of :data:`HANDS` (the right)."""
     if (path / 'metadata.yaml').is_file():
         held = bag_image_count(path)
         if held != frames:
@@ -61,7 +69,7 @@ def two_hand_bag(path: Path, seed: int, frames: int) -> Path:
         path.parent.mkdir(parents=True, exist_ok=True)
         with SequenceBagWriter(path, camera, fps=BAG_RATE_HZ) as writer:
             for i in range(frames):
-                frame, _ = synth.render_hands([(poses[h][i], h) for h in ('right', 'left')],
+                frame, _ = synth.render_hands([(poses[h][i], h) for h in HANDS],
                                               camera, np.random.default_rng([seed, i, 11]),
                                               conditions)
                 writer.write(frame)
@@ -72,11 +80,8 @@ def two_hand_bag(path: Path, seed: int, frames: int) -> Path:
 
 def bag_image_count(path: Path) -> int:
     """How many camera images the bag at ``path`` holds."""
-    reader = open_bag_reader(path)
-    try:
+    with closing(open_bag_reader(path)) as reader:
         return sum(c.msgcount for c in reader.connections if c.topic == TOPIC_IMAGE)
-    finally:
-        reader.close()
 
 
 def hand_rows(record: Any, hands: Sequence[str], frames: int, offered_hz: float

@@ -38,7 +38,7 @@ __all__ = ['BagDefinitionError', 'BagPlayer', 'PLAYBACK_OPTIONS', 'main']
 
 class BagDefinitionError(ValueError):
     """The bag holds topics recorded with another definition of their message type than the
-    installed one, and converting them was not asked for."""
+    installed one that are not to be converted, or cannot be."""
 
 # The player's options: --NAME -> (type, default, help); bool options are flags.
 PLAYBACK_OPTIONS: dict[str, tuple[type, object, str]] = {
@@ -151,19 +151,27 @@ class BagPlayer(Node):
         self.resent = 0                   # frames published again after a --pace-timeout
         self.published = 0                # messages published by play(), over every loop
 
+    def _first_message(self, connection: Any) -> Any:
+        """The raw bytes of the first message on ``connection``, or None."""
+        for _conn, _timestamp, rawdata in bag_messages(self.reader, [connection], self.bag):
+            return rawdata
+        return None
+
     def _check_conversions(self) -> None:
         """Convert the first message of every converted topic now, so a value the installed
         definition cannot hold is refused before anything is published."""
         for connection in self.connections:
-            if connection.topic not in self.converted_types:
+            rawdata = (self._first_message(connection)
+                       if connection.topic in self.converted_types else None)
+            if rawdata is None:
                 continue
-            for _conn, _timestamp, rawdata in bag_messages(self.reader, [connection], self.bag):
-                try:
-                    self.installed_bytes(connection.topic, rawdata)
-                except (DefinitionConversionError, ValueError, TypeError) as error:
-                    raise BagDefinitionError(f'{connection.topic}: its first message cannot be '
-                                             f'converted: {error}') from error
-                break
+            try:
+                self.installed_bytes(connection.topic, rawdata)
+            except BagDefinitionError:     # a value that does not fit: it names the topic
+                raise
+            except (ValueError, TypeError) as error:   # bytes its recorded definition misreads
+                raise BagDefinitionError(f'{connection.topic}: its first message cannot be '
+                                         f'converted: {error}') from error
 
     def installed_bytes(self, topic: str, rawdata: bytes | memoryview) -> bytes:
         """``rawdata`` of ``topic`` laid out for the installed definition of its type
@@ -223,13 +231,13 @@ class BagPlayer(Node):
         driver publishes the image first). Returns the topics primed."""
         primed = []
         for connection in self.connections:
-            if connection.msgtype != 'sensor_msgs/msg/CameraInfo':
+            rawdata = (self._first_message(connection)
+                       if connection.msgtype == 'sensor_msgs/msg/CameraInfo' else None)
+            if rawdata is None:
                 continue
-            for _conn, _timestamp, rawdata in bag_messages(self.reader, [connection], self.bag):
-                self.publishers_by_topic[connection.topic].publish(
-                    self.installed_bytes(connection.topic, rawdata))
-                primed.append(connection.topic)
-                break
+            self.publishers_by_topic[connection.topic].publish(
+                self.installed_bytes(connection.topic, rawdata))
+            primed.append(connection.topic)
         return primed
 
     def play(self, rate: float, pace_topic: str | None, pace_on: str | None,
