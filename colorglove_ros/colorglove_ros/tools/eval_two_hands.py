@@ -33,6 +33,11 @@ from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.evaluation.metrics import fingertip_errors_mm
 from colorglove_ros.core.evaluation.sequences import eval_seeds, open_database_for_calibration
 from colorglove_ros.core.evaluation.targets import target_row
+from colorglove_ros.core.evaluation.two_hand_frames import (
+    FULLY_VISIBLE_SHARE,
+    RATE_TARGET_PER_HAND_HZ,
+    two_hand_frames,
+)
 from colorglove_ros.core.hand.handedness import HANDS, mirrored_observer, to_right_frame
 from colorglove_ros.core.hands import DEFAULT_THREADS, TwoHandPipeline, slot_lookups
 from colorglove_ros.core.pipeline import FramePipeline, Tracked, image_observer
@@ -42,37 +47,10 @@ from colorglove_ros.core.tracking.config import load_ik_config
 from colorglove_ros.paths import data_dir, share_dir
 from colorglove_ros.tools._cli import sequence_tool_parser, tool_error
 
-__all__ = ['main', 'both_visible', 'visible_share', 'MAX_FINGERTIP_EXCESS_MM',
-           'RATE_TARGET_HZ', 'FULLY_VISIBLE_SHARE']
+__all__ = ['main', 'MAX_FINGERTIP_EXCESS_MM']
 
 MODE = 'ik_smooth'
 MAX_FINGERTIP_EXCESS_MM = 2.0
-RATE_TARGET_HZ = 30.0
-#: A glove is fully visible when it shows at least this share of the pixels it shows alone.
-FULLY_VISIBLE_SHARE = 0.99
-
-
-def both_visible(kp2: dict[str, np.ndarray], width: int, height: int,
-                 grow: float = 0.15) -> bool:
-    """Both hands fully in view and apart: their 2-D keypoint boxes grown by ``grow`` lie
-    inside the image and do not overlap."""
-    boxes = []
-    for pts in kp2.values():
-        lo, hi = pts.min(0), pts.max(0)
-        pad = grow * (hi - lo)
-        lo, hi = lo - pad, hi + pad
-        if lo[0] < 0 or lo[1] < 0 or hi[0] > width - 1 or hi[1] > height - 1:
-            return False
-        boxes.append((lo, hi))
-    (a0, a1), (b0, b1) = boxes
-    return bool(np.any(a1 < b0) or np.any(b1 < a0))
-
-
-def visible_share(which: np.ndarray, k: int, which_alone: np.ndarray) -> float:
-    """The share of hand ``k``'s glove pixels when rendered alone (``which_alone`` == 1) that
-    the two-hand frame shows as its glove (``which`` == k + 1); 1 for a glove out of view."""
-    alone = int(np.count_nonzero(which_alone == 1))
-    return 1.0 if alone == 0 else float(np.count_nonzero(which == k + 1)) / alone
 
 
 def _new_stats() -> dict[str, Any]:
@@ -144,24 +122,17 @@ def main(argv: list[str] | None = None) -> int:
             alone[h] = (FramePipeline(observer, lookup, camera), tracker())
         was_correct: dict[str, bool | None] = {h: None for h in HANDS}
         ts = time.perf_counter()
-        for i in range(args.frames):
-            frame, which = synth.render_hands([(poses[h][i], h) for h in HANDS], camera,
-                                              np.random.default_rng([seed, i, 11]), conditions)
+        for i, shot in enumerate(two_hand_frames(synth, camera, poses, seed, conditions,
+                                                 args.frames)):
+            which, singles, apart, visible = shot.which, shot.singles, shot.apart, \
+                shot.fully_visible
             c0, p0, t0 = time.perf_counter(), time.process_time(), time.thread_time()
-            outcomes = pipeline.process(frame.image_rgb, i / args.fps)
+            outcomes = pipeline.process(shot.frame.image_rgb, i / args.fps)
             frame_ms.append(1e3 * (time.perf_counter() - c0))
             frame_cpu_ms.append(1e3 * (time.process_time() - p0))
             frame_thread_ms.append(1e3 * (time.thread_time() - t0))
             if i % 10 == 0:
                 loads.append(os.getloadavg()[0])
-            kp2 = {h: camera.project(synth.keypoints(poses[h][i], h)) for h in HANDS}
-            apart = both_visible(kp2, camera.width, camera.height)
-            singles, shares = {}, []
-            for k, h in enumerate(HANDS):
-                singles[h], which_alone = synth.render_hands(
-                    [(poses[h][i], h)], camera, np.random.default_rng([seed, i, 11]), conditions)
-                shares.append(visible_share(which, k, which_alone))
-            visible = apart and min(shares) >= FULLY_VISIBLE_SHARE
             for k, h in enumerate(HANDS):
                 one_pipeline, one_tracker = alone[h]
                 one = one_pipeline.process(one_tracker, [singles[h].image_rgb], i / args.fps)
@@ -249,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
                     target_row(f'{r["hand"]}: fingertip error minus the one-hand run\'s (mm)',
                                r['fingertip_excess_mm'], MAX_FINGERTIP_EXCESS_MM, '<=')]
     targets.append(target_row(f'JointStates/s per hand (offline, wall, load average '
-                              f'{load:.1f})', rate, RATE_TARGET_HZ, '>='))
+                              f'{load:.1f})', rate, RATE_TARGET_PER_HAND_HZ, '>='))
     print_table(targets, 'Targets (measured, not asserted)')
     if args.json:
         write_json(args.json, {'settings': {

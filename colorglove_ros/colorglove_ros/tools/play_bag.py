@@ -15,7 +15,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import rclpy
 from builtin_interfaces.msg import Time
@@ -33,7 +33,8 @@ from colorglove_ros.ros.bags import BagError, bag_messages, open_bag_reader
 from colorglove_ros.ros.typestore import colorglove_typestore, deserialize_cdr, message_class
 from colorglove_ros.tools._cli import tool_parser
 
-__all__ = ['BagDefinitionError', 'BagPlayer', 'PLAYBACK_OPTIONS', 'main']
+__all__ = ['BagDefinitionError', 'BagPlayer', 'PLAYBACK_OPTIONS', 'STAMP_LOG_HEADER',
+           'read_stamp_log', 'main']
 
 
 class BagDefinitionError(ValueError):
@@ -67,8 +68,30 @@ PLAYBACK_OPTIONS: dict[str, tuple[type, object, str]] = {
     'clock': (bool, False, "publish the bag's time on /clock (rosgraph_msgs/Clock)"),
     'restamp': (bool, False, 'stamp each message with its publish time (wall clock) instead of '
                 'its recorded header stamp (for latency measurements)'),
+    'stamp-log': (str, '', 'with --restamp, write every recorded header stamp and the new '
+                  'stamp it was published with (ns, CSV) to this file, so outputs stamped '
+                  'with the new stamps map back to the bag\'s frames'),
     'linger': (float, 1.0, 'seconds to stay up after the last message, for late deliveries'),
 }
+
+STAMP_LOG_HEADER = 'recorded_stamp_ns,published_stamp_ns'
+
+
+
+def read_stamp_log(path: str | Path) -> dict[int, int]:
+    """A ``--stamp-log`` file as {published stamp: recorded stamp} (ns); a ValueError naming
+    the file and line for anything else."""
+    lines = Path(path).read_text().splitlines()
+    if not lines or lines[0] != STAMP_LOG_HEADER:
+        raise ValueError(f'{path}: not a stamp log (first line must be {STAMP_LOG_HEADER!r})')
+    mapping = {}
+    for number, line in enumerate(lines[1:], 2):
+        try:
+            recorded, published = (int(field) for field in line.split(','))
+        except ValueError:
+            raise ValueError(f'{path}:{number}: expected two integers, got {line!r}') from None
+        mapping[published] = recorded
+    return mapping
 
 
 def _wait_until(condition: Callable[[], bool], timeout_s: float) -> bool:
@@ -148,6 +171,7 @@ class BagPlayer(Node):
             (installed if c.topic in self.converted_types else self.reader.typestore)
             .fielddefs.get(c.msgtype))}
         self.new_stamps: dict[bytes, bytes] = {}
+        self.stamp_log: TextIO | None = None  # --stamp-log: one line per new stamp
         self.resent = 0                   # frames published again after a --pace-timeout
         self.published = 0                # messages published by play(), over every loop
 
@@ -198,8 +222,12 @@ class BagPlayer(Node):
         if old not in self.new_stamps:
             if len(self.new_stamps) > 10_000:
                 self.new_stamps.clear()
-            sec, nanosec = divmod(time.time_ns(), 10**9)
-            self.new_stamps[old] = struct.pack(f'{order}iI', sec, nanosec)
+            now_ns = time.time_ns()
+            self.new_stamps[old] = struct.pack(f'{order}iI', *divmod(now_ns, 10**9))
+            if self.stamp_log is not None:
+                sec, nanosec = struct.unpack(f'{order}iI', old)
+                self.stamp_log.write(f'{sec * 10**9 + nanosec},{now_ns}\n')
+                self.stamp_log.flush()
         return data[:4] + self.new_stamps[old] + data[12:]
 
     def publish_clock(self, clock_topic: str = '/clock') -> None:
@@ -320,6 +348,9 @@ def main(argv: list[str] | None = None) -> int:
     if not args.bag.exists():
         print(f'colorglove_play_bag: no bag at {args.bag}', file=sys.stderr)
         return 2
+    if args.stamp_log and not args.restamp:
+        print('colorglove_play_bag: --stamp-log needs --restamp', file=sys.stderr)
+        return 2
     rclpy.init(args=ros_args)
     player = None
     executor = rclpy.executors.SingleThreadedExecutor()
@@ -335,6 +366,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f'colorglove_play_bag: converting {change.describe()}', file=sys.stderr,
                   flush=True)
         executor.add_node(player)
+        if args.stamp_log:
+            player.stamp_log = open(args.stamp_log, 'w', encoding='utf-8')  # noqa: SIM115
+            player.stamp_log.write(STAMP_LOG_HEADER + '\n')
         if args.paced:
             output_type = message_class('std_msgs/msg/String')
             player.create_subscription(output_type, args.pace_topic,
@@ -384,6 +418,8 @@ def main(argv: list[str] | None = None) -> int:
         if spinner.is_alive():
             spinner.join(timeout=5.0)
         if player is not None:
+            if player.stamp_log is not None:
+                player.stamp_log.close()
             player.close()
             player.destroy_node()
         rclpy.try_shutdown()

@@ -218,6 +218,53 @@ def test_each_loop_gets_new_stamps(tmp_path: Path) -> None:
                                                                        strict=True))
 
 
+def test_stamp_log_maps_each_new_stamp_to_the_recorded_one(tmp_path: Path) -> None:
+    """--stamp-log: every new stamp is logged once, beside the recorded stamp it replaced, so
+    an output stamped with it maps back to the bag's frame."""
+    import io
+
+    import rclpy
+
+    from colorglove_ros.tools.play_bag import STAMP_LOG_HEADER, BagPlayer, read_stamp_log
+
+    sent = _write_bag(tmp_path / 'input')
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    log = io.StringIO()
+    try:
+        player = BagPlayer(tmp_path / 'input', context=context)
+        player.stamp_log = log
+        log.write(STAMP_LOG_HEADER + '\n')
+        joints = [player.restamped('/test/joints', data) for data in sent['/test/joints']]
+        player.restamped('/test/joints', sent['/test/joints'][3])     # not a new stamp
+        player.close()
+        player.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    path = tmp_path / 'stamps.csv'
+    path.write_text(log.getvalue())
+    mapping = read_stamp_log(path)
+    assert len(mapping) == 20
+    for index, data in enumerate(joints):
+        stamp = deserialize_cdr(data, 'sensor_msgs/msg/JointState').header.stamp
+        assert mapping[stamp.sec * 10**9 + stamp.nanosec] == index * 10**9   # recorded: sec i
+    path.write_text(STAMP_LOG_HEADER + '\n1,2\nthree,4\n')
+    with pytest.raises(ValueError, match=r'stamps.csv:3: expected two integers'):
+        read_stamp_log(path)
+    path.write_text('1,2\n')
+    with pytest.raises(ValueError, match='not a stamp log'):
+        read_stamp_log(path)
+
+
+def test_stamp_log_needs_restamp(tmp_path: Path) -> None:
+    _write_bag(tmp_path / 'input')
+    done = subprocess.run([sys.executable, '-m', 'colorglove_ros.tools.play_bag',
+                           str(tmp_path / 'input'), '--stamp-log', str(tmp_path / 's.csv')],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and '--stamp-log needs --restamp' in done.stderr
+    assert not (tmp_path / 's.csv').exists()
+
+
 def _write_camera_bag(path: Path, messages: tuple[tuple[str, str, object], ...]) -> None:
     """A bag with one message on each (topic, type, message)."""
     store = colorglove_typestore()

@@ -23,6 +23,36 @@ def test_rows_count_each_hand_on_its_own_topic() -> None:
     assert rows['right']['latency_p95_ms'] == pytest.approx(20.0)
 
 
+def test_rows_judge_the_rate_on_frames_with_both_hands_visible() -> None:
+    """A hand answered on every frame where both are visible gets the offered rate there,
+    however many frames it could not be seen on; a stamp the player did not send is an
+    error, not a frame."""
+    stamps = np.arange(6, dtype=np.int64) * 10**9
+    visible_at = {int(s): k < 4 for k, s in enumerate(stamps)}     # frames 0-3 visible
+    record = ProbeRecord(stamps[:4], stamps[:4] + 10_000_000, np.array([0, 0, 0, 0]))
+    right, left = benchmark_two_hands.hand_rows(record, ('right', 'left'), 6, 30.0, visible_at)
+    assert right['frames_both_visible'] == 4
+    assert right['answered_when_visible'] == pytest.approx(1.0)
+    assert right['joint_states_per_s_when_visible'] == pytest.approx(30.0)
+    assert right['joint_states_per_s'] == pytest.approx(20.0)        # 4 of 6 frames
+    assert left['joint_states_per_s_when_visible'] == 0.0
+    stray = ProbeRecord(np.array([7]), np.array([8]), np.array([1]))
+    with pytest.raises(ValueError, match='left: 1 JointStates with a stamp the player'):
+        benchmark_two_hands.hand_rows(stray, ('right', 'left'), 6, 30.0, visible_at)
+
+
+def test_visibility_file_of_another_sequence_is_refused(tmp_path: Path) -> None:
+    from colorglove_ros.ros.bags import BagError
+
+    bag = tmp_path / 'bag'
+    benchmark_two_hands._write_visibility(bag, 5, [True, False])
+    with pytest.raises(BagError, match='not of sequence 6 x 2 frames'):
+        benchmark_two_hands.frame_visibility(bag, 6, 2)
+    benchmark_two_hands.visibility_path(bag).write_text('{"format": 1}')
+    with pytest.raises(BagError, match='not a visibility file'):
+        benchmark_two_hands.frame_visibility(bag, 6, 2)
+
+
 @pytest.mark.dds
 @pytest.mark.slow
 def test_short_run_over_dds(node_assets, tmp_path: Path, isolated_ros_domain: dict,
@@ -44,4 +74,8 @@ def test_short_run_over_dds(node_assets, tmp_path: Path, isolated_ros_domain: di
     # the node answered the bag: at least one hand got a pose, none more than once a frame
     assert sum(row['joint_states'] for row in report['dds'][:2]) >= 1
     assert all(0 <= row['joint_states'] <= 6 for row in report['dds'])
+    # every JointState mapped to its frame through the player's stamp log
+    assert all(row['frames_both_visible'] == report['dds'][0]['frames_both_visible']
+               for row in report['dds'])
+    assert (tmp_path / 'bag_visibility.json').is_file()
     assert [row['result'] in ('PASS', 'FAIL') for row in report['targets']] == [True, True]

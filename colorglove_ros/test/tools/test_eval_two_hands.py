@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from colorglove_ros.tools.eval_two_hands import FULLY_VISIBLE_SHARE, both_visible, visible_share
+from colorglove_ros.core.evaluation.two_hand_frames import (
+    FULLY_VISIBLE_SHARE,
+    both_visible,
+    visible_share,
+)
 
 
 def test_a_glove_hidden_by_the_other_arm_is_not_fully_visible():
