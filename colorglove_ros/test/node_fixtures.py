@@ -297,7 +297,7 @@ def assert_run_tracked(run, figures: dict, frames: int, min_tracked: float = 0.9
     waiting for CameraInfo', as a frame played ahead of its CameraInfo is) and tracked at least
     ``min_tracked`` of them with ground truth (``figures``: its ``pipeline_run.summarize``)."""
     assert not run.timed_out
-    assert run.segmented == frames, 'segmentation_node missed camera frames'
+    assert run.segmented == frames, f'segmentation_node missed frames: {run.missed_frames()}'
     assert not run.camera_refusals, run.camera_refusals
     assert figures['tracked_fraction'] >= min_tracked, figures
     assert figures['frames_with_truth'] >= min_tracked * frames

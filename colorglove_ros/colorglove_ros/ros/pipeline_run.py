@@ -37,9 +37,9 @@ from colorglove_ros.ros.image import image_to_rgb8
 from colorglove_ros.ros.latency_probe import LatencyProbe, ProbeRecord
 from colorglove_ros.ros.launcher import Launcher, NodeSpec, use_fastdds_profile
 
-__all__ = ['PipelineMonitor', 'PipelineRun', 'bag_feed', 'node_specs', 'run_pipeline', 'summarize',
-           'ik_times_ms', 'COLOR_CONFIG', 'DATABASE_CONFIG', 'ASSET_CALIBRATION_FRAMES',
-           'prepare_assets', 'pipeline_parameters', 'write_params']
+__all__ = ['BagFeed', 'PipelineMonitor', 'PipelineRun', 'bag_feed', 'node_specs', 'run_pipeline',
+           'summarize', 'ik_times_ms', 'COLOR_CONFIG', 'DATABASE_CONFIG',
+           'ASSET_CALIBRATION_FRAMES', 'prepare_assets', 'pipeline_parameters', 'write_params']
 
 COLOR_CONFIG = 'config/color_calibration.yaml'
 DATABASE_CONFIG = 'config/database.yaml'
@@ -190,6 +190,16 @@ class PipelineRun:
     statuses: list[str] = field(default_factory=list)      # ik_node's tracking status lines
     # segmentation's 'camera: ...' answers (e.g. a frame ahead of its CameraInfo)
     camera_refusals: list[str] = field(default_factory=list)
+    # camera frames (header stamp sec, nanosec) the monitor saw that got no observation
+    unsegmented: list[tuple[int, int]] = field(default_factory=list)
+    feed_output: str = ''                     # what the feed (e.g. the bag player) printed
+
+    def missed_frames(self) -> str:
+        """Why a run segmented fewer frames than it saw, for a failure message: the frames
+        without an observation, the camera refusals and the feed's output."""
+        return (f'{self.segmented} of {self.frames} camera frames segmented; without an '
+                f'observation: {self.unsegmented}; camera refusals: {self.camera_refusals}; '
+                f'feed output: {self.feed_output.strip()!r}')
 
 
 def prepare_assets(database: Path | None = None) -> Path:
@@ -339,6 +349,7 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
             rclpy.try_shutdown(context=context)
     run = _collect(monitor, duration, expected_frames, record)
     run.timed_out = not completed
+    run.feed_output = getattr(feed, 'output', '')
     return run
 
 
@@ -386,7 +397,8 @@ def _collect(monitor: PipelineMonitor, duration: float, published: int,
             lookup_ms=list(monitor.lookup_ms.values()), probe=record,
             frame_index=frame_index,
             overlays=list(monitor.overlays), statuses=list(monitor.statuses),
-            camera_refusals=list(monitor.camera_refusals))
+            camera_refusals=list(monitor.camera_refusals),
+            unsegmented=sorted(set(monitor.frame_times) - set(monitor.observation_times)))
 
 
 def ik_times_ms(statuses: Sequence[str]) -> list[float]:
@@ -432,23 +444,35 @@ def _mean(values: list[float]) -> float:
     return float(np.mean(values)) if values else float('nan')
 
 
-def bag_feed(bag: Path, rate: float = 1.0, paced: bool = False) -> Any:
+class BagFeed:
     """A feed for :func:`run_pipeline`: play ``bag`` with ``colorglove_play_bag`` (a separate
-    process) at ``rate`` times its original timing, or paced by the tracker's output."""
-    import shutil
-    import subprocess
+    process) at ``rate`` times its original timing, or paced by the tracker's output; what the
+    player printed (frames resent, warnings) is kept in ``output``."""
 
-    player = shutil.which('colorglove_play_bag')
-    if player is None:
-        raise FileNotFoundError('colorglove_play_bag not on PATH (is the venv active?)')
-    # two image subscribers before the first frame (segmentation_node and the monitor) and
-    # three CameraInfo subscribers (segmentation, lookup and IK each read it: one matched late
-    # answers the whole short bag 'waiting for CameraInfo'); restamped at publish time: the
-    # latency probe takes arrival minus header stamp
-    command = [player, str(bag), '--rate', str(rate), '--min-subscribers', '2',
-               '--min-info-subscribers', '3', '--restamp'] + (['--paced'] if paced else [])
+    def __init__(self, bag: Path, rate: float = 1.0, paced: bool = False) -> None:
+        import shutil
 
-    def feed() -> None:
-        subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+        player = shutil.which('colorglove_play_bag')
+        if player is None:
+            raise FileNotFoundError('colorglove_play_bag not on PATH (is the venv active?)')
+        # two image subscribers before the first frame (segmentation_node and the monitor)
+        # and three CameraInfo subscribers (segmentation, lookup and IK each read it: one
+        # matched late answers the whole short bag 'waiting for CameraInfo'); restamped at
+        # publish time: the latency probe takes arrival minus header stamp
+        self.command = [player, str(bag), '--rate', str(rate), '--min-subscribers', '2',
+                        '--min-info-subscribers', '3', '--restamp'] + (
+                            ['--paced'] if paced else [])
+        self.output = ''
 
-    return feed
+    def __call__(self) -> None:
+        import subprocess
+
+        done = subprocess.run(self.command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                              text=True)
+        self.output = done.stdout
+        done.check_returncode()
+
+
+def bag_feed(bag: Path, rate: float = 1.0, paced: bool = False) -> BagFeed:
+    """A :class:`BagFeed` of ``bag`` (see there)."""
+    return BagFeed(bag, rate, paced)

@@ -61,7 +61,8 @@ def test_bag_through_the_pipeline(assets: dict[str, Path], isolated_ros_domain: 
     figures = summarize(run, default_hand()[0])
     print(figures)
     assert not run.timed_out
-    assert run.segmented == E2E_FRAMES, 'segmentation_node missed camera frames'
+    assert run.segmented == E2E_FRAMES, \
+        f'segmentation_node missed camera frames: {run.missed_frames()}'
     assert figures['tracked_fraction'] >= 0.95, figures
     assert figures['frames_with_truth'] >= 0.95 * E2E_FRAMES
     assert figures['fingertip_mm'] < FINGERTIP_BOUND_MM, figures
