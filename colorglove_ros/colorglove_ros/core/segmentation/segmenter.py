@@ -290,9 +290,9 @@ def _coarse_cells(coarse: np.ndarray, origin: tuple[int, int], r: int, shape: tu
 
 
 #: What :meth:`GloveSegmenter._without_search` gives: the hand's window ((cx, cy), half; full
-#: pixels), the light table, the scene colours, the static background and the coarse shape.
+#: pixels), the light table, the scene colours, the static background and the coarse frame.
 _Followed = tuple[tuple[tuple[float, float], float], 'np.ndarray | None', 'np.ndarray | None',
-                  'np.ndarray | None', tuple[int, int]]
+                  'np.ndarray | None', np.ndarray]
 
 
 def _check_image(image: object) -> np.ndarray:
@@ -560,18 +560,15 @@ class GloveSegmenter:
         """What :meth:`_coarse` gives, without its search, for a frame that follows a hand
         found without fail (``search_every`` > 1, fewer than ``search_every`` - 1 frames
         since the last search): the last frame's window, the last search's light table and
-        scene colours, and this frame's learnt static background (which learns from it with
-        the last search's glove-like pixels); then the coarse frame's shape. None when this
-        frame needs the search."""
+        scene colours, this frame's learnt static background and the coarse frame (which the
+        static background learns from once the hand is found). None when this frame needs
+        the search."""
         if (self.search_every <= 1 or self._window is None or self._searched is None
                 or self._window[1] != image.shape[:2]
                 or self._since_search + 1 >= self.search_every):
             return None
         small, _, _ = self._small(image)
-        static = self.background.match(small)
-        if self.background.enabled:
-            self.background.update(small, self._glove_like_mask)
-        return (self._window[0], *self._searched, static, small.shape[:2])
+        return (self._window[0], *self._searched, self.background.match(small), small)
 
     def _coarse(self, image: np.ndarray, learn: bool = False
                 ) -> tuple[tuple[tuple[float, float], float] | None, np.ndarray | None,
@@ -685,7 +682,7 @@ class GloveSegmenter:
             found, self._found, self._followed = self._found, None, None
             self._searched, self._since_search, self._window = (table, scene), 0, None
         else:
-            coarse, table, scene, static, small_shape = followed
+            coarse, table, scene, static, small = followed
             found = None
         t = tick('coarse', started)
         if coarse is None:
@@ -780,7 +777,9 @@ class GloveSegmenter:
                     and (y1 + r > h or fcy + fh <= y1)):
                 return None
             self._since_search += 1
-            small_h, small_w = small_shape
+            if self.background.enabled:    # (a frame searched after all learns there)
+                self.background.update(small, self._glove_like_mask)
+            small_h, small_w = small.shape[:2]
             sx, sy = w / small_w, h / small_h
             found = (((fcx + 0.5) / sx - 0.5, (fcy + 0.5) / sy - 0.5), chalf / max(sx, sy))
             self._found, self._followed = None, (found, (small_h, small_w))

@@ -187,16 +187,21 @@ def test_search_every_is_checked(calibration) -> None:
         GloveSegmenter(calibration, search_every=0)
 
 
-def test_the_static_background_learns_on_frames_without_the_search(calibration,
-                                                                     glove) -> None:
-    """The static background counts every frame, searched or not: the still background of a
-    moving glove has matched as many frames in a row as with a search on every frame."""
+@pytest.mark.parametrize('jump', [False, True])
+def test_the_static_background_learns_on_frames_without_the_search(calibration, glove,
+                                                                     jump: bool) -> None:
+    """The static background counts every frame once, searched or not (or searched after
+    all): the still background of a moving glove has matched as many frames in a row as with
+    a search on every frame."""
     frames = [_frame(glove, ((LEFT[0] + 6 * step, LEFT[1]), 1.0)) for step in range(6)]
+    if jump:           # the glove leaves the region of interest: frame 4 is searched after all
+        frames[4:] = [_frame(glove, ((LEFT[0] + 90 + 6 * step, LEFT[1]), 1.0))
+                      for step in range(2)]
     skipping = GloveSegmenter(calibration, follow_margin=2.5, search_every=3,
                               background_frames=50)
     searching = GloveSegmenter(calibration, follow_margin=2.5, background_frames=50)
     for frame in frames:
         assert skipping.process(frame).hand_found and searching.process(frame).hand_found
-    far = np.s_[:, 100:]       # coarse columns right of the glove
+    far = np.s_[:, 110:]       # coarse columns right of the glove
     assert searching.background._matched[far].min() == len(frames) - 1
     assert np.array_equal(skipping.background._matched[far], searching.background._matched[far])
