@@ -289,6 +289,12 @@ def _coarse_cells(coarse: np.ndarray, origin: tuple[int, int], r: int, shape: tu
     return coarse[rows][:, cols]   # faster than coarse[np.ix_(rows, cols)]
 
 
+#: What :meth:`GloveSegmenter._without_search` gives: the hand's window ((cx, cy), half; full
+#: pixels), the light table, the scene colours, the static background and the coarse frame.
+_Followed = tuple[tuple[tuple[float, float], float], 'np.ndarray | None', 'np.ndarray | None',
+                  'np.ndarray | None', np.ndarray]
+
+
 def _check_image(image: object) -> np.ndarray:
     if not isinstance(image, np.ndarray):
         raise SegmentationInputError(f'expected a numpy array, got {type(image).__name__}')
@@ -343,7 +349,13 @@ class GloveSegmenter:
     background learns its glove-like mask there; when the hand is not found there, or its
     region of interest reaches past that region's edge inside the image, the whole coarse
     frame is searched again (as after a frame without a hand). :meth:`lose_track` forgets
-    the hand for frames that do not follow each other.
+    the hand for frames that do not follow each other. With ``search_every`` > 1 the coarse
+    pass runs on only one frame in ``search_every`` while the hand is found: on the frames
+    between, the region of interest is placed around the last frame's crop (at the last
+    search's window size) and classified with the last search's light colour and scene
+    colours and this frame's learnt static background (which learns from the frame with the
+    last search's glove-like pixels kept out); a frame whose hand is not found there with its
+    crop window inside the region of interest is searched after all.
 
     Every setting is checked (ranges, odd median kernel, finite numbers) by
     ``core.validation.validate_segmenter_settings`` however the segmenter is built; a bad one
@@ -366,7 +378,8 @@ class GloveSegmenter:
                  junction_reach: float = 0.0,
                  scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
-                 follow_margin: float = 0.0, source: str = 'GloveSegmenter') -> None:
+                 follow_margin: float = 0.0, search_every: int = 1,
+                 source: str = 'GloveSegmenter') -> None:
         # every keyword argument but ``source`` is a setting named in SEGMENTER_RULES: checked
         # and converted (int, float, tuple of ints) in one place, kept as the attribute of
         # the same name
@@ -381,11 +394,18 @@ class GloveSegmenter:
         # pixels, and the coarse frame's shape), which the next frame's search follows
         self._followed: tuple[tuple[tuple[float, float], float], tuple[int, int]] | None = None
         self._found: tuple[tuple[tuple[float, float], float], tuple[int, int]] | None = None
+        # search_every > 1: the last coarse search's light table and scene colours, the frames
+        # since it, and the window ((cx, cy), half in full pixels; the frame's (h, w)) the
+        # next frame's region of interest follows without a search
+        self._searched: tuple[np.ndarray | None, np.ndarray | None] | None = None
+        self._since_search = 0
+        self._window: tuple[tuple[tuple[float, float], float], tuple[int, int]] | None = None
+        self._glove_like_mask: np.ndarray | None = None   # the last search's, coarse
 
     def lose_track(self) -> None:
         """Forget the followed hand: the next frame is searched whole (for frames that do not
         follow each other, such as a set of independent test images)."""
-        self._followed = self._found = None
+        self._followed = self._found = self._window = self._searched = None
 
     def settings(self) -> dict[str, object]:
         """The segmenter's settings (the keyword arguments it was built with, checked)."""
@@ -526,6 +546,30 @@ class GloveSegmenter:
         return scene_colour_table(small[rejected], SCENE_COLOUR_BITS,
                                   self.scene_colour_min_share * rejected.size)
 
+    def _small(self, image: np.ndarray) -> tuple[np.ndarray, float, float]:
+        """The coarse frame (``image`` downsampled by ``coarse_factor``) and its x and y
+        reduction."""
+        f = self.coarse_factor
+        h, w = image.shape[:2]
+        if f > 1 and h >= 2 * f and w >= 2 * f:
+            return (cv2.resize(image, (w // f, h // f), interpolation=cv2.INTER_LINEAR),
+                    w / (w // f), h / (h // f))
+        return image, 1.0, 1.0
+
+    def _without_search(self, image: np.ndarray) -> _Followed | None:
+        """What :meth:`_coarse` gives, without its search, for a frame that follows a hand
+        found without fail (``search_every`` > 1, fewer than ``search_every`` - 1 frames
+        since the last search): the last frame's window, the last search's light table and
+        scene colours, this frame's learnt static background and the coarse frame (which the
+        static background learns from once the hand is found). None when this frame needs
+        the search."""
+        if (self.search_every <= 1 or self._window is None or self._searched is None
+                or self._window[1] != image.shape[:2]
+                or self._since_search + 1 >= self.search_every):
+            return None
+        small, _, _ = self._small(image)
+        return (self._window[0], *self._searched, self.background.match(small), small)
+
     def _coarse(self, image: np.ndarray, learn: bool = False
                 ) -> tuple[tuple[tuple[float, float], float] | None, np.ndarray | None,
                            np.ndarray | None, np.ndarray | None]:
@@ -534,13 +578,8 @@ class GloveSegmenter:
         frame's scene colours (:func:`scene_colour_table`; None when off) and the coarse
         pixels that are learnt static background (None when none). With ``learn`` the
         static background learns from this frame."""
-        f = self.coarse_factor
         h, w = image.shape[:2]
-        if f > 1 and h >= 2 * f and w >= 2 * f:
-            small = cv2.resize(image, (w // f, h // f), interpolation=cv2.INTER_LINEAR)
-            sx, sy = w / (w // f), h / (h // f)
-        else:
-            small, sx, sy = image, 1.0, 1.0
+        small, sx, sy = self._small(image)
         reduction = float(np.sqrt(sx * sy))
         static = self.background.match(small) if learn else None
         region = self._follow_region(small.shape[:2]) if learn else None
@@ -563,6 +602,7 @@ class GloveSegmenter:
                 labels, None if found is None else ((found[0][0] - rx0, found[0][1] - ry0),
                                                     found[1]))
             self.background.update(small, glove)
+            self._glove_like_mask = glove
         if found is None:
             return None, table, scene, static
         (cx, cy), half = found
@@ -611,6 +651,21 @@ class GloveSegmenter:
         :class:`SegmentationInputError` on anything else."""
         image = _check_image(image_rgb)
         t0 = time.perf_counter()
+        followed = self._without_search(image)
+        if followed is not None:
+            obs = self._segment(image, keep_labels, t0, followed)
+            if obs is not None:
+                return obs
+            # not found whole inside the followed region of interest: search after all
+        obs = self._segment(image, keep_labels, t0)
+        assert obs is not None   # (only a frame without the search is given up)
+        return obs
+
+    def _segment(self, image: np.ndarray, keep_labels: bool, t0: float,
+                 followed: _Followed | None = None) -> Observation | None:
+        """Segment ``image`` (checked; ``t0``: when :meth:`process` started) with the coarse
+        search, or with ``followed`` (:meth:`_without_search`) instead: then None unless the
+        hand is found (status ok) with its crop window inside the region of interest."""
         h, w = image.shape[:2]
         timings: dict[str, float] = {}
         obs = Observation(False, STATUS_NO_GLOVE, w, h, timings_ms=timings)
@@ -620,10 +675,16 @@ class GloveSegmenter:
             timings[stage] = (now - t) * 1e3
             return now
 
-        coarse, table, scene, static = self._coarse(image, learn=True)
-        # follow this frame's hand in the next frame only if it is found (set at the end)
-        found, self._found, self._followed = self._found, None, None
-        t = tick('coarse', t0)
+        started = time.perf_counter()
+        if followed is None:
+            coarse, table, scene, static = self._coarse(image, learn=True)
+            # follow this frame's hand in the next frame only if it is found (set at the end)
+            found, self._found, self._followed = self._found, None, None
+            self._searched, self._since_search, self._window = (table, scene), 0, None
+        else:
+            coarse, table, scene, static, small = followed
+            found = None
+        t = tick('coarse', started)
         if coarse is None:
             timings['total'] = (time.perf_counter() - t0) * 1e3
             return obs
@@ -670,6 +731,8 @@ class GloveSegmenter:
             obs.label_image = full
         tiny = crop_to_tiny(labels, min_pixels=min_px)
         t = tick('crop', t)
+        if tiny is None and followed is not None:
+            return None
         if tiny is None:
             obs.status = STATUS_TOO_SMALL
             timings['total'] = (time.perf_counter() - t0) * 1e3
@@ -706,7 +769,24 @@ class GloveSegmenter:
         else:
             obs.status = STATUS_OK
             obs.hand_found = True
+        if followed is not None:
+            # the crop window must lie inside the region of interest (but where that ends at
+            # the image's edge): else the hand may reach past it
+            if not (obs.hand_found and (x0 == 0 or fcx - fh >= x0)
+                    and (x1 + r > w or fcx + fh <= x1) and (y0 == 0 or fcy - fh >= y0)
+                    and (y1 + r > h or fcy + fh <= y1)):
+                return None
+            self._since_search += 1
+            if self.background.enabled:    # (a frame searched after all learns there)
+                self.background.update(small, self._glove_like_mask)
+            small_h, small_w = small.shape[:2]
+            sx, sy = w / small_w, h / small_h
+            found = (((fcx + 0.5) / sx - 0.5, (fcy + 0.5) / sy - 0.5), chalf / max(sx, sy))
+            self._found, self._followed = None, (found, (small_h, small_w))
+        elif obs.hand_found:
             self._followed = found
+        if obs.hand_found and self.search_every > 1:
+            self._window = (((fcx, fcy), chalf), (h, w))
         timings['total'] = (time.perf_counter() - t0) * 1e3
         return obs
 

@@ -117,3 +117,91 @@ def test_the_scene_colours_are_the_whole_frames_while_following(calibration, glo
     assert b.hand_found and a.hand_found
     assert np.array_equal(a.tiny_labels, b.tiny_labels)
     assert a.crop == b.crop and a.blobs == b.blobs
+
+
+def _searches(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """Counts the coarse searches of every segmenter (one entry per search)."""
+    calls: list[int] = []
+    search = GloveSegmenter._coarse
+
+    def counted(self, *args, **kwargs):
+        calls.append(1)
+        return search(self, *args, **kwargs)
+    monkeypatch.setattr(GloveSegmenter, '_coarse', counted)
+    return calls
+
+
+@pytest.mark.parametrize('every', [2, 3])
+def test_the_search_runs_every_few_frames_while_the_hand_is_followed(calibration, glove,
+                                                                      monkeypatch,
+                                                                      every: int) -> None:
+    """``search_every``: while the hand is found, the coarse search runs on one frame in
+    ``every``; on the others the region of interest follows the last crop, and a glove moving
+    a few pixels per frame gives the observations of a segmenter that searches every frame."""
+    searches = _searches(monkeypatch)
+    skipping = GloveSegmenter(calibration, follow_margin=2.5, search_every=every)
+    frames = [_frame(glove, ((LEFT[0] + 6 * step, LEFT[1] + 3 * step), 1.0))
+              for step in range(6)]
+    seen = [skipping.process(frame) for frame in frames]
+    assert len(searches) == -(-len(frames) // every)      # frames 0, every, 2 every, ...
+    searching = GloveSegmenter(calibration, follow_margin=2.5)
+    for a, frame in zip(seen, frames, strict=True):
+        b = searching.process(frame)
+        assert a.hand_found and b.hand_found
+        assert np.array_equal(a.tiny_labels, b.tiny_labels)
+        # the region of interest lies elsewhere (filters near its edge differ): the same
+        # tiny image, the crop equal up to rounding, the blobs within a pixel
+        assert (a.crop.scale, a.crop.offset_x, a.crop.offset_y) == pytest.approx(
+            (b.crop.scale, b.crop.offset_x, b.crop.offset_y), abs=1e-9)
+        assert [x.color_label for x in a.blobs] == [x.color_label for x in b.blobs]
+        np.testing.assert_allclose([(x.centroid_x, x.centroid_y, x.pixel_count)
+                                    for x in a.blobs],
+                                   [(x.centroid_x, x.centroid_y, x.pixel_count)
+                                    for x in b.blobs], atol=1.0)
+
+
+def test_a_hand_that_left_the_region_of_interest_is_searched_for_at_once(calibration, glove,
+                                                                         monkeypatch) -> None:
+    """A frame that would not be searched, but whose hand is no longer found whole inside the
+    followed region of interest, is searched after all (the same frame, not the next)."""
+    searches = _searches(monkeypatch)
+    skipping = GloveSegmenter(calibration, follow_margin=2.5, search_every=5)
+    assert abs(_crop_x(skipping, _frame(glove, (LEFT, 1.0))) - LEFT[0]) < 20
+    assert abs(_crop_x(skipping, _frame(glove, ((LEFT[0] + 4, LEFT[1]), 1.0))) - LEFT[0]) < 24
+    assert len(searches) == 1
+    # found, but its crop window reaches past the region of interest: searched
+    moved = (LEFT[0] + 50, LEFT[1])
+    assert abs(_crop_x(skipping, _frame(glove, (moved, 1.0))) - moved[0]) < 20
+    assert len(searches) == 2
+    assert abs(_crop_x(skipping, _frame(glove, (RIGHT, 1.0))) - RIGHT[0]) < 20   # not found
+    assert len(searches) == 3
+    skipping.lose_track()             # nothing followed: the next frame is searched
+    assert abs(_crop_x(skipping, _frame(glove, (RIGHT, 1.0))) - RIGHT[0]) < 20
+    assert len(searches) == 4
+
+
+def test_search_every_is_checked(calibration) -> None:
+    from colorglove_ros.core.segmentation.segmenter import SegmentationConfigError
+
+    with pytest.raises(SegmentationConfigError, match='search_every'):
+        GloveSegmenter(calibration, search_every=0)
+
+
+@pytest.mark.parametrize('jump', [False, True])
+def test_the_static_background_learns_on_frames_without_the_search(calibration, glove,
+                                                                     jump: bool) -> None:
+    """The static background counts every frame once, searched or not (or searched after
+    all): the still background of a moving glove has matched as many frames in a row as with
+    a search on every frame."""
+    frames = [_frame(glove, ((LEFT[0] + 6 * step, LEFT[1]), 1.0)) for step in range(6)]
+    if jump:           # the glove leaves the region of interest: frame 4 is searched after all
+        frames[4:] = [_frame(glove, ((LEFT[0] + 90 + 6 * step, LEFT[1]), 1.0))
+                      for step in range(2)]
+    skipping = GloveSegmenter(calibration, follow_margin=2.5, search_every=3,
+                              background_frames=50)
+    searching = GloveSegmenter(calibration, follow_margin=2.5, background_frames=50)
+    for frame in frames:
+        assert skipping.process(frame).hand_found and searching.process(frame).hand_found
+    far = np.s_[:, 110:]       # coarse columns right of the glove
+    assert searching.background._matched[far].min() == len(frames) - 1
+    assert np.array_equal(skipping.background._matched[far], searching.background._matched[far])
