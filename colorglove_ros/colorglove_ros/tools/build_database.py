@@ -40,13 +40,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--seed', type=int, help='sampling seed')
     parser.add_argument('--retrain-codes', action='store_true',
                         help='only learn new codes for the existing database at --output')
+    parser.add_argument('--named-shape-configs', type=int,
+                        help='configurations picked first among the named shapes (letters, '
+                        'gestures) and their noisy copies')
     parser.add_argument('--training-images', type=int,
                         help='images the SSC training pairs are drawn from')
     args = parser.parse_args(argv)
     config, db_path, _ = load_build_config(args.config)
     overrides = {'entries': args.entries, 'orientations_per_config': args.orientations,
                  'num_bits': args.bits, 'num_pairs': args.pairs, 'seed': args.seed,
-                 'training_images': args.training_images}
+                 'training_images': args.training_images,
+                 'named_shape_configs': args.named_shape_configs}
     config = dataclasses.replace(config, **{k: v for k, v in overrides.items() if v is not None})
     output = Path(args.output) if args.output else db_path
     t0 = time.perf_counter()

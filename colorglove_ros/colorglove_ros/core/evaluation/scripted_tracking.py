@@ -11,10 +11,26 @@ import numpy as np
 from colorglove_ros.core.evaluation.scripted_hands import ScriptedSequence, ScriptError
 from colorglove_ros.core.hand.model import HandModel
 
-__all__ = ['TRACKED_FORMAT_VERSION', 'TRACKER_MODE', 'ScriptedTracker']
+__all__ = ['TRACKED_FORMAT_VERSION', 'TRACKER_MODE', 'ScriptedTracker', 'database_tag']
 
 TRACKED_FORMAT_VERSION = 1
 TRACKER_MODE = 'ik_smooth'        # the mode ik_node runs (IK and smoothing on)
+
+
+def database_tag(path: str | Path) -> str:
+    """A short name of a pose database's contents (the checksums of its poses and codes in its
+    manifest), for cache file names; ``ScriptError`` when it has no readable manifest."""
+    import json
+    import zlib
+
+    from colorglove_ros.core.lookup.database import MANIFEST_NAME
+
+    try:
+        arrays = json.loads((Path(path) / MANIFEST_NAME).read_text())['arrays']
+        key = f"{arrays['poses']['crc32']}:{arrays['codes']['crc32']}"
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ScriptError(f'{path}: no readable pose database manifest: {exc}') from exc
+    return f'db{zlib.crc32(key.encode()):08x}'
 
 
 @dataclass
@@ -23,20 +39,24 @@ class ScriptedTracker:
     the seed, the primary camera of ``calibration``), runs the per-frame recipe (segmentation
     with ``labels='segmented'``, lookup, IK with smoothing) and returns the tracked poses and
     the found flags. Results are cached in ``cache_dir`` as ``<name>_<seed>_<frames>_<labels>
-    .npz`` (versioned, with the true poses, so a changed script is tracked anew)."""
+    .npz`` (versioned, with the true poses, so a changed script is tracked anew), with
+    ``_<cache_tag>`` before the extension when a tag is given (another database's tracking,
+    :func:`database_tag`, is cached apart from the default database's)."""
 
     database: Path
     ik_config: Path
     calibration: Path
     cache_dir: Path
     labels: str = 'segmented'
+    cache_tag: str = ''
 
     def __post_init__(self) -> None:
         self._evaluator: Any = None
         self.frames_tracked = 0       # frames run through the tracker (not from the cache)
 
     def _cache_path(self, name: str, seed: int, frames: int) -> Path:
-        return Path(self.cache_dir) / f'{name}_{seed}_{frames}_{self.labels}.npz'
+        tag = f'_{self.cache_tag}' if self.cache_tag else ''
+        return Path(self.cache_dir) / f'{name}_{seed}_{frames}_{self.labels}{tag}.npz'
 
     def _load(self, path: Path, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         try:

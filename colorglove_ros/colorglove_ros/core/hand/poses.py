@@ -31,8 +31,8 @@ from colorglove_ros.core.hand.model import (
 
 __all__ = [
     'PosesError', 'NAMED_SHAPES', 'LETTER_SHAPES', 'GESTURE_SHAPES', 'ROLL_RANGE', 'YAW_RANGE',
-    'PITCH_RANGE', 'pose_collection', 'full_pose', 'sample_global_rotations',
-    'finger_limits', 'skin_fingers', 'pose_features', 'pose_distance',
+    'PITCH_RANGE', 'pose_collection', 'named_neighbourhood_rows', 'full_pose',
+    'sample_global_rotations', 'finger_limits', 'skin_fingers', 'pose_features', 'pose_distance',
 ]
 
 ROLL_RANGE = (-np.pi / 2, np.pi / 2)
@@ -188,14 +188,12 @@ def pose_collection(seed: int = 0, size: int = 18000,
     transitions (a random pair of named shapes at a random blend, 3 deg noise) and the rest
     random jiggling; all clipped into the joint limits.
     """
-    if size < len(NAMED_SHAPES):
-        raise PosesError(f'size must be >= {len(NAMED_SHAPES)}, got {size}')
     lo, hi = finger_limits(model)
     rng = np.random.default_rng(seed)
     shapes = np.clip(np.stack(list(NAMED_SHAPES.values())), lo, hi)
     k = len(shapes)
     rest = size - k
-    n_noisy = rest // 4
+    n_noisy = named_neighbourhood_rows(size) - k
     n_trans = (rest * 35) // 100
     n_jig = rest - n_noisy - n_trans
     noisy = shapes[rng.integers(0, k, n_noisy)] + rng.normal(0.0, np.deg2rad(5.0),
@@ -207,6 +205,14 @@ def pose_collection(seed: int = 0, size: int = 18000,
     jig = _jiggle(rng, n_jig, lo, hi)
     out = np.clip(np.concatenate([shapes, noisy, trans, jig]), lo, hi)
     return out
+
+
+def named_neighbourhood_rows(size: int) -> int:
+    """How many leading rows of ``pose_collection(seed, size)`` are the named shapes and their
+    noisy copies (the rest are transitions and jiggling)."""
+    if size < len(NAMED_SHAPES):
+        raise PosesError(f'size must be >= {len(NAMED_SHAPES)}, got {size}')
+    return len(NAMED_SHAPES) + (size - len(NAMED_SHAPES)) // 4
 
 
 def sample_global_rotations(rng: np.random.Generator, n: int,

@@ -74,6 +74,7 @@ _BUILD_LIMITS: dict[str, tuple[type, float, float]] = {
     'training_images': (int, 2, 10_000_000), 'hand_length_m': (float, *MODEL_HAND_LENGTH_RANGE_M),
     'glove_seed': (int, 0, 2**32 - 1), 'fps_vertices': (int, 1, 100_000),
     'batch': (int, 1, 100_000), 'visibility_tolerance_m': (float, 0.0, 0.1),
+    'named_shape_configs': (int, 0, 10_000_000),
 }
 """The range of every :class:`BuildConfig` number the build can run with."""
 LOOKUP_SETTINGS: dict[str, tuple[int, int]] = {'num_candidates': (1, 100_000),
@@ -83,7 +84,11 @@ LOOKUP_SETTINGS: dict[str, tuple[int, int]] = {'num_candidates': (1, 100_000),
 
 @dataclass(frozen=True)
 class BuildConfig:
-    """Parameters of :func:`build_database` (``config/database.yaml`` holds the defaults)."""
+    """Parameters of :func:`build_database` (``config/database.yaml`` holds the defaults).
+
+    ``named_shape_configs``: how many of the finger configurations are first picked among the
+    pose collection's named shapes and their noisy copies (finger-spelling letters and
+    gestures, :func:`sample_configurations`); 0: all picked over the whole collection."""
 
     entries: int = 100_000
     orientations_per_config: int = 50
@@ -101,6 +106,7 @@ class BuildConfig:
     fps_vertices: int = 300
     batch: int = 256
     visibility_tolerance_m: float = 0.004
+    named_shape_configs: int = 0
 
     def __post_init__(self) -> None:
         for name, (kind, low, high) in _BUILD_LIMITS.items():
@@ -154,20 +160,28 @@ def read_database_config(path: str | Path) -> tuple[BuildConfig, Path, dict[str,
 
 # ------------------------------------------------------------------------------- sampling
 def farthest_point_sampling(points: np.ndarray, count: int, seed: int = 0,
-                            chunk: int = 8192) -> tuple[np.ndarray, np.ndarray]:
+                            chunk: int = 8192, initial: np.ndarray | None = None
+                            ) -> tuple[np.ndarray, np.ndarray]:
     """Low-dispersion subset by greedy farthest-point sampling under Euclidean distance.
 
-    ``points`` (M, D): the first index is drawn with ``seed``, then each next index is the
-    argmax over candidates of the minimum distance to the chosen set. Returns the chosen
-    indices (count,) and the covering radius after each pick (count,) (the dispersion)."""
+    ``points`` (M, D): the first index is drawn with ``seed`` (or the picks start with the
+    distinct indices ``initial``), then each next index is the argmax over candidates of the
+    minimum distance to the chosen set. Returns the chosen indices (count,) and the covering
+    radius after each pick (count,) (the dispersion)."""
     pts = np.ascontiguousarray(points, dtype=np.float32)
     m = len(pts)
     if not 0 < count <= m:
         raise DatabaseError(f'cannot pick {count} of {m} points')
+    start = np.zeros(0, np.intp) if initial is None else np.asarray(initial, np.intp).ravel()
+    if len(start) > count or len(np.unique(start)) != len(start) or \
+            np.any((start < 0) | (start >= m)):
+        raise DatabaseError(f'initial picks must be at most {count} distinct indices < {m}')
     rng = np.random.default_rng(seed)
     chosen = np.empty(count, np.intp)
     radius = np.empty(count, np.float64)
-    chosen[0] = int(rng.integers(m))
+    chosen[:len(start)] = start
+    if not len(start):
+        chosen[0] = int(rng.integers(m))
     sq_norm = np.einsum('ij,ij->i', pts, pts)
     min_d2 = np.full(m, np.inf, np.float32)
     for i in range(count):
@@ -176,7 +190,7 @@ def farthest_point_sampling(points: np.ndarray, count: int, seed: int = 0,
             blk = pts[s:s + chunk]
             d2 = sq_norm[s:s + chunk] - 2.0 * (blk @ pts[c]) + sq_norm[c]
             np.minimum(min_d2[s:s + chunk], np.maximum(d2, 0.0), out=min_d2[s:s + chunk])
-        if i + 1 < count:
+        if len(start) <= i + 1 < count:
             chosen[i + 1] = int(np.argmax(min_d2))
         radius[i] = float(np.sqrt(min_d2.max()))
     return chosen, radius
@@ -186,9 +200,15 @@ def sample_configurations(config: BuildConfig, count: int, model: HandModel, mes
                           rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``count`` low-dispersion finger configurations of the pose collection: greedy
     farthest-point sampling under the RMS distance of a seeded subset of
-    ``config.fps_vertices`` mesh vertices. Returns the collection (M, 20), the chosen rows
-    (count,) and the covering radius after each pick (count,) (m)."""
-    from colorglove_ros.core.hand.poses import pose_collection, skin_fingers
+    ``config.fps_vertices`` mesh vertices. The first ``config.named_shape_configs`` picks are
+    made among the named shapes and their noisy copies only (a denser cover of the letters and
+    gestures), the rest over the whole collection from there. Returns the collection (M, 20),
+    the chosen rows (count,) and the covering radius after each pick (count,) (m)."""
+    from colorglove_ros.core.hand.poses import (
+        named_neighbourhood_rows,
+        pose_collection,
+        skin_fingers,
+    )
 
     collection = pose_collection(config.collection_seed, max(config.collection_size, count),
                                  model)
@@ -198,7 +218,15 @@ def sample_configurations(config: BuildConfig, count: int, model: HandModel, mes
         skin_fingers(mesh, model, collection[s:s + 2048])[:, subset].reshape(
             -1, 3 * len(subset)) for s in range(0, len(collection), 2048)])
     feats /= np.sqrt(len(subset))                        # Euclidean = RMS vertex distance
-    chosen, radius = farthest_point_sampling(feats, count, seed=config.seed)
+    named = min(config.named_shape_configs, count)
+    initial = None
+    if named:
+        rows = named_neighbourhood_rows(len(collection))
+        if named > rows:
+            raise DatabaseError(f'named_shape_configs {named} is more than the '
+                                f'{rows} named-shape rows of the pose collection')
+        initial, _ = farthest_point_sampling(feats[:rows], named, seed=config.seed)
+    chosen, radius = farthest_point_sampling(feats, count, seed=config.seed, initial=initial)
     return collection, chosen, radius
 
 

@@ -12,6 +12,7 @@ from colorglove_ros.core.hand.poses import (
     NAMED_SHAPES,
     PosesError,
     full_pose,
+    named_neighbourhood_rows,
     pose_collection,
     pose_distance,
     pose_features,
@@ -54,6 +55,22 @@ def test_collection_size_limits_determinism(hand, collection: np.ndarray) -> Non
     # every DOF uses a good part of its range
     span = collection.max(0) - collection.min(0)
     assert np.all(span > 0.6 * (hi - lo))
+
+
+def test_named_neighbourhood_rows(collection: np.ndarray) -> None:
+    rows = named_neighbourhood_rows(len(collection))
+    named = np.stack(list(NAMED_SHAPES.values()))
+    # every leading row is a named shape with 5 deg noise (largest DOF deviation from the
+    # nearest named shape: about 2 sigma typically, below 5 sigma always); the rows after are
+    # transitions between two shapes, farther from both
+    def nearest(rows_: np.ndarray) -> np.ndarray:
+        return np.degrees(np.abs(rows_[:, None] - named[None]).max(axis=2).min(axis=1))
+    assert np.all(nearest(collection[:rows]) < 25.0)
+    assert np.median(nearest(collection[:rows])) < 12.0
+    assert np.median(nearest(collection[rows:rows + 500])) > 15.0
+    assert rows == len(NAMED_SHAPES) + (18000 - len(NAMED_SHAPES)) // 4
+    with pytest.raises(PosesError):
+        named_neighbourhood_rows(len(NAMED_SHAPES) - 1)
 
 
 def test_dip_pip_coupling(collection: np.ndarray) -> None:

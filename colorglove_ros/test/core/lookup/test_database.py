@@ -11,6 +11,7 @@ from repo_paths import CONFIG_DIR
 from small_databases import RENDER_CAM, blob_database
 
 from colorglove_ros.core.conventions import TINY_SIZE
+from colorglove_ros.core.hand.poses import named_neighbourhood_rows, pose_features
 from colorglove_ros.core.lookup.database import (
     DATABASE_VERSION,
     DatabaseError,
@@ -19,8 +20,10 @@ from colorglove_ros.core.lookup.database import (
     save_database,
 )
 from colorglove_ros.core.lookup.database_build import (
+    BuildConfig,
     farthest_point_sampling,
     read_database_config,
+    sample_configurations,
 )
 
 
@@ -47,6 +50,43 @@ def test_farthest_point_sampling_is_low_dispersion() -> None:
     for i in range(1, 20):
         d = np.linalg.norm(pts[:, None] - pts[idx[:i]][None], axis=2).min(axis=1)
         assert d[idx[i]] == pytest.approx(d.max(), rel=1e-4)
+
+
+def test_farthest_point_sampling_continues_from_initial_picks() -> None:
+    rng = np.random.default_rng(3)
+    pts = rng.normal(size=(300, 4))
+    initial = np.array([5, 17, 200])
+    idx, radius = farthest_point_sampling(pts, 12, seed=0, initial=initial)
+    assert idx[:3].tolist() == initial.tolist() and len(set(idx.tolist())) == 12
+    for i in range(3, 12):             # each later pick is the farthest from all before it
+        d = np.linalg.norm(pts[:, None] - pts[idx[:i]][None], axis=2).min(axis=1)
+        assert d[idx[i]] == pytest.approx(d.max(), rel=1e-4)
+    assert radius[-1] == pytest.approx(
+        np.linalg.norm(pts[:, None] - pts[idx][None], axis=2).min(axis=1).max(), rel=1e-4)
+    for bad in ([1, 1], [300], list(range(13))):
+        with pytest.raises(DatabaseError):
+            farthest_point_sampling(pts, 12, initial=np.array(bad))
+
+
+def test_named_shape_configs_cover_the_named_shapes(hand) -> None:
+    """The first picks come from the named shapes' neighbourhood and cover it more densely
+    than plain farthest-point sampling; none asked for: the plain sampling."""
+    model, mesh, _ = hand
+    size, count = 400, 40
+    rows = named_neighbourhood_rows(size)
+    covers = []
+    for named in (0, 20):
+        cfg = BuildConfig(collection_size=size, fps_vertices=60, named_shape_configs=named)
+        coll, chosen, _ = sample_configurations(cfg, count, model, mesh,
+                                                np.random.default_rng(cfg.seed))
+        assert np.all(chosen[:named] < rows) and len(set(chosen.tolist())) == count
+        feats = pose_features(mesh, model, coll, max_vertices=60)
+        d = np.linalg.norm(feats[:rows, None] - feats[chosen][None], axis=2).min(axis=1)
+        covers.append(float(d.mean()))
+    assert covers[1] < 0.8 * covers[0]
+    with pytest.raises(DatabaseError):
+        sample_configurations(BuildConfig(collection_size=size, named_shape_configs=rows + 1),
+                              rows + 1, model, mesh, np.random.default_rng(0))
 
 
 def test_pixel_keys() -> None:

@@ -1,0 +1,50 @@
+"""Tests for the cache of the tracker's output on scripted sequences."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from small_databases import blob_database
+
+from colorglove_ros.core.evaluation.scripted_hands import ScriptError
+from colorglove_ros.core.evaluation.scripted_tracking import ScriptedTracker, database_tag
+from colorglove_ros.core.lookup.database import save_database
+
+
+def _saved(tmp_path: Path, name: str, seed: int) -> Path:
+    rng = np.random.default_rng(seed)
+    tiny = np.zeros((4, 40, 40), np.uint8)
+    for k in range(4):
+        tiny[k, 5 + k:15 + k, 5:20] = 1 + k
+    db = blob_database(tiny, rng.normal(size=(4, 26)), num_bits=8, num_pairs=20)
+    return save_database(db, tmp_path / name)
+
+
+def test_database_tag_names_the_contents(tmp_path: Path) -> None:
+    a, b = _saved(tmp_path, 'a', 0), _saved(tmp_path, 'b', 1)
+    assert database_tag(a) == database_tag(a) and database_tag(a) != database_tag(b)
+    assert database_tag(a).startswith('db') and len(database_tag(a)) == 10
+    manifest = json.loads((a / 'manifest.json').read_text())
+    del manifest['arrays']['codes']
+    (a / 'manifest.json').write_text(json.dumps(manifest))
+    with pytest.raises(ScriptError, match='manifest'):
+        database_tag(a)
+    with pytest.raises(ScriptError):
+        database_tag(tmp_path / 'missing')
+
+
+def test_tagged_tracking_is_cached_apart(tmp_path: Path) -> None:
+    """Tracking with another database never reads the default database's cache file."""
+    truth = np.zeros((3, 26))
+    plain = ScriptedTracker(Path('db'), Path('ik.yaml'), Path('cal.yaml'), tmp_path)
+    tagged = ScriptedTracker(Path('other'), Path('ik.yaml'), Path('cal.yaml'), tmp_path,
+                             cache_tag='db0000abcd')
+    path = plain._cache_path('spelling', 7, 3)
+    np.savez_compressed(path, version=1, q_true=truth, q_est=truth + 1.0,
+                        found=np.ones(3, bool))
+    assert plain._load(path, truth) is not None
+    other = tagged._cache_path('spelling', 7, 3)
+    assert other != path and other.name == 'spelling_7_3_segmented_db0000abcd.npz'
+    assert not other.exists()
