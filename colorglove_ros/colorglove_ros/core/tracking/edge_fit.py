@@ -148,11 +148,11 @@ class EdgeTrackerConfig:
     max_rms_px: float = 3.0
     camera_check: bool = False
     max_camera_disagreement_mm: float = 10.0
-    silhouette_weight: float = 0.0
+    silhouette_weight: float = 0.3
     silhouette_tolerance_px: float = 4.0
-    silhouette_points: int = 40
+    silhouette_points: int = 80
     max_off_silhouette: float = 1.0
-    max_unexplained: float = 1.0
+    max_unexplained: float = 0.08
     silhouette_agreement: float = 0.0
     silhouette_margin_px: float = 60.0
     loss_patience: int = 3

@@ -96,4 +96,4 @@ def test_empty_scene_is_the_same_scene_without_the_hand() -> None:
         ys, xs = np.nonzero(hand)
         far = np.ones_like(hand)
         far[max(ys.min() - 20, 0):, max(xs.min() - 20, 0):xs.max() + 20] = False
-        assert np.percentile(diff[far], 99) < 15   # the rest is the same scene, new noise
+        assert np.median(diff[far]) < 8 and np.percentile(diff[far], 99) < 25   # new noise only
