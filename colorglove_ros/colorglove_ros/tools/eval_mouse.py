@@ -18,8 +18,9 @@ the primary camera of ``--calibration`` looking down at the table at 45 degrees)
 tracker starts from the true first pose (a pose given to it, as from the glove tracker) and,
 after a loss, again from the true pose of the frame it was lost on (counted as
 ``reinitialisations``); frames without a published pose reach the mouse as gaps. With
-``--background empty`` (default) the tracker also has the silhouettes against one frame of
-the empty table scene (``BareHandSequence.render_empty_views``); ``none``: edges only.
+``--background empty`` the tracker also has the silhouettes against one frame of the empty
+table scene (``BareHandSequence.render_empty_views``); ``none`` (default): edges only (the
+silhouettes did not raise the click figures on tuning seeds 5-7, docs/RESULTS.md).
 
 ``--source glove`` feeds it the colour-glove tracker's output (segmentation, lookup, IK with
 smoothing, as ``ik_node`` runs) on the same script rendered with the glove
@@ -151,7 +152,7 @@ def noisy_poses(model: HandModel, Q: np.ndarray, seed: int, noise: dict[str, flo
 
 
 def edge_tracked_poses(Q: np.ndarray, seed: int, camera: PinholeCamera,
-                       hand_length_m: float, silhouettes: bool = True
+                       hand_length_m: float, silhouettes: bool = False
                        ) -> tuple[list[np.ndarray | None], int]:
     """The edge tracker's published poses on the bare-hand rendering of ``Q`` (None where
     it published none) and how often it was re-initialised from the true pose after a loss;
@@ -242,7 +243,7 @@ def main(argv: list[str] | None = None) -> int:
                         help='with --source glove: pose database (default: the largest under '
                         'data/)')
     parser.add_argument('--seconds', type=float, default=30.0, help='length of each sequence')
-    parser.add_argument('--background', choices=('empty', 'none'), default='empty',
+    parser.add_argument('--background', choices=('empty', 'none'), default='none',
                         help='with --source edges: silhouettes against the empty scene, or '
                         'edges only')
     parser.add_argument('--calibration', default='config/calibration.yaml',
