@@ -37,7 +37,6 @@ from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
-from scipy.spatial import ConvexHull
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.errors import ColorGloveError
@@ -118,10 +117,8 @@ class EdgeTrackerConfig:
     explains (farther than the tolerance from every capsule, tip and the palm); a fit
     whose share of such axis points exceeds ``max_off_silhouette`` or whose unexplained
     share of the hand's foreground exceeds ``max_unexplained`` (in any camera) counts as
-    drift (1.0: never); a fit whose both shares are at most ``silhouette_agreement`` in every
-    camera agrees with the silhouettes, and too few links found is then no fault (0: off):
-    the silhouettes vouch for the pose the links found give. Each frame's silhouette is
-    found only within ``silhouette_margin_px`` of the box around the pose it starts from.
+    drift (1.0: never). Each frame's silhouette is found only within
+    ``silhouette_margin_px`` of the box around the pose it starts from.
     """
 
     search: EdgeSearchConfig = field(default_factory=EdgeSearchConfig)
@@ -153,7 +150,6 @@ class EdgeTrackerConfig:
     silhouette_points: int = 80
     max_off_silhouette: float = 1.0
     max_unexplained: float = 0.08
-    silhouette_agreement: float = 0.0
     silhouette_margin_px: float = 60.0
     loss_patience: int = 3
     coast_patience: int = 0
@@ -191,11 +187,10 @@ class EdgeTrackerConfig:
             raise EdgeTrackerError('coast_patience and resume_frames must be >= 0')
         if self.silhouette_weight < 0 or self.silhouette_tolerance_px < 0 \
                 or self.silhouette_points < 0 or not 0.0 <= self.max_off_silhouette <= 1.0 \
-                or not 0.0 <= self.max_unexplained <= 1.0 \
-                or not 0.0 <= self.silhouette_agreement <= 1.0:
+                or not 0.0 <= self.max_unexplained <= 1.0:
             raise EdgeTrackerError('silhouette_weight, silhouette_tolerance_px, '
-                                   'silhouette_points must be >= 0, max_off_silhouette, '
-                                   'max_unexplained and silhouette_agreement in [0, 1]')
+                                   'silhouette_points must be >= 0, max_off_silhouette and '
+                                   'max_unexplained in [0, 1]')
         if self.loss_patience < 1 or self.init_hold_frames < 1:
             raise EdgeTrackerError('loss_patience and init_hold_frames must be >= 1')
 
@@ -336,6 +331,8 @@ def feature_points(model: HandModel, tracked: Sequence[str], use_tips: bool,
     tip_row = np.array([row.get(int(li), -1) for li in tip_links], dtype=np.int64)
     mesh = build_hand_mesh(model)
     palm = mesh.local_vertices[mesh.vertex_link == 0]
+    from scipy.spatial import ConvexHull  # here: nodes importing this module stay light
+
     hull = palm[ConvexHull(palm).vertices]
     palm = palm[::max(1, len(palm) // _PALM_OCCLUDER_POINTS)]
     return FeaturePoints(links, tip_links, tip_row, point_link,
@@ -930,8 +927,7 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
                               S, C, config)
         disagreement = fingertip_disagreement(kin, q, q0)
     off = unexplained = math.nan
-    checks = config.max_off_silhouette < 1.0 or config.max_unexplained < 1.0 \
-        or config.silhouette_agreement > 0.0
+    checks = config.max_off_silhouette < 1.0 or config.max_unexplained < 1.0
     if checks and any(sil is not None for sil in sils):
         p_final = kin.points(q, points.point_link, points.point_local, False)[0]
         shares = []

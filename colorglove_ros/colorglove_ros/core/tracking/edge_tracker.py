@@ -216,8 +216,6 @@ class EdgeTracker:
             return 'drift', (f'the primary camera alone puts a fingertip '
                              f'{fit.camera_disagreement_mm:.0f} mm from the joint fit (max '
                              f'{cfg.max_camera_disagreement_mm:.0f} mm)')
-        if max(fit.off_silhouette, fit.unexplained) <= cfg.silhouette_agreement:
-            return '', ''
         for name, found, usable in zip(self._names, fit.links_found, fit.links_usable,
                                        strict=True):
             if usable and found < cfg.min_camera_found_fraction * usable:

@@ -83,3 +83,17 @@ def test_unexplained_foreground_is_what_no_part_of_the_hand_covers() -> None:
     loose, share = sil.unexplained(_outline(10.0, 70.0), 3.0)
     assert 0.1 < share < 0.3          # 30 px less 13 px of round cap and tolerance
     assert np.all(loose[:, 1] < 70.0) and np.all(np.abs(loose[:, 0] - 110) < 12)
+
+
+def test_a_region_limits_where_the_foreground_is_looked_for() -> None:
+    empty, frame = _scene()
+    frame[200:230, 250:300] = (20, 220, 20)            # something else, far from the hand
+    model = BackgroundModel.from_frames([empty])
+    everywhere = model.silhouette(frame)
+    near = model.silhouette(frame, (80.0, 20.0, 140.0, 180.0))
+    assert near.area_px < everywhere.area_px - 1000
+    assert abs(near.area_px - 20 * 120) < 0.05 * 20 * 120
+    d, _ = near.outside_distance(np.array([[110.0, 100.0], [135.0, 100.0]]))
+    assert d[0] == 0.0 and d[1] == pytest.approx(135 - 119.5, abs=3.0)   # image pixels
+    loose, share = near.unexplained(_outline(10.0, 40.0), 3.0)
+    assert share < 0.02 and len(loose) < 50
