@@ -17,7 +17,10 @@ noise model: each scripted sequence is rendered as a bare hand (core.synthetic.b
 the primary camera of ``--calibration`` looking down at the table at 45 degrees), the edge
 tracker starts from the true first pose (a pose given to it, as from the glove tracker) and,
 after a loss, again from the true pose of the frame it was lost on (counted as
-``reinitialisations``); frames without a published pose reach the mouse as gaps.
+``reinitialisations``); frames without a published pose reach the mouse as gaps. With
+``--background empty`` the tracker also has the silhouettes against one frame of the empty
+table scene (``BareHandSequence.render_empty_views``); ``none`` (default): edges only (the
+silhouettes did not raise the click figures on tuning seeds 5-7, docs/RESULTS.md).
 
 ``--source glove`` feeds it the colour-glove tracker's output (segmentation, lookup, IK with
 smoothing, as ``ik_node`` runs) on the same script rendered with the glove
@@ -45,6 +48,7 @@ from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.synthetic.bare_hand import BareHandSequence
 from colorglove_ros.core.tracking.edge_tracker import EdgeTracker
 from colorglove_ros.core.tracking.mouse import Mouse3D, MouseConfig, raw_mouse_values
+from colorglove_ros.core.tracking.silhouette import BackgroundModel
 from colorglove_ros.paths import data_dir, resolve_path, share_dir
 from colorglove_ros.tools._cli import run_tool, tool_parser
 
@@ -148,12 +152,16 @@ def noisy_poses(model: HandModel, Q: np.ndarray, seed: int, noise: dict[str, flo
 
 
 def edge_tracked_poses(Q: np.ndarray, seed: int, camera: PinholeCamera,
-                       hand_length_m: float) -> tuple[list[np.ndarray | None], int]:
+                       hand_length_m: float, silhouettes: bool = False
+                       ) -> tuple[list[np.ndarray | None], int]:
     """The edge tracker's published poses on the bare-hand rendering of ``Q`` (None where
-    it published none) and how often it was re-initialised from the true pose after a loss."""
+    it published none) and how often it was re-initialised from the true pose after a loss;
+    ``silhouettes``: with a background model from the empty scene."""
     seq = BareHandSequence(camera, seed=seed, poses=Q, hand_length_m=hand_length_m, views=1)
     try:
-        tracker = EdgeTracker(seq.synth.model, [camera])
+        backgrounds = [BackgroundModel.from_frames(seq.render_empty_views([camera]))] \
+            if silhouettes else None
+        tracker = EdgeTracker(seq.synth.model, [camera], backgrounds=backgrounds)
         tracker.initialize(Q[0])
         out: list[np.ndarray | None] = []
         restarts = 0
@@ -235,6 +243,9 @@ def main(argv: list[str] | None = None) -> int:
                         help='with --source glove: pose database (default: the largest under '
                         'data/)')
     parser.add_argument('--seconds', type=float, default=30.0, help='length of each sequence')
+    parser.add_argument('--background', choices=('empty', 'none'), default='none',
+                        help='with --source edges: silhouettes against the empty scene, or '
+                        'edges only')
     parser.add_argument('--calibration', default='config/calibration.yaml',
                         help='camera (its first) for --source edges')
     args = parser.parse_args(argv)
@@ -271,7 +282,8 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
         Q, spans = scripted_sequence(model, config, seed, args.seconds)
         extra: dict[str, Any] = {}
         if args.source == 'edges':
-            poses, restarts = edge_tracked_poses(Q, seed, camera, hand_length_m)
+            poses, restarts = edge_tracked_poses(Q, seed, camera, hand_length_m,
+                                                 args.background == 'empty')
             extra['reinitialisations'] = restarts
         elif glove is not None:
             poses = glove_tracked_poses(model, Q, seed, glove)
@@ -295,7 +307,8 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
     if args.json:
         write_json(args.json, {'settings': {'seeds': args.seeds, **noise,
                                             'tolerance_frames': args.tolerance_frames,
-                                            'source': args.source, 'seconds': args.seconds},
+                                            'source': args.source, 'seconds': args.seconds,
+                                            'background': args.background},
                                'rows': rows, 'total': total, 'targets': targets})
     return 0
 

@@ -49,10 +49,14 @@ def test_noise_model_drops_frames_and_perturbs_the_rest() -> None:
 def test_edge_tracker_output_is_one_pose_or_none_per_frame() -> None:
     calibration = load_calibration(resolve_path('config/calibration.yaml'))
     Q, _ = scripted_sequence(MODEL, CONFIG, seed=0, seconds=3.0, clicks=1)
-    poses, restarts = edge_tracked_poses(Q, 0, calibration.cameras[0],
-                                         calibration.hand_length_m)
-    assert len(poses) == len(Q) and restarts >= 0
-    assert all(p is None or (p.shape == (26,) and np.all(np.isfinite(p))) for p in poses)
+    runs = {sil: edge_tracked_poses(Q, 0, calibration.cameras[0], calibration.hand_length_m,
+                                    silhouettes=sil) for sil in (False, True)}
+    for poses, restarts in runs.values():
+        assert len(poses) == len(Q) and restarts >= 0
+        assert all(p is None or (p.shape == (26,) and np.all(np.isfinite(p))) for p in poses)
+    # the silhouettes of the empty table scene reach the tracker and change its fits
+    assert any((a is None) != (b is None) or (a is not None and not np.allclose(a, b))
+               for a, b in zip(runs[False][0], runs[True][0], strict=True))
 
 
 class _FakeGloveTracker:

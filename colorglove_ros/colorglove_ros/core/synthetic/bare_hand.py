@@ -38,7 +38,7 @@ from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
 from colorglove_ros.core.synthetic.backgrounds import make_background
 from colorglove_ros.core.synthetic.conditions import FrameConditions, sample_conditions
-from colorglove_ros.core.synthetic.frames import Synthesizer, view_background_seed
+from colorglove_ros.core.synthetic.frames import Synthesizer, view_background_seed, view_of_scene
 from colorglove_ros.core.synthetic.sequences import SyntheticSequenceRenderer
 from colorglove_ros.core.tracking.edge_tracker import initialisation_pose
 
@@ -51,6 +51,7 @@ __all__ = [
 SKIN_TONES_SRGB = np.array([[236, 200, 180], [224, 172, 150], [198, 146, 116],
                             [165, 114, 84], [125, 82, 56], [90, 58, 40]], dtype=float)
 DEFAULT_INIT_WRIST = (0.0, 0.095, 0.5)   # the edge tracker's default marked spot, metres
+_OUT_OF_VIEW_M = 100.0   # depth that puts the hand and forearm beyond the renderer's far plane
 _LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
@@ -191,3 +192,20 @@ class BareHandSequence(SyntheticSequenceRenderer):
         self.poses = np.asarray(poses, dtype=float)
         # the parent's blur follows these hand centres
         self._centres = self.synth.model.keypoints_batch(self.poses).mean(axis=1)
+
+    def render_empty_views(self, cameras: Sequence[PinholeCamera]) -> list[np.ndarray]:
+        """The scene without the hand, as each of ``cameras`` sees it (RGB uint8): what a user
+        captures once to calibrate a background model (the same background, light, optics
+        and sensor, its own noise; the hand and forearm moved beyond the far plane)."""
+        q = self.poses[0].copy()
+        q[0:3] = (0.0, 0.0, _OUT_OF_VIEW_M)
+        rng = np.random.default_rng([self.seed, len(self.poses), 13])
+        out = []
+        for k, cam in enumerate(cameras):
+            qk, cond = view_of_scene(q, self.conditions, cameras, k)
+            frame = self.synth.render_frame(qk, cam, rng, replace(cond, blur_px=0.0))
+            if frame.patch_ids.any():
+                raise BareHandError('the hand is still in view in the empty scene')
+            out.append(frame.image_rgb)
+        return out
+

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -60,12 +60,13 @@ from colorglove_ros.core.tracking.edge_features import (
     segment_distances,
 )
 from colorglove_ros.core.tracking.kinematics import FastKinematics
+from colorglove_ros.core.tracking.silhouette import HandOutline, Silhouette
 
 __all__ = [
     'EdgeTrackerError', 'EdgeTrackerConfig', 'DEFAULT_TRACKED_LINKS', 'FeaturePoints',
     'feature_points', 'EdgePrediction', 'EdgeMeasurement', 'EdgeFit', 'link_axis_residuals',
     'tip_residuals', 'predict_features', 'measure_features', 'stack_residuals', 'fit_pose',
-    'fingertip_disagreement',
+    'fingertip_disagreement', 'hand_outline',
 ]
 
 # every phalanx except the thumb metacarpal, which lies inside the palm's outline
@@ -109,6 +110,15 @@ class EdgeTrackerConfig:
     alone, from the same start, and a fit whose fingertips (relative to the wrist) lie more
     than ``max_camera_disagreement_mm`` from that fit's counts as drift: the cameras' edges
     disagree, so at least one of them was taken from the wrong place.
+    Silhouettes (:mod:`silhouette`, given per camera to :func:`fit_pose`; none: all of this
+    is off): with ``silhouette_weight`` > 0 the fit also pulls the hand's axis points that
+    fall more than ``silhouette_tolerance_px`` off the foreground back onto it, and its link
+    capsules toward up to ``silhouette_points`` foreground pixels that no part of the hand
+    explains (farther than the tolerance from every capsule, tip and the palm); a fit
+    whose share of such axis points exceeds ``max_off_silhouette`` or whose unexplained
+    share of the hand's foreground exceeds ``max_unexplained`` (in any camera) counts as
+    drift (1.0: never). Each frame's silhouette is found only within
+    ``silhouette_margin_px`` of the box around the pose it starts from.
     """
 
     search: EdgeSearchConfig = field(default_factory=EdgeSearchConfig)
@@ -135,6 +145,12 @@ class EdgeTrackerConfig:
     max_rms_px: float = 3.0
     camera_check: bool = False
     max_camera_disagreement_mm: float = 10.0
+    silhouette_weight: float = 0.3
+    silhouette_tolerance_px: float = 4.0
+    silhouette_points: int = 80
+    max_off_silhouette: float = 1.0
+    max_unexplained: float = 0.08
+    silhouette_margin_px: float = 60.0
     loss_patience: int = 3
     coast_patience: int = 0
     resume_frames: int = 0
@@ -169,6 +185,12 @@ class EdgeTrackerConfig:
                                    'min_camera_found_fraction in [0, 1], max_rms_px > 0')
         if self.coast_patience < 0 or self.resume_frames < 0:
             raise EdgeTrackerError('coast_patience and resume_frames must be >= 0')
+        if self.silhouette_weight < 0 or self.silhouette_tolerance_px < 0 \
+                or self.silhouette_points < 0 or not 0.0 <= self.max_off_silhouette <= 1.0 \
+                or not 0.0 <= self.max_unexplained <= 1.0:
+            raise EdgeTrackerError('silhouette_weight, silhouette_tolerance_px, '
+                                   'silhouette_points must be >= 0, max_off_silhouette and '
+                                   'max_unexplained in [0, 1]')
         if self.loss_patience < 1 or self.init_hold_frames < 1:
             raise EdgeTrackerError('loss_patience and init_hold_frames must be >= 1')
 
@@ -217,6 +239,11 @@ class FeaturePoints:
     palm_sign: np.ndarray = field(default_factory=lambda: np.zeros(0))     # (P,) +1 radial
     palm_surface: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (V, 3) palm
     #                          frame, a subsample of the palm mesh's vertices (occluder)
+    palm_hull: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (H, 3) palm
+    #                          frame, the palm mesh's vertices on its convex hull (its outline)
+    outline_radius: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (E,) m: the
+    #                          untracked links drawn in the hand's outline (the thumb
+    #                          metacarpal), whose base and end are the last 2E points
 
     @property
     def num_palm_sides(self) -> int:
@@ -232,6 +259,11 @@ class FeaturePoints:
     def tip_slice(self) -> slice:
         """Rows of the tip centres among the points (every second from 2L)."""
         return slice(2 * len(self.links), 2 * len(self.links) + 2 * len(self.tip_links), 2)
+
+    @property
+    def outline_start(self) -> int:
+        """Row of the first untracked outline link's base (bases and ends alternate)."""
+        return len(self.point_link) - 2 * len(self.outline_radius)
 
     @property
     def palm_start(self) -> int:
@@ -287,18 +319,26 @@ def feature_points(model: HandModel, tracked: Sequence[str], use_tips: bool,
     centre = np.array([0.0, 0.5 * model.finger_anchors[2][1], 0.0])
     for side in generators:
         local += [*side.reshape(-1, 3), centre]
+    untracked = np.array([i for i in range(1, len(LINK_NAMES)) if i not in set(links)
+                          and model.link_parent[i] >= 0], dtype=np.int64)
+    for li in untracked:
+        local += [[0.0, 0.0, 0.0], [0.0, -length[li], 0.0]]
     point_link = np.concatenate([np.repeat(links, 2), np.repeat(tip_links, 2),
                                  np.zeros(generators.shape[0] * (2 * len(PALM_ANGLES) + 1),
-                                          dtype=np.int64)])
+                                          dtype=np.int64), np.repeat(untracked, 2)])
     palm_sign = np.array([1.0 if side == 'radial' else -1.0 for side in palm_sides])
     row = {int(li): k for k, li in enumerate(links)}
     tip_row = np.array([row.get(int(li), -1) for li in tip_links], dtype=np.int64)
     mesh = build_hand_mesh(model)
     palm = mesh.local_vertices[mesh.vertex_link == 0]
+    from scipy.spatial import ConvexHull  # here: nodes importing this module stay light
+
+    hull = palm[ConvexHull(palm).vertices]
     palm = palm[::max(1, len(palm) // _PALM_OCCLUDER_POINTS)]
     return FeaturePoints(links, tip_links, tip_row, point_link,
                           np.asarray(local, dtype=float).reshape(-1, 3), radius[links],
-                          radius[tip_links], palm_sign, np.asarray(palm, dtype=float))
+                          radius[tip_links], palm_sign, np.asarray(palm, dtype=float),
+                          np.asarray(hull, dtype=float), radius[untracked])
 
 
 @dataclass(frozen=True)
@@ -504,6 +544,124 @@ def _predict_palm(points: FeaturePoints, camera: PinholeCamera, config: EdgeTrac
     return pb, pe, n, generator, slice_valid, usable
 
 
+def hand_outline(points: FeaturePoints, camera: PinholeCamera, q: np.ndarray,
+                 pix: np.ndarray, depth: np.ndarray) -> HandOutline:
+    """The predicted hand of pose ``q`` in ``camera`` (``pix``, ``depth``: the feature
+    points projected): link capsules, tip discs, the projected palm surface, the wrist and the
+    direction from the wrist to the palm's centre."""
+    L, o = len(points.links), points.outline_start
+    focal = 0.5 * (camera.fx + camera.fy)
+    base = np.concatenate([pix[0:2 * L:2], pix[o::2]])
+    end = np.concatenate([pix[1:2 * L:2], pix[o + 1::2]])
+    zb = np.concatenate([depth[0:2 * L:2], depth[o::2]])
+    ze = np.concatenate([depth[1:2 * L:2], depth[o + 1::2]])
+    radius = np.concatenate([points.radius, points.outline_radius])
+    hw = radius * focal / np.maximum(0.5 * (zb + ze), 1e-6)
+    zt = depth[points.tip_slice]
+    R = rotvec_to_matrix(q[3:6])
+    centre = np.array([0.0, 0.5 * np.mean(points.palm_hull[:, 1]), 0.0]) \
+        if len(points.palm_hull) else np.zeros(3)
+    extra = q[0:3] + np.concatenate([points.palm_hull, [np.zeros(3), centre]]) @ R.T
+    epix, _, edepth = _project(camera, extra, None)
+    palm = epix[:-2][edepth[:-2] > 0]
+    axis = epix[-1] - epix[-2]
+    axis = axis / max(float(np.linalg.norm(axis)), 1e-9)
+    return HandOutline(base, end, hw, pix[points.tip_slice],
+                       points.tip_radius * focal / np.maximum(zt, 1e-6), palm, epix[-2], axis)
+
+
+def _axis_points(points: FeaturePoints, pix: np.ndarray, Jpix: np.ndarray | None,
+                 camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray | None]:
+    """The hand's axis points that must lie on its silhouette (each link's base, middle and
+    end, each tip centre) inside the image, and their pixel Jacobians."""
+    L = len(points.links)
+    base, end = pix[0:2 * L:2], pix[1:2 * L:2]
+    px = np.concatenate([base, 0.5 * (base + end), end, pix[points.tip_slice]])
+    J = None
+    if Jpix is not None:
+        Jb, Je = Jpix[0:2 * L:2], Jpix[1:2 * L:2]
+        J = np.concatenate([Jb, 0.5 * (Jb + Je), Je, Jpix[points.tip_slice]])
+    inside = (px[:, 0] >= 0) & (px[:, 0] < camera.width) & (px[:, 1] >= 0) \
+        & (px[:, 1] < camera.height)
+    return px[inside], None if J is None else J[inside]
+
+
+def silhouette_measures(points: FeaturePoints, camera: PinholeCamera, silhouette: Silhouette,
+                        q: np.ndarray, pix: np.ndarray, depth: np.ndarray,
+                        config: EdgeTrackerConfig
+                        ) -> tuple[float, float, np.ndarray, HandOutline]:
+    """How well pose ``q`` explains one camera's silhouette: the share of the hand's axis
+    points more than ``silhouette_tolerance_px`` off the foreground, the unexplained share of
+    the hand's foreground, the unexplained pixels (:meth:`Silhouette.unexplained`) and the
+    predicted hand (:func:`hand_outline`)."""
+    tol = config.silhouette_tolerance_px
+    ax, _ = _axis_points(points, pix, None, camera)
+    off = float(np.mean(silhouette.outside_distance(ax)[0] > tol)) if len(ax) else 0.0
+    outline = hand_outline(points, camera, q, pix, depth)
+    loose, share = silhouette.unexplained(outline, tol)
+    return off, share, loose, outline
+
+
+def _silhouette_targets(loose: np.ndarray, base: np.ndarray, end: np.ndarray,
+                        hw: np.ndarray, count: int, palm: np.ndarray) -> SilhouetteTargets:
+    """Up to ``count`` of the unexplained pixels (evenly through the list), each with its
+    nearest link capsule; pixels nearer the palm's outline ``palm`` (K, 2) than to every
+    capsule are left out (the palm is rigid with the wrist, and its rim would pull a finger)."""
+    if len(loose) > 2 * count:
+        loose = loose[np.linspace(0, len(loose) - 1, 2 * count).astype(np.int64)]
+    if len(loose) and len(palm) >= 3:
+        # unexplained pixels lie outside the palm's hull: their distance to it is that to
+        # its nearest edge
+        hull = cv2.convexHull(palm.astype(np.float32))[:, 0, :].astype(float)
+        to_palm = segment_distances(loose, hull, np.roll(hull, -1, axis=0))[0].min(axis=1)
+        to_link = (segment_distances(loose, base, end)[0] - hw[None, :]).min(axis=1) \
+            if len(base) else np.full(len(loose), np.inf)
+        loose = loose[to_link < to_palm]
+    if len(loose) > count:
+        loose = loose[np.linspace(0, len(loose) - 1, count).astype(np.int64)]
+    if not len(loose) or not len(base):
+        return SilhouetteTargets(np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0),
+                                 np.zeros((0, 2)))
+    dist, along = segment_distances(loose, base, end)
+    link = np.argmin(dist - hw[None, :], axis=1)
+    rows = np.arange(len(loose))
+    s = along[rows, link]
+    closest = base[link] + s[:, None] * (end[link] - base[link])
+    d = loose - closest
+    direction = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+    return SilhouetteTargets(loose, link, s, direction)
+
+
+def _silhouette_residuals(points: FeaturePoints, camera: PinholeCamera, meas: EdgeMeasurement,
+                          pix: np.ndarray, Jpix: np.ndarray, depth: np.ndarray,
+                          config: EdgeTrackerConfig) -> tuple[np.ndarray, np.ndarray]:
+    """One camera's silhouette rows: each axis point's distance beyond the tolerance off the
+    foreground, and each unexplained pixel's distance beyond the tolerance from its link's
+    capsule (rows only where positive)."""
+    tol = config.silhouette_tolerance_px
+    ax, Jax = _axis_points(points, pix, Jpix, camera)
+    d, grad = meas.silhouette.outside_distance(ax)
+    off = d > tol
+    r = [d[off] - tol]
+    J = [np.einsum('ij,ijd->id', grad[off], Jax[off])]
+    t = meas.loose
+    if t is not None and len(t.px):
+        L = len(points.links)
+        Jb, Je = Jpix[0:2 * L:2][t.link], Jpix[1:2 * L:2][t.link]
+        c = (1.0 - t.along)[:, None] * pix[0:2 * L:2][t.link] + t.along[:, None] \
+            * pix[1:2 * L:2][t.link]
+        focal = 0.5 * (camera.fx + camera.fy)
+        z = 0.5 * (depth[0:2 * L:2] + depth[1:2 * L:2])[t.link]
+        hw = points.radius[t.link] * focal / np.maximum(z, 1e-6)
+        rl = np.einsum('ij,ij->i', t.direction, t.px - c) - hw - tol
+        Jl = -np.einsum('ij,ijd->id', t.direction,
+                        (1.0 - t.along)[:, None, None] * Jb + t.along[:, None, None] * Je)
+        keep = rl > 0
+        r.append(rl[keep])
+        J.append(Jl[keep])
+    return np.concatenate(r), np.concatenate(J)
+
+
 # ---------------------------------------------------------------------------- measurement
 @dataclass(frozen=True)
 class EdgeMeasurement:
@@ -517,6 +675,20 @@ class EdgeMeasurement:
     tip_found: np.ndarray    # (T,) bool
     palm: LinkAxes | None = None
     palm_found: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    silhouette: Silhouette | None = None
+    loose: SilhouetteTargets | None = None
+
+
+@dataclass(frozen=True)
+class SilhouetteTargets:
+    """Foreground pixels no part of the predicted hand explains, each assigned to its nearest
+    link capsule: the pixels (M, 2), the link's row (M,), the closest point's fraction along
+    the link (M,) and the unit direction from that point to the pixel (M, 2)."""
+
+    px: np.ndarray
+    link: np.ndarray
+    along: np.ndarray
+    direction: np.ndarray
 
 
 def measure_features(grey: np.ndarray, prediction: EdgePrediction, config: EdgeTrackerConfig,
@@ -582,7 +754,7 @@ def stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
         if meas is None:
             continue
         start = len(ws)
-        pix, Jpix, _ = _project(cam, p, Jw if jacobian else None)
+        pix, Jpix, depth = _project(cam, p, Jw if jacobian else None)
         if Jpix is None:
             Jpix = np.zeros((len(pix), 2, 1))
         f = meas.link_found
@@ -609,6 +781,12 @@ def stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
             rs.append(r)
             Js.append(J)
             ws.append(config.palm_weight * _robust(r, config.huber_px, config.robust_loss))
+        if meas.silhouette is not None and config.silhouette_weight > 0 and jacobian:
+            r, J = _silhouette_residuals(points, cam, meas, pix, Jpix, depth, config)
+            if len(r):
+                rs.append(r)
+                Js.append(J)
+                ws.append(np.full(len(r), config.silhouette_weight))
         if index < len(config.camera_weights):
             ws[start:] = [config.camera_weights[index] * w for w in ws[start:]]
     if not rs:
@@ -624,7 +802,10 @@ class EdgeFit:
     none), per camera the links found, the links usable
     and the tips found, the number of Gauss-Newton iterations taken and, with
     ``camera_check``, how far the primary camera's fit alone puts the fingertips from the
-    joint fit's (:func:`fingertip_disagreement`, mm; NaN when not computed)."""
+    joint fit's (:func:`fingertip_disagreement`, mm; NaN when not computed) and, with
+    silhouettes, the largest over the cameras of the share of the hand's axis points off the
+    foreground and of the unexplained share of the foreground (:func:`silhouette_measures`;
+    NaN without silhouettes)."""
 
     q: np.ndarray
     rms_px: float
@@ -633,6 +814,8 @@ class EdgeFit:
     tips_found: tuple[int, ...]
     iterations: int
     camera_disagreement_mm: float = math.nan
+    off_silhouette: float = math.nan
+    unexplained: float = math.nan
 
     @property
     def found_fraction(self) -> float:
@@ -683,14 +866,20 @@ def fingertip_disagreement(kin: FastKinematics, q_a: np.ndarray, q_b: np.ndarray
 
 def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[PinholeCamera],
              greys: Sequence[np.ndarray | None], q_start: np.ndarray,
-             config: EdgeTrackerConfig, rounds: int, polarity: int | None = None) -> EdgeFit:
+             config: EdgeTrackerConfig, rounds: int, polarity: int | None = None,
+             silhouettes: Sequence[Silhouette | None] | None = None) -> EdgeFit:
     """Fit the pose to the edges of the cameras' grey images (None: no frame from that
     camera): ``rounds`` times predict at the current pose, measure, and take
     ``gn_iterations`` stabilised Gauss-Newton steps on the concatenated residuals with the
     joint limits enforced. The stabiliser is anchored at ``q_start``: the steps minimise
     ``|R(q)|^2_W + |q - q_start|^2_S``, ``dq = -(J^T W J + S)^-1 (J^T W R + S (q - q_start))``,
     whose first step is the paper's ``-(J^T J + S)^-1 J^T R``; further steps converge on the
-    same measurements without letting weakly observed DOFs wander."""
+    same measurements without letting weakly observed DOFs wander. ``silhouettes`` (one per
+    camera, None where there is none) add the silhouette residuals and measures (see
+    :class:`EdgeTrackerConfig`)."""
+    sils = list(silhouettes) if silhouettes is not None else [None] * len(cameras)
+    if len(sils) != len(cameras):
+        raise EdgeTrackerError(f'{len(cameras)} camera(s) but {len(sils)} silhouette(s)')
     q = kin.clamp(np.asarray(q_start, dtype=float))
     q_anchor = q.copy()
     S = np.diag(config.stabilizer_diagonal())
@@ -703,12 +892,20 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
     for _ in range(rounds):
         world = kin.points(q, points.point_link, points.point_local, True)
         measured: list[EdgeMeasurement | None] = []
-        for cam, grey in zip(cameras, greys, strict=True):
+        for cam, grey, sil in zip(cameras, greys, sils, strict=True):
             if grey is None:
                 measured.append(None)
                 continue
             pred = predict_features(kin, points, cam, q, config, world)
-            measured.append(measure_features(grey, pred, config, points.tip_row, polarity))
+            meas = measure_features(grey, pred, config, points.tip_row, polarity)
+            if sil is not None and config.silhouette_weight > 0:
+                pix, _, depth = _project(cam, world[0], None)
+                outline = hand_outline(points, cam, q, pix, depth)
+                loose = sil.unexplained(outline, config.silhouette_tolerance_px)[0]
+                meas = replace(meas, silhouette=sil, loose=_silhouette_targets(
+                    loose, pred.base_px, pred.end_px, pred.half_width_px,
+                    config.silhouette_points, outline.palm))
+            measured.append(meas)
         found = tuple(0 if m is None else int(m.link_found.sum()) for m in measured)
         usable = tuple(0 if m is None else int(m.prediction.link_usable.sum())
                        for m in measured)
@@ -729,4 +926,14 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
         q0, _ = _gauss_newton(kin, points, cameras, alone, world0, q_anchor.copy(), q_anchor,
                               S, C, config)
         disagreement = fingertip_disagreement(kin, q, q0)
-    return EdgeFit(q, rms, found, usable, tips, iterations, disagreement)
+    off = unexplained = math.nan
+    checks = config.max_off_silhouette < 1.0 or config.max_unexplained < 1.0
+    if checks and any(sil is not None for sil in sils):
+        p_final = kin.points(q, points.point_link, points.point_local, False)[0]
+        shares = []
+        for cam, sil in zip(cameras, sils, strict=True):
+            if sil is not None:
+                pix, _, depth = _project(cam, p_final, None)
+                shares.append(silhouette_measures(points, cam, sil, q, pix, depth, config)[:2])
+        off, unexplained = (float(v) for v in np.max(shares, axis=0))
+    return EdgeFit(q, rms, found, usable, tips, iterations, disagreement, off, unexplained)

@@ -11,7 +11,9 @@ tracking, a frame whose fit leaves too few links found or too large a residual g
 pose; ``loss_patience`` such frames in a row declare the track lost and the tracker waits
 for re-initialisation. A frame whose only fault is coverage (too few links found, a small
 residual on those found) can instead be coasted through for ``coast_patience`` frames (off by
-default), publishing nothing and keeping the track.
+default), publishing nothing and keeping the track. With a background model per camera
+(:class:`BackgroundModel`, the user's capture of the empty scene) each frame's silhouettes
+join the fit and its drift checks (:class:`EdgeTrackerConfig`).
 """
 from __future__ import annotations
 
@@ -32,6 +34,7 @@ from colorglove_ros.core.tracking.edge_fit import (
     fit_pose,
 )
 from colorglove_ros.core.tracking.kinematics import FastKinematics
+from colorglove_ros.core.tracking.silhouette import BackgroundModel, Silhouette
 
 __all__ = ['EdgeTrackResult', 'EdgeTracker', 'TRACKER_STATES', 'initialisation_pose']
 
@@ -74,10 +77,12 @@ class EdgeTrackResult:
 
 class EdgeTracker:
     """Temporal DigitEyes tracker over one or several calibrated cameras (the primary camera,
-    ``cameras[0]``, has identity extrinsics; poses are in its optical frame)."""
+    ``cameras[0]``, has identity extrinsics; poses are in its optical frame). ``backgrounds``
+    (one per camera, None where there is none) give the silhouettes."""
 
     def __init__(self, model: HandModel, cameras: Sequence[PinholeCamera],
-                 config: EdgeTrackerConfig | None = None) -> None:
+                 config: EdgeTrackerConfig | None = None,
+                 backgrounds: Sequence[BackgroundModel | None] | None = None) -> None:
         if not cameras:
             raise EdgeTrackerError('the edge tracker needs at least one camera')
         c0 = cameras[0]
@@ -92,6 +97,9 @@ class EdgeTracker:
         self.init_pose = initialisation_pose(model, self.config.init_wrist_position,
                                              self.config.init_rotation_vector)
         self._names = tuple(c.name for c in self.cameras)
+        self.backgrounds: tuple[BackgroundModel | None, ...] = (None,) * len(self.cameras)
+        if backgrounds is not None:
+            self.set_backgrounds(backgrounds)
         self._q: np.ndarray | None = None
         self._bad_frames = 0
         self._coast_frames = 0
@@ -127,12 +135,43 @@ class EdgeTracker:
         self._resume = 0
         self._hold = []
 
+    def set_backgrounds(self, backgrounds: Sequence[BackgroundModel | None]) -> None:
+        """Use these empty-scene models (one per camera, None for none) from now on."""
+        if len(backgrounds) != len(self.cameras):
+            raise EdgeTrackerError(f'{len(self.cameras)} camera(s) but {len(backgrounds)} '
+                                   'background model(s)')
+        for cam, bg in zip(self.cameras, backgrounds, strict=True):
+            if bg is not None and (bg.width, bg.height) != (cam.width, cam.height):
+                raise EdgeTrackerError(f'camera {cam.name!r} is {cam.width}x{cam.height} but '
+                                       f'its background model {bg.width}x{bg.height}')
+        self.backgrounds = tuple(backgrounds)
+
     def fit(self, images: Sequence[np.ndarray | None], q_start: np.ndarray,
             rounds: int | None = None) -> EdgeFit:
         """Fit one frame from ``q_start`` without touching the tracker's state."""
         greys = self._greys(images)
         return fit_pose(self.kin, self.points, self.cameras, greys, q_start, self.config,
-                        rounds or self.config.measurement_rounds)
+                        rounds or self.config.measurement_rounds,
+                        silhouettes=self._silhouettes(images))
+
+    def _silhouettes(self, images: Sequence[np.ndarray | None]) -> list[Silhouette | None]:
+        """Each camera's silhouette within ``silhouette_margin_px`` of the box around the
+        current pose's (or, while waiting, the initialisation pose's) feature points."""
+        if all(bg is None for bg in self.backgrounds):
+            return [None] * len(self.cameras)
+        q = self.init_pose if self._q is None else self._q
+        world = self.kin.points(q, self.points.point_link, self.points.point_local, False)[0]
+        m = self.config.silhouette_margin_px
+        out: list[Silhouette | None] = []
+        for cam, bg, img in zip(self.cameras, self.backgrounds, images, strict=True):
+            if bg is None or img is None:
+                out.append(None)
+                continue
+            pix = cam.project(cam.world_to_camera(world))
+            pix = pix[np.all(np.isfinite(pix), axis=1)]
+            region = None if not len(pix) else (*(pix.min(axis=0) - m), *(pix.max(axis=0) + m))
+            out.append(bg.silhouette(img, region))
+        return out
 
     def _greys(self, images: Sequence[np.ndarray | None]) -> list[np.ndarray | None]:
         if len(images) != len(self.cameras):
@@ -167,6 +206,12 @@ class EdgeTracker:
             return 'drift', 'no link found'
         if not fit.rms_px <= cfg.max_rms_px:
             return 'drift', f'edge residual {fit.rms_px:.1f} px > {cfg.max_rms_px:.1f} px'
+        if fit.off_silhouette > cfg.max_off_silhouette:
+            return 'drift', (f'{fit.off_silhouette:.0%} of the hand axis off the silhouette '
+                             f'(max {cfg.max_off_silhouette:.0%})')
+        if fit.unexplained > cfg.max_unexplained:
+            return 'drift', (f'{fit.unexplained:.0%} of the hand silhouette unexplained (max '
+                             f'{cfg.max_unexplained:.0%})')
         if cfg.camera_check and fit.camera_disagreement_mm > cfg.max_camera_disagreement_mm:
             return 'drift', (f'the primary camera alone puts a fingertip '
                              f'{fit.camera_disagreement_mm:.0f} mm from the joint fit (max '
@@ -185,16 +230,17 @@ class EdgeTracker:
         """Process one frame: one image per camera (grey or RGB; None if a camera has no
         frame). Returns the pose to publish or the reason there is none."""
         t0, c0 = time.perf_counter(), time.process_time()
-        result = self._step(self._greys(images))
+        result = self._step(self._greys(images), self._silhouettes(images))
         return replace(result, time_ms=1e3 * (time.perf_counter() - t0),
                        cpu_ms=1e3 * (time.process_time() - c0))
 
-    def _step(self, greys: list[np.ndarray | None]) -> EdgeTrackResult:
+    def _step(self, greys: list[np.ndarray | None],
+              silhouettes: list[Silhouette | None]) -> EdgeTrackResult:
         """One frame's state machine (initialisation, fit, loss), untimed."""
         cfg = self.config
         if self._q is None:
             fit = fit_pose(self.kin, self.points, self.cameras, greys, self.init_pose, cfg,
-                           cfg.init_rounds)
+                           cfg.init_rounds, silhouettes=silhouettes)
             reason = self._fit_ok(fit)
             offset = float(np.linalg.norm(fit.q[0:3] - self.init_pose[0:3]))
             if not reason and offset > cfg.init_max_offset_m:
@@ -216,7 +262,7 @@ class EdgeTracker:
                 'waiting', None, 'waiting for the initialisation pose (flat hand, palm to the '
                 f'camera, at the marked spot): {why}', fit, hold_frames=held)
         fit = fit_pose(self.kin, self.points, self.cameras, greys, self._q, cfg,
-                       cfg.measurement_rounds)
+                       cfg.measurement_rounds, silhouettes=silhouettes)
         kind, reason = self._check_fit(fit)
         if not np.all(np.isfinite(fit.q)):
             self.reset()
@@ -244,4 +290,5 @@ class EdgeTracker:
 
     def with_config(self, **changes: object) -> EdgeTracker:
         """A fresh tracker on the same model and cameras with some settings changed."""
-        return EdgeTracker(self.model, self.cameras, replace(self.config, **changes))
+        return EdgeTracker(self.model, self.cameras, replace(self.config, **changes),
+                           self.backgrounds)

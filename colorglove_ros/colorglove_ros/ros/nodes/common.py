@@ -270,18 +270,18 @@ def _frame_camera(node: Node, calibrated: PinholeCamera, use_camera_info: bool,
 
 
 def declare_topic_list(node: Node, name: str, default: list[str], description: str,
-                       executable: str) -> list[str]:
+                       executable: str, items: str = 'topic names') -> list[str]:
     """Declare a read-only topic-list parameter (``string[]``, ``default`` when not given,
     which may be empty); return its topics. Any other type (such as a comma-separated string)
-    stops the start with the reason."""
+    stops the start with the reason. ``items`` names what the strings are (e.g. 'files')."""
     def descriptor(read_only: bool) -> ParameterDescriptor:
-        return ParameterDescriptor(description=f'{description} (list of topic names)',
+        return ParameterDescriptor(description=f'{description} (list of {items})',
                                    type=ParameterType.PARAMETER_STRING_ARRAY, read_only=read_only)
     try:
         value = node.declare_parameter(name, Parameter.Type.STRING_ARRAY,
                                        descriptor(False)).value
     except InvalidParameterTypeException as exc:
-        raise StartupError(f'{executable} cannot start: {name} must be a list of topic names, '
+        raise StartupError(f'{executable} cannot start: {name} must be a list of {items}, '
                            f'e.g. [/camera2/hand/observation]: {exc}') from exc
     if value is None:
         # rclpy cannot infer string[] from an empty default: set it once typed, then freeze it

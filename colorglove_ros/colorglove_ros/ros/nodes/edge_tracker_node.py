@@ -6,6 +6,11 @@ publishes what ``ik_node`` publishes: ``hand/joint_states`` (URDF joint names),
 ``calibration_file`` (required for two cameras: the extrinsics); with ``calibration_file``
 empty, one camera is taken from the first ``CameraInfo`` on ``camera_info_topic``.
 
+Silhouettes: ``background_images`` names one image of the empty scene per camera (the hand
+out of view, same camera settings; PNG or JPEG, colour or grey like the camera's images).
+Each frame's foreground against it then enters the fit (``silhouette_weight``) and its drift
+checks (``max_unexplained``); empty: edges only.
+
 Start: hold the flat hand still, palm to the (primary) camera, at the marked spot
 ``init_wrist_position``; or publish a starting pose on ``edge_tracker/init_joint_states`` +
 ``edge_tracker/init_wrist_pose`` (e.g. remapped from the glove tracker's outputs). Frames
@@ -26,6 +31,7 @@ from colorglove_ros.core.hand.frames import finger_joint_names
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
 from colorglove_ros.core.tracking.edge_tracker import EdgeTracker
+from colorglove_ros.core.tracking.silhouette import SilhouetteConfig, read_background
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.bags import camera_info_to_pinhole
 from colorglove_ros.ros.conversions import pose_from_msgs, stamp_to_seconds
@@ -99,6 +105,19 @@ class EdgeTrackerNode(Node):
                                    defaults.max_camera_disagreement_mm,
                                    'camera_check: largest fingertip distance (relative to the '
                                    'wrist) between the two fits, mm', 0.1, 1000.0)
+        backgrounds = declare_topic_list(self, 'background_images', [],
+                                         'empty-scene image per camera for the silhouettes; '
+                                         'empty: edges only', 'edge_tracker_node', 'files')
+        threshold = declare(self, 'silhouette_threshold', SilhouetteConfig().threshold,
+                            'foreground: some channel differs from the empty scene by more '
+                            'than this, grey levels', 1.0, 255.0)
+        silhouette_weight = declare(self, 'silhouette_weight', defaults.silhouette_weight,
+                                    'weight of the silhouette residuals in the fit (0: off)',
+                                    0.0, 100.0)
+        max_unexplained = declare(self, 'max_unexplained', defaults.max_unexplained,
+                                  'largest share of the hand silhouette no part of the fitted '
+                                  'hand explains, in any camera, before a frame counts as '
+                                  'drift (1: never)', 0.0, 1.0)
         with startup_errors('edge_tracker_node', ValueError):
             if len(init_wrist) != 3:
                 raise ColorGloveError(f'init_wrist_position needs 3 values, got {init_wrist}')
@@ -110,7 +129,11 @@ class EdgeTrackerNode(Node):
                 min_found_fraction=float(min_found),
                 min_camera_found_fraction=float(min_camera), loss_patience=int(patience),
                 polarity=int(polarity), camera_check=bool(camera_check),
-                max_camera_disagreement_mm=float(max_disagreement))
+                max_camera_disagreement_mm=float(max_disagreement),
+                silhouette_weight=float(silhouette_weight),
+                max_unexplained=float(max_unexplained))
+            self.backgrounds = [read_background(resolve_path(f), SilhouetteConfig(
+                threshold=float(threshold))) for f in backgrounds]
             cameras: tuple[PinholeCamera, ...] = ()
             if calibration_file:
                 calibration = load_calibration(resolve_path(calibration_file))
@@ -120,6 +143,9 @@ class EdgeTrackerNode(Node):
             if cameras and len(self.image_topics) != len(cameras):
                 raise ColorGloveError(f'{len(cameras)} calibrated camera(s) but '
                                       f'{len(self.image_topics)} image topic(s); set image_topics')
+            if self.backgrounds and len(self.backgrounds) != len(self.image_topics):
+                raise ColorGloveError(f'{len(self.image_topics)} image topic(s) but '
+                                      f'{len(self.backgrounds)} background_images')
             if not cameras and len(self.image_topics) != 1:
                 raise ColorGloveError('several image topics need a calibration_file with their '
                                       'extrinsics')
@@ -146,7 +172,8 @@ class EdgeTrackerNode(Node):
 
     def _make_tracker(self, cameras: tuple[PinholeCamera, ...]) -> None:
         with startup_errors('edge_tracker_node'):
-            self.tracker = EdgeTracker(self.model, cameras, self.config)
+            self.tracker = EdgeTracker(self.model, cameras, self.config,
+                                       self.backgrounds or None)
         self.get_logger().info(f'edge tracking with {len(cameras)} camera(s)')
 
     def on_camera_info(self, msg: CameraInfo) -> None:

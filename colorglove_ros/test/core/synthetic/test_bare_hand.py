@@ -75,3 +75,25 @@ def test_min_contrast_holds_in_every_view_of_the_rig() -> None:
         assert min(contrast[:views]) >= 0.25
         if views == 1:
             assert contrast[1] < 0.25     # the case the rig-wide check exists for
+
+
+def test_empty_scene_is_the_same_scene_without_the_hand() -> None:
+    from colorglove_ros.core.camera import load_calibration
+    from colorglove_ros.paths import resolve_path
+
+    cameras = load_calibration(resolve_path('config/calibration_stereo.yaml')).cameras
+    seq = BareHandSequence(cameras[0], seed=2, num_frames=20)
+    try:
+        empty = seq.render_empty_views(cameras)
+        frames = seq.render_views(0, cameras)
+    finally:
+        seq.close()
+    for frame, image in zip(frames, empty, strict=True):
+        assert image.shape == frame.image_rgb.shape and image.dtype == np.uint8
+        diff = np.abs(frame.image_rgb.astype(int) - image.astype(int)).max(axis=2)
+        hand = frame.patch_ids > 0
+        assert np.median(diff[hand]) > 30          # the hand is gone
+        ys, xs = np.nonzero(hand)
+        far = np.ones_like(hand)
+        far[max(ys.min() - 20, 0):, max(xs.min() - 20, 0):xs.max() + 20] = False
+        assert np.median(diff[far]) < 8 and np.percentile(diff[far], 99) < 25   # new noise only

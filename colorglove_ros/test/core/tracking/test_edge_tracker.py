@@ -1,6 +1,8 @@
 """The DigitEyes edge tracker on rendered bare-hand frames with ground truth."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -30,6 +32,7 @@ def rig():
     cameras = load_calibration(resolve_path('config/calibration_stereo.yaml')).cameras
     seq = BareHandSequence(cameras[0], seed=5, num_frames=40, hold_frames=10)
     frames = {i: [f.image_rgb for f in seq.render_views(i, cameras)] for i in (0, 20, 21, 22)}
+    frames['empty'] = seq.render_empty_views(cameras)
     yield cameras, seq, frames
     seq.close()
 
@@ -290,3 +293,59 @@ def test_cameras_that_disagree_flag_drift(rig) -> None:
                                           + torn.camera_disagreement_mm))._check_fit(torn)
     assert kind == 'drift' and 'primary camera alone' in reason
 
+
+
+def _backgrounds(frames) -> list:
+    from colorglove_ros.core.tracking.silhouette import BackgroundModel
+
+    return [BackgroundModel.from_frames([e]) for e in frames['empty']]
+
+
+def test_silhouettes_measure_a_fit_that_left_the_hand(rig) -> None:
+    cameras, seq, frames = rig
+    # the shares are measured when a check uses them
+    tracker = EdgeTracker(seq.synth.model, cameras, EdgeTrackerConfig(max_unexplained=0.5),
+                          _backgrounds(frames))
+    truth = seq.poses[20]
+    good = tracker.fit(frames[20], truth)
+    assert good.off_silhouette < 0.02 and good.unexplained < 0.01
+    assert np.isnan(EdgeTracker(seq.synth.model, cameras).fit(frames[20], truth).off_silhouette)
+    assert np.isnan(tracker.with_config(max_unexplained=1.0).fit(frames[20], truth).unexplained)
+    # the index finger bent sideways and folded: its links leave the silhouette and its
+    # true place is left unexplained
+    bent = truth.copy()
+    bent[seq.synth.model.dof_names.index('index_mcp_abd')] += 1.0
+    bent[seq.synth.model.dof_names.index('index_mcp_flex')] += 0.8
+    tracker.config = replace(tracker.config, gn_iterations=1, stabilizer=(1e9, 1e9, 1e9))
+    wrong = tracker.fit(frames[20], bent)
+    assert wrong.off_silhouette > 0.05 and wrong.unexplained > 0.02
+    strict = tracker.with_config(max_off_silhouette=0.05, max_unexplained=0.02)
+    kind, reason = strict._check_fit(wrong)
+    assert kind == 'drift' and 'off the silhouette' in reason
+    kind, reason = tracker.with_config(max_unexplained=0.02)._check_fit(wrong)
+    assert kind == 'drift' and 'unexplained' in reason
+    assert strict._check_fit(good) == ('', '')
+    with pytest.raises(EdgeTrackerError):
+        tracker.set_backgrounds(_backgrounds(frames)[:1])
+    with pytest.raises(EdgeTrackerError):
+        EdgeTrackerConfig(max_unexplained=1.5)
+
+
+def test_silhouette_residuals_pull_a_finger_back_onto_the_hand(rig) -> None:
+    # the index finger bent 34 degrees too far, beyond the reach of short edge searches: the
+    # edges cannot bring it back; the silhouette residuals (its axis off the hand in the side
+    # camera, its true place unexplained) move it toward the silhouette
+    from colorglove_ros.core.tracking.edge_features import EdgeSearchConfig
+
+    cameras, seq, frames = rig
+    truth = seq.poses[20]
+    dof = seq.synth.model.dof_names.index('index_mcp_flex')
+    start = truth.copy()
+    start[dof] += 0.6
+    fits = {}
+    for weight in (0.0, 0.3):
+        config = EdgeTrackerConfig(silhouette_weight=weight, max_unexplained=0.99,
+                                   search=EdgeSearchConfig(search_px=2.0))
+        tracker = EdgeTracker(seq.synth.model, cameras, config, _backgrounds(frames))
+        fits[weight] = tracker.fit(frames[20], start, rounds=3)
+    assert fits[0.3].unexplained < 0.5 * fits[0.0].unexplained

@@ -106,3 +106,28 @@ def test_camera_check_parameters_reach_the_tracker() -> None:
                        max_camera_disagreement_mm=15.0)) as h:
         config = h.nodes[0].config
     assert config.camera_check and config.max_camera_disagreement_mm == 15.0
+
+
+def test_background_images_give_the_tracker_silhouettes(tmp_path, sequence) -> None:
+    import cv2
+
+    seq, frames = sequence
+    empty = seq.render_empty_views([default_camera()])[0]
+    path = tmp_path / 'empty.png'
+    cv2.imwrite(str(path), empty[..., ::-1])
+    with running(_node(background_images=[str(path)], silhouette_weight=0.3,
+                       max_unexplained=0.2, silhouette_threshold=25.0)) as h:
+        tracker = h.nodes[0].tracker
+        assert tracker.config.silhouette_weight == 0.3 and tracker.config.max_unexplained == 0.2
+        (background,) = tracker.backgrounds
+        assert background.config.threshold == 25.0
+        assert np.abs(background.mean.astype(float) - cv2.resize(
+            empty, background.mean.shape[1::-1], interpolation=cv2.INTER_AREA)).max() < 1.0
+        silhouette = background.silhouette(frames[20])
+        assert silhouette.area_px > 3000
+    with pytest.raises(StartupError):
+        with running(_node(background_images=[str(path), str(path)])):
+            pass
+    with pytest.raises(StartupError):
+        with running(_node(background_images=[str(tmp_path / 'missing.png')])):
+            pass

@@ -1,0 +1,24 @@
+"""colorglove_eval_edges end to end on a short sequence: table, --json, silhouettes or not."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from colorglove_ros.tools.eval_edges import main
+
+
+@pytest.mark.slow
+def test_short_run_with_and_without_the_empty_scene(tmp_path) -> None:
+    rows = {}
+    for background in ('empty', 'none'):
+        out = tmp_path / f'{background}.json'
+        assert main(['--seeds', '1', '--frames', '40', '--speeds', '1', '--cameras', '2',
+                     '--background', background, '--json', str(out)]) == 0
+        data = json.loads(out.read_text())
+        assert data['settings']['background'] == background
+        (row,) = data['rows']
+        assert row['frames'] == 40 and row['published'] > 10     # started from the hold
+        rows[background] = row
+    # the silhouettes take part in the fit: the estimates differ
+    assert rows['empty']['fingertip_rel_wrist_mm'] != rows['none']['fingertip_rel_wrist_mm']
