@@ -128,7 +128,7 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
     from dataclasses import asdict
 
     from colorglove_ros.core.evaluation.scripted_hands import load_tracking_noise
-    from colorglove_ros.core.evaluation.scripted_tracking import ScriptedTracker, database_tag
+    from colorglove_ros.core.evaluation.scripted_tracking import ScriptedTracker
     from colorglove_ros.core.evaluation.sequences import LABEL_SOURCES, find_database
     from colorglove_ros.paths import data_dir, share_dir
 
@@ -152,7 +152,7 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
                         "rendered images) or 'truth' (the renderer's labels)")
     parser.add_argument('--database', type=Path,
                         help='with --tracker: pose database (default: the largest under data/; '
-                        'a database given here has its tracked poses cached apart)')
+                        'tracked poses are cached per database contents)')
     parser.add_argument('--classifier', type=Path,
                         default=share_dir() / settings.classifier if settings.classifier
                         else None, help='trained classifier (colorglove_train_hand_classifiers; '
@@ -166,10 +166,9 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
         args.classifier, settings.feature_set)
     if args.tracker:
         database = args.database or find_database(data_dir())
-        # a database given by name is cached under its own tag (the default's cache is untagged)
+        # tracked poses are cached under a tag of the database's contents
         source: Any = ScriptedTracker(database, config / 'ik.yaml', config / 'calibration.yaml',
-                                      data_dir() / 'scripted_tracking', args.labels,
-                                      database_tag(database) if args.database else '')
+                                      data_dir() / 'scripted_tracking', args.labels)
         source_settings: dict[str, Any] = {'source': 'tracker', 'labels': args.labels,
                                            'database': str(database)}
     else:

@@ -39,24 +39,23 @@ class ScriptedTracker:
     the seed, the primary camera of ``calibration``), runs the per-frame recipe (segmentation
     with ``labels='segmented'``, lookup, IK with smoothing) and returns the tracked poses and
     the found flags. Results are cached in ``cache_dir`` as ``<name>_<seed>_<frames>_<labels>
-    .npz`` (versioned, with the true poses, so a changed script is tracked anew), with
-    ``_<cache_tag>`` before the extension when a tag is given (another database's tracking,
-    :func:`database_tag`, is cached apart from the default database's)."""
+    _<database tag>.npz`` (versioned, with the true poses, so a changed script is tracked
+    anew; :func:`database_tag` of ``database``'s contents, so a rebuilt or another database
+    never reads a cache of other tracking)."""
 
     database: Path
     ik_config: Path
     calibration: Path
     cache_dir: Path
     labels: str = 'segmented'
-    cache_tag: str = ''
 
     def __post_init__(self) -> None:
         self._evaluator: Any = None
         self.frames_tracked = 0       # frames run through the tracker (not from the cache)
 
     def _cache_path(self, name: str, seed: int, frames: int) -> Path:
-        tag = f'_{self.cache_tag}' if self.cache_tag else ''
-        return Path(self.cache_dir) / f'{name}_{seed}_{frames}_{self.labels}{tag}.npz'
+        tag = database_tag(self.database)
+        return Path(self.cache_dir) / f'{name}_{seed}_{frames}_{self.labels}_{tag}.npz'
 
     def _load(self, path: Path, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         try:

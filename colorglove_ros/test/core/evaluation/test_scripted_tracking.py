@@ -35,16 +35,17 @@ def test_database_tag_names_the_contents(tmp_path: Path) -> None:
         database_tag(tmp_path / 'missing')
 
 
-def test_tagged_tracking_is_cached_apart(tmp_path: Path) -> None:
-    """Tracking with another database never reads the default database's cache file."""
+def test_each_database_has_its_own_cache(tmp_path: Path) -> None:
+    """Tracking with another database, or with the default database rebuilt, never reads the
+    cache of the database before: every cache file is named by the database's contents."""
     truth = np.zeros((3, 26))
-    plain = ScriptedTracker(Path('db'), Path('ik.yaml'), Path('cal.yaml'), tmp_path)
-    tagged = ScriptedTracker(Path('other'), Path('ik.yaml'), Path('cal.yaml'), tmp_path,
-                             cache_tag='db0000abcd')
-    path = plain._cache_path('spelling', 7, 3)
+    first, rebuilt = _saved(tmp_path, 'a', 0), _saved(tmp_path, 'b', 1)
+    before = ScriptedTracker(first, Path('ik.yaml'), Path('cal.yaml'), tmp_path)
+    after = ScriptedTracker(rebuilt, Path('ik.yaml'), Path('cal.yaml'), tmp_path)
+    path = before._cache_path('spelling', 7, 3)
     np.savez_compressed(path, version=1, q_true=truth, q_est=truth + 1.0,
                         found=np.ones(3, bool))
-    assert plain._load(path, truth) is not None
-    other = tagged._cache_path('spelling', 7, 3)
-    assert other != path and other.name == 'spelling_7_3_segmented_db0000abcd.npz'
-    assert not other.exists()
+    assert before._load(path, truth) is not None
+    assert path.name == f'spelling_7_3_segmented_{database_tag(first)}.npz'
+    other = after._cache_path('spelling', 7, 3)
+    assert other != path and not other.exists()
