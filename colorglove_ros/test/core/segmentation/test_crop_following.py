@@ -2,19 +2,19 @@
 it, and the whole frame again when the hand is not there (or after a frame without one)."""
 from __future__ import annotations
 
-import cv2
 import numpy as np
 import pytest
-from segmentation_samples import blob_glove_calibration
-
-from colorglove_ros.core.segmentation.segmenter import GloveSegmenter
-from colorglove_ros.core.synthetic.blob_glove import (
-    BlobConditions,
-    render_blob_frame,
+from segmentation_samples import (
+    GREY,
+    LEFT,
+    RIGHT,
+    blob_glove_calibration,
+    blob_glove_cutout,
+    paste_gloves,
 )
 
-GREY = 110
-LEFT, RIGHT = (150, 240), (470, 240)      # glove centres (x, y) in a 640x480 frame
+from colorglove_ros.core.segmentation.segmenter import GloveSegmenter
+
 # the whole-frame search's crop on the two-glove frame lies at least this far from LEFT
 WHOLE_FRAME_SHIFT_PX = 60
 
@@ -25,28 +25,8 @@ def calibration():
 
 
 @pytest.fixture(scope='module')
-def glove() -> tuple[np.ndarray, np.ndarray]:
-    """A clean blob glove's pixels and mask, cut to its bounding box."""
-    rng = np.random.default_rng(3)
-    image, labels = render_blob_frame(rng, BlobConditions(1.0, (1.0, 1.0, 1.0), 1.0, 0, False,
-                                                          1.0))
-    ys, xs = np.nonzero(labels)
-    box = np.s_[ys.min():ys.max() + 1, xs.min():xs.max() + 1]
-    return image[box], labels[box] > 0
-
-
-def _frame(glove: tuple[np.ndarray, np.ndarray], *placed: tuple[tuple[int, int], float]
-           ) -> np.ndarray:
-    """A grey frame with the glove pasted centred at each (centre, scale)."""
-    frame = np.full((480, 640, 3), GREY, np.uint8)
-    pixels, mask = glove
-    for (cx, cy), scale in placed:
-        size = (round(pixels.shape[1] * scale), round(pixels.shape[0] * scale))
-        p = cv2.resize(pixels, size, interpolation=cv2.INTER_NEAREST)
-        m = cv2.resize(mask.view(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
-        y0, x0 = cy - size[1] // 2, cx - size[0] // 2
-        frame[y0:y0 + size[1], x0:x0 + size[0]][m] = p[m]
-    return frame
+def glove():
+    return blob_glove_cutout()
 
 
 def _crop_x(segmenter: GloveSegmenter, frame: np.ndarray) -> float | None:
@@ -57,34 +37,34 @@ def _crop_x(segmenter: GloveSegmenter, frame: np.ndarray) -> float | None:
 def test_the_search_follows_the_hand_past_a_larger_glove_elsewhere(calibration, glove) -> None:
     """With a second, larger glove appearing far away, the followed hand keeps the crop;
     searching the whole frame (following off) the crop leaves the first glove."""
-    two = _frame(glove, (LEFT, 1.0), (RIGHT, 1.4))
+    two = paste_gloves(glove, (LEFT, 1.0), (RIGHT, 1.4))
     following = GloveSegmenter(calibration, follow_margin=2.5)
-    assert abs(_crop_x(following, _frame(glove, (LEFT, 1.0))) - LEFT[0]) < 20
+    assert abs(_crop_x(following, paste_gloves(glove, (LEFT, 1.0))) - LEFT[0]) < 20
     assert abs(_crop_x(following, two) - LEFT[0]) < 20
     whole = GloveSegmenter(calibration, follow_margin=0.0)
-    assert abs(_crop_x(whole, _frame(glove, (LEFT, 1.0))) - LEFT[0]) < 20
+    assert abs(_crop_x(whole, paste_gloves(glove, (LEFT, 1.0))) - LEFT[0]) < 20
     assert abs(_crop_x(whole, two) - LEFT[0]) > WHOLE_FRAME_SHIFT_PX
 
 
-def test_a_hand_that_left_the_followed_region_is_found_on_the_whole_frame(calibration,
+def test_a_hand_that_left_the_followed_region_is_found_on_the_wholepaste_gloves(calibration,
                                                                           glove) -> None:
     following = GloveSegmenter(calibration, follow_margin=2.5)
-    assert abs(_crop_x(following, _frame(glove, (LEFT, 1.0))) - LEFT[0]) < 20
-    assert abs(_crop_x(following, _frame(glove, (RIGHT, 1.0))) - RIGHT[0]) < 20
+    assert abs(_crop_x(following, paste_gloves(glove, (LEFT, 1.0))) - LEFT[0]) < 20
+    assert abs(_crop_x(following, paste_gloves(glove, (RIGHT, 1.0))) - RIGHT[0]) < 20
 
 
 def test_nothing_is_followed_after_a_frame_without_hand_or_lose_track(calibration,
                                                                       glove) -> None:
-    two = _frame(glove, (LEFT, 1.0), (RIGHT, 1.4))
+    two = paste_gloves(glove, (LEFT, 1.0), (RIGHT, 1.4))
     following = GloveSegmenter(calibration, follow_margin=2.5)
-    assert _crop_x(following, _frame(glove, (LEFT, 1.0))) is not None
+    assert _crop_x(following, paste_gloves(glove, (LEFT, 1.0))) is not None
     assert _crop_x(following, np.full((480, 640, 3), GREY, np.uint8)) is None
     # searched whole again: the crop leaves the first glove
     assert abs(_crop_x(following, two) - LEFT[0]) > WHOLE_FRAME_SHIFT_PX
-    assert abs(_crop_x(following, _frame(glove, (LEFT, 1.0))) - LEFT[0]) < 20
+    assert abs(_crop_x(following, paste_gloves(glove, (LEFT, 1.0))) - LEFT[0]) < 20
     following.lose_track()
     assert abs(_crop_x(following, two) - LEFT[0]) > WHOLE_FRAME_SHIFT_PX
-    assert abs(_crop_x(following, _frame(glove, (LEFT, 1.0))) - LEFT[0]) < 20
+    assert abs(_crop_x(following, paste_gloves(glove, (LEFT, 1.0))) - LEFT[0]) < 20
     fresh = following.fresh()          # a fresh segmenter follows nothing
     assert abs(_crop_x(fresh, two) - LEFT[0]) > WHOLE_FRAME_SHIFT_PX
 
@@ -95,7 +75,7 @@ def test_following_gives_the_same_observations_on_a_slow_motion(calibration, glo
     following = GloveSegmenter(calibration, follow_margin=2.5)
     whole = GloveSegmenter(calibration, follow_margin=0.0)
     for step in range(6):
-        frame = _frame(glove, ((LEFT[0] + 6 * step, LEFT[1] + 3 * step), 1.0))
+        frame = paste_gloves(glove, ((LEFT[0] + 6 * step, LEFT[1] + 3 * step), 1.0))
         a, b = following.process(frame), whole.process(frame)
         assert a.hand_found and b.hand_found
         assert np.array_equal(a.tiny_labels, b.tiny_labels)
@@ -108,11 +88,11 @@ def test_the_scene_colours_are_the_whole_frames_while_following(calibration, glo
     outside the followed region still counts, and the observation is the whole-frame one."""
     pixels, mask = glove
     colours, counts = np.unique(pixels[mask].reshape(-1, 3), axis=0, return_counts=True)
-    surface = _frame(glove, (LEFT, 1.0))
+    surface = paste_gloves(glove, (LEFT, 1.0))
     surface[40:440, 420:630] = colours[np.argmax(counts)]
     following = GloveSegmenter(calibration, follow_margin=2.5)
     whole = GloveSegmenter(calibration, follow_margin=0.0)
-    for frame in (_frame(glove, (LEFT, 1.0)), surface):
+    for frame in (paste_gloves(glove, (LEFT, 1.0)), surface):
         a, b = following.process(frame), whole.process(frame)
     assert b.hand_found and a.hand_found
     assert np.array_equal(a.tiny_labels, b.tiny_labels)
