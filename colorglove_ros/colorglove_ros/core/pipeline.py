@@ -49,7 +49,7 @@ __all__ = [
     'TemporalPrior', 'Observer', 'FrameObservations', 'FrameLookup', 'FramePipeline',
     'segment_frame', 'bad_image', 'observe_image', 'image_observer', 'look_up', 'track',
     'bad_prior', 'hand_keypoints_at_plausible_depth', 'weak_evidence', 'missing_glove',
-    'tracked_crop',
+    'tracked_crop', 'glove_outside',
 ]
 
 # Nearest database image farther than this from the observation (tiny-image pixels): glove-
@@ -82,7 +82,13 @@ class StageLimits:
     reference focal length) and is found when a blob of its colour with at least
     ``min_patch_blob_share`` of its visible area lies within ``near_patch_sizes`` patch sizes
     of it. That is the signature of glove colours the segmentation missed: the rest of the
-    hand looks like a smaller hand farther away, and the lookup and the IK agree with it."""
+    hand looks like a smaller hand farther away, and the lookup and the IK agree with it.
+
+    Glove outside the hand: a fit with more than ``max_outside_blob_share`` of the primary
+    camera's glove blob pixels in blobs centred farther than ``outside_reach`` times the
+    fitted hand's crop window (:func:`tracked_crop`) from its centre is refused
+    (:func:`glove_outside`; 1 turns this off): glove-coloured clutter in the crop that the
+    fitted hand does not account for."""
 
     max_image_distance: float = DEFAULT_MAX_IMAGE_DISTANCE
     require_constraint: bool = True
@@ -94,6 +100,8 @@ class StageLimits:
     min_shown_patch_px: float = 30.0
     near_patch_sizes: float = 1.5
     min_patch_blob_share: float = 0.1
+    max_outside_blob_share: float = 1.0
+    outside_reach: float = 1.0
 
 
 NODE_LIMITS = StageLimits()
@@ -102,7 +110,7 @@ NODE_LIMITS = StageLimits()
 # measures the tracker itself, as its figures always have, not the nodes' refusals.
 UNGATED = StageLimits(max_image_distance=math.inf, require_constraint=False, check_depth=False,
                       refuse_cut_hands=False, min_explained_blob_share=0.0,
-                      max_missing_glove_share=1.0)
+                      max_missing_glove_share=1.0, max_outside_blob_share=1.0)
 
 
 @dataclass(frozen=True)
@@ -336,6 +344,29 @@ def tracked_crop(tracker: Any, q: np.ndarray, stamp: float) -> CropPrediction | 
     return predict_crop(surface, q, tracker.cameras[0], stamp)
 
 
+def glove_outside(tracker: Any, q: np.ndarray, observation: CameraObservation,
+                  limits: StageLimits) -> str:
+    """Why pose ``q`` leaves much of the primary camera's observed glove outside the hand
+    ('' when it does not, or the gate is off): the share of the observation's blob pixels
+    in blobs whose centroid lies farther than ``limits.outside_reach`` times the fitted
+    hand's crop window (:func:`tracked_crop`; per axis) from its centre is more than
+    ``limits.max_outside_blob_share``."""
+    if limits.max_outside_blob_share >= 1.0 or not len(observation.blobs):
+        return ''
+    window = tracked_crop(tracker, q, 0.0)
+    if window is None:
+        return ''
+    blobs = observation.blobs
+    reach = limits.outside_reach * window.half_size
+    off = np.abs(blobs.centroid_px - np.asarray(window.center_xy)).max(axis=1) > reach
+    share = float(blobs.pixel_count[off].sum() / max(blobs.pixel_count.sum(), 1e-9))
+    if not share > limits.max_outside_blob_share:
+        return ''
+    return (f'glove outside the hand: {share:.0%} of the glove blob pixels lie beyond '
+            f'{limits.outside_reach:g} crop windows of the fitted hand (more than '
+            f'{limits.max_outside_blob_share:.0%})')
+
+
 def track(tracker: Any, prior: PosePrior | LookupResult | None,
           observations: Sequence[CameraObservation], stamp: float,
           limits: StageLimits = NODE_LIMITS, *, temporal: TemporalPrior | None = None,
@@ -348,7 +379,8 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
     :class:`NoHand` when the prior is unusable or at an implausible depth ('bad candidates:
     ...'), the tracker found nothing (the upstream reason, or 'lost'), or the fit is refused:
     no constraint matched an observed blob (``limits.require_constraint``), a non-finite pose,
-    weak evidence (:func:`weak_evidence`), glove the image lacks (:func:`missing_glove`) or
+    weak evidence (:func:`weak_evidence`), glove the image lacks (:func:`missing_glove`),
+    glove the fitted hand leaves outside (:func:`glove_outside`) or
     a hand at an implausible depth (``limits.check_depth``); with ``limits.refuse_cut_hands``
     a hand cut by the primary image's border is not tracked (:data:`CUT_BY_BORDER`). A
     refusal resets the tracker.
@@ -382,6 +414,8 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
         reason = weak
     elif missing := missing_glove(tracker, result.q, observations[0], limits):
         reason = missing
+    elif outside := glove_outside(tracker, result.q, observations[0], limits):
+        reason = outside
     elif limits.check_depth:
         try:
             keypoints = hand_keypoints_at_plausible_depth(tracker, result.q)

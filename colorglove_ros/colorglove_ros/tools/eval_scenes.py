@@ -105,6 +105,13 @@ def main(argv: list[str] | None = None) -> int:
                         help='crop predictions from a tracked frame serve the next frames this '
                              'long (segmentation_node parameter of that name; 0: off; used when '
                              'the colour config\'s prediction_margin > 0)')
+    parser.add_argument('--max-outside-blob-share', type=float,
+                        default=NODE_LIMITS.max_outside_blob_share,
+                        help='the glove-outside-the-hand gate (ik_node parameter of that name; '
+                             '1: off)')
+    parser.add_argument('--outside-reach', type=float, default=NODE_LIMITS.outside_reach,
+                        help='its reach in crop windows of the fitted hand (ik_node parameter '
+                             'of that name)')
     args = parser.parse_args(argv)
     from colorglove_ros.core.hand.glove import default_hand
     from colorglove_ros.core.lookup.search import PoseLookup
@@ -123,7 +130,9 @@ def main(argv: list[str] | None = None) -> int:
     except ColorGloveError as exc:
         return tool_error('colorglove_eval_scenes', exc)
     camera = calibration.primary
-    limits = replace(NODE_LIMITS, max_missing_glove_share=args.max_missing_glove_share)
+    limits = replace(NODE_LIMITS, max_missing_glove_share=args.max_missing_glove_share,
+                     max_outside_blob_share=args.max_outside_blob_share,
+                     outside_reach=args.outside_reach)
 
     def hand_factory(factors: Any) -> Any:
         if factors is None:
@@ -181,6 +190,8 @@ def main(argv: list[str] | None = None) -> int:
                 'calibration': args.calibration, 'fps': args.fps,
                 'max_missing_glove_share': args.max_missing_glove_share,
                 'prediction_max_age_s': args.prediction_max_age_s,
+                'max_outside_blob_share': args.max_outside_blob_share,
+                'outside_reach': args.outside_reach,
                 'wall_s': time.perf_counter() - started}
     if args.json:
         write_json(Path(args.json), {'settings': settings, 'rows': rows, 'targets': targets})

@@ -17,10 +17,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from colorglove_ros.core.segmentation.crop import DEFAULT_BANDWIDTH_FACTOR
+from colorglove_ros.core.segmentation.crop import (
+    DEFAULT_BANDWIDTH_FACTOR,
+    CropTransform,
+    TinyCrop,
+    crop_window,
+)
 
 __all__ = ['CropPrediction', 'predict_crop', 'window_from_moments', 'CropFeedback',
-           'DEFAULT_PREDICTION_MAX_AGE_S', 'prediction_bounds', 'covers', 'crop_disagrees']
+           'DEFAULT_PREDICTION_MAX_AGE_S', 'prediction_bounds', 'covers',
+           'predicted_size_crop']
 
 #: A prediction older than this (seconds before the frame it would serve) is stale: the next
 #: frame is searched as without one. The segmentation node's parameter default.
@@ -95,21 +101,34 @@ def covers(prediction: CropPrediction, low: tuple[float, float],
     return low[0] <= cx < high[0] and low[1] <= cy < high[1]
 
 
-def crop_disagrees(prediction: CropPrediction, center_xy: tuple[float, float],
-                   half_size: float, max_ratio: float) -> str:
-    """Why a found crop window (``center_xy``, ``half_size``, full pixels) disagrees with the
-    prediction ('' when it does not, or ``max_ratio`` is 0): its size more than ``max_ratio``
-    times the predicted size or less than its inverse, or its centre farther than
-    ``max_ratio`` - 1 predicted half sides from the predicted centre."""
-    if max_ratio <= 0:
-        return ''
-    ratio = half_size / max(prediction.half_size, 1e-9)
-    if not 1.0 / max_ratio <= ratio <= max_ratio:
-        return f'crop {ratio:.2f} times the size the tracked hand predicts'
-    shift = math.dist(center_xy, prediction.center_xy) / max(prediction.half_size, 1e-9)
-    if shift > max_ratio - 1.0:
-        return f'crop {shift:.2f} predicted half sides off the tracked hand'
-    return ''
+def predicted_size_crop(labels: np.ndarray, found: TinyCrop,
+                        window: tuple[tuple[float, float], float], max_ratio: float,
+                        min_pixels: int, iterations: int = 1) -> TinyCrop | None:
+    """``found`` (the crop of ``labels``), or, when its size is more than ``max_ratio`` times
+    the predicted ``window``'s ((cx, cy), half, in ``labels``' pixels) or less than its
+    inverse, the crop of the predicted size: the predicted window moved ``iterations`` times
+    to the mean of the glove pixels inside it (a fixed-size mean shift; more steps drift
+    into a large surface touching the hand), None when fewer than ``min_pixels`` glove
+    pixels are inside. ``max_ratio`` 0: ``found`` always."""
+    half = window[1]
+    if max_ratio <= 0 or 1.0 / max_ratio <= found.transform.half_size / half <= max_ratio:
+        return found
+    glove = np.asarray(labels) > 0
+    rows, cols = glove.shape
+    (cx, cy) = window[0]
+    for _ in range(iterations):
+        x0, x1 = max(int(np.ceil(cx - half)), 0), min(int(np.floor(cx + half)) + 1, cols)
+        y0, y1 = max(int(np.ceil(cy - half)), 0), min(int(np.floor(cy + half)) + 1, rows)
+        ys, xs = np.nonzero(glove[y0:y1, x0:x1])
+        if len(xs) < min_pixels:
+            return None
+        nx, ny = float(xs.mean()) + x0, float(ys.mean()) + y0
+        done = abs(nx - cx) < 0.05 and abs(ny - cy) < 0.05
+        cx, cy = nx, ny
+        if done:
+            break
+    transform = CropTransform.from_window((cx, cy), half)
+    return TinyCrop(crop_window(labels, transform), transform)
 
 
 class CropFeedback:

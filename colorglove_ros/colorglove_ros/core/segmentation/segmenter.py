@@ -21,6 +21,7 @@ from colorglove_ros.core.segmentation.crop import CropTransform, crop_to_tiny, m
 from colorglove_ros.core.segmentation.crop_prediction import (
     CropPrediction,
     covers,
+    predicted_size_crop,
     prediction_bounds,
 )
 from colorglove_ros.core.segmentation.detection import (
@@ -350,6 +351,15 @@ class GloveSegmenter:
     frame is searched again (as after a frame without a hand). :meth:`lose_track` forgets
     the hand for frames that do not follow each other.
 
+    Crop prediction (``prediction_margin`` > 0; :meth:`process`'s ``prediction``, the crop
+    window the tracked hand of an earlier frame predicts,
+    ``core.segmentation.crop_prediction``): when its centre lies in the region of interest,
+    glove labels farther than ``prediction_margin`` times its window are background (a
+    glove-coloured surface touching the hand is cut there) and the crop's mean shift starts
+    at it; with ``prediction_max_ratio`` (0 off; above 1) a crop more than that many times
+    larger or smaller than the predicted one is trimmed to the predicted size
+    (``predicted_size_crop``).
+
     Every setting is checked (ranges, odd median kernel, finite numbers) by
     ``core.validation.validate_segmenter_settings`` however the segmenter is built; a bad one
     raises :class:`SegmentationConfigError` naming ``source`` (the settings' file, if any)
@@ -372,6 +382,7 @@ class GloveSegmenter:
                  scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
                  follow_margin: float = 0.0, prediction_margin: float = 0.0,
+                 prediction_max_ratio: float = 0.0,
                  source: str = 'GloveSegmenter') -> None:
         # every keyword argument but ``source`` is a setting named in SEGMENTER_RULES: checked
         # and converted (int, float, tuple of ints) in one place, kept as the attribute of
@@ -693,6 +704,8 @@ class GloveSegmenter:
             full[y0:y0 + up.shape[0], x0:x0 + up.shape[1]] = up
             obs.label_image = full
         tiny = crop_to_tiny(labels, min_pixels=min_px, start=start)
+        if start is not None and tiny is not None:   # far off the predicted size: trimmed
+            tiny = predicted_size_crop(labels, tiny, start, self.prediction_max_ratio, min_px)
         t = tick('crop', t)
         if tiny is None:
             obs.status = STATUS_TOO_SMALL
@@ -727,6 +740,7 @@ class GloveSegmenter:
         elif (sum(b.pixel_count for b in obs.blobs)
               < self.min_blob_share * obs.glove_pixel_count):
             obs.status = STATUS_FRAGMENTED
+
         else:
             obs.status = STATUS_OK
             obs.hand_found = True

@@ -110,6 +110,13 @@ LIVE_EVIDENCE_LIMITS = {
         'share of the glove the fitted hand shows that may lack a blob of its colour near it, '
         'else no pose ("missing glove": colours the segmentation missed); 1 turns this off',
         (0.0, 1.0)),
+    'max_outside_blob_share': (
+        'share of the observed glove blob pixels that may lie in blobs centred beyond '
+        'outside_reach crop windows of the fitted hand, else no pose ("glove outside the '
+        'hand": clutter in the crop); 1 turns this off', (0.0, 1.0)),
+    'outside_reach': (
+        'how far from the fitted hand\'s crop window centre a blob is outside it, in crop '
+        'window half sides', (0.0, 100.0)),
 }
 
 

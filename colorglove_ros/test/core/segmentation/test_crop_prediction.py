@@ -14,12 +14,12 @@ from segmentation_samples import (
 )
 
 from colorglove_ros.core.pipeline import tracked_crop
-from colorglove_ros.core.segmentation.crop import mean_shift_crop
+from colorglove_ros.core.segmentation.crop import crop_to_tiny, mean_shift_crop
 from colorglove_ros.core.segmentation.crop_prediction import (
     CropFeedback,
     CropPrediction,
     covers,
-    crop_disagrees,
+    predicted_size_crop,
     prediction_bounds,
     window_from_moments,
 )
@@ -107,13 +107,19 @@ def test_bounds_of_the_predicted_window_in_a_reduced_label_image() -> None:
     assert covers(p, (90, 50), (101, 61)) and not covers(p, (90, 50), (100, 70))
 
 
-def test_a_crop_disagrees_when_its_size_or_place_is_off_the_prediction() -> None:
-    p = _prediction((100.0, 100.0), 40.0)
-    assert crop_disagrees(p, (100.0, 100.0), 44.0, 1.5) == ''
-    assert 'times the size' in crop_disagrees(p, (100.0, 100.0), 70.0, 1.5)
-    assert 'times the size' in crop_disagrees(p, (100.0, 100.0), 20.0, 1.5)
-    assert 'half sides off' in crop_disagrees(p, (130.0, 100.0), 40.0, 1.5)
-    assert crop_disagrees(p, (100.0, 100.0), 70.0, 0.0) == ''
+def test_a_crop_far_off_the_predicted_size_is_trimmed_to_it() -> None:
+    labels = np.zeros((200, 300), np.uint8)
+    labels[70:130, 70:130] = 3                  # the hand
+    labels[60:140, 130:290] = 5                 # a surface touching it
+    found = crop_to_tiny(labels)
+    assert found.transform.half_size > 1.5 * 75
+    window = ((100.0, 100.0), 75.0)
+    assert predicted_size_crop(labels, found, window, 0.0, 20) is found
+    assert predicted_size_crop(labels, found, window, 3.0, 20) is found
+    trimmed = predicted_size_crop(labels, found, window, 1.2, 20)
+    assert trimmed.transform.half_size == pytest.approx(75.0)
+    assert 100 < trimmed.transform.center_xy[0] < 150   # pulled right by the surface only
+    assert predicted_size_crop(labels, found, ((100.0, 100.0), 75.0), 1.2, 10 ** 6) is None
 
 
 def _touching(glove):
