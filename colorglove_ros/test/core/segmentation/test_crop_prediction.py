@@ -1,5 +1,5 @@
 """The crop predicted from the tracked pose (core/segmentation/crop_prediction.py): the window
-matches the crop of the rendered glove, the feedback serves only fresh predictions, and the
+matches the crop of the rendered blob_glove, the feedback serves only fresh predictions, and the
 segmenter given one crops the hand, not a glove-coloured neighbour touching it."""
 from __future__ import annotations
 
@@ -8,8 +8,6 @@ import pytest
 from segmentation_samples import (
     GREY,
     LEFT,
-    blob_glove_calibration,
-    blob_glove_cutout,
     paste_gloves,
 )
 
@@ -29,16 +27,6 @@ from colorglove_ros.core.tracking.tracker import HandTracker
 
 CAMERA = synth.default_camera()
 SIZE = (640, 480)
-
-
-@pytest.fixture(scope='module')
-def calibration():
-    return blob_glove_calibration()
-
-
-@pytest.fixture(scope='module')
-def glove():
-    return blob_glove_cutout()
 
 
 def _prediction(center: tuple[float, float], half: float, stamp: float = 0.0
@@ -122,38 +110,38 @@ def test_a_crop_far_off_the_predicted_size_is_trimmed_to_it() -> None:
     assert predicted_size_crop(labels, found, ((100.0, 100.0), 75.0), 1.2, 10 ** 6) is None
 
 
-def _touching(glove):
-    """The glove at LEFT and a second, larger copy touching it on its right (a glove-coloured
-    neighbour no colour filter can tell from the hand); and the first glove's crop alone."""
+def _touching(glove: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The glove at LEFT and a second, larger copy close to it on its right (a glove-coloured
+    neighbour no colour filter can tell from the hand); and the first glove alone."""
     width = glove[0].shape[1]
     right = (LEFT[0] + int(0.5 * width + 0.6 * 1.3 * width), LEFT[1])
     return paste_gloves(glove, (LEFT, 1.0), (right, 1.3)), paste_gloves(glove, (LEFT, 1.0))
 
 
-def test_a_prediction_keeps_a_touching_neighbour_out_of_the_crop(calibration, glove
-                                                                 ) -> None:
-    both, alone = _touching(glove)
-    plain = GloveSegmenter(calibration)
+def test_a_prediction_keeps_a_touching_neighbour_out_of_the_crop(blob_calibration,
+                                                                 blob_glove) -> None:
+    both, alone = _touching(blob_glove)
+    plain = GloveSegmenter(blob_calibration)
     hand = plain.process(alone).crop
-    merged = GloveSegmenter(calibration).process(both).crop
+    merged = GloveSegmenter(blob_calibration).process(both).crop
     assert merged.half_size > 1.4 * hand.half_size      # the neighbour grows the crop
     predicted = _prediction(hand.center_xy, hand.half_size)
-    segmenter = GloveSegmenter(calibration, prediction_margin=1.3)
+    segmenter = GloveSegmenter(blob_calibration, prediction_margin=1.3)
     obs = segmenter.process(both, prediction=predicted)
     assert obs.hand_found
     assert obs.crop.half_size == pytest.approx(hand.half_size, rel=0.15)
     assert abs(obs.crop.center_xy[0] - hand.center_xy[0]) < 0.15 * hand.half_size
     # margin 0 (off), or a prediction for another image size: as without one
-    for seg, p in ((GloveSegmenter(calibration), predicted),
+    for seg, p in ((GloveSegmenter(blob_calibration), predicted),
                    (segmenter, CropPrediction(0.0, hand.center_xy, hand.half_size, (320, 240)))):
         assert seg.process(both, prediction=p).crop.half_size == pytest.approx(
             merged.half_size, rel=0.02)
 
 
-def test_a_hand_away_from_the_prediction_is_found_on_the_wholepaste_gloves(calibration,
-                                                                     glove) -> None:
-    frame = paste_gloves(glove, (LEFT, 1.0))
-    segmenter = GloveSegmenter(calibration, prediction_margin=1.3)
+def test_a_hand_away_from_the_prediction_is_found_on_the_whole_frame(blob_calibration,
+                                                                     blob_glove) -> None:
+    frame = paste_gloves(blob_glove, (LEFT, 1.0))
+    segmenter = GloveSegmenter(blob_calibration, prediction_margin=1.3)
     obs = segmenter.process(frame, prediction=_prediction((500.0, 240.0), 60.0))
     assert obs.hand_found and abs(obs.crop.center_xy[0] - LEFT[0]) < 20
     assert np.all(frame[0, 0] == GREY)
