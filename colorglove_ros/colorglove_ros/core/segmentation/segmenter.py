@@ -740,7 +740,6 @@ class GloveSegmenter:
         elif (sum(b.pixel_count for b in obs.blobs)
               < self.min_blob_share * obs.glove_pixel_count):
             obs.status = STATUS_FRAGMENTED
-
         else:
             obs.status = STATUS_OK
             obs.hand_found = True

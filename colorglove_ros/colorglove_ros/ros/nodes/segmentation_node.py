@@ -141,9 +141,9 @@ class SegmentationNode(Node):
             'a crop prediction from ik_node (hand/crop_prediction) serves the frames at most '
             'this many seconds newer than its tracked frame (0: never; used when the '
             'segmenter\'s prediction_margin > 0)', self._check_prediction_max_age, 0.0, 10.0))
-        # the frame_id and size of the last frame segmented: a prediction comes from such a
-        # frame (the message does not carry the image size)
-        self.frame_key: tuple[str, int, int] = ('', 0, 0)
+        # the size of the last frame segmented: a prediction comes from such a frame (the
+        # message does not carry the image size)
+        self.frame_size: tuple[int, int] = (0, 0)
         self.prediction_frame_id = ''
         self.create_subscription(PolygonStamped, CROP_PREDICTION_TOPIC,
                                  self.on_crop_prediction, LATEST_ONLY)
@@ -199,7 +199,7 @@ class SegmentationNode(Node):
     def on_crop_prediction(self, msg: PolygonStamped) -> None:
         """Keep ik_node's newest crop prediction (for the size of the frames segmented)."""
         try:
-            prediction = crop_prediction_from_msg(msg, self.frame_key[1:])
+            prediction = crop_prediction_from_msg(msg, self.frame_size)
         except ValueError as exc:
             self.get_logger().warn(f'crop prediction ignored: {exc}', throttle_duration_sec=1.0)
             return
@@ -223,7 +223,7 @@ class SegmentationNode(Node):
         camera = self.frame_camera.camera_for(width, height, header.frame_id)
         if isinstance(camera, NoHand):
             return camera
-        self.frame_key = (header.frame_id, width, height)
+        self.frame_size = (width, height)
         prediction = None
         if header.frame_id == self.prediction_frame_id:
             prediction = self.feedback.for_frame(stamp_to_seconds(header.stamp))
