@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,6 +24,10 @@ from colorglove_ros.core.segmentation.crop import (
     TinyCrop,
     crop_window,
 )
+
+if TYPE_CHECKING:
+    from colorglove_ros.core.camera import PinholeCamera
+    from colorglove_ros.core.tracking.patch_surface import PatchSurface
 
 __all__ = ['CropPrediction', 'predict_crop', 'window_from_moments', 'CropFeedback',
            'DEFAULT_PREDICTION_MAX_AGE_S', 'prediction_bounds', 'covers',
@@ -62,20 +67,19 @@ def window_from_moments(weight: np.ndarray, uv: np.ndarray,
     return (float(mean[0]), float(mean[1])), bandwidth_factor * math.sqrt(float(var.max()))
 
 
-def predict_crop(surface: object, q: np.ndarray, camera: object, stamp: float
+def predict_crop(surface: PatchSurface, q: np.ndarray, camera: PinholeCamera, stamp: float
                  ) -> CropPrediction | None:
     """The crop predicted from pose ``q`` (``core.tracking.patch_surface.PatchSurface``'s
     visible glove faces in ``camera``, distorted back into the image), stamped ``stamp``;
     None when no glove is visible at the pose."""
-    _, uv, area = surface.visible_faces(q, camera)   # type: ignore[attr-defined]
+    _, uv, area = surface.visible_faces(q, camera)
     if not len(uv):
         return None
-    window = window_from_moments(area, camera.distort_pixels(uv))   # type: ignore[attr-defined]
+    window = window_from_moments(area, camera.distort_pixels(uv))
     if window is None:
         return None
     center, half = window
-    return CropPrediction(float(stamp), center, half,
-                          (int(camera.width), int(camera.height)))   # type: ignore[attr-defined]
+    return CropPrediction(float(stamp), center, half, (int(camera.width), int(camera.height)))
 
 
 def prediction_bounds(prediction: CropPrediction, margin: float, origin: tuple[float, float],
