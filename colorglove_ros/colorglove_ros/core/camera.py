@@ -118,6 +118,20 @@ class PinholeCamera:
                                                P=self.K).reshape(-1, 2)
         return cv2.undistortPoints(pts, self.K, self.distortion, P=self.K).reshape(-1, 2)
 
+    def distort_pixels(self, pixels: np.ndarray) -> np.ndarray:
+        """Add lens distortion to (N, 2) ideal pixels (:meth:`project`'s): where the camera
+        images them; the inverse of :meth:`undistort_pixels` (identity if no distortion)."""
+        if not np.any(self.distortion):
+            return np.asarray(pixels, dtype=float)
+        ideal = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+        xy = (ideal - np.array([self.cx, self.cy])) / np.array([self.fx, self.fy])
+        if self.distortion_model == 'equidistant':
+            return cv2.fisheye.distortPoints(xy.reshape(-1, 1, 2), self.K,
+                                             self.distortion).reshape(-1, 2)
+        rays = np.column_stack([xy, np.ones(len(xy))])
+        seen, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), self.K, self.distortion)
+        return seen.reshape(-1, 2)
+
     def to_dict(self) -> dict:
         """The YAML form of this camera (see ``config/calibration.yaml``)."""
         rvec = cv2.Rodrigues(np.asarray(self.rotation, dtype=np.float64))[0].ravel()

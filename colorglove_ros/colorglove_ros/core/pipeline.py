@@ -21,6 +21,11 @@ import numpy as np
 
 from colorglove_ros.core.lookup.types import LookupResult
 from colorglove_ros.core.segmentation.crop import TinyCrop
+from colorglove_ros.core.segmentation.crop_prediction import (
+    CropFeedback,
+    CropPrediction,
+    predict_crop,
+)
 from colorglove_ros.core.segmentation.types import Observation
 from colorglove_ros.core.tracking.line_constraints import glove_edge_image
 from colorglove_ros.core.tracking.types import Blobs, CameraObservation, IKError, PosePrior
@@ -44,6 +49,7 @@ __all__ = [
     'TemporalPrior', 'Observer', 'FrameObservations', 'FrameLookup', 'FramePipeline',
     'segment_frame', 'bad_image', 'observe_image', 'image_observer', 'look_up', 'track',
     'bad_prior', 'hand_keypoints_at_plausible_depth', 'weak_evidence', 'missing_glove',
+    'tracked_crop', 'glove_outside',
 ]
 
 # Nearest database image farther than this from the observation (tiny-image pixels): glove-
@@ -76,7 +82,13 @@ class StageLimits:
     reference focal length) and is found when a blob of its colour with at least
     ``min_patch_blob_share`` of its visible area lies within ``near_patch_sizes`` patch sizes
     of it. That is the signature of glove colours the segmentation missed: the rest of the
-    hand looks like a smaller hand farther away, and the lookup and the IK agree with it."""
+    hand looks like a smaller hand farther away, and the lookup and the IK agree with it.
+
+    Glove outside the hand: a fit with more than ``max_outside_blob_share`` of the primary
+    camera's glove blob pixels in blobs centred farther than ``outside_reach`` times the
+    fitted hand's crop window (:func:`tracked_crop`) from its centre is refused
+    (:func:`glove_outside`; 1 turns this off): glove-coloured clutter in the crop that the
+    fitted hand does not account for."""
 
     max_image_distance: float = DEFAULT_MAX_IMAGE_DISTANCE
     require_constraint: bool = True
@@ -88,6 +100,8 @@ class StageLimits:
     min_shown_patch_px: float = 30.0
     near_patch_sizes: float = 1.5
     min_patch_blob_share: float = 0.1
+    max_outside_blob_share: float = 1.0
+    outside_reach: float = 1.0
 
 
 NODE_LIMITS = StageLimits()
@@ -96,7 +110,7 @@ NODE_LIMITS = StageLimits()
 # measures the tracker itself, as its figures always have, not the nodes' refusals.
 UNGATED = StageLimits(max_image_distance=math.inf, require_constraint=False, check_depth=False,
                       refuse_cut_hands=False, min_explained_blob_share=0.0,
-                      max_missing_glove_share=1.0)
+                      max_missing_glove_share=1.0, max_outside_blob_share=1.0)
 
 
 @dataclass(frozen=True)
@@ -161,16 +175,19 @@ def _check_observation(observation: Observation) -> None:
         glove_pixel_count=observation.glove_pixel_count)
 
 
-def segment_frame(segmenter: Any, image_rgb: np.ndarray, keep_labels: bool = False
-                  ) -> Observation | NoHand:
-    """Segment one (H, W, 3) uint8 RGB image (``GloveSegmenter.process``). The observation
+def segment_frame(segmenter: Any, image_rgb: np.ndarray, keep_labels: bool = False,
+                  prediction: CropPrediction | None = None) -> Observation | NoHand:
+    """Segment one (H, W, 3) uint8 RGB image (``GloveSegmenter.process``; with the hand's
+    crop ``prediction`` from the tracked pose, :func:`tracked_crop`). The observation
     says itself whether the glove was found (``hand_found``, ``status``); :class:`NoHand` for
     an image the segmenter refuses ('bad image') or an observation with a hand that fails its
     own checks ('implausible observation')."""
     from colorglove_ros.core.segmentation.segmenter import SegmentationInputError
 
     try:
-        observation = segmenter.process(image_rgb, keep_labels=keep_labels)
+        observation = segmenter.process(image_rgb, keep_labels=keep_labels,
+                                        **({} if prediction is None else
+                                           {'prediction': prediction}))
     except SegmentationInputError as exc:
         return bad_image(exc)
     if observation.hand_found:
@@ -186,12 +203,13 @@ Observer = Callable[[Any, bool], tuple[CameraObservation, TinyCrop | None]]
 tracker and, for the primary camera, the tiny crop the lookup runs on (None = no hand)."""
 
 
-def observe_image(segmenter: Any, image_rgb: np.ndarray, primary: bool
+def observe_image(segmenter: Any, image_rgb: np.ndarray, primary: bool,
+                  prediction: CropPrediction | None = None
                   ) -> tuple[CameraObservation, TinyCrop | None]:
-    """One camera's observation of an RGB image (:func:`segment_frame`): its blobs and crop,
-    found when the segmentation found the glove with at least one blob; for the primary
-    camera also the tiny crop to look up."""
-    observation = segment_frame(segmenter, image_rgb)
+    """One camera's observation of an RGB image (:func:`segment_frame`, with the crop
+    ``prediction``): its blobs and crop, found when the segmentation found the glove with at
+    least one blob; for the primary camera also the tiny crop to look up."""
+    observation = segment_frame(segmenter, image_rgb, prediction=prediction)
     if isinstance(observation, NoHand):
         return CameraObservation(False), None
     blobs = Blobs.empty()
@@ -205,13 +223,15 @@ def observe_image(segmenter: Any, image_rgb: np.ndarray, primary: bool
                              glove_edge_image(observation.label_image)), tiny
 
 
-def image_observer(segmenter: Any, image_of: Callable[[Any], np.ndarray] = np.asarray
-                   ) -> Observer:
+def image_observer(segmenter: Any, image_of: Callable[[Any], np.ndarray] = np.asarray,
+                   feedback: CropFeedback | None = None) -> Observer:
     """An :data:`Observer` segmenting each view's RGB image (``image_of(view)``; default: the
     view is the image) with ``segmenter``. A frame's views come primary first, in camera
     order (as :class:`FramePipeline` gives them): every further camera gets a segmenter of its
     own (``segmenter.fresh()``, where it has one), since a segmenter learns its camera's
-    static background."""
+    static background. With ``feedback`` the primary camera's segmentation gets the crop
+    prediction selected for the frame (``CropFeedback.selected``: give the same object to
+    the :class:`FramePipeline`, which selects and offers them)."""
     per_camera = [segmenter]
     index = -1
 
@@ -221,7 +241,8 @@ def image_observer(segmenter: Any, image_of: Callable[[Any], np.ndarray] = np.as
         while len(per_camera) <= index:
             first = per_camera[0]
             per_camera.append(first.fresh() if hasattr(first, 'fresh') else first)
-        return observe_image(per_camera[index], image_of(view), primary)
+        prediction = feedback.selected if primary and feedback is not None else None
+        return observe_image(per_camera[index], image_of(view), primary, prediction)
     return observe
 
 
@@ -312,6 +333,40 @@ def missing_glove(tracker: Any, q: np.ndarray, observation: CameraObservation,
             f'({colors})')
 
 
+def tracked_crop(tracker: Any, q: np.ndarray, stamp: float) -> CropPrediction | None:
+    """The next frame's crop predicted from the tracked pose ``q`` of the frame at ``stamp``
+    in the tracker's primary camera (``core.segmentation.crop_prediction.predict_crop`` on
+    its ``patch_surface``): what ik_node publishes and :class:`FramePipeline` feeds back.
+    None for a tracker without a patch model (a stand-in) or with no glove in view."""
+    surface = getattr(tracker, 'patch_surface', None)
+    if surface is None:
+        return None
+    return predict_crop(surface, q, tracker.cameras[0], stamp)
+
+
+def glove_outside(tracker: Any, q: np.ndarray, observation: CameraObservation,
+                  limits: StageLimits) -> str:
+    """Why pose ``q`` leaves much of the primary camera's observed glove outside the hand
+    ('' when it does not, or the gate is off): the share of the observation's blob pixels
+    in blobs whose centroid lies farther than ``limits.outside_reach`` times the fitted
+    hand's crop window (:func:`tracked_crop`; per axis) from its centre is more than
+    ``limits.max_outside_blob_share``."""
+    if limits.max_outside_blob_share >= 1.0 or not len(observation.blobs):
+        return ''
+    window = tracked_crop(tracker, q, 0.0)
+    if window is None:
+        return ''
+    blobs = observation.blobs
+    reach = limits.outside_reach * window.half_size
+    off = np.abs(blobs.centroid_px - np.asarray(window.center_xy)).max(axis=1) > reach
+    share = float(blobs.pixel_count[off].sum() / max(blobs.pixel_count.sum(), 1e-9))
+    if not share > limits.max_outside_blob_share:
+        return ''
+    return (f'glove outside the hand: {share:.0%} of the glove blob pixels lie beyond '
+            f'{limits.outside_reach:g} crop windows of the fitted hand (more than '
+            f'{limits.max_outside_blob_share:.0%})')
+
+
 def track(tracker: Any, prior: PosePrior | LookupResult | None,
           observations: Sequence[CameraObservation], stamp: float,
           limits: StageLimits = NODE_LIMITS, *, temporal: TemporalPrior | None = None,
@@ -324,7 +379,8 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
     :class:`NoHand` when the prior is unusable or at an implausible depth ('bad candidates:
     ...'), the tracker found nothing (the upstream reason, or 'lost'), or the fit is refused:
     no constraint matched an observed blob (``limits.require_constraint``), a non-finite pose,
-    weak evidence (:func:`weak_evidence`), glove the image lacks (:func:`missing_glove`) or
+    weak evidence (:func:`weak_evidence`), glove the image lacks (:func:`missing_glove`),
+    glove the fitted hand leaves outside (:func:`glove_outside`) or
     a hand at an implausible depth (``limits.check_depth``); with ``limits.refuse_cut_hands``
     a hand cut by the primary image's border is not tracked (:data:`CUT_BY_BORDER`). A
     refusal resets the tracker.
@@ -358,6 +414,8 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
         reason = weak
     elif missing := missing_glove(tracker, result.q, observations[0], limits):
         reason = missing
+    elif outside := glove_outside(tracker, result.q, observations[0], limits):
+        reason = outside
     elif limits.check_depth:
         try:
             keypoints = hand_keypoints_at_plausible_depth(tracker, result.q)
@@ -399,17 +457,22 @@ class FramePipeline:
     primary camera (``camera``), and any number of trackers (whose camera rigs start with the
     same primary camera) track from that one lookup. With ``finger_evidence`` the lookup gets
     the primary camera's blobs; ``limits`` are the gates (the nodes' by default);
-    ``temporal`` reweights the neighbours by each tracker's previous output."""
+    ``temporal`` reweights the neighbours by each tracker's previous output. With
+    ``feedback`` (the object its observer reads, :func:`image_observer`), :meth:`process`
+    feeds each tracked frame's crop prediction (:func:`tracked_crop`) forward to the next
+    frames, as ik_node and segmentation_node do over the crop prediction topic."""
 
     def __init__(self, observer: Observer, lookup: Any, camera: Any, *,
                  limits: StageLimits = NODE_LIMITS, finger_evidence: bool = True,
-                 temporal: TemporalPrior | None = None) -> None:
+                 temporal: TemporalPrior | None = None,
+                 feedback: CropFeedback | None = None) -> None:
         self.observer = observer
         self.lookup = lookup
         self.camera = camera
         self.limits = limits
         self.finger_evidence = bool(finger_evidence)
         self.temporal = temporal
+        self.feedback = feedback
 
     def observe(self, views: Sequence[Any]) -> FrameObservations:
         """Every camera's observation of one frame's views (primary first)."""
@@ -437,6 +500,13 @@ class FramePipeline:
                      upstream_reason=outcome.reason if isinstance(outcome, NoHand) else '')
 
     def process(self, tracker: Any, views: Sequence[Any], stamp: float) -> Tracked | NoHand:
-        """One frame: observe every view, look up, track."""
+        """One frame: observe every view (with the crop prediction the feedback selects for
+        ``stamp``), look up, track (a tracked frame's prediction is offered to the
+        feedback)."""
+        if self.feedback is not None:
+            self.feedback.select(stamp)
         seen = self.observe(views)
-        return self.track(tracker, self.look_up(seen), seen, stamp)
+        outcome = self.track(tracker, self.look_up(seen), seen, stamp)
+        if self.feedback is not None and isinstance(outcome, Tracked):
+            self.feedback.offer(tracked_crop(tracker, outcome.result.q, stamp))
+        return outcome

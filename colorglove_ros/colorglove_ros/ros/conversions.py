@@ -10,7 +10,7 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from colorglove_msgs.msg import GestureEvent as GestureEventMsg
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates, PatchBlob
-from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
+from geometry_msgs.msg import Point, Point32, PolygonStamped, Pose, PoseStamped, Quaternion
 from sensor_msgs.msg import CameraInfo, JointState
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
@@ -23,6 +23,7 @@ from colorglove_ros.core.hand.overlay import SKELETON_BONES
 from colorglove_ros.core.hand.pose_fields import pose_from_fields, wrist_quaternion
 from colorglove_ros.core.lookup.types import LookupResult, ProjectionConstraints
 from colorglove_ros.core.segmentation.crop import CropTransform
+from colorglove_ros.core.segmentation.crop_prediction import CropPrediction
 from colorglove_ros.core.segmentation.types import Observation
 from colorglove_ros.core.tracking.types import Blobs, CameraObservation, PosePrior
 
@@ -35,7 +36,7 @@ __all__ = [
     'candidates_to_msg', 'candidate_arrays_from_msg', 'constraint_arrays_from_msg',
     'pose_prior_from_candidates_msg', 'skeleton_to_markers_msg',
     'observation_to_msg', 'wrist_pose_to_tf_msg', 'gesture_event_to_msg',
-    'gesture_event_from_msg',
+    'gesture_event_from_msg', 'crop_prediction_to_msg', 'crop_prediction_from_msg',
 ]
 
 
@@ -303,3 +304,30 @@ def gesture_event_from_msg(msg: GestureEventMsg) -> GestureEvent:
         raise GestureError(f'unknown gesture event code {msg.event}')
     return GestureEvent(str(msg.gesture), states[msg.event], float(msg.confidence),
                         stamp_to_seconds(msg.header.stamp))
+
+
+def crop_prediction_to_msg(prediction: CropPrediction, header: Header) -> PolygonStamped:
+    """A crop prediction as ``PolygonStamped``: the predicted crop window's four corners
+    (x, y in image pixels, pixel centres, z 0; top-left, top-right, bottom-right,
+    bottom-left) in ``header``, the tracked frame's (its stamp is the prediction's)."""
+    (cx, cy), h = prediction.center_xy, prediction.half_size
+    corners = ((cx - h, cy - h), (cx + h, cy - h), (cx + h, cy + h), (cx - h, cy + h))
+    msg = PolygonStamped(header=header)
+    msg.polygon.points = [Point32(x=float(x), y=float(y), z=0.0) for x, y in corners]
+    return msg
+
+
+def crop_prediction_from_msg(msg: PolygonStamped, image_size: tuple[int, int]
+                             ) -> CropPrediction:
+    """The crop prediction of :func:`crop_prediction_to_msg`'s message for images of
+    ``image_size`` (width, height; the message does not carry it): the centre and half side
+    of the corners' bounding square. Raises ``ValueError`` on a message without corners or
+    with non-finite ones."""
+    xy = np.array([[p.x, p.y] for p in msg.polygon.points], dtype=float).reshape(-1, 2)
+    if not len(xy) or not np.all(np.isfinite(xy)):
+        raise ValueError(f'a crop prediction needs finite corners, got {len(xy)} point(s)')
+    low, high = xy.min(axis=0), xy.max(axis=0)
+    centre = 0.5 * (low + high)
+    return CropPrediction(stamp_to_seconds(msg.header.stamp), (float(centre[0]),
+                          float(centre[1])), 0.5 * float(max(high - low)),
+                          (int(image_size[0]), int(image_size[1])))

@@ -29,6 +29,10 @@ from colorglove_ros.core.evaluation.sequences import eval_seeds, open_database_f
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.pipeline import NODE_LIMITS
 from colorglove_ros.core.report import print_table, write_json
+from colorglove_ros.core.segmentation.crop_prediction import (
+    DEFAULT_PREDICTION_MAX_AGE_S,
+    CropFeedback,
+)
 from colorglove_ros.core.tracking.config import load_ik_config
 from colorglove_ros.paths import data_dir, share_dir
 from colorglove_ros.tools._cli import tool_error, tool_parser
@@ -96,6 +100,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--max-missing-glove-share', type=float,
                         default=NODE_LIMITS.max_missing_glove_share,
                         help='the missing-glove gate (ik_node parameter of that name; 1: off)')
+    parser.add_argument('--prediction-max-age-s', type=float,
+                        default=DEFAULT_PREDICTION_MAX_AGE_S,
+                        help='crop predictions from a tracked frame serve the next frames this '
+                             'long (segmentation_node parameter of that name; 0: off; used when '
+                             'the colour config\'s prediction_margin > 0)')
+    parser.add_argument('--max-outside-blob-share', type=float,
+                        default=NODE_LIMITS.max_outside_blob_share,
+                        help='the glove-outside-the-hand gate (ik_node parameter of that name; '
+                             '1: off)')
+    parser.add_argument('--outside-reach', type=float, default=NODE_LIMITS.outside_reach,
+                        help='its reach in crop windows of the fitted hand (ik_node parameter '
+                             'of that name)')
     args = parser.parse_args(argv)
     from colorglove_ros.core.hand.glove import default_hand
     from colorglove_ros.core.lookup.search import PoseLookup
@@ -114,7 +130,9 @@ def main(argv: list[str] | None = None) -> int:
     except ColorGloveError as exc:
         return tool_error('colorglove_eval_scenes', exc)
     camera = calibration.primary
-    limits = replace(NODE_LIMITS, max_missing_glove_share=args.max_missing_glove_share)
+    limits = replace(NODE_LIMITS, max_missing_glove_share=args.max_missing_glove_share,
+                     max_outside_blob_share=args.max_outside_blob_share,
+                     outside_reach=args.outside_reach)
 
     def hand_factory(factors: Any) -> Any:
         if factors is None:
@@ -126,8 +144,8 @@ def main(argv: list[str] | None = None) -> int:
         model, mesh, glove = hand
         return HandTracker(model, mesh, [camera], ik_config, glove)
 
-    def observer_factory() -> Any:
-        return image_observer(load_segmenter(args.color_config))
+    def observer_factory(feedback: CropFeedback) -> Any:
+        return image_observer(load_segmenter(args.color_config), feedback=feedback)
 
     started = time.perf_counter()
     rows = []
@@ -142,7 +160,8 @@ def main(argv: list[str] | None = None) -> int:
                                       camera=camera, observer_factory=observer_factory,
                                       tracker_factory=tracker_factory,
                                       hand_factory=hand_factory, limits=limits,
-                                      fps=args.fps))
+                                      fps=args.fps,
+                                      prediction_max_age_s=args.prediction_max_age_s))
             except ColorGloveError as exc:
                 return tool_error('colorglove_eval_scenes', exc)
             print(f'[eval_scenes] {condition.name} sequence {seed}: {args.frames} frames in '
@@ -170,6 +189,9 @@ def main(argv: list[str] | None = None) -> int:
                 'color_config': args.color_config, 'ik_config': args.ik_config,
                 'calibration': args.calibration, 'fps': args.fps,
                 'max_missing_glove_share': args.max_missing_glove_share,
+                'prediction_max_age_s': args.prediction_max_age_s,
+                'max_outside_blob_share': args.max_outside_blob_share,
+                'outside_reach': args.outside_reach,
                 'wall_s': time.perf_counter() - started}
     if args.json:
         write_json(Path(args.json), {'settings': settings, 'rows': rows, 'targets': targets})

@@ -110,3 +110,20 @@ def test_unopenable_sources_raise(spec: str, message: str) -> None:
 def test_empty_folder_raises(tmp_path: Path) -> None:
     with pytest.raises(FrameSourceError, match='holds no images'):
         open_frame_source(str(tmp_path), CAMERA)
+
+
+@pytest.mark.parametrize('distortion', [[0.1, -0.05, 0.001, 0.002, 0.0],
+                                        [0.05, 0.01, -0.01, 0.002]])
+def test_distort_pixels_is_the_inverse_of_undistort_pixels(distortion) -> None:
+    """plumb_bob (5 coefficients) and equidistant (4): where the camera images ideal pixels,
+    undistorted back to them; no distortion: unchanged."""
+    from colorglove_ros.core.camera import PinholeCamera
+
+    camera = PinholeCamera(640, 480, 500.0, 510.0, 320.0, 240.0,
+                           distortion=np.array(distortion))
+    ideal = np.random.default_rng(0).uniform([0, 0], [640, 480], (20, 2))
+    seen = camera.distort_pixels(ideal)
+    assert np.abs(seen - ideal).max() > 1.0           # the lens moves them
+    np.testing.assert_allclose(camera.undistort_pixels(seen), ideal, atol=1e-3)
+    plain = PinholeCamera(640, 480, 500.0, 510.0, 320.0, 240.0)
+    np.testing.assert_array_equal(plain.distort_pixels(ideal), ideal)

@@ -26,12 +26,14 @@ from colorglove_ros.core.pipeline import (
     look_up,
     segment_frame,
     track,
+    tracked_crop,
 )
 from colorglove_ros.core.segmentation.calibration_fit import (
     fit_color_calibration,
     render_training_frames,
 )
 from colorglove_ros.core.segmentation.crop import CropTransform, TinyCrop
+from colorglove_ros.core.segmentation.crop_prediction import CropFeedback
 from colorglove_ros.core.segmentation.segmenter import GloveSegmenter
 from colorglove_ros.core.segmentation.types import Blob, Observation
 from colorglove_ros.core.synthetic import frames as synth
@@ -323,6 +325,31 @@ def test_a_rendered_glove_frame_goes_through(segmenter, glove_rgb, lookup, track
     assert tracker.previous_pose is None
 
 
+def test_the_pipeline_feeds_a_tracked_frames_crop_forward(segmenter, glove_rgb, lookup,
+                                                          tracker) -> None:
+    """With a feedback, a tracked frame's crop prediction (the fitted pose's) is what the
+    observer of the next frame gives the segmenter, while fresh; no hand makes none."""
+    feedback = CropFeedback(max_age_s=0.1)
+    given = []
+
+    class Spy:
+        def process(self, image, keep_labels=False, prediction=None):
+            given.append(prediction)
+            return segmenter.process(image, keep_labels=keep_labels, prediction=prediction)
+
+    pipeline = FramePipeline(image_observer(Spy(), feedback=feedback), lookup, CAMERA,
+                             limits=StageLimits(max_image_distance=math.inf,
+                                                min_explained_blob_share=0.0,
+                                                max_missing_glove_share=1.0),
+                             feedback=feedback)
+    out = pipeline.process(tracker, [glove_rgb], 1.0)
+    assert isinstance(out, Tracked), out.reason
+    expected = tracked_crop(tracker, out.result.q, 1.0)
+    pipeline.process(tracker, [glove_rgb], 1.0 + 1 / 30)
+    pipeline.process(tracker, [glove_rgb], 1.5)           # the newest is stale by then
+    assert given[0] is None and given[1] == expected and given[2] is None
+
+
 def test_depth_gate_keypoints_from_the_trackers_kinematics_equal_the_models(tracker) -> None:
     q = np.zeros(26)
     q[2], q[3:6], q[6:] = 0.5, (0.3, -0.4, 0.2), 0.3
@@ -331,3 +358,31 @@ def test_depth_gate_keypoints_from_the_trackers_kinematics_equal_the_models(trac
     q[2] = 0.05                                  # closer than any hand can be
     with pytest.raises(InvalidInputError):
         hand_keypoints_at_plausible_depth(tracker, q)
+
+
+def test_track_refuses_a_fit_leaving_much_glove_outside_the_hand(tracker) -> None:
+    q = synth.sample_pose(np.random.default_rng(3), CAMERA, out_of_frame_prob=0.0)
+    area, centroid = tracker.patch_surface.visible_patches(q, CAMERA)
+    color = tracker.patch_color
+    keep = np.flatnonzero(area > 0)
+    window = tracked_crop(tracker, q, 0.0)
+    far = np.asarray(window.center_xy) + [1.5 * window.half_size, 0.0]
+
+    def seen(clutter_px: float) -> list[CameraObservation]:
+        """The hand's blobs and a glove-coloured blob of ``clutter_px`` beside it."""
+        return [CameraObservation(True, Blobs(np.append(color[keep], 5),
+                                              np.vstack([centroid[keep], far]),
+                                              np.append(area[keep], clutter_px)),
+                                  CropTransform(4.0, 240.0, 160.0))]
+
+    limits = replace(NODE_LIMITS, max_outside_blob_share=0.2)
+    fake = _GloveTracker(tracker, IKResult(True, 0.0, q=q, num_constraints=6,
+                                           explained_blob_share=1.0))
+    hand_px = area[keep].sum()
+    assert isinstance(track(fake, _prior(), seen(0.1 * hand_px), 0.0, limits), Tracked)
+    assert isinstance(track(fake, _prior(), seen(hand_px), 0.0), Tracked)   # off by default
+    out = track(fake, _prior(), seen(hand_px), 0.0, limits)
+    assert isinstance(out, NoHand) and out.warn and fake.resets == 1
+    assert out.reason.startswith('glove outside the hand: 50% of the glove blob pixels')
+    wide = replace(limits, outside_reach=2.0)
+    assert isinstance(track(fake, _prior(), seen(hand_px), 0.0, wide), Tracked)

@@ -13,6 +13,7 @@ from types import SimpleNamespace
 import pytest
 import rclpy
 from colorglove_msgs.msg import HandObservation
+from geometry_msgs.msg import PolygonStamped
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from repo_paths import CONFIG_DIR, PKG_DIR, TEST_DIR
@@ -210,9 +211,13 @@ def test_stereo_launch_file_runs_the_two_camera_graph(monkeypatch: pytest.Monkey
             sub.topic_name for sub in ik.subscriptions}
         assert stereo[extra].get_parameter('camera_index').value == 1
         for index, seg in enumerate((stereo['/segmentation'], stereo[extra])):
-            # input: the image and CameraInfo topics colorglove_make_bag writes for this camera
+            # input: the image and CameraInfo topics colorglove_make_bag writes for this camera,
+            # and the crop predictions in its namespace: ik_node's (camera 0's) for camera 0
+            predictions = _topics(seg.subscriptions, PolygonStamped)
             assert sorted(s.topic_name for s in seg.subscriptions) == sorted(
-                camera_topics(rig[index], index))
+                [*camera_topics(rig[index], index), *predictions])
+            assert len(predictions) == 1
+            assert (predictions == _topics(ik.publishers, PolygonStamped)) == (index == 0)
             output = _topics(seg.publishers, HandObservation)
             assert len(output) == 1
             if index == 0:

@@ -31,6 +31,10 @@ from colorglove_ros.core.evaluation.metrics import fingertip_positions, translat
 from colorglove_ros.core.evaluation.sequences import EvaluationError
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.pipeline import NODE_LIMITS, FramePipeline, StageLimits, Tracked
+from colorglove_ros.core.segmentation.crop_prediction import (
+    DEFAULT_PREDICTION_MAX_AGE_S,
+    CropFeedback,
+)
 
 __all__ = [
     'SceneCondition', 'SCENE_LADDER', 'HAND_SHAPES', 'MOTIONS', 'FINGER_FACTOR_SPREAD',
@@ -132,16 +136,19 @@ def fully_visible(labels: np.ndarray, keypoints_uv: np.ndarray) -> bool:
 
 
 def run_scene(condition: SceneCondition, seed: int, num_frames: int, *, lookup: Any,
-              camera: PinholeCamera, observer_factory: Callable[[], Any],
+              camera: PinholeCamera, observer_factory: Callable[[CropFeedback], Any],
               tracker_factory: Callable[[Any], Any], hand_factory: Callable[[Any], Any],
               limits: StageLimits = NODE_LIMITS, fps: float = 30.0, split: str = 'test',
+              prediction_max_age_s: float = DEFAULT_PREDICTION_MAX_AGE_S,
               progress: Callable[[int], None] | None = None) -> SceneRun:
     """Render and track one sequence of a rung.
 
     ``hand_factory(finger_factors or None)`` gives the (model, mesh, glove) of a hand with
     the database's hand length and glove; ``tracker_factory(hand)`` a fresh tracker for
-    that hand; ``observer_factory()`` a fresh observer (``core.pipeline.image_observer``
-    of a new segmenter: nothing carries over between sequences)."""
+    that hand; ``observer_factory(feedback)`` a fresh observer (``core.pipeline.image_observer``
+    of a new segmenter: nothing carries over between sequences) reading the crop predictions
+    of ``feedback``, which the pipeline feeds from each tracked frame (``CropFeedback`` with
+    ``prediction_max_age_s``; 0 turns the feedback off), as the nodes do."""
     from colorglove_ros.core.synthetic.conditions import scene_conditions
     from colorglove_ros.core.synthetic.frames import Synthesizer
 
@@ -156,7 +163,8 @@ def run_scene(condition: SceneCondition, seed: int, num_frames: int, *, lookup: 
         look = replace(scene_conditions(condition.appearance, rng, split),
                        distractors_avoid_hand=False)
         tracker = tracker_factory(tracker_hand)
-        observe = observer_factory()
+        feedback = CropFeedback(prediction_max_age_s)
+        observe = observer_factory(feedback)
         timed_ms: list[float] = []
 
         def timed(view: Any, primary: bool) -> Any:
@@ -166,7 +174,7 @@ def run_scene(condition: SceneCondition, seed: int, num_frames: int, *, lookup: 
                 timed_ms.append(1e3 * (time.perf_counter() - started))
             return out
 
-        pipeline = FramePipeline(timed, lookup, camera, limits=limits)
+        pipeline = FramePipeline(timed, lookup, camera, limits=limits, feedback=feedback)
         n = len(poses)
         q_est = np.full((n, poses.shape[1]), np.nan)
         tracked = np.zeros(n, bool)

@@ -132,6 +132,7 @@ def mean_shift_crop(mask: np.ndarray, bandwidth_factor: float = DEFAULT_BANDWIDT
                     min_pixels: int = DEFAULT_MIN_PIXELS, max_iterations: int = 50,
                     tolerance: float = 0.05, min_half_size: float = 2.0,
                     initial_bandwidth_factor: float = DEFAULT_INITIAL_BANDWIDTH_FACTOR,
+                    start: tuple[tuple[float, float], float] | None = None,
                     ) -> tuple[tuple[float, float], float] | None:
     """Find the glove by mean-shift with a uniform square kernel of variable bandwidth.
 
@@ -141,7 +142,8 @@ def mean_shift_crop(mask: np.ndarray, bandwidth_factor: float = DEFAULT_BANDWIDT
     their (larger per-axis) standard deviation, until the centre and half-width change by
     less than ``tolerance`` pixels. The factor is ``initial_bandwidth_factor`` until
     convergence (a tight window that sheds outlying blobs), then ``bandwidth_factor`` until
-    convergence again (grows the window over the fingers). Returns ``((cx, cy), half_size)``
+    convergence again (grows the window over the fingers). ``start`` ((cx, cy), half) starts
+    from that window instead (where the hand is expected). Returns ``((cx, cy), half_size)``
     in full-image pixels, or None when fewer than ``min_pixels`` glove pixels end up inside.
     """
     m = _as_mask(mask)
@@ -157,6 +159,8 @@ def mean_shift_crop(mask: np.ndarray, bandwidth_factor: float = DEFAULT_BANDWIDT
     ys = np.arange(H, dtype=np.float64)
     cx, cy = 0.5 * (W - 1), 0.5 * (H - 1)
     h = 0.5 * max(W, H)
+    if start is not None:
+        (cx, cy), h = start
     factors = (initial_bandwidth_factor, bandwidth_factor) \
         if initial_bandwidth_factor != bandwidth_factor else (bandwidth_factor,)
     for factor in factors:
@@ -258,14 +262,16 @@ def crop_window(labels: np.ndarray, transform: CropTransform,
 
 def crop_to_tiny(label_image: np.ndarray, bandwidth_factor: float = DEFAULT_BANDWIDTH_FACTOR,
                  min_pixels: int = DEFAULT_MIN_PIXELS,
-                 glove_fraction: float = DEFAULT_GLOVE_FRACTION) -> TinyCrop | None:
+                 glove_fraction: float = DEFAULT_GLOVE_FRACTION,
+                 start: tuple[tuple[float, float], float] | None = None) -> TinyCrop | None:
     """Crop the glove with :func:`mean_shift_crop` and scale the square to a 40x40 tiny image.
 
     ``label_image`` is (H, W) uint8 (0 = background, 1..10 = glove colours). Deterministic;
     the database builder and the camera pipeline both call this. None if too few glove pixels.
+    ``start``: the mean shift's first window (:func:`mean_shift_crop`; default the image).
     """
     result = mean_shift_crop(label_image, bandwidth_factor=bandwidth_factor,
-                             min_pixels=min_pixels)
+                             min_pixels=min_pixels, start=start)
     if result is None:
         return None
     center, half = result

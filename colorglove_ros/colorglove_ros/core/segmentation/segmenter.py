@@ -18,6 +18,12 @@ from colorglove_ros.core.segmentation.color_model import (
     read_calibration_config,
 )
 from colorglove_ros.core.segmentation.crop import CropTransform, crop_to_tiny, mean_shift_crop
+from colorglove_ros.core.segmentation.crop_prediction import (
+    CropPrediction,
+    covers,
+    predicted_size_crop,
+    prediction_bounds,
+)
 from colorglove_ros.core.segmentation.detection import (
     SCENE_COLOUR_BITS,
     colour_diversity,
@@ -357,6 +363,15 @@ class GloveSegmenter:
     last search's glove-like pixels kept out); a frame whose hand is not found there with its
     crop window inside the region of interest is searched after all.
 
+    Crop prediction (``prediction_margin`` > 0; :meth:`process`'s ``prediction``, the crop
+    window the tracked hand of an earlier frame predicts,
+    ``core.segmentation.crop_prediction``): when its centre lies in the region of interest,
+    glove labels farther than ``prediction_margin`` times its window are background (a
+    glove-coloured surface touching the hand is cut there) and the crop's mean shift starts
+    at it; with ``prediction_max_ratio`` (0 off; above 1) a crop more than that many times
+    larger or smaller than the predicted one is trimmed to the predicted size
+    (``predicted_size_crop``).
+
     Every setting is checked (ranges, odd median kernel, finite numbers) by
     ``core.validation.validate_segmenter_settings`` however the segmenter is built; a bad one
     raises :class:`SegmentationConfigError` naming ``source`` (the settings' file, if any)
@@ -379,6 +394,7 @@ class GloveSegmenter:
                  scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
                  follow_margin: float = 0.0, search_every: int = 1,
+                 prediction_margin: float = 0.0, prediction_max_ratio: float = 0.0,
                  source: str = 'GloveSegmenter') -> None:
         # every keyword argument but ``source`` is a setting named in SEGMENTER_RULES: checked
         # and converted (int, float, tuple of ints) in one place, kept as the attribute of
@@ -646,26 +662,34 @@ class GloveSegmenter:
                                self.border_distances)
 
     # ------------------------------------------------------------------ main entry
-    def process(self, image_rgb: np.ndarray, keep_labels: bool = False) -> Observation:
+    def process(self, image_rgb: np.ndarray, keep_labels: bool = False,
+                prediction: CropPrediction | None = None) -> Observation:
         """Segment one (H, W, 3) uint8 RGB frame. Never raises on such a frame; raises
-        :class:`SegmentationInputError` on anything else."""
+        :class:`SegmentationInputError` on anything else. ``prediction``: the hand's crop
+        predicted from the tracked pose (``core.segmentation.crop_prediction``), used when
+        ``prediction_margin`` > 0 and it is for this frame's size."""
         image = _check_image(image_rgb)
+        if (self.prediction_margin <= 0 or prediction is None
+                or prediction.image_size != (image.shape[1], image.shape[0])):
+            prediction = None
         t0 = time.perf_counter()
         followed = self._without_search(image)
         if followed is not None:
-            obs = self._segment(image, keep_labels, t0, followed)
+            obs = self._segment(image, keep_labels, t0, prediction, followed)
             if obs is not None:
                 return obs
             # not found whole inside the followed region of interest: search after all
-        obs = self._segment(image, keep_labels, t0)
+        obs = self._segment(image, keep_labels, t0, prediction)
         assert obs is not None   # (only a frame without the search is given up)
         return obs
 
     def _segment(self, image: np.ndarray, keep_labels: bool, t0: float,
-                 followed: _Followed | None = None) -> Observation | None:
-        """Segment ``image`` (checked; ``t0``: when :meth:`process` started) with the coarse
-        search, or with ``followed`` (:meth:`_without_search`) instead: then None unless the
-        hand is found (status ok) with its crop window inside the region of interest."""
+                 prediction: CropPrediction | None = None, followed: _Followed | None = None
+                 ) -> Observation | None:
+        """Segment ``image`` (checked; ``t0``: when :meth:`process` started; ``prediction``:
+        :meth:`process`'s, checked) with the coarse search, or with ``followed``
+        (:meth:`_without_search`) instead: then None unless the hand is found (status ok)
+        with its crop window inside the region of interest."""
         h, w = image.shape[:2]
         timings: dict[str, float] = {}
         obs = Observation(False, STATUS_NO_GLOVE, w, h, timings_ms=timings)
@@ -697,12 +721,24 @@ class GloveSegmenter:
         x1 = x0 + max((x1 - x0) // r, 1) * r
         y1 = y0 + max((y1 - y0) // r, 1) * r
         roi = image[y0:y1, x0:x1]
+        if prediction is not None and not covers(prediction, (x0, y0), (x1, y1)):
+            prediction = None    # the glove was found away from the predicted hand
         if r > 1:
             roi = cv2.resize(roi, ((x1 - x0) // r, (y1 - y0) // r),
                              interpolation=cv2.INTER_AREA)
         roi = self._filter(roi)
         t = tick('filter', t)
         labels = self.calibration.classify(roi, table)
+        start = None
+        if prediction is not None:   # glove colour outside the predicted window is not the hand
+            px0, px1, py0, py1 = prediction_bounds(prediction, self.prediction_margin,
+                                                   (x0, y0), r, labels.shape)
+            (pcx, pcy), start_half = prediction.center_xy, prediction.half_size / r
+            start = (((pcx - x0 - 0.5 * (r - 1)) / r, (pcy - y0 - 0.5 * (r - 1)) / r),
+                     start_half)
+            inside = labels[py0:py1, px0:px1].copy()
+            labels[...] = 0
+            labels[py0:py1, px0:px1] = inside
         if scene is not None:
             labels[scene.take(lut_index(roi, SCENE_COLOUR_BITS))] = 0
         if static is not None:
@@ -729,7 +765,9 @@ class GloveSegmenter:
             up = labels if r == 1 else np.repeat(np.repeat(labels, r, 0), r, 1)
             full[y0:y0 + up.shape[0], x0:x0 + up.shape[1]] = up
             obs.label_image = full
-        tiny = crop_to_tiny(labels, min_pixels=min_px)
+        tiny = crop_to_tiny(labels, min_pixels=min_px, start=start)
+        if start is not None and tiny is not None:   # far off the predicted size: trimmed
+            tiny = predicted_size_crop(labels, tiny, start, self.prediction_max_ratio, min_px)
         t = tick('crop', t)
         if tiny is None and followed is not None:
             return None

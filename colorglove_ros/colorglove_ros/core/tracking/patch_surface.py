@@ -212,23 +212,29 @@ class PatchSurface:
         weight /= np.where(seen, weight.sum(axis=1), 1.0)[:, None]
         return self._group_link[g], mean[gc], weight, seen
 
+    def visible_faces(self, q: np.ndarray, camera: PinholeCamera
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The glove's visible surface elements in ``camera``'s image at pose ``q``: each
+        one's patch (M,), undistorted pixel centre (M, 2) and visible area (M, pixels);
+        hidden and back-facing elements are left out."""
+        pc, normal = self._in_camera(*self._posed(q), camera)
+        _, w_vis = self._camera_frame_weights(pc, normal, camera)
+        shown = w_vis > 0
+        uv = camera.project(pc[shown]) if shown.any() else np.zeros((0, 2))
+        return self._elem_patch[shown], uv, w_vis[shown] * (camera.fx * camera.fy)
+
     def visible_patches(self, q: np.ndarray, camera: PinholeCamera
                         ) -> tuple[np.ndarray, np.ndarray]:
         """Every patch's visible area in ``camera``'s image at pose ``q`` (num_patches,
         pixels; hidden and back-facing faces count nothing) and the undistorted pixel
         centroid of that area (num_patches, 2; NaN where nothing is visible): what the
         segmenter should see of the glove if the pose is right."""
-        pc, normal = self._in_camera(*self._posed(q), camera)
-        _, w_vis = self._camera_frame_weights(pc, normal, camera)
+        patch, uv, weight = self.visible_faces(q, camera)
         n = self.num_patches
-        area = np.bincount(self._elem_patch, w_vis, n) * (camera.fx * camera.fy)
-        shown = w_vis > 0
-        uv = camera.project(pc[shown]) if shown.any() else np.zeros((0, 2))
-        weight = w_vis[shown]
-        total = np.bincount(self._elem_patch[shown], weight, n)
-        centroid = np.stack([np.bincount(self._elem_patch[shown], weight * uv[:, i], n)
-                             for i in range(2)], axis=1)
+        area = np.bincount(patch, weight, n)
+        centroid = np.stack([np.bincount(patch, weight * uv[:, i], n) for i in range(2)],
+                            axis=1)
         with np.errstate(invalid='ignore', divide='ignore'):
-            centroid = centroid / total[:, None]
-        centroid[total <= 0] = np.nan
+            centroid = centroid / area[:, None]
+        centroid[area <= 0] = np.nan
         return area, centroid

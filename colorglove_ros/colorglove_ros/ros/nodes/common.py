@@ -55,7 +55,8 @@ __all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'ending_on_shutdown', 'run_
            'HAND_LENGTH_RANGE_M', 'startup_errors',
            'declare_calibration_file', 'declare_hand_length', 'declare_hand',
            'declare_frame_prefix',
-           'CAMERA_INFO_TOPIC', 'OBSERVATION_TOPIC', 'declare_frame_camera',
+           'CAMERA_INFO_TOPIC', 'OBSERVATION_TOPIC', 'CROP_PREDICTION_TOPIC',
+           'declare_frame_camera',
            'declare_topic_list', 'extra_camera_info_topic', 'extra_frame_cameras',
            'declare_camera_index', 'calibrated_camera', 'OPENCV_THREADS', 'declare_opencv_threads',
            'hand_model_from_calibration', 'JOINT_STATES_TOPIC', 'WRIST_POSE_TOPIC',
@@ -244,6 +245,10 @@ CAMERA_INFO_TOPIC = 'camera/camera_info'
 """CameraInfo of camera 0 (remap it to the driver's), read by the glove pipeline nodes."""
 OBSERVATION_TOPIC = 'hand/observation'
 """What segmentation_node publishes (``HandObservation``), relative to its namespace."""
+CROP_PREDICTION_TOPIC = 'hand/crop_prediction'
+"""The crop window ik_node predicts from each tracked frame's pose for the next frames
+(``geometry_msgs/PolygonStamped``, ``ros.conversions.crop_prediction_to_msg``; stamped with
+the tracked frame), which segmentation_node reads."""
 
 
 def declare_frame_camera(node: Node, calibrated: PinholeCamera) -> FrameCamera:

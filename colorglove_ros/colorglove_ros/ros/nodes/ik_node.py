@@ -10,7 +10,10 @@ come from its own CameraInfo (``NS/camera/camera_info`` for observations on
 is ignored; the extra cameras' extrinsics and the user's hand (length and finger length
 factors) come from ``calibration_file``. With ``hand: left`` the candidates come from a
 left-hand segmentation_node's mirrored observation: the hand is tracked as the mirrored right
-hand and its pose mirrored back before it is published (one camera)."""
+hand and its pose mirrored back before it is published (one camera). Every tracked frame's
+crop prediction (``core.pipeline.tracked_crop``: the window the glove at the fitted pose
+fills in camera 0's image) goes to ``hand/crop_prediction`` (``geometry_msgs/PolygonStamped``,
+stamped with the frame), from which segmentation_node crops the next frames."""
 from __future__ import annotations
 
 import sys
@@ -20,13 +23,19 @@ from dataclasses import replace
 from typing import Any
 
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
+from geometry_msgs.msg import PolygonStamped
 from rclpy.node import Node
 from sensor_msgs.msg import Image
 
 from colorglove_ros.core.camera import PinholeCamera, load_calibration
 from colorglove_ros.core.hand.frames import hand_root_frame
 from colorglove_ros.core.hand.glove import calibrated_hand
-from colorglove_ros.core.hand.handedness import DEFAULT_HAND, from_right_frame, mirror_points
+from colorglove_ros.core.hand.handedness import (
+    DEFAULT_HAND,
+    from_right_frame,
+    mirror_pixels_x,
+    mirror_points,
+)
 from colorglove_ros.core.hand.overlay import draw_skeleton
 from colorglove_ros.core.lookup.database import check_hand_length, read_database_build
 from colorglove_ros.core.pipeline import (
@@ -35,6 +44,7 @@ from colorglove_ros.core.pipeline import (
     Tracked,
     bad_prior,
     track,
+    tracked_crop,
 )
 from colorglove_ros.core.tracking.config import IKConfig, load_ik_config
 from colorglove_ros.core.tracking.tracker import HandTracker
@@ -43,6 +53,7 @@ from colorglove_ros.core.validation import InvalidInputError
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
     camera_observation_from_msg,
+    crop_prediction_to_msg,
     pose_prior_from_candidates_msg,
     stamp_to_seconds,
     wrist_pose_to_tf_msg,
@@ -51,6 +62,7 @@ from colorglove_ros.ros.diagnostics import FrameStats, upstream
 from colorglove_ros.ros.image import ImageEncodingError, array_to_image, image_to_rgb8
 from colorglove_ros.ros.message_checks import check_candidates_msg, check_observation_msg
 from colorglove_ros.ros.nodes.common import (
+    CROP_PREDICTION_TOPIC,
     LATEST_IMAGE,
     LATEST_ONLY,
     StartupError,
@@ -98,6 +110,13 @@ LIVE_EVIDENCE_LIMITS = {
         'share of the glove the fitted hand shows that may lack a blob of its colour near it, '
         'else no pose ("missing glove": colours the segmentation missed); 1 turns this off',
         (0.0, 1.0)),
+    'max_outside_blob_share': (
+        'share of the observed glove blob pixels that may lie in blobs centred beyond '
+        'outside_reach crop windows of the fitted hand, else no pose ("glove outside the '
+        'hand": clutter in the crop); 1 turns this off', (0.0, 1.0)),
+    'outside_reach': (
+        'how far from the fitted hand\'s crop window centre a blob is outside it, in crop '
+        'window half sides', (0.0, 100.0)),
 }
 
 
@@ -164,6 +183,8 @@ class IKNode(Node):
         self.recent_images: deque[Image] = deque(maxlen=15)
         self.outputs = TrackerOutputs(self, frame_prefix)
         self.overlay_pub = self.create_publisher(Image, 'hand/overlay', 2)
+        self.crop_prediction_pub = self.create_publisher(PolygonStamped, CROP_PREDICTION_TOPIC,
+                                                         LATEST_ONLY)
         self.create_subscription(HandPoseCandidates, 'hand/pose_candidates', self.on_candidates,
                                  LATEST_ONLY)
         self._subscribe_images(self.publish_overlay)
@@ -369,8 +390,21 @@ class IKNode(Node):
                            zip(self.tracker.cameras, result.constraints_per_camera,
                                strict=False)},
                         **{'reprojection (px)': f'{result.reprojection_error_px:.1f}'})
+        self._publish_crop_prediction(msg, result.q)
         if self.publish_overlay:
             self._publish_overlay(msg, keypoints, result.reprojection_error_px)
+
+    def _publish_crop_prediction(self, msg: HandPoseCandidates, q) -> None:
+        """The crop the tracked pose ``q`` (the tracker's, right-hand frame) predicts for the
+        next frames, in the image's own columns (mirrored back for a left hand)."""
+        prediction = tracked_crop(self.tracker, q, stamp_to_seconds(msg.header.stamp))
+        if prediction is None:
+            return
+        if self.hand != DEFAULT_HAND:
+            x, y = prediction.center_xy
+            prediction = replace(prediction, center_xy=(
+                float(mirror_pixels_x(x, self.tracker.cameras[0].cx)), y))
+        self.crop_prediction_pub.publish(crop_prediction_to_msg(prediction, msg.header))
 
     def _publish_overlay(self, msg: HandPoseCandidates, keypoints, error_px: float) -> None:
         stamp = msg.header.stamp

@@ -12,7 +12,13 @@ An extra camera's segmentation_node runs in the camera's
 namespace ``NS`` (``NS/camera/image_raw``, ``NS/camera/camera_info`` -> ``NS/hand/observation``,
 which ik_node's ``extra_observation_topics`` names). The segmenter's settings
 (``segmenter.<name>``) and ``publish_debug_image`` can be changed at run time; health goes to
-``/diagnostics``."""
+``/diagnostics``.
+
+Crop prediction: the node keeps the newest crop window ik_node predicts from a tracked frame
+(``hand/crop_prediction``, ``core.segmentation.crop_prediction.CropFeedback``) and gives it to
+the segmenter of every frame at most ``prediction_max_age_s`` newer than that tracked frame
+with the same frame_id (older: stale, ignored); the segmenter uses it when its
+``prediction_margin`` is above 0."""
 from __future__ import annotations
 
 import sys
@@ -24,6 +30,7 @@ from typing import Any
 import numpy as np
 from builtin_interfaces.msg import Time
 from colorglove_msgs.msg import HandObservation
+from geometry_msgs.msg import PolygonStamped
 from rclpy.node import Node
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
@@ -33,6 +40,10 @@ from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
 from colorglove_ros.core.hand.handedness import DEFAULT_HAND, mirror_observation
 from colorglove_ros.core.pipeline import NoHand, bad_image, segment_frame
 from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
+from colorglove_ros.core.segmentation.crop_prediction import (
+    DEFAULT_PREDICTION_MAX_AGE_S,
+    CropFeedback,
+)
 from colorglove_ros.core.segmentation.segmenter import (
     SegmentationConfigError,
     load_segmenter,
@@ -44,7 +55,11 @@ from colorglove_ros.core.validation import (
     validate_segmenter_settings,
 )
 from colorglove_ros.paths import resolve_path
-from colorglove_ros.ros.conversions import observation_to_msg
+from colorglove_ros.ros.conversions import (
+    crop_prediction_from_msg,
+    observation_to_msg,
+    stamp_to_seconds,
+)
 from colorglove_ros.ros.diagnostics import FrameStats
 from colorglove_ros.ros.image import (
     ImageEncodingError,
@@ -54,7 +69,9 @@ from colorglove_ros.ros.image import (
 )
 from colorglove_ros.ros.image_codec import image_from_cdr
 from colorglove_ros.ros.nodes.common import (
+    CROP_PREDICTION_TOPIC,
     LATEST_IMAGE,
+    LATEST_ONLY,
     OBSERVATION_TOPIC,
     StartupError,
     calibrated_camera,
@@ -119,6 +136,17 @@ class SegmentationNode(Node):
             'also publish the per-pixel classification as an image on hand/segmentation_debug',
             self._check_publish_debug)
         self._declare_segmenter_settings()
+        self.feedback = CropFeedback(self.live.declare(
+            'prediction_max_age_s', DEFAULT_PREDICTION_MAX_AGE_S,
+            'a crop prediction from ik_node (hand/crop_prediction) serves the frames at most '
+            'this many seconds newer than its tracked frame (0: never; used when the '
+            'segmenter\'s prediction_margin > 0)', self._check_prediction_max_age, 0.0, 10.0))
+        # the size of the last frame segmented: a prediction comes from such a frame (the
+        # message does not carry the image size)
+        self.frame_size: tuple[int, int] = (0, 0)
+        self.prediction_frame_id = ''
+        self.create_subscription(PolygonStamped, CROP_PREDICTION_TOPIC,
+                                 self.on_crop_prediction, LATEST_ONLY)
         self.hand = declare_hand(self, 'segmentation_node')
         self.frame_camera = declare_frame_camera(self, camera)
         self.stats = FrameStats({'camera': self.frame_camera.refused})
@@ -161,6 +189,23 @@ class SegmentationNode(Node):
             with startup_errors('segmentation_node'):
                 self.segmenter = self.segmenter.fresh(**changed)
 
+    def _check_prediction_max_age(self, value: Any) -> Apply:
+        max_age = CropFeedback(float(value)).max_age_s   # checked by the feedback's own rule
+
+        def apply() -> None:
+            self.feedback.max_age_s = max_age
+        return apply
+
+    def on_crop_prediction(self, msg: PolygonStamped) -> None:
+        """Keep ik_node's newest crop prediction (for the size of the frames segmented)."""
+        try:
+            prediction = crop_prediction_from_msg(msg, self.frame_size)
+        except ValueError as exc:
+            self.get_logger().warn(f'crop prediction ignored: {exc}', throttle_duration_sec=1.0)
+            return
+        self.feedback.offer(prediction)
+        self.prediction_frame_id = msg.header.frame_id
+
     def _check_segmenter_setting(self, name: str, value: Any) -> Apply:
         checked = validate_segmenter_settings({name: _parameter_value(value)},
                                               'segmenter parameter',
@@ -178,7 +223,12 @@ class SegmentationNode(Node):
         camera = self.frame_camera.camera_for(width, height, header.frame_id)
         if isinstance(camera, NoHand):
             return camera
-        observation = segment_frame(self.segmenter, rgb, keep_labels=self.publish_debug)
+        self.frame_size = (width, height)
+        prediction = None
+        if header.frame_id == self.prediction_frame_id:
+            prediction = self.feedback.for_frame(stamp_to_seconds(header.stamp))
+        observation = segment_frame(self.segmenter, rgb, keep_labels=self.publish_debug,
+                                    prediction=prediction)
         if self.hand == DEFAULT_HAND or isinstance(observation, NoHand):
             return observation
         # a left hand's query is the mirrored image's (the debug image stays as seen)

@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import pytest
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates, PatchBlob
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PolygonStamped, PoseStamped
 from node_fixtures import (
     NodeAssets,
     background_rgb,
@@ -40,6 +40,7 @@ from colorglove_ros.core.segmentation.segmenter import load_segmenter
 from colorglove_ros.ros.conversions import (
     blobs_from_observation_msg,
     crop_from_observation_msg,
+    crop_prediction_from_msg,
     tiny_labels_from_observation_msg,
 )
 from colorglove_ros.ros.image import array_to_image
@@ -249,13 +250,14 @@ def test_ik_node_outputs(good_candidates: HandPoseCandidates, good_rgb: np.ndarr
         markers = h.collect(MarkerArray, 'hand/markers')
         status = h.collect(String, 'hand/tracking_status')
         overlay = h.collect(Image, 'hand/overlay')
+        predictions = h.collect(PolygonStamped, 'hand/crop_prediction')
         image_pub = h.publisher(Image, 'camera/image_raw')
         image_pub.publish(array_to_image(good_rgb, 'rgb8', good_candidates.header))
         h.settle(0.3)
         pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
         first = h.exchange(pub, good_candidates, status)
-        assert h.spin_until(lambda: joints and wrist and markers and overlay, 10.0), \
-            (len(joints), len(wrist), len(markers), len(overlay))
+        assert h.spin_until(lambda: joints and wrist and markers and overlay and predictions,
+                            10.0), (len(joints), len(wrist), len(markers), len(overlay))
         lost = h.exchange(pub, no_hand, status)
         assert h.spin_until(lambda: len(markers) >= 2, 5.0)
         h.settle(0.5)
@@ -263,7 +265,14 @@ def test_ik_node_outputs(good_candidates: HandPoseCandidates, good_rgb: np.ndarr
     joint_state = joints[0]
     assert list(joint_state.name) == list(FINGER_DOF_NAMES) and len(joint_state.name) == 20
     assert np.all(np.isfinite(joint_state.position)) and len(joint_state.position) == 20
-    for msg in (joint_state, wrist[0], markers[0], overlay[0]):
+    # the tracked frame's crop prediction (only for it): near the crop the glove was found in
+    assert len(predictions) == 1 and predictions[0].header.frame_id == 'camera_optical_frame'
+    predicted = crop_prediction_from_msg(predictions[0], (640, 480))
+    crop = crop_from_observation_msg(good_candidates.observation)
+    assert predicted.stamp == pytest.approx(200.0000005)
+    assert 0.5 < predicted.half_size / crop.half_size < 2.0
+    assert np.hypot(*np.subtract(predicted.center_xy, crop.center_xy)) < crop.half_size
+    for msg in (joint_state, wrist[0], markers[0], overlay[0], predictions[0]):
         stamp = msg.markers[0].header.stamp if isinstance(msg, MarkerArray) else msg.header.stamp
         assert (stamp.sec, stamp.nanosec) == (200, 500)
     assert wrist[0].header.frame_id == 'camera_optical_frame'

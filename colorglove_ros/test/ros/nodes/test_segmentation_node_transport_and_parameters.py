@@ -1,17 +1,21 @@
 """segmentation_node reads CompressedImage (jpeg, png as OpenCV encodes them) with
 ``image_transport: compressed``, refuses undecodable data and keeps going; its debug image and
-segmenter settings change at run time, checked by the segmenter's own rules."""
+segmenter settings change at run time, checked by the segmenter's own rules; a fresh crop
+prediction from ik_node crops the next frames."""
 from __future__ import annotations
 
 import cv2
 import numpy as np
 import pytest
 from colorglove_msgs.msg import HandObservation
+from geometry_msgs.msg import PolygonStamped
 from node_fixtures import NodeAssets, header, running, segmentation_node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CompressedImage, Image
 
+from colorglove_ros.core.segmentation.crop_prediction import CropPrediction
 from colorglove_ros.core.segmentation.segmenter import load_segmenter
+from colorglove_ros.ros.conversions import crop_from_observation_msg, crop_prediction_to_msg
 from colorglove_ros.ros.image import array_to_image
 
 pytestmark = [pytest.mark.dds, pytest.mark.usefixtures('isolated_ros_domain')]
@@ -155,3 +159,34 @@ def test_opencv_threads_parameter_sets_the_process_threads(node_assets: NodeAsse
             assert cv2.getNumThreads() == (threads or OPENCV_THREADS)
     finally:
         cv2.setNumThreads(before)
+
+
+def test_a_fresh_crop_prediction_crops_the_next_frames(node_assets: NodeAssets,
+                                                       good_rgb: np.ndarray) -> None:
+    """A crop prediction on hand/crop_prediction crops the frames of its frame_id up to
+    prediction_max_age_s newer than it, as the segmenter given it does; older frames are
+    segmented as without one."""
+    segmenter = load_segmenter(str(node_assets.color_config)).fresh(prediction_margin=1.3)
+    crop = segmenter.fresh().process(good_rgb).crop
+    # a third of the hand's window at its centre: a crop visibly smaller than the hand's
+    prediction = CropPrediction(9.0, crop.center_xy, 0.3 * crop.half_size, (640, 480))
+    same = segmenter.fresh()
+    expected = [same.process(good_rgb).crop, same.process(good_rgb, prediction=prediction).crop,
+                same.process(good_rgb).crop]
+    assert expected[1].half_size < 0.9 * expected[0].half_size
+    assert expected[2] == expected[0]
+    with running(segmentation_node(node_assets, **{'segmenter.prediction_margin': 1.3,
+                                                   'prediction_max_age_s': 0.1})) as h:
+        out = h.collect(HandObservation, 'hand/observation')
+        images = h.publisher(Image, 'camera/image_raw')
+        predictions = h.publisher(PolygonStamped, 'hand/crop_prediction')
+        got = [h.exchange(images, array_to_image(good_rgb, 'rgb8', header(9, 0)), out)]
+        predictions.publish(crop_prediction_to_msg(prediction, header(9, 0)))
+        node = h.nodes[0]
+        assert h.spin_until(lambda: node.feedback.for_frame(9.05) is not None, 5.0)
+        got.append(h.exchange(images, array_to_image(good_rgb, 'rgb8',
+                                                     header(9, 50_000_000)), out))
+        got.append(h.exchange(images, array_to_image(good_rgb, 'rgb8',
+                                                     header(9, 200_000_000)), out))
+    for msg, want in zip(got, expected, strict=True):
+        assert crop_from_observation_msg(msg) == want
