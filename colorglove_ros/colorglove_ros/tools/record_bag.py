@@ -64,8 +64,15 @@ class BagRecorder(Node):
         self.create_timer(0.2, self.discover)
 
     def discover(self) -> None:
-        """Subscribe to requested topics as soon as they appear in the graph."""
-        for topic, types in self.get_topic_names_and_types():
+        """Subscribe to requested topics as soon as they appear in the graph (nothing once the
+        context is shut down: Ctrl-C's handler may do that while a spin runs this timer)."""
+        try:
+            graph = self.get_topic_names_and_types()
+        except Exception:
+            if self.context.ok():
+                raise
+            return
+        for topic, types in graph:
             if topic not in self.pending or not types:
                 continue
             msgtype = types[0]

@@ -481,3 +481,24 @@ def test_player_says_which_subscribers_did_not_come(tmp_path: Path,
     assert '/camera/image_raw has 0 of 1 subscribers' in done.stderr
     assert '/camera/camera_info has 0 of 2 subscribers' in done.stderr
     assert 'no publisher on /hand/tracking_status' in done.stderr
+
+
+def test_recorder_timer_after_shutdown_does_nothing(tmp_path: Path) -> None:
+    """Ctrl-C: rclpy's handler shuts the context down, and a spin already under way may still
+    run the recorder's discovery timer; it must not raise (the recorder then exited 1 with
+    'rcl node's context is invalid' instead of closing the bag)."""
+    import rclpy
+
+    from colorglove_ros.tools.record_bag import BagRecorder
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    recorder = BagRecorder(tmp_path / 'recorded', ['/test/joints'], context=context)
+    try:
+        rclpy.shutdown(context=context)
+        recorder.discover()
+        assert recorder.pending == {'/test/joints'}
+    finally:
+        recorder.close()
+        recorder.destroy_node()
+        rclpy.try_shutdown(context=context)
