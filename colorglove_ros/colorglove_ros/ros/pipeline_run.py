@@ -10,7 +10,6 @@ times in the monitor, which also deserialises camera images and so delays what i
 from __future__ import annotations
 
 import re
-import struct
 import tempfile
 import threading
 import time
@@ -34,6 +33,7 @@ from colorglove_ros.core.evaluation.metrics import jitter_runs_mm, latency_summa
 from colorglove_ros.ros.conversions import pose_from_msgs
 from colorglove_ros.ros.frame_camera import CAMERA_REFUSAL_PREFIX
 from colorglove_ros.ros.image import image_to_rgb8
+from colorglove_ros.ros.image_codec import header_stamp_from_cdr
 from colorglove_ros.ros.latency_probe import LatencyProbe, ProbeRecord
 from colorglove_ros.ros.launcher import Launcher, NodeSpec, use_fastdds_profile
 
@@ -56,15 +56,6 @@ _BEST_EFFORT = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=200,
 
 def _key(msg: Any) -> tuple[int, int]:
     return (msg.header.stamp.sec, msg.header.stamp.nanosec)
-
-
-def _raw_stamp_key(data: bytes) -> tuple[int, int]:
-    """The header stamp of a serialized message that starts with a ``std_msgs/Header``
-    (CDR: 4 bytes of encapsulation, then sec int32 and nanosec uint32), without
-    deserializing the rest (a 640x480 image is ~1 MB)."""
-    order = '<' if data[1] == 1 else '>'
-    sec, nanosec = struct.unpack_from(f'{order}iI', data, 4)
-    return (sec, nanosec)
 
 
 class PipelineMonitor(Node):
@@ -117,7 +108,7 @@ class PipelineMonitor(Node):
     def _on_frame(self, data: bytes) -> None:
         received = time.monotonic()
         with self.lock:
-            self.frame_times.setdefault(_raw_stamp_key(data), received)
+            self.frame_times.setdefault(header_stamp_from_cdr(data), received)
 
     def _on_joints(self, msg: JointState) -> None:
         received = time.monotonic()

@@ -136,15 +136,17 @@ def frame_visibility(bag: Path, seed: int, frames: int) -> dict[int, bool]:
 
 
 def bag_image_stamps(path: Path) -> list[int]:
-    """The header stamps (ns) of the bag's camera images, in order."""
-    from colorglove_ros.ros.bags import bag_deserialize, bag_messages
+    """The header stamps (ns) of the bag's camera images, in order (read from the serialized
+    bytes: the images are not decoded)."""
+    from colorglove_ros.ros.bags import bag_messages
+    from colorglove_ros.ros.image_codec import header_stamp_from_cdr
 
     stamps = []
     with closing(open_bag_reader(path)) as reader:
         connections = [c for c in reader.connections if c.topic == TOPIC_IMAGE]
-        for connection, _, raw in bag_messages(reader, connections, path):
-            stamp = bag_deserialize(reader, raw, connection.msgtype, path).header.stamp
-            stamps.append(stamp.sec * 10**9 + stamp.nanosec)
+        for _, _, raw in bag_messages(reader, connections, path):
+            sec, nanosec = header_stamp_from_cdr(raw)
+            stamps.append(sec * 10**9 + nanosec)
     return sorted(stamps)
 
 

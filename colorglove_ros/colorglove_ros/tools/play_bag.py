@@ -30,6 +30,7 @@ from colorglove_ros.ros.bag_definitions import (
 )
 from colorglove_ros.ros.bag_qos import publisher_qos_for_recorded
 from colorglove_ros.ros.bags import BagError, bag_messages, open_bag_reader
+from colorglove_ros.ros.image_codec import header_stamp_from_cdr
 from colorglove_ros.ros.typestore import colorglove_typestore, deserialize_cdr, message_class
 from colorglove_ros.tools._cli import tool_parser
 
@@ -225,7 +226,7 @@ class BagPlayer(Node):
             now_ns = time.time_ns()
             self.new_stamps[old] = struct.pack(f'{order}iI', *divmod(now_ns, 10**9))
             if self.stamp_log is not None:
-                sec, nanosec = struct.unpack(f'{order}iI', old)
+                sec, nanosec = header_stamp_from_cdr(data)
                 self.stamp_log.write(f'{sec * 10**9 + nanosec},{now_ns}\n')
                 self.stamp_log.flush()
         return data[:4] + self.new_stamps[old] + data[12:]

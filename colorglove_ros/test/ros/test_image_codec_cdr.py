@@ -11,6 +11,7 @@ from std_msgs.msg import Header
 from colorglove_ros.ros.image import array_to_image
 from colorglove_ros.ros.image_codec import (
     ImageEncodingError,
+    header_stamp_from_cdr,
     image_from_cdr,
     image_to_rgb8,
     rgb8_to_encoding,
@@ -62,3 +63,16 @@ def test_truncated_or_foreign_bytes_are_refused(cut: int) -> None:
         image_from_cdr(data[:cut])
     with pytest.raises(ImageEncodingError):
         image_from_cdr(b'\x07\x07' + data[2:])
+
+
+def test_header_stamp_of_any_stamped_message() -> None:
+    """The stamp read in place equals the message's, for an image and another stamped type."""
+    from sensor_msgs.msg import JointState
+
+    image = array_to_image(PIXELS, 'rgb8')
+    image.header = _header('camera')
+    joints = JointState(header=_header(''), name=['a'], position=[1.0])
+    for message in (image, joints):
+        assert header_stamp_from_cdr(serialize_message(message)) == (1_795_000_123, 456_789)
+    with pytest.raises(ImageEncodingError):
+        header_stamp_from_cdr(b'\x00\x01\x00')
