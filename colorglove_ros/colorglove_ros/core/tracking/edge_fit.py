@@ -383,6 +383,12 @@ def _project(camera: PinholeCamera, p_world: np.ndarray, J_world: np.ndarray | N
     return pix, A @ J_world, depth
 
 
+def _pixel_radius(radius: np.ndarray, camera: PinholeCamera, depth: np.ndarray) -> np.ndarray:
+    """Image radius (pixels) of cylinders or discs of ``radius`` (m) at ``depth`` (m)."""
+    focal = 0.5 * (camera.fx + camera.fy)
+    return radius * focal / np.maximum(depth, 1e-6)
+
+
 def predict_features(kin: FastKinematics, points: FeaturePoints, camera: PinholeCamera,
                      q: np.ndarray, config: EdgeTrackerConfig,
                      world: tuple[np.ndarray, np.ndarray] | None = None) -> EdgePrediction:
@@ -395,9 +401,7 @@ def predict_features(kin: FastKinematics, points: FeaturePoints, camera: Pinhole
     base, end = pix[0:2 * L:2], pix[1:2 * L:2]
     Jb, Je = Jpix[0:2 * L:2], Jpix[1:2 * L:2]
     zb, ze = depth[0:2 * L:2], depth[1:2 * L:2]
-    z_mid = 0.5 * (zb + ze)
-    focal = 0.5 * (camera.fx + camera.fy)
-    hw = points.radius * focal / np.maximum(z_mid, 1e-6)
+    hw = _pixel_radius(points.radius, camera, 0.5 * (zb + ze))
     in_front = (zb > config.min_depth_m) & (ze > config.min_depth_m)
     long_enough = np.linalg.norm(end - base, axis=1) >= config.min_link_px
     usable = in_front & long_enough
@@ -430,7 +434,7 @@ def predict_features(kin: FastKinematics, points: FeaturePoints, camera: Pinhole
     tip_end = pix[2 * L + 1:points.palm_start:2]
     Jt = Jpix[points.tip_slice] if T else np.zeros((0, 2, NUM_DOFS))
     zt = depth[points.tip_slice]
-    tip_r = points.tip_radius * focal / np.maximum(zt, 1e-6)
+    tip_r = _pixel_radius(points.tip_radius, camera, zt)
     rows = points.tip_row
     tip_ok = (rows >= 0) & (zt > config.min_depth_m)
     tip_ok &= np.where(rows >= 0, link_usable[np.maximum(rows, 0)], False)
@@ -550,13 +554,12 @@ def hand_outline(points: FeaturePoints, camera: PinholeCamera, q: np.ndarray,
     points projected): link capsules, tip discs, the projected palm surface, the wrist and the
     direction from the wrist to the palm's centre."""
     L, o = len(points.links), points.outline_start
-    focal = 0.5 * (camera.fx + camera.fy)
     base = np.concatenate([pix[0:2 * L:2], pix[o::2]])
     end = np.concatenate([pix[1:2 * L:2], pix[o + 1::2]])
     zb = np.concatenate([depth[0:2 * L:2], depth[o::2]])
     ze = np.concatenate([depth[1:2 * L:2], depth[o + 1::2]])
     radius = np.concatenate([points.radius, points.outline_radius])
-    hw = radius * focal / np.maximum(0.5 * (zb + ze), 1e-6)
+    hw = _pixel_radius(radius, camera, 0.5 * (zb + ze))
     zt = depth[points.tip_slice]
     R = rotvec_to_matrix(q[3:6])
     centre = np.array([0.0, 0.5 * np.mean(points.palm_hull[:, 1]), 0.0]) \
@@ -567,7 +570,7 @@ def hand_outline(points: FeaturePoints, camera: PinholeCamera, q: np.ndarray,
     axis = epix[-1] - epix[-2]
     axis = axis / max(float(np.linalg.norm(axis)), 1e-9)
     return HandOutline(base, end, hw, pix[points.tip_slice],
-                       points.tip_radius * focal / np.maximum(zt, 1e-6), palm, epix[-2], axis)
+                       _pixel_radius(points.tip_radius, camera, zt), palm, epix[-2], axis)
 
 
 def _axis_points(points: FeaturePoints, pix: np.ndarray, Jpix: np.ndarray | None,
@@ -650,9 +653,8 @@ def _silhouette_residuals(points: FeaturePoints, camera: PinholeCamera, meas: Ed
         Jb, Je = Jpix[0:2 * L:2][t.link], Jpix[1:2 * L:2][t.link]
         c = (1.0 - t.along)[:, None] * pix[0:2 * L:2][t.link] + t.along[:, None] \
             * pix[1:2 * L:2][t.link]
-        focal = 0.5 * (camera.fx + camera.fy)
         z = 0.5 * (depth[0:2 * L:2] + depth[1:2 * L:2])[t.link]
-        hw = points.radius[t.link] * focal / np.maximum(z, 1e-6)
+        hw = _pixel_radius(points.radius[t.link], camera, z)
         rl = np.einsum('ij,ij->i', t.direction, t.px - c) - hw - tol
         Jl = -np.einsum('ij,ijd->id', t.direction,
                         (1.0 - t.along)[:, None, None] * Jb + t.along[:, None, None] * Je)
