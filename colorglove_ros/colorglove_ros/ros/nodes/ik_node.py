@@ -10,10 +10,11 @@ come from its own CameraInfo (``NS/camera/camera_info`` for observations on
 is ignored; the extra cameras' extrinsics and the user's hand (length and finger length
 factors) come from ``calibration_file``. With ``hand: left`` the candidates come from a
 left-hand segmentation_node's mirrored observation: the hand is tracked as the mirrored right
-hand and its pose mirrored back before it is published (one camera). Every tracked frame's
-crop prediction (``core.pipeline.tracked_crop``: the window the glove at the fitted pose
-fills in camera 0's image) goes to ``hand/crop_prediction`` (``geometry_msgs/PolygonStamped``,
-stamped with the frame), from which segmentation_node crops the next frames."""
+hand and its pose mirrored back before it is published (one camera). While someone
+subscribes, every tracked frame's crop prediction (``core.pipeline.tracked_crop``: the window
+the glove at the fitted pose fills in camera 0's image) goes to ``hand/crop_prediction``
+(``geometry_msgs/PolygonStamped``, stamped with the frame), from which segmentation_node
+crops the next frames."""
 from __future__ import annotations
 
 import sys
@@ -396,7 +397,10 @@ class IKNode(Node):
 
     def _publish_crop_prediction(self, msg: HandPoseCandidates, q) -> None:
         """The crop the tracked pose ``q`` (the tracker's, right-hand frame) predicts for the
-        next frames, in the image's own columns (mirrored back for a left hand)."""
+        next frames, in the image's own columns (mirrored back for a left hand); computed only
+        for a subscriber (segmentation_node subscribes while its segmenter uses predictions)."""
+        if self.crop_prediction_pub.get_subscription_count() == 0:
+            return
         prediction = tracked_crop(self.tracker, q, stamp_to_seconds(msg.header.stamp))
         if prediction is None:
             return

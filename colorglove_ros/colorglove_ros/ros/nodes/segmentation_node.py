@@ -18,7 +18,7 @@ Crop prediction: the node keeps the newest crop window ik_node predicts from a t
 (``hand/crop_prediction``, ``core.segmentation.crop_prediction.CropFeedback``) and gives it to
 the segmenter of every frame at most ``prediction_max_age_s`` newer than that tracked frame
 with the same frame_id (older: stale, ignored); the segmenter uses it when its
-``prediction_margin`` is above 0."""
+``prediction_margin`` is above 0 (the node subscribes only then)."""
 from __future__ import annotations
 
 import sys
@@ -145,8 +145,8 @@ class SegmentationNode(Node):
         # message does not carry the image size)
         self.frame_size: tuple[int, int] = (0, 0)
         self.prediction_frame_id = ''
-        self.create_subscription(PolygonStamped, CROP_PREDICTION_TOPIC,
-                                 self.on_crop_prediction, LATEST_ONLY)
+        self.prediction_subscription = None
+        self._subscribe_predictions_if_used()
         self.hand = declare_hand(self, 'segmentation_node')
         self.frame_camera = declare_frame_camera(self, camera)
         self.stats = FrameStats({'camera': self.frame_camera.refused})
@@ -213,7 +213,21 @@ class SegmentationNode(Node):
 
         def apply() -> None:
             self.segmenter = self.segmenter.fresh(**{name: checked})
+            self._subscribe_predictions_if_used()
         return apply
+
+    def _subscribe_predictions_if_used(self) -> None:
+        """Subscribe to ik_node's crop predictions while the segmenter uses them
+        (``prediction_margin`` > 0), and not otherwise: ik_node computes and publishes a
+        prediction only for a subscriber."""
+        used = self.segmenter.settings()['prediction_margin'] > 0
+        if used and self.prediction_subscription is None:
+            self.prediction_subscription = self.create_subscription(
+                PolygonStamped, CROP_PREDICTION_TOPIC, self.on_crop_prediction, LATEST_ONLY)
+        elif not used and self.prediction_subscription is not None:
+            self.destroy_subscription(self.prediction_subscription)
+            self.prediction_subscription = None
+            self.feedback.clear()
 
     # ------------------------------------------------------------------ frames
     def _segment(self, header: Header, rgb: np.ndarray) -> Observation | NoHand:

@@ -290,6 +290,38 @@ def test_ik_node_outputs(good_candidates: HandPoseCandidates, good_rgb: np.ndarr
     assert len(joints) == 1 and len(wrist) == 1
 
 
+
+def test_ik_node_computes_crop_predictions_only_for_a_subscriber(
+        good_candidates: HandPoseCandidates, small_database_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """No subscriber to hand/crop_prediction (segmentation_node's default): tracked frames are
+    published without computing a prediction; once someone subscribes, each tracked frame
+    gets one."""
+    from colorglove_ros.ros.nodes import ik_node as ik_node_module
+
+    computed = []
+
+    def counting_tracked_crop(*args, **kwargs):
+        computed.append(args[-1])
+        return real_tracked_crop(*args, **kwargs)
+
+    real_tracked_crop = ik_node_module.tracked_crop
+    monkeypatch.setattr(ik_node_module, 'tracked_crop', counting_tracked_crop)
+    with running(ik_node(small_database_path)) as h:
+        status = h.collect(String, 'hand/tracking_status')
+        pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
+        assert h.exchange(pub, good_candidates, status).data.startswith('tracking:')
+        assert computed == []
+        predictions = h.collect(PolygonStamped, 'hand/crop_prediction')
+        assert h.spin_until(
+            lambda: h.nodes[0].crop_prediction_pub.get_subscription_count() == 1, 5.0)
+        later = copy.deepcopy(good_candidates)
+        later.header.stamp.nanosec += 33_000_000
+        assert h.exchange(pub, later, status).data.startswith('tracking:')
+        assert h.spin_until(lambda: predictions, 5.0)
+    assert len(computed) == 1 and len(predictions) == 1
+
+
 def test_ik_node_frame_prefix_names_joints_and_tf_child(good_candidates: HandPoseCandidates,
                                                         small_database_path: Path) -> None:
     """ik_node with frame_prefix 'right_' publishes 'right_...' joints and the camera ->

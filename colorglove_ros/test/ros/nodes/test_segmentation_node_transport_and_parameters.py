@@ -190,3 +190,21 @@ def test_a_fresh_crop_prediction_crops_the_next_frames(node_assets: NodeAssets,
                                                      header(9, 200_000_000)), out))
     for msg, want in zip(got, expected, strict=True):
         assert crop_from_observation_msg(msg) == want
+
+
+def test_crop_predictions_are_subscribed_only_while_the_segmenter_uses_them(
+        node_assets: NodeAssets) -> None:
+    """With prediction_margin 0 (the default) the node does not subscribe to
+    hand/crop_prediction, so ik_node computes none; raising the margin subscribes, setting it
+    back to 0 unsubscribes and forgets the kept prediction."""
+    with running(segmentation_node(node_assets)) as h:
+        node = h.nodes[0]
+        assert node.count_subscribers('hand/crop_prediction') == 0
+        assert node.set_parameters([Parameter('segmenter.prediction_margin',
+                                              value=1.3)])[0].successful
+        assert node.count_subscribers('hand/crop_prediction') == 1
+        node.feedback.offer(CropPrediction(9.0, (320.0, 240.0), 50.0, (640, 480)))
+        assert node.set_parameters([Parameter('segmenter.prediction_margin',
+                                              value=0.0)])[0].successful
+        assert node.count_subscribers('hand/crop_prediction') == 0
+        assert node.feedback.for_frame(9.01) is None
