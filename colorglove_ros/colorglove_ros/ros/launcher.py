@@ -39,6 +39,7 @@ from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.yaml_io import load_yaml_mapping
 
 __all__ = ['LaunchError', 'NodeSpec', 'load_launch_file', 'node_command', 'Launcher',
+           'process_cpu_seconds',
            'use_fastdds_profile', 'with_camera_input', 'CAMERA_NODE_EXECUTABLE',
            'CAMERA_IMAGE_TOPIC', 'CAMERA_INFO_TOPIC', 'FASTDDS_PROFILE_VARIABLE', 'main']
 
@@ -155,6 +156,17 @@ def node_command(spec: NodeSpec) -> list[str]:
     return command
 
 
+def process_cpu_seconds(pid: int) -> float:
+    """CPU time (user + system, seconds) process ``pid`` has used so far, from
+    ``/proc/<pid>/stat`` (Linux); ``OSError`` if there is no such process."""
+    with open(f'/proc/{pid}/stat', encoding='ascii', errors='replace') as stat:
+        text = stat.read()
+    # fields after the command name, which is in parentheses and may hold spaces and ')'
+    fields = text[text.rindex(')') + 2:].split()
+    # utime and stime are fields 14 and 15 of proc(5), 12 and 13 after the name
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
 class Launcher:
     """Runs node processes, prefixes their output, and stops them in order."""
 
@@ -187,6 +199,18 @@ class Launcher:
         _clean_shared_memory()
         for index in range(len(self.specs)):
             self._start(index)
+
+    def cpu_seconds(self) -> dict[str, float]:
+        """CPU time (seconds) each running node process has used so far, by node label
+        (:func:`process_cpu_seconds`); processes that ended are left out."""
+        used = {}
+        for index, process in enumerate(self.processes):
+            if process is not None and process.poll() is None:
+                try:
+                    used[self._label(index)] = process_cpu_seconds(process.pid)
+                except OSError:     # ended between the poll and the read
+                    pass
+        return used
 
     def watch(self, stop_event: threading.Event) -> int:
         """Wait until ``stop_event`` is set or a non-respawning node exits; return its code."""

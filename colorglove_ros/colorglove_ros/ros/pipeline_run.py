@@ -9,6 +9,7 @@ lookup times in ``HandPoseCandidates``, the IK time in the tracking status), nev
 times in the monitor, which also deserialises camera images and so delays what it receives."""
 from __future__ import annotations
 
+import os
 import re
 import tempfile
 import threading
@@ -184,6 +185,9 @@ class PipelineRun:
     # camera frames (header stamp sec, nanosec) the monitor saw that got no observation
     unsegmented: list[tuple[int, int]] = field(default_factory=list)
     feed_output: str = ''                     # what the feed (e.g. the bag player) printed
+    # CPU time (seconds) while the feed ran, per node process (launcher label), 'monitor' (this
+    # process: the monitor, the feed's thread) and 'player' (the feed's process, whole run)
+    cpu_s: dict[str, float] = field(default_factory=dict)
 
     def missed_frames(self) -> str:
         """Why a run segmented fewer frames than it saw, for a failure message: the frames
@@ -313,17 +317,22 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
             replace(spec, parameters=[params_file, *spec.parameters]) for spec in extra_nodes])
         probe = LatencyProbe()
         record = None
+        cpu_s: dict[str, float] = {}
         try:
             probe.start()
             if feed is not None:
                 launcher.start()
                 _wait_for_graph(monitor, startup_s, {**STAGE_INPUTS, **(extra_inputs or {})})
                 started = time.monotonic()
+                cpu_before = {**launcher.cpu_seconds(), 'monitor': time.process_time()}
                 feeder = threading.Thread(target=feed, daemon=True)
                 feeder.start()
                 feeder.join(timeout_s)
                 # the feed has ended: wait for the last outputs (no frame count needed)
                 completed = not feeder.is_alive() and monitor.wait_for_frames(0, 60.0)
+                cpu_s = _cpu_since(cpu_before, {**launcher.cpu_seconds(),
+                                                'monitor': time.process_time()})
+                cpu_s['player'] = float(getattr(feed, 'cpu_s', float('nan')))
             else:
                 started = time.monotonic()
                 launcher.start()
@@ -341,7 +350,13 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
     run = _collect(monitor, duration, expected_frames, record)
     run.timed_out = not completed
     run.feed_output = getattr(feed, 'output', '')
+    run.cpu_s = cpu_s
     return run
+
+
+def _cpu_since(before: dict[str, float], after: dict[str, float]) -> dict[str, float]:
+    """CPU seconds used between two readings, for what both readings hold."""
+    return {name: after[name] - before[name] for name in before if name in after}
 
 
 # Each stage's input topic and the node that must subscribe to it before frames flow.
@@ -412,6 +427,10 @@ def summarize(run: PipelineRun, model) -> dict[str, float]:
         'latency_p95_ms': latency['p95'],
         'frames_with_truth': len(run.truth),
     }
+    # CPU time per offered frame of each process while the feed ran (``PipelineRun.cpu_s``)
+    for name, seconds in run.cpu_s.items():
+        figures[f'cpu_ms_per_frame_{name}'] = (1e3 * seconds / run.frames_expected
+                                               if run.frames_expected else float('nan'))
     # each stage's own processing time, carried in its messages
     for stage, times in (('segmentation', run.segmentation_ms), ('lookup', run.lookup_ms),
                          ('ik', ik_times_ms(run.statuses))):
@@ -454,14 +473,21 @@ class BagFeed:
                         '--min-info-subscribers', '3', '--restamp'] + (
                             ['--paced'] if paced else [])
         self.output = ''
+        # CPU time of the player process (user + system, seconds), its start-up included
+        self.cpu_s = float('nan')
 
     def __call__(self) -> None:
         import subprocess
 
-        done = subprocess.run(self.command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                              text=True)
-        self.output = done.stdout
-        done.check_returncode()
+        with subprocess.Popen(self.command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                              text=True) as player:
+            self.output = player.stdout.read()
+            # reaped here, with its resource usage (Popen.wait gives none)
+            _, status, usage = os.wait4(player.pid, 0)
+            player.returncode = os.waitstatus_to_exitcode(status)
+        self.cpu_s = usage.ru_utime + usage.ru_stime
+        if player.returncode:
+            raise subprocess.CalledProcessError(player.returncode, self.command, self.output)
 
 
 def bag_feed(bag: Path, rate: float = 1.0, paced: bool = False) -> BagFeed:

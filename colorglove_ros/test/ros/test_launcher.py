@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import os
 import sys
 import threading
 import time
@@ -28,6 +29,7 @@ from colorglove_ros.ros.launcher import (
     NodeSpec,
     load_launch_file,
     node_command,
+    process_cpu_seconds,
 )
 from colorglove_ros.ros.nodes import ik_node, lookup_node, segmentation_node
 from colorglove_ros.ros.nodes.camera_node import CameraNode
@@ -132,6 +134,40 @@ nodes:
     launcher.start()
     assert launcher.watch(threading.Event()) == 3
     launcher.stop()
+
+
+def test_process_cpu_seconds_is_the_process_cpu_time() -> None:
+    ended = time.process_time() + 0.3
+    while time.process_time() < ended:    # burn CPU in this process
+        pass
+    # user + system time of every thread, as time.process_time counts it (to a clock tick)
+    assert process_cpu_seconds(os.getpid()) == pytest.approx(time.process_time(), abs=0.05)
+
+
+def test_cpu_seconds_of_the_running_nodes(tmp_path: Path) -> None:
+    launcher = Launcher(load_launch_file(_write(tmp_path, f"""
+nodes:
+  - executable: {sys.executable}
+    name: busy
+    arguments: [-c, "import time\\nwhile time.process_time() < 0.6: pass\\ntime.sleep(60)"]
+  - executable: {sys.executable}
+    name: idle
+    arguments: [-c, 'import time; time.sleep(60)']
+  - executable: {sys.executable}
+    name: ended
+    arguments: [-c, 'pass']
+""")))
+    launcher.start()
+    try:
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline and launcher.cpu_seconds().get('busy', 0.0) < 0.5:
+            time.sleep(0.1)
+        used = launcher.cpu_seconds()
+    finally:
+        launcher.stop()
+    assert set(used) == {'busy', 'idle'}       # the process that ended is left out
+    assert used['busy'] >= 0.5
+    assert used['idle'] < used['busy']
 
 
 class _NoLookup:

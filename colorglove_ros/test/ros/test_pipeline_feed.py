@@ -11,7 +11,13 @@ import numpy as np
 import pytest
 
 from colorglove_ros.ros.latency_probe import ProbeRecord
-from colorglove_ros.ros.pipeline_run import _collect, bag_feed
+from colorglove_ros.ros.pipeline_run import (
+    PipelineRun,
+    _collect,
+    _cpu_since,
+    bag_feed,
+    summarize,
+)
 
 
 def test_feed_keeps_what_the_player_printed(tmp_path: Path) -> None:
@@ -19,6 +25,24 @@ def test_feed_keeps_what_the_player_printed(tmp_path: Path) -> None:
     with pytest.raises(subprocess.CalledProcessError):
         feed()
     assert 'no bag at' in feed.output
+    # the player's CPU time, for the benchmark's per-process figures: a started Python process
+    assert 0.0 < feed.cpu_s < 60.0
+
+
+def test_cpu_per_offered_frame_of_each_process() -> None:
+    empty = np.zeros(0, np.int64)
+    run = PipelineRun(frames_expected=200, frames=200, segmented=0, tracked=0, duration_s=1.0,
+                      latencies_s=[], estimated=np.zeros((0, 26)), truth=np.zeros((0, 26)),
+                      segmentation_ms=[], lookup_ms=[], probe=ProbeRecord(empty, empty),
+                      cpu_s={'segmentation': 1.0, 'monitor': 0.5})
+    figures = summarize(run, None)
+    assert figures['cpu_ms_per_frame_segmentation'] == pytest.approx(5.0)
+    assert figures['cpu_ms_per_frame_monitor'] == pytest.approx(2.5)
+
+
+def test_cpu_used_between_two_readings() -> None:
+    assert _cpu_since({'a': 1.0, 'b': 2.0, 'gone': 1.0}, {'a': 1.5, 'b': 2.0, 'new': 9.0}) \
+        == {'a': 0.5, 'b': 0.0}
 
 
 def test_run_names_the_frames_without_an_observation() -> None:
