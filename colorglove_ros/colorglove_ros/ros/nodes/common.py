@@ -270,7 +270,10 @@ def _frame_camera(node: Node, calibrated: PinholeCamera, use_camera_info: bool,
     frame_camera = FrameCamera(calibrated, use_camera_info,
                                calibrated_frame_id=calibrated_frame_id)
     if use_camera_info:
-        node.create_subscription(CameraInfo, info_topic, frame_camera.set_camera_info, 10)
+        # the newest only, like every input of the pipeline: a node busy with a frame while
+        # several came reads one, not each in turn
+        node.create_subscription(CameraInfo, info_topic, frame_camera.set_camera_info,
+                                 LATEST_ONLY)
     return frame_camera
 
 

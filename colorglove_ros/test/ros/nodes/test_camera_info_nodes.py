@@ -163,3 +163,50 @@ def test_lookup_and_ik_check_the_observation_against_their_camera_info(
     assert ik_tracked.data.startswith('tracking:'), ik_tracked.data
     assert ik_refusals == {'size': 1}
     assert [m.header.stamp.nanosec for m in joints] == [500]
+
+
+def test_a_node_busy_through_a_burst_of_camera_infos_reads_only_the_newest(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """CameraInfo is queued one deep, like every input of the pipeline: a node that was busy
+    while several came reads the newest once, not each in turn (every message read costs the
+    executor a wake-up)."""
+    import time
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    from colorglove_ros.ros.frame_camera import FrameCamera
+    from colorglove_ros.ros.nodes.common import CAMERA_INFO_TOPIC, declare_frame_camera
+
+    widths = []
+    keep = FrameCamera.set_camera_info
+    monkeypatch.setattr(FrameCamera, 'set_camera_info',
+                        lambda self, msg: (widths.append(msg.width), keep(self, msg)))
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        reader = Node('reader', context=context)
+        frame_camera = declare_frame_camera(reader, CAMERA)
+        writer = Node('writer', context=context)
+        publisher = writer.create_publisher(CameraInfo, CAMERA_INFO_TOPIC, 10)
+        deadline = time.monotonic() + 10.0
+        while publisher.get_subscription_count() < 1 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        burst = [replace(CAMERA, width=CAMERA.width + k) for k in range(5)]
+        stamp = header(1, frame_id=CAMERA.frame_id)
+        for camera in burst:      # the reader does not spin: as if busy with a frame
+            publisher.publish(camera_to_camera_info_msg(camera, stamp))
+        time.sleep(1.0)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(reader)
+        deadline = time.monotonic() + 3.0
+        while time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+        assert widths == [burst[-1].width]
+        assert frame_camera.camera_info_camera.width == burst[-1].width
+        executor.shutdown()
+        writer.destroy_node()
+        reader.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
