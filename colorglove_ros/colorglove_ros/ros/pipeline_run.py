@@ -309,7 +309,10 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
         monitor = PipelineMonitor(keep_overlays=keep_overlays,
                                   overlay_stride=max(1, expected_frames // (keep_overlays + 1)),
                                   context=context)
-        executor = rclpy.executors.MultiThreadedExecutor(num_threads=2, context=context)
+        # one thread: the monitor's callbacks only record, and rclpy's multi-threaded executor
+        # costs more CPU per message, taken from the cores the measured graph shares
+        # (docs/RESULTS.md, issue 19, sixth pass)
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
         executor.add_node(monitor)
         spinner = threading.Thread(target=executor.spin, daemon=True)
         spinner.start()
