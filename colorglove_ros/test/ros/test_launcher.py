@@ -33,7 +33,7 @@ from colorglove_ros.ros.launcher import (
 )
 from colorglove_ros.ros.nodes import ik_node, lookup_node, segmentation_node
 from colorglove_ros.ros.nodes.camera_node import CameraNode
-from colorglove_ros.ros.nodes.common import StartupError
+from colorglove_ros.ros.nodes.common import CROP_PREDICTION_TOPIC, StartupError
 from colorglove_ros.ros.nodes.hand_description_node import HandDescriptionNode
 from colorglove_ros.ros.nodes.ik_node import IKNode
 
@@ -247,12 +247,12 @@ def test_stereo_launch_file_runs_the_two_camera_graph(monkeypatch: pytest.Monkey
             sub.topic_name for sub in ik.subscriptions}
         assert stereo[extra].get_parameter('camera_index').value == 1
         for index, seg in enumerate((stereo['/segmentation'], stereo[extra])):
-            # input: the image and CameraInfo topics colorglove_make_bag writes for this camera,
-            # and the crop predictions in its namespace: ik_node's (camera 0's) for camera 0
-            predictions = _topics(seg.subscriptions, PolygonStamped)
+            # input: the image and CameraInfo topics colorglove_make_bag writes for this camera
+            # (crop predictions only while prediction_margin > 0, off here); the predictions'
+            # topic in its namespace is ik_node's (camera 0's) for camera 0
             assert sorted(s.topic_name for s in seg.subscriptions) == sorted(
-                [*camera_topics(rig[index], index), *predictions])
-            assert len(predictions) == 1
+                camera_topics(rig[index], index))
+            predictions = [seg.resolve_topic_name(CROP_PREDICTION_TOPIC)]
             assert (predictions == _topics(ik.publishers, PolygonStamped)) == (index == 0)
             output = _topics(seg.publishers, HandObservation)
             assert len(output) == 1
