@@ -196,11 +196,11 @@ class Silhouette:
         grad = np.stack([v[:, 1] - v[:, 2], v[:, 3] - v[:, 4]], axis=1) / (2.0 * h)
         return v[:, 0], grad
 
-    def unexplained(self, outline: HandOutline, tolerance_px: float
+    def unexplained(self, outline: HandOutline, tolerance_px: float, pixels: bool = True
                     ) -> tuple[np.ndarray, float]:
-        """Foreground pixels (full-resolution coordinates, (M, 2)) farther than
-        ``tolerance_px`` from every part of ``outline``, and their share of the hand's
-        foreground (the forearm, beyond the wrist, left out of both)."""
+        """Foreground pixels (full-resolution coordinates, (M, 2); none listed unless
+        ``pixels``) farther than ``tolerance_px`` from every part of ``outline``, and their
+        share of the hand's foreground (the forearm, beyond the wrist, left out of both)."""
         s = self.scale
         covered = np.zeros(self.mask.shape, np.uint8)
         tol = float(tolerance_px)
@@ -235,6 +235,8 @@ class Silhouette:
         if count == 0:
             return np.zeros((0, 2)), 0.0
         loose = cv2.bitwise_and(hand, 1 - covered)
+        if not pixels:
+            return np.zeros((0, 2)), float(cv2.countNonZero(loose)) / float(count)
         found = cv2.findNonZero(loose)
         if found is None:
             return np.zeros((0, 2)), 0.0
