@@ -112,6 +112,8 @@ def to_grey(image: np.ndarray) -> np.ndarray:
 def _sample(grey: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """Bilinear samples of ``grey`` at (..., 2) pixel positions (NaN outside the image)."""
     shape = xy.shape[:-1]
+    if not np.size(xy):
+        return np.zeros(shape, dtype=np.float32)
     flat = xy.reshape(-1, 2).astype(np.float32)
     mx = np.ascontiguousarray(flat[:, 0]).reshape(-1, 1)
     my = np.ascontiguousarray(flat[:, 1]).reshape(-1, 1)
@@ -250,7 +252,7 @@ def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
                      0.0)
     pair = np.add(enter[..., None], later)                                     # (R, W, G)
     pair *= agree[li][:, None, :]
-    flat = pair.reshape(len(rows), -1)
+    flat = pair.reshape(len(rows), W * len(gaps))
     k = np.argmax(flat, axis=1) if len(rows) else np.zeros(0, dtype=np.int64)
     best_score = np.take_along_axis(flat, k[:, None], 1)[:, 0]
     best_i = k // len(gaps)

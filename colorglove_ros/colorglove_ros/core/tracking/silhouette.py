@@ -207,9 +207,11 @@ class Silhouette:
         shift = s * self.offset
         ok = np.isfinite(outline.base).all(1) & np.isfinite(outline.end).all(1)
         thick = np.maximum(1, np.round(2.0 * (outline.half_width + tol) / s)).astype(int)
-        for b, e, t in zip(_pts(outline.base[ok] - shift, s), _pts(outline.end[ok] - shift, s),
-                           thick[ok], strict=True):
-            cv2.line(covered, b, e, 1, int(t), cv2.LINE_8, 4)
+        ends = np.stack([_fixed(outline.base[ok] - shift, s), _fixed(outline.end[ok] - shift, s)],
+                        axis=1)                                   # (K, 2, 2) capsule ends
+        # one call per thickness: a two-point polyline is drawn as cv2.line draws it
+        for t in np.unique(thick[ok]):
+            cv2.polylines(covered, list(ends[thick[ok] == t]), False, 1, int(t), cv2.LINE_8, 4)
         ok = np.isfinite(outline.tip).all(1)
         radius = np.maximum(1, np.round(16 * (outline.tip_radius + tol) / s)).astype(int)
         for c, r in zip(_pts(outline.tip[ok] - shift, s), radius[ok], strict=True):
@@ -244,8 +246,12 @@ class Silhouette:
         return pix, float(len(pix)) / float(count)
 
 
-def _pts(xy: np.ndarray, scale: int) -> list[tuple[int, int]]:
+def _fixed(xy: np.ndarray, scale: int) -> np.ndarray:
     """Full-resolution pixels (N, 2) as cv2 drawing coordinates (4 fractional bits) at
-    1 / scale."""
-    return [tuple(p) for p in np.round((np.asarray(xy) + 0.5) / scale * 16 - 8).astype(int)
-            .tolist()]
+    1 / scale, (N, 2) int32."""
+    return np.round((np.asarray(xy) + 0.5) / scale * 16 - 8).astype(np.int32)
+
+
+def _pts(xy: np.ndarray, scale: int) -> list[tuple[int, int]]:
+    """:func:`_fixed` as a list of (x, y) tuples."""
+    return [tuple(p) for p in _fixed(xy, scale).tolist()]
