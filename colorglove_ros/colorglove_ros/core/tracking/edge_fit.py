@@ -693,11 +693,13 @@ def _silhouette_residuals(points: FeaturePoints, camera: PinholeCamera, meas: Ed
     foreground, and each unexplained pixel's distance beyond the tolerance from its link's
     capsule (rows only where positive)."""
     tol = config.silhouette_tolerance_px
-    ax, Jax = _axis_points(points, pix, Jpix, camera)
+    ax, _ = _axis_points(points, pix, None, camera)
     d, grad = meas.silhouette.outside_distance(ax)
     off = d > tol
     r = [d[off] - tol]
-    J = [np.einsum('ij,ijd->id', grad[off], Jax[off])]
+    J = [np.zeros((0, Jpix.shape[-1]))]
+    if off.any():          # the axis points' Jacobians only when one is off
+        J = [np.einsum('ij,ijd->id', grad[off], _axis_points(points, pix, Jpix, camera)[1][off])]
     t = meas.loose
     if t is not None and len(t.px):
         L = len(points.links)
