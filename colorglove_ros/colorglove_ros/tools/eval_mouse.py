@@ -14,7 +14,9 @@ The thresholds were fixed before this evaluation (no tuning seeds); seeds 0-4 ar
 
 ``--source edges`` feeds the mouse the DigitEyes edge tracker's actual output instead of the
 noise model: each scripted sequence is rendered as a bare hand (core.synthetic.bare_hand,
-the primary camera of ``--calibration`` looking down at the table at 45 degrees), the edge
+the primary camera of ``--calibration`` looking down at the table at 45 degrees; with
+``--cameras 2`` also its second camera, e.g. ``config/calibration_table_stereo.yaml``'s
+camera facing the user from the far side of the table, and the tracker fits both), the edge
 tracker starts from the true first pose (a pose given to it, as from the glove tracker) and,
 after a loss, again from the true pose of the frame it was lost on (counted as
 ``reinitialisations``); frames without a published pose reach the mouse as gaps. With
@@ -31,6 +33,7 @@ poses are cached in data/scripted_tracking/); frames it did not track reach the 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +49,7 @@ from colorglove_ros.core.geometry import matrix_to_rotvec
 from colorglove_ros.core.hand.model import DOF_NAMES, KEYPOINT_NAMES, HandModel
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.synthetic.bare_hand import BareHandSequence
+from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
 from colorglove_ros.core.tracking.edge_tracker import EdgeTracker
 from colorglove_ros.core.tracking.mouse import Mouse3D, MouseConfig, raw_mouse_values
 from colorglove_ros.core.tracking.silhouette import BackgroundModel
@@ -151,17 +155,22 @@ def noisy_poses(model: HandModel, Q: np.ndarray, seed: int, noise: dict[str, flo
     return out
 
 
-def edge_tracked_poses(Q: np.ndarray, seed: int, camera: PinholeCamera,
-                       hand_length_m: float, silhouettes: bool = False
+def edge_tracked_poses(Q: np.ndarray, seed: int, cameras: Sequence[PinholeCamera],
+                       hand_length_m: float, silhouettes: bool = False,
+                       config: EdgeTrackerConfig | None = None
                        ) -> tuple[list[np.ndarray | None], int]:
-    """The edge tracker's published poses on the bare-hand rendering of ``Q`` (None where
-    it published none) and how often it was re-initialised from the true pose after a loss;
-    ``silhouettes``: with a background model from the empty scene."""
-    seq = BareHandSequence(camera, seed=seed, poses=Q, hand_length_m=hand_length_m, views=1)
+    """The edge tracker's published poses on the bare-hand rendering of ``Q`` seen by
+    ``cameras`` (the primary first; the poses are in its frame) and how often it was
+    re-initialised from the true pose after a loss (None where it published none);
+    ``silhouettes``: with a background model per camera from the empty scene; ``config``:
+    the tracker's settings (default :class:`EdgeTrackerConfig`)."""
+    cameras = list(cameras)
+    seq = BareHandSequence(cameras[0], seed=seed, poses=Q, hand_length_m=hand_length_m,
+                           views=len(cameras))
     try:
-        backgrounds = [BackgroundModel.from_frames(seq.render_empty_views([camera]))] \
-            if silhouettes else None
-        tracker = EdgeTracker(seq.synth.model, [camera], backgrounds=backgrounds)
+        backgrounds = [BackgroundModel.from_frames([e]) for e in
+                       seq.render_empty_views(cameras)] if silhouettes else None
+        tracker = EdgeTracker(seq.synth.model, cameras, config, backgrounds)
         tracker.initialize(Q[0])
         out: list[np.ndarray | None] = []
         restarts = 0
@@ -169,7 +178,8 @@ def edge_tracked_poses(Q: np.ndarray, seed: int, camera: PinholeCamera,
             if tracker.state == 'waiting':
                 tracker.initialize(Q[i])
                 restarts += 1
-            out.append(tracker.update([seq.render(i).image_rgb]).q)
+            views = seq.render_views(i, cameras)
+            out.append(tracker.update([v.image_rgb for v in views]).q)
         return out, restarts
     finally:
         seq.close()
@@ -247,14 +257,23 @@ def main(argv: list[str] | None = None) -> int:
                         help='with --source edges: silhouettes against the empty scene, or '
                         'edges only')
     parser.add_argument('--calibration', default='config/calibration.yaml',
-                        help='camera (its first) for --source edges')
+                        help='cameras (the first --cameras of them) for --source edges')
+    parser.add_argument('--cameras', type=int, default=1, choices=(1, 2),
+                        help='with --source edges: cameras of --calibration the edge tracker '
+                        'fits (2: e.g. config/calibration_table_stereo.yaml)')
+    parser.add_argument('--camera-weights', type=float, nargs='+',
+                        help='with --source edges: the edge tracker\'s camera_weights '
+                        '(default: EdgeTrackerConfig\'s)')
     args = parser.parse_args(argv)
     return run_tool('colorglove_eval_mouse', lambda: _run(args))
 
 
 def _run(args: Any) -> int:
     calibration = load_calibration(resolve_path(args.calibration))
-    camera = calibration.cameras[0]
+    if args.source == 'edges' and len(calibration.cameras) < args.cameras:
+        raise ColorGloveError(f'{args.calibration} has {len(calibration.cameras)} camera(s), '
+                              f'--cameras asks for {args.cameras}')
+    cameras = calibration.cameras[:args.cameras]
     model = HandModel(calibration.hand_length_m) if args.source != 'noise' else HandModel()
     config = MouseConfig()
     noise = {'joint_deg': args.joint_noise_deg, 'position_mm': args.position_noise_mm,
@@ -267,7 +286,7 @@ def _run(args: Any) -> int:
         glove = ScriptedTracker(database, share_dir() / 'config' / 'ik.yaml',
                                 resolve_path(args.calibration), data_dir() / 'scripted_tracking')
     try:
-        return _evaluate_all(args, model, config, noise, camera, calibration.hand_length_m,
+        return _evaluate_all(args, model, config, noise, cameras, calibration.hand_length_m,
                              glove)
     finally:
         if glove is not None:
@@ -275,15 +294,17 @@ def _run(args: Any) -> int:
 
 
 def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[str, float],
-                  camera: PinholeCamera, hand_length_m: float, glove: ScriptedTracker | None
-                  ) -> int:
+                  cameras: Sequence[PinholeCamera], hand_length_m: float,
+                  glove: ScriptedTracker | None) -> int:
+    edge_config = EdgeTrackerConfig() if args.camera_weights is None else \
+        EdgeTrackerConfig(camera_weights=tuple(args.camera_weights))
     rows = []
     for seed in args.seeds:
         Q, spans = scripted_sequence(model, config, seed, args.seconds)
         extra: dict[str, Any] = {}
         if args.source == 'edges':
-            poses, restarts = edge_tracked_poses(Q, seed, camera, hand_length_m,
-                                                 args.background == 'empty')
+            poses, restarts = edge_tracked_poses(Q, seed, cameras, hand_length_m,
+                                                 args.background == 'empty', edge_config)
             extra['reinitialisations'] = restarts
         elif glove is not None:
             poses = glove_tracked_poses(model, Q, seed, glove)
@@ -297,7 +318,9 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
     truth = sum(r['scripted_clicks'] for r in rows)
     total = {'precision': tp / det if det else 0.0, 'recall': tp / truth,
              'cursor_error_mm': float(np.mean([r['cursor_error_mm'] for r in rows]))}
-    source = {'noise': f'noise {noise}', 'edges': 'the edge tracker (1 camera)',
+    source = {'noise': f'noise {noise}',
+              'edges': f'the edge tracker ({len(cameras)} camera(s): '
+                       f'{", ".join(c.name for c in cameras)})',
               'glove': 'the glove tracker (1 camera)'}[args.source]
     print_table(rows, f'3-D mouse, scripted sequences, poses from {source}')
     targets = [target_row('click precision >= 95 %', 100 * total['precision'], 95.0, '>='),
@@ -308,7 +331,10 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
         write_json(args.json, {'settings': {'seeds': args.seeds, **noise,
                                             'tolerance_frames': args.tolerance_frames,
                                             'source': args.source, 'seconds': args.seconds,
-                                            'background': args.background},
+                                            'background': args.background,
+                                            'calibration': args.calibration,
+                                            'cameras': [c.name for c in cameras],
+                                            'camera_weights': list(edge_config.camera_weights)},
                                'rows': rows, 'total': total, 'targets': targets})
     return 0
 

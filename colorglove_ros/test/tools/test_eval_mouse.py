@@ -17,6 +17,9 @@ from colorglove_ros.tools.eval_mouse import (
     noisy_poses,
     scripted_sequence,
 )
+from colorglove_ros.tools.eval_mouse import (
+    main as eval_mouse_main,
+)
 
 MODEL = HandModel()
 CONFIG = MouseConfig()
@@ -49,7 +52,7 @@ def test_noise_model_drops_frames_and_perturbs_the_rest() -> None:
 def test_edge_tracker_output_is_one_pose_or_none_per_frame() -> None:
     calibration = load_calibration(resolve_path('config/calibration.yaml'))
     Q, _ = scripted_sequence(MODEL, CONFIG, seed=0, seconds=3.0, clicks=1)
-    runs = {sil: edge_tracked_poses(Q, 0, calibration.cameras[0], calibration.hand_length_m,
+    runs = {sil: edge_tracked_poses(Q, 0, calibration.cameras[:1], calibration.hand_length_m,
                                     silhouettes=sil) for sil in (False, True)}
     for poses, restarts in runs.values():
         assert len(poses) == len(Q) and restarts >= 0
@@ -57,6 +60,25 @@ def test_edge_tracker_output_is_one_pose_or_none_per_frame() -> None:
     # the silhouettes of the empty table scene reach the tracker and change its fits
     assert any((a is None) != (b is None) or (a is not None and not np.allclose(a, b))
                for a, b in zip(runs[False][0], runs[True][0], strict=True))
+
+
+@pytest.mark.slow
+def test_edge_tracker_fits_the_second_table_camera_when_asked() -> None:
+    calibration = load_calibration(resolve_path('config/calibration_table_stereo.yaml'))
+    Q, _ = scripted_sequence(MODEL, CONFIG, seed=0, seconds=2.5, clicks=1)
+    one, _ = edge_tracked_poses(Q, 0, calibration.cameras[:1], calibration.hand_length_m)
+    two, restarts = edge_tracked_poses(Q, 0, calibration.cameras[:2], calibration.hand_length_m)
+    assert len(two) == len(Q) and restarts >= 0
+    assert all(p is None or (p.shape == (26,) and np.all(np.isfinite(p))) for p in two)
+    # the front camera's edges change the fits
+    assert any((a is None) != (b is None) or (a is not None and not np.allclose(a, b))
+               for a, b in zip(one, two, strict=True))
+
+
+def test_two_cameras_need_a_calibration_with_two() -> None:
+    code = eval_mouse_main(['--source', 'edges', '--cameras', '2', '--seeds', '0',
+                            '--seconds', '1', '--calibration', 'config/calibration.yaml'])
+    assert code != 0
 
 
 class _FakeGloveTracker:

@@ -112,6 +112,8 @@ def to_grey(image: np.ndarray) -> np.ndarray:
 def _sample(grey: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """Bilinear samples of ``grey`` at (..., 2) pixel positions (NaN outside the image)."""
     shape = xy.shape[:-1]
+    if not np.size(xy):
+        return np.zeros(shape, dtype=np.float32)
     flat = xy.reshape(-1, 2).astype(np.float32)
     mx = np.ascontiguousarray(flat[:, 0]).reshape(-1, 1)
     my = np.ascontiguousarray(flat[:, 1]).reshape(-1, 1)
@@ -127,16 +129,20 @@ def _derivative(profile: np.ndarray, step: np.ndarray) -> np.ndarray:
     p[..., 1:-1] = 0.25 * profile[..., :-2] + 0.5 * profile[..., 1:-1] + 0.25 * profile[..., 2:]
     d = np.zeros_like(p)
     d[..., 1:-1] = (p[..., 2:] - p[..., :-2]) / (2.0 * step[..., None])
-    return np.nan_to_num(d, nan=0.0)
+    d[np.isnan(d)] = 0.0
+    return d
 
 
-def _subpixel(score: np.ndarray, index: np.ndarray) -> np.ndarray:
-    """Parabolic refinement of the peak ``index`` of ``score`` along the last axis."""
+def _subpixel(score: np.ndarray, index: np.ndarray, sign: np.ndarray | None = None
+              ) -> np.ndarray:
+    """Parabolic refinement of the peak ``index`` of ``score`` along the last axis (of
+    ``-score`` where ``sign`` < 0)."""
     n = score.shape[-1]
     i = np.clip(index, 1, n - 2)
-    a = np.take_along_axis(score, (i - 1)[..., None], -1)[..., 0]
-    b = np.take_along_axis(score, i[..., None], -1)[..., 0]
-    c = np.take_along_axis(score, (i + 1)[..., None], -1)[..., 0]
+    abc = np.take_along_axis(score, i[..., None] + np.arange(-1, 2), -1)
+    if sign is not None:
+        abc = np.where(sign[..., None] >= 0, abc, -abc)
+    a, b, c = abc[..., 0], abc[..., 1], abc[..., 2]
     den = a - 2.0 * b + c
     shift = np.where(np.abs(den) > 1e-9, 0.5 * (a - c) / np.where(den == 0, 1.0, den), 0.0)
     return i + np.clip(shift, -0.5, 0.5)
@@ -210,10 +216,14 @@ def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
     t = np.linspace(-1.0, 1.0, W)
     offsets = reach[:, None] * t[None, :]                                      # (L, W)
     step = 2.0 * reach / (W - 1)                                               # (L,)
-    xy = centres[:, :, None, :] + offsets[:, None, :, None] * n[:, None, None, :]
-    profile = _sample(grey, xy)                                                # (L, S, W)
-    d = _derivative(profile, np.broadcast_to(step[:, None], (L, S)))
-    pol = np.broadcast_to(np.asarray(polarity, dtype=np.int64), (L,))[:, None, None]
+    # only the slices that may be measured are searched (R rows of the (L, S) slices)
+    rows = np.flatnonzero(np.ones(L * S, dtype=bool) if slice_valid is None
+                          else np.asarray(slice_valid, dtype=bool).reshape(-1))
+    li = rows // S                                                             # (R,) link
+    xy = centres.reshape(-1, 2)[rows][:, None, :] + offsets[li][:, :, None] * n[li][:, None, :]
+    profile = _sample(grey, xy)                                                # (R, W)
+    d = _derivative(profile, step[li])
+    pol = np.broadcast_to(np.asarray(polarity, dtype=np.int64), (L,))[li][:, None]
     # edge strengths: a link brighter than its surroundings rises then falls (+1), a darker
     # one falls then rises (-1); with polarity 0 each edge may have either sign, since a
     # shaded cylinder before a mid-grey background can be brighter on one side and darker
@@ -221,7 +231,7 @@ def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
     if np.all(pol == 0):
         enter = leave = np.abs(d)
     else:
-        enter = np.where(pol == 0, np.abs(d), pol * d)                        # (L, S, W)
+        enter = np.where(pol == 0, np.abs(d), pol * d)                        # (R, W)
         leave = np.where(pol == 0, np.abs(d), -pol * d)
     enter = np.where(enter > cfg.min_gradient, enter, _NO_EDGE)
     leave = np.where(leave > cfg.min_gradient, leave, _NO_EDGE)
@@ -233,30 +243,35 @@ def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
     g_lo = max(1, int(np.floor((2.0 * hw * lo / step).min())))
     g_hi = max(g_lo, min(W - 1, int(np.ceil((2.0 * hw * hi / step).max()))))
     gaps = np.arange(g_lo, g_hi + 1)                                           # (G,)
-    padded = np.concatenate([leave[..., g_lo:], np.full((L, S, g_hi), _NO_EDGE)], axis=2)
-    later = sliding_window_view(padded, len(gaps), axis=2)[:, :, :W]          # (L, S, W, G)
+    padded = np.concatenate([leave[:, g_lo:], np.full((len(rows), g_hi), _NO_EDGE)], axis=1)
+    later = sliding_window_view(padded, len(gaps), axis=1)[:, :W]             # (R, W, G)
     width = gaps[None, :] * step[:, None]                                      # (L, G)
     ok_width = (width >= 2.0 * hw[:, None] * lo) & (width <= 2.0 * hw[:, None] * hi)
     agree = np.where(ok_width, np.exp(-0.5 * ((width - 2.0 * hw[:, None])
                                               / (cfg.width_sigma * 2.0 * hw[:, None])) ** 2),
                      0.0)
-    pair = (enter[..., None] + later) * agree[:, None, None, :]               # (L, S, W, G)
-    flat = pair.reshape(L, S, -1)
-    k = np.argmax(flat, axis=2)
-    best_score = np.take_along_axis(flat, k[..., None], 2)[..., 0]
+    pair = np.add(enter[..., None], later)                                     # (R, W, G)
+    pair *= agree[li][:, None, :]
+    flat = pair.reshape(len(rows), W * len(gaps))
+    k = np.argmax(flat, axis=1) if len(rows) else np.zeros(0, dtype=np.int64)
+    best_score = np.take_along_axis(flat, k[:, None], 1)[:, 0]
     best_i = k // len(gaps)
     best_j = best_i + gaps[k % len(gaps)]
-    best_score = np.where((best_score > 0) & (best_j < W), best_score, -np.inf)
-    valid = np.isfinite(best_score)
-    if slice_valid is not None:
-        valid &= np.asarray(slice_valid, dtype=bool).reshape(L, S)
-    sign_i = np.sign(np.take_along_axis(d, best_i[..., None], 2)[..., 0]).astype(np.int64)
-    sign_j = np.sign(np.take_along_axis(d, best_j[..., None], 2)[..., 0]).astype(np.int64)
-    best_sign = np.where(sign_i == -sign_j, sign_i, 0)
-    ei = _subpixel(np.where(sign_i[..., None] >= 0, d, -d), best_i)
-    ej = _subpixel(np.where(sign_j[..., None] >= 0, d, -d), best_j)
-    mid_t = (ei + ej) / (W - 1) - 1.0            # mean of the two sample positions in [-1, 1]
-    mid_off = mid_t * reach[:, None]                                           # (L, S)
+    found_pair = (best_score > 0) & (best_j < W)
+    sign_i = np.sign(np.take_along_axis(d, best_i[:, None], 1)[:, 0]).astype(np.int64)
+    sign_j = np.sign(np.take_along_axis(d, best_j[:, None], 1)[:, 0]).astype(np.int64)
+    ei = _subpixel(d, best_i, sign_i)
+    ej = _subpixel(d, best_j, sign_j)
+    # back to (L, S); a slice not searched has no pair (its offset 0 is weighted 0)
+    valid = np.zeros(L * S, dtype=bool)
+    valid[rows] = found_pair
+    valid = valid.reshape(L, S)
+    best_sign = np.zeros(L * S, dtype=np.int64)
+    best_sign[rows] = np.where(sign_i == -sign_j, sign_i, 0)
+    best_sign = best_sign.reshape(L, S)
+    mid_t = np.zeros(L * S)
+    mid_t[rows] = (ei + ej) / (W - 1) - 1.0      # mean of the two sample positions in [-1, 1]
+    mid_off = mid_t.reshape(L, S) * reach[:, None]                             # (L, S)
     normal, offset, w, midpoints = _fit_lines(base, end, centres, n, frac, mid_off, valid, cfg)
     found = w.sum(1) >= cfg.min_slices
     signs = np.where(w > 0, best_sign, 0).sum(1)
@@ -297,7 +312,7 @@ def measure_outline_edges(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndar
     if slice_valid is not None:
         valid &= np.asarray(slice_valid, dtype=bool).reshape(L, S)
     sign = np.sign(np.take_along_axis(d, k[..., None], 2)[..., 0])
-    refined = _subpixel(np.where(sign[..., None] >= 0, d, -d), k)
+    refined = _subpixel(d, k, sign)
     off = -cfg.search_px + refined * step
     normal, offset, w, points = _fit_lines(base, end, centres, n, frac, off, valid, cfg)
     # re-orient the fitted normals outward (they follow the direction of n)

@@ -32,8 +32,9 @@ pixels and their Jacobians, so other trackers (the glove IK) can add the same co
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any, TypeVar
 
 import cv2
 import numpy as np
@@ -66,7 +67,7 @@ __all__ = [
     'EdgeTrackerError', 'EdgeTrackerConfig', 'DEFAULT_TRACKED_LINKS', 'FeaturePoints',
     'feature_points', 'EdgePrediction', 'EdgeMeasurement', 'EdgeFit', 'link_axis_residuals',
     'tip_residuals', 'predict_features', 'measure_features', 'stack_residuals', 'fit_pose',
-    'fingertip_disagreement', 'hand_outline',
+    'fingertip_disagreement', 'hand_outline', 'LineRows', 'line_rows',
 ]
 
 # every phalanx except the thumb metacarpal, which lies inside the palm's outline
@@ -369,6 +370,36 @@ class EdgePrediction:
     palm_usable: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
 
+# pose-derived values one frame asks for several times (every camera's prediction, occlusion
+# and outline) and the next frame again (its start is this frame's final pose): key ->
+# (the objects the key names by id, kept alive so no id is reused while cached; value)
+_MEMO: dict[tuple[object, ...], tuple[tuple[object, ...], Any]] = {}
+_MEMO_SIZE = 16
+_T = TypeVar('_T')
+
+
+def _memo(kind: str, owners: tuple[object, ...], q: np.ndarray, make: Callable[[], _T]) -> _T:
+    """``make()``, remembered for the last few (``kind``, ``owners``, pose ``q``)."""
+    key = (kind, *(id(o) for o in owners), np.asarray(q, dtype=float).tobytes())
+    hit = _MEMO.get(key)
+    if hit is not None:
+        return hit[1]
+    value = make()
+    if len(_MEMO) >= _MEMO_SIZE:
+        _MEMO.pop(next(iter(_MEMO)))
+    _MEMO[key] = (owners, value)
+    return value
+
+
+def _palm_rotation(q: np.ndarray) -> np.ndarray:
+    """The palm's rotation matrix of pose ``q`` (read-only)."""
+    def make() -> np.ndarray:
+        R = rotvec_to_matrix(q[3:6])
+        R.setflags(write=False)
+        return R
+    return _memo('rotation', (), q[3:6], make)
+
+
 def _project(camera: PinholeCamera, p_world: np.ndarray, J_world: np.ndarray | None
              ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """Pixels, pixel Jacobians (N, 2, 26) and depths of primary-frame points in a camera."""
@@ -461,16 +492,15 @@ def _behind_palm(points: FeaturePoints, camera: PinholeCamera, config: EdgeTrack
     surface points and farther from the camera, by more than the link's radius, than the
     nearest of those points within ``palm_occlusion_px`` (or the nearest one): e.g. fingers
     curled behind the back of the hand."""
-    world = q[0:3] + points.palm_surface @ rotvec_to_matrix(q[3:6]).T
+    world = q[0:3] + points.palm_surface @ _palm_rotation(q).T
     pix, _, depth = _project(camera, world, None)
     ok = depth > config.min_depth_m
     if ok.sum() < 3:
         return np.zeros(centres.shape[:2], dtype=bool)
     pix, depth = pix[ok], depth[ok]
-    hull = cv2.convexHull(pix.astype(np.float32))
+    hull = cv2.convexHull(pix.astype(np.float32))[:, 0, :].astype(float)
     flat = centres.reshape(-1, 2)
-    inside = np.array([cv2.pointPolygonTest(hull, (float(x), float(y)), False) >= 0
-                       for x, y in flat])
+    inside = _inside_convex(hull, flat)
     out = np.zeros(len(flat), dtype=bool)
     if inside.any():
         d2 = ((flat[inside, None, :] - pix[None, :, :]) ** 2).sum(-1)
@@ -480,6 +510,17 @@ def _behind_palm(points: FeaturePoints, camera: PinholeCamera, config: EdgeTrack
         radius = np.repeat(points.radius, centres.shape[1])[inside]
         out[inside] = z_self.reshape(-1)[inside] > z_palm + radius
     return out.reshape(centres.shape[:2])
+
+
+def _inside_convex(hull: np.ndarray, px: np.ndarray) -> np.ndarray:
+    """Which of (N, 2) pixels lie inside or on the convex polygon ``hull`` (K, 2, vertices in
+    order, either direction); none when it has fewer than 3 vertices."""
+    if len(hull) < 3:
+        return np.zeros(len(px), dtype=bool)
+    edge = np.roll(hull, -1, axis=0) - hull                                  # (K, 2)
+    rel = px[:, None, :] - hull[None, :, :]                                  # (N, K, 2)
+    cross = edge[None, :, 0] * rel[..., 1] - edge[None, :, 1] * rel[..., 0]  # (N, K)
+    return np.all(cross >= 0, axis=1) | np.all(cross <= 0, axis=1)
 
 
 def palm_rows(points: FeaturePoints, generator: np.ndarray) -> tuple[np.ndarray, np.ndarray,
@@ -514,7 +555,7 @@ def _predict_palm(points: FeaturePoints, camera: PinholeCamera, config: EdgeTrac
     centre_rows = points.palm_start + np.arange(P) * stride + 2 * A
     # the view direction in the palm frame picks the generator: the outline is where the
     # surface's outward cross-section normal is perpendicular to the line of sight
-    R = rotvec_to_matrix(q[3:6])
+    R = _palm_rotation(q)
     eye = -camera.rotation.T @ camera.translation
     view = (world[centre_rows] - eye) @ R                                    # (P, 3) palm frame
     # the outward normal (sign cos a, 0, sin a) is perpendicular to the view (vx, vz):
@@ -552,7 +593,14 @@ def hand_outline(points: FeaturePoints, camera: PinholeCamera, q: np.ndarray,
                  pix: np.ndarray, depth: np.ndarray) -> HandOutline:
     """The predicted hand of pose ``q`` in ``camera`` (``pix``, ``depth``: the feature
     points projected): link capsules, tip discs, the projected palm surface, the wrist and the
-    direction from the wrist to the palm's centre."""
+    direction from the wrist to the palm's centre (remembered for the last few poses: a
+    frame's final check and the next frame's start ask for the same)."""
+    return _memo('outline', (points, camera), q,
+                 lambda: _hand_outline(points, camera, q, pix, depth))
+
+
+def _hand_outline(points: FeaturePoints, camera: PinholeCamera, q: np.ndarray,
+                  pix: np.ndarray, depth: np.ndarray) -> HandOutline:
     L, o = len(points.links), points.outline_start
     base = np.concatenate([pix[0:2 * L:2], pix[o::2]])
     end = np.concatenate([pix[1:2 * L:2], pix[o + 1::2]])
@@ -561,7 +609,7 @@ def hand_outline(points: FeaturePoints, camera: PinholeCamera, q: np.ndarray,
     radius = np.concatenate([points.radius, points.outline_radius])
     hw = _pixel_radius(radius, camera, 0.5 * (zb + ze))
     zt = depth[points.tip_slice]
-    R = rotvec_to_matrix(q[3:6])
+    R = _palm_rotation(q)
     centre = np.array([0.0, 0.5 * np.mean(points.palm_hull[:, 1]), 0.0]) \
         if len(points.palm_hull) else np.zeros(3)
     extra = q[0:3] + np.concatenate([points.palm_hull, [np.zeros(3), centre]]) @ R.T
@@ -591,18 +639,21 @@ def _axis_points(points: FeaturePoints, pix: np.ndarray, Jpix: np.ndarray | None
 
 def silhouette_measures(points: FeaturePoints, camera: PinholeCamera, silhouette: Silhouette,
                         q: np.ndarray, pix: np.ndarray, depth: np.ndarray,
-                        config: EdgeTrackerConfig
-                        ) -> tuple[float, float, np.ndarray, HandOutline]:
-    """How well pose ``q`` explains one camera's silhouette: the share of the hand's axis
-    points more than ``silhouette_tolerance_px`` off the foreground, the unexplained share of
-    the hand's foreground, the unexplained pixels (:meth:`Silhouette.unexplained`) and the
-    predicted hand (:func:`hand_outline`)."""
+                        config: EdgeTrackerConfig) -> tuple[float, float]:
+    """How well pose ``q`` explains one camera's silhouette, for the drift checks that are
+    on (NaN for a check that is off, ``max_off_silhouette`` or ``max_unexplained`` 1): the
+    share of the hand's axis points more than ``silhouette_tolerance_px`` off the
+    foreground, and the unexplained share of the hand's foreground
+    (:meth:`Silhouette.unexplained` of the predicted hand, :func:`hand_outline`)."""
     tol = config.silhouette_tolerance_px
-    ax, _ = _axis_points(points, pix, None, camera)
-    off = float(np.mean(silhouette.outside_distance(ax)[0] > tol)) if len(ax) else 0.0
-    outline = hand_outline(points, camera, q, pix, depth)
-    loose, share = silhouette.unexplained(outline, tol)
-    return off, share, loose, outline
+    off = share = math.nan
+    if config.max_off_silhouette < 1.0:
+        ax, _ = _axis_points(points, pix, None, camera)
+        off = float(np.mean(silhouette.outside_distance(ax)[0] > tol)) if len(ax) else 0.0
+    if config.max_unexplained < 1.0:
+        outline = hand_outline(points, camera, q, pix, depth)
+        share = silhouette.unexplained(outline, tol, pixels=False)[1]
+    return off, share
 
 
 def _silhouette_targets(loose: np.ndarray, base: np.ndarray, end: np.ndarray,
@@ -642,11 +693,13 @@ def _silhouette_residuals(points: FeaturePoints, camera: PinholeCamera, meas: Ed
     foreground, and each unexplained pixel's distance beyond the tolerance from its link's
     capsule (rows only where positive)."""
     tol = config.silhouette_tolerance_px
-    ax, Jax = _axis_points(points, pix, Jpix, camera)
+    ax, _ = _axis_points(points, pix, None, camera)
     d, grad = meas.silhouette.outside_distance(ax)
     off = d > tol
     r = [d[off] - tol]
-    J = [np.einsum('ij,ijd->id', grad[off], Jax[off])]
+    J = [np.zeros((0, Jpix.shape[-1]))]
+    if off.any():          # the axis points' Jacobians only when one is off
+        J = [np.einsum('ij,ijd->id', grad[off], _axis_points(points, pix, Jpix, camera)[1][off])]
     t = meas.loose
     if t is not None and len(t.px):
         L = len(points.links)
@@ -679,6 +732,7 @@ class EdgeMeasurement:
     palm_found: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     silhouette: Silhouette | None = None
     loose: SilhouetteTargets | None = None
+    lines: LineRows | None = None
 
 
 @dataclass(frozen=True)
@@ -742,55 +796,90 @@ def _robust(r: np.ndarray, k: float, loss: str) -> np.ndarray:
     return np.where(a <= k, 1.0, k / np.maximum(a, 1e-12))
 
 
+@dataclass(frozen=True)
+class LineRows:
+    """One camera's measured lines, links first, then palm sides, as rows of the feature
+    points: each line's model base and end rows (a palm side's generator blends a row with
+    the one two rows on by ``alpha``; links have alpha 0), the measured unit normals and
+    offsets, the number of link lines, and the rows of the measured tip centres."""
+
+    base: np.ndarray
+    end: np.ndarray
+    alpha: np.ndarray
+    normal: np.ndarray
+    offset: np.ndarray
+    num_links: int
+    tips: np.ndarray
+
+
+def line_rows(points: FeaturePoints, meas: EdgeMeasurement) -> LineRows:
+    """The :class:`LineRows` of one camera's measurement (``meas.lines`` if already set)."""
+    if meas.lines is not None:
+        return meas.lines
+    f = np.flatnonzero(meas.link_found)
+    rows_b, rows_e, alpha = 2 * f, 2 * f + 1, np.zeros(len(f))
+    normal, offset = meas.axes.normal[f], meas.axes.offset[f]
+    pf = meas.palm_found
+    if meas.palm is not None and pf.any():
+        rb, re, a = palm_rows(points, meas.prediction.palm_generator[pf])
+        rows_b, rows_e = np.concatenate([rows_b, rb]), np.concatenate([rows_e, re])
+        alpha = np.concatenate([alpha, a])
+        normal = np.concatenate([normal, meas.palm.normal[pf]])
+        offset = np.concatenate([offset, meas.palm.offset[pf]])
+    tips = np.arange(points.tip_slice.start, points.tip_slice.stop, 2)[meas.tip_found]
+    return LineRows(rows_b, rows_e, alpha, normal, offset, len(f), tips)
+
+
 def stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
-                     measured: Sequence[EdgeMeasurement | None],
-                     world: tuple[np.ndarray, np.ndarray | None], config: EdgeTrackerConfig,
-                     jacobian: bool = True
-                     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-    """All cameras' link and tip residuals at the pose of ``world`` (points, Jacobians),
-    their Jacobian and their weights (Huber x tip weight)."""
+                    measured: Sequence[EdgeMeasurement | None],
+                    world: tuple[np.ndarray, np.ndarray | None], config: EdgeTrackerConfig,
+                    jacobian: bool = True
+                    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """All cameras' link, tip, palm-side and silhouette residuals at the pose of ``world``
+    (points, Jacobians), their Jacobian and their weights (robust x feature x camera
+    weight); per camera the rows are links, tips, palm sides, silhouette."""
     p, Jw = world
-    L = len(points.links)
     rs, Js, ws = [], [], []
     for index, (cam, meas) in enumerate(zip(cameras, measured, strict=True)):
         if meas is None:
             continue
-        start = len(ws)
         pix, Jpix, depth = _project(cam, p, Jw if jacobian else None)
-        if Jpix is None:
-            Jpix = np.zeros((len(pix), 2, 1))
-        f = meas.link_found
-        if f.any():
-            r, J = link_axis_residuals(meas.axes.normal[f], meas.axes.offset[f],
-                                       pix[0:2 * L:2][f], pix[1:2 * L:2][f],
-                                       Jpix[0:2 * L:2][f], Jpix[1:2 * L:2][f])
-            rs.append(r)
-            Js.append(J)
-            ws.append(_robust(r, config.huber_px, config.robust_loss))
-        t = meas.tip_found
-        if t.any():
-            r, J = tip_residuals(pix[points.tip_slice][t], meas.tips.centre[t],
-                                 Jpix[points.tip_slice][t])
-            rs.append(r)
-            Js.append(J)
-            ws.append(config.tip_weight * _robust(r, config.huber_px, config.robust_loss))
-        pf = meas.palm_found
-        if meas.palm is not None and pf.any():
-            rb, re, alpha = palm_rows(points, meas.prediction.palm_generator[pf])
-            r, J = link_axis_residuals(meas.palm.normal[pf], meas.palm.offset[pf],
-                                       _blend(pix, rb, alpha), _blend(pix, re, alpha),
-                                       _blend(Jpix, rb, alpha), _blend(Jpix, re, alpha))
-            rs.append(r)
-            Js.append(J)
-            ws.append(config.palm_weight * _robust(r, config.huber_px, config.robust_loss))
+        lines = line_rows(points, meas)
+        rows_b, rows_e, alpha, n_link = lines.base, lines.end, lines.alpha, lines.num_links
+        cam_r, cam_J, cam_w = [], [], []
+        if len(rows_b):
+            # (1 - 0) x + 0 y is x exactly: link lines and palm lines in one set of products
+            r, J = link_axis_residuals(
+                lines.normal, lines.offset, _blend(pix, rows_b, alpha),
+                _blend(pix, rows_e, alpha),
+                _blend(Jpix, rows_b, alpha) if jacobian else np.zeros((len(rows_b), 2, 1)),
+                _blend(Jpix, rows_e, alpha) if jacobian else np.zeros((len(rows_b), 2, 1)))
+            w = _robust(r, config.huber_px, config.robust_loss)
+            cam_r.append(r[:2 * n_link])
+            cam_J.append(J[:2 * n_link])
+            cam_w.append(w[:2 * n_link])
+        if len(lines.tips):
+            tip_rows = lines.tips
+            rt, Jt = tip_residuals(pix[tip_rows], meas.tips.centre[meas.tip_found],
+                                   Jpix[tip_rows] if jacobian else np.zeros((len(tip_rows), 2, 1)))
+            cam_r.append(rt)
+            cam_J.append(Jt)
+            cam_w.append(config.tip_weight * _robust(rt, config.huber_px, config.robust_loss))
+        if len(rows_b) > n_link:
+            cam_r.append(r[2 * n_link:])
+            cam_J.append(J[2 * n_link:])
+            cam_w.append(config.palm_weight * w[2 * n_link:])
         if meas.silhouette is not None and config.silhouette_weight > 0 and jacobian:
             r, J = _silhouette_residuals(points, cam, meas, pix, Jpix, depth, config)
             if len(r):
-                rs.append(r)
-                Js.append(J)
-                ws.append(np.full(len(r), config.silhouette_weight))
+                cam_r.append(r)
+                cam_J.append(J)
+                cam_w.append(np.full(len(r), config.silhouette_weight))
         if index < len(config.camera_weights):
-            ws[start:] = [config.camera_weights[index] * w for w in ws[start:]]
+            cam_w = [config.camera_weights[index] * w for w in cam_w]
+        rs += cam_r
+        Js += cam_J
+        ws += cam_w
     if not rs:
         return np.zeros(0), np.zeros((0, NUM_DOFS)) if jacobian else None, np.zeros(0)
     return (np.concatenate(rs), np.concatenate(Js) if jacobian else None, np.concatenate(ws))
@@ -834,6 +923,7 @@ def _gauss_newton(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[
     """``gn_iterations`` stabilised Gauss-Newton steps from ``q`` on fixed measurements
     (``world``: the points and Jacobians at ``q``), joint limits enforced; (q, steps)."""
     steps = 0
+    CtC = config.coupling_weight * (C.T @ C) if C is not None else None
     for it in range(config.gn_iterations):
         if it > 0:
             world = kin.points(q, points.point_link, points.point_local, True)
@@ -842,7 +932,7 @@ def _gauss_newton(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[
         H = WJ @ J + S
         g = WJ @ r + S @ (q - q_anchor)
         if C is not None:
-            H += config.coupling_weight * (C.T @ C)
+            H += CtC
             g += config.coupling_weight * (C.T @ (C @ q))
         at_lo = (q <= kin.lower + 1e-9) & (g > 0)
         at_hi = (q >= kin.upper - 1e-9) & (g < 0)
@@ -900,14 +990,15 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
                 continue
             pred = predict_features(kin, points, cam, q, config, world)
             meas = measure_features(grey, pred, config, points.tip_row, polarity)
+            extra: dict[str, object] = {'lines': line_rows(points, meas)}
             if sil is not None and config.silhouette_weight > 0:
                 pix, _, depth = _project(cam, world[0], None)
                 outline = hand_outline(points, cam, q, pix, depth)
                 loose = sil.unexplained(outline, config.silhouette_tolerance_px)[0]
-                meas = replace(meas, silhouette=sil, loose=_silhouette_targets(
+                extra.update(silhouette=sil, loose=_silhouette_targets(
                     loose, pred.base_px, pred.end_px, pred.half_width_px,
                     config.silhouette_points, outline.palm))
-            measured.append(meas)
+            measured.append(replace(meas, **extra))
         found = tuple(0 if m is None else int(m.link_found.sum()) for m in measured)
         usable = tuple(0 if m is None else int(m.prediction.link_usable.sum())
                        for m in measured)
@@ -931,11 +1022,11 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
     off = unexplained = math.nan
     checks = config.max_off_silhouette < 1.0 or config.max_unexplained < 1.0
     if checks and any(sil is not None for sil in sils):
-        p_final = kin.points(q, points.point_link, points.point_local, False)[0]
+        p_final = world[0]          # the final pose's points, as for the RMS above
         shares = []
         for cam, sil in zip(cameras, sils, strict=True):
             if sil is not None:
                 pix, _, depth = _project(cam, p_final, None)
-                shares.append(silhouette_measures(points, cam, sil, q, pix, depth, config)[:2])
+                shares.append(silhouette_measures(points, cam, sil, q, pix, depth, config))
         off, unexplained = (float(v) for v in np.max(shares, axis=0))
     return EdgeFit(q, rms, found, usable, tips, iterations, disagreement, off, unexplained)

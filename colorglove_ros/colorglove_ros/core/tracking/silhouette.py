@@ -196,20 +196,22 @@ class Silhouette:
         grad = np.stack([v[:, 1] - v[:, 2], v[:, 3] - v[:, 4]], axis=1) / (2.0 * h)
         return v[:, 0], grad
 
-    def unexplained(self, outline: HandOutline, tolerance_px: float
+    def unexplained(self, outline: HandOutline, tolerance_px: float, pixels: bool = True
                     ) -> tuple[np.ndarray, float]:
-        """Foreground pixels (full-resolution coordinates, (M, 2)) farther than
-        ``tolerance_px`` from every part of ``outline``, and their share of the hand's
-        foreground (the forearm, beyond the wrist, left out of both)."""
+        """Foreground pixels (full-resolution coordinates, (M, 2); none listed unless
+        ``pixels``) farther than ``tolerance_px`` from every part of ``outline``, and their
+        share of the hand's foreground (the forearm, beyond the wrist, left out of both)."""
         s = self.scale
         covered = np.zeros(self.mask.shape, np.uint8)
         tol = float(tolerance_px)
         shift = s * self.offset
         ok = np.isfinite(outline.base).all(1) & np.isfinite(outline.end).all(1)
         thick = np.maximum(1, np.round(2.0 * (outline.half_width + tol) / s)).astype(int)
-        for b, e, t in zip(_pts(outline.base[ok] - shift, s), _pts(outline.end[ok] - shift, s),
-                           thick[ok], strict=True):
-            cv2.line(covered, b, e, 1, int(t), cv2.LINE_8, 4)
+        ends = np.stack([_fixed(outline.base[ok] - shift, s), _fixed(outline.end[ok] - shift, s)],
+                        axis=1)                                   # (K, 2, 2) capsule ends
+        # one call per thickness: a two-point polyline is drawn as cv2.line draws it
+        for t in np.unique(thick[ok]):
+            cv2.polylines(covered, list(ends[thick[ok] == t]), False, 1, int(t), cv2.LINE_8, 4)
         ok = np.isfinite(outline.tip).all(1)
         radius = np.maximum(1, np.round(16 * (outline.tip_radius + tol) / s)).astype(int)
         for c, r in zip(_pts(outline.tip[ok] - shift, s), radius[ok], strict=True):
@@ -235,6 +237,8 @@ class Silhouette:
         if count == 0:
             return np.zeros((0, 2)), 0.0
         loose = cv2.bitwise_and(hand, 1 - covered)
+        if not pixels:
+            return np.zeros((0, 2)), float(cv2.countNonZero(loose)) / float(count)
         found = cv2.findNonZero(loose)
         if found is None:
             return np.zeros((0, 2)), 0.0
@@ -242,8 +246,12 @@ class Silhouette:
         return pix, float(len(pix)) / float(count)
 
 
-def _pts(xy: np.ndarray, scale: int) -> list[tuple[int, int]]:
+def _fixed(xy: np.ndarray, scale: int) -> np.ndarray:
     """Full-resolution pixels (N, 2) as cv2 drawing coordinates (4 fractional bits) at
-    1 / scale."""
-    return [tuple(p) for p in np.round((np.asarray(xy) + 0.5) / scale * 16 - 8).astype(int)
-            .tolist()]
+    1 / scale, (N, 2) int32."""
+    return np.round((np.asarray(xy) + 0.5) / scale * 16 - 8).astype(np.int32)
+
+
+def _pts(xy: np.ndarray, scale: int) -> list[tuple[int, int]]:
+    """:func:`_fixed` as a list of (x, y) tuples."""
+    return [tuple(p) for p in _fixed(xy, scale).tolist()]

@@ -106,6 +106,15 @@ def test_slices_switched_off_are_not_used() -> None:
     valid[0, :2] = True
     axes = measure_link_axes(grey, A[None], B[None], np.array([R]), cfg, slice_valid=valid)
     assert axes.num_points[0] <= 2 and not axes.found[0]
+    # a link with no usable slice at all is not searched, and not found
+    none = measure_link_axes(grey, A[None], B[None], np.array([R]), cfg,
+                             slice_valid=np.zeros((1, cfg.slices_per_link), bool))
+    assert not none.found[0] and none.num_points[0] == 0
+    # the slices searched give the same line as searching all and dropping the rest
+    some = np.ones((1, cfg.slices_per_link), bool)
+    some[0, 1] = False
+    kept = measure_link_axes(grey, A[None], B[None], np.array([R]), cfg, slice_valid=some)
+    assert kept.found[0] and np.isnan(kept.midpoints[0, 1]).all()
 
 
 def test_tip_centre_is_the_end_edge_moved_back_by_the_radius() -> None:

@@ -303,14 +303,18 @@ def _backgrounds(frames) -> list:
 
 def test_silhouettes_measure_a_fit_that_left_the_hand(rig) -> None:
     cameras, seq, frames = rig
-    # the shares are measured when a check uses them
-    tracker = EdgeTracker(seq.synth.model, cameras, EdgeTrackerConfig(max_unexplained=0.5),
+    # each share is measured when its check uses it
+    tracker = EdgeTracker(seq.synth.model, cameras,
+                          EdgeTrackerConfig(max_unexplained=0.5, max_off_silhouette=0.5),
                           _backgrounds(frames))
     truth = seq.poses[20]
     good = tracker.fit(frames[20], truth)
     assert good.off_silhouette < 0.02 and good.unexplained < 0.01
     assert np.isnan(EdgeTracker(seq.synth.model, cameras).fit(frames[20], truth).off_silhouette)
-    assert np.isnan(tracker.with_config(max_unexplained=1.0).fit(frames[20], truth).unexplained)
+    only_share = tracker.with_config(max_off_silhouette=1.0).fit(frames[20], truth)
+    assert np.isnan(only_share.off_silhouette) and only_share.unexplained == good.unexplained
+    only_off = tracker.with_config(max_unexplained=1.0).fit(frames[20], truth)
+    assert np.isnan(only_off.unexplained) and only_off.off_silhouette == good.off_silhouette
     # the index finger bent sideways and folded: its links leave the silhouette and its
     # true place is left unexplained
     bent = truth.copy()

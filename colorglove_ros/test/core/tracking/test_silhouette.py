@@ -83,6 +83,9 @@ def test_unexplained_foreground_is_what_no_part_of_the_hand_covers() -> None:
     loose, share = sil.unexplained(_outline(10.0, 70.0), 3.0)
     assert 0.1 < share < 0.3          # 30 px less 13 px of round cap and tolerance
     assert np.all(loose[:, 1] < 70.0) and np.all(np.abs(loose[:, 0] - 110) < 12)
+    # the share alone (the drift check's): the same share, no pixels listed
+    none, same = sil.unexplained(_outline(10.0, 70.0), 3.0, pixels=False)
+    assert same == share and none.shape == (0, 2)
 
 
 def test_a_region_limits_where_the_foreground_is_looked_for() -> None:
