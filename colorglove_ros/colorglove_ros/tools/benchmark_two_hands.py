@@ -42,7 +42,8 @@ from colorglove_ros.ros.bags import (
 from colorglove_ros.tools._cli import add_pipeline_arguments, run_tool, tool_parser
 from colorglove_ros.tools.benchmark import BAG_RATE_HZ, isolate_domain
 
-__all__ = ['VISIBILITY_FORMAT', 'hand_rows', 'two_hand_bag', 'frame_visibility', 'main']
+__all__ = ['VISIBILITY_FORMAT', 'hand_rows', 'two_hand_bag', 'frame_visibility',
+           'node_parameters', 'main']
 
 IMAGE_TOPICS = [TOPIC_IMAGE, TOPIC_CAMERA_INFO]
 #: Version of the ``<bag>_visibility.json`` layout.
@@ -242,11 +243,25 @@ def main(argv: list[str] | None = None) -> int:
                         help='colour calibration config of the node (default its own)')
     parser.add_argument('--threads', type=int, choices=(1, 2),
                         help="two_hands_node's threads parameter (default its own)")
+    parser.add_argument('--opencv-threads', type=int,
+                        help="two_hands_node's opencv_threads parameter (default its own; -1: "
+                        "OpenCV's own thread pool)")
     parser.add_argument('--domain-id', type=int,
                         help='ROS domain of the measured graph (default: $ROS_DOMAIN_ID, else '
                              'one of its own)')
     args = parser.parse_args(argv)
     return run_tool('colorglove_benchmark_two_hands', lambda: _benchmark(args))
+
+
+def node_parameters(args: argparse.Namespace, database: Path) -> dict[str, Any]:
+    """two_hands_node's parameters for the run: the database, and the colour config, threads
+    and OpenCV threads where given (else the node's defaults)."""
+    parameters: dict[str, Any] = {'database_path': str(database)}
+    for name, value in (('color_calibration_file', args.color_config),
+                        ('threads', args.threads), ('opencv_threads', args.opencv_threads)):
+        if value is not None:
+            parameters[name] = str(value) if isinstance(value, Path) else value
+    return parameters
 
 
 def _benchmark(args: argparse.Namespace) -> int:
@@ -257,11 +272,7 @@ def _benchmark(args: argparse.Namespace) -> int:
     bag = two_hand_bag(args.bag or resolve_path('data') / 'bags' /
                        f'two_hands_seed{args.seed}_{args.frames}', args.seed, args.frames)
     visible = frame_visibility(bag, args.seed, args.frames)
-    parameters: dict[str, Any] = {'database_path': str(database)}
-    if args.color_config is not None:
-        parameters['color_calibration_file'] = str(args.color_config)
-    if args.threads is not None:
-        parameters['threads'] = args.threads
+    parameters = node_parameters(args, database)
     rows: list[dict[str, Any]] = []
     started = time.monotonic()
     for rate in args.rates:
@@ -276,7 +287,9 @@ def _benchmark(args: argparse.Namespace) -> int:
                for row in rows if row['offered_hz'] == BAG_RATE_HZ]
     print_table(targets, title='issue 18 rate target (measured on this machine)')
     if args.json:
-        write_json(args.json, {'bag': bag.name, 'database': database.name, 'dds': rows,
+        write_json(args.json, {'bag': bag.name, 'database': database.name,
+                               'node_parameters': {k: v for k, v in parameters.items()
+                                                   if k != 'database_path'}, 'dds': rows,
                                'targets': targets,
                                'wall_s': time.monotonic() - started})
     return 0

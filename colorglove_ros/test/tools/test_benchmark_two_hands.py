@@ -41,6 +41,19 @@ def test_rows_judge_the_rate_on_frames_with_both_hands_visible() -> None:
         benchmark_two_hands.hand_rows(stray, ('right', 'left'), 6, 30.0, visible_at)
 
 
+def test_node_gets_only_the_parameters_given() -> None:
+    """The node's defaults stand unless the command names a setting (threads, OpenCV's
+    threads: compared on an idle machine with --threads / --opencv-threads)."""
+    from argparse import Namespace
+
+    bare = Namespace(color_config=None, threads=None, opencv_threads=None)
+    assert benchmark_two_hands.node_parameters(bare, Path('/db')) == {'database_path': '/db'}
+    given = Namespace(color_config=Path('c.yaml'), threads=1, opencv_threads=-1)
+    assert benchmark_two_hands.node_parameters(given, Path('/db')) == {
+        'database_path': '/db', 'color_calibration_file': 'c.yaml', 'threads': 1,
+        'opencv_threads': -1}
+
+
 def test_visibility_file_of_another_sequence_is_refused(tmp_path: Path) -> None:
     from colorglove_ros.ros.bags import BagError
 

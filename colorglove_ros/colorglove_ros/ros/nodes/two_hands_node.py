@@ -14,6 +14,7 @@ import sys
 import traceback
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from rclpy.node import Node
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header, String
@@ -37,12 +38,14 @@ from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import stamp_to_seconds, wrist_pose_to_tf_msg
 from colorglove_ros.ros.frame_camera import CAMERA_REFUSAL_PREFIX
 from colorglove_ros.ros.image import ImageEncodingError, image_to_rgb8
+from colorglove_ros.ros.image_codec import image_from_cdr
 from colorglove_ros.ros.nodes.common import (
     LATEST_IMAGE,
     PosePublishers,
     declare,
     declare_calibration_file,
     declare_database,
+    declare_opencv_threads,
     run_node,
     startup_errors,
 )
@@ -70,6 +73,7 @@ class TwoHandsNode(Node):
         threads = declare(self, 'threads', DEFAULT_THREADS,
                           '2: the two glove regions segmented and looked up, and the two hands '
                           'tracked, on two threads; 1: one after the other', 1, 2)
+        declare_opencv_threads(self)
         with startup_errors('two_hands_node', ValueError):
             calibration = load_calibration(resolve_path(calibration_file))
             database_path = declare_database(self)
@@ -89,7 +93,9 @@ class TwoHandsNode(Node):
         self.status = {h: self.create_publisher(String, hand_topic(h, 'tracking_status'), 10)
                        for h in HANDS}
         self.tf_pub = self._tf_publisher()
-        self.create_subscription(Image, IMAGE_TOPIC, self.on_image, LATEST_IMAGE)
+        # serialized: the pixels are read in place, not converted to a Python message
+        self.create_subscription(Image, IMAGE_TOPIC, self.on_serialized_image, LATEST_IMAGE,
+                                 raw=True)
         self.get_logger().info(f'two hands: database {database_path} ({len(database)} entries); '
                                f'images on {self.resolve_topic_name(IMAGE_TOPIC)}')
 
@@ -106,15 +112,32 @@ class TwoHandsNode(Node):
             return None
         return self.create_publisher(TFMessage, '/tf', 10)
 
+    def on_serialized_image(self, data: bytes) -> None:
+        """Track both hands in one frame received serialized (``ros.image_codec.image_from_cdr``:
+        its pixels are a view of the received bytes, not a Python message's copy)."""
+        try:
+            image = image_from_cdr(data)
+        except ImageEncodingError as exc:   # no header to answer with: logged
+            self.get_logger().error(f'bad image: {exc}', throttle_duration_sec=1.0)
+            return
+        header = Header(frame_id=image.frame_id,
+                        stamp=Time(sec=image.stamp_sec, nanosec=image.stamp_nanosec))
+        self._track(image, header, read_only=True)
+
     def on_image(self, image: Image) -> None:
         """Track both hands in one frame; every hand gets a pose or a 'no hand' status."""
+        self._track(image, image.header)
+
+    def _track(self, image: Image, header: Header, read_only: bool = False) -> None:
+        """Track both hands in ``image`` (an Image or a ``SerializedImage``, stamped
+        ``header``) and publish each hand's pose or why not."""
         try:
             if (image.width, image.height) != (self.camera.width, self.camera.height):
                 raise ImageEncodingError(
                     f'{CAMERA_REFUSAL_PREFIX}image {image.width}x{image.height}, calibrated '
                     f'{self.camera.width}x{self.camera.height}')
-            rgb = image_to_rgb8(image)
-            outcomes = self.pipeline.process(rgb, stamp_to_seconds(image.header.stamp))
+            rgb = image_to_rgb8(image, read_only=read_only)
+            outcomes = self.pipeline.process(rgb, stamp_to_seconds(header.stamp))
         except Exception as exc:   # a frame must never stop the node
             if not isinstance(exc, ImageEncodingError):
                 self.get_logger().error(f'two-hand tracking failed: {exc!r}\n'
@@ -123,7 +146,7 @@ class TwoHandsNode(Node):
                 self.status[h].publish(String(data=f'no hand: {exc}'))
             return
         for h in HANDS:
-            self._publish(outcomes[h], image.header)
+            self._publish(outcomes[h], header)
 
     def _publish(self, outcome: HandOutcome, header: Header) -> None:
         hand = outcome.hand

@@ -72,3 +72,38 @@ def test_two_hands_node_publishes_each_hand_under_its_namespace(node_assets, thr
         for hand in HANDS:
             assert status[hand][1].data.startswith('no hand: camera: image 320x240')
             assert len(joints[hand]) == (hand in tracked)
+
+
+def test_two_hands_node_reads_frames_serialized_and_runs_opencv_in_its_own_threads(
+        node_assets) -> None:
+    """Frames come serialized (the pixels read in place, no Python message): one of another
+    size gives both hands its reason, bytes that are no image are logged and answered with
+    nothing; OpenCV runs in the calling threads (``opencv_threads``, as the one-hand nodes)."""
+    import cv2
+    from rclpy.serialization import serialize_message
+
+    from colorglove_ros.ros.nodes.common import OPENCV_THREADS
+
+    rgb, _ = _two_hand_frame()
+    before = cv2.getNumThreads()
+    try:
+        cv2.setNumThreads(2)
+        with running(lambda ctx: TwoHandsNode(context=ctx, parameter_overrides=params(
+                color_calibration_file=str(node_assets.color_config),
+                database_path=str(node_assets.database)))) as h:
+            node = h.nodes[0]
+            assert node.get_parameter('opencv_threads').value == OPENCV_THREADS
+            assert cv2.getNumThreads() == OPENCV_THREADS
+            status = {hand: h.collect(String, hand_topic(hand, 'tracking_status'))
+                      for hand in HANDS}
+            h.settle(0.3)
+            node.on_serialized_image(b'\x00\x07 not an image')
+            node.on_serialized_image(serialize_message(
+                array_to_image(rgb[:240, :320].copy(), 'rgb8', header(8))))
+            assert h.spin_until(lambda: all(status.values()), 20.0)
+            h.settle(0.3)
+            for hand in HANDS:
+                assert [s.data for s in status[hand]] == [
+                    'no hand: camera: image 320x240, calibrated 640x480']
+    finally:
+        cv2.setNumThreads(before)
