@@ -43,6 +43,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--named-shape-configs', type=int,
                         help='configurations picked first among the named shapes (letters, '
                         'gestures) and their noisy copies')
+    parser.add_argument('--pinch-shapes', action='store_true', default=None,
+                        help='add the pinches of the middle, ring and little fingers to the '
+                        "collection's named shapes (core/hand/poses.py PINCH_SHAPES)")
     parser.add_argument('--training-images', type=int,
                         help='images the SSC training pairs are drawn from')
     args = parser.parse_args(argv)
@@ -50,7 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     overrides = {'entries': args.entries, 'orientations_per_config': args.orientations,
                  'num_bits': args.bits, 'num_pairs': args.pairs, 'seed': args.seed,
                  'training_images': args.training_images,
-                 'named_shape_configs': args.named_shape_configs}
+                 'named_shape_configs': args.named_shape_configs,
+                 'pinch_shapes': args.pinch_shapes}
     config = dataclasses.replace(config, **{k: v for k, v in overrides.items() if v is not None})
     output = Path(args.output) if args.output else db_path
     t0 = time.perf_counter()

@@ -53,7 +53,8 @@ def _held_out_queries(db: PoseDatabase, count: int, seed: int
     from colorglove_ros.core.hand.poses import pose_collection, sample_global_rotations
 
     cfg = _build_config(db)
-    collection = pose_collection(cfg.collection_seed, cfg.collection_size)
+    collection = pose_collection(cfg.collection_seed, cfg.collection_size,
+                                 pinch_shapes=cfg.pinch_shapes)
     free = np.setdiff1d(np.arange(len(collection)), np.unique(np.asarray(db.config_index)))
     rng = np.random.default_rng(seed)
     pick = rng.choice(free, size=count, replace=count > len(free))
@@ -142,7 +143,8 @@ def _size_study(db: PoseDatabase, dist: np.ndarray, q_fingers: np.ndarray) -> li
 
     cfg = _build_config(db)
     model, mesh, _ = default_hand(cfg.hand_length_m, seed=cfg.glove_seed)
-    collection = pose_collection(cfg.collection_seed, cfg.collection_size)
+    collection = pose_collection(cfg.collection_seed, cfg.collection_size,
+                                 pinch_shapes=cfg.pinch_shapes)
     cfg_idx = np.asarray(db.config_index)
     fq = pose_features(mesh, model, q_fingers).astype(np.float64)
     n = len(db)

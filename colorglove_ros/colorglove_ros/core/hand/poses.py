@@ -1,7 +1,8 @@
 """Natural finger configurations (alphabet, gestures, transitions, jiggling) and hand orientations.
 
 The collection stands in for the paper's 18,000 recorded configurations: named hand
-shapes (approximate one-hand finger-spelling letters A-Z and common gestures), noisy
+shapes (approximate one-hand finger-spelling letters A-Z and common gestures; optionally
+``PINCH_SHAPES``, the thumb on the middle, ring or little fingertip), noisy
 copies of them, interpolations between random pairs of them, and random finger jiggling
 within the joint limits with the DIP ~ 2/3 PIP coupling. Finger vectors have 20 entries
 in ``FINGER_DOF_NAMES`` order (radians).
@@ -30,7 +31,8 @@ from colorglove_ros.core.hand.model import (
 )
 
 __all__ = [
-    'PosesError', 'NAMED_SHAPES', 'LETTER_SHAPES', 'GESTURE_SHAPES', 'ROLL_RANGE', 'YAW_RANGE',
+    'PosesError', 'NAMED_SHAPES', 'LETTER_SHAPES', 'GESTURE_SHAPES', 'PINCH_SHAPES',
+    'named_shapes', 'ROLL_RANGE', 'YAW_RANGE',
     'PITCH_RANGE', 'pose_collection', 'named_neighbourhood_rows', 'full_pose',
     'sample_global_rotations', 'finger_limits', 'skin_fingers', 'pose_features', 'pose_distance',
 ]
@@ -139,8 +141,37 @@ GESTURE_SHAPES: dict[str, np.ndarray] = {
 
 NAMED_SHAPES: dict[str, np.ndarray] = {**{f'letter_{k}': v for k, v in LETTER_SHAPES.items()},
                                        **GESTURE_SHAPES}
-for _v in NAMED_SHAPES.values():
+
+# the thumb tip on the middle, ring or little fingertip (6-7 % of the hand length away), that
+# finger half bent, the other fingers as in a relaxed, flat or spread hand: the thumb and the
+# finger solved as the gesture evaluation's pinches are (eval_gestures.pinch_shape) from the
+# middle of its start range; 'pinch' (thumb on the index) and 'ok' are in GESTURE_SHAPES
+_PINCH_THUMB_FINGER: dict[str, tuple[tuple, tuple]] = {
+    'middle': ((26, 39, 21, 21), (0, 46, 52, 34)),
+    'ring': ((25, 47, 25, 22), (0, 47, 52, 34)),
+    'little': ((24, 55, 29, 24), (0, 47, 47, 31)),
+}
+
+
+def _pinch_on(background: str, finger: str) -> np.ndarray:
+    out = GESTURE_SHAPES[background].copy()
+    thumb, bent = _PINCH_THUMB_FINGER[finger]
+    i = 4 + 4 * ('index', 'middle', 'ring', 'little').index(finger)
+    out[0:4], out[i:i + 4] = _deg(*thumb), _deg(*bent)
+    return out
+
+
+PINCH_SHAPES: dict[str, np.ndarray] = {
+    f'pinch_{finger}_{background}': _pinch_on(background, finger)
+    for finger in _PINCH_THUMB_FINGER for background in ('relaxed', 'flat', 'spread')}
+for _v in (*NAMED_SHAPES.values(), *PINCH_SHAPES.values()):
     _v.setflags(write=False)
+
+
+def named_shapes(pinch_shapes: bool = False) -> dict[str, np.ndarray]:
+    """The named shapes of the pose collection: ``NAMED_SHAPES``, then with ``pinch_shapes``
+    the ``PINCH_SHAPES``."""
+    return {**NAMED_SHAPES, **PINCH_SHAPES} if pinch_shapes else dict(NAMED_SHAPES)
 
 
 def finger_limits(model: HandModel | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -181,19 +212,19 @@ def _jiggle(rng: np.random.Generator, n: int, lo: np.ndarray, hi: np.ndarray) ->
 
 
 def pose_collection(seed: int = 0, size: int = 18000,
-                    model: HandModel | None = None) -> np.ndarray:
+                    model: HandModel | None = None, pinch_shapes: bool = False) -> np.ndarray:
     """(size, 20) natural finger configurations, deterministic from ``seed``.
 
-    Rows: every named shape once, then ~25% noisy named shapes (5 deg noise), ~35%
-    transitions (a random pair of named shapes at a random blend, 3 deg noise) and the rest
-    random jiggling; all clipped into the joint limits.
+    Rows: every named shape (:func:`named_shapes` of ``pinch_shapes``) once, then ~25% noisy
+    named shapes (5 deg noise), ~35% transitions (a random pair of named shapes at a random
+    blend, 3 deg noise) and the rest random jiggling; all clipped into the joint limits.
     """
     lo, hi = finger_limits(model)
     rng = np.random.default_rng(seed)
-    shapes = np.clip(np.stack(list(NAMED_SHAPES.values())), lo, hi)
+    shapes = np.clip(np.stack(list(named_shapes(pinch_shapes).values())), lo, hi)
     k = len(shapes)
     rest = size - k
-    n_noisy = named_neighbourhood_rows(size) - k
+    n_noisy = named_neighbourhood_rows(size, pinch_shapes) - k
     n_trans = (rest * 35) // 100
     n_jig = rest - n_noisy - n_trans
     noisy = shapes[rng.integers(0, k, n_noisy)] + rng.normal(0.0, np.deg2rad(5.0),
@@ -207,12 +238,13 @@ def pose_collection(seed: int = 0, size: int = 18000,
     return out
 
 
-def named_neighbourhood_rows(size: int) -> int:
-    """How many leading rows of ``pose_collection(seed, size)`` are the named shapes and their
-    noisy copies (the rest are transitions and jiggling)."""
-    if size < len(NAMED_SHAPES):
-        raise PosesError(f'size must be >= {len(NAMED_SHAPES)}, got {size}')
-    return len(NAMED_SHAPES) + (size - len(NAMED_SHAPES)) // 4
+def named_neighbourhood_rows(size: int, pinch_shapes: bool = False) -> int:
+    """How many leading rows of ``pose_collection(seed, size, pinch_shapes=pinch_shapes)``
+    are the named shapes and their noisy copies (the rest are transitions and jiggling)."""
+    k = len(named_shapes(pinch_shapes))
+    if size < k:
+        raise PosesError(f'size must be >= {k}, got {size}')
+    return k + (size - k) // 4
 
 
 def sample_global_rotations(rng: np.random.Generator, n: int,

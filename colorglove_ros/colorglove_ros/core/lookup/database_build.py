@@ -88,7 +88,9 @@ class BuildConfig:
 
     ``named_shape_configs``: how many of the finger configurations are first picked among the
     pose collection's named shapes and their noisy copies (finger-spelling letters and
-    gestures, :func:`sample_configurations`); 0: all picked over the whole collection."""
+    gestures, :func:`sample_configurations`); 0: all picked over the whole collection.
+    ``pinch_shapes``: the collection's named shapes include ``poses.PINCH_SHAPES`` (the thumb
+    on the middle, ring or little fingertip; off: the collection without them)."""
 
     entries: int = 100_000
     orientations_per_config: int = 50
@@ -107,8 +109,11 @@ class BuildConfig:
     batch: int = 256
     visibility_tolerance_m: float = 0.004
     named_shape_configs: int = 0
+    pinch_shapes: bool = False
 
     def __post_init__(self) -> None:
+        if not isinstance(self.pinch_shapes, bool):
+            raise DatabaseError(f'pinch_shapes must be true or false, got {self.pinch_shapes!r}')
         for name, (kind, low, high) in _BUILD_LIMITS.items():
             value = check_number(name, getattr(self, name), low=low, high=high,
                                  low_open=kind is float, integer=kind is int,
@@ -211,7 +216,7 @@ def sample_configurations(config: BuildConfig, count: int, model: HandModel, mes
     )
 
     collection = pose_collection(config.collection_seed, max(config.collection_size, count),
-                                 model)
+                                 model, config.pinch_shapes)
     subset = np.sort(rng.choice(mesh.num_vertices, size=min(config.fps_vertices,
                                                             mesh.num_vertices), replace=False))
     feats = np.concatenate([
@@ -221,7 +226,7 @@ def sample_configurations(config: BuildConfig, count: int, model: HandModel, mes
     named = min(config.named_shape_configs, count)
     initial = None
     if named:
-        rows = named_neighbourhood_rows(len(collection))
+        rows = named_neighbourhood_rows(len(collection), config.pinch_shapes)
         if named > rows:
             raise DatabaseError(f'named_shape_configs {named} is more than the '
                                 f'{rows} named-shape rows of the pose collection')

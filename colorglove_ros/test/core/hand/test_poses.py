@@ -10,6 +10,7 @@ from colorglove_ros.core.hand.poses import (
     GESTURE_SHAPES,
     LETTER_SHAPES,
     NAMED_SHAPES,
+    PINCH_SHAPES,
     PosesError,
     full_pose,
     named_neighbourhood_rows,
@@ -71,6 +72,31 @@ def test_named_neighbourhood_rows(collection: np.ndarray) -> None:
     assert rows == len(NAMED_SHAPES) + (18000 - len(NAMED_SHAPES)) // 4
     with pytest.raises(PosesError):
         named_neighbourhood_rows(len(NAMED_SHAPES) - 1)
+
+
+def test_pinch_shapes_put_the_thumb_on_one_fingertip(hand) -> None:
+    """Each pinch shape's thumb tip is near its finger's tip (the gesture evaluation's pinch
+    range, 4-9 % of the hand length) and far from the others; the collection holds them only
+    when asked, and is otherwise the same."""
+    from colorglove_ros.core.hand.gestures import PINCH_FINGERS, gesture_features
+
+    model, _, _ = hand
+    assert len(PINCH_SHAPES) == 9 and not set(PINCH_SHAPES) & set(NAMED_SHAPES)
+    for name, f in PINCH_SHAPES.items():
+        finger = PINCH_FINGERS.index(name.split('_')[1])
+        d = gesture_features(model, full_pose(model, f)).pinch_distance
+        assert 0.04 < d[finger] < 0.09, name
+        assert np.delete(d, finger).min() > 0.25, name
+    plain = pose_collection(seed=0, size=600)
+    with_pinches = pose_collection(seed=0, size=600, pinch_shapes=True)
+    assert np.array_equal(plain, pose_collection(seed=0, size=600, pinch_shapes=False))
+    k = len(NAMED_SHAPES)
+    assert np.allclose(with_pinches[k:k + len(PINCH_SHAPES)],
+                       np.stack(list(PINCH_SHAPES.values())))
+    assert not any(np.isclose(plain, f, atol=1e-6).all(axis=1).any()
+                   for f in PINCH_SHAPES.values())
+    assert named_neighbourhood_rows(600, pinch_shapes=True) == \
+        k + len(PINCH_SHAPES) + (600 - k - len(PINCH_SHAPES)) // 4
 
 
 def test_dip_pip_coupling(collection: np.ndarray) -> None:

@@ -89,6 +89,22 @@ def test_named_shape_configs_cover_the_named_shapes(hand) -> None:
                               rows + 1, model, mesh, np.random.default_rng(0))
 
 
+def test_pinch_shapes_build_setting(hand) -> None:
+    """``pinch_shapes`` puts the pinch shapes into the sampled collection (the first named
+    picks then cover them) and must be a boolean."""
+    from colorglove_ros.core.hand.poses import PINCH_SHAPES
+
+    model, mesh, _ = hand
+    cfg = BuildConfig(collection_size=400, fps_vertices=60, named_shape_configs=60,
+                      pinch_shapes=True)
+    coll, chosen, _ = sample_configurations(cfg, 80, model, mesh, np.random.default_rng(0))
+    pinches = np.stack(list(PINCH_SHAPES.values()))
+    near = np.abs(coll[chosen][:, None] - pinches[None]).max(axis=2).min(axis=0)
+    assert np.all(np.degrees(near) < 25.0)      # every pinch shape has a pick near it
+    with pytest.raises(DatabaseError):
+        BuildConfig(pinch_shapes=1)
+
+
 def test_pixel_keys() -> None:
     tiny = np.zeros((2, 40, 40), np.uint8)
     tiny[0, 1, 2] = 3
