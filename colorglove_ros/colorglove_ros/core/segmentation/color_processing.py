@@ -46,6 +46,7 @@ def _grid(step: float = SATURATION_STEP) -> np.ndarray:
 
 
 _GRID = _grid()
+_GRID_MATRICES = np.stack([saturation_matrix(s) for s in _GRID])
 
 
 def estimate_saturation(linear_rgb: np.ndarray, labels: np.ndarray,
@@ -62,8 +63,8 @@ def estimate_saturation(linear_rgb: np.ndarray, labels: np.ndarray,
     if len(present) < min_colors:
         return None
     r = ref[present]
-    costs = [solve_light(means, counts, r @ saturation_matrix(s).T, weight_reference=r)[1]
-             for s in _GRID]
+    _, costs = solve_light(means, counts, r @ _GRID_MATRICES.transpose(0, 2, 1),
+                           weight_reference=r)
     return float(_GRID[int(np.argmin(costs))])
 
 

@@ -46,29 +46,34 @@ def colour_means(linear_rgb: np.ndarray, labels: np.ndarray, num_colors: int,
 
 
 def solve_light(means: np.ndarray, counts: np.ndarray, reference: np.ndarray,
-                weight_reference: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-    """Log light colour (3,) (luminance-weighted mix 0) and the weighted squared residual of
-    the model ``means_c = s_c * light * reference_c`` (``s_c`` each colour's own shading
-    level), solved by least squares in log space with each channel weighted by its share of
-    ``weight_reference`` (default ``reference``: dark channels are noise) and each colour
-    by the square root of its pixel ``counts``."""
+                weight_reference: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Log light colour (..., 3) (luminance-weighted mix 0) and the weighted squared residual
+    (...) of the model ``means_c = s_c * light * reference_c`` (``s_c`` each colour's own
+    shading level; ``means`` (n, 3), ``counts`` (n,)), solved by least squares in log space
+    with each channel weighted by its share of ``weight_reference`` (n, 3; default
+    ``reference``: dark channels are noise) and each colour by the square root of its pixel
+    count. ``reference`` (..., n, 3) may hold several candidate reference sets (then
+    ``weight_reference`` is needed), solved in one factorisation."""
     r = np.asarray(reference, dtype=np.float64)
     wr = r if weight_reference is None else np.asarray(weight_reference, dtype=np.float64)
     # unknowns: log s_c (n), log light (3); rows: (c, k) residuals + the luminance constraint
-    n = len(r)
+    n = r.shape[-2]
     design = np.zeros((3 * n + 1, n + 3))
     rows = np.arange(3 * n)
     design[rows, rows // 3] = 1.0
     design[rows, n + rows % 3] = 1.0
     design[-1, n:] = LUMINANCE_WEIGHTS   # the gains keep this mix of log gains at 0
-    log_ratio = _log_floored(means) - _log_floored(r)
-    target = np.append(log_ratio.ravel(), 0.0)
+    log_ratio = _log_floored(means) - _log_floored(r.reshape(-1, 3)).reshape(r.shape)
+    batch = log_ratio.shape[:-2]
+    target = np.concatenate([log_ratio.reshape(*batch, 3 * n),
+                             np.zeros((*batch, 1))], axis=-1).reshape(-1, 3 * n + 1).T
     weight = np.append((wr / wr.max(axis=1, keepdims=True)
                         * np.sqrt(counts[:, None] / counts.max())).ravel(), 10.0) ** 2
     wd = design * weight[:, None]
     sol = np.linalg.solve(design.T @ wd, wd.T @ target)
     residual = design @ sol - target
-    return sol[n:], float(np.sum(weight * residual * residual))
+    cost = (weight[:, None] * residual * residual).sum(axis=0)
+    return sol[n:].T.reshape(*batch, 3), cost.reshape(batch)
 
 
 def estimate_light_gains(linear_rgb: np.ndarray, labels: np.ndarray,
