@@ -13,7 +13,8 @@ from colorglove_ros.core.colorimetry import (
 )
 from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
 
-__all__ = ['LIGHT_TEMPERATURES_K', 'estimate_light_gains', 'gain_table', 'planckian_illuminants']
+__all__ = ['LIGHT_TEMPERATURES_K', 'colour_means', 'solve_light', 'estimate_light_gains',
+           'gain_table', 'planckian_illuminants']
 
 #: Bounds of everyday light colour, as seen through the camera's fixed white balance: from
 #: 3300 K (the warm end of the 'intermediate' lamp class of EN 12464-1) to 20000 K (shade
@@ -25,6 +26,56 @@ def _log_floored(colours: np.ndarray, floor: float = 1e-3) -> np.ndarray:
     return np.log(np.maximum(colours, floor * colours.max(axis=1, keepdims=True) + 1e-12))
 
 
+def colour_means(linear_rgb: np.ndarray, labels: np.ndarray, num_colors: int,
+                 min_pixels: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The glove colours (0-based indices, (n,)) with at least ``min_pixels`` pixels among
+    ``labels`` (...; 0 not glove, 1..``num_colors``), their pixel counts (n,) and their mean
+    colours (n, 3) in ``linear_rgb`` (..., 3)."""
+    labels = np.asarray(labels).ravel()
+    glove = np.flatnonzero(labels != 0)   # a bool array: 4x faster than on the labels
+    labels = labels[glove]
+    num = num_colors + 1
+    counts = np.bincount(labels, minlength=num)[1:num]
+    present = np.flatnonzero(counts >= min_pixels)
+    if not len(present):
+        return present, counts[present], np.zeros((0, 3))
+    lin = np.asarray(linear_rgb).reshape(-1, 3)[glove].T
+    sums = np.stack([np.bincount(labels, channel, minlength=num)[1:num] for channel in lin],
+                    axis=1)
+    return present, counts[present], sums[present] / counts[present, None]
+
+
+def solve_light(means: np.ndarray, counts: np.ndarray, reference: np.ndarray,
+                weight_reference: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Log light colour (..., 3) (luminance-weighted mix 0) and the weighted squared residual
+    (...) of the model ``means_c = s_c * light * reference_c`` (``s_c`` each colour's own
+    shading level; ``means`` (n, 3), ``counts`` (n,)), solved by least squares in log space
+    with each channel weighted by its share of ``weight_reference`` (n, 3; default
+    ``reference``: dark channels are noise) and each colour by the square root of its pixel
+    count. ``reference`` (..., n, 3) may hold several candidate reference sets (then
+    ``weight_reference`` is needed), solved in one factorisation."""
+    r = np.asarray(reference, dtype=np.float64)
+    wr = r if weight_reference is None else np.asarray(weight_reference, dtype=np.float64)
+    # unknowns: log s_c (n), log light (3); rows: (c, k) residuals + the luminance constraint
+    n = r.shape[-2]
+    design = np.zeros((3 * n + 1, n + 3))
+    rows = np.arange(3 * n)
+    design[rows, rows // 3] = 1.0
+    design[rows, n + rows % 3] = 1.0
+    design[-1, n:] = LUMINANCE_WEIGHTS   # the gains keep this mix of log gains at 0
+    log_ratio = _log_floored(means) - _log_floored(r.reshape(-1, 3)).reshape(r.shape)
+    batch = log_ratio.shape[:-2]
+    target = np.concatenate([log_ratio.reshape(*batch, 3 * n),
+                             np.zeros((*batch, 1))], axis=-1).reshape(-1, 3 * n + 1).T
+    weight = np.append((wr / wr.max(axis=1, keepdims=True)
+                        * np.sqrt(counts[:, None] / counts.max())).ravel(), 10.0) ** 2
+    wd = design * weight[:, None]
+    sol = np.linalg.solve(design.T @ wd, wd.T @ target)
+    residual = design @ sol - target
+    cost = (weight[:, None] * residual * residual).sum(axis=0)
+    return sol[n:].T.reshape(*batch, 3), cost.reshape(batch)
+
+
 def estimate_light_gains(linear_rgb: np.ndarray, labels: np.ndarray,
                          reference_linear_rgb: np.ndarray, min_pixels: int = 20,
                          min_colors: int = 3, max_gain: float = 2.0) -> np.ndarray:
@@ -34,38 +85,16 @@ def estimate_light_gains(linear_rgb: np.ndarray, labels: np.ndarray,
     not glove (ignored), 1..C for glove colours whose colours under the calibration's light
     are ``reference_linear_rgb`` (C, 3). Per colour c with at least ``min_pixels`` pixels the
     mean ``m_c`` is modelled as ``s_c * light * reference_c`` (``s_c`` its own shading
-    level), solved by least squares in log space with each channel weighted by its share of
-    the reference colour (dark channels are noise). Returns ``1 / light`` normalised to
+    level; :func:`solve_light`). Returns ``1 / light`` normalised to
     luminance 1 (a colour, not a level, correction) and clipped to
     ``1/max_gain .. max_gain``; ones with fewer than ``min_colors`` colours.
     """
-    labels = np.asarray(labels).ravel()
-    glove = np.flatnonzero(labels != 0)   # a bool array: 4x faster than on the labels
-    labels = labels[glove]
     ref = np.asarray(reference_linear_rgb, dtype=np.float64)
-    num = len(ref) + 1
-    counts = np.bincount(labels, minlength=num)[1:num]
-    present = np.flatnonzero(counts >= min_pixels)
+    present, counts, means = colour_means(linear_rgb, labels, len(ref), min_pixels)
     if len(present) < min_colors:
         return np.ones(3)
-    lin = np.asarray(linear_rgb).reshape(-1, 3)[glove].T
-    sums = np.stack([np.bincount(labels, channel, minlength=num)[1:num] for channel in lin],
-                    axis=1)
-    r = ref[present]
-    # unknowns: log s_c (n), log light (3); rows: (c, k) residuals + the luminance constraint
-    n = len(present)
-    design = np.zeros((3 * n + 1, n + 3))
-    rows = np.arange(3 * n)
-    design[rows, rows // 3] = 1.0
-    design[rows, n + rows % 3] = 1.0
-    design[-1, n:] = LUMINANCE_WEIGHTS   # the gains keep this mix of log gains at 0
-    log_ratio = _log_floored(sums[present] / counts[present, None]) - _log_floored(r)
-    target = np.append(log_ratio.ravel(), 0.0)
-    weight = np.append((r / r.max(axis=1, keepdims=True)
-                        * np.sqrt(counts[present, None] / counts.max())).ravel(), 10.0) ** 2
-    wd = design * weight[:, None]
-    sol = np.linalg.solve(design.T @ wd, wd.T @ target)
-    return np.clip(np.exp(-sol[n:]), 1.0 / max_gain, max_gain)
+    log_light, _ = solve_light(means, counts, ref[present])
+    return np.clip(np.exp(-log_light), 1.0 / max_gain, max_gain)
 
 
 #: sRGB byte -> linear RGB (0..1), and a fine table of linear RGB -> sRGB byte.

@@ -17,6 +17,11 @@ from colorglove_ros.core.segmentation.color_model import (
     lut_index,
     read_calibration_config,
 )
+from colorglove_ros.core.segmentation.color_processing import (
+    SaturationEstimate,
+    estimate_saturation,
+    saturation_matrix,
+)
 from colorglove_ros.core.segmentation.crop import CropTransform, crop_to_tiny, mean_shift_crop
 from colorglove_ros.core.segmentation.crop_prediction import (
     CropPrediction,
@@ -372,6 +377,17 @@ class GloveSegmenter:
     larger or smaller than the predicted one is trimmed to the predicted size
     (``predicted_size_crop``).
 
+    Another camera's colour processing (``saturation_rate`` > 0; 0, the default, is off):
+    a camera that washes colours out (or boosts them) shows the glove's palette with its
+    saturation scaled, and washed-out yellow and lime fall outside the colour model first.
+    Each frame with a hand, the coarse glove pixels inside its window (patch interiors)
+    against the calibration's reference colours give the saturation that explains them best
+    under one light colour (``core.segmentation.color_processing.estimate_saturation``); a
+    running value moves ``saturation_rate`` of the way to it per such frame, and the colour
+    table used from then on undoes the settled saturation (compiled once per value,
+    ``resaturated_lut``), with the light colour estimated against the references seen through
+    it.
+
     Every setting is checked (ranges, odd median kernel, finite numbers) by
     ``core.validation.validate_segmenter_settings`` however the segmenter is built; a bad one
     raises :class:`SegmentationConfigError` naming ``source`` (the settings' file, if any)
@@ -395,6 +411,7 @@ class GloveSegmenter:
                  background_frames: int = 0, background_tolerance: float = 12.0,
                  follow_margin: float = 0.0, search_every: int = 1,
                  prediction_margin: float = 0.0, prediction_max_ratio: float = 0.0,
+                 saturation_rate: float = 0.0,
                  source: str = 'GloveSegmenter') -> None:
         # every keyword argument but ``source`` is a setting named in SEGMENTER_RULES: checked
         # and converted (int, float, tuple of ints) in one place, kept as the attribute of
@@ -406,6 +423,9 @@ class GloveSegmenter:
             setattr(self, name, value)
         self.source = source
         self.background = StaticBackground(self.background_frames, self.background_tolerance)
+        # the camera's saturation, settled over the frames with a hand (saturation_rate > 0)
+        self._saturation = (None if self.saturation_rate <= 0 else SaturationEstimate(
+            calibration.lut, calibration.bits, self.saturation_rate))
         # the hand's coarse window of the last frame with a hand ((cx, cy), half in coarse
         # pixels, and the coarse frame's shape), which the next frame's search follows
         self._followed: tuple[tuple[tuple[float, float], float], tuple[int, int]] | None = None
@@ -435,6 +455,21 @@ class GloveSegmenter:
                               source=self.source)
 
     # ------------------------------------------------------------------ helpers
+    def _classify(self, image: np.ndarray, table: np.ndarray | None) -> np.ndarray:
+        """The calibration's labels of ``image`` after the light ``table``, with the
+        camera's settled saturation undone (``saturation_rate`` > 0)."""
+        if self._saturation is None:
+            return self.calibration.classify(image, table)
+        return self._saturation.lut().take(lut_index(image, self.calibration.bits, table))
+
+    def _reference(self) -> np.ndarray:
+        """The glove's reference colours (linear RGB) as this camera shows them: through its
+        settled saturation (``saturation_rate`` > 0), which the table then undoes."""
+        ref = self.calibration.reference_linear_rgb
+        if self._saturation is None:
+            return ref
+        return ref @ saturation_matrix(self._saturation.saturation).T
+
     def _glove_only(self, labels: np.ndarray, reduction: float, image_pixels: int
                     ) -> np.ndarray:
         """Background surfaces out of a label image whose pixels are ``reduction`` image
@@ -486,7 +521,7 @@ class GloveSegmenter:
     def _coarse_labels(self, small: np.ndarray, table: np.ndarray | None = None,
                        reduction: float = 1.0, image_pixels: int = 0,
                        static: np.ndarray | None = None) -> np.ndarray:
-        labels = self._median(self.calibration.classify(small, table))
+        labels = self._median(self._classify(small, table))
         if static is not None:
             labels[static] = 0
         labels = self._glove_only(labels, reduction, image_pixels or labels.size)
@@ -540,13 +575,30 @@ class GloveSegmenter:
                 seen = cv2.LUT(part, table)
                 labels = self._coarse_labels(part, table, reduction, pixels, static_part)
             gains = gains * estimate_light_gains(cv2.LUT(seen, _LINEAR_RGB), labels,
-                                                 self.calibration.reference_linear_rgb)
+                                                 self._reference())
             table = gain_table(gains)
         found = mean_shift_crop(labels, min_pixels=min_px)
         if found is not None:
             (cx, cy), half = found
             found = ((cx + x0, cy + y0), half)
         return found, table, labels
+
+    def _window_saturation(self, small: np.ndarray, region: tuple[int, int, int, int],
+                           labels: np.ndarray, found: tuple[tuple[float, float], float]
+                           ) -> float | None:
+        """This frame's estimate of the camera's saturation (:func:`estimate_saturation`)
+        from the coarse glove ``labels`` of ``region`` inside the hand's window ``found``
+        ((cx, cy), half; coarse pixels)."""
+        rx0, rx1, ry0, ry1 = region
+        (cx, cy), half = found
+        x0, x1 = max(int(cx - half) - rx0, 0), min(int(np.ceil(cx + half)) + 1 - rx0, rx1 - rx0)
+        y0, y1 = max(int(cy - half) - ry0, 0), min(int(np.ceil(cy + half)) + 1 - ry0, ry1 - ry0)
+        part = small[ry0 + y0:ry0 + y1, rx0 + x0:rx0 + x1]
+        inside = labels[y0:y1, x0:x1]
+        # patch interiors only: a coarse pixel on a colour border mixes two colours
+        inside = inside * (cv2.erode(inside, _CROSS) == cv2.dilate(inside, _CROSS))
+        return estimate_saturation(cv2.LUT(part, _LINEAR_RGB), inside,
+                                   self.calibration.reference_linear_rgb)
 
     def _scene_colours(self, small: np.ndarray, table: np.ndarray | None,
                        region: tuple[int, int, int, int], labels: np.ndarray
@@ -557,7 +609,7 @@ class GloveSegmenter:
         if self.scene_colour_min_share <= 0:
             return None
         x0, x1, y0, y1 = region
-        rejected = self.calibration.classify(small, table) > 0
+        rejected = self._classify(small, table) > 0
         rejected[y0:y1, x0:x1] &= labels == 0
         return scene_colour_table(small[rejected], SCENE_COLOUR_BITS,
                                   self.scene_colour_min_share * rejected.size)
@@ -609,6 +661,8 @@ class GloveSegmenter:
             region = (0, small.shape[1], 0, small.shape[0])
             detected = self._detect(small, region, reduction, h * w, static, min_px)
         found, table, labels = detected
+        if learn and found is not None and self._saturation is not None:
+            self._saturation.update(self._window_saturation(small, region, labels, found))
         scene = self._scene_colours(small, table, region, labels)
         self._found = None if found is None else (found, small.shape[:2])
         if learn and self.background.enabled:   # (the glove-like mask costs a few loops)
@@ -657,7 +711,7 @@ class GloveSegmenter:
         filter), with the same light-colour correction; for evaluation and debug images."""
         image = _check_image(image_rgb)
         filtered = self._filter(image)
-        labels = self._median(self.calibration.classify(filtered, self._coarse(image)[1]))
+        labels = self._median(self._classify(filtered, self._coarse(image)[1]))
         return relabel_borders(filtered, labels, self.border_passes,
                                self.border_distances)
 
@@ -728,7 +782,7 @@ class GloveSegmenter:
                              interpolation=cv2.INTER_AREA)
         roi = self._filter(roi)
         t = tick('filter', t)
-        labels = self.calibration.classify(roi, table)
+        labels = self._classify(roi, table)
         start = None
         if prediction is not None:   # glove colour outside the predicted window is not the hand
             px0, px1, py0, py1 = prediction_bounds(prediction, self.prediction_margin,

@@ -1,0 +1,142 @@
+"""Tests for another camera's saturation, estimated from the glove's palette and undone in the
+colour table (``core.segmentation.color_processing``), alone and in the segmenter."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from segmentation_samples import printed_glove_calibration
+
+from colorglove_ros.core.colorimetry import LUMINANCE_WEIGHTS, linear_to_srgb, srgb_to_linear
+from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
+from colorglove_ros.core.segmentation.color_model import lut_index
+from colorglove_ros.core.segmentation.color_processing import (
+    SATURATION_STEP,
+    SaturationEstimate,
+    estimate_saturation,
+    resaturated_lut,
+    saturation_matrix,
+)
+from colorglove_ros.core.segmentation.segmenter import GloveSegmenter, SegmentationConfigError
+from colorglove_ros.core.synthetic import frames as synth
+from colorglove_ros.core.synthetic.conditions import FrameConditions
+
+YELLOW, LIME = 4, 10
+
+
+@pytest.fixture(scope='module')
+def calibration():
+    return printed_glove_calibration()
+
+
+def test_saturation_matrix_keeps_luminance_and_inverts() -> None:
+    rgb = np.array([[0.6, 0.2, 0.05], [0.1, 0.5, 0.7], [0.3, 0.3, 0.3]])
+    for s in (0.6, 1.0, 1.4):
+        out = rgb @ saturation_matrix(s).T
+        np.testing.assert_allclose(out @ LUMINANCE_WEIGHTS, rgb @ LUMINANCE_WEIGHTS)
+        np.testing.assert_allclose(out[2], rgb[2])          # a grey stays grey
+        np.testing.assert_allclose(out @ saturation_matrix(1.0 / s).T, rgb, atol=1e-12)
+    grey = rgb[0] @ LUMINANCE_WEIGHTS
+    np.testing.assert_allclose((rgb[0] @ saturation_matrix(0.5).T) - grey,
+                               0.5 * (rgb[0] - grey))
+
+
+@pytest.mark.parametrize('saturation, light, steps', [
+    (0.6, (1.0, 1.0, 1.0), 1), (0.7, (1.15, 1.0, 0.85), 1), (1.0, (1.0, 1.0, 1.0), 1),
+    (1.35, (0.9, 1.0, 1.2), 2)])
+def test_estimate_saturation_from_glove_pixels(saturation, light, steps) -> None:
+    """Glove pixels = own shading * light * (the reference colour seen through the
+    saturation) + noise: the estimate lands within a grid step of the truth, whatever the
+    light colour (two steps when boosted saturation pushes channels below black, where
+    the noise hides how far)."""
+    rng = np.random.default_rng(5)
+    ref = srgb_to_linear(GLOVE_PALETTE_RGB / 255.0)
+    labels = rng.integers(1, 11, 4000)
+    shown = np.clip(ref @ saturation_matrix(saturation).T, 0.0, None)
+    shading = rng.uniform(0.3, 0.6, (4000, 1)) * rng.uniform(0.6, 1.0, 11)[labels, None]
+    pix = shading * np.asarray(light) * shown[labels - 1] + rng.normal(0.0, 0.003, (4000, 3))
+    est = estimate_saturation(np.clip(pix, 1e-4, 1.0), labels, ref)
+    assert est is not None
+    assert abs(np.log(est / saturation)) <= 1.01 * steps * SATURATION_STEP
+    few = np.isin(labels, (1, 2, 3))   # three hues: not enough to tell saturation from light
+    assert estimate_saturation(pix[few], labels[few], ref) is None
+
+
+def test_resaturated_table_recovers_washed_out_yellow_and_lime(calibration) -> None:
+    """The palette's yellow and lime washed out to 0.6 of their saturation: the calibration's
+    own table loses them; the table resaturated for 0.6 gives them back and keeps grey and
+    the other colours."""
+    bits = calibration.bits
+    palette = srgb_to_linear(GLOVE_PALETTE_RGB / 255.0) * 0.8
+    washed = palette @ saturation_matrix(0.6).T
+    srgb = np.round(255 * linear_to_srgb(washed)).astype(np.uint8)[None]
+    plain = calibration.classify(srgb)[0]
+    table = resaturated_lut(calibration.lut, bits, 0.6)
+    fixed = table.take(lut_index(srgb, bits))[0]
+    assert plain[YELLOW - 1] != YELLOW and plain[LIME - 1] != LIME
+    assert fixed[YELLOW - 1] == YELLOW and fixed[LIME - 1] == LIME
+    assert (fixed == np.arange(1, 11)).sum() >= 9
+    grey = np.full((1, 1, 3), 128, np.uint8)
+    assert table.take(lut_index(grey, bits))[0, 0] == 0
+    np.testing.assert_array_equal(resaturated_lut(calibration.lut, bits, 1.0), calibration.lut)
+
+
+def test_saturation_estimate_settles_and_caches_tables(calibration) -> None:
+    est = SaturationEstimate(calibration.lut, calibration.bits, 0.5)
+    assert est.saturation == 1.0 and est.lut() is calibration.lut
+    est.update(None)
+    assert est.saturation == 1.0
+    est.update(0.7)                       # half way (the rate) in log saturation
+    assert abs(np.log(est.saturation / np.sqrt(0.7))) <= 0.5 * SATURATION_STEP
+    for _ in range(12):
+        est.update(0.7)
+    assert abs(np.log(est.saturation / 0.7)) <= SATURATION_STEP
+    first = est.lut()
+    assert first is est.lut() and first is not calibration.lut
+    boosted = SaturationEstimate(calibration.lut, calibration.bits, 1.0)
+    boosted.update(1.4)                   # a camera that boosts saturation is not undone
+    assert boosted.saturation == 1.0 and boosted.lut() is calibration.lut
+    boosted.update(0.92)                  # nor one within the dead band of 1
+    assert boosted.saturation == 1.0
+    boosted.update(0.8)
+    assert abs(np.log(boosted.saturation / 0.8)) <= 0.5 * SATURATION_STEP
+    with pytest.raises(ValueError, match='rate'):
+        SaturationEstimate(calibration.lut, calibration.bits, 0.0)
+
+
+def _washed_out_frames(count: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Frames of the printed glove seen by a camera that washes colours out (saturation
+    0.75), one hand moving slightly."""
+    rng = np.random.default_rng(3)
+    camera = synth.default_camera()
+    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
+    look = replace(FrameConditions(glove_distractors=False), saturation=0.75)
+    out = []
+    for k in range(count):
+        frame = synth.render_frame(q + np.r_[0.002 * k, np.zeros(25)], camera,
+                                   np.random.default_rng(k), look)
+        out.append((frame.image_rgb, frame.labels))
+    return out
+
+
+def test_segmenter_settles_on_a_washed_out_camera(calibration) -> None:
+    """With ``saturation_rate`` the segmenter finds yellow and lime again after a few frames of
+    a washed-out camera; without, it labels almost none of them."""
+    frames = _washed_out_frames(6)
+    adapting = GloveSegmenter(calibration, saturation_rate=0.5)
+    plain = GloveSegmenter(calibration)
+    for image, _ in frames[:-1]:
+        adapting.process(image)
+        plain.process(image)
+    image, truth = frames[-1]
+    recall = {}
+    for name, seg in (('adapting', adapting), ('plain', plain)):
+        labels = seg.process(image, keep_labels=True).label_image
+        washed = np.isin(truth, (YELLOW, LIME))
+        recall[name] = float(np.mean(labels[washed] == truth[washed]))
+    assert recall['plain'] < 0.3, recall
+    assert recall['adapting'] > 0.8, recall
+    assert adapting.settings()['saturation_rate'] == 0.5
+    with pytest.raises(SegmentationConfigError, match='saturation_rate'):
+        GloveSegmenter(calibration, saturation_rate=1.5)
