@@ -1,10 +1,12 @@
 """The camera model of each incoming frame: from the newest ``sensor_msgs/CameraInfo`` of the
 camera (any driver, any resolution) or from the calibration YAML, and the refusal of a frame
 whose size or frame_id does not match it (never tracked with the wrong intrinsics). No rclpy
-import: the nodes feed it messages, so it is unit-testable in one process."""
+import: the nodes feed it messages (or a function taking them), so it is unit-testable in one
+process."""
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import replace
 
 from sensor_msgs.msg import CameraInfo
@@ -33,11 +35,17 @@ class FrameCamera:
     camera's). The returned camera keeps the calibrated camera's name (status lines) and
     extrinsics (identity for camera 0, the calibration's for the others). Refusals are
     :class:`NoHand` ``'camera: ...'`` and are counted per kind in :attr:`refused`.
+
+    ``take_camera_info``, when given, returns the next CameraInfo that has arrived (None when
+    none is pending): :meth:`camera_for` first takes every pending one (the newest wins), so a
+    node reads CameraInfo when a frame needs it instead of on every message's arrival.
     """
 
     def __init__(self, calibrated: PinholeCamera, use_camera_info: bool = True, *,
-                 rectified: bool = False, calibrated_frame_id: bool = False) -> None:
+                 rectified: bool = False, calibrated_frame_id: bool = False,
+                 take_camera_info: Callable[[], CameraInfo | None] | None = None) -> None:
         self.calibrated = calibrated
+        self.take_camera_info = take_camera_info
         self.use_camera_info = bool(use_camera_info)
         self.rectified = bool(rectified)
         self.calibrated_frame_id = bool(calibrated_frame_id)
@@ -70,6 +78,16 @@ class FrameCamera:
             self._info_camera = None
             self._info_error = str(exc)
 
+    def take_pending(self) -> None:
+        """Take every CameraInfo pending on ``take_camera_info`` and keep the newest."""
+        if self.take_camera_info is None:
+            return
+        newest = None
+        while (msg := self.take_camera_info()) is not None:
+            newest = msg
+        if newest is not None:
+            self.set_camera_info(newest)
+
     def _refuse(self, kind: str, detail: str) -> NoHand:
         self.refused[kind] += 1
         return NoHand(f'{CAMERA_REFUSAL_PREFIX}{detail}', warn=True)
@@ -77,6 +95,8 @@ class FrameCamera:
     def camera_for(self, width: int, height: int, frame_id: str) -> PinholeCamera | NoHand:
         """The camera model of a ``width`` x ``height`` frame in ``frame_id``, or the reason
         it is refused (see the class docstring)."""
+        if self.use_camera_info:
+            self.take_pending()
         if not self.use_camera_info:
             camera, source = self.calibrated, 'calibration'
         elif self._info_key is None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -16,11 +17,14 @@ from rcl_interfaces.msg import (
     ParameterType,
 )
 from rclpy._rclpy_pybind11 import RCLError
-from rclpy.exceptions import InvalidParameterTypeException
+from rclpy.callback_groups import CallbackGroup
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.exceptions import InvalidHandle, InvalidParameterTypeException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo, JointState
 from std_msgs.msg import Header, String
 from visualization_msgs.msg import MarkerArray
@@ -58,6 +62,7 @@ __all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'ending_on_shutdown', 'run_
            'CAMERA_INFO_TOPIC', 'OBSERVATION_TOPIC', 'CROP_PREDICTION_TOPIC',
            'declare_frame_camera',
            'declare_topic_list', 'extra_camera_info_topic', 'extra_frame_cameras',
+           'TakenOnDemand', 'take_message',
            'declare_camera_index', 'calibrated_camera', 'OPENCV_THREADS', 'declare_opencv_threads',
            'hand_model_from_calibration', 'JOINT_STATES_TOPIC', 'WRIST_POSE_TOPIC',
            'MARKERS_TOPIC', 'TRACKING_STATUS_TOPIC',
@@ -267,14 +272,47 @@ def _frame_camera(node: Node, calibrated: PinholeCamera, use_camera_info: bool,
                   info_topic: str, calibrated_frame_id: bool = False) -> FrameCamera:
     """A :class:`FrameCamera` of ``calibrated``, fed from ``info_topic`` when
     ``use_camera_info``."""
-    frame_camera = FrameCamera(calibrated, use_camera_info,
-                               calibrated_frame_id=calibrated_frame_id)
+    take = None
     if use_camera_info:
-        # the newest only, like every input of the pipeline: a node busy with a frame while
-        # several came reads one, not each in turn
-        node.create_subscription(CameraInfo, info_topic, frame_camera.set_camera_info,
-                                 LATEST_ONLY)
-    return frame_camera
+        # the newest only, like every input of the pipeline, and taken when a frame asks for
+        # its camera: the subscription is the node's (remapped, listed and destroyed with it)
+        # but in a callback group no executor runs, so a CameraInfo never wakes the node; no
+        # QoS event handlers (rclpy's incompatible-QoS warning): they would wake it instead
+        subscription = node.create_subscription(
+            CameraInfo, info_topic, _never_called, LATEST_ONLY, callback_group=TakenOnDemand(),
+            event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
+        take = partial(take_message, subscription)
+    return FrameCamera(calibrated, use_camera_info, calibrated_frame_id=calibrated_frame_id,
+                       take_camera_info=take)
+
+
+def _never_called(msg: Any) -> None:
+    raise AssertionError('a TakenOnDemand subscription is read by take_message, not spun')
+
+
+class TakenOnDemand(CallbackGroup):
+    """A callback group no executor runs: its subscriptions stay out of the executor's wait set
+    (no wake per message) and are read with :func:`take_message` when needed. Nothing of theirs
+    may wait in the executor: a QoS event handler would wake it on every unread message."""
+
+    def can_execute(self, entity: Any) -> bool:
+        return False
+
+    def beginning_execution(self, entity: Any) -> bool:
+        return False
+
+    def ending_execution(self, entity: Any) -> None:
+        pass
+
+
+def take_message(subscription: Subscription) -> Any | None:
+    """The next message waiting on ``subscription`` (None if none, or once it is destroyed)."""
+    try:
+        with subscription.handle:
+            taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+    except InvalidHandle:
+        return None
+    return None if taken is None else taken[0]
 
 
 def declare_topic_list(node: Node, name: str, default: list[str], description: str,

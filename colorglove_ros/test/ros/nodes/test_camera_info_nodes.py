@@ -165,11 +165,12 @@ def test_lookup_and_ik_check_the_observation_against_their_camera_info(
     assert [m.header.stamp.nanosec for m in joints] == [500]
 
 
-def test_a_node_busy_through_a_burst_of_camera_infos_reads_only_the_newest(
+def test_camera_info_is_taken_when_a_frame_needs_it_not_when_it_arrives(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """CameraInfo is queued one deep, like every input of the pipeline: a node that was busy
-    while several came reads the newest once, not each in turn (every message read costs the
-    executor a wake-up)."""
+    """A spinning node runs no callback for CameraInfo (every message read by the executor
+    costs it a wake-up): the subscription is the node's but outside the executor's wait set,
+    and a frame asking for its camera takes the newest of those that came (one deep, like
+    every input of the pipeline); the node's destruction ends the subscription."""
     import time
 
     import rclpy
@@ -188,25 +189,51 @@ def test_a_node_busy_through_a_burst_of_camera_infos_reads_only_the_newest(
     try:
         reader = Node('reader', context=context)
         frame_camera = declare_frame_camera(reader, CAMERA)
+        assert [s.topic_name for s in reader.subscriptions] == ['/' + CAMERA_INFO_TOPIC]
+        executor = SingleThreadedExecutor(context=context)
+        subscription = next(iter(reader.subscriptions))
+        # out of the wait set, and nothing of it in: a QoS event handler waiting there would
+        # wake the executor on every unread CameraInfo (a busy loop)
+        assert not executor.can_execute(subscription)
+        assert not any(executor.can_execute(h) for h in subscription.event_handlers)
+        assert not any(executor.can_execute(w) for w in reader.waitables
+                       if w.callback_group is subscription.callback_group)
         writer = Node('writer', context=context)
         publisher = writer.create_publisher(CameraInfo, CAMERA_INFO_TOPIC, 10)
         deadline = time.monotonic() + 10.0
         while publisher.get_subscription_count() < 1 and time.monotonic() < deadline:
             time.sleep(0.05)
-        burst = [replace(CAMERA, width=CAMERA.width + k) for k in range(5)]
+        executor.add_node(reader)
         stamp = header(1, frame_id=CAMERA.frame_id)
-        for camera in burst:      # the reader does not spin: as if busy with a frame
+
+        def frame() -> object:
+            return frame_camera.camera_for(CAMERA.width, CAMERA.height, CAMERA.frame_id)
+
+        assert frame().reason == 'camera: waiting for CameraInfo'
+        burst = [replace(CAMERA, width=CAMERA.width + k) for k in range(5)]
+        for camera in burst:
             publisher.publish(camera_to_camera_info_msg(camera, stamp))
         time.sleep(1.0)
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(reader)
-        deadline = time.monotonic() + 3.0
+        deadline = time.monotonic() + 2.0
         while time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.1)
-        assert widths == [burst[-1].width]
-        assert frame_camera.camera_info_camera.width == burst[-1].width
+        assert widths == []                      # the executor never read it
+        assert frame_camera.camera_info_camera is None
+        assert frame().reason == (f'camera: image {CAMERA.width}x{CAMERA.height} but '
+                                f'CameraInfo says {burst[-1].width}x{CAMERA.height}')
+        assert widths == [burst[-1].width]       # the newest only
+        publisher.publish(camera_to_camera_info_msg(CAMERA, stamp))
+        time.sleep(0.5)
+        assert frame() == frame_camera.camera_info_camera
+        assert frame_camera.camera_info_camera.width == CAMERA.width
+        assert frame_camera.refused == {'waiting for CameraInfo': 1, 'size': 1}
         executor.shutdown()
-        writer.destroy_node()
         reader.destroy_node()
+        deadline = time.monotonic() + 5.0
+        while publisher.get_subscription_count() > 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert publisher.get_subscription_count() == 0
+        assert frame_camera.take_camera_info() is None   # destroyed: nothing, no error
+        writer.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
