@@ -41,6 +41,26 @@ def test_rows_judge_the_rate_on_frames_with_both_hands_visible() -> None:
         benchmark_two_hands.hand_rows(stray, ('right', 'left'), 6, 30.0, visible_at)
 
 
+
+def test_rows_count_the_start_up_misses_apart() -> None:
+    """Frames missed during the node's start-up (the first startup_frames sent, in the order
+    sent) are counted apart and left out of the share judged; the share over all visible
+    frames stays beside it."""
+    stamps = np.arange(8, dtype=np.int64) * 10**9
+    visible_at = {int(s): k != 5 for k, s in enumerate(stamps)}     # frame 5 hidden
+    answered = stamps[[2, 3, 4, 6]]                                  # 0, 1 and 7 missed
+    record = ProbeRecord(answered, answered + 10_000_000, np.zeros(4, np.int64))
+    right, _ = benchmark_two_hands.hand_rows(record, ('right', 'left'), 8, 30.0, visible_at,
+                                             startup_frames=2)
+    assert right['frames_both_visible'] == 7
+    assert right['answered_when_visible'] == pytest.approx(4 / 7)
+    assert right['startup_frames_missed'] == 2
+    assert right['answered_when_visible_after_startup'] == pytest.approx(4 / 5)
+    assert right['joint_states_per_s_when_visible_after_startup'] == pytest.approx(24.0)
+    whole, _ = benchmark_two_hands.hand_rows(record, ('right', 'left'), 8, 30.0, visible_at)
+    assert whole['startup_frames_missed'] == 0
+    assert whole['answered_when_visible_after_startup'] == pytest.approx(4 / 7)
+
 def test_node_gets_only_the_parameters_given() -> None:
     """The node's defaults stand unless the command names a setting (threads, OpenCV's
     threads: compared on an idle machine with --threads / --opencv-threads)."""
