@@ -77,6 +77,10 @@ LATEST_ONLY = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=1,
 # drops older ones, so latency stays bounded by the processing time plus a frame period.
 LATEST_IMAGE = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=1,
                           reliability=QoSReliabilityPolicy.BEST_EFFORT)
+# CameraInfo: the same, so it matches every camera driver (reliable or sensor-data QoS): a
+# reliable reader and a best-effort driver never connect, and the nodes take CameraInfo
+# without QoS event handlers (below), so nothing would say why every frame waits for it
+CAMERA_INFO_QOS = LATEST_IMAGE
 
 
 def declare(node: Node, name: str, default: Any, description: str,
@@ -279,7 +283,8 @@ def _frame_camera(node: Node, calibrated: PinholeCamera, use_camera_info: bool,
         # but in a callback group no executor runs, so a CameraInfo never wakes the node; no
         # QoS event handlers (rclpy's incompatible-QoS warning): they would wake it instead
         subscription = node.create_subscription(
-            CameraInfo, info_topic, _never_called, LATEST_ONLY, callback_group=TakenOnDemand(),
+            CameraInfo, info_topic, _never_called, CAMERA_INFO_QOS,
+            callback_group=TakenOnDemand(),
             event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
         take = partial(take_message, subscription)
     return FrameCamera(calibrated, use_camera_info, calibrated_frame_id=calibrated_frame_id,

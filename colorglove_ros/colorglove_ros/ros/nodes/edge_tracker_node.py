@@ -38,6 +38,7 @@ from colorglove_ros.ros.conversions import pose_from_msgs, stamp_to_seconds
 from colorglove_ros.ros.diagnostics import FrameStats
 from colorglove_ros.ros.image import ImageEncodingError, image_to_array
 from colorglove_ros.ros.nodes.common import (
+    CAMERA_INFO_QOS,
     LATEST_IMAGE,
     StartupError,
     TrackerOutputs,
@@ -153,7 +154,8 @@ class EdgeTrackerNode(Node):
         if cameras:
             self._make_tracker(cameras)
         else:
-            self.create_subscription(CameraInfo, self.info_topic, self.on_camera_info, 10)
+            self.create_subscription(CameraInfo, self.info_topic, self.on_camera_info,
+                                     CAMERA_INFO_QOS)
         self.pending: dict[int, list[Image | None]] = {}
         for index, topic in enumerate(self.image_topics):
             self.create_subscription(Image, topic, lambda m, i=index: self.on_image(i, m),

@@ -20,6 +20,7 @@ from node_fixtures import (
     running,
     segmentation_node,
 )
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from repo_paths import CONFIG_DIR
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import String
@@ -52,10 +53,10 @@ def _pipeline(assets: NodeAssets, database: Path, use_camera_info: bool = True) 
 
 def _run_frame(assets: NodeAssets, database: Path, rgb: np.ndarray,
                info: PinholeCamera | None, frame_id: str = CAMERA.frame_id,
-               use_camera_info: bool = True):
-    """Send ``info`` (as CameraInfo, unless None) then one image through segmentation ->
-    lookup -> IK; return (status line, joint states, wrist poses, lookup candidates, the
-    nodes)."""
+               use_camera_info: bool = True, info_qos: QoSProfile | int = 10):
+    """Send ``info`` (as CameraInfo with ``info_qos``, unless None) then one image through
+    segmentation -> lookup -> IK; return (status line, joint states, wrist poses, lookup
+    candidates, the nodes)."""
     with running(*_pipeline(assets, database, use_camera_info)) as h:
         status = h.collect(String, 'hand/tracking_status')
         joints = h.collect(JointState, 'hand/joint_states')
@@ -63,7 +64,7 @@ def _run_frame(assets: NodeAssets, database: Path, rgb: np.ndarray,
         candidates = h.collect(HandPoseCandidates, 'hand/pose_candidates')
         image_pub = h.publisher(Image, 'camera/image_raw')
         if info is not None:
-            info_pub = h.probe.create_publisher(CameraInfo, 'camera/camera_info', 10)
+            info_pub = h.probe.create_publisher(CameraInfo, 'camera/camera_info', info_qos)
             assert h.spin_until(lambda: info_pub.get_subscription_count() >= 3, 10.0)
             info_pub.publish(camera_to_camera_info_msg(info, header(50, 0, info.frame_id)))
             h.settle(0.3)
@@ -95,6 +96,17 @@ def test_same_hand_at_twice_the_resolution_is_tracked_at_the_same_depth(
     # outlier_px and the gates, and the blobs the segmenter keeps depend on the resolution)
     z_640, z_1280 = wrist_640[0].pose.position.z, wrist_1280[0].pose.position.z
     assert 0.8 < z_1280 / z_640 < 1.25, (z_640, z_1280)
+
+
+def test_camera_info_from_a_sensor_data_driver_is_used(
+        node_assets: NodeAssets, small_database_path: Path, good_rgb: np.ndarray) -> None:
+    """A driver publishing CameraInfo best effort (sensor-data QoS) reaches all three nodes:
+    a reliable reader would never connect to it."""
+    status, joints, _, _, nodes = _run_frame(node_assets, small_database_path,
+                                             _upscaled(good_rgb, 2), _scaled(CAMERA, 2),
+                                             info_qos=qos_profile_sensor_data)
+    assert status.startswith('tracking:'), status
+    assert len(joints) == 1 and nodes[2].tracker.cameras[0].width == 1280
 
 
 @pytest.mark.parametrize('size_factor, frame_id, reason', [
