@@ -6,6 +6,8 @@ scikit-learn."""
 from __future__ import annotations
 
 import json
+import os
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -30,7 +32,8 @@ from colorglove_ros.core.validation import validate_database_arrays
 __all__ = [
     'DATABASE_VERSION', 'MANIFEST_NAME', 'ENTRY_ARRAYS', 'DatabaseError', 'PoseDatabase',
     'DatabaseBuild', 'pixel_keys', 'manifest_entry', 'save_database', 'load_database',
-    'read_database_build', 'check_hand_length', 'STANDARD_BUILD',
+    'read_database_build', 'check_hand_length', 'STANDARD_BUILD', 'read_into_page_cache',
+    'start_reading_into_page_cache',
 ]
 
 DATABASE_VERSION = 1
@@ -246,6 +249,45 @@ def check_hand_length(build: DatabaseBuild, hand_length_m: float, calibration: s
             f'{calibration}: hand_length_m {hand_length_m} but the pose database {database} was '
             f'built for a {build.hand_length_m} m hand; rebuild the database with '
             f'hand_length_m: {hand_length_m} in config/database.yaml or fix the calibration')
+
+
+def read_into_page_cache(path: str | Path, chunk_bytes: int = 1 << 24) -> int:
+    """Read every array file of the database folder ``path`` once, start to end, and return
+    the bytes read. The arrays are memory-mapped and the re-rank reads rows of the largest at
+    random; from a cold page cache (after a boot) each such row is a disk read on the first
+    lookups, while one sequential pass puts the files in the cache. The kernel's own read-ahead
+    advice (``posix_fadvise`` WILLNEED) reads only a little of a large file, so the files are
+    read here. Meant for a background thread: :func:`start_reading_into_page_cache`."""
+    path = Path(path)
+    listed = _read_manifest(path).get('arrays', {})
+    buffer = bytearray(chunk_bytes)
+    total = 0
+    for info in listed.values():
+        with open(path / str(info.get('file', '')), 'rb', buffering=0) as file:
+            while count := file.readinto(buffer):
+                total += count
+    return total
+
+
+def _read_at_lowest_priority(path: Path) -> None:
+    """:func:`read_into_page_cache` on a thread lowered to nice 19 (Linux threads have their
+    own priority; elsewhere it reads at the process's)."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
+    except (AttributeError, OSError):
+        pass
+    read_into_page_cache(path)
+
+
+def start_reading_into_page_cache(path: str | Path) -> threading.Thread:
+    """:func:`read_into_page_cache` of ``path`` on a daemon thread at the lowest CPU priority,
+    started (a node calls it once its database is loaded, so its first lookups after a cold
+    start do not wait for the disk, while the reading yields the CPU to the node's work; an
+    error reading is reported by the thread, the lookups are unaffected)."""
+    thread = threading.Thread(target=_read_at_lowest_priority, args=(Path(path),),
+                              name='database page cache', daemon=True)
+    thread.start()
+    return thread
 
 
 def load_database(path: str | Path, verify: bool = True) -> PoseDatabase:

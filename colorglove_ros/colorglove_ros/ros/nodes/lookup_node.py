@@ -17,7 +17,11 @@ from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from rclpy.node import Node
 
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.lookup.database import check_hand_length, load_database
+from colorglove_ros.core.lookup.database import (
+    check_hand_length,
+    load_database,
+    start_reading_into_page_cache,
+)
 from colorglove_ros.core.lookup.search import PoseLookup
 from colorglove_ros.core.lookup.types import LookupResult
 from colorglove_ros.core.pipeline import DEFAULT_MAX_IMAGE_DISTANCE, NoHand, StageLimits, look_up
@@ -70,6 +74,9 @@ class LookupNode(Node):
             calibration = load_calibration(resolve_path(calibration_file))
             started = time.perf_counter()
             database = load_database(path)
+            # the memory-mapped arrays into the page cache in the background: from a cold
+            # cache the first lookups would wait for random disk reads
+            self.page_cache_reader = start_reading_into_page_cache(path)
             check_hand_length(database.build, calibration.hand_length_m, calibration_file, path)
             self.lookup = PoseLookup(database, num_candidates, num_neighbors)
         self.frame_camera = declare_frame_camera(self, calibration.primary)

@@ -29,7 +29,11 @@ from colorglove_ros.core.hands import (
     TwoHandPipeline,
     slot_lookups,
 )
-from colorglove_ros.core.lookup.database import check_hand_length, load_database
+from colorglove_ros.core.lookup.database import (
+    check_hand_length,
+    load_database,
+    start_reading_into_page_cache,
+)
 from colorglove_ros.core.pipeline import Tracked
 from colorglove_ros.core.segmentation.segmenter import load_segmenter
 from colorglove_ros.core.tracking.config import load_ik_config
@@ -78,6 +82,9 @@ class TwoHandsNode(Node):
             calibration = load_calibration(resolve_path(calibration_file))
             database_path = declare_database(self)
             database = load_database(database_path)
+            # the memory-mapped arrays into the page cache in the background: from a cold
+            # cache the first lookups would wait for random disk reads
+            self.page_cache_reader = start_reading_into_page_cache(database_path)
             check_hand_length(database.build, calibration.hand_length_m, calibration_file,
                               database_path)
             segmenter = load_segmenter(color_config)

@@ -17,7 +17,9 @@ from colorglove_ros.core.lookup.database import (
     DatabaseError,
     load_database,
     pixel_keys,
+    read_into_page_cache,
     save_database,
+    start_reading_into_page_cache,
 )
 from colorglove_ros.core.lookup.database_build import (
     BuildConfig,
@@ -128,6 +130,21 @@ def test_round_trip(tmp_path: Path) -> None:
     np.testing.assert_array_equal(loaded.encoder.dims, db.encoder.dims)
     assert loaded.meta['note'] == 'test' and loaded.render_camera == RENDER_CAM
 
+
+
+def test_every_array_file_is_read_into_the_page_cache(tmp_path: Path) -> None:
+    """The background reader goes through every array file the manifest lists, start to end
+    (chunks smaller than a file included), on a daemon thread."""
+    save_database(_small_db(), tmp_path / 'db')
+    listed = json.loads((tmp_path / 'db' / 'manifest.json').read_text())['arrays']
+    sizes = sum((tmp_path / 'db' / info['file']).stat().st_size for info in listed.values())
+    assert read_into_page_cache(tmp_path / 'db', chunk_bytes=1000) == sizes
+    thread = start_reading_into_page_cache(tmp_path / 'db')
+    assert thread.daemon
+    thread.join(10.0)
+    assert not thread.is_alive()
+    with pytest.raises(DatabaseError, match='not found'):
+        read_into_page_cache(tmp_path / 'nothing_here')
 
 def _corrupt(path: Path, how: str) -> None:
     manifest = path / 'manifest.json'

@@ -181,6 +181,10 @@ def test_lookup_node_candidates(node_assets: NodeAssets, good_observation: HandO
         out = h.collect(HandPoseCandidates, 'hand/pose_candidates')
         pub = h.publisher(HandObservation, 'hand/observation')
         msg = h.exchange(pub, good_observation, out)
+        # the database's files were read into the page cache in the background
+        reader = h.nodes[0].page_cache_reader
+        reader.join(10.0)
+        assert reader.daemon and not reader.is_alive()
     assert msg.hand_found and msg.status == ''
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (200, 500)
     assert msg.header.frame_id == 'camera_optical_frame'

@@ -42,6 +42,8 @@ def test_two_hands_node_publishes_each_hand_under_its_namespace(node_assets, thr
             color_calibration_file=str(node_assets.color_config),
             database_path=str(node_assets.database), threads=threads))) as h:
         assert h.nodes[0].pipeline.parallel == (threads == 2)
+        h.nodes[0].page_cache_reader.join(10.0)        # the database read into the page cache
+        assert not h.nodes[0].page_cache_reader.is_alive()
         joints = {hand: h.collect(JointState, hand_topic(hand, 'joint_states')) for hand in HANDS}
         wrists = {hand: h.collect(PoseStamped, hand_topic(hand, 'wrist_pose')) for hand in HANDS}
         status = {hand: h.collect(String, hand_topic(hand, 'tracking_status')) for hand in HANDS}
