@@ -42,7 +42,7 @@ from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import stamp_to_seconds, wrist_pose_to_tf_msg
 from colorglove_ros.ros.frame_camera import CAMERA_REFUSAL_PREFIX
 from colorglove_ros.ros.image import ImageEncodingError, image_to_rgb8
-from colorglove_ros.ros.image_codec import image_from_cdr
+from colorglove_ros.ros.image_codec import SerializedImage, image_from_cdr
 from colorglove_ros.ros.nodes.common import (
     LATEST_IMAGE,
     PosePublishers,
@@ -129,21 +129,17 @@ class TwoHandsNode(Node):
             return
         header = Header(frame_id=image.frame_id,
                         stamp=Time(sec=image.stamp_sec, nanosec=image.stamp_nanosec))
-        self._track(image, header, read_only=True)
+        self._track(image, header)
 
-    def on_image(self, image: Image) -> None:
-        """Track both hands in one frame; every hand gets a pose or a 'no hand' status."""
-        self._track(image, image.header)
-
-    def _track(self, image: Image, header: Header, read_only: bool = False) -> None:
-        """Track both hands in ``image`` (an Image or a ``SerializedImage``, stamped
-        ``header``) and publish each hand's pose or why not."""
+    def _track(self, image: SerializedImage, header: Header) -> None:
+        """Track both hands in ``image`` (stamped ``header``); every hand gets a pose or a
+        'no hand' status."""
         try:
             if (image.width, image.height) != (self.camera.width, self.camera.height):
                 raise ImageEncodingError(
                     f'{CAMERA_REFUSAL_PREFIX}image {image.width}x{image.height}, calibrated '
                     f'{self.camera.width}x{self.camera.height}')
-            rgb = image_to_rgb8(image, read_only=read_only)
+            rgb = image_to_rgb8(image, read_only=True)
             outcomes = self.pipeline.process(rgb, stamp_to_seconds(header.stamp))
         except Exception as exc:   # a frame must never stop the node
             if not isinstance(exc, ImageEncodingError):
