@@ -184,14 +184,14 @@ def hand_rows(record: Any, hands: Sequence[str], frames: int, offered_hz: float,
             got = {int(s) for s in own.stamp_ns}
             sent = sorted(visible_at)
             shown = [stamp for stamp in sent if visible_at[stamp]]
+            startup = [stamp for stamp in sent[:startup_frames] if visible_at[stamp]]
             steady = [stamp for stamp in sent[startup_frames:] if visible_at[stamp]]
             share = _answered_share(shown, got)
             steady_share = _answered_share(steady, got)
             row.update({'frames_both_visible': len(shown),
                         'answered_when_visible': share,
                         'joint_states_per_s_when_visible': share * offered_hz,
-                        'startup_frames_missed': sum(stamp not in got for stamp in shown
-                                                     if stamp not in steady),
+                        'startup_frames_missed': sum(stamp not in got for stamp in startup),
                         'answered_when_visible_after_startup': steady_share,
                         # the rate the node keeps up while both hands can be tracked
                         'joint_states_per_s_when_visible_after_startup':

@@ -78,7 +78,6 @@ PLAYBACK_OPTIONS: dict[str, tuple[type, object, str]] = {
 STAMP_LOG_HEADER = 'recorded_stamp_ns,published_stamp_ns'
 
 
-
 def read_stamp_log(path: str | Path) -> dict[int, int]:
     """A ``--stamp-log`` file as {published stamp: recorded stamp} (ns); a ValueError naming
     the file and line for anything else."""
