@@ -152,14 +152,14 @@ class EdgeTracker:
         greys = self._greys(images)
         return fit_pose(self.kin, self.points, self.cameras, greys, q_start, self.config,
                         rounds or self.config.measurement_rounds,
-                        silhouettes=self._silhouettes(images))
+                        silhouettes=self._silhouettes(images, q_start))
 
-    def _silhouettes(self, images: Sequence[np.ndarray | None]) -> list[Silhouette | None]:
+    def _silhouettes(self, images: Sequence[np.ndarray | None], q: np.ndarray
+                     ) -> list[Silhouette | None]:
         """Each camera's silhouette within ``silhouette_margin_px`` of the box around the
-        current pose's (or, while waiting, the initialisation pose's) feature points."""
+        feature points of pose ``q``, the pose the fit starts from."""
         if all(bg is None for bg in self.backgrounds):
             return [None] * len(self.cameras)
-        q = self.init_pose if self._q is None else self._q
         world = self.kin.points(q, self.points.point_link, self.points.point_local, False)[0]
         m = self.config.silhouette_margin_px
         out: list[Silhouette | None] = []
@@ -230,7 +230,8 @@ class EdgeTracker:
         """Process one frame: one image per camera (grey or RGB; None if a camera has no
         frame). Returns the pose to publish or the reason there is none."""
         t0, c0 = time.perf_counter(), time.process_time()
-        result = self._step(self._greys(images), self._silhouettes(images))
+        start = self.init_pose if self._q is None else self._q
+        result = self._step(self._greys(images), self._silhouettes(images, start))
         return replace(result, time_ms=1e3 * (time.perf_counter() - t0),
                        cpu_ms=1e3 * (time.process_time() - c0))
 

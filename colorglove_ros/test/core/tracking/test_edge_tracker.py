@@ -301,6 +301,17 @@ def _backgrounds(frames) -> list:
     return [BackgroundModel.from_frames([e]) for e in frames['empty']]
 
 
+
+def test_a_fit_takes_its_silhouettes_around_its_own_start(rig) -> None:
+    """EdgeTracker.fit from a given pose crops each silhouette around that pose, not around
+    the tracker's own (here, waiting: the initialisation spot, moved far off the hand)."""
+    cameras, seq, frames = rig
+    far = EdgeTrackerConfig(max_unexplained=0.5, max_off_silhouette=0.5,
+                            init_wrist_position=(0.4, 0.3, 0.6))
+    truth = seq.poses[20]
+    fit = EdgeTracker(seq.synth.model, cameras, far, _backgrounds(frames)).fit(frames[20], truth)
+    assert fit.off_silhouette < 0.02 and fit.unexplained < 0.01
+
 def test_silhouettes_measure_a_fit_that_left_the_hand(rig) -> None:
     cameras, seq, frames = rig
     # each share is measured when its check uses it
