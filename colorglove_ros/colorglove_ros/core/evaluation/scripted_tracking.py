@@ -10,27 +10,12 @@ import numpy as np
 
 from colorglove_ros.core.evaluation.scripted_hands import ScriptedSequence, ScriptError
 from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.lookup.database import DatabaseError, contents_tag
 
-__all__ = ['TRACKED_FORMAT_VERSION', 'TRACKER_MODE', 'ScriptedTracker', 'database_tag']
+__all__ = ['TRACKED_FORMAT_VERSION', 'TRACKER_MODE', 'ScriptedTracker']
 
 TRACKED_FORMAT_VERSION = 1
 TRACKER_MODE = 'ik_smooth'        # the mode ik_node runs (IK and smoothing on)
-
-
-def database_tag(path: str | Path) -> str:
-    """A short name of a pose database's contents (the checksums of its poses and codes in its
-    manifest), for cache file names; ``ScriptError`` when it has no readable manifest."""
-    import json
-    import zlib
-
-    from colorglove_ros.core.lookup.database import MANIFEST_NAME
-
-    try:
-        arrays = json.loads((Path(path) / MANIFEST_NAME).read_text())['arrays']
-        key = f"{arrays['poses']['crc32']}:{arrays['codes']['crc32']}"
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ScriptError(f'{path}: no readable pose database manifest: {exc}') from exc
-    return f'db{zlib.crc32(key.encode()):08x}'
 
 
 @dataclass
@@ -40,8 +25,8 @@ class ScriptedTracker:
     with ``labels='segmented'``, lookup, IK with smoothing) and returns the tracked poses and
     the found flags. Results are cached in ``cache_dir`` as ``<name>_<seed>_<frames>_<labels>
     _<database tag>.npz`` (versioned, with the true poses, so a changed script is tracked
-    anew; :func:`database_tag` of ``database``'s contents, so a rebuilt or another database
-    never reads a cache of other tracking)."""
+    anew; the tag is the database's ``contents_tag``, so a rebuilt or another database never
+    reads a cache of other tracking)."""
 
     database: Path
     ik_config: Path
@@ -54,7 +39,11 @@ class ScriptedTracker:
         self.frames_tracked = 0       # frames run through the tracker (not from the cache)
 
     def _cache_path(self, name: str, seed: int, frames: int) -> Path:
-        tag = database_tag(self.database)
+        try:
+            tag = contents_tag(self.database)
+        except DatabaseError as exc:
+            raise ScriptError(f'{self.database}: no readable pose database manifest: {exc}') \
+                from exc
         return Path(self.cache_dir) / f'{name}_{seed}_{frames}_{self.labels}_{tag}.npz'
 
     def _load(self, path: Path, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import threading
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,9 +32,9 @@ from colorglove_ros.core.validation import validate_database_arrays
 
 __all__ = [
     'DATABASE_VERSION', 'MANIFEST_NAME', 'ENTRY_ARRAYS', 'DatabaseError', 'PoseDatabase',
-    'DatabaseBuild', 'pixel_keys', 'manifest_entry', 'save_database', 'load_database',
-    'read_database_build', 'check_hand_length', 'STANDARD_BUILD', 'read_into_page_cache',
-    'start_reading_into_page_cache',
+    'DatabaseBuild', 'contents_tag', 'pixel_keys', 'manifest_entry', 'save_database',
+    'load_database', 'read_database_build', 'check_hand_length', 'STANDARD_BUILD',
+    'read_into_page_cache', 'start_reading_into_page_cache',
 ]
 
 DATABASE_VERSION = 1
@@ -231,6 +232,20 @@ def _read_manifest(path: Path) -> dict[str, Any]:
         raise DatabaseError(f'{path}: dt_scale {manifest.get("dt_scale")} != {DT_SCALE}')
     DatabaseBuild.from_meta(manifest.get('meta', {}), str(mpath))
     return manifest
+
+
+def contents_tag(path: str | Path) -> str:
+    """A short name of the contents of the database at ``path`` (the checksums of its poses and
+    codes in its manifest), for the file names of caches computed with it: a rebuilt or another
+    database gets another name. :class:`DatabaseError` when the manifest does not list them."""
+    path = Path(path)
+    arrays = _read_manifest(path).get('arrays')
+    try:
+        key = f"{arrays['poses']['crc32']}:{arrays['codes']['crc32']}"
+    except (KeyError, TypeError) as exc:
+        raise DatabaseError(f'{path / MANIFEST_NAME} does not list the poses and codes '
+                            f'checksums ({exc!r}): an incomplete manifest') from exc
+    return f'db{zlib.crc32(key.encode()):08x}'
 
 
 def read_database_build(path: str | Path) -> DatabaseBuild:

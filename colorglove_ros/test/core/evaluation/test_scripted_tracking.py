@@ -9,8 +9,8 @@ import pytest
 from small_databases import blob_database
 
 from colorglove_ros.core.evaluation.scripted_hands import ScriptError
-from colorglove_ros.core.evaluation.scripted_tracking import ScriptedTracker, database_tag
-from colorglove_ros.core.lookup.database import save_database
+from colorglove_ros.core.evaluation.scripted_tracking import ScriptedTracker
+from colorglove_ros.core.lookup.database import contents_tag, save_database
 
 
 def _saved(tmp_path: Path, name: str, seed: int) -> Path:
@@ -22,17 +22,17 @@ def _saved(tmp_path: Path, name: str, seed: int) -> Path:
     return save_database(db, tmp_path / name)
 
 
-def test_database_tag_names_the_contents(tmp_path: Path) -> None:
-    a, b = _saved(tmp_path, 'a', 0), _saved(tmp_path, 'b', 1)
-    assert database_tag(a) == database_tag(a) and database_tag(a) != database_tag(b)
-    assert database_tag(a).startswith('db') and len(database_tag(a)) == 10
+def test_an_unreadable_database_manifest_is_a_script_error(tmp_path: Path) -> None:
+    a = _saved(tmp_path, 'a', 0)
     manifest = json.loads((a / 'manifest.json').read_text())
     del manifest['arrays']['codes']
     (a / 'manifest.json').write_text(json.dumps(manifest))
+    tracker = ScriptedTracker(a, Path('ik.yaml'), Path('cal.yaml'), tmp_path)
     with pytest.raises(ScriptError, match='manifest'):
-        database_tag(a)
+        tracker._cache_path('spelling', 7, 3)
+    missing = ScriptedTracker(tmp_path / 'missing', Path('ik.yaml'), Path('cal.yaml'), tmp_path)
     with pytest.raises(ScriptError):
-        database_tag(tmp_path / 'missing')
+        missing._cache_path('spelling', 7, 3)
 
 
 def test_each_database_has_its_own_cache(tmp_path: Path) -> None:
@@ -46,6 +46,6 @@ def test_each_database_has_its_own_cache(tmp_path: Path) -> None:
     np.savez_compressed(path, version=1, q_true=truth, q_est=truth + 1.0,
                         found=np.ones(3, bool))
     assert before._load(path, truth) is not None
-    assert path.name == f'spelling_7_3_segmented_{database_tag(first)}.npz'
+    assert path.name == f'spelling_7_3_segmented_{contents_tag(first)}.npz'
     other = after._cache_path('spelling', 7, 3)
     assert other != path and not other.exists()

@@ -15,6 +15,7 @@ from colorglove_ros.core.hand.poses import named_neighbourhood_rows, pose_featur
 from colorglove_ros.core.lookup.database import (
     DATABASE_VERSION,
     DatabaseError,
+    contents_tag,
     load_database,
     pixel_keys,
     read_into_page_cache,
@@ -130,6 +131,23 @@ def test_round_trip(tmp_path: Path) -> None:
     np.testing.assert_array_equal(loaded.encoder.dims, db.encoder.dims)
     assert loaded.meta['note'] == 'test' and loaded.render_camera == RENDER_CAM
 
+
+def test_contents_tag_names_the_poses_and_codes(tmp_path: Path) -> None:
+    """Caches computed with a database are named by its contents: the same files give the same
+    tag, other poses another one; a manifest without the checksums is refused."""
+    first = save_database(_small_db(), tmp_path / 'a')
+    other_db = _small_db()
+    other_db.poses[0] += 1.0
+    other = save_database(other_db, tmp_path / 'b')
+    assert contents_tag(first) == contents_tag(first) != contents_tag(other)
+    assert contents_tag(first).startswith('db') and len(contents_tag(first)) == 10
+    manifest = json.loads((first / 'manifest.json').read_text())
+    del manifest['arrays']['codes']
+    (first / 'manifest.json').write_text(json.dumps(manifest))
+    with pytest.raises(DatabaseError, match='checksums'):
+        contents_tag(first)
+    with pytest.raises(DatabaseError, match='not found'):
+        contents_tag(tmp_path / 'missing')
 
 
 def test_every_array_file_is_read_into_the_page_cache(tmp_path: Path) -> None:
