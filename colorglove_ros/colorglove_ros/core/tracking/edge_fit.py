@@ -942,7 +942,8 @@ class EdgeFit:
     joint fit's (:func:`fingertip_disagreement`, mm; NaN when not computed) and, with
     silhouettes, the largest over the cameras of the share of the hand's axis points off the
     foreground and of the unexplained share of the foreground (:func:`silhouette_measures`;
-    NaN without silhouettes)."""
+    NaN without silhouettes) and, with ``finger_refit``, per digit the largest over the
+    cameras of the share of the foreground left unexplained nearest to that digit."""
 
     q: np.ndarray
     rms_px: float
