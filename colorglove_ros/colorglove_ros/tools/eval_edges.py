@@ -13,10 +13,12 @@ tracker's time per frame (tracking frames, this process).
 Silhouettes (``--background empty``, default): each camera's background model is made from
 one frame of its empty scene (``BareHandSequence.render_empty_views``: what a user captures
 once with the hand out of view); ``--background none`` tracks from edges alone.
+``--finger-refit`` turns on the tracker's ``finger_refit`` (a finger that leaves part of the
+hand's silhouette unexplained is re-fitted from its last explained angles; off by default).
 
 Seeds: the tracker was tuned on seeds 1-8 (``TUNING_SEEDS``) and checked on seeds 21-24,
-31-36 and 41-46 (``CHECK_SEEDS``, a fresh set each pass); the reported figures use the
-held-out seeds ``EVALUATION_SEEDS`` (11, 12, 13) unless ``--seeds`` says otherwise.
+31-36, 41-46, 51-56 and 61-66 (``CHECK_SEEDS``, a fresh set each pass); the reported figures
+use the held-out seeds ``EVALUATION_SEEDS`` (11, 12, 13) unless ``--seeds`` says otherwise.
 """
 from __future__ import annotations
 
@@ -33,6 +35,7 @@ from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.synthetic.bare_hand import BareHandSequence
+from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
 from colorglove_ros.core.tracking.edge_tracker import EdgeTracker
 from colorglove_ros.core.tracking.silhouette import BackgroundModel
 from colorglove_ros.paths import resolve_path
@@ -42,7 +45,7 @@ __all__ = ['main', 'TUNING_SEEDS', 'CHECK_SEEDS', 'EVALUATION_SEEDS', 'TARGETS',
            'sequence_figures']
 
 TUNING_SEEDS = tuple(range(1, 9))
-CHECK_SEEDS = (21, 22, 23, 24, *range(31, 37), *range(41, 47))
+CHECK_SEEDS = (21, 22, 23, 24, *range(31, 37), *range(41, 47), *range(51, 57), *range(61, 67))
 EVALUATION_SEEDS = (11, 12, 13)
 _TIPS = [KEYPOINT_NAMES.index(f'{d}_tip') for d in ('thumb', 'index', 'middle', 'ring',
                                                      'little')]
@@ -147,6 +150,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--background', choices=('empty', 'none'), default='empty',
                         help='empty: silhouettes against one frame of the empty scene per '
                         'camera; none: edges only')
+    parser.add_argument('--finger-refit', action='store_true',
+                        help='the tracker\'s finger_refit: re-fit a finger that leaves part of '
+                        'the hand\'s silhouette unexplained (needs --background empty)')
     args = parser.parse_args(argv)
     return run_tool('colorglove_eval_edges', lambda: _run(args))
 
@@ -168,7 +174,8 @@ def _run(args: Any) -> int:
             empty = seq.render_empty_views(cams_all) if args.background == 'empty' else None
             for n in args.cameras:
                 if n not in trackers:
-                    trackers[n] = EdgeTracker(seq.synth.model, cams_all[:n])
+                    trackers[n] = EdgeTracker(seq.synth.model, cams_all[:n], EdgeTrackerConfig(
+                        finger_refit=args.finger_refit))
                 trackers[n].set_backgrounds([None] * n if empty is None else
                                             [BackgroundModel.from_frames([e]) for e in empty[:n]])
                 fig = evaluate_run(trackers[n], [v[:n] for v in views], seq.poses, args.init)
@@ -211,6 +218,7 @@ def _run(args: Any) -> int:
                                             'frames': args.frames, 'speeds': args.speeds,
                                             'cameras': args.cameras, 'init': args.init,
                                             'background': args.background,
+                                            'finger_refit': args.finger_refit,
                                             'python_loop_s': loop_s, 'load_average': load},
                                'rows': rows, 'summary': summary, 'targets': targets})
     return 0

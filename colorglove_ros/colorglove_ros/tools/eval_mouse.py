@@ -22,7 +22,8 @@ after a loss, again from the true pose of the frame it was lost on (counted as
 ``reinitialisations``); frames without a published pose reach the mouse as gaps. With
 ``--background empty`` the tracker also has the silhouettes against one frame of the empty
 table scene (``BareHandSequence.render_empty_views``); ``none`` (default): edges only (the
-silhouettes did not raise the click figures on tuning seeds 5-7, docs/RESULTS.md).
+silhouettes did not raise the click figures on tuning seeds 5-7, docs/RESULTS.md);
+``--finger-refit`` turns on the tracker's ``finger_refit`` (off by default).
 
 ``--source glove`` feeds it the colour-glove tracker's output (segmentation, lookup, IK with
 smoothing, as ``ik_node`` runs) on the same script rendered with the glove
@@ -34,6 +35,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -264,6 +266,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--camera-weights', type=float, nargs='+',
                         help='with --source edges: the edge tracker\'s camera_weights '
                         '(default: EdgeTrackerConfig\'s)')
+    parser.add_argument('--finger-refit', action='store_true',
+                        help='with --source edges and --background empty: the edge tracker\'s '
+                        'finger_refit')
     args = parser.parse_args(argv)
     return run_tool('colorglove_eval_mouse', lambda: _run(args))
 
@@ -296,8 +301,9 @@ def _run(args: Any) -> int:
 def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[str, float],
                   cameras: Sequence[PinholeCamera], hand_length_m: float,
                   glove: ScriptedTracker | None) -> int:
-    edge_config = EdgeTrackerConfig() if args.camera_weights is None else \
-        EdgeTrackerConfig(camera_weights=tuple(args.camera_weights))
+    edge_config = EdgeTrackerConfig(finger_refit=args.finger_refit)
+    if args.camera_weights is not None:
+        edge_config = replace(edge_config, camera_weights=tuple(args.camera_weights))
     rows = []
     for seed in args.seeds:
         Q, spans = scripted_sequence(model, config, seed, args.seconds)
@@ -334,7 +340,8 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'background': args.background,
                                             'calibration': args.calibration,
                                             'cameras': [c.name for c in cameras],
-                                            'camera_weights': list(edge_config.camera_weights)},
+                                            'camera_weights': list(edge_config.camera_weights),
+                                            'finger_refit': edge_config.finger_refit},
                                'rows': rows, 'total': total, 'targets': targets})
     return 0
 

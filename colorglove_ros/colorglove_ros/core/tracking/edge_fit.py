@@ -120,6 +120,13 @@ class EdgeTrackerConfig:
     share of the hand's foreground exceeds ``max_unexplained`` (in any camera) counts as
     drift (1.0: never). Each frame's silhouette is found only within
     ``silhouette_margin_px`` of the box around the pose it starts from.
+    ``finger_refit`` (with silhouettes): each fit also measures, per digit, the share of the
+    hand's foreground left unexplained nearest to that digit's capsules
+    (:func:`silhouette_measures`); a tracked frame where a digit's share exceeds
+    ``max_finger_unexplained`` re-fits that digit from other starting angles (its angles on
+    the last frame where it was explained, and the initialisation pose's), each with
+    ``finger_refit_rounds`` measurement rounds, and keeps the fit that leaves the least of
+    that digit unexplained (:class:`EdgeTracker`).
     """
 
     search: EdgeSearchConfig = field(default_factory=EdgeSearchConfig)
@@ -151,6 +158,9 @@ class EdgeTrackerConfig:
     silhouette_points: int = 80
     max_off_silhouette: float = 1.0
     max_unexplained: float = 0.08
+    finger_refit: bool = False
+    max_finger_unexplained: float = 0.01
+    finger_refit_rounds: int = 2
     silhouette_margin_px: float = 60.0
     loss_patience: int = 3
     coast_patience: int = 0
@@ -192,6 +202,9 @@ class EdgeTrackerConfig:
             raise EdgeTrackerError('silhouette_weight, silhouette_tolerance_px, '
                                    'silhouette_points must be >= 0, max_off_silhouette and '
                                    'max_unexplained in [0, 1]')
+        if not 0.0 <= self.max_finger_unexplained <= 1.0 or self.finger_refit_rounds < 1:
+            raise EdgeTrackerError('max_finger_unexplained must be in [0, 1], '
+                                   'finger_refit_rounds >= 1')
         if self.loss_patience < 1 or self.init_hold_frames < 1:
             raise EdgeTrackerError('loss_patience and init_hold_frames must be >= 1')
 
@@ -245,6 +258,8 @@ class FeaturePoints:
     outline_radius: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (E,) m: the
     #                          untracked links drawn in the hand's outline (the thumb
     #                          metacarpal), whose base and end are the last 2E points
+    outline_digit: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (L +
+    #                          E,) the digit (index in DIGITS) of each tracked, then untracked link
 
     @property
     def num_palm_sides(self) -> int:
@@ -336,10 +351,12 @@ def feature_points(model: HandModel, tracked: Sequence[str], use_tips: bool,
 
     hull = palm[ConvexHull(palm).vertices]
     palm = palm[::max(1, len(palm) // _PALM_OCCLUDER_POINTS)]
+    digit = np.array([DIGITS.index(LINK_NAMES[li].split('_')[0])
+                      for li in np.concatenate([links, untracked])], dtype=np.int64)
     return FeaturePoints(links, tip_links, tip_row, point_link,
                           np.asarray(local, dtype=float).reshape(-1, 3), radius[links],
                           radius[tip_links], palm_sign, np.asarray(palm, dtype=float),
-                          np.asarray(hull, dtype=float), radius[untracked])
+                          np.asarray(hull, dtype=float), radius[untracked], digit)
 
 
 @dataclass(frozen=True)
@@ -639,21 +656,50 @@ def _axis_points(points: FeaturePoints, pix: np.ndarray, Jpix: np.ndarray | None
 
 def silhouette_measures(points: FeaturePoints, camera: PinholeCamera, silhouette: Silhouette,
                         q: np.ndarray, pix: np.ndarray, depth: np.ndarray,
-                        config: EdgeTrackerConfig) -> tuple[float, float]:
+                        config: EdgeTrackerConfig) -> np.ndarray:
     """How well pose ``q`` explains one camera's silhouette, for the drift checks that are
-    on (NaN for a check that is off, ``max_off_silhouette`` or ``max_unexplained`` 1): the
-    share of the hand's axis points more than ``silhouette_tolerance_px`` off the
-    foreground, and the unexplained share of the hand's foreground
-    (:meth:`Silhouette.unexplained` of the predicted hand, :func:`hand_outline`)."""
+    on (NaN for a check that is off, ``max_off_silhouette`` or ``max_unexplained`` 1, or
+    ``finger_refit`` false), (7,): the share of the hand's axis points more than
+    ``silhouette_tolerance_px`` off the foreground, the unexplained share of the hand's
+    foreground (:meth:`Silhouette.unexplained` of the predicted hand, :func:`hand_outline`)
+    and, per digit, the share of the hand's foreground left unexplained nearest to that
+    digit's capsules (:func:`_digit_shares`)."""
     tol = config.silhouette_tolerance_px
-    off = share = math.nan
+    out = np.full(2 + len(DIGITS), math.nan)
     if config.max_off_silhouette < 1.0:
         ax, _ = _axis_points(points, pix, None, camera)
-        off = float(np.mean(silhouette.outside_distance(ax)[0] > tol)) if len(ax) else 0.0
-    if config.max_unexplained < 1.0:
+        out[0] = float(np.mean(silhouette.outside_distance(ax)[0] > tol)) if len(ax) else 0.0
+    if config.max_unexplained < 1.0 or config.finger_refit:
         outline = hand_outline(points, camera, q, pix, depth)
-        share = silhouette.unexplained(outline, tol, pixels=False)[1]
-    return off, share
+        loose, out[1] = silhouette.unexplained(outline, tol, pixels=config.finger_refit)
+        if config.finger_refit:
+            out[2:] = _digit_shares(points, outline, loose, out[1])
+    return out
+
+
+_DIGIT_SAMPLES = 200     # unexplained pixels (at most) assigned to digits per camera
+
+
+def _digit_shares(points: FeaturePoints, outline: HandOutline, loose: np.ndarray,
+                  share: float) -> np.ndarray:
+    """(5,) the unexplained ``share`` of the hand's foreground split over the digits: each
+    of the ``loose`` pixels (an even subsample) goes to the digit of its nearest capsule,
+    none when the palm's outline is nearer."""
+    out = np.zeros(len(DIGITS))
+    if not len(loose) or not len(outline.base):
+        return out
+    sample = loose[np.linspace(0, len(loose) - 1, min(len(loose), _DIGIT_SAMPLES))
+                   .astype(np.int64)]
+    to_link = segment_distances(sample, outline.base, outline.end)[0] \
+        - outline.half_width[None, :]
+    nearest = np.argmin(to_link, axis=1)
+    keep = np.ones(len(sample), dtype=bool)
+    if len(outline.palm) >= 3:
+        hull = cv2.convexHull(outline.palm.astype(np.float32))[:, 0, :].astype(float)
+        to_palm = segment_distances(sample, hull, np.roll(hull, -1, axis=0))[0].min(axis=1)
+        keep = to_link[np.arange(len(sample)), nearest] < to_palm
+    counts = np.bincount(points.outline_digit[nearest[keep]], minlength=len(DIGITS))
+    return share * counts / len(sample)
 
 
 def _silhouette_targets(loose: np.ndarray, base: np.ndarray, end: np.ndarray,
@@ -896,7 +942,8 @@ class EdgeFit:
     joint fit's (:func:`fingertip_disagreement`, mm; NaN when not computed) and, with
     silhouettes, the largest over the cameras of the share of the hand's axis points off the
     foreground and of the unexplained share of the foreground (:func:`silhouette_measures`;
-    NaN without silhouettes)."""
+    NaN without silhouettes) and, with ``finger_refit``, per digit the largest over the
+    cameras of the share of the foreground left unexplained nearest to that digit."""
 
     q: np.ndarray
     rms_px: float
@@ -907,6 +954,7 @@ class EdgeFit:
     camera_disagreement_mm: float = math.nan
     off_silhouette: float = math.nan
     unexplained: float = math.nan
+    finger_unexplained: tuple[float, ...] = (math.nan,) * len(DIGITS)
 
     @property
     def found_fraction(self) -> float:
@@ -1019,14 +1067,16 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
         q0, _ = _gauss_newton(kin, points, cameras, alone, world0, q_anchor.copy(), q_anchor,
                               S, C, config)
         disagreement = fingertip_disagreement(kin, q, q0)
-    off = unexplained = math.nan
-    checks = config.max_off_silhouette < 1.0 or config.max_unexplained < 1.0
+    shares = np.full(2 + len(DIGITS), math.nan)
+    checks = config.max_off_silhouette < 1.0 or config.max_unexplained < 1.0 \
+        or config.finger_refit
     if checks and any(sil is not None for sil in sils):
         p_final = world[0]          # the final pose's points, as for the RMS above
-        shares = []
+        per_camera = []
         for cam, sil in zip(cameras, sils, strict=True):
             if sil is not None:
                 pix, _, depth = _project(cam, p_final, None)
-                shares.append(silhouette_measures(points, cam, sil, q, pix, depth, config))
-        off, unexplained = (float(v) for v in np.max(shares, axis=0))
-    return EdgeFit(q, rms, found, usable, tips, iterations, disagreement, off, unexplained)
+                per_camera.append(silhouette_measures(points, cam, sil, q, pix, depth, config))
+        shares = np.max(per_camera, axis=0)
+    return EdgeFit(q, rms, found, usable, tips, iterations, disagreement, float(shares[0]),
+                   float(shares[1]), tuple(float(v) for v in shares[2:]))

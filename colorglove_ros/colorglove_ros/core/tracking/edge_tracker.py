@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
+from colorglove_ros.core.hand.model import DIGITS, NUM_DOFS, HandModel
 from colorglove_ros.core.tracking.edge_features import to_grey
 from colorglove_ros.core.tracking.edge_fit import (
     EdgeFit,
@@ -105,6 +105,9 @@ class EdgeTracker:
         self._coast_frames = 0
         self._resume = 0
         self._hold: list[np.ndarray] = []
+        self._digit_dofs = [np.array([i for i, n in enumerate(model.dof_names)
+                                      if n.startswith(f'{d}_')]) for d in DIGITS]
+        self._good_digits: list[np.ndarray | None] = [None] * len(DIGITS)
 
     @property
     def state(self) -> str:
@@ -123,6 +126,7 @@ class EdgeTracker:
         self._coast_frames = 0
         self._resume = 0
         self._hold = []
+        self._good_digits = [None] * len(DIGITS)
 
     def initialize(self, q: np.ndarray) -> None:
         """Start tracking from a given pose (e.g. from the glove tracker)."""
@@ -134,6 +138,7 @@ class EdgeTracker:
         self._coast_frames = 0
         self._resume = 0
         self._hold = []
+        self._good_digits = [None] * len(DIGITS)
 
     def set_backgrounds(self, backgrounds: Sequence[BackgroundModel | None]) -> None:
         """Use these empty-scene models (one per camera, None for none) from now on."""
@@ -264,6 +269,8 @@ class EdgeTracker:
                 f'camera, at the marked spot): {why}', fit, hold_frames=held)
         fit = fit_pose(self.kin, self.points, self.cameras, greys, self._q, cfg,
                        cfg.measurement_rounds, silhouettes=silhouettes)
+        if cfg.finger_refit:
+            fit = self._refit_digits(greys, silhouettes, fit)
         kind, reason = self._check_fit(fit)
         if not np.all(np.isfinite(fit.q)):
             self.reset()
@@ -288,6 +295,43 @@ class EdgeTracker:
             return EdgeTrackResult('tracking', None, 'resuming after coasting: '
                                    f'{self._resume + 1} more good frame(s) needed', fit)
         return EdgeTrackResult('tracking', fit.q.copy(), 'tracking', fit)
+
+    def _refit_digits(self, greys: list[np.ndarray | None],
+                      silhouettes: list[Silhouette | None], fit: EdgeFit) -> EdgeFit:
+        """``finger_refit``: where a digit leaves more than ``max_finger_unexplained`` of the
+        hand's foreground unexplained, re-fit it from its angles on the last frame where it
+        was explained and from the initialisation pose's; if it still leaves too much, its
+        neighbours likewise (a finger that drifted off its place leaves pixels nearest to the
+        next one). A re-fit passing every check is kept when it leaves less near that digit
+        (then less of the hand) unexplained."""
+        cfg = self.config
+        shares = np.asarray(fit.finger_unexplained)
+        if not np.all(np.isfinite(shares)):
+            return fit
+        for d in np.argsort(-shares):
+            if not fit.finger_unexplained[d] > cfg.max_finger_unexplained:
+                continue
+            for e in (d, d - 1, d + 1):
+                if not 0 <= e < len(DIGITS) or not fit.finger_unexplained[d] \
+                        > cfg.max_finger_unexplained:
+                    continue
+                dofs = self._digit_dofs[e]
+                best = fit
+                for angles in (self._good_digits[e], self.init_pose[dofs]):
+                    if angles is None:
+                        continue
+                    q0 = fit.q.copy()
+                    q0[dofs] = angles
+                    cand = fit_pose(self.kin, self.points, self.cameras, greys, q0, cfg,
+                                    cfg.finger_refit_rounds, silhouettes=silhouettes)
+                    if not self._fit_ok(cand) and (cand.finger_unexplained[d], cand.unexplained) \
+                            < (best.finger_unexplained[d], best.unexplained):
+                        best = cand
+                fit = best
+        for d, share in enumerate(fit.finger_unexplained):
+            if share <= cfg.max_finger_unexplained:
+                self._good_digits[d] = fit.q[self._digit_dofs[d]].copy()
+        return fit
 
     def with_config(self, **changes: object) -> EdgeTracker:
         """A fresh tracker on the same model and cameras with some settings changed."""

@@ -9,7 +9,8 @@ empty, one camera is taken from the first ``CameraInfo`` on ``camera_info_topic`
 Silhouettes: ``background_images`` names one image of the empty scene per camera (the hand
 out of view, same camera settings; PNG or JPEG, colour or grey like the camera's images).
 Each frame's foreground against it then enters the fit (``silhouette_weight``) and its drift
-checks (``max_unexplained``); empty: edges only.
+checks (``max_unexplained``); empty: edges only. ``finger_refit`` (off by default) re-fits a
+finger that leaves part of the hand's silhouette unexplained.
 
 Start: hold the flat hand still, palm to the (primary) camera, at the marked spot
 ``init_wrist_position``; or publish a starting pose on ``edge_tracker/init_joint_states`` +
@@ -119,6 +120,15 @@ class EdgeTrackerNode(Node):
                                   'largest share of the hand silhouette no part of the fitted '
                                   'hand explains, in any camera, before a frame counts as '
                                   'drift (1: never)', 0.0, 1.0)
+        finger_refit = declare(self, 'finger_refit', defaults.finger_refit,
+                               'with silhouettes: re-fit a digit (and its neighbours) that '
+                               'leaves part of the hand unexplained, from its last explained '
+                               'angles')
+        max_finger_unexplained = declare(self, 'max_finger_unexplained',
+                                         defaults.max_finger_unexplained,
+                                         'finger_refit: share of the hand silhouette left '
+                                         'unexplained near one digit that triggers its re-fit',
+                                         0.0, 1.0)
         with startup_errors('edge_tracker_node', ValueError):
             if len(init_wrist) != 3:
                 raise ColorGloveError(f'init_wrist_position needs 3 values, got {init_wrist}')
@@ -132,7 +142,8 @@ class EdgeTrackerNode(Node):
                 polarity=int(polarity), camera_check=bool(camera_check),
                 max_camera_disagreement_mm=float(max_disagreement),
                 silhouette_weight=float(silhouette_weight),
-                max_unexplained=float(max_unexplained))
+                max_unexplained=float(max_unexplained), finger_refit=bool(finger_refit),
+                max_finger_unexplained=float(max_finger_unexplained))
             self.backgrounds = [read_background(resolve_path(f), SilhouetteConfig(
                 threshold=float(threshold))) for f in backgrounds]
             cameras: tuple[PinholeCamera, ...] = ()
