@@ -195,7 +195,7 @@ class EdgeTracker:
             raise EdgeTrackerError('no image from any camera')
         return greys
 
-    def _fit_ok(self, fit: EdgeFit) -> str:
+    def _fit_problem(self, fit: EdgeFit) -> str:
         """'' if the fit explains the edges, else the reason it does not."""
         return self._check_fit(fit)[1]
 
@@ -247,7 +247,7 @@ class EdgeTracker:
         if self._q is None:
             fit = fit_pose(self.kin, self.points, self.cameras, greys, self.init_pose, cfg,
                            cfg.init_rounds, silhouettes=silhouettes)
-            reason = self._fit_ok(fit)
+            reason = self._fit_problem(fit)
             offset = float(np.linalg.norm(fit.q[0:3] - self.init_pose[0:3]))
             if not reason and offset > cfg.init_max_offset_m:
                 reason = f'hand {100 * offset:.0f} cm from the marked spot'
@@ -324,7 +324,8 @@ class EdgeTracker:
                     q0[dofs] = angles
                     cand = fit_pose(self.kin, self.points, self.cameras, greys, q0, cfg,
                                     cfg.finger_refit_rounds, silhouettes=silhouettes)
-                    if not self._fit_ok(cand) and (cand.finger_unexplained[d], cand.unexplained) \
+                    if not self._fit_problem(cand) and \
+                            (cand.finger_unexplained[d], cand.unexplained) \
                             < (best.finger_unexplained[d], best.unexplained):
                         best = cand
                 fit = best

@@ -171,10 +171,10 @@ def test_found_fractions_per_camera_and_over_all_cameras(rig) -> None:
     fit = EdgeFit(q, 1.0, (14, 2), (14, 7), (5, 1), 3)       # 16 of 21 found, 2 of 7 in one
     strict = EdgeTracker(seq.synth.model, cameras,
                          EdgeTrackerConfig(min_camera_found_fraction=0.6))
-    assert 'links found in camera2' in strict._fit_ok(fit)
+    assert 'links found in camera2' in strict._fit_problem(fit)
     lenient = strict.with_config(min_camera_found_fraction=0.25)
-    assert lenient._fit_ok(fit) == ''
-    assert '(need 80%)' in lenient.with_config(min_found_fraction=0.8)._fit_ok(fit)
+    assert lenient._fit_problem(fit) == ''
+    assert '(need 80%)' in lenient.with_config(min_found_fraction=0.8)._fit_problem(fit)
 
 
 def test_fit_faults_are_told_apart_coverage_from_drift(rig) -> None:
