@@ -213,6 +213,24 @@ def test_lookup_node_candidates(node_assets: NodeAssets, good_observation: HandO
     assert msg.lookup_time_ms > 0.0
 
 
+@pytest.mark.parametrize('threads', [1, 2])
+def test_lookup_node_search_threads(node_assets: NodeAssets, good_observation: HandObservation,
+                                    threads: int) -> None:
+    """search_threads 1 runs the scan and re-rank in the callback (no worker thread), 2 with
+    a worker; the candidates are the same."""
+    lookup = node_lookup(node_assets)
+    camera = load_calibration(CONFIG_DIR / 'calibration.yaml').primary
+    expected = lookup.lookup(tiny_labels_from_observation_msg(good_observation),
+                             crop_from_observation_msg(good_observation), camera,
+                             blobs_from_observation_msg(good_observation))
+    with running(lookup_node(node_assets, search_threads=threads)) as h:
+        assert (h.nodes[0].lookup._pool is None) == (threads == 1)
+        out = h.collect(HandPoseCandidates, 'hand/pose_candidates')
+        msg = h.exchange(h.publisher(HandObservation, 'hand/observation'), good_observation, out)
+    assert list(msg.candidate_indices) == [int(i) for i in expected.indices]
+    assert list(msg.candidate_distances) == [float(d) for d in expected.distances]
+
+
 def test_lookup_node_passes_no_hand_through(node_assets: NodeAssets) -> None:
     no_hand = HandObservation(header=header(300, 1, 'cam'), hand_found=False,
                               status='out_of_frame', image_width=640, image_height=480)
@@ -324,6 +342,37 @@ def test_ik_node_computes_crop_predictions_only_for_a_subscriber(
         assert h.exchange(pub, later, status).data.startswith('tracking:')
         assert h.spin_until(lambda: predictions, 5.0)
     assert len(computed) == 1 and len(predictions) == 1
+
+
+def test_ik_node_builds_the_tf_only_for_a_subscriber(good_candidates: HandPoseCandidates,
+                                                     small_database_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    """No /tf subscriber: tracked frames are published without building the camera -> palm
+    transform; once someone subscribes, each tracked frame gets one."""
+    from tf2_msgs.msg import TFMessage
+
+    from colorglove_ros.ros.nodes import ik_node as ik_node_module
+
+    built = []
+    real = ik_node_module.wrist_pose_to_tf_msg
+
+    def counting(*args, **kwargs):
+        built.append(True)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(ik_node_module, 'wrist_pose_to_tf_msg', counting)
+    with running(ik_node(small_database_path)) as h:
+        status = h.collect(String, 'hand/tracking_status')
+        pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
+        assert h.exchange(pub, good_candidates, status).data.startswith('tracking:')
+        assert built == []
+        tf = h.collect(TFMessage, '/tf')
+        assert h.spin_until(lambda: h.nodes[0].tf_pub.get_subscription_count() == 1, 5.0)
+        later = copy.deepcopy(good_candidates)
+        later.header.stamp.nanosec += 33_000_000
+        assert h.exchange(pub, later, status).data.startswith('tracking:')
+        assert h.spin_until(lambda: tf, 5.0)
+    assert len(built) == 1 and len(tf) == 1
 
 
 def test_ik_node_frame_prefix_names_joints_and_tf_child(good_candidates: HandPoseCandidates,
