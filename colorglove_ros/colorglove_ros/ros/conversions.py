@@ -70,7 +70,7 @@ def pose_to_joint_state_msg(pose: np.ndarray, header: Header,
     ``joint_names`` (``FINGER_DOF_NAMES`` order; default the plain URDF joint names, a
     prefixed hand's from ``core.hand.frames.finger_joint_names``)."""
     return JointState(header=header, name=_finger_joint_names(joint_names),
-                      position=[float(v) for v in np.asarray(pose)[6:26]])
+                      position=_packed('d', np.asarray(pose, np.float64)[6:26], np.float64))
 
 
 def pose_from_joint_state_msg(msg: JointState,

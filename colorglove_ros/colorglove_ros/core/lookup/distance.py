@@ -46,16 +46,35 @@ def _check_labels(labels: np.ndarray, batch: bool) -> np.ndarray:
     return labels
 
 
+_DT_ALIGN = 64
+"""Byte alignment of the planes OpenCV's precise distance transform writes: its result
+differs in the last bit with the output's address (vector loops peel a misaligned head), and
+NumPy aligns a fresh array to 16 bytes only, so the same label image could give other
+distances (and, through the re-rank, other poses) from run to run."""
+
+
+def _aligned_dts() -> np.ndarray:
+    """An uninitialised (NUM_COLORS, 40, 40) float32 array starting on a
+    :data:`_DT_ALIGN`-byte boundary (each 6400-byte plane does too)."""
+    nbytes = NUM_COLORS * TINY_SIZE * TINY_SIZE * 4
+    raw = np.empty(nbytes + _DT_ALIGN, np.uint8)
+    start = -raw.ctypes.data % _DT_ALIGN
+    return raw[start:start + nbytes].view(np.float32).reshape(NUM_COLORS, TINY_SIZE, TINY_SIZE)
+
+
 def _dts_into(labels: np.ndarray, out: np.ndarray) -> None:
-    """Fill ``out`` (NUM_COLORS, 40, 40) float32 with clipped per-colour Euclidean DTs."""
+    """Fill ``out`` (NUM_COLORS, 40, 40) float32 with clipped per-colour Euclidean DTs (the
+    same bits whatever ``out``'s address: computed in aligned planes, :data:`_DT_ALIGN`)."""
     present = np.bincount(labels.ravel(), minlength=NUM_COLORS + 1)
     masks = (labels[None] != _COLORS).view(np.uint8)      # all ten masks in one pass
+    work = out if out.ctypes.data % _DT_ALIGN == 0 and out.flags.c_contiguous \
+        else _aligned_dts()
     for c in range(1, NUM_COLORS + 1):
         if present[c] == 0:
-            out[c - 1] = ABSENT_PENALTY
+            work[c - 1] = ABSENT_PENALTY
             continue
-        cv2.distanceTransform(masks[c - 1], cv2.DIST_L2, cv2.DIST_MASK_PRECISE, dst=out[c - 1])
-    np.minimum(out, ABSENT_PENALTY, out=out)
+        cv2.distanceTransform(masks[c - 1], cv2.DIST_L2, cv2.DIST_MASK_PRECISE, dst=work[c - 1])
+    np.minimum(work, ABSENT_PENALTY, out=out)
 
 
 def distance_transforms(labels: np.ndarray) -> np.ndarray:
@@ -65,7 +84,7 @@ def distance_transforms(labels: np.ndarray) -> np.ndarray:
     (x, y) to the nearest pixel of colour c, clipped to :data:`ABSENT_PENALTY` (which is
     also the value everywhere when colour c is absent)."""
     labels = _check_labels(labels, batch=False)
-    out = np.empty((NUM_COLORS, TINY_SIZE, TINY_SIZE), np.float32)
+    out = _aligned_dts()
     _dts_into(labels, out)
     return out
 
@@ -116,7 +135,7 @@ class QueryDistance:
     def __init__(self, labels: np.ndarray, dts: np.ndarray | None = None) -> None:
         self.labels = _check_labels(labels, batch=False)
         if dts is None:
-            self.dts = np.empty((NUM_COLORS, TINY_SIZE, TINY_SIZE), np.float32)
+            self.dts = _aligned_dts()
             _dts_into(self.labels, self.dts)
         else:
             self.dts = np.asarray(dts, np.float32)

@@ -25,8 +25,11 @@ from colorglove_ros.core.lookup.finger_evidence import (
 from colorglove_ros.core.lookup.types import LookupResult, ProjectionConstraints
 from colorglove_ros.core.segmentation.crop import tiny_to_full
 
-__all__ = ['SearchError', 'PoseLookup',
+__all__ = ['SearchError', 'PoseLookup', 'DEFAULT_THREADS',
            'top_k_with_ties', 'estimate_global_pose']
+
+DEFAULT_THREADS = 2
+"""Threads of a :class:`PoseLookup`'s Hamming scan and re-rank: the caller and one worker."""
 
 
 _BUFFER_CAP = 1 << 20
@@ -152,11 +155,12 @@ class PoseLookup:
 
     Buffers for the Hamming scan and re-rank are reused; one instance is not thread-safe.
     ``threads=2`` (default) splits the Hamming scan (two halves) and the re-rank (its two
-    gathers) between the caller and one worker thread; ``threads=1`` runs everything in the
-    caller (same results)."""
+    gathers) between the caller and one worker thread: less wall time while a core is free,
+    a little more CPU in all (the hand-off); ``threads=1`` runs everything in the caller
+    (same results)."""
 
     def __init__(self, database: PoseDatabase, num_candidates: int = 300,
-                 num_blend: int = 10, threads: int = 2,
+                 num_blend: int = 10, threads: int = DEFAULT_THREADS,
                  finger_evidence: FingerEvidenceConfig | None = None,
                  vertex_link: np.ndarray | None = None) -> None:
         if num_candidates < 1 or num_blend < 1:

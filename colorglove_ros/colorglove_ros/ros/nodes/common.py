@@ -418,9 +418,14 @@ class PosePublishers:
         self.joints = node.create_publisher(JointState, joints_topic, 10)
         self.wrist = node.create_publisher(PoseStamped, wrist_topic, 10)
 
-    def publish(self, q: np.ndarray, header: Header) -> PoseStamped:
-        """Publish pose ``q`` with ``header``; return the wrist message."""
+    def publish(self, q: np.ndarray, header: Header, *, wrist_wanted: bool = True
+                ) -> PoseStamped | None:
+        """Publish pose ``q`` with ``header``; return the wrist message. With ``wrist_wanted``
+        false the wrist message is built (and published, and returned) only while something
+        subscribes to it, else None: the caller needs it for nothing else."""
         self.joints.publish(pose_to_joint_state_msg(q, header, self.joint_names))
+        if not (wrist_wanted or self.wrist.get_subscription_count()):
+            return None
         wrist = pose_to_wrist_pose_msg(q, header)
         self.wrist.publish(wrist)
         return wrist
@@ -437,12 +442,14 @@ class TrackerOutputs:
         self.status = node.create_publisher(String, TRACKING_STATUS_TOPIC, 10)
         self.hand_was_found = False
 
-    def publish_pose(self, q: np.ndarray, keypoints: np.ndarray, header: Header) -> PoseStamped:
+    def publish_pose(self, q: np.ndarray, keypoints: np.ndarray, header: Header, *,
+                     wrist_wanted: bool = True) -> PoseStamped | None:
         """Publish a tracked frame's pose and skeleton (``keypoints`` of ``q``; built only
-        while something subscribes to the markers); return the wrist message. The status line
-        is the caller's (:meth:`publish_status`)."""
+        while something subscribes to the markers); return the wrist message (None when not
+        ``wrist_wanted`` and nothing subscribes to it: :meth:`PosePublishers.publish`). The
+        status line is the caller's (:meth:`publish_status`)."""
         self.hand_was_found = True
-        wrist = self.pose.publish(q, header)
+        wrist = self.pose.publish(q, header, wrist_wanted=wrist_wanted)
         if self.markers.get_subscription_count():
             self.markers.publish(skeleton_to_markers_msg(keypoints, header))
         return wrist

@@ -8,7 +8,6 @@ from collections.abc import Callable
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
-from rclpy.time import Time as RclpyTime
 from std_msgs.msg import Header
 
 from colorglove_ros.ros.diagnostics import (
@@ -33,12 +32,16 @@ class DiagnosticsPublisher:
         self.hardware_id = hardware_id
         self.stats = stats
         self.publisher = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
-        self._last_report = node.get_clock().now()
+        self._clock = node.get_clock()
+        self._last_report = self._clock.now()
         self.timer = node.create_timer(DIAGNOSTICS_PERIOD_S, self.publish)
 
     def latency_s(self, stamp: Time) -> float:
         """Seconds from a frame's header ``stamp`` to now (the node's clock)."""
-        return (self.node.get_clock().now() - RclpyTime.from_msg(stamp)).nanoseconds * 1e-9
+        # integer nanoseconds, as (now - Time.from_msg(stamp)) gives them, without the two
+        # Time objects
+        return (self._clock.now().nanoseconds - (stamp.sec * 1_000_000_000 + stamp.nanosec)
+                ) * 1e-9
 
     def publish(self) -> None:
         """Publish the report of the period that ends now."""

@@ -370,14 +370,16 @@ class IKNode(Node):
         return camera
 
     def _publish(self, msg: HandPoseCandidates, tracked: Tracked) -> None:
-        """Publish a tracked frame: joint state, wrist pose (and TF), markers, status line and
-        the overlay."""
+        """Publish a tracked frame: joint state, wrist pose and TF (each while something
+        subscribes to it), markers, status line and the overlay."""
         result, keypoints = tracked.result, tracked.keypoints
         q = from_right_frame(result.q, self.hand)
         if self.hand != DEFAULT_HAND:     # tracked as the mirrored right hand
             keypoints = mirror_points(keypoints)
-        wrist = self.outputs.publish_pose(q, keypoints, msg.header)
-        if self.tf_pub is not None:
+        # the wrist and its transform are built only for a subscriber
+        tf_wanted = self.tf_pub is not None and self.tf_pub.get_subscription_count() > 0
+        wrist = self.outputs.publish_pose(q, keypoints, msg.header, wrist_wanted=tf_wanted)
+        if tf_wanted:
             self.tf_pub.publish(wrist_pose_to_tf_msg(wrist, child_frame_id=self.hand_frame))
         per_camera = ', '.join(f'{camera.name} {count}' for camera, count in
                                zip(self.tracker.cameras, result.constraints_per_camera,

@@ -22,7 +22,7 @@ from colorglove_ros.core.lookup.database import (
     load_database,
     start_reading_into_page_cache,
 )
-from colorglove_ros.core.lookup.search import PoseLookup
+from colorglove_ros.core.lookup.search import DEFAULT_THREADS, PoseLookup
 from colorglove_ros.core.lookup.types import LookupResult
 from colorglove_ros.core.pipeline import DEFAULT_MAX_IMAGE_DISTANCE, NoHand, StageLimits, look_up
 from colorglove_ros.core.segmentation.crop import TinyCrop
@@ -60,6 +60,11 @@ class LookupNode(Node):
         num_candidates = declare(self, 'num_candidates', 300,
                                  'entries re-ranked with the exact distance', 1, 100000)
         num_neighbors = declare(self, 'num_neighbors', 10, 'nearest entries blended', 1, 300)
+        threads = declare(self, 'search_threads', DEFAULT_THREADS,
+                          'threads of the Hamming scan and re-rank: 2 shares them between the '
+                          'callback and a worker thread (less latency while a core is free), '
+                          '1 runs them in the callback (a little less CPU in all; the same '
+                          'results)', 1, 2)
         self.live = LiveParameters(self)
         self.limits = StageLimits(max_image_distance=self.live.declare(
             'max_image_distance', DEFAULT_MAX_IMAGE_DISTANCE,
@@ -78,7 +83,7 @@ class LookupNode(Node):
             # cache the first lookups would wait for random disk reads
             self.page_cache_reader = start_reading_into_page_cache(path)
             check_hand_length(database.build, calibration.hand_length_m, calibration_file, path)
-            self.lookup = PoseLookup(database, num_candidates, num_neighbors)
+            self.lookup = PoseLookup(database, num_candidates, num_neighbors, threads)
         self.frame_camera = declare_frame_camera(self, calibration.primary)
         self.stats = FrameStats({'camera': self.frame_camera.refused})
         self.diagnostics = DiagnosticsPublisher(self, 'lookup', calibration.primary.frame_id,

@@ -8,6 +8,7 @@ from colorglove_ros.core.lookup.distance import (
     ABSENT_PENALTY,
     DistanceError,
     QueryDistance,
+    _dts_into,
     directed_distance,
     distance_transforms,
     image_distance,
@@ -93,3 +94,20 @@ def test_rejects_bad_input() -> None:
         distance_transforms(np.zeros((20, 20), np.uint8))
     with pytest.raises(DistanceError):
         image_distance(np.full((40, 40), 11, np.uint8), np.zeros((40, 40), np.uint8))
+
+
+def test_distance_transforms_do_not_depend_on_the_output_address() -> None:
+    """OpenCV's precise transform rounds the last bit by its output's alignment: the same
+    labels must give the same bits wherever the caller's array happens to lie (NumPy only
+    aligns to 16 bytes), or the lookup's poses change from run to run."""
+    rng = np.random.default_rng(7)
+    labels = np.where(rng.random((40, 40)) < 0.4, rng.integers(1, 11, (40, 40)), 0).astype(np.uint8)
+    reference = distance_transforms(labels)
+    assert np.array_equal(QueryDistance(labels).dts, reference)
+    nbytes = reference.nbytes
+    raw = np.empty(nbytes + 128, np.uint8)
+    base = -raw.ctypes.data % 64
+    for offset in range(0, 64, 4):
+        out = raw[base + offset:base + offset + nbytes].view(np.float32).reshape(reference.shape)
+        _dts_into(labels, out)
+        np.testing.assert_array_equal(out, reference, err_msg=f'output at 64n + {offset} bytes')

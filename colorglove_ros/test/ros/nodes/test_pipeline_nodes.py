@@ -213,6 +213,24 @@ def test_lookup_node_candidates(node_assets: NodeAssets, good_observation: HandO
     assert msg.lookup_time_ms > 0.0
 
 
+@pytest.mark.parametrize('threads', [1, 2])
+def test_lookup_node_search_threads(node_assets: NodeAssets, good_observation: HandObservation,
+                                    threads: int) -> None:
+    """search_threads 1 runs the scan and re-rank in the callback (no worker thread), 2 with
+    a worker; the candidates are the same."""
+    lookup = node_lookup(node_assets)
+    camera = load_calibration(CONFIG_DIR / 'calibration.yaml').primary
+    expected = lookup.lookup(tiny_labels_from_observation_msg(good_observation),
+                             crop_from_observation_msg(good_observation), camera,
+                             blobs_from_observation_msg(good_observation))
+    with running(lookup_node(node_assets, search_threads=threads)) as h:
+        assert (h.nodes[0].lookup._pool is None) == (threads == 1)
+        out = h.collect(HandPoseCandidates, 'hand/pose_candidates')
+        msg = h.exchange(h.publisher(HandObservation, 'hand/observation'), good_observation, out)
+    assert list(msg.candidate_indices) == [int(i) for i in expected.indices]
+    assert list(msg.candidate_distances) == [float(d) for d in expected.distances]
+
+
 def test_lookup_node_passes_no_hand_through(node_assets: NodeAssets) -> None:
     no_hand = HandObservation(header=header(300, 1, 'cam'), hand_found=False,
                               status='out_of_frame', image_width=640, image_height=480)
@@ -295,35 +313,47 @@ def test_ik_node_outputs(good_candidates: HandPoseCandidates, good_rgb: np.ndarr
 
 
 
-def test_ik_node_computes_crop_predictions_only_for_a_subscriber(
+def _tf_message_type() -> type:
+    from tf2_msgs.msg import TFMessage
+    return TFMessage
+
+
+@pytest.mark.parametrize('function, message_type, topic, publisher', [
+    # segmentation_node subscribes to crop predictions only while it uses them (its default:
+    # not)
+    ('tracked_crop', lambda: PolygonStamped, 'hand/crop_prediction', 'crop_prediction_pub'),
+    # the camera -> palm transform, for RViz or a tf listener
+    ('wrist_pose_to_tf_msg', _tf_message_type, '/tf', 'tf_pub'),
+])
+def test_ik_node_builds_an_output_only_for_a_subscriber(
+        function: str, message_type, topic: str, publisher: str,
         good_candidates: HandPoseCandidates, small_database_path: Path,
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """No subscriber to hand/crop_prediction (segmentation_node's default): tracked frames are
-    published without computing a prediction; once someone subscribes, each tracked frame
-    gets one."""
+    """No subscriber to the output: tracked frames are published without computing it; once
+    someone subscribes, each tracked frame gets one."""
     from colorglove_ros.ros.nodes import ik_node as ik_node_module
 
     computed = []
+    real = getattr(ik_node_module, function)
 
-    def counting_tracked_crop(*args, **kwargs):
-        computed.append(args[-1])
-        return real_tracked_crop(*args, **kwargs)
+    def counting(*args, **kwargs):
+        computed.append(True)
+        return real(*args, **kwargs)
 
-    real_tracked_crop = ik_node_module.tracked_crop
-    monkeypatch.setattr(ik_node_module, 'tracked_crop', counting_tracked_crop)
+    monkeypatch.setattr(ik_node_module, function, counting)
     with running(ik_node(small_database_path)) as h:
         status = h.collect(String, 'hand/tracking_status')
         pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
         assert h.exchange(pub, good_candidates, status).data.startswith('tracking:')
         assert computed == []
-        predictions = h.collect(PolygonStamped, 'hand/crop_prediction')
-        assert h.spin_until(
-            lambda: h.nodes[0].crop_prediction_pub.get_subscription_count() == 1, 5.0)
+        outputs = h.collect(message_type(), topic)
+        output_pub = getattr(h.nodes[0], publisher)
+        assert h.spin_until(lambda: output_pub.get_subscription_count() == 1, 5.0)
         later = copy.deepcopy(good_candidates)
         later.header.stamp.nanosec += 33_000_000
         assert h.exchange(pub, later, status).data.startswith('tracking:')
-        assert h.spin_until(lambda: predictions, 5.0)
-    assert len(computed) == 1 and len(predictions) == 1
+        assert h.spin_until(lambda: outputs, 5.0)
+    assert len(computed) == 1 and len(outputs) == 1
 
 
 def test_ik_node_frame_prefix_names_joints_and_tf_child(good_candidates: HandPoseCandidates,
