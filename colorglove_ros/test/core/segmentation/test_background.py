@@ -55,6 +55,32 @@ def test_the_glove_never_becomes_background_and_a_moved_camera_starts_again() ->
     assert not off.enabled and all(_feed(off, frame) is None for _ in range(5))
 
 
+@pytest.mark.parametrize('remember', [False, True])
+def test_a_surface_uncovered_as_it_was_is_background_at_once_when_remembered(
+        remember: bool) -> None:
+    """An arm sweeping over a learnt surface: with ``remember`` the pixels it uncovers are
+    background again in the first frame they show their old colour (without, only after
+    ``frames_needed`` frames); pixels uncovered showing something else are not."""
+    frame = np.random.default_rng(3).integers(0, 256, (12, 16, 3), dtype=np.uint8)
+    model = StaticBackground(frames_needed=3, tolerance=10, remember=remember)
+    for _ in range(5):
+        learnt = _feed(model, frame)
+    assert learnt is not None and learnt.all()
+    covered = frame.copy()
+    covered[:, 4:9] = 255 - covered[:, 4:9]      # the arm over columns 4..8
+    for _ in range(2):                           # passing: too short to be learnt itself
+        learnt = _feed(model, covered)
+    uncovered = frame.copy()
+    uncovered[0:3, 4:9] = 128                    # ... except something new left there
+    learnt = _feed(model, uncovered)
+    assert learnt[3:, 4:9].all() == remember     # uncovered as it was
+    assert not learnt[3:, 4:9].any() or remember
+    assert not learnt[0:3, 4:9].any()            # changed: not background
+    assert learnt[:, :4].all() and learnt[:, 9:].all()
+    model.reset()                                # a reset forgets the remembered colours
+    assert _feed(model, frame) is None and _feed(model, frame) is None
+
+
 @pytest.fixture(scope='module')
 def calibration():
     return blob_glove_calibration()
