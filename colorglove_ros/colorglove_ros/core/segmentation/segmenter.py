@@ -531,6 +531,11 @@ class GloveSegmenter:
                        static: np.ndarray | None = None) -> np.ndarray:
         labels = self._median(self._classify(small, table))
         if static is not None:
+            # a surface larger than any glove is judged whole, before the learnt background
+            # cuts it into pieces that each pass for smaller (joined to the glove, they would
+            # swamp the glove's share of colours in keep_multicolor_components)
+            labels = drop_oversized_components(
+                labels, self.max_patch_fraction * (image_pixels or labels.size) / reduction ** 2)
             labels[static] = 0
         labels = self._glove_only(labels, reduction, image_pixels or labels.size)
         if self.max_patch_window_share > 0:   # (finding the junctions costs a few loops)

@@ -137,6 +137,26 @@ def test_still_glove_coloured_clutter_stops_pulling_the_crop(calibration) -> Non
     assert max(errors[10][-10:]) < 0.02          # ... unless it has been seen holding still
 
 
+def test_a_surface_cut_by_the_learnt_background_does_not_swamp_the_glove(calibration) -> None:
+    """A red surface larger than any glove (more than ``max_patch_fraction`` of the frame),
+    learnt as background but for the band beside the glove (the arm just left it): the band
+    alone would pass for small and, joined to the glove, leave each glove colour under 3 % of
+    their component, so that the glove is dropped with it. Judged whole, the surface is
+    background and the glove is kept."""
+    small = np.full((120, 160, 3), 110, np.uint8)
+    small[:, :70] = GLOVE_PALETTE_RGB[1]                 # the red surface, 8400 coarse px
+    _glove_clutter(small, 70, 50, cell=6)                # the glove beside it, 324 px
+    static = np.zeros((120, 160), bool)
+    static[:, :58] = True                                # learnt but the 12-px band
+    segmenter = GloveSegmenter(calibration, background_frames=5)
+    factor = segmenter.coarse_factor                      # a 640x480 frame's coarse pass
+    labels = segmenter._coarse_labels(small, None, float(factor), small.size // 3 * factor ** 2,
+                                      static)
+    glove = labels[50:68, 70:88]                         # (its red cell joined the surface)
+    assert (glove > 0).mean() > 0.85 and len(np.unique(glove)) == 9
+    assert not labels[:, :70].any()                      # the whole surface is background
+
+
 def test_a_hand_held_still_stays_found(calibration) -> None:
     """The glove's patches, however large and still, never become background (a few
     outline pixels may)."""
