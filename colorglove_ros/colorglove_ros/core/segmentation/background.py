@@ -35,7 +35,9 @@ class StaticBackground:
     matches; ``adapt``: how fast the running colour follows slow changes (share per frame);
     ``max_changed_share``: when more of the frame than this changes at once, start again;
     ``remember``: a pixel showing again the colour it had when it was last learnt background
-    is background (a surface uncovered as it was), within ``tolerance``."""
+    is background (a surface uncovered as it was), within ``tolerance``, unless it was in
+    the glove mask of the last :meth:`update` (the glove, moving over a surface of about its
+    own colour, would match it)."""
 
     def __init__(self, frames_needed: int, tolerance: float, adapt: float = 0.05,
                  max_changed_share: float = 0.5, remember: bool = False) -> None:
@@ -47,8 +49,10 @@ class StaticBackground:
         self._colour: np.ndarray | None = None    # (h, w, 3) float32 running colour
         self._matched: np.ndarray | None = None   # (h, w) int32 frames matched in a row
         self._same: np.ndarray | None = None      # this frame's match, from :meth:`match`
-        # remember: each pixel's colour when it was last learnt background (NaN: never)
+        # remember: each pixel's colour when it was last learnt background (NaN: never), and
+        # the last frame's glove mask, where a glove over a surface of its colour would match
         self._learnt: np.ndarray | None = None
+        self._glove: np.ndarray | None = None
 
     @property
     def enabled(self) -> bool:
@@ -57,7 +61,7 @@ class StaticBackground:
 
     def reset(self) -> None:
         """Forget everything learnt (a new stream, the camera moved)."""
-        self._colour = self._matched = self._same = self._learnt = None
+        self._colour = self._matched = self._same = self._learnt = self._glove = None
 
     def _max_difference(self, small: np.ndarray, colour: np.ndarray) -> np.ndarray:
         """(h, w) float32: the largest channel difference of ``small`` from ``colour``
@@ -82,7 +86,10 @@ class StaticBackground:
         self._same = same
         learnt = same & (self._matched >= self.frames_needed)
         if self._learnt is not None:    # uncovered as it was when learnt (NaN: never learnt)
-            learnt |= self._max_difference(small, self._learnt) <= self.tolerance
+            uncovered = self._max_difference(small, self._learnt) <= self.tolerance
+            if self._glove is not None:   # ... but not where the glove was a frame ago
+                uncovered &= ~self._glove
+            learnt |= uncovered
         return learnt if learnt.any() else None
 
     def update(self, small: np.ndarray, glove: np.ndarray | None) -> None:
@@ -105,6 +112,7 @@ class StaticBackground:
         # matched pixels follow slow changes (light drifting); changed ones restart
         cv2.accumulateWeighted(frame, self._colour, self.adapt, counting.view(np.uint8))
         if self.remember:
+            self._glove = None if glove is None else glove.copy()
             if self._learnt is None:
                 self._learnt = np.full(frame.shape, np.nan, np.float32)
             np.copyto(self._learnt, self._colour,

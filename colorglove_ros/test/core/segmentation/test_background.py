@@ -60,7 +60,8 @@ def test_a_surface_uncovered_as_it_was_is_background_at_once_when_remembered(
         remember: bool) -> None:
     """An arm sweeping over a learnt surface: with ``remember`` the pixels it uncovers are
     background again in the first frame they show their old colour (without, only after
-    ``frames_needed`` frames); pixels uncovered showing something else are not."""
+    ``frames_needed`` frames); pixels uncovered showing something else are not, nor pixels
+    the glove covered a frame ago (a glove of the surface's colour)."""
     frame = np.random.default_rng(3).integers(0, 256, (12, 16, 3), dtype=np.uint8)
     model = StaticBackground(frames_needed=3, tolerance=10, remember=remember)
     for _ in range(5):
@@ -77,6 +78,13 @@ def test_a_surface_uncovered_as_it_was_is_background_at_once_when_remembered(
     assert not learnt[3:, 4:9].any() or remember
     assert not learnt[0:3, 4:9].any()            # changed: not background
     assert learnt[:, :4].all() and learnt[:, 9:].all()
+    glove = np.zeros((12, 16), bool)             # the glove found over columns 10..12 ...
+    glove[:, 10:13] = True
+    gloved = uncovered.copy()
+    gloved[:, 10:13] = 255 - gloved[:, 10:13]
+    _feed(model, gloved, glove)
+    learnt = _feed(model, uncovered)             # ... then showing the remembered colour
+    assert learnt[3:, 4:9].all() == remember and not learnt[:, 10:13].any()
     model.reset()                                # a reset forgets the remembered colours
     assert _feed(model, frame) is None and _feed(model, frame) is None
 
