@@ -177,6 +177,7 @@ SEGMENTER_RULES: dict[str, SettingRule] = {
     'scene_colour_min_share': ('float', 0.0, 1.0, False),
     'background_frames': ('int', 0, 100000, False),
     'background_tolerance': ('float', 1.0, 255.0, False),
+    'background_memory': ('int', 0, 1, False),
     'follow_margin': ('float', 0.0, 100.0, False),
     'search_every': ('int', 1, 1000, False),
     'prediction_margin': ('float', 0.0, 100.0, False),

@@ -11,6 +11,12 @@ towards that (a hand held still never becomes background), and a pixel that chan
 again. When most of the frame changes at once (the camera moved, the exposure jumped) the
 model starts again: until it has learnt, the segmenter works as without it.
 
+With ``remember`` a pixel also keeps the colour it had when it was last learnt background,
+through the frames something covers it: the arm sweeping across a wooden desk or a red
+cushion uncovers it again as it was, and it is background again at once instead of after
+``frames_needed`` frames (the band the arm swept would otherwise be glove-coloured clutter
+right beside the hand until then).
+
 One model per camera stream, fed its frames in order. No rclpy import.
 """
 from __future__ import annotations
@@ -27,17 +33,26 @@ class StaticBackground:
     ``frames_needed``: frames a pixel must match its running colour before it counts as
     background; ``tolerance``: the largest channel difference (sRGB levels) that still
     matches; ``adapt``: how fast the running colour follows slow changes (share per frame);
-    ``max_changed_share``: when more of the frame than this changes at once, start again."""
+    ``max_changed_share``: when more of the frame than this changes at once, start again;
+    ``remember``: a pixel showing again the colour it had when it was last learnt background
+    is background (a surface uncovered as it was), within ``tolerance``, unless it was in
+    the glove mask of the last :meth:`update` (the glove, moving over a surface of about its
+    own colour, would match it)."""
 
     def __init__(self, frames_needed: int, tolerance: float, adapt: float = 0.05,
-                 max_changed_share: float = 0.5) -> None:
+                 max_changed_share: float = 0.5, remember: bool = False) -> None:
         self.frames_needed = int(frames_needed)
         self.tolerance = float(tolerance)
         self.adapt = float(adapt)
         self.max_changed_share = float(max_changed_share)
+        self.remember = bool(remember)
         self._colour: np.ndarray | None = None    # (h, w, 3) float32 running colour
         self._matched: np.ndarray | None = None   # (h, w) int32 frames matched in a row
         self._same: np.ndarray | None = None      # this frame's match, from :meth:`match`
+        # remember: each pixel's colour when it was last learnt background (NaN: never), and
+        # the last frame's glove mask, where a glove over a surface of its colour would match
+        self._learnt: np.ndarray | None = None
+        self._glove: np.ndarray | None = None
 
     @property
     def enabled(self) -> bool:
@@ -46,7 +61,13 @@ class StaticBackground:
 
     def reset(self) -> None:
         """Forget everything learnt (a new stream, the camera moved)."""
-        self._colour = self._matched = self._same = None
+        self._colour = self._matched = self._same = self._learnt = self._glove = None
+
+    def _max_difference(self, small: np.ndarray, colour: np.ndarray) -> np.ndarray:
+        """(h, w) float32: the largest channel difference of ``small`` from ``colour``
+        (NaN where ``colour`` is)."""
+        diff = cv2.absdiff(small.astype(np.float32), colour)
+        return np.maximum(np.maximum(diff[..., 0], diff[..., 1]), diff[..., 2])
 
     def match(self, small: np.ndarray) -> np.ndarray | None:
         """(h, w) bool: the pixels of coarse frame ``small`` (uint8 RGB) that are learnt
@@ -58,14 +79,17 @@ class StaticBackground:
         if self._colour is None or self._colour.shape != small.shape:
             self.reset()
             return None
-        diff = cv2.absdiff(small.astype(np.float32), self._colour)
-        diff = np.maximum(np.maximum(diff[..., 0], diff[..., 1]), diff[..., 2])
-        same = diff <= self.tolerance
+        same = self._max_difference(small, self._colour) <= self.tolerance
         if 1.0 - float(same.mean()) > self.max_changed_share:
             self.reset()
             return None
         self._same = same
         learnt = same & (self._matched >= self.frames_needed)
+        if self._learnt is not None:    # uncovered as it was when learnt (NaN: never learnt)
+            uncovered = self._max_difference(small, self._learnt) <= self.tolerance
+            if self._glove is not None:   # ... but not where the glove was a frame ago
+                uncovered &= ~self._glove
+            learnt |= uncovered
         return learnt if learnt.any() else None
 
     def update(self, small: np.ndarray, glove: np.ndarray | None) -> None:
@@ -87,5 +111,11 @@ class StaticBackground:
         self._matched *= same
         # matched pixels follow slow changes (light drifting); changed ones restart
         cv2.accumulateWeighted(frame, self._colour, self.adapt, counting.view(np.uint8))
+        if self.remember:
+            self._glove = None if glove is None else glove.copy()
+            if self._learnt is None:
+                self._learnt = np.full(frame.shape, np.nan, np.float32)
+            np.copyto(self._learnt, self._colour,
+                      where=(self._matched >= self.frames_needed)[..., None])
         np.copyto(self._colour, frame, where=~same[..., None])
         self._same = None

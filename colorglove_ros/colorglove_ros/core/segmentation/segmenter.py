@@ -354,6 +354,12 @@ class GloveSegmenter:
     small clutter) are the scene's own colours in this frame: the region of interest labels
     them background (0 disables).
 
+    Static background (``background_frames`` > 0, ``core.segmentation.background``): a coarse
+    pixel that held its colour that many frames, outside the glove-like pixels, is background;
+    with ``background_memory`` 1 a pixel uncovered showing the colour it had when it was last
+    learnt is background at once (the band a moving arm sweeps, glove-coloured surfaces
+    beside the hand, would otherwise wait ``background_frames`` frames again).
+
     Crop following (``follow_margin`` > 0): a segmenter is fed one camera's frames in order.
     After a frame with a hand, the next frame's coarse search looks only within
     ``follow_margin`` times the hand's coarse window around where it was, and the static
@@ -409,6 +415,7 @@ class GloveSegmenter:
                  junction_reach: float = 0.0,
                  scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
+                 background_memory: int = 0,
                  follow_margin: float = 0.0, search_every: int = 1,
                  prediction_margin: float = 0.0, prediction_max_ratio: float = 0.0,
                  saturation_rate: float = 0.0,
@@ -422,7 +429,8 @@ class GloveSegmenter:
                                                        SegmentationConfigError).items():
             setattr(self, name, value)
         self.source = source
-        self.background = StaticBackground(self.background_frames, self.background_tolerance)
+        self.background = StaticBackground(self.background_frames, self.background_tolerance,
+                                           remember=bool(self.background_memory))
         # the camera's saturation, settled over the frames with a hand (saturation_rate > 0)
         self._saturation = (None if self.saturation_rate <= 0 else SaturationEstimate(
             calibration.lut, calibration.bits, self.saturation_rate))
@@ -523,6 +531,11 @@ class GloveSegmenter:
                        static: np.ndarray | None = None) -> np.ndarray:
         labels = self._median(self._classify(small, table))
         if static is not None:
+            # a surface larger than any glove is judged whole, before the learnt background
+            # cuts it into pieces that each pass for smaller (joined to the glove, they would
+            # swamp the glove's share of colours in keep_multicolor_components)
+            labels = drop_oversized_components(
+                labels, self.max_patch_fraction * (image_pixels or labels.size) / reduction ** 2)
             labels[static] = 0
         labels = self._glove_only(labels, reduction, image_pixels or labels.size)
         if self.max_patch_window_share > 0:   # (finding the junctions costs a few loops)

@@ -55,6 +55,40 @@ def test_the_glove_never_becomes_background_and_a_moved_camera_starts_again() ->
     assert not off.enabled and all(_feed(off, frame) is None for _ in range(5))
 
 
+@pytest.mark.parametrize('remember', [False, True])
+def test_a_surface_uncovered_as_it_was_is_background_at_once_when_remembered(
+        remember: bool) -> None:
+    """An arm sweeping over a learnt surface: with ``remember`` the pixels it uncovers are
+    background again in the first frame they show their old colour (without, only after
+    ``frames_needed`` frames); pixels uncovered showing something else are not, nor pixels
+    the glove covered a frame ago (a glove of the surface's colour)."""
+    frame = np.random.default_rng(3).integers(0, 256, (12, 16, 3), dtype=np.uint8)
+    model = StaticBackground(frames_needed=3, tolerance=10, remember=remember)
+    for _ in range(5):
+        learnt = _feed(model, frame)
+    assert learnt is not None and learnt.all()
+    covered = frame.copy()
+    covered[:, 4:9] = 255 - covered[:, 4:9]      # the arm over columns 4..8
+    for _ in range(2):                           # passing: too short to be learnt itself
+        learnt = _feed(model, covered)
+    uncovered = frame.copy()
+    uncovered[0:3, 4:9] = 128                    # ... except something new left there
+    learnt = _feed(model, uncovered)
+    assert learnt[3:, 4:9].all() == remember     # uncovered as it was
+    assert not learnt[3:, 4:9].any() or remember
+    assert not learnt[0:3, 4:9].any()            # changed: not background
+    assert learnt[:, :4].all() and learnt[:, 9:].all()
+    glove = np.zeros((12, 16), bool)             # the glove found over columns 10..12 ...
+    glove[:, 10:13] = True
+    gloved = uncovered.copy()
+    gloved[:, 10:13] = 255 - gloved[:, 10:13]
+    _feed(model, gloved, glove)
+    learnt = _feed(model, uncovered)             # ... then showing the remembered colour
+    assert learnt[3:, 4:9].all() == remember and not learnt[:, 10:13].any()
+    model.reset()                                # a reset forgets the remembered colours
+    assert _feed(model, frame) is None and _feed(model, frame) is None
+
+
 @pytest.fixture(scope='module')
 def calibration():
     return blob_glove_calibration()
@@ -109,6 +143,26 @@ def test_still_glove_coloured_clutter_stops_pulling_the_crop(calibration) -> Non
     assert max(errors[0][:10]) < 0.02            # far from the hand, the clutter is shed
     assert min(errors[0][-10:]) > 0.1            # beside it, it is in the crop
     assert max(errors[10][-10:]) < 0.02          # ... unless it has been seen holding still
+
+
+def test_a_surface_cut_by_the_learnt_background_does_not_swamp_the_glove(calibration) -> None:
+    """A red surface larger than any glove (more than ``max_patch_fraction`` of the frame),
+    learnt as background but for the band beside the glove (the arm just left it): the band
+    alone would pass for small and, joined to the glove, leave each glove colour under 3 % of
+    their component, so that the glove is dropped with it. Judged whole, the surface is
+    background and the glove is kept."""
+    small = np.full((120, 160, 3), 110, np.uint8)
+    small[:, :70] = GLOVE_PALETTE_RGB[1]                 # the red surface, 8400 coarse px
+    _glove_clutter(small, 70, 50, cell=6)                # the glove beside it, 324 px
+    static = np.zeros((120, 160), bool)
+    static[:, :58] = True                                # learnt but the 12-px band
+    segmenter = GloveSegmenter(calibration, background_frames=5)
+    factor = segmenter.coarse_factor                      # a 640x480 frame's coarse pass
+    labels = segmenter._coarse_labels(small, None, float(factor), small.size // 3 * factor ** 2,
+                                      static)
+    glove = labels[50:68, 70:88]                         # (its red cell joined the surface)
+    assert (glove > 0).mean() > 0.85 and len(np.unique(glove)) == 9
+    assert not labels[:, :70].any()                      # the whole surface is background
 
 
 def test_a_hand_held_still_stays_found(calibration) -> None:
