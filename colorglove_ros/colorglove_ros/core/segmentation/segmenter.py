@@ -146,8 +146,9 @@ def _reference_steps(distances: tuple[int, ...], row_stride: int) -> np.ndarray:
 
 
 def _gather(colours: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """Colours (at.shape + (3,)) float32 of the pixels ``at`` (flat indices) of ``colours``."""
-    return colours.take(at).view(np.float32).reshape(*at.shape, 3)
+    """Colours (at.shape + (4,)) float32 (R, G, B and a fourth channel to ignore) of the
+    pixels ``at`` (flat indices) of ``colours`` (one complex128 per pixel)."""
+    return colours.take(at).view(np.float32).reshape(*at.shape, 4)
 
 
 def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
@@ -184,10 +185,12 @@ def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
     # Work on the bounding box padded by the reach, as flat arrays: a step is an offset.
     box = cv2.copyMakeBorder(labels[y0:y1, x0:x1], pad, pad, pad, pad, cv2.BORDER_CONSTANT,
                              value=_UNSURE)
-    # Linear RGB as one 12-byte item per pixel, so one take gathers a pixel's whole colour.
-    rgb = cv2.copyMakeBorder(np.ascontiguousarray(image[y0:y1, x0:x1]), pad, pad, pad, pad,
-                             cv2.BORDER_CONSTANT)
-    colours = cv2.LUT(rgb, _LINEAR_RGB).view(np.dtype((np.void, 12))).ravel()
+    # Linear RGB (and alpha) as one 16-byte item per pixel, a complex128: one take gathers a
+    # pixel's whole colour, on numpy's fast path for a native type (a 12-byte void is slower).
+    rgba = cv2.copyMakeBorder(cv2.cvtColor(np.ascontiguousarray(image[y0:y1, x0:x1]),
+                                           cv2.COLOR_RGB2RGBA), pad, pad, pad, pad,
+                              cv2.BORDER_CONSTANT)
+    colours = cv2.LUT(rgba, _LINEAR_RGB).view(np.complex128).ravel()
     steps = _reference_steps(tuple(distances), box.shape[1])
     inner = box[pad:-pad, pad:-pad]   # a view of the box without the padding
     flat = box.ravel()
@@ -687,12 +690,10 @@ class GloveSegmenter:
         min_px = max(int(np.ceil(self.min_blob_pixels / (r * r))), 1)
         colors, cents, areas = color_components(labels[wy0:wy1, wx0:wx1], min_px,
                                                 self.calibration.num_colors)
-        blobs: list[Blob] = []
-        for c, (cx, cy), area in zip(colors, cents, areas, strict=True):
-            fx = x0 + r * (cx + wx0) + 0.5 * (r - 1)
-            fy = y0 + r * (cy + wy0) + 0.5 * (r - 1)
-            blobs.append(Blob(int(c), float(fx), float(fy), int(area) * r * r))
-        return blobs
+        fx = x0 + r * (cents[:, 0] + wx0) + 0.5 * (r - 1)
+        fy = y0 + r * (cents[:, 1] + wy0) + 0.5 * (r - 1)
+        return [Blob(c, x, y, area * r * r) for c, x, y, area in zip(
+            colors.tolist(), fx.tolist(), fy.tolist(), areas.tolist(), strict=True)]
 
     def _filter(self, image: np.ndarray) -> np.ndarray:
         if self.bilateral_diameter > 0 and min(image.shape[:2]) > self.bilateral_diameter:
