@@ -518,7 +518,7 @@ class GloveSegmenter:
             patch[comp[mixed[y:y + h, x:x + w]]] = True
             patch &= stats[:, cv2.CC_STAT_AREA] <= max_area
             patch[0] = False
-            out[y:y + h, x:x + w] |= patch[comp]
+            out[y:y + h, x:x + w] |= patch.take(comp)
         return out
 
     def _coarse_labels(self, small: np.ndarray, table: np.ndarray | None = None,
