@@ -109,6 +109,9 @@ def lut_index(rgb: np.ndarray, bits: int, channel_table: np.ndarray | None = Non
     ``channel_table`` (1, 256, 3) uint8 (e.g. :func:`gain_table`) maps each channel first,
     in the same pass as the quantisation (only for (H, W, 3) images)."""
     shift = 8 - bits
+    if (channel_table is None and isinstance(rgb, np.ndarray) and rgb.ndim == 3
+            and rgb.shape[2] == 3 and rgb.dtype == np.uint8):   # the same index, faster
+        channel_table = _IDENTITY_TABLE
     if channel_table is not None:   # per plane, a table straight to its shifted index bits
         planes = cv2.split(rgb)
         idx = cv2.LUT(planes[0], _index_bits(channel_table, 0, bits))
@@ -120,6 +123,10 @@ def lut_index(rgb: np.ndarray, bits: int, channel_table: np.ndarray | None = Non
     idx |= q[..., 1].astype(np.int32) << bits
     idx |= q[..., 2]
     return idx
+
+
+#: The channel table that changes nothing (1, 256, 3).
+_IDENTITY_TABLE = np.repeat(np.arange(256, dtype=np.uint8)[None, :, None], 3, axis=2)
 
 
 def _index_bits(channel_table: np.ndarray, channel: int, bits: int) -> np.ndarray:

@@ -72,7 +72,7 @@ def glove_region_mask(labels: np.ndarray, num_colors: int, window: int, min_colo
     reached = np.zeros(n, bool)
     reached[comp[rich]] = True
     reached[0] = False
-    return near | reached[comp]
+    return near | reached.take(comp)   # (take: faster than reached[comp])
 
 
 def drop_oversized_components(labels: np.ndarray, max_pixels: float) -> np.ndarray:
@@ -91,7 +91,7 @@ def drop_oversized_components(labels: np.ndarray, max_pixels: float) -> np.ndarr
                 out = labels.copy()
             drop = np.zeros(n, bool)
             drop[big] = True
-            out[drop[comp]] = 0
+            out[drop.take(comp)] = 0
     return out
 
 
@@ -214,7 +214,7 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
         big = stats[:, cv2.CC_STAT_AREA] > max_pixels
         big[0] = False
         if big.any():
-            drop |= big[comp]
+            drop |= big.take(comp)
     drop &= far
     if not drop.any():
         return labels

@@ -48,7 +48,8 @@ __all__ = [
     'STATUS_OK',
     'STATUS_NO_GLOVE', 'STATUS_TOO_SMALL', 'STATUS_OUT_OF_FRAME', 'STATUS_FRAGMENTED',
     'STAGES', 'load_segmenter',
-    'keep_multicolor_components', 'relabel_borders', 'border_contact_px',
+    'keep_multicolor_components', 'keep_reaching_components', 'relabel_borders',
+    'border_contact_px',
 ]
 
 STATUS_OK = 'ok'
@@ -126,6 +127,22 @@ def keep_multicolor_components(labels: np.ndarray, min_colors: int = 3,
     return labels * keep.view(np.uint8).take(comp)   # 5x faster than np.where
 
 
+def keep_reaching_components(labels: np.ndarray, reached: np.ndarray, removed: np.ndarray
+                             ) -> np.ndarray:
+    """``labels`` (0 = background) with only the 8-connected glove components that hold a
+    ``reached`` pixel, less the ``removed`` pixels (both (H, W) bool): how the finer grid of a
+    two-resolution cleanup follows the coarser grid's decisions (``reached``: its kept glove,
+    ``removed``: the glove it took out), shapes and thin gaps taken from the finer grid."""
+    n, comp = cv2.connectedComponents((labels > 0).view(np.uint8), connectivity=8,
+                                      ltype=cv2.CV_32S)
+    keep = np.zeros(n, bool)
+    keep[comp[reached]] = True
+    keep[0] = False
+    mask = keep.take(comp)
+    mask &= ~removed
+    return labels * mask.view(np.uint8)
+
+
 #: sRGB byte -> linear RGB in 0..255 (float32): mixed pixels are linear mixes there.
 _LINEAR_RGB = (255.0 * srgb_to_linear(np.arange(256) / 255.0)).astype(np.float32)
 _CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
@@ -146,8 +163,9 @@ def _reference_steps(distances: tuple[int, ...], row_stride: int) -> np.ndarray:
 
 
 def _gather(colours: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """Colours (at.shape + (3,)) float32 of the pixels ``at`` (flat indices) of ``colours``."""
-    return colours.take(at).view(np.float32).reshape(*at.shape, 3)
+    """Colours (at.shape + (4,)) float32 (R, G, B and a fourth channel to ignore) of the
+    pixels ``at`` (flat indices) of ``colours`` (one complex128 per pixel)."""
+    return colours.take(at).view(np.float32).reshape(*at.shape, 4)
 
 
 def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
@@ -184,10 +202,12 @@ def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
     # Work on the bounding box padded by the reach, as flat arrays: a step is an offset.
     box = cv2.copyMakeBorder(labels[y0:y1, x0:x1], pad, pad, pad, pad, cv2.BORDER_CONSTANT,
                              value=_UNSURE)
-    # Linear RGB as one 12-byte item per pixel, so one take gathers a pixel's whole colour.
-    rgb = cv2.copyMakeBorder(np.ascontiguousarray(image[y0:y1, x0:x1]), pad, pad, pad, pad,
-                             cv2.BORDER_CONSTANT)
-    colours = cv2.LUT(rgb, _LINEAR_RGB).view(np.dtype((np.void, 12))).ravel()
+    # Linear RGB (and alpha) as one 16-byte item per pixel, a complex128: one take gathers a
+    # pixel's whole colour, on numpy's fast path for a native type (a 12-byte void is slower).
+    rgba = cv2.copyMakeBorder(cv2.cvtColor(np.ascontiguousarray(image[y0:y1, x0:x1]),
+                                           cv2.COLOR_RGB2RGBA), pad, pad, pad, pad,
+                              cv2.BORDER_CONSTANT)
+    colours = cv2.LUT(rgba, _LINEAR_RGB).view(np.complex128).ravel()
     steps = _reference_steps(tuple(distances), box.shape[1])
     inner = box[pad:-pad, pad:-pad]   # a view of the box without the padding
     flat = box.ravel()
@@ -306,6 +326,34 @@ _Followed = tuple[tuple[tuple[float, float], float], 'np.ndarray | None', 'np.nd
                   'np.ndarray | None', np.ndarray]
 
 
+#: What the region of interest's labelling rules out with (:meth:`GloveSegmenter._label_roi`):
+#: the light table, the scene colours, the static background and the crop prediction.
+_Masks = tuple['np.ndarray | None', 'np.ndarray | None', 'np.ndarray | None',
+               'CropPrediction | None']
+#: The coarser grid of ``cleanup_factor`` needs at least this many cells a side.
+MIN_CLEANUP_CELLS = 8
+
+
+def _reduced(image: np.ndarray, box: tuple[int, int, int, int], r: int) -> np.ndarray:
+    """``image``'s pixels in ``box`` (x0, x1, y0, y1; sides multiples of ``r``), averaged over
+    ``r`` x ``r`` blocks (a view when ``r`` is 1)."""
+    x0, x1, y0, y1 = box
+    if r == 1:
+        return image[y0:y1, x0:x1]
+    return cv2.resize(image[y0:y1, x0:x1], ((x1 - x0) // r, (y1 - y0) // r),
+                      interpolation=cv2.INTER_AREA)
+
+
+def _cells(mask: np.ndarray, factor: int, box: tuple[int, int, int, int]) -> np.ndarray:
+    """``mask`` (a label grid each of whose cells is ``factor`` x ``factor`` pixels of a finer
+    grid) at the finer grid's pixels in ``box`` (x0, x1, y0, y1); pixels past the last cell
+    take the last cell's value."""
+    x0, x1, y0, y1 = box
+    rows = np.minimum(np.arange(y0, y1) // factor, mask.shape[0] - 1)
+    cols = np.minimum(np.arange(x0, x1) // factor, mask.shape[1] - 1)
+    return mask[rows][:, cols]
+
+
 def _check_image(image: object) -> np.ndarray:
     if not isinstance(image, np.ndarray):
         raise SegmentationInputError(f'expected a numpy array, got {type(image).__name__}')
@@ -383,6 +431,17 @@ class GloveSegmenter:
     larger or smaller than the predicted one is trimmed to the predicted size
     (``predicted_size_crop``).
 
+    Two resolutions (``cleanup_factor`` > 1; 1 is off): the region of interest's wide clutter
+    filters (:meth:`_glove_only`: oversized single-colour regions, the colour-diversity region
+    and its margin) run on it averaged over ``cleanup_factor`` x ``cleanup_factor`` blocks, a
+    grid with that many times fewer pixels a side; at the region's own resolution only the
+    box around the glove kept there is filtered and classified, and there a glove component
+    stays when it reaches a kept cell (:func:`keep_reaching_components`) less the pixels of
+    the cells the coarser filter removed. The multi-colour component test, the border
+    relabelling, the crop, the tiny image and the blobs are the region's own resolution as
+    before. A region of interest under ``MIN_CLEANUP_CELLS`` cells a side on that grid is
+    cleaned at its own resolution.
+
     Another camera's colour processing (``saturation_rate`` > 0; 0, the default, is off):
     a camera that washes colours out (or boosts them) shows the glove's palette with its
     saturation scaled, and washed-out yellow and lime fall outside the colour model first.
@@ -418,7 +477,7 @@ class GloveSegmenter:
                  background_memory: int = 0,
                  follow_margin: float = 0.0, search_every: int = 1,
                  prediction_margin: float = 0.0, prediction_max_ratio: float = 0.0,
-                 saturation_rate: float = 0.0,
+                 saturation_rate: float = 0.0, cleanup_factor: int = 1,
                  source: str = 'GloveSegmenter') -> None:
         # every keyword argument but ``source`` is a setting named in SEGMENTER_RULES: checked
         # and converted (int, float, tuple of ints) in one place, kept as the attribute of
@@ -523,8 +582,84 @@ class GloveSegmenter:
             patch[comp[mixed[y:y + h, x:x + w]]] = True
             patch &= stats[:, cv2.CC_STAT_AREA] <= max_area
             patch[0] = False
-            out[y:y + h, x:x + w] |= patch[comp]
+            out[y:y + h, x:x + w] |= patch.take(comp)
         return out
+
+    def _label_roi(self, roi: np.ndarray, origin: tuple[int, int], r: int,
+                   image_hw: tuple[int, int], masks: _Masks) -> np.ndarray:
+        """Labels of ``roi`` (filtered RGB of the region of interest, or of a box in it,
+        whose pixel (0, 0) starts at full pixel ``origin`` (x, y), each ``r`` full pixels a
+        side) with the light ``table`` of ``masks`` and without what it rules out: glove
+        colour outside the predicted window, the frame's scene colours, the learnt static
+        background."""
+        table, scene, static, prediction = masks
+        labels = self._classify(roi, table)
+        if prediction is not None:   # glove colour outside the predicted window is not the hand
+            px0, px1, py0, py1 = prediction_bounds(prediction, self.prediction_margin,
+                                                   origin, r, labels.shape)
+            inside = labels[py0:py1, px0:px1].copy()
+            labels[...] = 0
+            labels[py0:py1, px0:px1] = inside
+        if scene is not None:
+            labels[scene.take(lut_index(roi, SCENE_COLOUR_BITS))] = 0
+        if static is not None:
+            labels[_coarse_cells(static, origin, r, labels.shape, image_hw)] = 0
+        return labels
+
+    def _clean_roi(self, labels: np.ndarray, r: int, image_pixels: int, chalf: float,
+                   region: bool = True) -> np.ndarray:
+        """The region of interest's (median-filtered) ``labels``, each ``r`` full pixels a
+        side, without what is not the glove (:meth:`_glove_only` unless not ``region``,
+        :func:`keep_multicolor_components`, :func:`shed_oversized_patches` at the coarse
+        window's half side ``chalf``)."""
+        if region:
+            labels = self._glove_only(labels, r, image_pixels)
+        if self.min_component_colors > 1:
+            labels = keep_multicolor_components(labels, self.min_component_colors,
+                                                min_pixels=max(self.min_blob_pixels // (r * r), 2),
+                                                reattach_radius=self.reattach_radius,
+                                                reattach_max_share=self.reattach_max_share)
+        # single-colour surfaces larger than a patch at the (coarse) hand window's scale
+        return shed_oversized_patches(labels, self.max_patch_window_share,
+                                      ((0.0, 0.0), chalf / r))
+
+    def _two_resolution(self, image: np.ndarray, roi_box: tuple[int, int, int, int], r: int,
+                        masks: _Masks, chalf: float
+                        ) -> tuple[np.ndarray, np.ndarray, int, int] | None:
+        """The region of interest ``roi_box`` (full-pixel bounds, sides multiples of ``r``)
+        cleaned in two resolutions (``cleanup_factor``; the class docstring): (the glove's
+        box's filtered RGB at ``r``, its cleaned labels, its origin (x, y) in the ROI's label
+        pixels). None when the coarser grid would be too small (then the ROI is cleaned at
+        ``r``)."""
+        f = self.cleanup_factor
+        x0, x1, y0, y1 = roi_box
+        big = r * f
+        rows_c, cols_c = (y1 - y0) // big, (x1 - x0) // big
+        if min(rows_c, cols_c) < MIN_CLEANUP_CELLS:
+            return None
+        h, w = image.shape[:2]
+        small = self._filter(_reduced(image, (x0, x0 + cols_c * big, y0, y0 + rows_c * big),
+                                      big))
+        found = self._median(self._label_roi(small, (x0, y0), big, (h, w), masks))
+        kept = self._glove_only(found, big, h * w) > 0
+        rows, cols = (y1 - y0) // r, (x1 - x0) // r
+        kx, ky, kw, kh = cv2.boundingRect(kept.view(np.uint8))
+        if not kw:
+            return (np.zeros((1, 1, 3), np.uint8), np.zeros((1, 1), np.uint8), 0, 0)
+        # the kept cells' box at r, padded so that the filters and the border relabelling
+        # inside it read the pixels they would read in the whole region of interest
+        pad = (f + self.bilateral_diameter // 2 + self.median_size // 2
+               + max(self.border_distances, default=0) + 1)
+        bx0, bx1 = max(kx * f - pad, 0), min((kx + kw) * f + pad, cols)
+        by0, by1 = max(ky * f - pad, 0), min((ky + kh) * f + pad, rows)
+        roi = self._filter(_reduced(image, (x0 + bx0 * r, x0 + bx1 * r, y0 + by0 * r,
+                                            y0 + by1 * r), r))
+        labels = self._median(self._label_roi(roi, (x0 + bx0 * r, y0 + by0 * r), r, (h, w),
+                                              masks))
+        box = (bx0, bx1, by0, by1)
+        labels = keep_reaching_components(labels, _cells(kept, f, box),
+                                          _cells((found > 0) & ~kept, f, box))
+        return roi, self._clean_roi(labels, r, h * w, chalf, region=False), bx0, by0
 
     def _coarse_labels(self, small: np.ndarray, table: np.ndarray | None = None,
                        reduction: float = 1.0, image_pixels: int = 0,
@@ -700,12 +835,10 @@ class GloveSegmenter:
         min_px = max(int(np.ceil(self.min_blob_pixels / (r * r))), 1)
         colors, cents, areas = color_components(labels[wy0:wy1, wx0:wx1], min_px,
                                                 self.calibration.num_colors)
-        blobs: list[Blob] = []
-        for c, (cx, cy), area in zip(colors, cents, areas, strict=True):
-            fx = x0 + r * (cx + wx0) + 0.5 * (r - 1)
-            fy = y0 + r * (cy + wy0) + 0.5 * (r - 1)
-            blobs.append(Blob(int(c), float(fx), float(fy), int(area) * r * r))
-        return blobs
+        fx = x0 + r * (cents[:, 0] + wx0) + 0.5 * (r - 1)
+        fy = y0 + r * (cents[:, 1] + wy0) + 0.5 * (r - 1)
+        return [Blob(c, x, y, area * r * r) for c, x, y, area in zip(
+            colors.tolist(), fx.tolist(), fy.tolist(), areas.tolist(), strict=True)]
 
     def _filter(self, image: np.ndarray) -> np.ndarray:
         if self.bilateral_diameter > 0 and min(image.shape[:2]) > self.bilateral_diameter:
@@ -787,42 +920,33 @@ class GloveSegmenter:
         r = max(1, int(np.floor(2.0 * chalf / self.max_roi_cells)))
         x1 = x0 + max((x1 - x0) // r, 1) * r
         y1 = y0 + max((y1 - y0) // r, 1) * r
-        roi = image[y0:y1, x0:x1]
         if prediction is not None and not covers(prediction, (x0, y0), (x1, y1)):
             prediction = None    # the glove was found away from the predicted hand
-        if r > 1:
-            roi = cv2.resize(roi, ((x1 - x0) // r, (y1 - y0) // r),
-                             interpolation=cv2.INTER_AREA)
-        roi = self._filter(roi)
-        t = tick('filter', t)
-        labels = self._classify(roi, table)
         start = None
-        if prediction is not None:   # glove colour outside the predicted window is not the hand
-            px0, px1, py0, py1 = prediction_bounds(prediction, self.prediction_margin,
-                                                   (x0, y0), r, labels.shape)
+        if prediction is not None:   # the crop's mean shift starts at the predicted window
             (pcx, pcy), start_half = prediction.center_xy, prediction.half_size / r
             start = (((pcx - x0 - 0.5 * (r - 1)) / r, (pcy - y0 - 0.5 * (r - 1)) / r),
                      start_half)
-            inside = labels[py0:py1, px0:px1].copy()
-            labels[...] = 0
-            labels[py0:py1, px0:px1] = inside
-        if scene is not None:
-            labels[scene.take(lut_index(roi, SCENE_COLOUR_BITS))] = 0
-        if static is not None:
-            labels[_coarse_cells(static, (x0, y0), r, labels.shape, (h, w))] = 0
-        t = tick('classify', t)
-        labels = self._glove_only(self._median(labels), r, h * w)
-        if self.min_component_colors > 1:
-            labels = keep_multicolor_components(labels, self.min_component_colors,
-                                                min_pixels=max(self.min_blob_pixels // (r * r), 2),
-                                                reattach_radius=self.reattach_radius,
-                                                reattach_max_share=self.reattach_max_share)
-        # single-colour surfaces larger than a patch at the (coarse) hand window's scale
-        labels = shed_oversized_patches(labels, self.max_patch_window_share,
-                                        ((0.0, 0.0), chalf / r))
+        roi_box = (x0, x1, y0, y1)
+        masks = (table, scene, static, prediction)
+        box = None
+        if self.cleanup_factor > 1:
+            box = self._two_resolution(image, roi_box, r, masks, chalf)
+        if box is None:
+            roi = self._filter(_reduced(image, roi_box, r))
+            t = tick('filter', t)
+            labels = self._label_roi(roi, (x0, y0), r, (h, w), masks)
+            t = tick('classify', t)
+            labels = self._clean_roi(self._median(labels), r, h * w, chalf)
+            box = (roi, labels, 0, 0)
+        roi, labels, bx0, by0 = box
         t = tick('cleanup', t)
         min_px = max(int(self.min_glove_pixels / (r * r)), 1)
         labels = relabel_borders(roi, labels, self.border_passes, self.border_distances)
+        if labels.shape != ((y1 - y0) // r, (x1 - x0) // r):   # the glove's box: into the ROI
+            whole = np.zeros(((y1 - y0) // r, (x1 - x0) // r), np.uint8)
+            whole[by0:by0 + labels.shape[0], bx0:bx0 + labels.shape[1]] = labels
+            labels = whole
         # glove colour out of a patch's reach of every junction: a surface touching the glove
         labels = keep_near_junctions(labels, self.calibration.num_colors, self.junction_reach,
                                      JUNCTION_MIN_PIXELS)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from segmentation_samples import printed_glove_calibration
 
 from colorglove_ros.core.segmentation import segmenter as segmenter_module
@@ -26,3 +27,66 @@ def test_patch_junctions_are_only_searched_when_oversized_patches_are_shed(monke
     assert off.hand_found and not calls
     on = segmenter_module.GloveSegmenter(calibration, max_patch_window_share=0.15).process(image)
     assert on.hand_found and calls
+
+
+@pytest.fixture(scope='module')
+def printed_calibration():
+    """The printed glove's calibration, fitted once for this module's tests."""
+    return printed_glove_calibration()
+
+
+def _printed_frame(seed: int) -> np.ndarray:
+    """A clean synthetic frame of the printed glove, 0.6 m from the camera."""
+    camera = synth.default_camera()
+    rng = np.random.default_rng(seed)
+    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
+    q[0:3] = [0.0, 0.0, 0.6]
+    return synth.render_frame(q, camera, rng, FrameConditions()).image_rgb
+
+
+@pytest.mark.parametrize('seed', [4, 8])
+def test_two_resolution_cleans_the_region_on_a_coarser_grid_and_keeps_the_observation(
+        monkeypatch, printed_calibration, seed: int) -> None:
+    """``cleanup_factor`` 2: the region of interest's clutter filter runs on a grid half as
+    fine, and the glove's labels, crop, tiny image and blobs come from full resolution:
+    on a clean frame the observation is the one-resolution one."""
+    shapes: list[tuple[int, int]] = []
+    real = segmenter_module.glove_region_mask
+    monkeypatch.setattr(segmenter_module, 'glove_region_mask',
+                        lambda labels, *a, **k: shapes.append(labels.shape) or real(
+                            labels, *a, **k))
+    image = _printed_frame(seed)
+    calibration = printed_calibration
+    one = segmenter_module.GloveSegmenter(calibration).process(image)
+    (_, roi_shape), shapes[:] = shapes, []
+    two = segmenter_module.GloveSegmenter(calibration, cleanup_factor=2).process(image)
+    (_, cleaned_shape) = shapes
+    assert cleaned_shape == (roi_shape[0] // 2, roi_shape[1] // 2)
+    assert one.hand_found and two.hand_found
+    assert one.crop == two.crop
+    np.testing.assert_array_equal(one.tiny_labels, two.tiny_labels)
+    assert one.blobs == two.blobs
+    assert one.glove_pixel_count == two.glove_pixel_count
+
+
+def test_the_finer_grid_keeps_whole_components_that_reach_the_kept_glove() -> None:
+    """A glove component of the finer grid is kept whole when one of its pixels lies in the
+    kept glove (a fingertip cut off on the coarser grid stays with its finger), a component
+    reaching none is dropped, and so are the removed pixels (clutter touching the glove)."""
+    labels = np.zeros((12, 16), np.uint8)
+    labels[2:6, 2:8] = 1          # the hand's piece, kept on the coarser grid
+    labels[6:10, 7:9] = 2         # a fingertip touching it: not kept on the coarser grid
+    labels[2:4, 12:15] = 3        # clutter reaching no kept pixel
+    labels[6, 2:4] = 4            # clutter touching the hand, removed on the coarser grid
+    reached = np.zeros(labels.shape, bool)
+    reached[3:5, 3:6] = True
+    removed = labels == 4
+    out = segmenter_module.keep_reaching_components(labels, reached, removed)
+    expected = labels.copy()
+    expected[labels >= 3] = 0
+    np.testing.assert_array_equal(out, expected)
+
+
+def test_cleanup_factor_is_checked(blob_calibration) -> None:
+    with pytest.raises(segmenter_module.SegmentationConfigError, match='cleanup_factor'):
+        segmenter_module.GloveSegmenter(blob_calibration, cleanup_factor=0)
