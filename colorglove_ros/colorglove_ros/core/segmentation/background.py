@@ -49,6 +49,7 @@ class StaticBackground:
         self._colour: np.ndarray | None = None    # (h, w, 3) float32 running colour
         self._matched: np.ndarray | None = None   # (h, w) int32 frames matched in a row
         self._same: np.ndarray | None = None      # this frame's match, from :meth:`match`
+        self._frame: np.ndarray | None = None     # ... and the frame as float32
         # remember: each pixel's colour when it was last learnt background (NaN: never), and
         # the last frame's glove mask, where a glove over a surface of its colour would match
         self._learnt: np.ndarray | None = None
@@ -61,32 +62,35 @@ class StaticBackground:
 
     def reset(self) -> None:
         """Forget everything learnt (a new stream, the camera moved)."""
-        self._colour = self._matched = self._same = self._learnt = self._glove = None
+        self._colour = self._matched = self._same = self._frame = None
+        self._learnt = self._glove = None
 
-    def _max_difference(self, small: np.ndarray, colour: np.ndarray) -> np.ndarray:
-        """(h, w) float32: the largest channel difference of ``small`` from ``colour``
-        (NaN where ``colour`` is)."""
-        diff = cv2.absdiff(small.astype(np.float32), colour)
+    @staticmethod
+    def _max_difference(frame: np.ndarray, colour: np.ndarray) -> np.ndarray:
+        """(h, w) float32: the largest channel difference of ``frame`` (float32 RGB) from
+        ``colour`` (NaN where ``colour`` is)."""
+        diff = cv2.absdiff(frame, colour)
         return np.maximum(np.maximum(diff[..., 0], diff[..., 1]), diff[..., 2])
 
     def match(self, small: np.ndarray) -> np.ndarray | None:
         """(h, w) bool: the pixels of coarse frame ``small`` (uint8 RGB) that are learnt
         background and still show it; None when nothing is learnt yet (or disabled). Call
         :meth:`update` with the same frame afterwards."""
-        self._same = None
+        self._same = self._frame = None
         if not self.enabled:
             return None
         if self._colour is None or self._colour.shape != small.shape:
             self.reset()
             return None
-        same = self._max_difference(small, self._colour) <= self.tolerance
+        frame = small.astype(np.float32)
+        same = self._max_difference(frame, self._colour) <= self.tolerance
         if 1.0 - float(same.mean()) > self.max_changed_share:
             self.reset()
             return None
-        self._same = same
+        self._same, self._frame = same, frame
         learnt = same & (self._matched >= self.frames_needed)
         if self._learnt is not None:    # uncovered as it was when learnt (NaN: never learnt)
-            uncovered = self._max_difference(small, self._learnt) <= self.tolerance
+            uncovered = self._max_difference(frame, self._learnt) <= self.tolerance
             if self._glove is not None:   # ... but not where the glove was a frame ago
                 uncovered &= ~self._glove
             learnt |= uncovered
@@ -99,12 +103,12 @@ class StaticBackground:
         colour."""
         if not self.enabled:
             return
-        frame = small.astype(np.float32)
         if self._colour is None or self._same is None:
-            self._colour = frame
+            self._colour = small.astype(np.float32)
             self._matched = np.zeros(small.shape[:2], np.int32)
-            self._same = None
+            self._same = self._frame = None
             return
+        frame = self._frame       # the float copy match() made of the same frame
         same = self._same
         counting = same if glove is None else same & ~glove
         self._matched += counting
@@ -115,7 +119,7 @@ class StaticBackground:
             self._glove = None if glove is None else glove.copy()
             if self._learnt is None:
                 self._learnt = np.full(frame.shape, np.nan, np.float32)
-            np.copyto(self._learnt, self._colour,
-                      where=(self._matched >= self.frames_needed)[..., None])
-        np.copyto(self._colour, frame, where=~same[..., None])
-        self._same = None
+            cv2.copyTo(self._colour, (self._matched >= self.frames_needed).view(np.uint8),
+                       self._learnt)
+        cv2.copyTo(frame, (~same).view(np.uint8), self._colour)    # (in place)
+        self._same = self._frame = None
