@@ -4,7 +4,8 @@ objects and plain data that returns the stage's result or a :class:`NoHand` with
 Every gate of the per-frame recipe is here once: a bad image, an implausible observation, a
 failed lookup, no database image near enough (``max_image_distance``), a prior the tracker
 cannot use (or at an implausible depth), a fit with no matched constraint, a non-finite pose,
-a fitted hand at an implausible depth. The ROS nodes (segmentation, lookup, ik) call these
+a fit on too little evidence (weak evidence, a poor fit, missing glove, glove outside the
+hand), a fitted hand at an implausible depth. The ROS nodes (segmentation, lookup, ik) call these
 stage functions between their message conversions; the evaluation
 (``core.evaluation.sequences``) and a single-process runner go through
 :class:`FramePipeline`. No rclpy import.
@@ -48,7 +49,8 @@ __all__ = [
     'NoHand', 'Tracked',
     'TemporalPrior', 'Observer', 'FrameObservations', 'FrameLookup', 'FramePipeline',
     'segment_frame', 'bad_image', 'observe_image', 'image_observer', 'look_up', 'track',
-    'bad_prior', 'hand_keypoints_at_plausible_depth', 'weak_evidence', 'missing_glove',
+    'bad_prior', 'hand_keypoints_at_plausible_depth', 'weak_evidence', 'poor_fit',
+    'missing_glove',
     'tracked_crop', 'glove_outside',
 ]
 
@@ -96,6 +98,7 @@ class StageLimits:
     refuse_cut_hands: bool = True
     close_match_distance: float = 2.0
     min_explained_blob_share: float = 0.5
+    max_weak_match_residual_px: float = 6.0
     max_missing_glove_share: float = 0.2
     min_shown_patch_px: float = 30.0
     near_patch_sizes: float = 1.5
@@ -110,7 +113,8 @@ NODE_LIMITS = StageLimits()
 # measures the tracker itself, as its figures always have, not the nodes' refusals.
 UNGATED = StageLimits(max_image_distance=math.inf, require_constraint=False, check_depth=False,
                       refuse_cut_hands=False, min_explained_blob_share=0.0,
-                      max_missing_glove_share=1.0, max_outside_blob_share=1.0)
+                      max_weak_match_residual_px=math.inf, max_missing_glove_share=1.0,
+                      max_outside_blob_share=1.0)
 
 
 @dataclass(frozen=True)
@@ -305,6 +309,29 @@ def weak_evidence(prior: PosePrior, result: IKResult, limits: StageLimits) -> st
             f'{prior.image_distance:.2f} tiny px away (more than {limits.close_match_distance:g})')
 
 
+def poor_fit(tracker: Any, prior: PosePrior, result: IKResult, limits: StageLimits) -> str:
+    """Why the fit does not fit its own blobs well enough to stand without a close lookup
+    ('' when it does, or the gate is off): the lookup was not a close match and the mean
+    reprojection residual is more than ``limits.max_weak_match_residual_px`` (scaled to the
+    primary camera's pixels, ``core.tracking.projection.pixel_scale``; :class:`StageLimits`).
+    A tracker without a ``config`` (a stand-in) is taken at the reference focal length."""
+    from colorglove_ros.core.tracking.projection import pixel_scale
+
+    if (limits.max_weak_match_residual_px >= math.inf
+            or prior.image_distance <= limits.close_match_distance):
+        return ''
+    config = getattr(tracker, 'config', None)
+    scale = 1.0 if config is None else pixel_scale(tracker.cameras[0],
+                                                   config.reference_focal_px)
+    residual = float(result.reprojection_error_px) / scale
+    if not residual > limits.max_weak_match_residual_px:
+        return ''
+    return (f'poor fit: the fitted hand misses its matched blobs by {residual:.1f} px on '
+            f'average (more than max_weak_match_residual_px '
+            f'{limits.max_weak_match_residual_px:g}) and the nearest database image is '
+            f'{prior.image_distance:.2f} tiny px away (more than {limits.close_match_distance:g})')
+
+
 def missing_glove(tracker: Any, q: np.ndarray, observation: CameraObservation,
                   limits: StageLimits) -> str:
     """Why pose ``q`` shows glove the primary camera's ``observation`` lacks ('' when it
@@ -379,7 +406,8 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
     :class:`NoHand` when the prior is unusable or at an implausible depth ('bad candidates:
     ...'), the tracker found nothing (the upstream reason, or 'lost'), or the fit is refused:
     no constraint matched an observed blob (``limits.require_constraint``), a non-finite pose,
-    weak evidence (:func:`weak_evidence`), glove the image lacks (:func:`missing_glove`),
+    weak evidence (:func:`weak_evidence`), a poor fit after a lookup that was not a close
+    match (:func:`poor_fit`), glove the image lacks (:func:`missing_glove`),
     glove the fitted hand leaves outside (:func:`glove_outside`) or
     a hand at an implausible depth (``limits.check_depth``); with ``limits.refuse_cut_hands``
     a hand cut by the primary image's border is not tracked (:data:`CUT_BY_BORDER`). A
@@ -412,6 +440,8 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
         reason = 'non-finite pose'
     elif weak := weak_evidence(prior, result, limits):
         reason = weak
+    elif poor := poor_fit(tracker, prior, result, limits):
+        reason = poor
     elif missing := missing_glove(tracker, result.q, observations[0], limits):
         reason = missing
     elif outside := glove_outside(tracker, result.q, observations[0], limits):

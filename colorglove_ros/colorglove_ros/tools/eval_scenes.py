@@ -100,6 +100,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--max-missing-glove-share', type=float,
                         default=NODE_LIMITS.max_missing_glove_share,
                         help='the missing-glove gate (ik_node parameter of that name; 1: off)')
+    parser.add_argument('--max-weak-match-residual-px', type=float,
+                        default=NODE_LIMITS.max_weak_match_residual_px,
+                        help='the poor-fit gate (ik_node parameter of that name; inf: off)')
     parser.add_argument('--prediction-max-age-s', type=float,
                         default=DEFAULT_PREDICTION_MAX_AGE_S,
                         help='crop predictions from a tracked frame serve the next frames this '
@@ -131,6 +134,7 @@ def main(argv: list[str] | None = None) -> int:
         return tool_error('colorglove_eval_scenes', exc)
     camera = calibration.primary
     limits = replace(NODE_LIMITS, max_missing_glove_share=args.max_missing_glove_share,
+                     max_weak_match_residual_px=args.max_weak_match_residual_px,
                      max_outside_blob_share=args.max_outside_blob_share,
                      outside_reach=args.outside_reach)
 
@@ -189,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
                 'color_config': args.color_config, 'ik_config': args.ik_config,
                 'calibration': args.calibration, 'fps': args.fps,
                 'max_missing_glove_share': args.max_missing_glove_share,
+                'max_weak_match_residual_px': args.max_weak_match_residual_px,
                 'prediction_max_age_s': args.prediction_max_age_s,
                 'max_outside_blob_share': args.max_outside_blob_share,
                 'outside_reach': args.outside_reach,

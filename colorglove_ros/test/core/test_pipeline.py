@@ -211,6 +211,42 @@ def test_track_refuses_a_fit_on_weak_evidence(hand, image_distance, share, refus
         assert isinstance(out, Tracked)
 
 
+@pytest.mark.parametrize(('image_distance', 'residual_px', 'refused'), [
+    (3.0, 8.0, True),             # far match whose fit misses its own blobs: a pulled crop
+    (math.nan, 8.0, True),        # distance unknown: not a close match
+    (3.0, 4.0, False),            # far match, but the fitted hand sits on its blobs
+    (1.0, 8.0, False),            # close match: the lookup's own evidence suffices
+    (3.0, math.nan, False),       # no residual measured (the constraint gate's business)
+])
+def test_track_refuses_a_poor_fit_after_a_far_lookup(hand, image_distance, residual_px,
+                                                     refused) -> None:
+    result = IKResult(True, 0.0, q=_pose(), num_constraints=6, explained_blob_share=0.9,
+                      reprojection_error_px=residual_px)
+    fake = _FakeTracker(hand[0], result)
+    out = track(fake, _prior(image_distance=image_distance), SEEN, 0.0)
+    if refused:
+        assert isinstance(out, NoHand) and out.warn and fake.resets == 1
+        assert out.reason.startswith('poor fit: the fitted hand misses its matched blobs by '
+                                     '8.0 px')
+        off = replace(NODE_LIMITS, max_weak_match_residual_px=math.inf)
+        assert isinstance(track(fake, _prior(image_distance=image_distance), SEEN, 0.0, off),
+                          Tracked)
+    else:
+        assert isinstance(out, Tracked)
+
+
+def test_the_poor_fit_residual_is_in_reference_focal_pixels(tracker) -> None:
+    """A camera with twice the reference focal length sees a residual twice as long in its own
+    pixels: the same fit passes there."""
+    result = IKResult(True, 0.0, q=_pose(), num_constraints=6, explained_blob_share=0.9,
+                      reprojection_error_px=8.0)
+    fake = _FakeTracker(tracker.model, result)
+    fake.config = replace(tracker.config, reference_focal_px=CAMERA.fx)
+    assert isinstance(track(fake, _prior(image_distance=3.0), SEEN, 0.0), NoHand)
+    fake.config = replace(tracker.config, reference_focal_px=CAMERA.fx / 2.0)
+    assert isinstance(track(fake, _prior(image_distance=3.0), SEEN, 0.0), Tracked)
+
+
 class _GloveTracker(_FakeTracker):
     """A stand-in tracker that also predicts the glove at a pose (a real tracker's patches)."""
 

@@ -107,6 +107,10 @@ LIVE_EVIDENCE_LIMITS = {
     'min_explained_blob_share': (
         'share of the observed glove blobs the fitted hand must explain after a lookup that '
         'was not a close match, else no pose ("weak evidence"); 0 turns this off', (0.0, 1.0)),
+    'max_weak_match_residual_px': (
+        'mean reprojection residual (pixels at the IK\'s reference focal length) a fit may '
+        'keep after a lookup that was not a close match, else no pose ("poor fit": depth from '
+        'a crop that clutter pulled); 1000 lets every fit through', (0.0, 1000.0)),
     'max_missing_glove_share': (
         'share of the glove the fitted hand shows that may lack a blob of its colour near it, '
         'else no pose ("missing glove": colours the segmentation missed); 1 turns this off',

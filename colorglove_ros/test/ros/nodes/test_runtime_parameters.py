@@ -74,6 +74,8 @@ def test_ik_evidence_gate_is_settable_at_run_time(small_database_path: Path) -> 
         assert _set(node, max_missing_glove_share=0.3).successful
         assert node.limits.max_missing_glove_share == 0.3
         assert not _set(node, max_missing_glove_share=-0.1).successful
+        assert _set(node, max_weak_match_residual_px=4.5).successful
+        assert node.limits.max_weak_match_residual_px == 4.5
 
 
 def test_ik_gate_given_at_start_up_is_checked(small_database_path: Path) -> None:
