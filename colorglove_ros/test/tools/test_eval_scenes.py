@@ -67,13 +67,14 @@ def test_eval_scenes_prints_and_writes_the_ladder(node_assets, tmp_path, capsys)
     code = eval_scenes.main(['--conditions', 'clean', 'borders', '--sequences', '1',
                              '--frames', '24', '--database', str(node_assets.database),
                              '--color-config', str(node_assets.color_config),
-                             '--json', str(out)])
+                             '--max-weak-match-residual-px', '7.5', '--json', str(out)])
     assert code == 0
     text = capsys.readouterr().out
     assert 'Real-scene ladder' in text and 'Targets' in text
     figures = json.loads(out.read_text())
     rows = {r['condition']: r for r in figures['rows']}
     assert set(rows) == {'clean', 'borders'}
+    assert figures['settings']['max_weak_match_residual_px'] == 7.5
     for row in rows.values():
         assert row['frames'] == 24 and row['no_hand_frames'] >= 4
         assert row['no_hand_with_pose_count'] == 0
