@@ -469,10 +469,11 @@ class GloveSegmenter:
     it.
 
     The static background's learning from a frame (its glove-like mask and update) is
-    needed only by the next frame: with ``learn_in_thread`` 1 (0, the default, is off) it
-    runs on one worker thread shared by the process's segmenters while the region of
-    interest is segmented (OpenCV and NumPy release the GIL), and :meth:`process` waits for
-    it before returning, so the observations and what is learnt are the same.
+    needed only by the next frame: with ``learn_in_thread`` 1 (0, inline, is the class's
+    default; ``config/color_calibration.yaml`` sets 1) it runs on one worker thread shared
+    by the process's segmenters while the region of interest is segmented (OpenCV and NumPy
+    release the GIL), and :meth:`process` waits for it before returning, so the
+    observations and what is learnt are the same.
 
     Every setting is checked (ranges, odd median kernel, finite numbers) by
     ``core.validation.validate_segmenter_settings`` however the segmenter is built; a bad one
