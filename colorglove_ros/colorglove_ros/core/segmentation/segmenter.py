@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 import functools
+import threading
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import cv2
 import numpy as np
@@ -354,6 +356,19 @@ def _cells(mask: np.ndarray, factor: int, box: tuple[int, int, int, int]) -> np.
     return mask[rows][:, cols]
 
 
+_LEARNER: list[ThreadPoolExecutor] = []
+_LEARNER_LOCK = threading.Lock()
+
+
+def _learner() -> ThreadPoolExecutor:
+    """The one worker thread on which segmenters with ``learn_in_thread`` learn their
+    static background (started on first use, shared by every segmenter of the process)."""
+    with _LEARNER_LOCK:
+        if not _LEARNER:
+            _LEARNER.append(ThreadPoolExecutor(1, thread_name_prefix='static-background'))
+        return _LEARNER[0]
+
+
 def _check_image(image: object) -> np.ndarray:
     if not isinstance(image, np.ndarray):
         raise SegmentationInputError(f'expected a numpy array, got {type(image).__name__}')
@@ -453,6 +468,13 @@ class GloveSegmenter:
     ``resaturated_lut``), with the light colour estimated against the references seen through
     it.
 
+    The static background's learning from a frame (its glove-like mask and update) is
+    needed only by the next frame: with ``learn_in_thread`` 1 (0, inline, is the class's
+    default; ``config/color_calibration.yaml`` sets 1) it runs on one worker thread shared
+    by the process's segmenters while the region of interest is segmented (OpenCV and NumPy
+    release the GIL), and :meth:`process` waits for it before returning, so the
+    observations and what is learnt are the same.
+
     Every setting is checked (ranges, odd median kernel, finite numbers) by
     ``core.validation.validate_segmenter_settings`` however the segmenter is built; a bad one
     raises :class:`SegmentationConfigError` naming ``source`` (the settings' file, if any)
@@ -478,6 +500,7 @@ class GloveSegmenter:
                  follow_margin: float = 0.0, search_every: int = 1,
                  prediction_margin: float = 0.0, prediction_max_ratio: float = 0.0,
                  saturation_rate: float = 0.0, cleanup_factor: int = 1,
+                 learn_in_thread: int = 0,
                  source: str = 'GloveSegmenter') -> None:
         # every keyword argument but ``source`` is a setting named in SEGMENTER_RULES: checked
         # and converted (int, float, tuple of ints) in one place, kept as the attribute of
@@ -504,6 +527,10 @@ class GloveSegmenter:
         self._since_search = 0
         self._window: tuple[tuple[tuple[float, float], float], tuple[int, int]] | None = None
         self._glove_like_mask: np.ndarray | None = None   # the last search's, coarse
+        # learn_in_thread: the static background's learning from this frame, running on
+        # the shared worker while the region of interest is segmented (done before
+        # :meth:`process` returns)
+        self._learning: Future[None] | None = None
 
     def lose_track(self) -> None:
         """Forget the followed hand: the next frame is searched whole (for frames that do not
@@ -813,20 +840,38 @@ class GloveSegmenter:
             self._saturation.update(self._window_saturation(small, region, labels, found))
         scene = self._scene_colours(small, table, region, labels)
         self._found = None if found is None else (found, small.shape[:2])
-        if learn and self.background.enabled:   # (the glove-like mask costs a few loops)
-            rx0, rx1, ry0, ry1 = region
-            glove = np.zeros(small.shape[:2], bool)
-            glove[ry0:ry1, rx0:rx1] = self._glove_like(
-                labels, None if found is None else ((found[0][0] - rx0, found[0][1] - ry0),
-                                                    found[1]))
-            self.background.update(small, glove)
-            self._glove_like_mask = glove
+        if learn and self.background.enabled:
+            if self.learn_in_thread:
+                self._learning = _learner().submit(self._learn, small, region, labels, found)
+            else:
+                self._learn(small, region, labels, found)
         if found is None:
             return None, table, scene, static
         (cx, cy), half = found
         # small pixel u covers full pixels [u * s, (u + 1) * s): centre (u + 0.5) s - 0.5
         return ((((cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5), half * max(sx, sy)), table,
                 scene, static)
+
+    def _learn(self, small: np.ndarray, region: tuple[int, int, int, int],
+               labels: np.ndarray, found: tuple[tuple[float, float], float] | None) -> None:
+        """The static background learns from coarse frame ``small`` (given to its match)
+        but where the coarse ``labels`` of the searched ``region`` are glove-like around the
+        coarse window ``found`` (None: none found); that mask is kept for the frames that
+        follow without a search."""
+        rx0, rx1, ry0, ry1 = region
+        glove = np.zeros(small.shape[:2], bool)
+        glove[ry0:ry1, rx0:rx1] = self._glove_like(
+            labels, None if found is None else ((found[0][0] - rx0, found[0][1] - ry0),
+                                                found[1]))
+        self.background.update(small, glove)
+        self._glove_like_mask = glove
+
+    def _learnt(self) -> None:
+        """Wait for the static background's learning on the worker (``learn_in_thread``),
+        if any; its error, if it failed, is raised here."""
+        learning, self._learning = self._learning, None
+        if learning is not None:
+            learning.result()
 
     def _blobs(self, labels: np.ndarray, r: int, x0: int, y0: int,
                window: tuple[int, int, int, int]) -> list[Blob]:
@@ -873,14 +918,18 @@ class GloveSegmenter:
                 or prediction.image_size != (image.shape[1], image.shape[0])):
             prediction = None
         t0 = time.perf_counter()
-        followed = self._without_search(image)
-        if followed is not None:
-            obs = self._segment(image, keep_labels, t0, prediction, followed)
-            if obs is not None:
-                return obs
-            # not found whole inside the followed region of interest: search after all
-        obs = self._segment(image, keep_labels, t0, prediction)
+        try:
+            followed = self._without_search(image)
+            if followed is not None:
+                obs = self._segment(image, keep_labels, t0, prediction, followed)
+                if obs is not None:
+                    return obs
+                # not found whole inside the followed region of interest: search after all
+            obs = self._segment(image, keep_labels, t0, prediction)
+        finally:
+            self._learnt()
         assert obs is not None   # (only a frame without the search is given up)
+        obs.timings_ms['total'] = (time.perf_counter() - t0) * 1e3   # (the learning too)
         return obs
 
     def _segment(self, image: np.ndarray, keep_labels: bool, t0: float,

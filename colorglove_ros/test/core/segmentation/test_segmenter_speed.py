@@ -1,6 +1,8 @@
 """The segmenter skips work whose result is not used (issue 19)."""
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 from segmentation_samples import printed_glove_calibration
@@ -90,3 +92,57 @@ def test_the_finer_grid_keeps_whole_components_that_reach_the_kept_glove() -> No
 def test_cleanup_factor_is_checked(blob_calibration) -> None:
     with pytest.raises(segmenter_module.SegmentationConfigError, match='cleanup_factor'):
         segmenter_module.GloveSegmenter(blob_calibration, cleanup_factor=0)
+
+
+def test_learning_in_a_thread_gives_the_same_observations_and_learns_on_the_worker(
+        monkeypatch, printed_calibration) -> None:
+    """``learn_in_thread`` 1: the static background learns from each frame on the worker
+    thread while the region of interest is segmented, and is done when ``process``
+    returns: frame after frame the observations, the learnt background and the glove-like
+    mask are those of learning in the caller's thread."""
+    threads: list[str] = []
+    real = segmenter_module.StaticBackground.update
+
+    def update(self, *args, **kwargs) -> None:
+        threads.append(threading.current_thread().name)
+        real(self, *args, **kwargs)
+
+    monkeypatch.setattr(segmenter_module.StaticBackground, 'update', update)
+    image = _printed_frame(4)
+    settings = {'background_frames': 2, 'background_memory': 1}
+    inline = segmenter_module.GloveSegmenter(printed_calibration, **settings)
+    worker = segmenter_module.GloveSegmenter(printed_calibration, learn_in_thread=1, **settings)
+    main = threading.current_thread().name
+    for _ in range(4):
+        one, threads[:] = inline.process(image), []
+        two = worker.process(image)
+        assert threads and main not in threads and worker._learning is None
+        assert one.status == two.status and one.crop == two.crop and one.blobs == two.blobs
+        np.testing.assert_array_equal(one.tiny_labels, two.tiny_labels)
+        np.testing.assert_array_equal(inline._glove_like_mask, worker._glove_like_mask)
+        np.testing.assert_array_equal(inline.background._matched, worker.background._matched)
+    assert one.hand_found and inline.background.match(
+        inline._small(image)[0]) is not None    # (something was learnt and is used)
+
+
+def test_a_failed_learning_in_the_thread_is_raised_by_process(monkeypatch,
+                                                              printed_calibration) -> None:
+    """An error of the worker's learning is not lost: ``process`` raises it."""
+    def update(self, *args, **kwargs) -> None:
+        raise RuntimeError('learning failed')
+
+    monkeypatch.setattr(segmenter_module.StaticBackground, 'update', update)
+    seg = segmenter_module.GloveSegmenter(printed_calibration, background_frames=2,
+                                          learn_in_thread=1)
+    with pytest.raises(RuntimeError, match='learning failed'):
+        seg.process(_printed_frame(4))
+    assert seg._learning is None
+
+
+def test_the_shipped_configuration_learns_in_the_thread() -> None:
+    """``config/color_calibration.yaml`` turns ``learn_in_thread`` on (the same
+    observations as learning inline, the test above)."""
+    from colorglove_ros.core.segmentation.color_model import read_calibration_config
+
+    assert read_calibration_config('config/color_calibration.yaml')['segmenter'][
+        'learn_in_thread'] == 1
