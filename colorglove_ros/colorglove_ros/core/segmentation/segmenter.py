@@ -920,12 +920,10 @@ class GloveSegmenter:
         t0 = time.perf_counter()
         try:
             followed = self._without_search(image)
-            if followed is not None:
-                obs = self._segment(image, keep_labels, t0, prediction, followed)
-                if obs is not None:
-                    return obs
-                # not found whole inside the followed region of interest: search after all
-            obs = self._segment(image, keep_labels, t0, prediction)
+            obs = (None if followed is None
+                   else self._segment(image, keep_labels, t0, prediction, followed))
+            if obs is None:   # not found whole inside the followed region: search after all
+                obs = self._segment(image, keep_labels, t0, prediction)
         finally:
             self._learnt()
         assert obs is not None   # (only a frame without the search is given up)
