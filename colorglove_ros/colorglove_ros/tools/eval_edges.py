@@ -14,7 +14,9 @@ Silhouettes (``--background empty``, default): each camera's background model is
 one frame of its empty scene (``BareHandSequence.render_empty_views``: what a user captures
 once with the hand out of view); ``--background none`` tracks from edges alone.
 ``--finger-refit`` turns on the tracker's ``finger_refit`` (a finger that leaves part of the
-hand's silhouette unexplained is re-fitted from its last explained angles; off by default).
+hand's silhouette unexplained is re-fitted from its last explained angles; off by default);
+``--silhouette-palm`` its ``silhouette_palm`` (the unexplained foreground next to the palm
+pulls the whole hand; off by default).
 
 Seeds: the tracker was tuned on seeds 1-8 (``TUNING_SEEDS``) and checked on seeds 21-24,
 31-36, 41-46, 51-56 and 61-66 (``CHECK_SEEDS``, a fresh set each pass); the reported figures
@@ -153,6 +155,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--finger-refit', action='store_true',
                         help='the tracker\'s finger_refit: re-fit a finger that leaves part of '
                         'the hand\'s silhouette unexplained (needs --background empty)')
+    parser.add_argument('--silhouette-palm', action='store_true',
+                        help='the tracker\'s silhouette_palm: the unexplained foreground next '
+                        'to the palm pulls the whole hand (needs --background empty)')
     args = parser.parse_args(argv)
     return run_tool('colorglove_eval_edges', lambda: _run(args))
 
@@ -175,7 +180,7 @@ def _run(args: Any) -> int:
             for n in args.cameras:
                 if n not in trackers:
                     trackers[n] = EdgeTracker(seq.synth.model, cams_all[:n], EdgeTrackerConfig(
-                        finger_refit=args.finger_refit))
+                        finger_refit=args.finger_refit, silhouette_palm=args.silhouette_palm))
                 trackers[n].set_backgrounds([None] * n if empty is None else
                                             [BackgroundModel.from_frames([e]) for e in empty[:n]])
                 fig = evaluate_run(trackers[n], [v[:n] for v in views], seq.poses, args.init)
@@ -219,6 +224,7 @@ def _run(args: Any) -> int:
                                             'cameras': args.cameras, 'init': args.init,
                                             'background': args.background,
                                             'finger_refit': args.finger_refit,
+                                            'silhouette_palm': args.silhouette_palm,
                                             'python_loop_s': loop_s, 'load_average': load},
                                'rows': rows, 'summary': summary, 'targets': targets})
     return 0

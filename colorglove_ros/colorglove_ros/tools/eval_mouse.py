@@ -23,7 +23,8 @@ after a loss, again from the true pose of the frame it was lost on (counted as
 ``--background empty`` the tracker also has the silhouettes against one frame of the empty
 table scene (``BareHandSequence.render_empty_views``); ``none`` (default): edges only (the
 silhouettes did not raise the click figures on tuning seeds 5-7, docs/RESULTS.md);
-``--finger-refit`` turns on the tracker's ``finger_refit`` (off by default).
+``--finger-refit`` turns on the tracker's ``finger_refit``, ``--silhouette-palm`` its
+``silhouette_palm`` (both off by default).
 
 ``--source glove`` feeds it the colour-glove tracker's output (segmentation, lookup, IK with
 smoothing, as ``ik_node`` runs) on the same script rendered with the glove
@@ -269,6 +270,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--finger-refit', action='store_true',
                         help='with --source edges and --background empty: the edge tracker\'s '
                         'finger_refit')
+    parser.add_argument('--silhouette-palm', action='store_true',
+                        help='edge tracker with --background empty: the tracker\'s '
+                        'silhouette_palm')
     args = parser.parse_args(argv)
     return run_tool('colorglove_eval_mouse', lambda: _run(args))
 
@@ -301,7 +305,8 @@ def _run(args: Any) -> int:
 def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[str, float],
                   cameras: Sequence[PinholeCamera], hand_length_m: float,
                   glove: ScriptedTracker | None) -> int:
-    edge_config = EdgeTrackerConfig(finger_refit=args.finger_refit)
+    edge_config = EdgeTrackerConfig(finger_refit=args.finger_refit,
+                                    silhouette_palm=args.silhouette_palm)
     if args.camera_weights is not None:
         edge_config = replace(edge_config, camera_weights=tuple(args.camera_weights))
     rows = []
@@ -341,7 +346,8 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'calibration': args.calibration,
                                             'cameras': [c.name for c in cameras],
                                             'camera_weights': list(edge_config.camera_weights),
-                                            'finger_refit': edge_config.finger_refit},
+                                            'finger_refit': edge_config.finger_refit,
+                                            'silhouette_palm': edge_config.silhouette_palm},
                                'rows': rows, 'total': total, 'targets': targets})
     return 0
 

@@ -118,7 +118,10 @@ class EdgeTrackerConfig:
     explains (farther than the tolerance from every capsule, tip and the palm); a fit
     whose share of such axis points exceeds ``max_off_silhouette`` or whose unexplained
     share of the hand's foreground exceeds ``max_unexplained`` (in any camera) counts as
-    drift (1.0: never). Each frame's silhouette is found only within
+    drift (1.0: never). With ``silhouette_palm`` the unexplained pixels nearer the palm's
+    outline than to every capsule (up to ``silhouette_points`` more) pull the palm's outline
+    toward them, moving the wrist (needs a palm side: the palm's rigid feature points). Each
+    frame's silhouette is found only within
     ``silhouette_margin_px`` of the box around the pose it starts from.
     ``finger_refit`` (with silhouettes): each fit also measures, per digit, the share of the
     hand's foreground left unexplained nearest to that digit's capsules
@@ -156,6 +159,7 @@ class EdgeTrackerConfig:
     silhouette_weight: float = 0.3
     silhouette_tolerance_px: float = 4.0
     silhouette_points: int = 80
+    silhouette_palm: bool = False
     max_off_silhouette: float = 1.0
     max_unexplained: float = 0.08
     finger_refit: bool = False
@@ -260,6 +264,10 @@ class FeaturePoints:
     #                          metacarpal), whose base and end are the last 2E points
     outline_digit: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (L +
     #                          E,) the digit (index in DIGITS) of each tracked, then untracked link
+    palm_rigid: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (K,) rows
+    #                          of the points on the palm link (the palm sides' and its centre)
+    palm_affine: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))  # (K, 4): a palm
+    #                          point x's weights over those points are palm_affine @ (x, 1)
 
     @property
     def num_palm_sides(self) -> int:
@@ -353,10 +361,16 @@ def feature_points(model: HandModel, tracked: Sequence[str], use_tips: bool,
     palm = palm[::max(1, len(palm) // _PALM_OCCLUDER_POINTS)]
     digit = np.array([DIGITS.index(LINK_NAMES[li].split('_')[0])
                       for li in np.concatenate([links, untracked])], dtype=np.int64)
-    return FeaturePoints(links, tip_links, tip_row, point_link,
-                          np.asarray(local, dtype=float).reshape(-1, 3), radius[links],
+    local = np.asarray(local, dtype=float).reshape(-1, 3)
+    start = 2 * len(links) + 2 * len(tip_links)
+    rigid = np.arange(start, start + generators.shape[0] * (2 * len(PALM_ANGLES) + 1))
+    basis = np.vstack([local[rigid].T, np.ones(len(rigid))])
+    affine = np.linalg.pinv(basis) if len(rigid) >= 4 and np.linalg.matrix_rank(basis) == 4 \
+        else np.zeros((0, 4))
+    return FeaturePoints(links, tip_links, tip_row, point_link, local, radius[links],
                           radius[tip_links], palm_sign, np.asarray(palm, dtype=float),
-                          np.asarray(hull, dtype=float), radius[untracked], digit)
+                          np.asarray(hull, dtype=float), radius[untracked], digit,
+                          rigid[:len(affine)], affine)
 
 
 @dataclass(frozen=True)
@@ -703,25 +717,36 @@ def _digit_shares(points: FeaturePoints, outline: HandOutline, loose: np.ndarray
 
 
 def _silhouette_targets(loose: np.ndarray, base: np.ndarray, end: np.ndarray,
-                        hw: np.ndarray, count: int, palm: np.ndarray) -> SilhouetteTargets:
+                        hw: np.ndarray, count: int, palm: np.ndarray,
+                        points: FeaturePoints | None = None) -> SilhouetteTargets:
     """Up to ``count`` of the unexplained pixels (evenly through the list), each with its
     nearest link capsule; pixels nearer the palm's outline ``palm`` (K, 2) than to every
-    capsule are left out (the palm is rigid with the wrist, and its rim would pull a finger)."""
+    capsule are left out (the palm is rigid with the wrist, and its rim would pull a finger),
+    or, given ``points`` (``silhouette_palm``; ``palm`` then the projection of every point of
+    ``points.palm_hull``), kept as up to ``count`` palm targets."""
     if len(loose) > 2 * count:
         loose = loose[np.linspace(0, len(loose) - 1, 2 * count).astype(np.int64)]
+    palm_targets: dict[str, np.ndarray] = {}
     if len(loose) and len(palm) >= 3:
         # unexplained pixels lie outside the palm's hull: their distance to it is that to
         # its nearest edge
-        hull = cv2.convexHull(palm.astype(np.float32))[:, 0, :].astype(float)
-        to_palm = segment_distances(loose, hull, np.roll(hull, -1, axis=0))[0].min(axis=1)
+        index = cv2.convexHull(palm.astype(np.float32), returnPoints=False)[:, 0]
+        hull = palm.astype(np.float32)[index].astype(float)
+        to_edge, along = segment_distances(loose, hull, np.roll(hull, -1, axis=0))
+        to_palm = to_edge.min(axis=1)
         to_link = (segment_distances(loose, base, end)[0] - hw[None, :]).min(axis=1) \
             if len(base) else np.full(len(loose), np.inf)
-        loose = loose[to_link < to_palm]
+        near_palm = to_link >= to_palm
+        if points is not None and near_palm.any() and len(points.palm_affine) \
+                and len(palm) == len(points.palm_hull):
+            palm_targets = _palm_targets(loose[near_palm], hull, index,
+                                         to_edge[near_palm], along[near_palm], count, points)
+        loose = loose[~near_palm]
     if len(loose) > count:
         loose = loose[np.linspace(0, len(loose) - 1, count).astype(np.int64)]
     if not len(loose) or not len(base):
         return SilhouetteTargets(np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0),
-                                 np.zeros((0, 2)))
+                                 np.zeros((0, 2)), **palm_targets)
     dist, along = segment_distances(loose, base, end)
     link = np.argmin(dist - hw[None, :], axis=1)
     rows = np.arange(len(loose))
@@ -729,15 +754,41 @@ def _silhouette_targets(loose: np.ndarray, base: np.ndarray, end: np.ndarray,
     closest = base[link] + s[:, None] * (end[link] - base[link])
     d = loose - closest
     direction = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
-    return SilhouetteTargets(loose, link, s, direction)
+    return SilhouetteTargets(loose, link, s, direction, **palm_targets)
+
+
+def _palm_targets(px: np.ndarray, hull: np.ndarray, index: np.ndarray, to_edge: np.ndarray,
+                  along: np.ndarray, count: int, points: FeaturePoints) -> dict[str, np.ndarray]:
+    """The palm targets of :class:`SilhouetteTargets` for unexplained pixels ``px`` nearest
+    the palm's projected hull (vertices ``hull``, rows ``index`` of ``points.palm_hull``;
+    ``to_edge``, ``along``: each pixel's distance to each hull edge and the closest point's
+    place on it): up to ``count`` pixels, the palm point under each one's closest point as
+    weights of the palm's rigid feature points, the direction to the pixel."""
+    if len(px) > count:
+        keep = np.linspace(0, len(px) - 1, count).astype(np.int64)
+        px, to_edge, along = px[keep], to_edge[keep], along[keep]
+    rows = np.arange(len(px))
+    edge = np.argmin(to_edge, axis=1)
+    s = along[rows, edge]
+    nxt = (edge + 1) % len(hull)
+    closest = hull[edge] + s[:, None] * (hull[nxt] - hull[edge])
+    d = px - closest
+    direction = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+    local = (1.0 - s)[:, None] * points.palm_hull[index[edge]] \
+        + s[:, None] * points.palm_hull[index[nxt]]
+    weights = np.hstack([local, np.ones((len(px), 1))]) @ points.palm_affine.T
+    return {'palm_px': px, 'palm_weights': weights, 'palm_direction': direction}
 
 
 def _silhouette_residuals(points: FeaturePoints, camera: PinholeCamera, meas: EdgeMeasurement,
                           pix: np.ndarray, Jpix: np.ndarray, depth: np.ndarray,
-                          config: EdgeTrackerConfig) -> tuple[np.ndarray, np.ndarray]:
+                          config: EdgeTrackerConfig,
+                          world: tuple[np.ndarray, np.ndarray | None] | None = None
+                          ) -> tuple[np.ndarray, np.ndarray]:
     """One camera's silhouette rows: each axis point's distance beyond the tolerance off the
-    foreground, and each unexplained pixel's distance beyond the tolerance from its link's
-    capsule (rows only where positive)."""
+    foreground, each unexplained pixel's distance beyond the tolerance from its link's
+    capsule and (palm targets, ``world`` the feature points and Jacobians) from its point of
+    the palm (rows only where positive)."""
     tol = config.silhouette_tolerance_px
     ax, _ = _axis_points(points, pix, None, camera)
     d, grad = meas.silhouette.outside_distance(ax)
@@ -760,6 +811,14 @@ def _silhouette_residuals(points: FeaturePoints, camera: PinholeCamera, meas: Ed
         keep = rl > 0
         r.append(rl[keep])
         J.append(Jl[keep])
+    if t is not None and len(t.palm_px) and world is not None and world[1] is not None:
+        rigid = points.palm_rigid
+        c, Jc, _ = _project(camera, t.palm_weights @ world[0][rigid],
+                            np.einsum('nk,kad->nad', t.palm_weights, world[1][rigid]))
+        rp = np.einsum('ij,ij->i', t.palm_direction, t.palm_px - c) - tol
+        keep = rp > 0
+        r.append(rp[keep])
+        J.append(-np.einsum('ij,ijd->id', t.palm_direction[keep], Jc[keep]))
     return np.concatenate(r), np.concatenate(J)
 
 
@@ -785,12 +844,18 @@ class EdgeMeasurement:
 class SilhouetteTargets:
     """Foreground pixels no part of the predicted hand explains, each assigned to its nearest
     link capsule: the pixels (M, 2), the link's row (M,), the closest point's fraction along
-    the link (M,) and the unit direction from that point to the pixel (M, 2)."""
+    the link (M,) and the unit direction from that point to the pixel (M, 2); with
+    ``silhouette_palm`` also pixels nearest the palm's outline (N, 2), the point of the palm
+    nearest each as weights of the palm's rigid feature points (N, K: an affine combination,
+    exact under any motion of the palm) and the unit direction from it to the pixel (N, 2)."""
 
     px: np.ndarray
     link: np.ndarray
     along: np.ndarray
     direction: np.ndarray
+    palm_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    palm_weights: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    palm_direction: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
 
 def measure_features(grey: np.ndarray, prediction: EdgePrediction, config: EdgeTrackerConfig,
@@ -916,7 +981,7 @@ def stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
             cam_J.append(J[2 * n_link:])
             cam_w.append(config.palm_weight * w[2 * n_link:])
         if meas.silhouette is not None and config.silhouette_weight > 0 and jacobian:
-            r, J = _silhouette_residuals(points, cam, meas, pix, Jpix, depth, config)
+            r, J = _silhouette_residuals(points, cam, meas, pix, Jpix, depth, config, world)
             if len(r):
                 cam_r.append(r)
                 cam_J.append(J)
@@ -1045,7 +1110,8 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
                 loose = sil.unexplained(outline, config.silhouette_tolerance_px)[0]
                 extra.update(silhouette=sil, loose=_silhouette_targets(
                     loose, pred.base_px, pred.end_px, pred.half_width_px,
-                    config.silhouette_points, outline.palm))
+                    config.silhouette_points, outline.palm,
+                    points if config.silhouette_palm else None))
             measured.append(replace(meas, **extra))
         found = tuple(0 if m is None else int(m.link_found.sum()) for m in measured)
         usable = tuple(0 if m is None else int(m.prediction.link_usable.sum())

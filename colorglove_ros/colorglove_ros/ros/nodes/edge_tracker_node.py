@@ -10,7 +10,8 @@ Silhouettes: ``background_images`` names one image of the empty scene per camera
 out of view, same camera settings; PNG or JPEG, colour or grey like the camera's images).
 Each frame's foreground against it then enters the fit (``silhouette_weight``) and its drift
 checks (``max_unexplained``); empty: edges only. ``finger_refit`` (off by default) re-fits a
-finger that leaves part of the hand's silhouette unexplained.
+finger that leaves part of the hand's silhouette unexplained; ``silhouette_palm`` (off by
+default) lets the unexplained foreground next to the palm pull the whole hand.
 
 Start: hold the flat hand still, palm to the (primary) camera, at the marked spot
 ``init_wrist_position``; or publish a starting pose on ``edge_tracker/init_joint_states`` +
@@ -129,6 +130,9 @@ class EdgeTrackerNode(Node):
                                          'finger_refit: share of the hand silhouette left '
                                          'unexplained near one digit that triggers its re-fit',
                                          0.0, 1.0)
+        silhouette_palm = declare(self, 'silhouette_palm', defaults.silhouette_palm,
+                                  'with silhouettes: the unexplained foreground next to the '
+                                  'palm pulls the palm (the whole hand) toward it')
         with startup_errors('edge_tracker_node', ValueError):
             if len(init_wrist) != 3:
                 raise ColorGloveError(f'init_wrist_position needs 3 values, got {init_wrist}')
@@ -143,7 +147,8 @@ class EdgeTrackerNode(Node):
                 max_camera_disagreement_mm=float(max_disagreement),
                 silhouette_weight=float(silhouette_weight),
                 max_unexplained=float(max_unexplained), finger_refit=bool(finger_refit),
-                max_finger_unexplained=float(max_finger_unexplained))
+                max_finger_unexplained=float(max_finger_unexplained),
+                silhouette_palm=bool(silhouette_palm))
             self.backgrounds = [read_background(resolve_path(f), SilhouetteConfig(
                 threshold=float(threshold))) for f in backgrounds]
             cameras: tuple[PinholeCamera, ...] = ()

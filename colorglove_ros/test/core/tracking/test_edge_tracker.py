@@ -15,6 +15,7 @@ from colorglove_ros.core.tracking.edge_fit import (
     EdgeTrackerConfig,
     EdgeTrackerError,
     _robust,
+    feature_points,
     link_axis_residuals,
     measure_features,
     predict_features,
@@ -411,3 +412,44 @@ def test_finger_refit_brings_a_drifted_finger_back(rig) -> None:
         unexplained[on] = result.fit.unexplained
     assert errors[True] < 0.5 * errors[False]
     assert unexplained[True] < 0.5 * unexplained[False]
+
+
+def test_palm_silhouette_targets_pull_a_displaced_hand_back(rig) -> None:
+    """The whole hand 15 mm off along the palm's width, beyond short edge searches: with
+    ``silhouette_palm`` the unexplained pixels nearest the palm pull the wrist back toward its
+    true place; without, nothing measures the palm's place but its one side."""
+    from colorglove_ros.core.tracking.edge_features import EdgeSearchConfig
+
+    cameras, seq, frames = rig
+    truth = seq.poses[20]
+    start = truth.copy()
+    start[0] += 0.015
+    errors, unexplained = {}, {}
+    for on in (False, True):
+        config = EdgeTrackerConfig(silhouette_palm=on, max_unexplained=0.99,
+                                   search=EdgeSearchConfig(search_px=2.0))
+        tracker = EdgeTracker(seq.synth.model, cameras, config, _backgrounds(frames))
+        fit = tracker.fit(frames[20], start, rounds=3)
+        errors[on] = 1e3 * float(np.linalg.norm(fit.q[0:3] - truth[0:3]))
+        unexplained[on] = fit.unexplained
+    assert errors[True] < 0.6 * errors[False]
+    assert unexplained[True] < unexplained[False]
+
+
+def test_palm_targets_are_rigid_with_the_palm(rig) -> None:
+    """The palm targets' weights over the palm's rigid feature points give the palm point
+    itself at any pose (an affine combination of points of one rigid body)."""
+    from colorglove_ros.core.tracking.kinematics import FastKinematics
+
+    cameras, seq, _ = rig
+    model = seq.synth.model
+    points = feature_points(model, EdgeTrackerConfig().tracked_links, True, ('ulnar',))
+    kin = FastKinematics(model)
+    hull = points.palm_hull
+    weights = np.hstack([hull, np.ones((len(hull), 1))]) @ points.palm_affine.T
+    q = seq.poses[20]
+    world = kin.points(q, points.point_link, points.point_local, False)[0]
+    direct = kin.points(q, np.zeros(len(hull), np.int64), hull, False)[0]
+    assert np.allclose(weights @ world[points.palm_rigid], direct, atol=1e-9)
+    assert len(feature_points(model, EdgeTrackerConfig().tracked_links, True, ()).palm_affine) \
+        == 0

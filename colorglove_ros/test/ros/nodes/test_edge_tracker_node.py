@@ -108,6 +108,13 @@ def test_camera_check_parameters_reach_the_tracker() -> None:
     assert config.camera_check and config.max_camera_disagreement_mm == 15.0
 
 
+def test_silhouette_palm_parameter_reaches_the_tracker() -> None:
+    with running(_node(silhouette_palm=True)) as h:
+        assert h.nodes[0].config.silhouette_palm
+    with running(_node()) as h:
+        assert not h.nodes[0].config.silhouette_palm
+
+
 def test_background_images_give_the_tracker_silhouettes(tmp_path, sequence) -> None:
     import cv2
 
