@@ -62,7 +62,8 @@ class GestureError(ColorGloveError, ValueError):
 class GestureConfig:
     """Rule thresholds (pinch distances as a fraction of the hand length, curls in [0, 1]) and
     the width of each logistic ramp, used without a classifier; the hysteresis (``hold``);
-    the gate that skips frames of weak tracker evidence (``evidence``, off by default)."""
+    the gate that skips frames of weak tracker evidence (``evidence``: frames whose pose
+    matched fewer than 11 constraints; ``EvidenceGate()`` turns it off)."""
 
     pinch_distance: float = 0.21
     pinch_width: float = 0.025
@@ -73,7 +74,7 @@ class GestureConfig:
     curl_width: float = 0.04
     hold: HoldConfig = field(default_factory=lambda: HoldConfig(
         smoothing=0.25, on_score=0.75, off_score=0.3, hold_on_s=0.1, hold_off_s=0.1))
-    evidence: EvidenceGate = field(default_factory=EvidenceGate)
+    evidence: EvidenceGate = field(default_factory=lambda: EvidenceGate(min_constraints=11.0))
 
     def __post_init__(self) -> None:
         for f in fields(self):

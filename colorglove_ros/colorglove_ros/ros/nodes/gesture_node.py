@@ -2,9 +2,9 @@
 each as a ``colorglove_msgs/GestureEvent`` on ``hand/gestures`` and, as before, as a
 ``std_msgs/String`` line ``name:state:confidence`` on ``hand/gesture_events`` (e.g.
 ``pinch_index:start:0.93``); a ``no hand`` on ``hand/tracking_status`` ends the active ones.
-With ``evidence_min_constraints`` or ``evidence_max_reprojection_px`` set, the newest
-``tracking:`` status line's evidence (``core.hand.frame_evidence``) gates each frame: a frame
-of weak evidence decides nothing (off by default)."""
+The newest ``tracking:`` status line's evidence (``core.hand.frame_evidence``) gates each
+frame (``evidence_min_constraints``, default the core's; ``evidence_max_reprojection_px``,
+default off; 0 turns either off): a frame of weak evidence decides nothing."""
 from __future__ import annotations
 
 import math
@@ -71,7 +71,8 @@ class GestureNode(Node):
                                     'hand/gesture_events (std_msgs/String)')
         classifier = declare_classifier(self, 'gesture_node', DEFAULT_GESTURE_CLASSIFIER,
                                         GESTURE_FEATURES, 'rules on the finger geometry')
-        min_constraints = declare(self, 'evidence_min_constraints', 0.0,
+        min_constraints = declare(self, 'evidence_min_constraints',
+                                  GestureConfig().evidence.min_constraints,
                                   'skip frames whose newest tracking status matched fewer '
                                   'constraints than this (0: off)', 0.0, 1000.0)
         max_reprojection = declare(self, 'evidence_max_reprojection_px', 0.0,

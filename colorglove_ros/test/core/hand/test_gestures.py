@@ -134,7 +134,8 @@ def test_hold_accuracy_needs_a_classifier() -> None:
 def test_frames_of_weak_evidence_decide_nothing() -> None:
     """With the evidence gate on, a hold whose frames matched too few constraints starts no
     gesture and does not end an active one (a skipped frame is not a lost hand); frames with
-    unknown evidence count; with the gate off (the default) the evidence is ignored."""
+    unknown evidence count; with the gate off the evidence is ignored; the default gate
+    is on."""
     from colorglove_ros.core.hand.frame_evidence import EvidenceGate, FrameEvidence
 
     hold = HoldConfig(smoothing=0.25, on_score=0.7, off_score=0.3, hold_on_s=2 / 30,
@@ -150,6 +151,7 @@ def test_frames_of_weak_evidence_decide_nothing() -> None:
     assert [e for k in range(15) for e in gated.update(fist, 1.0 + k / 30, weak)] == []
     assert gated.active == ('open_hand',)
     assert [e.state for e in gated.update(None, 2.0, weak)] == ['end']      # still a loss
-    plain = GestureDetector(MODEL, GestureConfig(hold=hold))
+    assert GestureConfig().evidence.enabled
+    plain = GestureDetector(MODEL, GestureConfig(hold=hold, evidence=EvidenceGate()))
     events = [e for k in range(15) for e in plain.update(flat, k / 30, weak)]
     assert [(e.name, e.state) for e in events] == [('open_hand', 'start')]
