@@ -39,6 +39,7 @@ from colorglove_ros.core.validation import (
 
 if TYPE_CHECKING:
     from colorglove_ros.core.hand.model import HandModel
+    from colorglove_ros.core.tracking.evidence import GloveEvidence
     from colorglove_ros.core.tracking.tracker import IKResult
 
 # The stages import the segmenter, the search and the temporal prior where they run: a node
@@ -46,7 +47,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     'DEFAULT_MAX_IMAGE_DISTANCE', 'CUT_BY_BORDER', 'StageLimits', 'NODE_LIMITS', 'UNGATED',
-    'NoHand', 'Tracked',
+    'NoHand', 'Tracked', 'glove_seen',
     'TemporalPrior', 'Observer', 'FrameObservations', 'FrameLookup', 'FramePipeline',
     'segment_frame', 'bad_image', 'observe_image', 'image_observer', 'look_up', 'track',
     'bad_prior', 'hand_keypoints_at_plausible_depth', 'weak_evidence', 'poor_fit',
@@ -332,27 +333,39 @@ def poor_fit(tracker: Any, prior: PosePrior, result: IKResult, limits: StageLimi
             f'{prior.image_distance:.2f} tiny px away (more than {limits.close_match_distance:g})')
 
 
-def missing_glove(tracker: Any, q: np.ndarray, observation: CameraObservation,
-                  limits: StageLimits) -> str:
-    """Why pose ``q`` shows glove the primary camera's ``observation`` lacks ('' when it
-    does not, or the gate is off): the share of its visible glove area on patches with no
-    same-colour blob near them (``core.tracking.evidence.glove_evidence``, the tracker's
-    ``patch_surface`` and ``patch_color``) is more than ``limits.max_missing_glove_share``.
-    A tracker without a ``patch_surface`` (a stand-in) is not gated."""
-    from colorglove_ros.core.hand.glove import GLOVE_COLOR_NAMES
+def glove_seen(tracker: Any, q: np.ndarray, observation: CameraObservation,
+               limits: StageLimits) -> GloveEvidence | None:
+    """How much of the glove pose ``q`` shows in the tracker's primary camera has a
+    same-colour blob of ``observation`` near it (``core.tracking.evidence.glove_evidence``
+    with the tracker's ``patch_surface`` and ``patch_color`` and ``limits``' patch settings);
+    None for a tracker without a ``patch_surface`` (a stand-in)."""
     from colorglove_ros.core.tracking.evidence import glove_evidence
     from colorglove_ros.core.tracking.projection import pixel_scale
 
     surface = getattr(tracker, 'patch_surface', None)
-    if limits.max_missing_glove_share >= 1.0 or surface is None:
-        return ''
+    if surface is None:
+        return None
     camera = tracker.cameras[0]
     scale = pixel_scale(camera, tracker.config.reference_focal_px)
-    seen = glove_evidence(surface, tracker.patch_color, q, camera,
+    return glove_evidence(surface, tracker.patch_color, q, camera,
                           observation.blobs, min_patch_px=limits.min_shown_patch_px * scale**2,
                           near_patch_sizes=limits.near_patch_sizes,
                           min_blob_share=limits.min_patch_blob_share)
-    if not seen.missing_share > limits.max_missing_glove_share:
+
+
+def missing_glove(tracker: Any, q: np.ndarray, observation: CameraObservation,
+                  limits: StageLimits) -> str:
+    """Why pose ``q`` shows glove the primary camera's ``observation`` lacks ('' when it
+    does not, or the gate is off): the share of its visible glove area on patches with no
+    same-colour blob near them (:func:`glove_seen`) is more than
+    ``limits.max_missing_glove_share``. A tracker without a ``patch_surface`` (a stand-in) is
+    not gated."""
+    from colorglove_ros.core.hand.glove import GLOVE_COLOR_NAMES
+
+    if limits.max_missing_glove_share >= 1.0:
+        return ''
+    seen = glove_seen(tracker, q, observation, limits)
+    if seen is None or not seen.missing_share > limits.max_missing_glove_share:
         return ''
     colors = ', '.join(GLOVE_COLOR_NAMES[c - 1] for c in seen.missing_colors)
     return (f'missing glove: {seen.missing_share:.0%} of the glove the fitted hand shows (more '

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from collections.abc import Callable
@@ -70,6 +71,7 @@ class ScriptedSettings:
     default_count: int
     classifier: str               # default trained classifier (package-relative; '': none)
     feature_set: str              # its feature set (core.hand.pose_classifier)
+    evidence_gate: bool = False   # evaluate(...) takes evidence=EvidenceGate (--evidence-*)
 
 
 @dataclass(frozen=True)
@@ -159,6 +161,14 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
                         f'default: {settings.classifier or "none, the templates"})')
     parser.add_argument('--rules', action='store_true',
                         help='score with the hand-written rules / templates, no classifier')
+    if settings.evidence_gate:
+        parser.add_argument('--evidence-min-constraints', type=float,
+                            help="with --tracker: skip frames whose tracker evidence (the "
+                            "status line a node has) matched fewer constraints (0: off; "
+                            "default: the core's)")
+        parser.add_argument('--evidence-max-reprojection-px', type=float,
+                            help='with --tracker: skip frames whose reprojection error is '
+                            "larger (default: the core's, off)")
     args = parser.parse_args(argv)
     from colorglove_ros.core.hand.pose_classifier import load_pose_classifier
 
@@ -180,8 +190,16 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
                                           'noise': asdict(noise)}
     source_settings['classifier'] = 'rules' if classifier is None else str(args.classifier)
     started = time.perf_counter()
+    extra: dict[str, Any] = {}
+    if settings.evidence_gate and (args.evidence_min_constraints is not None
+                                   or args.evidence_max_reprojection_px is not None):
+        from colorglove_ros.core.hand.frame_evidence import EvidenceGate
+
+        extra['evidence'] = EvidenceGate(args.evidence_max_reprojection_px or math.inf,
+                                         args.evidence_min_constraints or 0.0)
+        source_settings['evidence_gate'] = asdict(extra['evidence'])
     try:
-        result = evaluate(args.seeds, getattr(args, unit), source, classifier)
+        result = evaluate(args.seeds, getattr(args, unit), source, classifier, **extra)
     finally:
         if args.tracker:
             source.close()

@@ -28,6 +28,7 @@ Thresholds were tuned on seeds 0-4; the default report seeds 100-109 were not us
 """
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
@@ -39,10 +40,12 @@ from colorglove_ros.core.evaluation.scripted_hands import (
     Segment,
     TrackingNoise,
     classify_holds,
+    evidence_seen,
     realised_joint_mae_deg,
     script_poses,
 )
 from colorglove_ros.core.evaluation.targets import target_row
+from colorglove_ros.core.hand.frame_evidence import EvidenceGate
 from colorglove_ros.core.hand.gestures import (
     DEFAULT_GESTURE_CLASSIFIER,
     GESTURE_FEATURES,
@@ -72,7 +75,8 @@ __all__ = ['SETTINGS', 'GESTURE_EXEMPLARS', 'NEUTRAL_SHAPES', 'pinch_shape',
 TARGET = 0.95
 SETTINGS = ScriptedSettings(tuning_seeds=tuple(range(5)), default_seeds=tuple(range(100, 110)),
                             unit='episodes', default_count=60,
-                            classifier=DEFAULT_GESTURE_CLASSIFIER, feature_set=GESTURE_FEATURES)
+                            classifier=DEFAULT_GESTURE_CLASSIFIER, feature_set=GESTURE_FEATURES,
+                            evidence_gate=True)
 MATCH_GRACE_S = 0.3
 HOLD_SETTLE_S = 0.2
 VARIATION_DEG = 3.0
@@ -232,14 +236,17 @@ def run_sequence(model: HandModel, seed: int, episodes: int, source: PoseSource,
     """Script, observe (noise model or tracker), detect: event counts, frame counts, the
     realised joint MAE, and with a classifier each whole hold classified (``classify_holds``:
     (scripted, classified) with :data:`NO_GESTURE` for the neutral shapes; empty without one).
-    Frames the tracker lost reach the detector as 'no hand'."""
+    Frames the tracker lost reach the detector as 'no hand'; with the tracker, each frame comes
+    with the evidence a node would have (``scripted_hands.evidence_seen``) for the config's
+    evidence gate."""
     truth = script_poses(gesture_script(model, seed, episodes), fps)
     seen, found = source.observe('gestures', seed, truth, model)
+    evidence = evidence_seen(source, 'gestures', seed, truth, model)
     detector = GestureDetector(model, config, classifier)
     events: list[GestureEvent] = []
     active = np.zeros((len(seen), len(GESTURE_NAMES)), dtype=bool)
     for i, (q, ok, t) in enumerate(zip(seen, found, truth.times, strict=True)):
-        events += detector.update(q if ok else None, float(t))
+        events += detector.update(q if ok else None, float(t), evidence[i])
         for name in detector.active:
             active[i, GESTURE_NAMES.index(name)] = True
     holds: list[tuple[str, str]] = []
@@ -254,14 +261,16 @@ def run_sequence(model: HandModel, seed: int, episodes: int, source: PoseSource,
 
 
 def evaluate(seeds: Sequence[int], episodes: int = 60, source: PoseSource | None = None,
-             classifier: PoseClassifier | None = None, config: GestureConfig | None = None
-             ) -> dict:
+             classifier: PoseClassifier | None = None, config: GestureConfig | None = None,
+             evidence: EvidenceGate | None = None) -> dict:
     """Precision and recall per gesture over the sequences of ``seeds``, as seen through
     ``source`` (default: the built-in ``TrackingNoise``), scored by ``classifier`` (None: the
-    rules)."""
+    rules); ``evidence`` replaces the config's evidence gate."""
     model = HandModel()
     source = TrackingNoise() if source is None else source
     config = GestureConfig() if config is None else config
+    if evidence is not None:
+        config = dataclasses.replace(config, evidence=evidence)
     totals = {g: {'episodes': 0, 'detected': 0, 'starts': 0, 'true_starts': 0}
               for g in GESTURE_NAMES}
     frames = {'gesture_frames': 0, 'held_active': 0, 'settled_frames': 0, 'other_active': 0}

@@ -32,13 +32,14 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.frame_evidence import FrameEvidence
 from colorglove_ros.core.hand.model import NUM_DOFS, NUM_FINGER_DOFS, HandModel
 from colorglove_ros.core.synthetic.sequences import min_jerk
 from colorglove_ros.core.yaml_io import load_yaml_mapping
 
 __all__ = ['ScriptError', 'Segment', 'ScriptedSequence', 'TrackingNoise', 'script_poses',
            'ar1_noise', 'PoseSource', 'fit_tracking_noise', 'save_tracking_noise',
-           'load_tracking_noise', 'classify_holds',
+           'load_tracking_noise', 'classify_holds', 'evidence_seen',
            'NOISE_FORMAT', 'NOISE_FORMAT_VERSION', 'NOISE_SEED_OFFSET', 'realised_joint_mae_deg']
 
 NOISE_FORMAT = 'colorglove_tracking_noise'
@@ -133,6 +134,24 @@ class PoseSource(Protocol):
                 ) -> tuple[np.ndarray, np.ndarray]:
         """Observed poses (N, 26) and found flags (N,) of sequence ``name`` / ``seed``."""
         ...
+
+
+def evidence_seen(source: PoseSource, name: str, seed: int, truth: ScriptedSequence,
+                  model: HandModel) -> list[FrameEvidence | None]:
+    """The tracker's evidence a consumer node has at each frame of sequence ``name`` /
+    ``seed``: the newest status line, which ik_node publishes after the frame's pose, so the
+    previous frame's (``core.hand.frame_evidence``); None for the first frame, after a lost
+    frame, and for a source that records no evidence (the noise model)."""
+    record = getattr(source, 'evidence', None)
+    n = len(truth.poses)
+    if record is None:
+        return [None] * n
+    ev = record(name, seed, truth, model)
+    seen: list[FrameEvidence | None] = [None]
+    for i in range(n - 1):
+        c, r = ev['constraints'][i], ev['reprojection_px'][i]
+        seen.append(FrameEvidence(float(c), float(r)) if np.isfinite(c) else None)
+    return seen
 
 
 @dataclass(frozen=True)

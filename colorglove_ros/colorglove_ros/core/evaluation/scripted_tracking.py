@@ -9,13 +9,24 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.evaluation.scripted_hands import ScriptedSequence, ScriptError
+from colorglove_ros.core.evaluation.sequences import EVIDENCE_FIELDS
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.lookup.database import DatabaseError, contents_tag
 
-__all__ = ['TRACKED_FORMAT_VERSION', 'TRACKER_MODE', 'ScriptedTracker']
+__all__ = ['TRACKED_FORMAT_VERSION', 'TRACKER_MODE', 'ScriptedTracker', 'TrackedScript']
 
-TRACKED_FORMAT_VERSION = 1
+TRACKED_FORMAT_VERSION = 2      # 2: with the tracker's evidence per frame
 TRACKER_MODE = 'ik_smooth'        # the mode ik_node runs (IK and smoothing on)
+
+
+@dataclass(frozen=True)
+class TrackedScript:
+    """One scripted sequence tracked: poses (N, 26; NaN where not found), found flags (N,)
+    and the tracker's evidence per frame (``sequences.EVIDENCE_FIELDS``)."""
+
+    q_est: np.ndarray
+    found: np.ndarray
+    evidence: dict[str, np.ndarray]
 
 
 @dataclass
@@ -46,14 +57,15 @@ class ScriptedTracker:
                 from exc
         return Path(self.cache_dir) / f'{name}_{seed}_{frames}_{self.labels}_{tag}.npz'
 
-    def _load(self, path: Path, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    def _load(self, path: Path, truth: np.ndarray) -> TrackedScript | None:
         try:
             with np.load(path) as data:
                 if int(data['version']) != TRACKED_FORMAT_VERSION or \
                         data['q_true'].shape != truth.shape or \
                         not np.allclose(data['q_true'], truth, atol=1e-9):
                     return None
-                return data['q_est'], data['found'].astype(bool)
+                return TrackedScript(data['q_est'], data['found'].astype(bool),
+                                     {k: data[f'evidence_{k}'] for k in EVIDENCE_FIELDS})
         except (OSError, KeyError, ValueError):
             return None
 
@@ -72,12 +84,25 @@ class ScriptedTracker:
         cameras = load_calibration(str(self.calibration)).cameras
         return SequenceEvaluator(PoseLookup(db), {'1 camera': cameras[:1]}, [TRACKER_MODE],
                                  config, make_observer(self.labels, None,
-                                                       config.min_blob_pixels))
+                                                       config.min_blob_pixels),
+                                 evidence=True)
 
     def observe(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
                 ) -> tuple[np.ndarray, np.ndarray]:
         """Tracked poses (N, 26; NaN where not found) and found flags (N,) of sequence
         ``name`` / ``seed`` with true poses ``truth`` (``model`` must be the database's hand)."""
+        tracked = self.track(name, seed, truth, model)
+        return tracked.q_est, tracked.found
+
+    def evidence(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
+                 ) -> dict[str, np.ndarray]:
+        """The tracker's evidence per frame (``sequences.EVIDENCE_FIELDS``, NaN where not
+        found) of the sequence :meth:`observe` tracks."""
+        return self.track(name, seed, truth, model).evidence
+
+    def track(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
+              ) -> TrackedScript:
+        """The sequence tracked (from the cache when it holds it)."""
         path = self._cache_path(name, seed, len(truth.poses))
         cached = self._load(path, truth.poses)
         if cached is not None:
@@ -91,8 +116,9 @@ class ScriptedTracker:
         self.frames_tracked += len(truth.poses)
         path.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(path, version=TRACKED_FORMAT_VERSION, q_true=truth.poses,
-                            q_est=run.q_est, found=run.found)
-        return run.q_est, run.found
+                            q_est=run.q_est, found=run.found,
+                            **{f'evidence_{k}': v for k, v in run.evidence.items()})
+        return TrackedScript(run.q_est, run.found, run.evidence)
 
     def close(self) -> None:
         """Free the renderer."""

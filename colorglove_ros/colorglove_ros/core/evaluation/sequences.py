@@ -31,12 +31,14 @@ from colorglove_ros.core.hand.handedness import (
 )
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
 from colorglove_ros.core.pipeline import (
+    NODE_LIMITS,
     UNGATED,
     FramePipeline,
     Observer,
     StageLimits,
     TemporalPrior,
     Tracked,
+    glove_seen,
     image_observer,
 )
 from colorglove_ros.core.segmentation.blobs import extract_blobs
@@ -54,7 +56,16 @@ __all__ = [
     'segmenter_observer', 'make_observer', 'TrackedSequence',
     'SequenceEvaluator', 'same_camera', 'jitter_runs_mm', 'contiguous_runs', 'summarize',
     'training_sequences', 'find_database', 'open_database', 'EvaluationSequence',
+    'EVIDENCE_FIELDS',
 ]
+
+# The tracker's evidence per tracked frame (SequenceEvaluator with evidence=True): the
+# lookup's nearest database image distance (tiny px), the share of the primary camera's glove
+# blobs the fit explains, the mean reprojection error of its matched constraints (px), the
+# number of constraints, and the share of the glove the fit shows that has no blob of its
+# colour near it (the nodes' missing-glove measure, core.pipeline.glove_seen with NODE_LIMITS).
+EVIDENCE_FIELDS = ('image_distance', 'explained_blob_share', 'reprojection_px', 'constraints',
+                   'missing_glove_share')
 
 LABEL_SOURCES = ('truth', 'segmented')
 # Sequence seeds (core.synthetic.sequences.generate_sequence): evaluation uses
@@ -188,6 +199,9 @@ class TrackedSequence:
     constraints: np.ndarray                  # (N,)
     results: list[IKResult | None] = field(default_factory=list)
     hand: str = DEFAULT_HAND                 # whose poses q_true and q_est are
+    # the tracker's evidence per frame (:data:`EVIDENCE_FIELDS`; NaN where not found), kept
+    # when the evaluator was made with ``evidence=True``
+    evidence: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def same_camera(a: PinholeCamera, b: PinholeCamera) -> bool:
@@ -218,10 +232,12 @@ class SequenceEvaluator:
                  observer: Observer | None = None, synthesizer: Any = None,
                  fps: float = 30.0, keep_results: bool = False,
                  temporal: TemporalPrior | None = None, finger_evidence: bool = True,
-                 limits: StageLimits = UNGATED, hand: str = DEFAULT_HAND) -> None:
+                 limits: StageLimits = UNGATED, hand: str = DEFAULT_HAND,
+                 evidence: bool = False) -> None:
         from colorglove_ros.core.synthetic.frames import Synthesizer
 
         self.hand = check_hand(hand)
+        self.evidence = bool(evidence)
 
         if not rigs:
             raise EvaluationError('need at least one camera rig')
@@ -290,6 +306,9 @@ class SequenceEvaluator:
                                     np.zeros(n, np.int64), np.zeros(n, np.int64),
                                     hand=self.hand)
                for key in self.trackers}
+        if self.evidence:
+            for ts in out.values():
+                ts.evidence = {k: np.full(n, np.nan) for k in EVIDENCE_FIELDS}
         for tr in self.trackers.values():
             tr.reset()
         for i in range(n):
@@ -313,9 +332,25 @@ class SequenceEvaluator:
                     ts.ik_cpu_ms[i] = cpu_ms
                     ts.iterations[i] = res.iterations
                     ts.constraints[i] = res.num_constraints
+                    if self.evidence:
+                        self._record_evidence(ts.evidence, i, tracker, res, found, seen)
             if progress is not None:
                 progress(i)
         return out
+
+    @staticmethod
+    def _record_evidence(evidence: dict[str, np.ndarray], i: int, tracker: HandTracker,
+                         res: IKResult, found: Any, seen: Any) -> None:
+        """Frame ``i``'s :data:`EVIDENCE_FIELDS` of the tracked result ``res``."""
+        lookup = found.result
+        if lookup is not None and len(lookup.distances):
+            evidence['image_distance'][i] = float(lookup.distances[0])
+        evidence['explained_blob_share'][i] = res.explained_blob_share
+        evidence['reprojection_px'][i] = res.reprojection_error_px
+        evidence['constraints'][i] = res.num_constraints
+        glove = glove_seen(tracker, res.q, seen.cameras[0], NODE_LIMITS)
+        if glove is not None:
+            evidence['missing_glove_share'][i] = glove.missing_share
 
     def close(self) -> None:
         """Free the renderer's GL contexts."""

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.frame_evidence import EvidenceGate, FrameEvidence
 from colorglove_ros.core.hand.hysteresis import HoldConfig, ScoreHysteresis
 from colorglove_ros.core.hand.keypoints import FINGERTIP_INDICES, hand_keypoints
 from colorglove_ros.core.hand.model import DOF_NAMES, HandModel
@@ -60,7 +61,9 @@ class GestureError(ColorGloveError, ValueError):
 @dataclass(frozen=True)
 class GestureConfig:
     """Rule thresholds (pinch distances as a fraction of the hand length, curls in [0, 1]) and
-    the width of each logistic ramp, used without a classifier; the hysteresis (``hold``)."""
+    the width of each logistic ramp, used without a classifier; the hysteresis (``hold``);
+    the gate that skips frames of weak tracker evidence (``evidence``: frames whose pose
+    matched fewer than 11 constraints; ``EvidenceGate()`` turns it off)."""
 
     pinch_distance: float = 0.21
     pinch_width: float = 0.025
@@ -71,10 +74,11 @@ class GestureConfig:
     curl_width: float = 0.04
     hold: HoldConfig = field(default_factory=lambda: HoldConfig(
         smoothing=0.25, on_score=0.75, off_score=0.3, hold_on_s=0.1, hold_off_s=0.1))
+    evidence: EvidenceGate = field(default_factory=lambda: EvidenceGate(min_constraints=11.0))
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            if f.name != 'hold':
+            if f.name not in ('hold', 'evidence'):
                 check_number(f.name, getattr(self, f.name), low=0.0, low_open=True,
                              error=GestureError)
         if self.extended >= self.curled:
@@ -175,8 +179,13 @@ class GestureDetector:
         return {c: float(v) for c, v in zip(self.classifier.classes, p, strict=True)
                 if c != NO_GESTURE}
 
-    def update(self, q: np.ndarray | None, stamp: float = 0.0) -> list[GestureEvent]:
-        """Feed one frame's pose (None: no hand); returns the events it decided."""
+    def update(self, q: np.ndarray | None, stamp: float = 0.0,
+               evidence: FrameEvidence | None = None) -> list[GestureEvent]:
+        """Feed one frame's pose (None: no hand) and the tracker's evidence for it (None:
+        unknown); returns the events it decided. A frame the config's evidence gate finds weak
+        is skipped: it decides nothing."""
+        if q is not None and self.config.evidence.weak(evidence):
+            return []
         if q is None:
             changes = self._hysteresis.lose(stamp)
         else:

@@ -1,9 +1,13 @@
 """gesture_node: gesture events (pinches, grab, point, open hand) from ``hand/joint_states``,
 each as a ``colorglove_msgs/GestureEvent`` on ``hand/gestures`` and, as before, as a
 ``std_msgs/String`` line ``name:state:confidence`` on ``hand/gesture_events`` (e.g.
-``pinch_index:start:0.93``); a ``no hand`` on ``hand/tracking_status`` ends the active ones."""
+``pinch_index:start:0.93``); a ``no hand`` on ``hand/tracking_status`` ends the active ones.
+The newest ``tracking:`` status line's evidence (``core.hand.frame_evidence``) gates each
+frame (``evidence_min_constraints``, default the core's; ``evidence_max_reprojection_px``,
+default off; 0 turns either off): a frame of weak evidence decides nothing."""
 from __future__ import annotations
 
+import math
 import sys
 
 from colorglove_msgs.msg import GestureEvent as GestureEventMsg
@@ -11,10 +15,16 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header, String
 
+from colorglove_ros.core.hand.frame_evidence import (
+    EvidenceGate,
+    FrameEvidence,
+    parse_tracking_status,
+)
 from colorglove_ros.core.hand.frames import finger_joint_names, hand_root_frame
 from colorglove_ros.core.hand.gestures import (
     DEFAULT_GESTURE_CLASSIFIER,
     GESTURE_FEATURES,
+    GestureConfig,
     GestureDetector,
     GestureEvent,
     format_event,
@@ -61,7 +71,16 @@ class GestureNode(Node):
                                     'hand/gesture_events (std_msgs/String)')
         classifier = declare_classifier(self, 'gesture_node', DEFAULT_GESTURE_CLASSIFIER,
                                         GESTURE_FEATURES, 'rules on the finger geometry')
-        self.detector = GestureDetector(self.model, classifier=classifier)
+        min_constraints = declare(self, 'evidence_min_constraints',
+                                  GestureConfig().evidence.min_constraints,
+                                  'skip frames whose newest tracking status matched fewer '
+                                  'constraints than this (0: off)', 0.0, 1000.0)
+        max_reprojection = declare(self, 'evidence_max_reprojection_px', 0.0,
+                                   'skip frames whose newest tracking status has a larger '
+                                   'reprojection error, px (0: off)', 0.0, 1000.0)
+        gate = EvidenceGate(max_reprojection or math.inf, min_constraints)
+        self.detector = GestureDetector(self.model, GestureConfig(evidence=gate), classifier)
+        self.evidence: FrameEvidence | None = None    # the newest status line's
         self.event_pub = self.create_publisher(GestureEventMsg, 'hand/gestures', 10)
         self.text_pub = self.create_publisher(String, 'hand/gesture_events', 10) \
             if self.publish_text else None
@@ -78,14 +97,16 @@ class GestureNode(Node):
         """Detect on one frame's finger joints (the wrist pose does not matter)."""
         try:
             q = full_pose(self.model, pose_from_joint_state_msg(msg, self.joint_names))
-            events = self.detector.update(q, stamp_to_seconds(msg.header.stamp))
+            events = self.detector.update(q, stamp_to_seconds(msg.header.stamp),
+                                          self.evidence)
         except (KeyError, ValueError) as exc:
             self.get_logger().warn(f'bad JointState: {exc}', throttle_duration_sec=1.0)
             return
         self._publish(events, Header(stamp=msg.header.stamp, frame_id=self.hand_frame))
 
     def on_status(self, msg: String) -> None:
-        """End the active gestures when the tracker loses the hand."""
+        """Keep the tracker's evidence; end the active gestures when it loses the hand."""
+        self.evidence = parse_tracking_status(msg.data)
         if is_no_hand_status(msg.data):
             now = self.get_clock().now()
             self._publish(self.detector.update(None, now.nanoseconds * 1e-9),

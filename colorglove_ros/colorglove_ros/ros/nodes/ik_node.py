@@ -29,6 +29,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image
 
 from colorglove_ros.core.camera import PinholeCamera, load_calibration
+from colorglove_ros.core.hand.frame_evidence import tracking_status
 from colorglove_ros.core.hand.frames import hand_root_frame
 from colorglove_ros.core.hand.glove import calibrated_hand
 from colorglove_ros.core.hand.handedness import (
@@ -388,9 +389,8 @@ class IKNode(Node):
         per_camera = ', '.join(f'{camera.name} {count}' for camera, count in
                                zip(self.tracker.cameras, result.constraints_per_camera,
                                    strict=False))
-        self.outputs.publish_status(
-            f'tracking: {result.num_constraints} constraints ({per_camera}), reprojection '
-            f'{result.reprojection_error_px:.1f} px, IK {result.time_ms:.1f} ms')
+        self.outputs.publish_status(tracking_status(
+            result.num_constraints, per_camera, result.reprojection_error_px, result.time_ms))
         self.stats.hand(self.diagnostics.latency_s(msg.header.stamp),
                         constraints=result.num_constraints,
                         **{f'constraints {camera.name}': count for camera, count in

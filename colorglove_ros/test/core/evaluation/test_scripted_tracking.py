@@ -9,7 +9,8 @@ import pytest
 from small_databases import blob_database
 
 from colorglove_ros.core.evaluation.scripted_hands import ScriptError
-from colorglove_ros.core.evaluation.scripted_tracking import ScriptedTracker
+from colorglove_ros.core.evaluation.scripted_tracking import TRACKED_FORMAT_VERSION, ScriptedTracker
+from colorglove_ros.core.evaluation.sequences import EVIDENCE_FIELDS
 from colorglove_ros.core.lookup.database import contents_tag, save_database
 
 
@@ -43,9 +44,31 @@ def test_each_database_has_its_own_cache(tmp_path: Path) -> None:
     before = ScriptedTracker(first, Path('ik.yaml'), Path('cal.yaml'), tmp_path)
     after = ScriptedTracker(rebuilt, Path('ik.yaml'), Path('cal.yaml'), tmp_path)
     path = before._cache_path('spelling', 7, 3)
-    np.savez_compressed(path, version=1, q_true=truth, q_est=truth + 1.0,
-                        found=np.ones(3, bool))
+    _write_cache(path, truth)
     assert before._load(path, truth) is not None
     assert path.name == f'spelling_7_3_segmented_{contents_tag(first)}.npz'
     other = after._cache_path('spelling', 7, 3)
     assert other != path and not other.exists()
+
+
+def _write_cache(path: Path, truth: np.ndarray, version: int = TRACKED_FORMAT_VERSION,
+                 evidence: bool = True) -> None:
+    fields = {f'evidence_{k}': np.arange(len(truth), dtype=float) for k in EVIDENCE_FIELDS} \
+        if evidence else {}
+    np.savez_compressed(path, version=version, q_true=truth, q_est=truth + 1.0,
+                        found=np.ones(len(truth), bool), **fields)
+
+
+def test_the_cache_holds_the_trackers_evidence_per_frame(tmp_path: Path) -> None:
+    """The cache gives back the tracker's evidence with the poses; a cache written before the
+    evidence was recorded (format 1) is not read (the sequence is tracked anew)."""
+    truth = np.zeros((3, 26))
+    tracker = ScriptedTracker(_saved(tmp_path, 'a', 0), Path('ik.yaml'), Path('cal.yaml'),
+                              tmp_path)
+    path = tracker._cache_path('gestures', 7, 3)
+    _write_cache(path, truth)
+    loaded = tracker._load(path, truth)
+    assert loaded is not None and set(loaded.evidence) == set(EVIDENCE_FIELDS)
+    np.testing.assert_array_equal(loaded.evidence['image_distance'], [0.0, 1.0, 2.0])
+    _write_cache(path, truth, version=1, evidence=False)
+    assert tracker._load(path, truth) is None

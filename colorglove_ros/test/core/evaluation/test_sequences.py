@@ -329,3 +329,27 @@ def test_segmenter_observer_converts_blobs_and_crop():
     seen.hand_found = False
     obs3, tiny3 = segmenter_observer(_Seg())(frame, True)
     assert not obs3.hand_found and tiny3 is None
+
+
+def test_the_trackers_evidence_is_recorded_per_tracked_frame(small_database_path, rigs, synth):
+    """With ``evidence`` every tracked frame carries the lookup's nearest image distance, the
+    explained blob share, the reprojection error, the constraint count and the missing-glove
+    share; without it nothing is recorded."""
+    from colorglove_ros.core.evaluation.sequences import EVIDENCE_FIELDS
+    from colorglove_ros.core.lookup.database import load_database
+
+    mono, _ = rigs
+    lookup = PoseLookup(load_database(small_database_path))
+    run = SequenceEvaluator(lookup, {'1': mono.cameras}, modes=('ik_smooth',),
+                            synthesizer=synth, evidence=True).run(eval_seeds(1)[0], 4)
+    run = run[('1', 'ik_smooth')]
+    assert run.found.sum() >= 3 and set(run.evidence) == set(EVIDENCE_FIELDS)
+    for key in ('image_distance', 'explained_blob_share', 'constraints'):
+        values = run.evidence[key]
+        assert np.all(np.isfinite(values[run.found])) and np.all(np.isnan(values[~run.found]))
+    np.testing.assert_array_equal(run.evidence['constraints'][run.found],
+                                  run.constraints[run.found])
+    assert np.all(run.evidence['image_distance'][run.found] >= 0.0)
+    plain = SequenceEvaluator(lookup, {'1': mono.cameras}, modes=('ik_smooth',),
+                              synthesizer=synth).run(eval_seeds(1)[0], 2)
+    assert plain[('1', 'ik_smooth')].evidence == {}

@@ -129,3 +129,29 @@ def test_hold_accuracy_needs_a_classifier() -> None:
     rules = eval_gestures.evaluate([7], episodes=6, source=TrackingNoise(0.0, 0.0))
     assert all(np.isnan(row['hold_accuracy']) for row in rules['rows'])
     assert np.isnan(rules['neutral_holds_as_gesture'])
+
+
+def test_frames_of_weak_evidence_decide_nothing() -> None:
+    """With the evidence gate on, a hold whose frames matched too few constraints starts no
+    gesture and does not end an active one (a skipped frame is not a lost hand); frames with
+    unknown evidence count; with the gate off the evidence is ignored; the default gate
+    is on."""
+    from colorglove_ros.core.hand.frame_evidence import EvidenceGate, FrameEvidence
+
+    hold = HoldConfig(smoothing=0.25, on_score=0.7, off_score=0.3, hold_on_s=2 / 30,
+                      hold_off_s=4 / 30)
+    weak = FrameEvidence(5.0, 2.0)
+    flat, fist = _pose('flat'), _pose('fist')
+    gated = GestureDetector(MODEL, GestureConfig(hold=hold, evidence=EvidenceGate(
+        min_constraints=11)))
+    assert [e for k in range(15) for e in gated.update(flat, k / 30, weak)] == []
+    assert gated.active == ()
+    started = [e for k in range(15) for e in gated.update(flat, 0.5 + k / 30, None)]
+    assert [(e.name, e.state) for e in started] == [('open_hand', 'start')]
+    assert [e for k in range(15) for e in gated.update(fist, 1.0 + k / 30, weak)] == []
+    assert gated.active == ('open_hand',)
+    assert [e.state for e in gated.update(None, 2.0, weak)] == ['end']      # still a loss
+    assert GestureConfig().evidence.enabled
+    plain = GestureDetector(MODEL, GestureConfig(hold=hold, evidence=EvidenceGate()))
+    events = [e for k in range(15) for e in plain.update(flat, k / 30, weak)]
+    assert [(e.name, e.state) for e in events] == [('open_hand', 'start')]

@@ -97,6 +97,30 @@ def test_gesture_node_text_events_can_be_turned_off() -> None:
     assert events == []
 
 
+def test_gesture_node_skips_frames_of_weak_tracking_evidence() -> None:
+    """With evidence_min_constraints set, frames after a status line with fewer constraints
+    start nothing; after a status line with enough they do."""
+    from colorglove_ros.core.hand.frame_evidence import tracking_status
+
+    with running(lambda ctx: GestureNode(context=ctx, parameter_overrides=params(
+            evidence_min_constraints=11.0))) as h:
+        events = h.collect(String, 'hand/gesture_events')
+        joints_pub = h.publisher(JointState, 'hand/joint_states')
+        status_pub = h.publisher(String, 'hand/tracking_status')
+        status_pub.publish(String(data=tracking_status(6, 'cam0 6', 2.0, 3.0)))
+        h.settle(0.3)
+        for k in range(10):
+            joints_pub.publish(pose_to_joint_state_msg(_pose(GESTURE_SHAPES['fist']), _frame(k)))
+        h.settle(0.5)
+        assert events == []
+        status_pub.publish(String(data=tracking_status(15, 'cam0 15', 2.0, 3.0)))
+        h.settle(0.3)
+        for k in range(10, 20):
+            joints_pub.publish(pose_to_joint_state_msg(_pose(GESTURE_SHAPES['fist']), _frame(k)))
+        assert h.spin_until(lambda: len(events) >= 1, 10.0)
+    assert events[0].data.startswith('grab:start')
+
+
 def test_spelling_node_commits_held_letters() -> None:
     with running(lambda ctx: SpellingNode(context=ctx)) as h:
         letters = h.collect(String, 'hand/spelled_letters')
