@@ -138,11 +138,3 @@ def test_a_failed_learning_in_the_thread_is_raised_by_process(monkeypatch,
         seg.process(_printed_frame(4))
     assert seg._learning is None
 
-
-def test_the_shipped_configuration_learns_in_the_thread() -> None:
-    """``config/color_calibration.yaml`` turns ``learn_in_thread`` on (the same
-    observations as learning inline, the test above)."""
-    from colorglove_ros.core.segmentation.color_model import read_calibration_config
-
-    assert read_calibration_config('config/color_calibration.yaml')['segmenter'][
-        'learn_in_thread'] == 1
