@@ -310,21 +310,25 @@ def weak_evidence(prior: PosePrior, result: IKResult, limits: StageLimits) -> st
             f'{prior.image_distance:.2f} tiny px away (more than {limits.close_match_distance:g})')
 
 
+def primary_pixel_scale(tracker: Any) -> float:
+    """How many of the tracker's primary camera's pixels span one pixel at the IK's reference
+    focal length (``core.tracking.projection.pixel_scale``): the factor every pixel setting
+    of :class:`StageLimits` is scaled by. 1 for a tracker without a ``config`` (a stand-in)."""
+    from colorglove_ros.core.tracking.projection import pixel_scale
+
+    config = getattr(tracker, 'config', None)
+    return 1.0 if config is None else pixel_scale(tracker.cameras[0], config.reference_focal_px)
+
+
 def poor_fit(tracker: Any, prior: PosePrior, result: IKResult, limits: StageLimits) -> str:
     """Why the fit does not fit its own blobs well enough to stand without a close lookup
     ('' when it does, or the gate is off): the lookup was not a close match and the mean
     reprojection residual is more than ``limits.max_weak_match_residual_px`` (scaled to the
-    primary camera's pixels, ``core.tracking.projection.pixel_scale``; :class:`StageLimits`).
-    A tracker without a ``config`` (a stand-in) is taken at the reference focal length."""
-    from colorglove_ros.core.tracking.projection import pixel_scale
-
+    primary camera's pixels, :func:`primary_pixel_scale`; :class:`StageLimits`)."""
     if (limits.max_weak_match_residual_px >= math.inf
             or prior.image_distance <= limits.close_match_distance):
         return ''
-    config = getattr(tracker, 'config', None)
-    scale = 1.0 if config is None else pixel_scale(tracker.cameras[0],
-                                                   config.reference_focal_px)
-    residual = float(result.reprojection_error_px) / scale
+    residual = float(result.reprojection_error_px) / primary_pixel_scale(tracker)
     if not residual > limits.max_weak_match_residual_px:
         return ''
     return (f'poor fit: the fitted hand misses its matched blobs by {residual:.1f} px on '
@@ -340,14 +344,12 @@ def glove_seen(tracker: Any, q: np.ndarray, observation: CameraObservation,
     with the tracker's ``patch_surface`` and ``patch_color`` and ``limits``' patch settings);
     None for a tracker without a ``patch_surface`` (a stand-in)."""
     from colorglove_ros.core.tracking.evidence import glove_evidence
-    from colorglove_ros.core.tracking.projection import pixel_scale
 
     surface = getattr(tracker, 'patch_surface', None)
     if surface is None:
         return None
-    camera = tracker.cameras[0]
-    scale = pixel_scale(camera, tracker.config.reference_focal_px)
-    return glove_evidence(surface, tracker.patch_color, q, camera,
+    scale = primary_pixel_scale(tracker)
+    return glove_evidence(surface, tracker.patch_color, q, tracker.cameras[0],
                           observation.blobs, min_patch_px=limits.min_shown_patch_px * scale**2,
                           near_patch_sizes=limits.near_patch_sizes,
                           min_blob_share=limits.min_patch_blob_share)
