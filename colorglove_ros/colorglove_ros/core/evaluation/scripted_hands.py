@@ -138,20 +138,16 @@ class PoseSource(Protocol):
 
 def evidence_seen(source: PoseSource, name: str, seed: int, truth: ScriptedSequence,
                   model: HandModel) -> list[FrameEvidence | None]:
-    """The tracker's evidence a consumer node has at each frame of sequence ``name`` /
-    ``seed``: the newest status line, which ik_node publishes after the frame's pose, so the
-    previous frame's (``core.hand.frame_evidence``); None for the first frame, after a lost
-    frame, and for a source that records no evidence (the noise model)."""
+    """The tracker's evidence a consumer node pairs with each frame of sequence ``name`` /
+    ``seed``: the frame's own status line (``frame_evidence.EvidencePairer``, by stamp); None
+    for a lost frame and for a source that records no evidence (the noise model)."""
     record = getattr(source, 'evidence', None)
     n = len(truth.poses)
     if record is None:
         return [None] * n
     ev = record(name, seed, truth, model)
-    seen: list[FrameEvidence | None] = [None]
-    for i in range(n - 1):
-        c, r = ev['constraints'][i], ev['reprojection_px'][i]
-        seen.append(FrameEvidence(float(c), float(r)) if np.isfinite(c) else None)
-    return seen
+    return [FrameEvidence(float(c), float(r)) if np.isfinite(c) else None
+            for c, r in zip(ev['constraints'], ev['reprojection_px'], strict=True)]
 
 
 @dataclass(frozen=True)

@@ -1,27 +1,34 @@
 """How well the tracked pose explains its frame, as the consumers of the pose see it.
 
 ``ik_node`` ends every tracked frame with a status line (:func:`tracking_status`): the number
-of constraints the IK matched to observed glove blobs and their mean reprojection error at the
-output pose. The gesture and spelling cores read it back (:func:`parse_tracking_status`) and
-an :class:`EvidenceGate` sets aside the frames whose pose the image explains poorly: such a
-frame neither starts nor ends anything (it is skipped, not a lost hand), so a whole hold the
-tracker misreads with few or badly fitting constraints starts no gesture, while a good hold
-with a few weak frames is not cut. Frames without evidence (another tracker's status, or
-none) always count. No rclpy import.
+of constraints the IK matched to observed glove blobs, their mean reprojection error at the
+output pose and the frame's stamp. The gesture and spelling cores read it back
+(:func:`parse_tracking_status`); an :class:`EvidencePairer` gives each pose the status line of
+its own frame (same stamp; the line and the pose travel on different topics, in either
+order), and an :class:`EvidenceGate` sets aside the frames whose pose the image explains
+poorly: such a frame neither starts nor ends anything (it is skipped, not a lost hand), so a
+whole hold the tracker misreads with few or badly fitting constraints starts no gesture,
+while a good hold with a few weak frames is not cut. Frames without evidence (another
+tracker's status, a line lost, or none) always count. No rclpy import.
 """
 from __future__ import annotations
 
 import math
 import re
+from collections import OrderedDict
 from dataclasses import dataclass
+from typing import Generic, TypeVar
 
 import numpy as np
 
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.validation import check_number
 
-__all__ = ['FrameEvidenceError', 'FrameEvidence', 'EvidenceGate', 'tracking_status',
-           'parse_tracking_status']
+__all__ = ['FrameEvidenceError', 'FrameEvidence', 'EvidenceGate', 'EvidencePairer',
+           'Stamp', 'tracking_status', 'parse_tracking_status']
+
+Stamp = tuple[int, int]          # a frame's header stamp (sec, nanosec)
+Frame = TypeVar('Frame')
 
 
 class FrameEvidenceError(ColorGloveError, ValueError):
@@ -31,10 +38,12 @@ class FrameEvidenceError(ColorGloveError, ValueError):
 @dataclass(frozen=True)
 class FrameEvidence:
     """One tracked frame's evidence: matched constraints and their mean reprojection error
-    (px; NaN when unknown). Fields may also be arrays of frames (the evaluations)."""
+    (px; NaN when unknown), and the stamp of the frame it is of (None: unknown). The first two
+    may also be arrays of frames (the evaluations)."""
 
     constraints: float | np.ndarray = math.nan
     reprojection_px: float | np.ndarray = math.nan
+    stamp: Stamp | None = None
 
 
 @dataclass(frozen=True)
@@ -69,13 +78,16 @@ class EvidenceGate:
 
 
 _STATUS = re.compile(r'^tracking: (\d+) constraints\b.*?, reprojection (\S+) px\b')
+_STAMP = re.compile(r', frame (\d+)\.(\d{9})$')
 
 
 def tracking_status(constraints: int, per_camera: str, reprojection_px: float,
-                    ik_ms: float) -> str:
-    """ik_node's status line of a tracked frame (``per_camera``: e.g. ``'cam0 12, cam1 4'``)."""
-    return (f'tracking: {constraints} constraints ({per_camera}), reprojection '
+                    ik_ms: float, stamp: Stamp | None = None) -> str:
+    """ik_node's status line of a tracked frame (``per_camera``: e.g. ``'cam0 12, cam1 4'``),
+    ending with the frame's header stamp (``frame <sec>.<nanosec>``) when given."""
+    line = (f'tracking: {constraints} constraints ({per_camera}), reprojection '
             f'{reprojection_px:.1f} px, IK {ik_ms:.1f} ms')
+    return line if stamp is None else f'{line}, frame {stamp[0]}.{stamp[1]:09d}'
 
 
 def parse_tracking_status(text: str) -> FrameEvidence | None:
@@ -87,4 +99,65 @@ def parse_tracking_status(text: str) -> FrameEvidence | None:
         reprojection = float(match.group(2))
     except ValueError:
         reprojection = math.nan
-    return FrameEvidence(float(match.group(1)), reprojection)
+    stamp = _STAMP.search(text)
+    return FrameEvidence(float(match.group(1)), reprojection,
+                         None if stamp is None else (int(stamp.group(1)), int(stamp.group(2))))
+
+
+class EvidencePairer(Generic[Frame]):
+    """Gives each tracked frame the evidence of its own status line.
+
+    :meth:`add_frame` and :meth:`add_status` return the frames now ready, oldest first, each
+    with its evidence. A frame whose line (same stamp) is already in goes at once; otherwise
+    it waits for the next status line: its own (same stamp), or a line without a stamp
+    (another tracker's, an older ik_node's, ``no hand``), which ik_node publishes after the
+    frame's pose, pairs with it; a newer frame or a newer frame's line lets it go without
+    evidence (its line was lost). While no stamped line has been seen, a frame let go so
+    has the newest line's evidence instead. ``keep`` lines wait for their frame at most."""
+
+    def __init__(self, keep: int = 32) -> None:
+        self.keep = keep
+        self._lines: OrderedDict[Stamp, FrameEvidence] = OrderedDict()
+        self._waiting: tuple[Stamp, Frame] | None = None
+        self._stamped = False
+        self._newest: FrameEvidence | None = None
+
+    def add_frame(self, stamp: Stamp, frame: Frame
+                  ) -> list[tuple[Frame, FrameEvidence | None]]:
+        """A tracked frame of header stamp ``stamp``."""
+        ready = self.flush()
+        for old in [s for s in self._lines if s < stamp]:
+            del self._lines[old]
+        if stamp in self._lines:
+            ready.append((frame, self._lines.pop(stamp)))
+        else:
+            self._waiting = (stamp, frame)
+        return ready
+
+    def add_status(self, evidence: FrameEvidence | None
+                   ) -> list[tuple[Frame, FrameEvidence | None]]:
+        """A status line's evidence (``parse_tracking_status``; None for other lines)."""
+        if evidence is None or evidence.stamp is None:
+            self._newest = evidence
+            return self._release(evidence)
+        self._stamped = True
+        if self._waiting is not None and self._waiting[0] == evidence.stamp:
+            return self._release(evidence)
+        ready = self.flush() if self._waiting is not None and \
+            self._waiting[0] < evidence.stamp else []
+        self._lines[evidence.stamp] = evidence
+        while len(self._lines) > self.keep:
+            self._lines.popitem(last=False)
+        return ready
+
+    def flush(self) -> list[tuple[Frame, FrameEvidence | None]]:
+        """The waiting frame, if any, without its line."""
+        return self._release(None if self._stamped else self._newest)
+
+    def _release(self, evidence: FrameEvidence | None
+                 ) -> list[tuple[Frame, FrameEvidence | None]]:
+        if self._waiting is None:
+            return []
+        frame = self._waiting[1]
+        self._waiting = None
+        return [(frame, evidence)]

@@ -2,14 +2,17 @@
 each as a ``colorglove_msgs/GestureEvent`` on ``hand/gestures`` and, as before, as a
 ``std_msgs/String`` line ``name:state:confidence`` on ``hand/gesture_events`` (e.g.
 ``pinch_index:start:0.93``); a ``no hand`` on ``hand/tracking_status`` ends the active ones.
-The newest ``tracking:`` status line's evidence (``core.hand.frame_evidence``) gates each
-frame (``evidence_min_constraints``, default the core's; ``evidence_max_reprojection_px``,
-default off; 0 turns either off): a frame of weak evidence decides nothing."""
+The evidence of each frame's own ``tracking:`` status line (``core.hand.frame_evidence``,
+paired by the frame's stamp) gates it (``evidence_min_constraints``, default the core's;
+``evidence_max_reprojection_px``, default off; 0 turns either off): a frame of weak evidence
+decides nothing."""
 from __future__ import annotations
 
 import math
 import sys
 
+import numpy as np
+from builtin_interfaces.msg import Time
 from colorglove_msgs.msg import GestureEvent as GestureEventMsg
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -17,6 +20,7 @@ from std_msgs.msg import Header, String
 
 from colorglove_ros.core.hand.frame_evidence import (
     EvidenceGate,
+    EvidencePairer,
     FrameEvidence,
     parse_tracking_status,
 )
@@ -80,7 +84,8 @@ class GestureNode(Node):
                                    'reprojection error, px (0: off)', 0.0, 1000.0)
         gate = EvidenceGate(max_reprojection or math.inf, min_constraints)
         self.detector = GestureDetector(self.model, GestureConfig(evidence=gate), classifier)
-        self.evidence: FrameEvidence | None = None    # the newest status line's
+        # each JointState waits for its frame's status line (same stamp)
+        self.pairer: EvidencePairer[tuple[np.ndarray, Time]] = EvidencePairer()
         self.event_pub = self.create_publisher(GestureEventMsg, 'hand/gestures', 10)
         self.text_pub = self.create_publisher(String, 'hand/gesture_events', 10) \
             if self.publish_text else None
@@ -94,20 +99,32 @@ class GestureNode(Node):
                 self.text_pub.publish(String(data=format_event(event)))
 
     def on_joints(self, msg: JointState) -> None:
-        """Detect on one frame's finger joints (the wrist pose does not matter)."""
+        """Detect on one frame's finger joints (the wrist pose does not matter), once its
+        status line is in."""
         try:
             q = full_pose(self.model, pose_from_joint_state_msg(msg, self.joint_names))
-            events = self.detector.update(q, stamp_to_seconds(msg.header.stamp),
-                                          self.evidence)
         except (KeyError, ValueError) as exc:
             self.get_logger().warn(f'bad JointState: {exc}', throttle_duration_sec=1.0)
             return
-        self._publish(events, Header(stamp=msg.header.stamp, frame_id=self.hand_frame))
+        stamp = msg.header.stamp
+        self._detect(self.pairer.add_frame((stamp.sec, stamp.nanosec), (q, stamp)))
+
+    def _detect(self, frames: list[tuple[tuple[np.ndarray, Time], FrameEvidence | None]]
+                ) -> None:
+        for (q, stamp), evidence in frames:
+            try:
+                events = self.detector.update(q, stamp_to_seconds(stamp), evidence)
+            except ValueError as exc:
+                self.get_logger().warn(f'bad JointState: {exc}', throttle_duration_sec=1.0)
+                continue
+            self._publish(events, Header(stamp=stamp, frame_id=self.hand_frame))
 
     def on_status(self, msg: String) -> None:
-        """Keep the tracker's evidence; end the active gestures when it loses the hand."""
-        self.evidence = parse_tracking_status(msg.data)
+        """Pair the tracker's evidence with its frame; end the active gestures when it loses
+        the hand."""
+        self._detect(self.pairer.add_status(parse_tracking_status(msg.data)))
         if is_no_hand_status(msg.data):
+            self._detect(self.pairer.flush())
             now = self.get_clock().now()
             self._publish(self.detector.update(None, now.nanoseconds * 1e-9),
                           Header(stamp=now.to_msg(), frame_id=self.hand_frame))

@@ -390,7 +390,8 @@ class IKNode(Node):
                                zip(self.tracker.cameras, result.constraints_per_camera,
                                    strict=False))
         self.outputs.publish_status(tracking_status(
-            result.num_constraints, per_camera, result.reprojection_error_px, result.time_ms))
+            result.num_constraints, per_camera, result.reprojection_error_px, result.time_ms,
+            (msg.header.stamp.sec, msg.header.stamp.nanosec)))
         self.stats.hand(self.diagnostics.latency_s(msg.header.stamp),
                         constraints=result.num_constraints,
                         **{f'constraints {camera.name}': count for camera, count in

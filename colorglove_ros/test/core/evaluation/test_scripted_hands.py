@@ -73,9 +73,9 @@ def test_file_round_trip_and_refusals(tmp_path) -> None:
     assert scaled.joint_bias_deg[4] == pytest.approx(8.0)
 
 
-def test_evidence_seen_is_the_previous_tracked_frames() -> None:
-    """A consumer node has the newest status line, published after its frame's pose: frame i
-    sees frame i-1's evidence, none after a lost frame, none at all from the noise model."""
+def test_evidence_seen_is_each_frames_own() -> None:
+    """A consumer node pairs each pose with its frame's status line (by stamp): frame i sees
+    frame i's evidence, none for a lost frame, none at all from the noise model."""
     from types import SimpleNamespace
 
     from colorglove_ros.core.evaluation.scripted_hands import evidence_seen
@@ -86,5 +86,6 @@ def test_evidence_seen_is_the_previous_tracked_frames() -> None:
               'reprojection_px': np.array([2.0, np.nan, 4.0, 1.0])}
     source = SimpleNamespace(evidence=lambda name, seed, t, model: record)
     seen = evidence_seen(source, 'gestures', 1, truth, None)
-    assert seen == [None, FrameEvidence(12.0, 2.0), None, FrameEvidence(9.0, 4.0)]
+    assert seen == [FrameEvidence(12.0, 2.0), None, FrameEvidence(9.0, 4.0),
+                    FrameEvidence(15.0, 1.0)]
     assert evidence_seen(SimpleNamespace(), 'gestures', 1, truth, None) == [None] * 4

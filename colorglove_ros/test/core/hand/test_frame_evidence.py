@@ -8,6 +8,7 @@ import pytest
 
 from colorglove_ros.core.hand.frame_evidence import (
     EvidenceGate,
+    EvidencePairer,
     FrameEvidence,
     FrameEvidenceError,
     parse_tracking_status,
@@ -21,6 +22,10 @@ def test_status_line_round_trip() -> None:
     assert parse_tracking_status(line) == FrameEvidence(12.0, 2.1)
     unknown = parse_tracking_status(tracking_status(0, 'cam0 0', math.nan, 1.0))
     assert unknown is not None and unknown.constraints == 0 and math.isnan(unknown.reprojection_px)
+    stamped = tracking_status(12, 'cam0 12', 2.14, 4.5, (100, 33333333))
+    assert stamped == ('tracking: 12 constraints (cam0 12), reprojection 2.1 px, IK 4.5 ms, '
+                       'frame 100.033333333')
+    assert parse_tracking_status(stamped) == FrameEvidence(12.0, 2.1, (100, 33333333))
 
 
 @pytest.mark.parametrize('line', [
@@ -47,3 +52,44 @@ def test_gate_is_off_by_default_and_weighs_known_values_only() -> None:
 def test_bad_gate_settings(kwargs: dict) -> None:
     with pytest.raises(FrameEvidenceError):
         EvidenceGate(**kwargs)
+
+
+def _line(constraints: float, stamp: tuple[int, int]) -> FrameEvidence:
+    return FrameEvidence(constraints, 2.0, stamp)
+
+
+def test_pairer_gives_each_frame_its_own_line_in_either_order() -> None:
+    pairer: EvidencePairer[str] = EvidencePairer()
+    # the line after its frame: the frame waits for it
+    assert pairer.add_status(_line(15, (1, 0))) == []
+    assert pairer.add_frame((1, 0), 'a') == [('a', _line(15, (1, 0)))]
+    assert pairer.add_frame((2, 0), 'b') == []
+    assert pairer.add_status(_line(6, (2, 0))) == [('b', _line(6, (2, 0)))]
+    # the line before its frame
+    assert pairer.add_status(_line(9, (3, 0))) == []
+    assert pairer.add_frame((3, 0), 'c') == [('c', _line(9, (3, 0)))]
+
+
+def test_pairer_lets_a_frame_whose_line_is_lost_go_without_evidence() -> None:
+    pairer: EvidencePairer[str] = EvidencePairer()
+    pairer.add_status(_line(15, (1, 0)))
+    pairer.add_frame((1, 0), 'a')
+    assert pairer.add_frame((2, 0), 'b') == []
+    # a newer frame, or a newer frame's line, releases it
+    assert pairer.add_frame((3, 0), 'c') == [('b', None)]
+    assert pairer.add_status(_line(7, (4, 0))) == [('c', None)]
+    assert pairer.add_frame((4, 0), 'd') == [('d', _line(7, (4, 0)))]
+    assert pairer.add_frame((5, 0), 'e') == []
+    assert pairer.flush() == [('e', None)] and pairer.flush() == []
+
+
+def test_pairer_without_stamped_lines_pairs_the_next_line() -> None:
+    """Lines without a stamp (another tracker, an older ik_node): a frame pairs with the line
+    that follows it; let go by the next frame, it has the newest line's evidence."""
+    pairer: EvidencePairer[str] = EvidencePairer()
+    assert pairer.add_frame((1, 0), 'a') == []
+    assert pairer.add_status(FrameEvidence(6.0, 2.0)) == [('a', FrameEvidence(6.0, 2.0))]
+    assert pairer.add_frame((2, 0), 'b') == []
+    assert pairer.add_frame((3, 0), 'c') == [('b', FrameEvidence(6.0, 2.0))]
+    assert pairer.add_status(None) == [('c', None)]          # e.g. 'no hand: lost'
+    assert pairer.add_frame((4, 0), 'd') == [] and pairer.flush() == [('d', None)]

@@ -121,6 +121,48 @@ def test_gesture_node_skips_frames_of_weak_tracking_evidence() -> None:
     assert events[0].data.startswith('grab:start')
 
 
+def test_gesture_node_gates_each_frame_on_its_own_status_line() -> None:
+    """ik_node publishes a frame's status line after its JointState: each frame is gated by
+    its own line (same stamp), not by the newest line the node has (the previous frame's).
+    Frames 0-11 have weak lines, frames 12-23 strong ones: the start comes on the frame the
+    core detector, given each frame's own evidence, starts it on."""
+    from colorglove_ros.core.hand.frame_evidence import EvidenceGate, FrameEvidence, tracking_status
+    from colorglove_ros.core.hand.gestures import (
+        DEFAULT_GESTURE_CLASSIFIER,
+        GESTURE_FEATURES,
+        GestureConfig,
+        GestureDetector,
+    )
+    from colorglove_ros.core.hand.pose_classifier import load_pose_classifier
+    from colorglove_ros.paths import share_dir
+
+    q = _pose(GESTURE_SHAPES['fist'])
+    constraints = [6 if k < 12 else 15 for k in range(24)]
+    detector = GestureDetector(MODEL, GestureConfig(evidence=EvidenceGate(min_constraints=11.0)),
+                               load_pose_classifier(share_dir() / DEFAULT_GESTURE_CLASSIFIER,
+                                                    GESTURE_FEATURES))
+    expected = next(k for k, n in enumerate(constraints) if detector.update(
+        q, 100 + k / 30, FrameEvidence(float(n), 2.0)))
+    with running(lambda ctx: GestureNode(context=ctx, parameter_overrides=params(
+            evidence_min_constraints=11.0))) as h:
+        messages = h.collect(GestureEventMsg, 'hand/gestures')
+        joints_pub = h.publisher(JointState, 'hand/joint_states')
+        status_pub = h.publisher(String, 'hand/tracking_status')
+        h.settle(0.3)
+        for k, n in enumerate(constraints):
+            stamp = _frame(k).stamp
+            joints_pub.publish(pose_to_joint_state_msg(q, _frame(k)))
+            h.settle(0.05)
+            status_pub.publish(String(data=tracking_status(
+                n, f'cam0 {n}', 2.0, 3.0, (stamp.sec, stamp.nanosec))))
+            h.settle(0.05)
+        assert h.spin_until(lambda: len(messages) >= 1, 10.0)
+    start = messages[0]
+    assert (start.gesture, start.event) == ('grab', GestureEventMsg.START)
+    assert (start.header.stamp.sec, start.header.stamp.nanosec) == \
+        (_frame(expected).stamp.sec, _frame(expected).stamp.nanosec), expected
+
+
 def test_spelling_node_commits_held_letters() -> None:
     with running(lambda ctx: SpellingNode(context=ctx)) as h:
         letters = h.collect(String, 'hand/spelled_letters')
