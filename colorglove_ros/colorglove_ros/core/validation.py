@@ -123,15 +123,19 @@ def check_array(name: str, value: Any, *, shape: Sequence[int | None] | None = N
         raise error(f'{name} must have shape {wanted}, got {array.shape}')
     if array.size == 0:
         return array
-    if finite and array.dtype.kind == 'f':
+    floats = array.dtype.kind == 'f'
+    # the extremes, once: a NaN makes both NaN and an infinity is one of them, so finite
+    # extremes mean every value is finite
+    smallest = array.min() if low is not None or finite and floats else None
+    largest = array.max() if high is not None or finite and floats else None
+    if finite and floats and not (np.isfinite(smallest) and np.isfinite(largest)):
         bad = ~np.isfinite(array)
-        if bad.any():
-            raise error(f'{name} must be finite, got {array[bad].ravel()[0].item()!r} at index '
-                        f'{tuple(int(i) for i in np.argwhere(bad)[0])}')
-    if low is not None and array.min() < low:
-        raise error(f'{name} must be >= {low:g}, got {array.min().item()!r}')
-    if high is not None and array.max() > high:
-        raise error(f'{name} must be <= {high:g}, got {array.max().item()!r}')
+        raise error(f'{name} must be finite, got {array[bad].ravel()[0].item()!r} at index '
+                    f'{tuple(int(i) for i in np.argwhere(bad)[0])}')
+    if low is not None and smallest < low:
+        raise error(f'{name} must be >= {low:g}, got {smallest.item()!r}')
+    if high is not None and largest > high:
+        raise error(f'{name} must be <= {high:g}, got {largest.item()!r}')
     return array
 
 

@@ -131,11 +131,14 @@ def blobs_from_observation_msg(msg: HandObservation) -> Blobs:
                  pixel_count=np.array([b.pixel_count for b in msg.blobs], dtype=float))
 
 
-def camera_observation_from_msg(msg: HandObservation) -> CameraObservation:
-    """An observation message as the IK's per-camera input."""
+def camera_observation_from_msg(msg: HandObservation, blobs: Blobs | None = None
+                                ) -> CameraObservation:
+    """An observation message as the IK's per-camera input (with ``blobs``, its blobs
+    already converted by :func:`blobs_from_observation_msg`)."""
     if not msg.hand_found:
         return CameraObservation(hand_found=False)
-    return CameraObservation(hand_found=True, blobs=blobs_from_observation_msg(msg),
+    return CameraObservation(hand_found=True,
+                             blobs=blobs_from_observation_msg(msg) if blobs is None else blobs,
                              crop=crop_from_observation_msg(msg),
                              cut_by_border=bool(msg.cut_by_border))
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 
+from colorglove_ros.core.tracking.types import Blobs
 from colorglove_ros.core.validation import (
     MAX_BLOBS,
     InvalidObservationError,
@@ -13,9 +14,14 @@ from colorglove_ros.core.validation import (
     validate_observation,
     validate_prior,
 )
-from colorglove_ros.ros.conversions import candidate_arrays_from_msg, constraint_arrays_from_msg
+from colorglove_ros.ros.conversions import (
+    blobs_from_observation_msg,
+    candidate_arrays_from_msg,
+    constraint_arrays_from_msg,
+)
 
-__all__ = ['check_observation_msg', 'check_candidates_msg']
+__all__ = ['check_observation_msg', 'checked_observation_msg', 'check_candidates_msg',
+           'checked_candidates_msg']
 
 _DOFS = 26
 MAX_CANDIDATES = 10_000   # candidates per message
@@ -26,24 +32,30 @@ def check_observation_msg(msg: HandObservation, camera_size: tuple[int, int] | N
     """Check an observation with ``hand_found`` (image size, equal to ``camera_size`` when
     given; tiny labels; crop; blobs); return its (40, 40) tiny label image. Raises
     :class:`~colorglove_ros.core.validation.InvalidObservationError` naming the field."""
+    return checked_observation_msg(msg, camera_size)[0]
+
+
+def checked_observation_msg(msg: HandObservation, camera_size: tuple[int, int] | None = None
+                            ) -> tuple[np.ndarray, Blobs]:
+    """:func:`check_observation_msg`, also returning the blobs it checked (as
+    ``ros.conversions.blobs_from_observation_msg`` gives them), so that a caller that reads
+    them next does not convert the message's blobs again."""
     if not msg.hand_found:
         raise InvalidObservationError('hand_found is false')
-    blobs = msg.blobs
-    if len(blobs) > MAX_BLOBS:      # refused before building arrays of them
-        raise InvalidObservationError(f'{len(blobs)} blobs, at most {MAX_BLOBS} allowed')
+    if len(msg.blobs) > MAX_BLOBS:      # refused before building arrays of them
+        raise InvalidObservationError(f'{len(msg.blobs)} blobs, at most {MAX_BLOBS} allowed')
+    blobs = blobs_from_observation_msg(msg)
     tiny = validate_observation(
         image_width=msg.image_width, image_height=msg.image_height,
         tiny_labels=msg.tiny_labels,
         crop=(msg.crop_scale, msg.crop_offset_x, msg.crop_offset_y),
-        blob_color=np.array([b.color_label for b in blobs], dtype=np.int64),
-        blob_centroid_px=np.array([[b.x, b.y] for b in blobs], dtype=float).reshape(-1, 2),
-        blob_pixel_count=np.array([b.pixel_count for b in blobs], dtype=np.int64),
-        glove_pixel_count=msg.glove_pixel_count)
+        blob_color=blobs.color, blob_centroid_px=blobs.centroid_px,
+        blob_pixel_count=blobs.pixel_count, glove_pixel_count=msg.glove_pixel_count)
     if camera_size is not None and (msg.image_width, msg.image_height) != tuple(camera_size):
         raise InvalidObservationError(
             f'image {msg.image_width}x{msg.image_height}, but the camera is calibrated for '
             f'{camera_size[0]}x{camera_size[1]}')
-    return tiny
+    return tiny, blobs
 
 
 def check_candidates_msg(msg: HandPoseCandidates, num_vertices: int,
@@ -53,12 +65,20 @@ def check_candidates_msg(msg: HandPoseCandidates, num_vertices: int,
     and vertices of a mesh of ``num_vertices``) and finger spread; return the blended pose.
     Raises ``InvalidObservationError`` or
     :class:`~colorglove_ros.core.validation.InvalidPriorError` naming the field."""
+    return checked_candidates_msg(msg, num_vertices, camera_size)[0]
+
+
+def checked_candidates_msg(msg: HandPoseCandidates, num_vertices: int,
+                           camera_size: tuple[int, int] | None = None
+                           ) -> tuple[np.ndarray, Blobs]:
+    """:func:`check_candidates_msg`, also returning the blobs of the observation it checked
+    (:func:`checked_observation_msg`)."""
     if not msg.hand_found:
         raise InvalidPriorError('hand_found is false')
     if len(msg.blended_pose) != _DOFS:
         raise InvalidPriorError(f'blended_pose holds {len(msg.blended_pose)} values, '
                                 f'expected {_DOFS}')
-    check_observation_msg(msg.observation, camera_size)
+    _, blobs = checked_observation_msg(msg.observation, camera_size)
     count = len(msg.candidate_indices)
     if count > MAX_CANDIDATES:
         raise InvalidPriorError(f'{count} candidates, at most {MAX_CANDIDATES} allowed')
@@ -77,4 +97,4 @@ def check_candidates_msg(msg: HandPoseCandidates, num_vertices: int,
         constraints=(c['patch_ids'], c['colors'], c['vertices'], c['tiny_xy'],
                      c['pixel_counts']),
         num_vertices=num_vertices,
-        finger_std=np.frombuffer(msg.finger_std, np.float64))
+        finger_std=np.frombuffer(msg.finger_std, np.float64)), blobs

@@ -278,3 +278,29 @@ def test_a_passed_check_is_remembered_until_a_file_changes(tmp_path: Path) -> No
     assert crc32_matches(files[0], crc)
     with pytest.raises(ValueError, match='one folder'):
         check_unless_passed([files[0], tmp_path.parent / 'c.npy'], 'x', passing)
+
+
+@pytest.mark.parametrize('bad, shown', [(np.nan, 'nan'), (np.inf, 'inf'), (-np.inf, '-inf')])
+@pytest.mark.parametrize('bounds', [{}, {'low': -1.0}, {'high': 1.0}, {'low': -1.0, 'high': 1.0}])
+def test_check_array_names_the_first_non_finite_value_whatever_the_bounds(bad, shown,
+                                                                          bounds) -> None:
+    values = np.zeros((3, 2))
+    values[2, 1], values[1, 0] = bad, 0.5
+    with pytest.raises(InvalidInputError,
+                       match=rf'xy must be finite, got {shown} at index \(2, 1\)'):
+        check_array('xy', values, shape=(None, 2), **bounds)
+    # not asked to be finite: a NaN passes the bounds (it compares false), as before
+    if bad != bad:
+        assert check_array('xy', values, finite=False, **bounds) is values
+
+
+def test_check_array_finite_check_scans_the_extremes_only(monkeypatch) -> None:
+    """A finite float array is known finite from its extremes (a NaN or infinity would be
+    one): no elementwise mask is built."""
+    seen = []
+    original = np.isfinite
+    monkeypatch.setattr(np, 'isfinite', lambda x, *a, **k: seen.append(np.ndim(x)) or
+                        original(x, *a, **k))
+    out = check_array('xy', np.linspace(0.0, 1.0, 40).reshape(20, 2), shape=(None, 2),
+                      low=0.0, high=1.0)
+    assert out.shape == (20, 2) and seen and max(seen) == 0

@@ -158,3 +158,26 @@ def test_importing_the_adapters_is_light() -> None:
             'print(sorted(m for m in ("trimesh", "sklearn", "moderngl") if m in sys.modules))')
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == '[]'
+
+
+def test_checked_observation_returns_the_blobs_it_checked() -> None:
+    """lookup_node and ik_node convert an observation's blobs once: the check returns them as
+    ``blobs_from_observation_msg`` gives them, and the IK's observation takes them as given."""
+    from colorglove_ros.core.validation import InvalidObservationError
+    from colorglove_ros.ros.message_checks import checked_candidates_msg, checked_observation_msg
+
+    observation = observation_to_msg(Observation(
+        True, '', 640, 480, np.ones((40, 40), np.uint8), CropTransform(4.5, 220.0, 120.0),
+        [Blob(3, 310.5, 200.25, 90), Blob(7, 100.0, 50.5, 12)], glove_pixel_count=102), HEADER)
+    tiny, blobs = checked_observation_msg(observation, (640, 480))
+    expected = blobs_from_observation_msg(observation)
+    assert tiny.shape == (40, 40)
+    for field in ('color', 'centroid_px', 'pixel_count'):
+        got, want = getattr(blobs, field), getattr(expected, field)
+        assert got.dtype == want.dtype and np.array_equal(got, want)
+    q, same = checked_candidates_msg(candidates_to_msg(observation, _lookup_result()), 100)
+    assert len(q) == NUM_DOFS and np.array_equal(same.centroid_px, expected.centroid_px)
+    assert camera_observation_from_msg(observation, blobs).blobs is blobs
+    observation.blobs[1].x = float('nan')
+    with pytest.raises(InvalidObservationError, match='blob centroid must be finite'):
+        checked_observation_msg(observation)

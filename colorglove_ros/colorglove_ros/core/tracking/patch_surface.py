@@ -64,6 +64,7 @@ class PatchSurface:
         self._block_frame, start = np.unique(frame, return_index=True)
         self._blocks = [slice(int(a), int(b)) for a, b in
                         zip(start, [*start[1:], len(frame)], strict=True)]
+        self._element_frame = frame
         self._elem_patch = elem_patch
         self._kin = kin
         pairs, self._group = np.unique(np.stack([elem_patch, elem_link], axis=1), axis=0,
@@ -112,14 +113,14 @@ class PatchSurface:
         if self._posed_cache is not None and self._posed_cache[0] == key:
             return self._posed_cache[1]
         Rs, ts, _ = self._kin.frames(q)
-        R, t = Rs[self._block_frame], ts[self._block_frame]
+        # every block's transposed rotation, contiguous (the fast matmul path), in one copy
+        Rt = np.ascontiguousarray(Rs[self._block_frame].transpose(0, 2, 1))
         centre = np.empty_like(self._centre)
         normal = np.empty_like(self._centre)
         for b, sl in enumerate(self._blocks):
-            Rt = np.ascontiguousarray(R[b].T)             # the fast matmul path
-            np.dot(self._centre[sl], Rt, out=centre[sl])
-            centre[sl] += t[b]
-            np.dot(self._area_normal[sl], Rt, out=normal[sl])
+            np.dot(self._centre[sl], Rt[b], out=centre[sl])
+            np.dot(self._area_normal[sl], Rt[b], out=normal[sl])
+        centre += ts[self._element_frame]
         centre.setflags(write=False)
         normal.setflags(write=False)
         self._posed_cache = (key, (centre, normal))

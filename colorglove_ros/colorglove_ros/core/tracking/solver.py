@@ -97,29 +97,36 @@ def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Corres
     lam = lambda_init
     it = 0
     converged = False
+    q_diag = np.diag(q_inv)
+    p_diag = None if p_inv is None else np.diag(p_inv)
+    # a DOF is frozen at a bound when it sits there and its step would point outward
+    lower, upper = kin.lower + _EPS_LIMIT, kin.upper - _EPS_LIMIT
     while it < max_iterations and J is not None:
         JW = J.T * w
-        H = JW @ J + np.diag(q_inv)
+        H = JW @ J + q_diag
         g = JW @ r + q_inv * (q_blend - q)
         if p_inv is not None:
-            H += np.diag(p_inv)
+            H += p_diag
             g += p_inv * (q_prev - q)
-        at_lo = (q <= kin.lower + _EPS_LIMIT) & (g < 0)
-        at_hi = (q >= kin.upper - _EPS_LIMIT) & (g > 0)
-        free = ~(at_lo | at_hi)
-        Hf = H[np.ix_(free, free)]
-        gf = g[free]
+        free = ~(((q <= lower) & (g < 0)) | ((q >= upper) & (g > 0)))
+        every = bool(free.all())
+        Hf = H if every else H[np.ix_(free, free)]
+        gf = g if every else g[free]
+        damping = np.diag(np.diag(Hf))
         accepted = False
         while it < max_iterations:
             it += 1
-            A = Hf + lam * np.diag(np.diag(Hf))
+            A = Hf + lam * damping
             try:
                 dqf = np.linalg.solve(A, gf)
             except np.linalg.LinAlgError:
                 lam *= 10.0
                 continue
-            dq = np.zeros(NUM_DOFS)
-            dq[free] = dqf
+            if every:
+                dq = dqf
+            else:
+                dq = np.zeros(NUM_DOFS)
+                dq[free] = dqf
             q_new = kin.clamp(q + dq)
             # the last linear solve's pose needs no Jacobian
             cost_new, r_new, J_new = evaluate(q_new, it < max_iterations)

@@ -62,7 +62,7 @@ from colorglove_ros.ros.conversions import (
 )
 from colorglove_ros.ros.diagnostics import FrameStats, upstream
 from colorglove_ros.ros.image import ImageEncodingError, array_to_image, image_to_rgb8
-from colorglove_ros.ros.message_checks import check_candidates_msg, check_observation_msg
+from colorglove_ros.ros.message_checks import checked_candidates_msg, checked_observation_msg
 from colorglove_ros.ros.nodes.common import (
     CROP_PREDICTION_TOPIC,
     LATEST_IMAGE,
@@ -276,15 +276,16 @@ class IKNode(Node):
                                        throttle_duration_sec=1.0)
             if not isinstance(camera, PinholeCamera):
                 match = None
+            blobs = None
             if match is not None and match.hand_found:
                 try:
-                    check_observation_msg(match, (camera.width, camera.height))
+                    _, blobs = checked_observation_msg(match, (camera.width, camera.height))
                 except InvalidInputError as exc:
                     self.get_logger().warn(f'observation of camera {index} ignored: {exc}',
                                            throttle_duration_sec=1.0)
                     match = None
             observations.append(CameraObservation(hand_found=False) if match is None
-                                else camera_observation_from_msg(match))
+                                else camera_observation_from_msg(match, blobs))
         return observations
 
     def _all_extras_arrived(self, msg: HandPoseCandidates) -> bool:
@@ -342,15 +343,16 @@ class IKNode(Node):
         observations of it."""
         stamp = stamp_to_seconds(msg.header.stamp)
         try:
-            prior = None
+            prior = blobs = None
             if msg.hand_found:
                 camera = self._camera_model(0, msg.observation)
                 if isinstance(camera, NoHand):
                     self.tracker.reset()
                     return camera
-                check_candidates_msg(msg, self.num_vertices, (camera.width, camera.height))
+                _, blobs = checked_candidates_msg(msg, self.num_vertices,
+                                                  (camera.width, camera.height))
                 prior = pose_prior_from_candidates_msg(msg)
-            observations = [camera_observation_from_msg(msg.observation),
+            observations = [camera_observation_from_msg(msg.observation, blobs),
                             *self._extra_camera_observations(stamp)]
         except (IKError, InvalidInputError, ValueError) as exc:
             return bad_prior(self.tracker, exc)

@@ -28,13 +28,9 @@ from colorglove_ros.core.pipeline import DEFAULT_MAX_IMAGE_DISTANCE, NoHand, Sta
 from colorglove_ros.core.segmentation.crop import TinyCrop
 from colorglove_ros.core.validation import InvalidInputError
 from colorglove_ros.paths import resolve_path
-from colorglove_ros.ros.conversions import (
-    blobs_from_observation_msg,
-    candidates_to_msg,
-    crop_from_observation_msg,
-)
+from colorglove_ros.ros.conversions import candidates_to_msg, crop_from_observation_msg
 from colorglove_ros.ros.diagnostics import FrameStats, upstream
-from colorglove_ros.ros.message_checks import check_observation_msg
+from colorglove_ros.ros.message_checks import checked_observation_msg
 from colorglove_ros.ros.nodes.common import (
     LATEST_ONLY,
     declare,
@@ -108,12 +104,11 @@ class LookupNode(Node):
         if isinstance(camera, NoHand):
             return camera
         try:
-            tiny = check_observation_msg(observation, (camera.width, camera.height))
+            tiny, blobs = checked_observation_msg(observation, (camera.width, camera.height))
         except InvalidInputError as exc:
             return NoHand(f'lookup: invalid observation: {exc}', warn=True)
-        blobs = blobs_from_observation_msg(observation) if self.finger_evidence else None
         return look_up(self.lookup, TinyCrop(tiny, crop_from_observation_msg(observation)),
-                       camera, blobs, self.limits)
+                       camera, blobs if self.finger_evidence else None, self.limits)
 
     def on_observation(self, observation: HandObservation) -> None:
         """Look one observation up and publish the candidates, or a 'no hand' message with

@@ -1,0 +1,171 @@
+"""Exact speed cuts of the IK (issue 19, ninth pass): the same bits as the code they replace,
+with fewer numpy calls per frame."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from repo_paths import CONFIG_DIR
+
+from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.hand.glove import default_hand
+from colorglove_ros.core.hand.model import NUM_DOFS
+from colorglove_ros.core.tracking import solver as solver_module
+from colorglove_ros.core.tracking.config import IKCovariances
+from colorglove_ros.core.tracking.kinematics import FastKinematics
+from colorglove_ros.core.tracking.patch_surface import PatchSurface
+from colorglove_ros.core.tracking.projection import project_correspondences
+from colorglove_ros.core.tracking.solver import solve_ik
+from colorglove_ros.core.tracking.types import Correspondences
+
+
+@pytest.fixture(scope='module')
+def hand():
+    model, mesh, glove = default_hand()
+    kin = FastKinematics(model)
+    camera = load_calibration(CONFIG_DIR / 'calibration.yaml').cameras[0]
+    return model, mesh, kin, PatchSurface(kin, mesh, glove.face_patch), camera
+
+
+def _poses(model, count: int, seed: int) -> list[np.ndarray]:
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(count):
+        q = model.rest_pose()
+        q[:3] = [rng.normal(0.0, 0.05), rng.normal(0.0, 0.05), rng.uniform(0.35, 0.8)]
+        q[3:6] = rng.normal(0.0, 0.6, 3)
+        q[6:] = rng.uniform(model.lower_limits[6:], model.upper_limits[6:])
+        out.append(model.clamp(q))
+    return out
+
+
+def _posed_reference(surface: PatchSurface, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The element posing as it was: one transpose and one translation per block."""
+    Rs, ts, _ = surface._kin.frames(q)
+    R, t = Rs[surface._block_frame], ts[surface._block_frame]
+    centre = np.empty_like(surface._centre)
+    normal = np.empty_like(surface._centre)
+    for b, sl in enumerate(surface._blocks):
+        Rt = np.ascontiguousarray(R[b].T)
+        np.dot(surface._centre[sl], Rt, out=centre[sl])
+        centre[sl] += t[b]
+        np.dot(surface._area_normal[sl], Rt, out=normal[sl])
+    return centre, normal
+
+
+def test_posed_elements_are_the_per_block_bits(hand):
+    model, _, _, surface, _ = hand
+    for q in _poses(model, 40, 1):
+        centre, normal = surface._posed(q)
+        ref_centre, ref_normal = _posed_reference(surface, q)
+        assert np.array_equal(centre, ref_centre) and np.array_equal(normal, ref_normal)
+
+
+def test_posed_transposes_every_block_in_one_copy(hand, monkeypatch):
+    model, _, kin, surface, _ = hand
+    q = _poses(model, 1, 2)[0]
+    kin.frames(q)                       # the kinematics' own copies, out of the count
+    calls = []
+    original = np.ascontiguousarray
+    monkeypatch.setattr(np, 'ascontiguousarray', lambda *a, **k: calls.append(1) or
+                        original(*a, **k))
+    surface._posed_cache = None
+    surface._posed(q)
+    assert len(calls) == 1 and len(surface._blocks) > 1
+
+
+def _solve_reference(kin, cameras, corr, q_init, q_blend, cov, q_prev, max_iterations,
+                     lambda_init, step_tol, min_depth_m, cost_tol, reference_focal_px):
+    """``solve_ik``'s loop as it was (every iteration gathers the free block and builds the
+    prior diagonals), without line features."""
+    q = kin.clamp(np.asarray(q_init, dtype=float))
+    q_inv = 1.0 / cov.q_var
+    p_inv = 1.0 / cov.p_var if q_prev is not None else None
+    per_point = solver_module.per_point_cameras(cameras, corr)
+    w = (1.0 / cov.r_var_px2 / per_point.axis_scale(reference_focal_px) ** 2).reshape(-1)
+    target = corr.target_px.reshape(-1)
+
+    def evaluate(qq, jacobian):
+        pix, J, depth = project_correspondences(kin, cameras, corr, qq, jacobian, per_point)
+        if len(depth) and depth.min() <= min_depth_m:
+            return math.inf, np.zeros(0), np.zeros((0, NUM_DOFS))
+        r = target - pix.reshape(-1)
+        return solver_module._cost(r, w, qq, q_blend, q_inv, q_prev, p_inv), r, J
+
+    cost, r, J = evaluate(q, max_iterations > 0)
+    lam, it, converged = lambda_init, 0, False
+    while it < max_iterations and J is not None:
+        JW = J.T * w
+        H = JW @ J + np.diag(q_inv)
+        g = JW @ r + q_inv * (q_blend - q)
+        if p_inv is not None:
+            H += np.diag(p_inv)
+            g += p_inv * (q_prev - q)
+        at_lo = (q <= kin.lower + 1e-9) & (g < 0)
+        at_hi = (q >= kin.upper - 1e-9) & (g > 0)
+        free = ~(at_lo | at_hi)
+        Hf, gf = H[np.ix_(free, free)], g[free]
+        accepted = False
+        while it < max_iterations:
+            it += 1
+            A = Hf + lam * np.diag(np.diag(Hf))
+            dq = np.zeros(NUM_DOFS)
+            dq[free] = np.linalg.solve(A, gf)
+            q_new = kin.clamp(q + dq)
+            cost_new, r_new, J_new = evaluate(q_new, it < max_iterations)
+            if cost_new < cost:
+                step = float(np.abs(q_new - q).max())
+                rel = (cost - cost_new) / max(cost, 1e-12)
+                q, cost, r, J = q_new, cost_new, r_new, J_new
+                lam = max(lam / 10.0, 1e-9)
+                accepted = True
+                converged = step < step_tol or rel < cost_tol
+                break
+            lam *= 10.0
+        if not accepted or converged:
+            break
+    return q, it, cost
+
+
+def _problem(hand, seed: int, at_bounds: bool):
+    """A fit from a perturbed start to the projections of mesh vertices at a true pose
+    (with fingers pushed beyond their limits when ``at_bounds``, so DOFs freeze)."""
+    model, mesh, kin, _, camera = hand
+    rng = np.random.default_rng(seed)
+    q_true = _poses(model, 1, seed)[0]
+    if at_bounds:
+        q_true[6:] = model.lower_limits[6:] - 0.3
+    verts = rng.choice(len(mesh.vertex_link), 24, replace=False)
+    links = mesh.vertex_link[verts]
+    local = mesh.local_vertices[verts]
+    pw, _ = kin.points(q_true, links, local)
+    target = camera.project(camera.world_to_camera(pw)) + rng.normal(0.0, 1.0, (24, 2))
+    corr = Correspondences(np.zeros(24, np.int64), links, local, target, np.arange(24), verts)
+    q0 = model.clamp(q_true + rng.normal(0.0, 0.05, NUM_DOFS))
+    return kin, [camera], corr, q0, model.clamp(q_true)
+
+
+@pytest.mark.parametrize('at_bounds', [False, True])
+@pytest.mark.parametrize('smoothing', [False, True])
+def test_solve_is_the_old_loops_bits(hand, at_bounds, smoothing):
+    cov = IKCovariances([3.0, 3.0], np.full(NUM_DOFS, 0.2), np.full(NUM_DOFS, 0.1))
+    for seed in range(6):
+        kin, cameras, corr, q0, q_true = _problem(hand, seed, at_bounds)
+        q_prev = q0 + 0.01 if smoothing else None
+        args = (kin, cameras, corr, q0, q0, cov, q_prev, 4, 1e-3, 1e-5, 0.05, 1e-4, 600.0)
+        sol = solve_ik(*args)
+        q, iterations, cost = _solve_reference(*args)
+        assert np.array_equal(sol.q, q) and sol.iterations == iterations and sol.cost == cost
+
+
+def test_solve_gathers_no_block_when_every_dof_is_free(hand, monkeypatch):
+    model = hand[0]
+    kin, cameras, corr, q0, _ = _problem(hand, 3, False)
+    q0 = np.clip(q0, model.lower_limits + 0.01, model.upper_limits - 0.01)
+    gathers = []
+    original = np.ix_
+    monkeypatch.setattr(np, 'ix_', lambda *a: gathers.append(1) or original(*a))
+    cov = IKCovariances([3.0, 3.0], np.full(NUM_DOFS, 0.2), np.full(NUM_DOFS, 0.1))
+    sol = solve_ik(kin, cameras, corr, q0, q0, cov, None, 1)
+    assert sol.iterations == 1 and not gathers
