@@ -267,15 +267,19 @@ def _glove_with_a_red_sleeve() -> tuple[np.ndarray, np.ndarray]:
 def test_a_red_sleeve_running_off_the_image_does_not_cut_the_hand(calibration) -> None:
     """A red sleeve joined to the glove and running off the image: off (the class default)
     it pulls the crop down the forearm and makes the hand look cut by the border; with
-    ``sleeve_reach`` the crop keeps about the size it has with a grey sleeve and the hand is
-    not cut. With the grey sleeve the setting changes nothing."""
+    ``sleeve_reach`` (the shipped config's) the crop keeps about the size it has with a grey
+    sleeve and the hand is not cut. With the grey sleeve the setting changes nothing."""
+    from colorglove_ros.core.segmentation.color_model import read_calibration_config
+
+    reach = read_calibration_config('config/color_calibration.yaml')['segmenter'][
+        'sleeve_reach']
     red, grey = _glove_with_a_red_sleeve()
     plain = GloveSegmenter(calibration).process(grey)
-    plain_on = GloveSegmenter(calibration, sleeve_reach=0.35).process(grey)
+    plain_on = GloveSegmenter(calibration, sleeve_reach=reach).process(grey)
     assert plain.hand_found and not plain.cut_by_border
     assert plain_on.crop.half_size == plain.crop.half_size
     off = GloveSegmenter(calibration).process(red)
-    on = GloveSegmenter(calibration, sleeve_reach=0.35).process(red)
+    on = GloveSegmenter(calibration, sleeve_reach=reach).process(red)
     assert off.cut_by_border and off.crop.half_size > 2.0 * plain.crop.half_size
     assert on.hand_found and not on.cut_by_border
     assert on.crop.half_size < 1.5 * plain.crop.half_size
@@ -290,6 +294,6 @@ def test_a_glove_really_cut_by_the_border_stays_cut_with_sleeve_reach(calibratio
     shift = 480 - int(ys.max()) + int(0.3 * (ys.max() - ys.min()))
     image = np.concatenate([np.repeat(grey[:1], shift, 0), grey[:480 - shift]])
     for segmenter in (GloveSegmenter(calibration), GloveSegmenter(calibration,
-                                                                  sleeve_reach=0.35)):
+                                                                  sleeve_reach=0.1)):
         seen = segmenter.process(image)
         assert seen.hand_found and seen.cut_by_border
