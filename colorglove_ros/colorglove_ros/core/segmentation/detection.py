@@ -108,24 +108,32 @@ def _drop_surfaces(labels: np.ndarray, max_pixels: float) -> np.ndarray:
     if not labels.size or max_pixels <= 0:
         return labels
     out = labels
-    ring_kernel = np.ones((3, 3), np.uint8)
-    h, w = labels.shape
     for color in np.flatnonzero(np.bincount(labels.ravel())[1:] > max_pixels) + 1:
         n, comp, stats, _ = cv2.connectedComponentsWithStats(
             cv2.compare(labels, int(color), cv2.CMP_EQ), connectivity=8, ltype=cv2.CV_32S)
         for k in np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] > max_pixels) + 1:
-            x, y, bw, bh = stats[k, :4]
-            x0, y0 = max(x - 1, 0), max(y - 1, 0)
-            x1, y1 = min(x + bw + 1, w), min(y + bh + 1, h)
-            mine = (comp[y0:y1, x0:x1] == k).view(np.uint8)
-            ring = cv2.dilate(mine, ring_kernel).view(bool) & ~mine.view(bool)
-            if np.count_nonzero(labels[y0:y1, x0:x1][ring]) >= (
-                    PATCH_OUTLINE_GLOVE_SHARE * np.count_nonzero(ring)):
+            if not _is_surface(labels, comp, stats, k):
                 continue
             if out is labels:
                 out = labels.copy()
-            out[y0:y1, x0:x1][mine.view(bool)] = 0
+            x, y, bw, bh = stats[k, :4]
+            out[y:y + bh, x:x + bw][comp[y:y + bh, x:x + bw] == k] = 0
     return out
+
+
+def _is_surface(labels: np.ndarray, comp: np.ndarray, stats: np.ndarray, k: int) -> bool:
+    """Whether component ``k`` of ``comp`` (``cv2.connectedComponentsWithStats`` of one
+    colour of ``labels``, with its ``stats``) has an outline running mostly along background:
+    less than ``PATCH_OUTLINE_GLOVE_SHARE`` of the pixels just outside it (inside the image)
+    are other glove colours."""
+    h, w = labels.shape
+    x, y, bw, bh = stats[k, :4]
+    x0, y0 = max(x - 1, 0), max(y - 1, 0)
+    x1, y1 = min(x + bw + 1, w), min(y + bh + 1, h)
+    mine = (comp[y0:y1, x0:x1] == k).view(np.uint8)
+    ring = cv2.dilate(mine, np.ones((3, 3), np.uint8)).view(bool) & ~mine.view(bool)
+    return bool(np.count_nonzero(labels[y0:y1, x0:x1][ring])
+                < PATCH_OUTLINE_GLOVE_SHARE * np.count_nonzero(ring))
 
 
 #: The glove's largest printed patch (the palm's, seen flat: about 0.12) is at most this share
@@ -178,7 +186,8 @@ def shed_oversized_patches(labels: np.ndarray, max_window_share: float,
 
 def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_pixels: int,
                         max_patch_share: float = LARGEST_PATCH_WINDOW_SHARE,
-                        step: int = JUNCTION_STEP) -> np.ndarray:
+                        step: int = JUNCTION_STEP,
+                        edges: tuple[bool, bool, bool, bool] | None = None) -> np.ndarray:
     """``labels`` with the glove pixels of oversized single-colour regions that lie farther
     than ``reach`` times the hand's half window from every patch junction set to background.
 
@@ -190,7 +199,10 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
     a patch's size, with junctions only where it meets the palm) stays whole. All of it is
     decided on every ``step``-th pixel of every ``step``-th row (``min_pixels`` junctions
     there at least; fewer: unchanged) and applied to the pixels each stands for. Unchanged
-    with ``reach`` 0."""
+    with ``reach`` 0. With ``edges`` (left, right, top, bottom: which sides of ``labels`` are
+    the image's border) only the oversized regions reaching one of those sides with an
+    outline running mostly along background are trimmed (a sleeve: the forearm always runs
+    off the image; a patch of a glove cut by the border is surrounded by its neighbours)."""
     labels = np.asarray(labels, np.uint8)
     if reach <= 0 or not labels.size:
         return labels
@@ -213,6 +225,10 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
             cv2.compare(small, int(colour), cv2.CMP_EQ), connectivity=8, ltype=cv2.CV_32S)
         big = stats[:, cv2.CC_STAT_AREA] > max_pixels
         big[0] = False
+        if edges is not None and big.any():   # sleeves only: off the image, among background
+            big &= _reaching(comp, n, edges)
+            for k in np.flatnonzero(big):
+                big[k] = _is_surface(small, comp, stats, k)
         if big.any():
             drop |= big.take(comp)
     drop &= far
@@ -225,6 +241,18 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
     oversized[big_colours] = True
     out = labels.copy()
     out[drop & oversized[labels]] = 0     # (a pixel of another colour in the cell stays)
+    return out
+
+
+def _reaching(comp: np.ndarray, n: int, edges: tuple[bool, bool, bool, bool]) -> np.ndarray:
+    """(n,) bool: which of the ``n`` components of ``comp`` have a pixel on one of the sides
+    ``edges`` (left, right, top, bottom) of the image ``comp`` covers."""
+    left, right, top, bottom = edges
+    sides = [side for on, side in ((left, comp[:, 0]), (right, comp[:, -1]), (top, comp[0]),
+                                   (bottom, comp[-1])) if on]
+    out = np.zeros(n, bool)
+    if sides:
+        out[np.concatenate(sides)] = True
     return out
 
 

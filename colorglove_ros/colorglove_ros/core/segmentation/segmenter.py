@@ -51,7 +51,7 @@ __all__ = [
     'STATUS_NO_GLOVE', 'STATUS_TOO_SMALL', 'STATUS_OUT_OF_FRAME', 'STATUS_FRAGMENTED',
     'STAGES', 'load_segmenter',
     'keep_multicolor_components', 'keep_reaching_components', 'relabel_borders',
-    'border_contact_px',
+    'image_edges', 'border_contact_px',
 ]
 
 STATUS_OK = 'ok'
@@ -285,6 +285,15 @@ def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
     return out
 
 
+def image_edges(roi: tuple[int, int, int, int], reduction: int, width: int,
+                height: int) -> tuple[bool, bool, bool, bool]:
+    """Which sides (left, right, top, bottom) of the region of interest ``roi`` = (x0, x1,
+    y0, y1) (full-image bounds, labels ``reduction`` pixels wide) are the border of the
+    ``width`` x ``height`` image."""
+    x0, x1, y0, y1 = roi
+    return x0 == 0, x1 + reduction > width, y0 == 0, y1 + reduction > height
+
+
 def border_contact_px(labels: np.ndarray, roi: tuple[int, int, int, int], reduction: int,
                       width: int, height: int,
                       window: tuple[int, int, int, int] | None = None) -> int:
@@ -293,17 +302,17 @@ def border_contact_px(labels: np.ndarray, roi: tuple[int, int, int, int], reduct
     ``labels``, each label ``reduction`` pixels wide) cover; with ``window`` = (x0, x1, y0,
     y1) (bounds in ``labels``' pixels: the hand's crop window) only the border pixels inside
     it (glove-coloured clutter running off the image elsewhere does not cut the hand)."""
-    x0, x1, y0, y1 = roi
     rows, cols = labels.shape
     wx0, wx1, wy0, wy1 = window if window is not None else (0, cols, 0, rows)
     wx0, wy0 = max(wx0, 0), max(wy0, 0)
     wx1, wy1 = min(wx1, cols), min(wy1, rows)
     if wx1 <= wx0 or wy1 <= wy0:
         return 0
-    sides = ((x0 == 0 and wx0 == 0, labels[wy0:wy1, 0]),
-             (x1 + reduction > width and wx1 == cols, labels[wy0:wy1, -1]),
-             (y0 == 0 and wy0 == 0, labels[0, wx0:wx1]),
-             (y1 + reduction > height and wy1 == rows, labels[-1, wx0:wx1]))
+    left, right, top, bottom = image_edges(roi, reduction, width, height)
+    sides = ((left and wx0 == 0, labels[wy0:wy1, 0]),
+             (right and wx1 == cols, labels[wy0:wy1, -1]),
+             (top and wy0 == 0, labels[0, wx0:wx1]),
+             (bottom and wy1 == rows, labels[-1, wx0:wx1]))
     return reduction * sum(int(np.count_nonzero(edge)) for on_border, edge in sides
                            if on_border)
 
@@ -411,7 +420,10 @@ class GloveSegmenter:
     region of interest, after the border relabelling, a single-colour region larger than any
     printed patch keeps only its pixels within ``junction_reach`` times the hand's half window
     of a patch junction (``keep_near_junctions``; 0 turns this off): the crop and the blobs
-    then hold the hand and not the surface it touches. Colours
+    then hold the hand and not the surface it touches. The same for the regions that reach
+    the image's border only, with ``sleeve_reach`` (0 off): a sleeve of a glove colour
+    (a red sleeve is glove red) runs off the image, and joined to the glove it would pull the
+    crop down the forearm and make the hand look cut by the border. Colours
     the coarse pass labelled glove but found to be background (at least
     ``scene_colour_min_share`` of the coarse frame in one quantised colour: surfaces, not
     small clutter) are the scene's own colours in this frame: the region of interest labels
@@ -493,7 +505,7 @@ class GloveSegmenter:
                  max_border_contact: float = 0.1, diversity_window: int = 24,
                  min_region_colors: int = 6, diversity_density: float = 0.01,
                  max_patch_fraction: float = 0.1, max_patch_window_share: float = 0.0,
-                 junction_reach: float = 0.0,
+                 junction_reach: float = 0.0, sleeve_reach: float = 0.0,
                  scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
                  background_memory: int = 0,
@@ -873,6 +885,21 @@ class GloveSegmenter:
         if learning is not None:
             learning.result()
 
+    def _without_sleeve(self, labels: np.ndarray, edges: tuple[bool, bool, bool, bool]
+                        ) -> np.ndarray:
+        """The region of interest's ``labels`` (its sides ``edges``, left, right, top,
+        bottom, on the image's border: :func:`image_edges`) with a glove-coloured sleeve cut
+        back to the glove: an oversized single-colour region reaching the image's border keeps
+        only its pixels within ``sleeve_reach`` times the hand's half window of a patch
+        junction (``keep_near_junctions``). Nothing is done (or spent) unless some glove
+        label lies on the image's border."""
+        sides = (labels[:, 0], labels[:, -1], labels[0], labels[-1])
+        if self.sleeve_reach <= 0 or not any(
+                on and side.any() for on, side in zip(edges, sides, strict=True)):
+            return labels
+        return keep_near_junctions(labels, self.calibration.num_colors, self.sleeve_reach,
+                                   JUNCTION_MIN_PIXELS, edges=edges)
+
     def _blobs(self, labels: np.ndarray, r: int, x0: int, y0: int,
                window: tuple[int, int, int, int]) -> list[Blob]:
         """Connected components of each colour inside ``window`` (ROI pixel bounds)."""
@@ -997,6 +1024,7 @@ class GloveSegmenter:
         # glove colour out of a patch's reach of every junction: a surface touching the glove
         labels = keep_near_junctions(labels, self.calibration.num_colors, self.junction_reach,
                                      JUNCTION_MIN_PIXELS)
+        labels = self._without_sleeve(labels, image_edges((x0, x1, y0, y1), r, w, h))
         t = tick('borders', t)
         if keep_labels:
             full = np.zeros((h, w), np.uint8)

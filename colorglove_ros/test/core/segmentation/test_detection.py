@@ -113,6 +113,30 @@ def test_a_surface_touching_the_glove_is_trimmed_to_the_hand() -> None:
     assert keep_near_junctions(plain, 10, 0.5, 2) is plain
 
 
+def test_with_edges_only_a_surface_running_off_the_image_is_trimmed() -> None:
+    """``edges``: a single-colour region along the glove that runs off the image's bottom (a
+    sleeve) is trimmed to the junctions' reach; the same region ending inside the image, or
+    running off a side that is not the image's border, stays whole."""
+    labels = np.zeros((160, 120), np.uint8)
+    labels[40:64, 40:64] = _patchwork()
+    labels[64:160, 44:60] = 1                     # a red sleeve down to the bottom row
+    bottom = (False, False, False, True)
+    out = keep_near_junctions(labels, 10, 0.5, 2, edges=bottom)
+    assert (out[40:64, 40:64] == labels[40:64, 40:64]).all()
+    assert out[64:68, 44:60].all() and not out[120:160, 44:60].any()
+    assert (keep_near_junctions(labels, 10, 0.5, 2, edges=(True, True, True, False))
+            == labels).all()
+    inside = labels.copy()
+    inside[150:160] = 0                           # the same region, ending inside the image
+    assert (keep_near_junctions(inside, 10, 0.5, 2, edges=bottom) == inside).all()
+    cut = np.zeros((160, 120), np.uint8)          # a glove cut by the bottom border: its large
+    cut[100:160, 30:90] = np.where(np.arange(60)[None, :] % 20 < 10, 3, 4)   # patch among
+    cut[110:160, 50:70] = 1                       # its neighbours stays whole
+    cut[100:124, 30:54] = _patchwork()
+    kept = keep_near_junctions(cut, 10, 0.05, 2, edges=bottom)
+    assert (kept[110:160, 50:70] == cut[110:160, 50:70]).all()
+
+
 def test_a_surface_touching_the_glove_is_shed_at_the_hand_scale() -> None:
     """A single-colour surface touching a glove patchwork, too small for the image-wide
     limit but larger than any patch at the hand's scale (found from the patch junctions),
@@ -223,3 +247,53 @@ def test_an_orange_surface_touching_the_glove_is_trimmed_with_junction_reach(cal
     assert on.hand_found
     assert on.crop.half_size < 1.2 * plain.crop.half_size
     assert not off.hand_found or off.crop.half_size > 1.3 * plain.crop.half_size
+
+
+def _glove_with_a_red_sleeve() -> tuple[np.ndarray, np.ndarray]:
+    """A rendered glove in the middle of the image with a red sleeve (glove red to the
+    colour model) running off the image's bottom, and the same frame with a grey sleeve."""
+    from colorglove_ros.core.synthetic.conditions import SLEEVE_ALBEDOS
+
+    camera = synth.default_camera()
+    q = synth.sample_pose(np.random.default_rng(4), camera, out_of_frame_prob=0.0)
+    q[0:3] = [0.0, 0.0, 0.6]
+    red, grey = (synth.render_frame(q, camera, np.random.default_rng(5),
+                                    FrameConditions(sleeve_rgb=SLEEVE_ALBEDOS[name]))
+                 for name in ('red', 'grey'))
+    assert not red.labels[-1].any() and red.labels.any()     # the glove is whole in view
+    return red.image_rgb, grey.image_rgb
+
+
+def test_a_red_sleeve_running_off_the_image_does_not_cut_the_hand(calibration) -> None:
+    """A red sleeve joined to the glove and running off the image: off (the class default)
+    it pulls the crop down the forearm and makes the hand look cut by the border; with
+    ``sleeve_reach`` (the shipped config's) the crop keeps about the size it has with a grey
+    sleeve and the hand is not cut. With the grey sleeve the setting changes nothing."""
+    from colorglove_ros.core.segmentation.color_model import read_calibration_config
+
+    reach = read_calibration_config('config/color_calibration.yaml')['segmenter'][
+        'sleeve_reach']
+    red, grey = _glove_with_a_red_sleeve()
+    plain = GloveSegmenter(calibration).process(grey)
+    plain_on = GloveSegmenter(calibration, sleeve_reach=reach).process(grey)
+    assert plain.hand_found and not plain.cut_by_border
+    assert plain_on.crop.half_size == plain.crop.half_size
+    off = GloveSegmenter(calibration).process(red)
+    on = GloveSegmenter(calibration, sleeve_reach=reach).process(red)
+    assert off.cut_by_border and off.crop.half_size > 2.0 * plain.crop.half_size
+    assert on.hand_found and not on.cut_by_border
+    assert on.crop.half_size < 1.5 * plain.crop.half_size
+
+
+def test_a_glove_really_cut_by_the_border_stays_cut_with_sleeve_reach(calibration) -> None:
+    """The same glove moved down until a third of it is outside the image: cut by the
+    border with ``sleeve_reach`` as without (its own patches run off the image)."""
+    _, grey = _glove_with_a_red_sleeve()
+    plain = GloveSegmenter(calibration).process(grey, keep_labels=True)
+    ys = np.nonzero(plain.label_image)[0]
+    shift = 480 - int(ys.max()) + int(0.3 * (ys.max() - ys.min()))
+    image = np.concatenate([np.repeat(grey[:1], shift, 0), grey[:480 - shift]])
+    for segmenter in (GloveSegmenter(calibration), GloveSegmenter(calibration,
+                                                                  sleeve_reach=0.1)):
+        seen = segmenter.process(image)
+        assert seen.hand_found and seen.cut_by_border
