@@ -132,6 +132,9 @@ class EdgeTrackerConfig:
     that digit unexplained (:class:`EdgeTracker`); a re-fit that leaves the digit unexplained
     makes it wait ``finger_refit_backoff`` tracked frames before the next (0: none), twice as
     long after each further such re-fit in a row, at most ``finger_refit_max_wait``.
+    ``finger_refit_budget`` > 0 bounds the re-fits' CPU: each tracked frame adds that many
+    re-fit candidates (fits from another start) to an allowance of at most
+    ``finger_refit_burst``, each candidate takes one, and none is tried without.
     ``max_finger_off_silhouette`` (with silhouettes; 1: off): a fit whose hand passes every
     check but where one of ``finger_check_digits`` has more than this share of its axis points
     (its links' base, middle and end, its tip) off the foreground in some camera publishes no
@@ -175,7 +178,9 @@ class EdgeTrackerConfig:
     finger_refit_rounds: int = 2
     finger_refit_backoff: int = 0
     finger_refit_max_wait: int = 16
-    max_finger_off_silhouette: float = 1.0
+    finger_refit_budget: float = 0.0
+    finger_refit_burst: int = 6
+    max_finger_off_silhouette: float = 0.15
     finger_check_digits: tuple[str, ...] = ('index', 'middle', 'ring', 'little')
     silhouette_margin_px: float = 60.0
     loss_patience: int = 3
@@ -220,10 +225,12 @@ class EdgeTrackerConfig:
                                    'max_unexplained in [0, 1]')
         if not 0.0 <= self.max_finger_unexplained <= 1.0 or self.finger_refit_rounds < 1 \
                 or self.finger_refit_backoff < 0 \
-                or self.finger_refit_max_wait < self.finger_refit_backoff:
+                or self.finger_refit_max_wait < self.finger_refit_backoff \
+                or not self.finger_refit_budget >= 0 or self.finger_refit_burst < 1:
             raise EdgeTrackerError('max_finger_unexplained must be in [0, 1], '
                                    'finger_refit_rounds >= 1, '
-                                   '0 <= finger_refit_backoff <= finger_refit_max_wait')
+                                   '0 <= finger_refit_backoff <= finger_refit_max_wait, '
+                                   'finger_refit_budget >= 0, finger_refit_burst >= 1')
         if not 0.0 <= self.max_finger_off_silhouette <= 1.0 \
                 or any(d not in DIGITS for d in self.finger_check_digits):
             raise EdgeTrackerError(f'max_finger_off_silhouette must be in [0, 1] and '

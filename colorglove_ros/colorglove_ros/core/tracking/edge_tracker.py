@@ -36,9 +36,11 @@ from colorglove_ros.core.tracking.edge_fit import (
 from colorglove_ros.core.tracking.kinematics import FastKinematics
 from colorglove_ros.core.tracking.silhouette import BackgroundModel, Silhouette
 
-__all__ = ['EdgeTrackResult', 'EdgeTracker', 'TRACKER_STATES', 'initialisation_pose']
+__all__ = ['EdgeTrackResult', 'EdgeTracker', 'FINGER_WITHHELD', 'TRACKER_STATES',
+           'initialisation_pose']
 
 TRACKER_STATES = ('waiting', 'tracking')
+FINGER_WITHHELD = 'finger withheld'   # the reason's start on a frame the finger check held back
 _INIT_SPREAD_DEG = {'index': 6.0, 'middle': 0.0, 'ring': -6.0, 'little': -12.0}
 
 
@@ -126,6 +128,7 @@ class EdgeTracker:
         self._refit_failures = np.zeros(len(DIGITS), dtype=np.int64)
         self._refit_next = np.zeros(len(DIGITS), dtype=np.int64)
         self._frame = 0
+        self._refit_tokens = float(self.config.finger_refit_burst)
 
     def reset(self) -> None:
         """Drop the track and wait for an initialisation."""
@@ -296,7 +299,7 @@ class EdgeTracker:
             # silhouette: keep the track, publish nothing
             self._bad_frames = 0
             self._coast_frames = 0
-            return EdgeTrackResult('tracking', None, f'finger withheld: {reason}', fit)
+            return EdgeTrackResult('tracking', None, f'{FINGER_WITHHELD}: {reason}', fit)
         if kind:
             self._bad_frames += 1
             if self._bad_frames >= cfg.loss_patience:
@@ -325,6 +328,9 @@ class EdgeTracker:
         if not np.all(np.isfinite(shares)):
             return fit
         self._frame += 1
+        if cfg.finger_refit_budget > 0:
+            self._refit_tokens = min(self._refit_tokens + cfg.finger_refit_budget,
+                                     float(cfg.finger_refit_burst))
         for d in np.argsort(-shares):
             if not fit.finger_unexplained[d] > cfg.max_finger_unexplained \
                     or self._frame < self._refit_next[d]:
@@ -338,6 +344,10 @@ class EdgeTracker:
                 for angles in (self._good_digits[e], self.init_pose[dofs]):
                     if angles is None:
                         continue
+                    if cfg.finger_refit_budget > 0:
+                        if self._refit_tokens < 1.0:
+                            break
+                        self._refit_tokens -= 1.0
                     q0 = fit.q.copy()
                     q0[dofs] = angles
                     cand = fit_pose(self.kin, self.points, self.cameras, greys, q0, cfg,

@@ -472,16 +472,10 @@ def _with_blob_beyond_index_tip(model: HandModel, cameras, images, q: np.ndarray
     return out
 
 
-def test_a_finger_refit_that_fails_backs_off(rig, monkeypatch) -> None:
-    """A digit its re-fit leaves unexplained (a blob beyond the index tip no finger pose
-    explains) is re-fitted again only after ``finger_refit_backoff`` frames, then after twice
-    as many; without the back-off every frame re-fits it. The failed re-fits change nothing,
-    so the poses are the same either way."""
+def _count_fits(monkeypatch) -> list[int]:
+    """A one-element list counting the tracker's calls of ``fit_pose`` from now on."""
     from colorglove_ros.core.tracking import edge_tracker
 
-    cameras, seq, frames = rig
-    model, truth = seq.synth.model, seq.poses[20]
-    images = _with_blob_beyond_index_tip(model, cameras, frames[20], truth)
     calls = [0]
     fit_pose = edge_tracker.fit_pose
 
@@ -490,6 +484,18 @@ def test_a_finger_refit_that_fails_backs_off(rig, monkeypatch) -> None:
         return fit_pose(*args, **kwargs)
 
     monkeypatch.setattr(edge_tracker, 'fit_pose', counting)
+    return calls
+
+
+def test_a_finger_refit_that_fails_backs_off(rig, monkeypatch) -> None:
+    """A digit its re-fit leaves unexplained (a blob beyond the index tip no finger pose
+    explains) is re-fitted again only after ``finger_refit_backoff`` frames, then after twice
+    as many; without the back-off every frame re-fits it. The failed re-fits change nothing,
+    so the poses are the same either way."""
+    cameras, seq, frames = rig
+    model, truth = seq.synth.model, seq.poses[20]
+    images = _with_blob_beyond_index_tip(model, cameras, frames[20], truth)
+    calls = _count_fits(monkeypatch)
     fits, poses = {}, {}
     for backoff in (0, 1):
         tracker = EdgeTracker(model, cameras, EdgeTrackerConfig(
@@ -509,6 +515,29 @@ def test_a_finger_refit_that_fails_backs_off(rig, monkeypatch) -> None:
     assert np.allclose(poses[0], poses[1])
     with pytest.raises(EdgeTrackerError):
         EdgeTrackerConfig(finger_refit_backoff=4, finger_refit_max_wait=2)
+
+
+def test_the_finger_refit_budget_bounds_the_refits(rig, monkeypatch) -> None:
+    """With ``finger_refit_budget`` the re-fit candidates over N frames are at most
+    ``finger_refit_burst`` + budget x N, however many digits stay unexplained."""
+    cameras, seq, frames = rig
+    model, truth = seq.synth.model, seq.poses[20]
+    images = _with_blob_beyond_index_tip(model, cameras, frames[20], truth)
+    calls = _count_fits(monkeypatch)
+    candidates = {}
+    for budget in (0.0, 0.5):
+        tracker = EdgeTracker(model, cameras, EdgeTrackerConfig(
+            finger_refit=True, finger_refit_budget=budget, finger_refit_burst=2,
+            loss_patience=10), _backgrounds(frames))
+        tracker.initialize(truth)
+        calls[0] = 0
+        for _ in range(5):
+            tracker.update(images)
+        candidates[budget] = calls[0] - 5          # one fit per frame is the frame's own
+    assert candidates[0.0] >= 10
+    assert 0 < candidates[0.5] <= 2 + 0.5 * 5
+    with pytest.raises(EdgeTrackerError):
+        EdgeTrackerConfig(finger_refit_budget=-1.0)
 
 
 def test_even_subsample_spreads_at_most_count_indices() -> None:
