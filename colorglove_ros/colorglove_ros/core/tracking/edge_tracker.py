@@ -13,7 +13,8 @@ for re-initialisation. A frame whose only fault is coverage (too few links found
 residual on those found) can instead be coasted through for ``coast_patience`` frames (off by
 default), publishing nothing and keeping the track. With a background model per camera
 (:class:`BackgroundModel`, the user's capture of the empty scene) each frame's silhouettes
-join the fit and its drift checks (:class:`EdgeTrackerConfig`).
+join the fit and its drift checks (:class:`EdgeTrackerConfig`); a frame where only a finger
+lies off its silhouette is withheld (no pose, reason ``finger withheld: ...``), the track kept.
 """
 from __future__ import annotations
 
