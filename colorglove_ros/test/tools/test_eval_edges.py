@@ -19,6 +19,7 @@ def test_short_run_with_and_without_the_empty_scene(tmp_path) -> None:
         assert data['settings']['background'] == background
         (row,) = data['rows']
         assert row['frames'] == 40 and row['published'] > 10     # started from the hold
+        assert row['finger_withheld'] + row['published'] <= 40
         rows[background] = row
     # the silhouettes take part in the fit: the estimates differ
     assert rows['empty']['fingertip_rel_wrist_mm'] != rows['none']['fingertip_rel_wrist_mm']

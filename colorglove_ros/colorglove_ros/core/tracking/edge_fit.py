@@ -67,7 +67,7 @@ __all__ = [
     'EdgeTrackerError', 'EdgeTrackerConfig', 'DEFAULT_TRACKED_LINKS', 'FeaturePoints',
     'feature_points', 'EdgePrediction', 'EdgeMeasurement', 'EdgeFit', 'link_axis_residuals',
     'tip_residuals', 'predict_features', 'measure_features', 'stack_residuals', 'fit_pose',
-    'fingertip_disagreement', 'hand_outline', 'LineRows', 'line_rows',
+    'fingertip_disagreement', 'hand_outline', 'LineRows', 'line_rows', 'even_subsample',
 ]
 
 # every phalanx except the thumb metacarpal, which lies inside the palm's outline
@@ -129,7 +129,18 @@ class EdgeTrackerConfig:
     ``max_finger_unexplained`` re-fits that digit from other starting angles (its angles on
     the last frame where it was explained, and the initialisation pose's), each with
     ``finger_refit_rounds`` measurement rounds, and keeps the fit that leaves the least of
-    that digit unexplained (:class:`EdgeTracker`).
+    that digit unexplained (:class:`EdgeTracker`); a re-fit that leaves the digit unexplained
+    makes it wait ``finger_refit_backoff`` tracked frames before the next (0: none), twice as
+    long after each further such re-fit in a row, at most ``finger_refit_max_wait``.
+    ``finger_refit_budget`` > 0 bounds the re-fits' CPU: each tracked frame adds that many
+    re-fit candidates (fits from another start) to an allowance of at most
+    ``finger_refit_burst``, each candidate takes one, and none is tried without.
+    ``max_finger_off_silhouette`` (with silhouettes; 1: off): a fit whose hand passes every
+    check but where one of ``finger_check_digits`` has more than this share of its axis points
+    (its links' base, middle and end, its tip) off the foreground in some camera publishes no
+    pose, the track kept (the finger drifted: the fitted finger lies over the background).
+    The thumb is left out by default: its model axis lies off its silhouette even at the true
+    pose.
     """
 
     search: EdgeSearchConfig = field(default_factory=EdgeSearchConfig)
@@ -165,6 +176,12 @@ class EdgeTrackerConfig:
     finger_refit: bool = False
     max_finger_unexplained: float = 0.01
     finger_refit_rounds: int = 2
+    finger_refit_backoff: int = 0
+    finger_refit_max_wait: int = 16
+    finger_refit_budget: float = 0.0
+    finger_refit_burst: int = 6
+    max_finger_off_silhouette: float = 0.15
+    finger_check_digits: tuple[str, ...] = ('index', 'middle', 'ring', 'little')
     silhouette_margin_px: float = 60.0
     loss_patience: int = 3
     coast_patience: int = 0
@@ -206,9 +223,18 @@ class EdgeTrackerConfig:
             raise EdgeTrackerError('silhouette_weight, silhouette_tolerance_px, '
                                    'silhouette_points must be >= 0, max_off_silhouette and '
                                    'max_unexplained in [0, 1]')
-        if not 0.0 <= self.max_finger_unexplained <= 1.0 or self.finger_refit_rounds < 1:
+        if not 0.0 <= self.max_finger_unexplained <= 1.0 or self.finger_refit_rounds < 1 \
+                or self.finger_refit_backoff < 0 \
+                or self.finger_refit_max_wait < self.finger_refit_backoff \
+                or not self.finger_refit_budget >= 0 or self.finger_refit_burst < 1:
             raise EdgeTrackerError('max_finger_unexplained must be in [0, 1], '
-                                   'finger_refit_rounds >= 1')
+                                   'finger_refit_rounds >= 1, '
+                                   '0 <= finger_refit_backoff <= finger_refit_max_wait, '
+                                   'finger_refit_budget >= 0, finger_refit_burst >= 1')
+        if not 0.0 <= self.max_finger_off_silhouette <= 1.0 \
+                or any(d not in DIGITS for d in self.finger_check_digits):
+            raise EdgeTrackerError(f'max_finger_off_silhouette must be in [0, 1] and '
+                                   f'finger_check_digits among {DIGITS}')
         if self.loss_patience < 1 or self.init_hold_frames < 1:
             raise EdgeTrackerError('loss_patience and init_hold_frames must be >= 1')
 
@@ -268,6 +294,8 @@ class FeaturePoints:
     #                          of the points on the palm link (the palm sides' and its centre)
     palm_affine: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))  # (K, 4): a palm
     #                          point x's weights over those points are palm_affine @ (x, 1)
+    tip_digit: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (T,) the
+    #                          digit of each tip
 
     @property
     def num_palm_sides(self) -> int:
@@ -367,10 +395,12 @@ def feature_points(model: HandModel, tracked: Sequence[str], use_tips: bool,
     basis = np.vstack([local[rigid].T, np.ones(len(rigid))])
     affine = np.linalg.pinv(basis) if len(rigid) >= 4 and np.linalg.matrix_rank(basis) == 4 \
         else np.zeros((0, 4))
+    tip_digit = np.array([DIGITS.index(LINK_NAMES[li].split('_')[0]) for li in tip_links],
+                         dtype=np.int64)
     return FeaturePoints(links, tip_links, tip_row, point_link, local, radius[links],
                           radius[tip_links], palm_sign, np.asarray(palm, dtype=float),
                           np.asarray(hull, dtype=float), radius[untracked], digit,
-                          rigid[:len(affine)], affine)
+                          rigid[:len(affine)], affine, tip_digit)
 
 
 @dataclass(frozen=True)
@@ -653,9 +683,10 @@ def _hand_outline(points: FeaturePoints, camera: PinholeCamera, q: np.ndarray,
 
 
 def _axis_points(points: FeaturePoints, pix: np.ndarray, Jpix: np.ndarray | None,
-                 camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray | None]:
+                 camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """The hand's axis points that must lie on its silhouette (each link's base, middle and
-    end, each tip centre) inside the image, and their pixel Jacobians."""
+    end, each tip centre) inside the image, their pixel Jacobians and their digits (index
+    in DIGITS)."""
     L = len(points.links)
     base, end = pix[0:2 * L:2], pix[1:2 * L:2]
     px = np.concatenate([base, 0.5 * (base + end), end, pix[points.tip_slice]])
@@ -665,7 +696,8 @@ def _axis_points(points: FeaturePoints, pix: np.ndarray, Jpix: np.ndarray | None
         J = np.concatenate([Jb, 0.5 * (Jb + Je), Je, Jpix[points.tip_slice]])
     inside = (px[:, 0] >= 0) & (px[:, 0] < camera.width) & (px[:, 1] >= 0) \
         & (px[:, 1] < camera.height)
-    return px[inside], None if J is None else J[inside]
+    digit = np.concatenate([np.tile(points.outline_digit[:L], 3), points.tip_digit])
+    return px[inside], None if J is None else J[inside], digit[inside]
 
 
 def silhouette_measures(points: FeaturePoints, camera: PinholeCamera, silhouette: Silhouette,
@@ -673,25 +705,40 @@ def silhouette_measures(points: FeaturePoints, camera: PinholeCamera, silhouette
                         config: EdgeTrackerConfig) -> np.ndarray:
     """How well pose ``q`` explains one camera's silhouette, for the drift checks that are
     on (NaN for a check that is off, ``max_off_silhouette`` or ``max_unexplained`` 1, or
-    ``finger_refit`` false), (7,): the share of the hand's axis points more than
-    ``silhouette_tolerance_px`` off the foreground, the unexplained share of the hand's
-    foreground (:meth:`Silhouette.unexplained` of the predicted hand, :func:`hand_outline`)
-    and, per digit, the share of the hand's foreground left unexplained nearest to that
-    digit's capsules (:func:`_digit_shares`)."""
+    ``finger_refit`` false, ``max_finger_off_silhouette`` 1), (12,): the share of the hand's
+    axis points more than ``silhouette_tolerance_px`` off the foreground, the unexplained
+    share of the hand's foreground (:meth:`Silhouette.unexplained` of the predicted hand,
+    :func:`hand_outline`), per digit the share of the hand's foreground left unexplained
+    nearest to that digit's capsules (:func:`_digit_shares`) and per digit the share of its
+    axis points off the foreground (0 for a digit with none in the image)."""
     tol = config.silhouette_tolerance_px
-    out = np.full(2 + len(DIGITS), math.nan)
-    if config.max_off_silhouette < 1.0:
-        ax, _ = _axis_points(points, pix, None, camera)
-        out[0] = float(np.mean(silhouette.outside_distance(ax)[0] > tol)) if len(ax) else 0.0
+    D = len(DIGITS)
+    out = np.full(2 + 2 * D, math.nan)
+    if config.max_off_silhouette < 1.0 or config.max_finger_off_silhouette < 1.0:
+        ax, _, digit = _axis_points(points, pix, None, camera)
+        off = silhouette.outside_distance(ax)[0] > tol
+        if config.max_off_silhouette < 1.0:
+            out[0] = float(np.mean(off)) if len(ax) else 0.0
+        if config.max_finger_off_silhouette < 1.0:
+            count = np.bincount(digit, minlength=D)
+            out[2 + D:] = np.bincount(digit, weights=off, minlength=D) / np.maximum(count, 1)
     if config.max_unexplained < 1.0 or config.finger_refit:
         outline = hand_outline(points, camera, q, pix, depth)
         loose, out[1] = silhouette.unexplained(outline, tol, pixels=config.finger_refit)
         if config.finger_refit:
-            out[2:] = _digit_shares(points, outline, loose, out[1])
+            out[2:2 + D] = _digit_shares(points, outline, loose, out[1])
     return out
 
 
 _DIGIT_SAMPLES = 200     # unexplained pixels (at most) assigned to digits per camera
+
+
+def even_subsample(length: int, count: int) -> np.ndarray:
+    """Indices of at most ``count`` of ``length`` items, evenly through them (first and last
+    included, rounded down): all of them when there are no more than ``count``."""
+    if length <= count:
+        return np.arange(length, dtype=np.int64)
+    return np.linspace(0, length - 1, count).astype(np.int64)
 
 
 def _digit_shares(points: FeaturePoints, outline: HandOutline, loose: np.ndarray,
@@ -702,8 +749,7 @@ def _digit_shares(points: FeaturePoints, outline: HandOutline, loose: np.ndarray
     out = np.zeros(len(DIGITS))
     if not len(loose) or not len(outline.base):
         return out
-    sample = loose[np.linspace(0, len(loose) - 1, min(len(loose), _DIGIT_SAMPLES))
-                   .astype(np.int64)]
+    sample = loose[even_subsample(len(loose), _DIGIT_SAMPLES)]
     to_link = segment_distances(sample, outline.base, outline.end)[0] \
         - outline.half_width[None, :]
     nearest = np.argmin(to_link, axis=1)
@@ -724,8 +770,7 @@ def _silhouette_targets(loose: np.ndarray, base: np.ndarray, end: np.ndarray,
     capsule are left out (the palm is rigid with the wrist, and its rim would pull a finger),
     or, given ``points`` (``silhouette_palm``; ``palm`` then the projection of every point of
     ``points.palm_hull``), kept as up to ``count`` palm targets."""
-    if len(loose) > 2 * count:
-        loose = loose[np.linspace(0, len(loose) - 1, 2 * count).astype(np.int64)]
+    loose = loose[even_subsample(len(loose), 2 * count)]
     palm_targets: dict[str, np.ndarray] = {}
     if len(loose) and len(palm) >= 3:
         # unexplained pixels lie outside the palm's hull: their distance to it is that to
@@ -742,8 +787,7 @@ def _silhouette_targets(loose: np.ndarray, base: np.ndarray, end: np.ndarray,
             palm_targets = _palm_targets(loose[near_palm], hull, index,
                                          to_edge[near_palm], along[near_palm], count, points)
         loose = loose[~near_palm]
-    if len(loose) > count:
-        loose = loose[np.linspace(0, len(loose) - 1, count).astype(np.int64)]
+    loose = loose[even_subsample(len(loose), count)]
     if not len(loose) or not len(base):
         return SilhouetteTargets(np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0),
                                  np.zeros((0, 2)), **palm_targets)
@@ -764,9 +808,8 @@ def _palm_targets(px: np.ndarray, hull: np.ndarray, index: np.ndarray, to_edge: 
     ``to_edge``, ``along``: each pixel's distance to each hull edge and the closest point's
     place on it): up to ``count`` pixels, the palm point under each one's closest point as
     weights of the palm's rigid feature points, the direction to the pixel."""
-    if len(px) > count:
-        keep = np.linspace(0, len(px) - 1, count).astype(np.int64)
-        px, to_edge, along = px[keep], to_edge[keep], along[keep]
+    keep = even_subsample(len(px), count)
+    px, to_edge, along = px[keep], to_edge[keep], along[keep]
     rows = np.arange(len(px))
     edge = np.argmin(to_edge, axis=1)
     s = along[rows, edge]
@@ -790,7 +833,7 @@ def _silhouette_residuals(points: FeaturePoints, camera: PinholeCamera, meas: Ed
     capsule and (palm targets, ``world`` the feature points and Jacobians) from its point of
     the palm (rows only where positive)."""
     tol = config.silhouette_tolerance_px
-    ax, _ = _axis_points(points, pix, None, camera)
+    ax, _, _ = _axis_points(points, pix, None, camera)
     d, grad = meas.silhouette.outside_distance(ax)
     off = d > tol
     r = [d[off] - tol]
@@ -1008,7 +1051,9 @@ class EdgeFit:
     silhouettes, the largest over the cameras of the share of the hand's axis points off the
     foreground and of the unexplained share of the foreground (:func:`silhouette_measures`;
     NaN without silhouettes) and, with ``finger_refit``, per digit the largest over the
-    cameras of the share of the foreground left unexplained nearest to that digit."""
+    cameras of the share of the foreground left unexplained nearest to that digit and, with
+    ``max_finger_off_silhouette`` < 1, per digit the largest over the cameras of the share of
+    its axis points off the foreground."""
 
     q: np.ndarray
     rms_px: float
@@ -1020,6 +1065,7 @@ class EdgeFit:
     off_silhouette: float = math.nan
     unexplained: float = math.nan
     finger_unexplained: tuple[float, ...] = (math.nan,) * len(DIGITS)
+    finger_off_silhouette: tuple[float, ...] = (math.nan,) * len(DIGITS)
 
     @property
     def found_fraction(self) -> float:
@@ -1133,9 +1179,10 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
         q0, _ = _gauss_newton(kin, points, cameras, alone, world0, q_anchor.copy(), q_anchor,
                               S, C, config)
         disagreement = fingertip_disagreement(kin, q, q0)
-    shares = np.full(2 + len(DIGITS), math.nan)
+    D = len(DIGITS)
+    shares = np.full(2 + 2 * D, math.nan)
     checks = config.max_off_silhouette < 1.0 or config.max_unexplained < 1.0 \
-        or config.finger_refit
+        or config.finger_refit or config.max_finger_off_silhouette < 1.0
     if checks and any(sil is not None for sil in sils):
         p_final = world[0]          # the final pose's points, as for the RMS above
         per_camera = []
@@ -1145,4 +1192,5 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
                 per_camera.append(silhouette_measures(points, cam, sil, q, pix, depth, config))
         shares = np.max(per_camera, axis=0)
     return EdgeFit(q, rms, found, usable, tips, iterations, disagreement, float(shares[0]),
-                   float(shares[1]), tuple(float(v) for v in shares[2:]))
+                   float(shares[1]), tuple(float(v) for v in shares[2:2 + D]),
+                   tuple(float(v) for v in shares[2 + D:]))

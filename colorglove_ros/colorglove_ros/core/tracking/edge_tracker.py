@@ -13,7 +13,8 @@ for re-initialisation. A frame whose only fault is coverage (too few links found
 residual on those found) can instead be coasted through for ``coast_patience`` frames (off by
 default), publishing nothing and keeping the track. With a background model per camera
 (:class:`BackgroundModel`, the user's capture of the empty scene) each frame's silhouettes
-join the fit and its drift checks (:class:`EdgeTrackerConfig`).
+join the fit and its drift checks (:class:`EdgeTrackerConfig`); a frame where only a finger
+lies off its silhouette is withheld (no pose, reason ``finger withheld: ...``), the track kept.
 """
 from __future__ import annotations
 
@@ -36,9 +37,11 @@ from colorglove_ros.core.tracking.edge_fit import (
 from colorglove_ros.core.tracking.kinematics import FastKinematics
 from colorglove_ros.core.tracking.silhouette import BackgroundModel, Silhouette
 
-__all__ = ['EdgeTrackResult', 'EdgeTracker', 'TRACKER_STATES', 'initialisation_pose']
+__all__ = ['EdgeTrackResult', 'EdgeTracker', 'FINGER_WITHHELD', 'TRACKER_STATES',
+           'initialisation_pose']
 
 TRACKER_STATES = ('waiting', 'tracking')
+FINGER_WITHHELD = 'finger withheld'   # the reason's start on a frame the finger check held back
 _INIT_SPREAD_DEG = {'index': 6.0, 'middle': 0.0, 'ring': -6.0, 'little': -12.0}
 
 
@@ -100,14 +103,10 @@ class EdgeTracker:
         self.backgrounds: tuple[BackgroundModel | None, ...] = (None,) * len(self.cameras)
         if backgrounds is not None:
             self.set_backgrounds(backgrounds)
-        self._q: np.ndarray | None = None
-        self._bad_frames = 0
-        self._coast_frames = 0
-        self._resume = 0
-        self._hold: list[np.ndarray] = []
         self._digit_dofs = [np.array([i for i, n in enumerate(model.dof_names)
                                       if n.startswith(f'{d}_')]) for d in DIGITS]
-        self._good_digits: list[np.ndarray | None] = [None] * len(DIGITS)
+        self._q: np.ndarray | None = None
+        self._start_track()
 
     @property
     def state(self) -> str:
@@ -119,14 +118,23 @@ class EdgeTracker:
         """The current estimate (None while waiting)."""
         return None if self._q is None else self._q.copy()
 
-    def reset(self) -> None:
-        """Drop the track and wait for an initialisation."""
-        self._q = None
+    def _start_track(self) -> None:
+        """Clear what a track remembers (loss and coasting counts, the initialisation hold,
+        the digits' explained angles and re-fit back-off)."""
         self._bad_frames = 0
         self._coast_frames = 0
         self._resume = 0
-        self._hold = []
-        self._good_digits = [None] * len(DIGITS)
+        self._hold: list[np.ndarray] = []
+        self._good_digits: list[np.ndarray | None] = [None] * len(DIGITS)
+        self._refit_failures = np.zeros(len(DIGITS), dtype=np.int64)
+        self._refit_next = np.zeros(len(DIGITS), dtype=np.int64)
+        self._frame = 0
+        self._refit_tokens = float(self.config.finger_refit_burst)
+
+    def reset(self) -> None:
+        """Drop the track and wait for an initialisation."""
+        self._q = None
+        self._start_track()
 
     def initialize(self, q: np.ndarray) -> None:
         """Start tracking from a given pose (e.g. from the glove tracker)."""
@@ -134,11 +142,7 @@ class EdgeTracker:
         if q.shape != (NUM_DOFS,) or not np.all(np.isfinite(q)):
             raise EdgeTrackerError(f'initial pose must be 26 finite numbers, got {q.shape}')
         self._q = self.kin.clamp(q)
-        self._bad_frames = 0
-        self._coast_frames = 0
-        self._resume = 0
-        self._hold = []
-        self._good_digits = [None] * len(DIGITS)
+        self._start_track()
 
     def set_backgrounds(self, backgrounds: Sequence[BackgroundModel | None]) -> None:
         """Use these empty-scene models (one per camera, None for none) from now on."""
@@ -196,14 +200,17 @@ class EdgeTracker:
         return greys
 
     def _fit_problem(self, fit: EdgeFit) -> str:
-        """'' if the fit explains the edges, else the reason it does not."""
-        return self._check_fit(fit)[1]
+        """'' if the fit explains the edges, else the reason it does not (the finger check
+        aside: a re-fit candidate or an initialisation is judged as a whole hand)."""
+        return self._check_fit(fit, fingers=False)[1]
 
-    def _check_fit(self, fit: EdgeFit) -> tuple[str, str]:
+    def _check_fit(self, fit: EdgeFit, fingers: bool = True) -> tuple[str, str]:
         """(kind, reason) of a fit that does not explain the edges, ('', '') if it does:
         kind 'coverage' when too few links were found (in a camera or over all) but the
         residual of those found is small, 'drift' when the residual is too large, nothing
-        was found or the pose is not finite."""
+        was found or the pose is not finite, 'finger' (with ``fingers``) when the hand passes
+        but one of ``finger_check_digits`` has more than ``max_finger_off_silhouette`` of its
+        axis points off the silhouette in some camera."""
         cfg = self.config
         if not np.all(np.isfinite(fit.q)):
             return 'drift', 'non-finite pose'
@@ -229,6 +236,12 @@ class EdgeTracker:
         if fit.found_fraction < cfg.min_found_fraction:
             return 'coverage', (f'{sum(fit.links_found)} of {sum(fit.links_usable)} links '
                                 f'found (need {cfg.min_found_fraction:.0%})')
+        if fingers:
+            for name in cfg.finger_check_digits:
+                off = fit.finger_off_silhouette[DIGITS.index(name)]
+                if off > cfg.max_finger_off_silhouette:
+                    return 'finger', (f'{name} finger: {off:.0%} of its axis off the '
+                                      f'silhouette (max {cfg.max_finger_off_silhouette:.0%})')
         return '', ''
 
     def update(self, images: Sequence[np.ndarray | None]) -> EdgeTrackResult:
@@ -282,6 +295,12 @@ class EdgeTracker:
             self._bad_frames = 0
             self._resume = cfg.resume_frames
             return EdgeTrackResult('tracking', None, f'coasting: {reason}', fit)
+        if kind == 'finger':
+            # the hand explains its edges and silhouettes but one finger lies off its
+            # silhouette: keep the track, publish nothing
+            self._bad_frames = 0
+            self._coast_frames = 0
+            return EdgeTrackResult('tracking', None, f'{FINGER_WITHHELD}: {reason}', fit)
         if kind:
             self._bad_frames += 1
             if self._bad_frames >= cfg.loss_patience:
@@ -303,13 +322,19 @@ class EdgeTracker:
         was explained and from the initialisation pose's; if it still leaves too much, its
         neighbours likewise (a finger that drifted off its place leaves pixels nearest to the
         next one). A re-fit passing every check is kept when it leaves less near that digit
-        (then less of the hand) unexplained."""
+        (then less of the hand) unexplained. A digit its re-fit left unexplained waits before
+        the next (:meth:`_refit_due`)."""
         cfg = self.config
         shares = np.asarray(fit.finger_unexplained)
         if not np.all(np.isfinite(shares)):
             return fit
+        self._frame += 1
+        if cfg.finger_refit_budget > 0:
+            self._refit_tokens = min(self._refit_tokens + cfg.finger_refit_budget,
+                                     float(cfg.finger_refit_burst))
         for d in np.argsort(-shares):
-            if not fit.finger_unexplained[d] > cfg.max_finger_unexplained:
+            if not fit.finger_unexplained[d] > cfg.max_finger_unexplained \
+                    or self._frame < self._refit_next[d]:
                 continue
             for e in (d, d - 1, d + 1):
                 if not 0 <= e < len(DIGITS) or not fit.finger_unexplained[d] \
@@ -320,6 +345,10 @@ class EdgeTracker:
                 for angles in (self._good_digits[e], self.init_pose[dofs]):
                     if angles is None:
                         continue
+                    if cfg.finger_refit_budget > 0:
+                        if self._refit_tokens < 1.0:
+                            break
+                        self._refit_tokens -= 1.0
                     q0 = fit.q.copy()
                     q0[dofs] = angles
                     cand = fit_pose(self.kin, self.points, self.cameras, greys, q0, cfg,
@@ -329,10 +358,25 @@ class EdgeTracker:
                             < (best.finger_unexplained[d], best.unexplained):
                         best = cand
                 fit = best
+            self._refit_due(d, fit.finger_unexplained[d] <= cfg.max_finger_unexplained)
         for d, share in enumerate(fit.finger_unexplained):
             if share <= cfg.max_finger_unexplained:
                 self._good_digits[d] = fit.q[self._digit_dofs[d]].copy()
+                self._refit_failures[d] = 0
+                self._refit_next[d] = 0
         return fit
+
+    def _refit_due(self, digit: int, fixed: bool) -> None:
+        """After a re-fit of ``digit``: a re-fit that left it unexplained makes it wait
+        ``finger_refit_backoff`` frames, twice as long after each further such re-fit in a
+        row (at most ``finger_refit_max_wait``); one that explained it clears the count."""
+        cfg = self.config
+        if fixed or cfg.finger_refit_backoff == 0:
+            self._refit_failures[digit] = 0
+            return
+        self._refit_failures[digit] += 1
+        wait = cfg.finger_refit_backoff * 2 ** (int(self._refit_failures[digit]) - 1)
+        self._refit_next[digit] = self._frame + 1 + min(wait, cfg.finger_refit_max_wait)
 
     def with_config(self, **changes: object) -> EdgeTracker:
         """A fresh tracker on the same model and cameras with some settings changed."""

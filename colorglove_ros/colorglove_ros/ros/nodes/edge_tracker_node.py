@@ -12,6 +12,8 @@ Each frame's foreground against it then enters the fit (``silhouette_weight``) a
 checks (``max_unexplained``); empty: edges only. ``finger_refit`` (off by default) re-fits a
 finger that leaves part of the hand's silhouette unexplained; ``silhouette_palm`` (off by
 default) lets the unexplained foreground next to the palm pull the whole hand.
+A frame where a finger's axis lies off the silhouette (``max_finger_off_silhouette``; not
+the thumb) publishes no pose and says which finger on the status topic; the track is kept.
 
 Start: hold the flat hand still, palm to the (primary) camera, at the marked spot
 ``init_wrist_position``; or publish a starting pose on ``edge_tracker/init_joint_states`` +
@@ -133,6 +135,12 @@ class EdgeTrackerNode(Node):
         silhouette_palm = declare(self, 'silhouette_palm', defaults.silhouette_palm,
                                   'with silhouettes: the unexplained foreground next to the '
                                   'palm pulls the palm (the whole hand) toward it')
+        max_finger_off = declare(self, 'max_finger_off_silhouette',
+                                 defaults.max_finger_off_silhouette,
+                                 'with silhouettes: largest share of a finger\'s axis points '
+                                 '(not the thumb\'s) off the silhouette in any camera before '
+                                 'the frame is withheld (track kept, no pose; 1: never)',
+                                 0.0, 1.0)
         with startup_errors('edge_tracker_node', ValueError):
             if len(init_wrist) != 3:
                 raise ColorGloveError(f'init_wrist_position needs 3 values, got {init_wrist}')
@@ -148,7 +156,8 @@ class EdgeTrackerNode(Node):
                 silhouette_weight=float(silhouette_weight),
                 max_unexplained=float(max_unexplained), finger_refit=bool(finger_refit),
                 max_finger_unexplained=float(max_finger_unexplained),
-                silhouette_palm=bool(silhouette_palm))
+                silhouette_palm=bool(silhouette_palm),
+                max_finger_off_silhouette=float(max_finger_off))
             self.backgrounds = [read_background(resolve_path(f), SilhouetteConfig(
                 threshold=float(threshold))) for f in backgrounds]
             cameras: tuple[PinholeCamera, ...] = ()

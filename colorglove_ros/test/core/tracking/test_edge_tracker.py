@@ -453,3 +453,122 @@ def test_palm_targets_are_rigid_with_the_palm(rig) -> None:
     assert np.allclose(weights @ world[points.palm_rigid], direct, atol=1e-9)
     assert len(feature_points(model, EdgeTrackerConfig().tracked_links, True, ()).palm_affine) \
         == 0
+
+
+def _with_blob_beyond_index_tip(model: HandModel, cameras, images, q: np.ndarray) -> list:
+    """The images with a foreground blob drawn beyond the index fingertip of pose ``q``: it
+    stays unexplained next to the index whatever the finger does."""
+    import cv2
+
+    kp = model.keypoints(q)
+    ends = np.array([kp[KEYPOINT_NAMES.index('index_tip')], kp[KEYPOINT_NAMES.index('index_dip')]])
+    out = []
+    for cam, img in zip(cameras, images, strict=True):
+        tip, dip = cam.project(cam.world_to_camera(ends))
+        centre = tip + 35.0 * (tip - dip) / np.linalg.norm(tip - dip)
+        img = np.array(img, copy=True)
+        cv2.circle(img, tuple(int(v) for v in centre), 18, (40, 200, 40), -1)
+        out.append(img)
+    return out
+
+
+def _count_fits(monkeypatch) -> list[int]:
+    """A one-element list counting the tracker's calls of ``fit_pose`` from now on."""
+    from colorglove_ros.core.tracking import edge_tracker
+
+    calls = [0]
+    fit_pose = edge_tracker.fit_pose
+
+    def counting(*args, **kwargs):
+        calls[0] += 1
+        return fit_pose(*args, **kwargs)
+
+    monkeypatch.setattr(edge_tracker, 'fit_pose', counting)
+    return calls
+
+
+def test_a_finger_refit_that_fails_backs_off(rig, monkeypatch) -> None:
+    """A digit its re-fit leaves unexplained (a blob beyond the index tip no finger pose
+    explains) is re-fitted again only after ``finger_refit_backoff`` frames, then after twice
+    as many; without the back-off every frame re-fits it. The failed re-fits change nothing,
+    so the poses are the same either way."""
+    cameras, seq, frames = rig
+    model, truth = seq.synth.model, seq.poses[20]
+    images = _with_blob_beyond_index_tip(model, cameras, frames[20], truth)
+    calls = _count_fits(monkeypatch)
+    fits, poses = {}, {}
+    for backoff in (0, 1):
+        tracker = EdgeTracker(model, cameras, EdgeTrackerConfig(
+            finger_refit=True, finger_refit_backoff=backoff, loss_patience=10),
+            _backgrounds(frames))
+        tracker.initialize(truth)
+        fits[backoff], poses[backoff] = [], []
+        for _ in range(6):
+            calls[0] = 0
+            result = tracker.update(images)
+            fits[backoff].append(calls[0])
+            poses[backoff].append(result.fit.q)
+    assert all(n > 1 for n in fits[0])                  # re-fits on every frame
+    assert fits[1][0] > 1 and fits[1][1] == 1           # fails, waits one frame,
+    assert fits[1][2] > 1 and fits[1][3] == fits[1][4] == 1   # fails again, waits two
+    assert fits[1][5] > 1
+    assert np.allclose(poses[0], poses[1])
+    with pytest.raises(EdgeTrackerError):
+        EdgeTrackerConfig(finger_refit_backoff=4, finger_refit_max_wait=2)
+
+
+def test_the_finger_refit_budget_bounds_the_refits(rig, monkeypatch) -> None:
+    """With ``finger_refit_budget`` the re-fit candidates over N frames are at most
+    ``finger_refit_burst`` + budget x N, however many digits stay unexplained."""
+    cameras, seq, frames = rig
+    model, truth = seq.synth.model, seq.poses[20]
+    images = _with_blob_beyond_index_tip(model, cameras, frames[20], truth)
+    calls = _count_fits(monkeypatch)
+    candidates = {}
+    for budget in (0.0, 0.5):
+        tracker = EdgeTracker(model, cameras, EdgeTrackerConfig(
+            finger_refit=True, finger_refit_budget=budget, finger_refit_burst=2,
+            loss_patience=10), _backgrounds(frames))
+        tracker.initialize(truth)
+        calls[0] = 0
+        for _ in range(5):
+            tracker.update(images)
+        candidates[budget] = calls[0] - 5          # one fit per frame is the frame's own
+    assert candidates[0.0] >= 10
+    assert 0 < candidates[0.5] <= 2 + 0.5 * 5
+    with pytest.raises(EdgeTrackerError):
+        EdgeTrackerConfig(finger_refit_budget=-1.0)
+
+
+def test_even_subsample_spreads_at_most_count_indices() -> None:
+    from colorglove_ros.core.tracking.edge_fit import even_subsample
+
+    assert even_subsample(4, 10).tolist() == [0, 1, 2, 3]
+    assert even_subsample(10, 4).tolist() == [0, 3, 6, 9]
+    assert even_subsample(10, 0).tolist() == [] and even_subsample(0, 3).tolist() == []
+    assert even_subsample(1000, 7).dtype == np.int64
+
+
+def test_a_finger_off_its_silhouette_is_withheld(rig) -> None:
+    """A fit whose index finger lies off the silhouette (bent sideways onto the background)
+    while the rest of the hand explains its edges gives no pose with
+    ``max_finger_off_silhouette`` set, keeps the track and says which finger; the true pose
+    is published, and without the gate the bent one is too."""
+    cameras, seq, frames = rig
+    model, truth = seq.synth.model, seq.poses[20]
+    bent = truth.copy()
+    bent[model.dof_names.index('index_mcp_abd')] += 0.5
+    frozen = dict(gn_iterations=1, stabilizer=(1e9, 1e9, 1e9), max_unexplained=1.0)
+    results = {}
+    for name, gate, q in (('bent', 0.15, bent), ('true', 0.15, truth), ('off', 1.0, bent)):
+        tracker = EdgeTracker(model, cameras, EdgeTrackerConfig(
+            max_finger_off_silhouette=gate, **frozen), _backgrounds(frames))
+        tracker.initialize(q)
+        results[name] = tracker.update(frames[20])
+    bent_fit = results['bent'].fit
+    assert bent_fit.finger_off_silhouette[1] > 0.15
+    assert results['bent'].q is None and results['bent'].state == 'tracking'
+    assert results['bent'].reason.startswith('finger withheld: index finger')
+    assert max(results['true'].fit.finger_off_silhouette[1:]) <= 0.15
+    assert results['true'].q is not None and results['off'].q is not None
+    assert np.all(np.isnan(results['off'].fit.finger_off_silhouette))

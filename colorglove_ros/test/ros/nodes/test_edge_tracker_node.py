@@ -109,10 +109,27 @@ def test_camera_check_parameters_reach_the_tracker() -> None:
 
 
 def test_silhouette_palm_parameter_reaches_the_tracker() -> None:
+    with running(_node(silhouette_palm=False)) as h:
+        assert not h.nodes[0].config.silhouette_palm
     with running(_node(silhouette_palm=True)) as h:
         assert h.nodes[0].config.silhouette_palm
+
+
+def test_the_node_defaults_are_the_tracker_defaults() -> None:
+    """The node's parameters default to EdgeTrackerConfig's (one home for each default)."""
+    from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
+
     with running(_node()) as h:
-        assert not h.nodes[0].config.silhouette_palm
+        config = h.nodes[0].config
+    defaults = EdgeTrackerConfig()
+    for name in ('finger_refit', 'silhouette_palm', 'max_finger_off_silhouette',
+                 'max_finger_unexplained', 'max_unexplained', 'silhouette_weight'):
+        assert getattr(config, name) == getattr(defaults, name), name
+
+
+def test_max_finger_off_silhouette_parameter_reaches_the_tracker() -> None:
+    with running(_node(max_finger_off_silhouette=0.3)) as h:
+        assert h.nodes[0].config.max_finger_off_silhouette == 0.3
 
 
 def test_background_images_give_the_tracker_silhouettes(tmp_path, sequence) -> None:
