@@ -16,9 +16,10 @@ once with the hand out of view); ``--background none`` tracks from edges alone.
 ``--finger-refit`` turns on the tracker's ``finger_refit`` (a finger that leaves part of the
 hand's silhouette unexplained is re-fitted from its last explained angles; off by default);
 ``--silhouette-palm`` its ``silhouette_palm`` (the unexplained foreground next to the palm
-pulls the whole hand; off by default). With silhouettes the tracker also withholds a frame
-where a finger's axis lies off the silhouette (``max_finger_off_silhouette``; the track is
-kept): ``finger_withheld`` counts those frames, which break the runs of published frames.
+pulls the whole hand; off by default). With silhouettes and ``--max-finger-off-silhouette``
+below 1 (off by default) the tracker also withholds a frame where a finger's axis lies off the
+silhouette (the track is kept): ``finger_withheld`` counts those frames, which break the runs
+of published frames.
 
 Seeds: the tracker was tuned on seeds 1-8 (``TUNING_SEEDS``) and checked on seeds 21-24,
 31-36, 41-46, 51-56, 61-66 and 71-74 (``CHECK_SEEDS``, a fresh set each pass); the reported figures
@@ -164,6 +165,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--silhouette-palm', action='store_true',
                         help='the tracker\'s silhouette_palm: the unexplained foreground next '
                         'to the palm pulls the whole hand (needs --background empty)')
+    parser.add_argument('--max-finger-off-silhouette', type=float,
+                        default=EdgeTrackerConfig.max_finger_off_silhouette,
+                        help='the tracker\'s finger gate: a frame where a finger other than '
+                        'the thumb has more than this share of its axis points off the '
+                        'silhouette is withheld (needs --background empty; 1: off; default: '
+                        'EdgeTrackerConfig\'s; 0.15 was tuned on seeds 1 and 3)')
     args = parser.parse_args(argv)
     return run_tool('colorglove_eval_edges', lambda: _run(args))
 
@@ -186,7 +193,8 @@ def _run(args: Any) -> int:
             for n in args.cameras:
                 if n not in trackers:
                     trackers[n] = EdgeTracker(seq.synth.model, cams_all[:n], EdgeTrackerConfig(
-                        finger_refit=args.finger_refit, silhouette_palm=args.silhouette_palm))
+                        finger_refit=args.finger_refit, silhouette_palm=args.silhouette_palm,
+                        max_finger_off_silhouette=args.max_finger_off_silhouette))
                 trackers[n].set_backgrounds([None] * n if empty is None else
                                             [BackgroundModel.from_frames([e]) for e in empty[:n]])
                 fig = evaluate_run(trackers[n], [v[:n] for v in views], seq.poses, args.init)
@@ -231,6 +239,8 @@ def _run(args: Any) -> int:
                                             'background': args.background,
                                             'finger_refit': args.finger_refit,
                                             'silhouette_palm': args.silhouette_palm,
+                                            'max_finger_off_silhouette':
+                                                args.max_finger_off_silhouette,
                                             'python_loop_s': loop_s, 'load_average': load},
                                'rows': rows, 'summary': summary, 'targets': targets})
     return 0

@@ -28,6 +28,8 @@ def test_short_run_with_and_without_the_empty_scene(tmp_path) -> None:
 def test_tracker_options_reach_the_settings(tmp_path) -> None:
     out = tmp_path / 'options.json'
     assert main(['--seeds', '1', '--frames', '2', '--speeds', '1', '--cameras', '1',
-                 '--finger-refit', '--silhouette-palm', '--json', str(out)]) == 0
+                 '--finger-refit', '--silhouette-palm', '--max-finger-off-silhouette', '0.15',
+                 '--json', str(out)]) == 0
     settings = json.loads(out.read_text())['settings']
     assert settings['finger_refit'] and settings['silhouette_palm']
+    assert settings['max_finger_off_silhouette'] == 0.15

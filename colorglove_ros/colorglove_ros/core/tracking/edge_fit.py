@@ -135,7 +135,9 @@ class EdgeTrackerConfig:
     ``finger_refit_budget`` > 0 bounds the re-fits' CPU: each tracked frame adds that many
     re-fit candidates (fits from another start) to an allowance of at most
     ``finger_refit_burst``, each candidate takes one, and none is tried without.
-    ``max_finger_off_silhouette`` (with silhouettes; 1: off): a fit whose hand passes every
+    ``max_finger_off_silhouette`` (with silhouettes; 1, the default: off; 0.15 removes most
+    drifted fingers on the bare-hand sequences but withholds most frames of the 3-D mouse's
+    table views, docs/RESULTS.md, DigitEyes ninth pass): a fit whose hand passes every
     check but where one of ``finger_check_digits`` has more than this share of its axis points
     (its links' base, middle and end, its tip) off the foreground in some camera publishes no
     pose, the track kept (the finger drifted: the fitted finger lies over the background).
@@ -180,7 +182,7 @@ class EdgeTrackerConfig:
     finger_refit_max_wait: int = 16
     finger_refit_budget: float = 0.0
     finger_refit_burst: int = 6
-    max_finger_off_silhouette: float = 0.15
+    max_finger_off_silhouette: float = 1.0
     finger_check_digits: tuple[str, ...] = ('index', 'middle', 'ring', 'little')
     silhouette_margin_px: float = 60.0
     loss_patience: int = 3

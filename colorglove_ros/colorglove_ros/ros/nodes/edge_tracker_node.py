@@ -12,8 +12,9 @@ Each frame's foreground against it then enters the fit (``silhouette_weight``) a
 checks (``max_unexplained``); empty: edges only. ``finger_refit`` (off by default) re-fits a
 finger that leaves part of the hand's silhouette unexplained; ``silhouette_palm`` (off by
 default) lets the unexplained foreground next to the palm pull the whole hand.
-A frame where a finger's axis lies off the silhouette (``max_finger_off_silhouette``; not
-the thumb) publishes no pose and says which finger on the status topic; the track is kept.
+With ``max_finger_off_silhouette`` below 1 (off by default) a frame where a finger's axis lies
+off the silhouette (not the thumb) publishes no pose and says which finger on the status
+topic; the track is kept.
 
 Start: hold the flat hand still, palm to the (primary) camera, at the marked spot
 ``init_wrist_position``; or publish a starting pose on ``edge_tracker/init_joint_states`` +
