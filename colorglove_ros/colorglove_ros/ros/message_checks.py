@@ -20,26 +20,19 @@ from colorglove_ros.ros.conversions import (
     constraint_arrays_from_msg,
 )
 
-__all__ = ['check_observation_msg', 'checked_observation_msg', 'check_candidates_msg',
-           'checked_candidates_msg']
+__all__ = ['checked_observation_msg', 'checked_candidates_msg']
 
 _DOFS = 26
 MAX_CANDIDATES = 10_000   # candidates per message
 
 
-def check_observation_msg(msg: HandObservation, camera_size: tuple[int, int] | None = None
-                          ) -> np.ndarray:
-    """Check an observation with ``hand_found`` (image size, equal to ``camera_size`` when
-    given; tiny labels; crop; blobs); return its (40, 40) tiny label image. Raises
-    :class:`~colorglove_ros.core.validation.InvalidObservationError` naming the field."""
-    return checked_observation_msg(msg, camera_size)[0]
-
-
 def checked_observation_msg(msg: HandObservation, camera_size: tuple[int, int] | None = None
                             ) -> tuple[np.ndarray, Blobs]:
-    """:func:`check_observation_msg`, also returning the blobs it checked (as
-    ``ros.conversions.blobs_from_observation_msg`` gives them), so that a caller that reads
-    them next does not convert the message's blobs again."""
+    """Check an observation with ``hand_found`` (image size, equal to ``camera_size`` when
+    given; tiny labels; crop; blobs); return its (40, 40) tiny label image and the blobs it
+    checked (as ``ros.conversions.blobs_from_observation_msg`` gives them, so a caller that
+    reads them next does not convert the message's blobs again). Raises
+    :class:`~colorglove_ros.core.validation.InvalidObservationError` naming the field."""
     if not msg.hand_found:
         raise InvalidObservationError('hand_found is false')
     if len(msg.blobs) > MAX_BLOBS:      # refused before building arrays of them
@@ -58,21 +51,15 @@ def checked_observation_msg(msg: HandObservation, camera_size: tuple[int, int] |
     return tiny, blobs
 
 
-def check_candidates_msg(msg: HandPoseCandidates, num_vertices: int,
-                         camera_size: tuple[int, int] | None = None) -> np.ndarray:
-    """Check candidates with ``hand_found``: the observation they carry, then the blended
-    pose, candidates (one pose per index, one distance and weight each), constraints (patches
-    and vertices of a mesh of ``num_vertices``) and finger spread; return the blended pose.
-    Raises ``InvalidObservationError`` or
-    :class:`~colorglove_ros.core.validation.InvalidPriorError` naming the field."""
-    return checked_candidates_msg(msg, num_vertices, camera_size)[0]
-
-
 def checked_candidates_msg(msg: HandPoseCandidates, num_vertices: int,
                            camera_size: tuple[int, int] | None = None
                            ) -> tuple[np.ndarray, Blobs]:
-    """:func:`check_candidates_msg`, also returning the blobs of the observation it checked
-    (:func:`checked_observation_msg`)."""
+    """Check candidates with ``hand_found``: the observation they carry
+    (:func:`checked_observation_msg`), then the blended pose, candidates (one pose per index,
+    one distance and weight each), constraints (patches and vertices of a mesh of
+    ``num_vertices``) and finger spread; return the blended pose and the observation's blobs.
+    Raises ``InvalidObservationError`` or
+    :class:`~colorglove_ros.core.validation.InvalidPriorError` naming the field."""
     if not msg.hand_found:
         raise InvalidPriorError('hand_found is false')
     if len(msg.blended_pose) != _DOFS:

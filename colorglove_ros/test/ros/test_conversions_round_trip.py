@@ -135,22 +135,22 @@ def serialized_round_trip(msg):
     (lambda m: m.candidate_poses.__setitem__(30, float('nan')), 'candidate_poses'),
     (lambda m: m.candidate_poses.__setitem__(26 + 3, 1e4), r'candidate_poses\[1\].*rotation'),
 ])
-def test_check_candidates_msg_refuses_arrays_out_of_step(spoil, message) -> None:
+def test_checked_candidates_msg_refuses_arrays_out_of_step(spoil, message) -> None:
     """The parallel arrays must hold one value (or pose, or (x, y)) per candidate or
     constraint, each within its range; a spoiled array is refused naming it as the message
     does."""
     from colorglove_ros.core.validation import InvalidInputError
-    from colorglove_ros.ros.message_checks import check_candidates_msg
+    from colorglove_ros.ros.message_checks import checked_candidates_msg
 
     observation = observation_to_msg(Observation(
         True, '', 640, 480, np.ones((40, 40), np.uint8), CropTransform(4.5, 220.0, 120.0),
         [Blob(3, 310.5, 200.25, 90)], glove_pixel_count=90), HEADER)
     good = candidates_to_msg(observation, _lookup_result())
-    np.testing.assert_array_equal(check_candidates_msg(good, 100), good.blended_pose)
+    np.testing.assert_array_equal(checked_candidates_msg(good, 100)[0], good.blended_pose)
     bad = serialized_round_trip(good)
     spoil(bad)
     with pytest.raises(InvalidInputError, match=message):
-        check_candidates_msg(bad, 100)
+        checked_candidates_msg(bad, 100)
 
 
 def test_importing_the_adapters_is_light() -> None:
