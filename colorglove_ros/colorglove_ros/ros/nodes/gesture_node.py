@@ -123,8 +123,7 @@ class GestureNode(Node):
         """Pair the tracker's evidence with its frame; end the active gestures when it loses
         the hand."""
         self._detect(self.pairer.add_status(parse_tracking_status(msg.data)))
-        if is_no_hand_status(msg.data):
-            self._detect(self.pairer.flush())
+        if is_no_hand_status(msg.data):      # its line (no stamp) released the waiting frame
             now = self.get_clock().now()
             self._publish(self.detector.update(None, now.nanoseconds * 1e-9),
                           Header(stamp=now.to_msg(), frame_id=self.hand_frame))
