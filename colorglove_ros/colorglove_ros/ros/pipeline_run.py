@@ -31,6 +31,10 @@ from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import String
 
 from colorglove_ros.core.evaluation.metrics import jitter_runs_mm, latency_summary_ms, pose_accuracy
+from colorglove_ros.core.segmentation.calibration_fit import (
+    DEFAULT_COLOR_CONFIG,
+    prepared_color_config,
+)
 from colorglove_ros.ros.conversions import pose_from_msgs
 from colorglove_ros.ros.frame_camera import CAMERA_REFUSAL_PREFIX
 from colorglove_ros.ros.image import image_to_rgb8
@@ -39,12 +43,10 @@ from colorglove_ros.ros.latency_probe import LatencyProbe, ProbeRecord
 from colorglove_ros.ros.launcher import Launcher, NodeSpec, use_fastdds_profile
 
 __all__ = ['BagFeed', 'PipelineMonitor', 'PipelineRun', 'bag_feed', 'node_specs', 'run_pipeline',
-           'summarize', 'ik_times_ms', 'COLOR_CONFIG', 'DATABASE_CONFIG',
-           'ASSET_CALIBRATION_FRAMES', 'prepare_assets', 'pipeline_parameters', 'write_params']
+           'summarize', 'ik_times_ms', 'DATABASE_CONFIG',
+           'prepare_assets', 'pipeline_parameters', 'write_params']
 
-COLOR_CONFIG = 'config/color_calibration.yaml'
 DATABASE_CONFIG = 'config/database.yaml'
-ASSET_CALIBRATION_FRAMES = 12      # rendered training frames of a missing colour calibration
 
 # ik_node's status line of a tracked frame ends with "IK <time> ms"
 _IK_TIME = re.compile(r'IK (\d+(?:\.\d+)?) ms')
@@ -205,11 +207,6 @@ def prepare_assets(database: Path | None = None) -> Path:
     (each once)."""
     from colorglove_ros.core.lookup.database import DatabaseError, save_database
     from colorglove_ros.core.lookup.database_build import build_database, read_database_config
-    from colorglove_ros.core.segmentation.calibration_fit import (
-        SYNTHETIC_FRAMES_DIR,
-        calibrate_synthetic,
-    )
-    from colorglove_ros.core.segmentation.color_model import read_calibration_config
 
     config, default_database, _ = read_database_config(DATABASE_CONFIG)
     if database and not (Path(database) / 'manifest.json').is_file():
@@ -218,14 +215,7 @@ def prepare_assets(database: Path | None = None) -> Path:
                             f'out --database to use the default {default_database} (built '
                             'there on first use)')
     database = Path(database) if database else default_database
-    calibration_file = read_calibration_config(COLOR_CONFIG)['calibration_file']
-    if not Path(calibration_file).is_file():
-        print(f'[demo] no colour calibration at {calibration_file}: calibrating from '
-              f'{ASSET_CALIBRATION_FRAMES} rendered training frames (once)', flush=True)
-        fit = calibrate_synthetic(ASSET_CALIBRATION_FRAMES, calibration_file,
-                                  SYNTHETIC_FRAMES_DIR)
-        print(f'[demo] colour calibration saved at {fit.output} ({fit.fit_s:.1f} s)',
-              flush=True)
+    prepared_color_config(progress=lambda message: print(f'[demo] {message}', flush=True))
     if not (database / 'manifest.json').is_file():
         print(f'[demo] no pose database at {database}: building it (once; the default '
               '100,000 entries take several minutes on 2 cores)', flush=True)
@@ -246,7 +236,7 @@ def pipeline_parameters(database: Path, seed: int, frames: int, rate_hz: float,
         'camera': {'source': 'synthetic', 'synthetic_seed': seed, 'synthetic_frames': frames,
                    'synthetic_prerender': True, 'loop': False, 'rate_hz': rate_hz,
                    'calibration_file': calibration},
-        'segmentation': {'color_calibration_file': COLOR_CONFIG},
+        'segmentation': {'color_calibration_file': DEFAULT_COLOR_CONFIG},
         'lookup': {'database_path': str(database), 'calibration_file': calibration},
         'ik': {'database_path': str(database), 'calibration_file': calibration,
                'publish_overlay': True},

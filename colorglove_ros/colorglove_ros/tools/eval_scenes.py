@@ -93,7 +93,8 @@ def main(argv: list[str] | None = None) -> int:
                         'for the reported figures, another (e.g. 1000) to tune on')
     parser.add_argument('--database', help='pose database directory (default: the largest '
                         'under data/)')
-    parser.add_argument('--color-config', default=str(config / 'color_calibration.yaml'))
+    parser.add_argument('--color-config', help='colour calibration YAML (default: the '
+                        "package's, its calibration fitted on rendered frames if missing)")
     parser.add_argument('--ik-config', default=str(config / 'ik.yaml'))
     parser.add_argument('--calibration', default=str(config / 'calibration.yaml'))
     parser.add_argument('--fps', type=float, default=30.0)
@@ -119,6 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     from colorglove_ros.core.hand.glove import default_hand
     from colorglove_ros.core.lookup.search import PoseLookup
     from colorglove_ros.core.pipeline import image_observer
+    from colorglove_ros.core.segmentation.calibration_fit import prepared_color_config
     from colorglove_ros.core.segmentation.segmenter import load_segmenter
     from colorglove_ros.core.tracking.tracker import HandTracker
 
@@ -127,6 +129,7 @@ def main(argv: list[str] | None = None) -> int:
                                                                  args.calibration)
         build = db.build
         ik_config = load_ik_config(args.ik_config)
+        args.color_config = str(prepared_color_config(args.color_config))
         load_segmenter(args.color_config)          # refuse a bad colour config up front
         lookup = PoseLookup(db)
         seeds = eval_seeds(args.sequences, args.seed_offset)

@@ -44,7 +44,7 @@ from colorglove_ros.core.pipeline import FramePipeline, Tracked, image_observer
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.synthetic.sequences import LEFT_SEED_OFFSET, two_hand_sequences
 from colorglove_ros.core.tracking.config import load_ik_config
-from colorglove_ros.paths import data_dir, share_dir
+from colorglove_ros.paths import data_dir
 from colorglove_ros.tools._cli import sequence_tool_parser, tool_error
 
 __all__ = ['main', 'MAX_FINGERTIP_EXCESS_MM']
@@ -81,6 +81,7 @@ def main(argv: list[str] | None = None) -> int:
                         'the other (same results)')
     args = parser.parse_args(argv)
     from colorglove_ros.core.lookup.search import PoseLookup
+    from colorglove_ros.core.segmentation.calibration_fit import prepared_color_config
     from colorglove_ros.core.segmentation.segmenter import load_segmenter
     from colorglove_ros.core.synthetic.conditions import sample_conditions
     from colorglove_ros.core.synthetic.frames import Synthesizer
@@ -92,8 +93,7 @@ def main(argv: list[str] | None = None) -> int:
                                                           args.calibration)
         build = db.build
         config = load_ik_config(args.ik_config)
-        segmenter = load_segmenter(str(args.color_config or share_dir() / 'config' /
-                                       'color_calibration.yaml'))
+        segmenter = load_segmenter(str(prepared_color_config(args.color_config)))
         seeds = eval_seeds(args.sequences, args.seed_offset)
     except ColorGloveError as exc:
         return tool_error('colorglove_eval_two_hands', exc)

@@ -167,16 +167,16 @@ def segmenter_observer(segmenter: Any) -> Observer:
 def make_observer(labels: str, color_config: str | Path | None = None,
                   min_blob_pixels: int = 4) -> Observer:
     """'truth' (renderer labels) or 'segmented' (``core.segmentation.segmenter.load_segmenter`` on
-    ``color_config``, default ``config/color_calibration.yaml``; raises the segmentation's
-    error when its calibration file is missing)."""
+    ``color_config``; raises the segmentation's error when its calibration file is missing).
+    Without ``color_config``: the package's ``config/color_calibration.yaml``, whose calibration
+    is fitted on rendered frames first if it is missing, as the demo does."""
     if labels == 'truth':
         return truth_observer(min_blob_pixels)
     if labels == 'segmented':
+        from colorglove_ros.core.segmentation.calibration_fit import prepared_color_config
         from colorglove_ros.core.segmentation.segmenter import load_segmenter
-        from colorglove_ros.paths import share_dir
 
-        path = Path(color_config) if color_config else (
-            share_dir() / 'config' / 'color_calibration.yaml')
+        path = prepared_color_config(color_config)
         return segmenter_observer(load_segmenter(str(path)))
     raise EvaluationError(f'unknown label source {labels!r}, expected one of {LABEL_SOURCES}')
 

@@ -5,7 +5,7 @@ synthetic training frames, and fit and save a calibration file from either."""
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,7 +31,8 @@ __all__ = ['RESIDUAL_TEMPERATURES_K', 'DEFAULT_LUT_BITS', 'DEFAULT_MAX_PIXELS_PE
            'read_labelled_frames', 'write_labelled_frames', 'render_training_frames',
            'CalibrationFit', 'calibrate_frames', 'calibrate_synthetic', 'relit_copies',
            'processed_copies', 'PROCESSING_GROUPS', 'DEFAULT_PROCESSED_COPIES',
-           'DEFAULT_PROCESSED_COLORS', 'fit_mixture']
+           'DEFAULT_PROCESSED_COLORS', 'fit_mixture', 'FIRST_USE_FRAMES',
+           'DEFAULT_COLOR_CONFIG', 'prepared_color_config']
 
 DEFAULT_LUT_BITS = 6                  # lookup table bits per RGB channel
 DEFAULT_MAX_PIXELS_PER_CLASS = 5000   # training pixels sampled per class
@@ -46,6 +47,8 @@ MIN_FRAMES = 8                        # labelled frames a fit needs at least
 MASK_SUFFIX = '_mask'                 # NAME.png (RGB image) + NAME_mask.png (labels)
 # where rendered training frames are written by default (relative to the working folder)
 SYNTHETIC_FRAMES_DIR = Path('data/color_calibration_frames')
+FIRST_USE_FRAMES = 12                 # rendered training frames of a missing default calibration
+DEFAULT_COLOR_CONFIG = 'config/color_calibration.yaml'   # the package's colour config
 
 
 def _sample_pixels(frames: Sequence[tuple[np.ndarray, np.ndarray]], num_colors: int,
@@ -329,3 +332,26 @@ def calibrate_synthetic(count: int, output: str | Path, frames_out: str | Path, 
     write_labelled_frames(frames_out, frames)
     return calibrate_frames(frames, output, f'synthetic train frames, seed {seed} ({frames_out})',
                             seed=seed, **options)
+
+
+
+def prepared_color_config(color_config: str | Path | None = None,
+                          progress: Callable[[str], None] = print) -> Path:
+    """The colour config to run with: ``color_config`` as given (its calibration file is the
+    user's to make; a missing one is the segmenter's error), or without it the package's
+    :data:`DEFAULT_COLOR_CONFIG`, whose calibration file is fitted first on
+    :data:`FIRST_USE_FRAMES` rendered training frames (seed 0, :func:`calibrate_synthetic`) if it
+    is missing, saying so through ``progress``."""
+    from colorglove_ros.core.segmentation.color_model import read_calibration_config
+    from colorglove_ros.paths import resolve_path
+
+    if color_config:
+        return Path(color_config)
+    config = resolve_path(DEFAULT_COLOR_CONFIG)
+    calibration_file = Path(read_calibration_config(str(config))['calibration_file'])
+    if not calibration_file.is_file():
+        progress(f'no colour calibration at {calibration_file}: calibrating from '
+                 f'{FIRST_USE_FRAMES} rendered training frames (once)')
+        fit = calibrate_synthetic(FIRST_USE_FRAMES, calibration_file, SYNTHETIC_FRAMES_DIR)
+        progress(f'colour calibration saved at {fit.output} ({fit.fit_s:.1f} s)')
+    return config

@@ -12,6 +12,7 @@ import pytest
 from repo_paths import CONFIG_DIR
 
 from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.evaluation.metrics import fingertip_errors_mm, jitter_mm
 from colorglove_ros.core.evaluation.sequences import (
     EvaluationError,
@@ -20,6 +21,7 @@ from colorglove_ros.core.evaluation.sequences import (
     eval_seeds,
     find_database,
     jitter_runs_mm,
+    make_observer,
     observe_camera,
     summarize,
     train_seeds,
@@ -353,3 +355,56 @@ def test_the_trackers_evidence_is_recorded_per_tracked_frame(small_database_path
     plain = SequenceEvaluator(lookup, {'1': mono.cameras}, modes=('ik_smooth',),
                               synthesizer=synth).run(eval_seeds(1)[0], 2)
     assert plain[('1', 'ik_smooth')].evidence == {}
+
+
+def _copying_fit(source, calls):
+    """A stand-in for ``calibrate_synthetic`` that saves the ready-made calibration
+    ``source`` at the output it is asked for and records the call."""
+    import shutil
+
+    def fit(count, output, frames_out, **options):
+        calls.append(count)
+        shutil.copyfile(source, output)
+        return SimpleNamespace(output=output, fit_s=0.0)
+
+    return fit
+
+
+def test_segmented_observer_fits_the_missing_default_calibration_once(node_assets, tmp_path,
+                                                                      monkeypatch, capsys):
+    """An evaluation run before the demo on a new machine: the package's colour config names
+    a calibration file that does not exist yet; the segmented observer fits it (once), as the
+    demo does, instead of failing on the missing file."""
+    from colorglove_ros.core.segmentation import calibration_fit
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv('COLORGLOVE_DATA_DIR', str(tmp_path / 'data'))
+    (tmp_path / 'data').mkdir()
+    calls: list[int] = []
+    monkeypatch.setattr(calibration_fit, 'calibrate_synthetic',
+                        _copying_fit(node_assets.calibration_npz, calls))
+    observe = make_observer('segmented')
+    assert calls == [calibration_fit.FIRST_USE_FRAMES]
+    assert (tmp_path / 'data' / 'color_calibration.npz').is_file()
+    assert 'no colour calibration at' in capsys.readouterr().out
+    assert callable(observe)
+    make_observer('segmented')
+    assert calls == [calibration_fit.FIRST_USE_FRAMES]        # the second time it is there
+
+
+def test_segmented_observer_does_not_fit_a_calibration_the_user_named(tmp_path, monkeypatch):
+    """A colour config the user gives whose calibration file is missing is their error: no
+    synthetic calibration is made behind their back."""
+    from colorglove_ros.core.segmentation import calibration_fit
+
+    lines = (CONFIG_DIR / 'color_calibration.yaml').read_text().splitlines()
+    missing = tmp_path / 'mine.npz'
+    config = tmp_path / 'mine.yaml'
+    config.write_text('\n'.join(f'calibration_file: {missing}' if line.startswith(
+        'calibration_file:') else line for line in lines) + '\n')
+    calls: list[int] = []
+    monkeypatch.setattr(calibration_fit, 'calibrate_synthetic',
+                        _copying_fit(tmp_path / 'unused.npz', calls))
+    with pytest.raises(ColorGloveError, match='mine.npz'):
+        make_observer('segmented', config)
+    assert calls == [] and not missing.exists()
