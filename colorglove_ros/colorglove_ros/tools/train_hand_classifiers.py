@@ -12,7 +12,8 @@ is added, each tracked frame ``--tracker-repeats`` times: the noise model has on
 joint, the tracker a bias that depends on the hand shape, which the classifier then learns.
 Every frame of a hold is a sample labelled with what is held (a gesture, ``none`` for the
 neutral shapes, or a letter); lost frames are left out. ``--model`` picks the classifier
-(``core/hand/pose_classifier.py``: ``mlp`` or ``lda``). The classifiers are written as
+(``core/hand/pose_classifier.py``: ``mlp``, ``lda`` or ``qda`` with
+``--covariance-blend``). The classifiers are written as
 versioned ``.npz`` files, by default ``config/gesture_classifier.npz`` and
 ``config/letter_classifier.npz``, which the nodes and the evaluations read.
 """
@@ -104,6 +105,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--labels', choices=LABEL_SOURCES, default='segmented',
                         help="the tracker's labels (as the evaluations' --labels)")
     parser.add_argument('--model', choices=MODEL_KINDS, default='mlp', help='classifier kind')
+    parser.add_argument('--covariance-blend', type=float, default=0.5,
+                        help="with --model qda: the shared covariance's share in each "
+                        "class's (0-1; 1 is the lda)")
     parser.add_argument('--hidden', type=int, default=64, help='hidden units')
     parser.add_argument('--alpha', type=float, default=1e-3, help='L2 penalty')
     parser.add_argument('--seed', type=int, default=0, help='initialisation seed')
@@ -156,11 +160,13 @@ def main(argv: list[str] | None = None) -> int:
                           f'{args.first_seed} {sizes} --noise-draws {args.noise_draws} '
                           f'--tracker-seeds {tracked_seeds} --tracker-repeats '
                           f'{args.tracker_repeats} --labels {args.labels} --model {args.model} '
-                          f'--hidden {args.hidden} --alpha {args.alpha} --seed {args.seed}; '
+                          f'--hidden {args.hidden} --alpha {args.alpha} --seed {args.seed} '
+                          f'--covariance-blend {args.covariance_blend}; '
                           f'noise {args.noise_config.name}')
                 clf = train_pose_classifier(x, y, feature_set, hidden=args.hidden,
                                             seed=args.seed, alpha=args.alpha, source=source,
-                                            kind=args.model)
+                                            kind=args.model,
+                                            covariance_blend=args.covariance_blend)
                 save_pose_classifier(output, clf)
                 accuracy = float(np.mean(np.asarray(clf.classes)[
                     np.argmax(clf.log_proba(x), axis=1)] == y))

@@ -59,3 +59,16 @@ def test_tracked_frames_are_added_repeated_and_lost_ones_left_out() -> None:
 
 def test_tracker_seeds_must_be_training_seeds() -> None:
     assert train_hand_classifiers.main(['--what', 'letters', '--tracker-seeds', '100']) == 1
+
+
+def test_the_quadratic_discriminant_is_trained_and_written(tmp_path) -> None:
+    from colorglove_ros.core.hand.pose_classifier import load_pose_classifier
+
+    output = tmp_path / 'letters.npz'
+    assert train_hand_classifiers.main(['--what', 'letters', '--spelling-sequences', '2',
+                                        '--words', '2', '--noise-draws', '1', '--model', 'qda',
+                                        '--covariance-blend', '0.25',
+                                        '--letter-output', str(output)]) == 0
+    clf = load_pose_classifier(output, LETTER_FEATURES)
+    assert clf.quadratic is not None and clf.quadratic.shape[0] == len(clf.classes) >= 3
+    assert '--model qda' in clf.source and '--covariance-blend 0.25' in clf.source

@@ -93,3 +93,54 @@ def test_linear_discriminant_is_one_layer_and_round_trips(tmp_path) -> None:
     np.testing.assert_allclose(loaded.log_proba(test_x), clf.log_proba(test_x))
     with pytest.raises(ClassifierError, match='kind'):
         train_pose_classifier(x, y, 'hand_shape', kind='forest')
+
+
+def _spreads(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Three classes about the same centre told apart by their spread and its direction
+    (no linear boundary separates them)."""
+    labels = np.array(['narrow', 'wide_x', 'wide_y'])[rng.integers(3, size=n)]
+    spread = {'narrow': (0.2, 0.2), 'wide_x': (3.0, 0.2), 'wide_y': (0.2, 3.0)}
+    x = np.array([rng.normal(0.0, spread[k]) for k in labels])
+    return np.column_stack([x, rng.normal(0.0, 1.0, (n, 2))]), labels
+
+
+def test_quadratic_discriminant_holds_each_class_spread(tmp_path) -> None:
+    x, y = _spreads(np.random.default_rng(0), 3000)
+    test_x, test_y = _spreads(np.random.default_rng(1), 1000)
+
+    def accuracy(clf) -> float:
+        return float(np.mean(np.asarray(clf.classes)[np.argmax(clf.log_proba(test_x), 1)]
+                             == test_y))
+
+    lda = train_pose_classifier(x, y, 'hand_shape', kind='lda')
+    qda = train_pose_classifier(x, y, 'hand_shape', kind='qda', covariance_blend=0.0,
+                                source='qda test')
+    assert accuracy(lda) < 0.6 and accuracy(qda) > 0.85
+    assert qda.quadratic is not None and qda.quadratic.shape == (3, 4, 4)
+    np.testing.assert_allclose(np.exp(qda.log_proba(test_x)).sum(axis=1), 1.0)
+    np.testing.assert_allclose(qda.log_proba(test_x[0]), qda.log_proba(test_x[:1])[0])
+    # all of the shared covariance is the linear discriminant
+    shared = train_pose_classifier(x, y, 'hand_shape', kind='qda', covariance_blend=1.0)
+    np.testing.assert_allclose(shared.log_proba(test_x), lda.log_proba(test_x), atol=1e-8)
+    loaded = load_pose_classifier(save_pose_classifier(tmp_path / 'q.npz', qda), 'hand_shape')
+    assert loaded.source == 'qda test'
+    np.testing.assert_allclose(loaded.log_proba(test_x), qda.log_proba(test_x))
+    with pytest.raises(ClassifierError, match='covariance_blend'):
+        train_pose_classifier(x, y, 'hand_shape', kind='qda', covariance_blend=1.5)
+
+
+def test_version_1_files_are_still_read_and_a_bad_quadratic_layer_is_refused(tmp_path) -> None:
+    x, y = _samples(np.random.default_rng(0), 200)
+    lda = train_pose_classifier(x, y, 'hand_shape', kind='lda')
+    data = dict(np.load(save_pose_classifier(tmp_path / 'l.npz', lda)))
+    assert int(data['version']) == 2 and data['quadratic'].size == 0
+    del data['quadratic']
+    np.savez(tmp_path / 'v1.npz', **{**data, 'version': np.array(1)})
+    old = load_pose_classifier(tmp_path / 'v1.npz', 'hand_shape')
+    assert old.quadratic is None
+    np.testing.assert_allclose(old.log_proba(x), lda.log_proba(x))
+    qda = train_pose_classifier(x, y, 'hand_shape', kind='qda')
+    data = dict(np.load(save_pose_classifier(tmp_path / 'q.npz', qda)))
+    np.savez(tmp_path / 'bad.npz', **{**data, 'quadratic': data['quadratic'][:, :-1]})
+    with pytest.raises(ClassifierError, match='inconsistent'):
+        load_pose_classifier(tmp_path / 'bad.npz')
