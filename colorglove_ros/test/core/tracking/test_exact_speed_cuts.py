@@ -40,39 +40,18 @@ def _poses(model, count: int, seed: int) -> list[np.ndarray]:
     return out
 
 
-def _posed_reference(surface: PatchSurface, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The element posing as it was: one transpose and one translation per block."""
-    Rs, ts, _ = surface._kin.frames(q)
-    R, t = Rs[surface._block_frame], ts[surface._block_frame]
-    centre = np.empty_like(surface._centre)
-    normal = np.empty_like(surface._centre)
-    for b, sl in enumerate(surface._blocks):
-        Rt = np.ascontiguousarray(R[b].T)
-        np.dot(surface._centre[sl], Rt, out=centre[sl])
-        centre[sl] += t[b]
-        np.dot(surface._area_normal[sl], Rt, out=normal[sl])
-    return centre, normal
-
-
-def test_posed_elements_are_the_per_block_bits(hand):
+def test_posed_elements_are_each_elements_frame_transform(hand):
+    """The compiled posing (``ik_kernel.posed_elements``, tenth pass) against each element's
+    own frame transform (numpy), to rounding."""
     model, _, _, surface, _ = hand
     for q in _poses(model, 40, 1):
         centre, normal = surface._posed(q)
-        ref_centre, ref_normal = _posed_reference(surface, q)
-        assert np.array_equal(centre, ref_centre) and np.array_equal(normal, ref_normal)
-
-
-def test_posed_transposes_every_block_in_one_copy(hand, monkeypatch):
-    model, _, kin, surface, _ = hand
-    q = _poses(model, 1, 2)[0]
-    kin.frames(q)                       # the kinematics' own copies, out of the count
-    calls = []
-    original = np.ascontiguousarray
-    monkeypatch.setattr(np, 'ascontiguousarray', lambda *a, **k: calls.append(1) or
-                        original(*a, **k))
-    surface._posed_cache = None
-    surface._posed(q)
-    assert len(calls) == 1 and len(surface._blocks) > 1
+        Rs, ts, _ = surface._kin.frames(q)
+        R, t = Rs[surface._element_frame], ts[surface._element_frame]
+        np.testing.assert_allclose(centre, np.einsum('eij,ej->ei', R, surface._centre) + t,
+                                   rtol=0, atol=1e-15)
+        np.testing.assert_allclose(normal, np.einsum('eij,ej->ei', R, surface._area_normal),
+                                   rtol=0, atol=1e-15)
 
 
 def _solve_reference(kin, cameras, corr, q_init, q_blend, cov, q_prev, max_iterations,
