@@ -16,8 +16,13 @@ import time
 import numba
 import numpy as np
 
-__all__ = ['forward_frames', 'link_points', 'projected_rows', 'posed_elements',
-           'element_weights', 'compile_kernels']
+__all__ = ['forward_frames', 'link_points', 'projected_rows', 'prior_cost', 'normal_equations',
+           'damped_step', 'translation_fit',
+           'posed_elements', 'element_weights', 'compile_kernels', 'SINGULAR', 'BEHIND']
+
+#: :func:`translation_fit` outcomes besides 0 (solved): the normal equations are singular,
+#: the solution puts a point behind its camera.
+SINGULAR, BEHIND = 1, 2
 
 _JIT = {'cache': True, 'nogil': True}
 
@@ -213,6 +218,184 @@ def projected_rows(Rs: np.ndarray, ts: np.ndarray, jl: np.ndarray, axis: np.ndar
 
 
 @numba.njit(**_JIT)
+def prior_cost(r: np.ndarray, w: np.ndarray, q: np.ndarray, q_blend: np.ndarray,
+               q_inv: np.ndarray, q_prev: np.ndarray, p_inv: np.ndarray, smoothing: bool
+               ) -> float:
+    """|r|^2_w + |q - q_blend|^2_{q_inv} (+ |q - q_prev|^2_{p_inv} with ``smoothing``): the
+    IK's cost (``solver.solve_ik``)."""
+    data = 0.0
+    for i in range(len(r)):
+        data += r[i] * (w[i] * r[i])
+    blend = 0.0
+    prev = 0.0
+    for d in range(len(q)):
+        blend += (q[d] - q_blend[d]) ** 2 * q_inv[d]
+        if smoothing:
+            prev += (q[d] - q_prev[d]) ** 2 * p_inv[d]
+    return data + blend + prev if smoothing else data + blend
+
+
+@numba.njit(**_JIT)
+def normal_equations(J: np.ndarray, w: np.ndarray, r: np.ndarray, q: np.ndarray,
+                     q_blend: np.ndarray, q_inv: np.ndarray, q_prev: np.ndarray,
+                     p_inv: np.ndarray, smoothing: bool, lower: np.ndarray, upper: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The Gauss-Newton system of :func:`prior_cost` at ``q``: H = J^T W J + Q^-1 (+ P^-1),
+    g = J^T W r + Q^-1 (q_blend - q) (+ P^-1 (q_prev - q)), and the DOFs free to move (not
+    at a bound, ``lower`` / ``upper`` already moved inward by the solver's margin, with the
+    step pointing outward)."""
+    n = len(q)
+    H = np.zeros((n, n))
+    g = np.zeros(n)
+    for row in range(len(r)):
+        for a in range(n):
+            wa = J[row, a] * w[row]
+            if wa == 0.0:
+                continue
+            g[a] += wa * r[row]
+            for b in range(n):
+                H[a, b] += wa * J[row, b]
+    free = np.empty(n, np.bool_)
+    for d in range(n):
+        H[d, d] += q_inv[d]
+        g[d] += q_inv[d] * (q_blend[d] - q[d])
+        if smoothing:
+            H[d, d] += p_inv[d]
+            g[d] += p_inv[d] * (q_prev[d] - q[d])
+        free[d] = not ((q[d] <= lower[d] and g[d] < 0) or (q[d] >= upper[d] and g[d] > 0))
+    return H, g, free
+
+
+@numba.njit(**_JIT)
+def damped_step(H: np.ndarray, g: np.ndarray, free: np.ndarray, lam: float) -> np.ndarray:
+    """The step dq (zero on the frozen DOFs) solving (H + lam diag(H)) dq = g on the free
+    DOFs; raises ``numpy.linalg.LinAlgError`` when that matrix is singular."""
+    index = np.flatnonzero(free)
+    m = len(index)
+    dq = np.zeros(len(g))
+    if m == 0:
+        return dq
+    A = np.empty((m, m))
+    b = np.empty(m)
+    for i in range(m):
+        for j in range(m):
+            A[i, j] = H[index[i], index[j]]
+        A[i, i] += lam * A[i, i]
+        b[i] = g[index[i]]
+    x = np.linalg.solve(A, b)
+    for i in range(m):
+        dq[index[i]] = x[i]
+    return dq
+
+
+@numba.njit(**_JIT)
+def _solve3(H: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, bool]:
+    """H^-1 g of a 3 x 3 system by Gaussian elimination with partial pivoting (LAPACK's
+    gesv for n = 3); False when a pivot is exactly 0 (singular, where numpy raises)."""
+    A = H.copy()
+    b = g.copy()
+    for col in range(3):
+        pivot = col
+        for row in range(col + 1, 3):
+            if abs(A[row, col]) > abs(A[pivot, col]):
+                pivot = row
+        if A[pivot, col] == 0.0:
+            return b, False
+        if pivot != col:
+            for k in range(3):
+                A[col, k], A[pivot, k] = A[pivot, k], A[col, k]
+            b[col], b[pivot] = b[pivot], b[col]
+        for row in range(col + 1, 3):
+            f = A[row, col] / A[col, col]
+            for k in range(col, 3):
+                A[row, k] -= f * A[col, k]
+            b[row] -= f * b[col]
+    x = np.empty(3)
+    for row in range(2, -1, -1):
+        acc = b[row]
+        for k in range(row + 1, 3):
+            acc -= A[row, k] * x[k]
+        x[row] = acc / A[row, row]
+    return x, True
+
+
+@numba.njit(**_JIT)
+def _pixel_depth(p: np.ndarray, dt: np.ndarray, R: np.ndarray, t: np.ndarray, f: np.ndarray,
+                 c: np.ndarray) -> tuple[float, float, float]:
+    """Pixel (x, y) and depth of point ``p + dt`` in a camera (a depth within 1e-9 of 0
+    divides as 1e-9)."""
+    pc = np.empty(3)
+    for a in range(3):
+        pc[a] = (R[a, 0] * (p[0] + dt[0]) + R[a, 1] * (p[1] + dt[1])
+                 + R[a, 2] * (p[2] + dt[2])) + t[a]
+    z = 1e-9 if abs(pc[2]) < 1e-9 else pc[2]
+    return pc[0] / z * f[0] + c[0], pc[1] / z * f[1] + c[1], pc[2]
+
+
+@numba.njit(**_JIT)
+def translation_fit(p: np.ndarray, cam_R: np.ndarray, cam_t: np.ndarray, focal: np.ndarray,
+                    centre: np.ndarray, target: np.ndarray, scale: np.ndarray,
+                    reg: np.ndarray, min_depth_m: float, r_var_px2: float, outlier_px: float
+                    ) -> tuple[np.ndarray, int]:
+    """The wrist shift dt (3,) that best projects points ``p`` (K, 3) onto pixels ``target``
+    (K, 2), each in its camera (``cam_R``, ``cam_t``, ``focal``, ``centre`` per point):
+    weighted linear least squares on the cross-multiplied projection equations, regularised
+    by ``reg`` (3, 3), refitted once without the points farther than ``outlier_px`` (in
+    pixels over ``scale`` (K, 2); 0 = no refit) when at least 3 remain; with the outcome (0,
+    :data:`SINGULAR`, :data:`BEHIND`: a point within ``min_depth_m`` of its camera's plane).
+    ``projection.estimate_translation`` describes the weights."""
+    k_rows = len(p)
+    G = np.empty((k_rows, 2, 3))
+    y = np.empty((k_rows, 2))
+    w = np.empty((k_rows, 2))
+    zero = np.zeros(3)
+    for k in range(k_rows):
+        R, t = cam_R[k], cam_t[k]
+        _, _, depth = _pixel_depth(p[k], zero, R, t, focal[k], centre[k])
+        for i in range(2):
+            coef = (target[k, i] - centre[k, i]) / focal[k, i]
+            acc = 0.0
+            for j in range(3):
+                G[k, i, j] = R[i, j] - coef * R[2, j]
+                acc += G[k, i, j] * p[k, j]
+            y[k, i] = -acc - (t[i] - coef * t[2])
+            w[k, i] = (focal[k, i] / scale[k, i] / max(depth, min_depth_m)) ** 2 / r_var_px2
+    keep = np.ones(k_rows, np.bool_)
+    dt = np.zeros(3)
+    for _ in range(2 if outlier_px > 0 else 1):
+        H = reg.copy()
+        g = np.zeros(3)
+        for k in range(k_rows):
+            if not keep[k]:
+                continue
+            for i in range(2):
+                for a in range(3):
+                    wa = G[k, i, a] * w[k, i]
+                    g[a] += wa * y[k, i]
+                    for b in range(3):
+                        H[a, b] += wa * G[k, i, b]
+        dt, solved = _solve3(H, g)
+        if not solved:
+            return dt, SINGULAR
+        if outlier_px <= 0:
+            break
+        good = 0
+        for k in range(k_rows):
+            x_px, y_px, _ = _pixel_depth(p[k], dt, cam_R[k], cam_t[k], focal[k], centre[k])
+            ex = (x_px - target[k, 0]) / scale[k, 0]
+            ey = (y_px - target[k, 1]) / scale[k, 1]
+            keep[k] = math.sqrt(ex * ex + ey * ey) <= outlier_px
+            good += keep[k]
+        if good == k_rows or good < 3:
+            break
+    for k in range(k_rows):
+        _, _, depth = _pixel_depth(p[k], dt, cam_R[k], cam_t[k], focal[k], centre[k])
+        if depth <= min_depth_m:
+            return dt, BEHIND
+    return dt, 0
+
+
+@numba.njit(**_JIT)
 def posed_elements(Rs: np.ndarray, ts: np.ndarray, frame: np.ndarray, centre: np.ndarray,
                    normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Centres (E, 3) and normals (E, 3) of link-fixed surface elements (``centre``,
@@ -300,6 +483,11 @@ _SIGNATURES = {
     forward_frames: (_F1, _F1, _F3, _F3, _F3, _F2, _I1),
     link_points: (*_KINEMATIC, _I1, _F2, numba.boolean),
     projected_rows: (*_KINEMATIC, _I2, _F3, _F2, _F3, _F2, _F2, _F2, numba.boolean),
+    prior_cost: (_F1, _F1, _F1, _F1, _F1, _F1, _F1, numba.boolean),
+    normal_equations: (_F2, _F1, _F1, _F1, _F1, _F1, _F1, _F1, numba.boolean, _F1, _F1),
+    damped_step: (_F2, _F1, _array(numba.boolean, 1), numba.float64),
+    translation_fit: (_F2, _F3, _F2, _F2, _F2, _F2, _F2, _F2, numba.float64, numba.float64,
+                      numba.float64),
     posed_elements: (_F3, _F2, _I1, _F2, _F2),
     element_weights: (_F2, _F2, _F2, _F1, numba.float64, numba.float64, numba.float64,
                       numba.float64),

@@ -9,6 +9,7 @@ import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.hand.model import NUM_DOFS
+from colorglove_ros.core.tracking import ik_kernel
 from colorglove_ros.core.tracking.kinematics import FastKinematics
 from colorglove_ros.core.tracking.types import Correspondences, IKError
 
@@ -83,14 +84,6 @@ def project_correspondences(kin: FastKinematics, cameras: Sequence[PinholeCamera
     return kin.projected_points(q, link, local, weight, pp.R, pp.t, pp.f, pp.c, jacobian)
 
 
-def _project_points(pp: PerPointCameras, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels and depths of primary-frame points ``p``, each in its own camera."""
-    pc = np.einsum('nij,nj->ni', pp.R, p) + pp.t
-    depth = pc[:, 2].copy()
-    z = np.where(np.abs(depth) < 1e-9, 1e-9, depth)
-    return pc[:, :2] / z[:, None] * pp.f + pp.c, depth
-
-
 def reprojection_errors(kin: FastKinematics, cameras: Sequence[PinholeCamera],
                         corr: Correspondences, q: np.ndarray) -> np.ndarray:
     """Euclidean pixel distance between each constraint's projection and its target."""
@@ -119,35 +112,18 @@ def estimate_translation(kin: FastKinematics, cameras: Sequence[PinholeCamera],
     p, _ = constraint_points(kin, corr, q)
     pp = per_point_cameras(cameras, corr)
     # per correspondence and pixel axis i: (R_i - a_i R_2) (p + dt) + t_i - a_i t_2 = 0 with
-    # a the target's normalised image coordinates
-    coef = (corr.target_px - pp.c) / pp.f                                  # (K, 2)
-    G = pp.R[:, :2, :] - coef[:, :, None] * pp.R[:, 2:3, :]                 # (K, 2, 3)
-    y = -np.einsum('kij,kj->ki', G, p) - (pp.t[:, :2] - coef * pp.t[:, 2:3])
-    _, depth = _project_points(pp, p)
-    scale = pp.axis_scale(reference_focal_px)                               # (K, 2)
-    # a row's residual in reference pixels is (f / scale) / z times its value
-    w = (pp.f / scale / np.maximum(depth, min_depth_m)[:, None]) ** 2 / r_var_px2
-    A, y, w = G.reshape(-1, 3), y.reshape(-1), w.reshape(-1)
+    # a the target's normalised image coordinates; a row's residual in reference pixels is
+    # (f / scale) / z times its value (ik_kernel.translation_fit)
     reg = np.zeros((3, 3)) if prior_var is None else np.diag(1.0 / np.asarray(prior_var, float))
-    keep = np.ones(len(A), dtype=bool)
-    dt = np.zeros(3)
-    for _ in range(2 if outlier_px > 0 else 1):
-        Ak, wk = A[keep], w[keep]
-        H = (Ak.T * wk) @ Ak + reg
-        try:
-            dt = np.linalg.solve(H, (Ak.T * wk) @ y[keep])
-        except np.linalg.LinAlgError as exc:
-            raise IKError('translation is not determined by the correspondences') from exc
-        if outlier_px <= 0:
-            break
-        pix, _ = _project_points(pp, p + dt)
-        good = np.linalg.norm((pix - corr.target_px) / scale, axis=1) <= outlier_px
-        if good.all() or good.sum() < 3:
-            break
-        keep = np.repeat(good, 2)                    # rows x0, y0, x1, y1, ...
+    dt, outcome = ik_kernel.translation_fit(
+        np.ascontiguousarray(p), pp.R, pp.t, pp.f, pp.c,
+        np.ascontiguousarray(corr.target_px, dtype=float),
+        np.ascontiguousarray(pp.axis_scale(reference_focal_px)), reg, float(min_depth_m),
+        float(r_var_px2), float(outlier_px))
+    if outcome == ik_kernel.SINGULAR:
+        raise IKError('translation is not determined by the correspondences')
+    if outcome == ik_kernel.BEHIND:
+        raise IKError('translation estimate puts the hand behind a camera')
     out = np.array(q, dtype=float)
     out[0:3] = q[0:3] + dt
-    _, depth = _project_points(pp, p + dt)
-    if np.any(depth <= min_depth_m):
-        raise IKError('translation estimate puts the hand behind a camera')
     return kin.clamp(out)
