@@ -6,7 +6,8 @@ The same arithmetic as the numpy code they replaced, written as loops over small
 arrays, so one call replaces the dozens of numpy calls whose per-call overhead dominated the
 fit. Every kernel is compiled once and cached on disk (``cache=True``); :func:`compile_kernels`
 makes (or loads) them ahead of the first frame. Arrays passed in must be C-contiguous float64 /
-int64, as the callers in :mod:`kinematics` and :mod:`projection` make them.
+int64, as the callers (:mod:`kinematics`, :mod:`projection`, :mod:`solver`,
+:mod:`patch_surface`) make them.
 """
 from __future__ import annotations
 

@@ -1,13 +1,13 @@
 """Fast forward kinematics and analytic point Jacobians of the hand model, for the IK."""
 from __future__ import annotations
 
+from types import ModuleType
 from typing import Any
 
 import numpy as np
 
 from colorglove_ros.core.geometry import vector_to_skew
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
-from colorglove_ros.core.tracking import ik_kernel
 from colorglove_ros.core.tracking.types import IKError
 
 __all__ = ['FastKinematics']
@@ -24,12 +24,16 @@ class FastKinematics:
     """Forward kinematics and analytic point Jacobians of a :class:`HandModel` in one pass.
 
     Same numbers as ``model.transform_points`` / ``model.point_jacobian`` (checked at
-    construction), computed by the compiled kernels of :mod:`ik_kernel` (compiled, or loaded
-    from their cache, when the first instance is made).
+    construction), computed by the compiled kernels of :mod:`ik_kernel` (``kernels``: imported,
+    and compiled or loaded from their cache, when the first instance is made, so a module that
+    only imports this one loads neither numba nor scipy).
     """
 
     def __init__(self, model: HandModel) -> None:
+        from colorglove_ros.core.tracking import ik_kernel
+
         ik_kernel.compile_kernels()
+        self.kernels: ModuleType = ik_kernel
         joints = model.joints
         self.model = model
         self.lower = np.asarray(model.lower_limits, dtype=float)
@@ -88,7 +92,7 @@ class FastKinematics:
         hit = self._cache.get(key)
         if hit is not None:
             return hit
-        Rs, ts, jl = ik_kernel.forward_frames(q[3:6], q[self._dof], self._K, self._KK,
+        Rs, ts, jl = self.kernels.forward_frames(q[3:6], q[self._dof], self._K, self._KK,
                                               self._fixed_R, self._fixed_t, self._parent)
         for a in (Rs, ts, jl):
             a.setflags(write=False)
@@ -101,7 +105,7 @@ class FastKinematics:
                jacobian: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
         """Camera-frame points (N, 3) of link-fixed points and optionally d/dq (N, 3, 26)."""
         Rs, ts, jl = self.frames(q)
-        p, J = ik_kernel.link_points(
+        p, J = self.kernels.link_points(
             Rs, ts, jl, self._axis, self._ancestors, self._dof, NUM_DOFS,
             np.ascontiguousarray(self.link_frame[link]),
             np.ascontiguousarray(local, dtype=float), jacobian)
@@ -117,7 +121,7 @@ class FastKinematics:
         ``cam_R[k]``, translation ``cam_t[k]``, focal lengths ``focal[k]`` and centre
         ``centre[k]`` (``ik_kernel.projected_rows``; C-contiguous arrays)."""
         Rs, ts, jl = self.frames(q)
-        pix, J, depth = ik_kernel.projected_rows(
+        pix, J, depth = self.kernels.projected_rows(
             Rs, ts, jl, self._axis, self._ancestors, self._dof, NUM_DOFS, self.link_frame[link],
             local, weight, cam_R, cam_t, focal, centre, jacobian)
         return pix, (J if jacobian else None), depth

@@ -7,7 +7,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.tracking import ik_kernel
 from colorglove_ros.core.tracking.kinematics import FastKinematics
 from colorglove_ros.core.tracking.types import IKError, MeshLike
 
@@ -91,7 +90,7 @@ class PatchSurface:
         if self._posed_cache is not None and self._posed_cache[0] == key:
             return self._posed_cache[1]
         Rs, ts, _ = self._kin.frames(q)
-        centre, normal = ik_kernel.posed_elements(Rs, ts, self._element_frame, self._centre,
+        centre, normal = self._kin.kernels.posed_elements(Rs, ts, self._element_frame, self._centre,
                                                   self._area_normal)
         centre.setflags(write=False)
         normal.setflags(write=False)
@@ -111,7 +110,7 @@ class PatchSurface:
         """Element centres in ``camera``'s optical frame (E, 3), the projected-area weight (E,)
         of every element facing ``camera`` (area x cosine / depth^2), and the same with the
         elements hidden in the coarse depth buffer set to 0 (``ik_kernel.element_weights``)."""
-        return ik_kernel.element_weights(
+        return self._kin.kernels.element_weights(
             pc, normal, np.asarray(camera.rotation, float), np.asarray(camera.translation, float),
             float(camera.fx), float(camera.fy), self.cell_m, self.depth_tol_m)
 

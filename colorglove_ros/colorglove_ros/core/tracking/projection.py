@@ -9,7 +9,6 @@ import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.hand.model import NUM_DOFS
-from colorglove_ros.core.tracking import ik_kernel
 from colorglove_ros.core.tracking.kinematics import FastKinematics
 from colorglove_ros.core.tracking.types import Correspondences, IKError
 
@@ -113,16 +112,16 @@ def estimate_translation(kin: FastKinematics, cameras: Sequence[PinholeCamera],
     pp = per_point_cameras(cameras, corr)
     # per correspondence and pixel axis i: (R_i - a_i R_2) (p + dt) + t_i - a_i t_2 = 0 with
     # a the target's normalised image coordinates; a row's residual in reference pixels is
-    # (f / scale) / z times its value (ik_kernel.translation_fit)
+    # (f / scale) / z times its value (kin.kernels.translation_fit)
     reg = np.zeros((3, 3)) if prior_var is None else np.diag(1.0 / np.asarray(prior_var, float))
-    dt, outcome = ik_kernel.translation_fit(
+    dt, outcome = kin.kernels.translation_fit(
         np.ascontiguousarray(p), pp.R, pp.t, pp.f, pp.c,
         np.ascontiguousarray(corr.target_px, dtype=float),
         np.ascontiguousarray(pp.axis_scale(reference_focal_px)), reg, float(min_depth_m),
         float(r_var_px2), float(outlier_px))
-    if outcome == ik_kernel.SINGULAR:
+    if outcome == kin.kernels.SINGULAR:
         raise IKError('translation is not determined by the correspondences')
-    if outcome == ik_kernel.BEHIND:
+    if outcome == kin.kernels.BEHIND:
         raise IKError('translation estimate puts the hand behind a camera')
     out = np.array(q, dtype=float)
     out[0:3] = q[0:3] + dt

@@ -10,7 +10,6 @@ import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.hand.model import NUM_DOFS
-from colorglove_ros.core.tracking import ik_kernel
 from colorglove_ros.core.tracking.config import IKCovariances
 from colorglove_ros.core.tracking.kinematics import FastKinematics
 from colorglove_ros.core.tracking.line_constraints import ExtraConstraints
@@ -84,7 +83,7 @@ def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Corres
             r_extra, J_extra = extra.residuals(qq, jacobian)
             r = np.concatenate([r, r_extra])
             J = None if J is None else np.concatenate([J, J_extra])
-        return ik_kernel.prior_cost(r, w, qq, q_blend, q_inv, q_prev, p_inv, smoothing), r, J
+        return kin.kernels.prior_cost(r, w, qq, q_blend, q_inv, q_prev, p_inv, smoothing), r, J
 
     cost, r, J = evaluate(q, max_iterations > 0)
     if not math.isfinite(cost):
@@ -96,13 +95,13 @@ def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Corres
     # a DOF is frozen at a bound when it sits there and its step would point outward
     lower, upper = kin.lower + _EPS_LIMIT, kin.upper - _EPS_LIMIT
     while it < max_iterations and J is not None:
-        H, g, free = ik_kernel.normal_equations(np.ascontiguousarray(J), w, r, q, q_blend, q_inv,
+        H, g, free = kin.kernels.normal_equations(np.ascontiguousarray(J), w, r, q, q_blend, q_inv,
                                                 q_prev, p_inv, smoothing, lower, upper)
         accepted = False
         while it < max_iterations:
             it += 1
             try:
-                dq = ik_kernel.damped_step(H, g, free, lam)
+                dq = kin.kernels.damped_step(H, g, free, lam)
             except np.linalg.LinAlgError:
                 lam *= 10.0
                 continue
