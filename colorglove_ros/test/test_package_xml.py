@@ -10,7 +10,8 @@ from repo_paths import PKG_DIR
 # import name -> the rosdep key (rosdistro rosdep/python.yaml, or a ROS package) declaring it;
 # None: no rosdep key exists, installed by pip (said in a package.xml comment)
 ROSDEP_KEYS = {
-    'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'cv2': 'python3-opencv',
+    'numpy': 'python3-numpy', 'numba': 'python3-numba', 'scipy': 'python3-scipy',
+    'cv2': 'python3-opencv',
     'yaml': 'python3-yaml', 'tqdm': 'python3-tqdm', 'trimesh': 'python3-trimesh-pip',
     'rosbags': 'python3-rosbags-pip', 'matplotlib': 'python3-matplotlib',
     'sklearn': 'python3-sklearn', 'moderngl': None,

@@ -1,11 +1,12 @@
 """Fast forward kinematics and analytic point Jacobians of the hand model, for the IK."""
 from __future__ import annotations
 
+from types import ModuleType
 from typing import Any
 
 import numpy as np
 
-from colorglove_ros.core.geometry import rotvec_to_matrix_and_left_jacobian, vector_to_skew
+from colorglove_ros.core.geometry import vector_to_skew
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
 from colorglove_ros.core.tracking.types import IKError
 
@@ -23,11 +24,16 @@ class FastKinematics:
     """Forward kinematics and analytic point Jacobians of a :class:`HandModel` in one pass.
 
     Same numbers as ``model.transform_points`` / ``model.point_jacobian`` (checked at
-    construction), with the joints processed level by level so one IK iteration costs a
-    few dozen numpy calls instead of several hundred.
+    construction), computed by the compiled kernels of :mod:`ik_kernel` (``kernels``: imported,
+    and compiled or loaded from their cache, when the first instance is made, so a module that
+    only imports this one loads neither numba nor scipy).
     """
 
     def __init__(self, model: HandModel) -> None:
+        from colorglove_ros.core.tracking import ik_kernel
+
+        ik_kernel.compile_kernels()
+        self.kernels: ModuleType = ik_kernel
         joints = model.joints
         self.model = model
         self.lower = np.asarray(model.lower_limits, dtype=float)
@@ -47,29 +53,11 @@ class FastKinematics:
         self._dof = np.array([j.dof for j in joints], dtype=np.int64)
         if len(set(self._dof.tolist())) != n:
             raise IKError('each joint must drive its own DOF')
-        contiguous = np.array_equal(self._dof, np.arange(self._dof[0], self._dof[0] + n))
-        self._joint_dofs: slice | np.ndarray = (slice(int(self._dof[0]), int(self._dof[0]) + n)
-                                                if contiguous else self._dof)
-        depth = np.zeros(n + 1, dtype=np.int64)
         ancestors = np.zeros((n + 1, n), dtype=float)
         for f, j in enumerate(joints, start=1):
-            depth[f] = depth[j.parent_frame] + 1
             ancestors[f] = ancestors[j.parent_frame]
             ancestors[f, f - 1] = 1.0
-        self._levels = [np.flatnonzero(depth == d) for d in range(1, int(depth.max()) + 1)]
         self._ancestors = ancestors
-        # joints in level order, each level's joint transforms a slice of the stacked
-        # homogeneous link transforms (fixed translation, rotation filled per pose)
-        self._level_order = np.concatenate(self._levels) - 1
-        bounds = np.cumsum([0, *(len(lvl) for lvl in self._levels)])
-        self._level_data = [(lvl, self._parent[lvl - 1], slice(int(a), int(b)))
-                            for lvl, a, b in zip(self._levels, bounds[:-1], bounds[1:],
-                                                 strict=True)]
-        self._local_T = np.zeros((n, 4, 4))
-        self._local_T[:, :3, 3] = self._fixed_t[self._level_order]
-        self._local_T[:, 3, 3] = 1.0
-        self._eye = np.eye(3)
-        self._basis_skew = vector_to_skew(self._eye)
         self._cache: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         rng = np.random.default_rng(0)
         lo = np.where(np.isfinite(self.lower), self.lower, -1.0)
@@ -92,7 +80,7 @@ class FastKinematics:
         SO(3) left Jacobian of the wrist rotation vector (read-only arrays). The frames
         relative to the wrist position of the last few poses are remembered, as a frame's
         matching, translation fit, IK and error checks revisit the same rotation and fingers."""
-        q = np.asarray(q, dtype=float)
+        q = np.ascontiguousarray(q, dtype=float)
         Rs, ts_wrist, jl = self._wrist_frames(q)
         ts = ts_wrist + q[0:3]
         ts.setflags(write=False)
@@ -104,20 +92,8 @@ class FastKinematics:
         hit = self._cache.get(key)
         if hit is not None:
             return hit
-        n = len(self._dof)
-        T = np.zeros((n + 1, 4, 4))
-        T[0, :3, :3], jl = rotvec_to_matrix_and_left_jacobian(q[3:6])
-        T[0, 3, 3] = 1.0
-        ang = q[self._dof]
-        Rj = self._eye + np.sin(ang)[:, None, None] * self._K
-        Rj += (1.0 - np.cos(ang))[:, None, None] * self._KK
-        local_T = self._local_T.copy()
-        local_T[:, :3, :3] = (self._fixed_R @ Rj)[self._level_order]
-        # one homogeneous product per level: a frame's rotation and origin together
-        for lvl, p, rows in self._level_data:
-            T[lvl] = T[p] @ local_T[rows]
-        Rs = np.ascontiguousarray(T[:, :3, :3])
-        ts = np.ascontiguousarray(T[:, :3, 3])
+        Rs, ts, jl = self.kernels.forward_frames(q[3:6], q[self._dof], self._K, self._KK,
+                                              self._fixed_R, self._fixed_t, self._parent)
         for a in (Rs, ts, jl):
             a.setflags(write=False)
         if len(self._cache) >= 8:
@@ -129,25 +105,26 @@ class FastKinematics:
                jacobian: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
         """Camera-frame points (N, 3) of link-fixed points and optionally d/dq (N, 3, 26)."""
         Rs, ts, jl = self.frames(q)
-        fr = self.link_frame[link]
-        p = (Rs[fr] @ local[:, :, None])[:, :, 0] + ts[fr]
-        if not jacobian:
-            return p, None
-        J = np.empty((len(p), 3, NUM_DOFS))
-        J[:, :, 0:3] = self._eye
-        # -[p - o]_x jl, with [d]_x = sum_k d_k [e_k]_x: one (N, 3) @ (3, 9) product
-        d = p - ts[0]                                                      # wrist-relative
-        J[:, :, 3:6] = (-d @ (self._basis_skew @ jl).reshape(3, 9)).reshape(-1, 3, 3)
-        # revolute joint j: w_j x (p - o_j) = [w_j]_x d - w_j x (o_j - o_0), zero unless
-        # joint j moves p; all joints in one (N, 3) @ (3, 3 nj) product
-        w_skew = vector_to_skew((Rs[1:] @ self._axis[:, :, None])[:, :, 0])          # (nj, 3, 3)
-        nj = len(w_skew)
-        offset = (w_skew @ (ts[1:] - ts[0])[:, :, None])[:, :, 0].T        # (3, nj)
-        cross = (d @ w_skew.transpose(2, 1, 0).reshape(3, 3 * nj)).reshape(-1, 3, nj)
-        cross -= offset
-        cross *= self._ancestors[fr][:, None, :]
-        J[:, :, self._joint_dofs] = cross
-        return p, J
+        p, J = self.kernels.link_points(
+            Rs, ts, jl, self._axis, self._ancestors, self._dof, NUM_DOFS,
+            np.ascontiguousarray(self.link_frame[link]),
+            np.ascontiguousarray(local, dtype=float), jacobian)
+        return p, (J if jacobian else None)
+
+    def projected_points(self, q: np.ndarray, link: np.ndarray, local: np.ndarray,
+                         weight: np.ndarray, cam_R: np.ndarray, cam_t: np.ndarray,
+                         focal: np.ndarray, centre: np.ndarray, jacobian: bool
+                         ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """Pixels (K, 2), optionally d pixel / dq (2K, 26) (rows x0, y0, x1, ...) and camera
+        depths (K,) of K points, each the ``weight``-ed mean (K, S) of link-fixed points
+        (``link``, ``local``: (K, S), (K, S, 3)), row k seen by a pinhole camera with rotation
+        ``cam_R[k]``, translation ``cam_t[k]``, focal lengths ``focal[k]`` and centre
+        ``centre[k]`` (``ik_kernel.projected_rows``; C-contiguous arrays)."""
+        Rs, ts, jl = self.frames(q)
+        pix, J, depth = self.kernels.projected_rows(
+            Rs, ts, jl, self._axis, self._ancestors, self._dof, NUM_DOFS, self.link_frame[link],
+            local, weight, cam_R, cam_t, focal, centre, jacobian)
+        return pix, (J if jacobian else None), depth
 
     def clamp(self, q: np.ndarray) -> np.ndarray:
         """Clip a pose into the joint limits."""

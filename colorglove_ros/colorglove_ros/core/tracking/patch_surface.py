@@ -46,8 +46,7 @@ class PatchSurface:
         area_normal = 0.5 * np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
         area = np.linalg.norm(area_normal, axis=1)
         # surface elements: the faces of one patch and link in one element_m voxel, facing the
-        # same way (dominant normal axis and sign); sorted by kinematic frame, so each
-        # frame's block of elements moves with one transform
+        # same way (dominant normal axis and sign); sorted by kinematic frame
         dominant = np.argmax(np.abs(area_normal), axis=1)
         facing = 2 * dominant + (area_normal[np.arange(len(faces)), dominant] > 0)
         key = np.column_stack([kin.link_frame[face_link], face_patch, face_link, facing,
@@ -61,10 +60,7 @@ class PatchSurface:
         self._area_normal = np.stack([np.bincount(elem, area_normal[:, i], n)
                                       for i in range(3)], axis=1)
         frame, elem_patch, elem_link = keys[:, 0], keys[:, 1], keys[:, 2]
-        self._block_frame, start = np.unique(frame, return_index=True)
-        self._blocks = [slice(int(a), int(b)) for a, b in
-                        zip(start, [*start[1:], len(frame)], strict=True)]
-        self._element_frame = frame
+        self._element_frame = np.ascontiguousarray(frame)
         self._elem_patch = elem_patch
         self._kin = kin
         pairs, self._group = np.unique(np.stack([elem_patch, elem_link], axis=1), axis=0,
@@ -85,25 +81,6 @@ class PatchSurface:
         self.min_link_weight = float(min_link_weight)
         self._posed_cache: tuple[bytes, tuple[np.ndarray, np.ndarray]] | None = None
         self._bins: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
-        self._eye = np.eye(3)
-
-    def _visible(self, pc: np.ndarray, front: np.ndarray, camera: PinholeCamera) -> np.ndarray:
-        """Front elements not hidden behind another front element (coarse depth buffer)."""
-        idx = np.flatnonzero(front)
-        if len(idx) == 0:
-            return front
-        z = pc[idx, 2]
-        cell_px = self.cell_m / float(z.mean())
-        u = np.floor(pc[idx, 0] / z / cell_px * camera.fx / camera.fy).astype(np.int64)
-        v = np.floor(pc[idx, 1] / z / cell_px).astype(np.int64)
-        u -= u.min()
-        v -= v.min()
-        cell = v * (int(u.max()) + 1) + u
-        zbuf = np.full(int(cell.max()) + 1, np.inf)
-        np.minimum.at(zbuf, cell, z)
-        out = np.zeros(len(front), dtype=bool)
-        out[idx] = z <= zbuf[cell] + self.depth_tol_m
-        return out
 
     def _posed(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Element centres and area normals (E, 3) in the primary camera frame at pose ``q``
@@ -113,14 +90,8 @@ class PatchSurface:
         if self._posed_cache is not None and self._posed_cache[0] == key:
             return self._posed_cache[1]
         Rs, ts, _ = self._kin.frames(q)
-        # every block's transposed rotation, contiguous (the fast matmul path), in one copy
-        Rt = np.ascontiguousarray(Rs[self._block_frame].transpose(0, 2, 1))
-        centre = np.empty_like(self._centre)
-        normal = np.empty_like(self._centre)
-        for b, sl in enumerate(self._blocks):
-            np.dot(self._centre[sl], Rt[b], out=centre[sl])
-            np.dot(self._area_normal[sl], Rt[b], out=normal[sl])
-        centre += ts[self._element_frame]
+        centre, normal = self._kin.kernels.posed_elements(Rs, ts, self._element_frame, self._centre,
+                                                  self._area_normal)
         centre.setflags(write=False)
         normal.setflags(write=False)
         self._posed_cache = (key, (centre, normal))
@@ -134,29 +105,14 @@ class PatchSurface:
         patch_id = np.asarray(patch_id, np.int64)
         return self.points_by_camera(q, [camera], np.zeros(len(patch_id), np.int64), patch_id)
 
-    def _in_camera(self, pc: np.ndarray, normal: np.ndarray, camera: PinholeCamera
-                   ) -> tuple[np.ndarray, np.ndarray]:
-        """Element centres and normals in ``camera``'s optical frame (unchanged for the
-        reference camera)."""
-        if not (np.array_equal(camera.rotation, self._eye) and not camera.translation.any()):
-            Rt = np.ascontiguousarray(camera.rotation.T)     # the fast matmul path
-            pc = pc @ Rt + camera.translation
-            normal = normal @ Rt
-        return pc, normal
-
     def _element_weights(self, pc: np.ndarray, normal: np.ndarray, camera: PinholeCamera
-                         ) -> tuple[np.ndarray, np.ndarray]:
-        """Projected-area weight (E,) of every element facing ``camera``, and the same with
-        the elements hidden in the depth buffer set to 0."""
-        return self._camera_frame_weights(*self._in_camera(pc, normal, camera), camera)
-
-    def _camera_frame_weights(self, pc: np.ndarray, normal: np.ndarray,
-                              camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`_element_weights` of centres and normals already in ``camera``'s frame."""
-        dist = np.sqrt(np.einsum('fi,fi->f', pc, pc))
-        depth = np.maximum(pc[:, 2], 1e-3)
-        w = np.maximum(-np.einsum('fi,fi->f', normal, pc), 0.0) / (dist * depth**2)
-        return w, np.where(self._visible(pc, (w > 0) & (pc[:, 2] > 0), camera), w, 0.0)
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Element centres in ``camera``'s optical frame (E, 3), the projected-area weight (E,)
+        of every element facing ``camera`` (area x cosine / depth^2), and the same with the
+        elements hidden in the coarse depth buffer set to 0 (``ik_kernel.element_weights``)."""
+        return self._kin.kernels.element_weights(
+            pc, normal, np.asarray(camera.rotation, float), np.asarray(camera.translation, float),
+            float(camera.fx), float(camera.fy), self.cell_m, self.depth_tol_m)
 
     def _camera_bins(self, num_cameras: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
                                                       np.ndarray]:
@@ -190,8 +146,8 @@ class PatchSurface:
         nc, ng, np_ = len(cameras), len(self._group_link), self.num_patches
         # per camera: all front weights and the visible ones, all cameras summed in one call
         weights = [self._element_weights(pc, normal, cam) for cam in cameras]
-        w = np.concatenate([front for front, _ in weights])
-        w_vis = np.concatenate([vis for _, vis in weights])
+        w = np.concatenate([front for _, front, _ in weights])
+        w_vis = np.concatenate([vis for _, _, vis in weights])
         elem_patch, group, group_xyz, centre = self._camera_bins(nc)
         # patches mostly hidden in the depth buffer fall back to all their front faces
         vis_frac = (np.bincount(elem_patch, w_vis, nc * np_)
@@ -218,8 +174,7 @@ class PatchSurface:
         """The glove's visible surface elements in ``camera``'s image at pose ``q``: each
         one's patch (M,), undistorted pixel centre (M, 2) and visible area (M, pixels);
         hidden and back-facing elements are left out."""
-        pc, normal = self._in_camera(*self._posed(q), camera)
-        _, w_vis = self._camera_frame_weights(pc, normal, camera)
+        pc, _, w_vis = self._element_weights(*self._posed(q), camera)
         shown = w_vis > 0
         uv = camera.project(pc[shown]) if shown.any() else np.zeros((0, 2))
         return self._elem_patch[shown], uv, w_vis[shown] * (camera.fx * camera.fy)

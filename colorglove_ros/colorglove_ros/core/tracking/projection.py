@@ -49,10 +49,10 @@ class PerPointCameras:
 def per_point_cameras(cameras: Sequence[PinholeCamera], corr: Correspondences) -> PerPointCameras:
     if len(corr) and (corr.camera.min() < 0 or corr.camera.max() >= len(cameras)):
         raise IKError(f'correspondence camera index outside [0, {len(cameras)})')
-    Rs = np.stack([c.rotation for c in cameras])
-    ts = np.stack([c.translation for c in cameras])
-    fs = np.array([[c.fx, c.fy] for c in cameras])
-    cs = np.array([[c.cx, c.cy] for c in cameras])
+    Rs = np.stack([c.rotation for c in cameras]).astype(float, copy=False)
+    ts = np.stack([c.translation for c in cameras]).astype(float, copy=False)
+    fs = np.array([[c.fx, c.fy] for c in cameras], dtype=float)
+    cs = np.array([[c.cx, c.cy] for c in cameras], dtype=float)
     k = corr.camera
     return PerPointCameras(Rs[k], ts[k], fs[k], cs[k])
 
@@ -79,25 +79,8 @@ def project_correspondences(kin: FastKinematics, cameras: Sequence[PinholeCamera
     the depth of every point in its camera (K,). Pinhole projection without distortion
     (targets are undistorted); each camera's rotation is chained into the Jacobian."""
     pp = per_point if per_point is not None else per_point_cameras(cameras, corr)
-    p, Jp = constraint_points(kin, corr, q, jacobian)
-    return _project_points(pp, p, Jp if jacobian else None)
-
-
-def _project_points(pp: PerPointCameras, p: np.ndarray, Jp: np.ndarray | None
-                    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-    """Pixels, pixel Jacobian (if ``Jp``, the points' d/dq, is given) and depths of
-    primary-frame points ``p``, each in its own camera."""
-    pc = np.einsum('nij,nj->ni', pp.R, p) + pp.t
-    depth = pc[:, 2].copy()
-    z = np.where(np.abs(depth) < 1e-9, 1e-9, depth)
-    xy = pc[:, :2] / z[:, None]
-    pix = xy * pp.f + pp.c
-    if Jp is None:
-        return pix, None, depth
-    # d pixel / d world point (K, 2, 3) = (f / z) (R[0:2] - xy R[2]), chained with Jp
-    A = (pp.f / z[:, None])[:, :, None] * (pp.R[:, :2, :] - xy[:, :, None] * pp.R[:, 2:3, :])
-    J = np.einsum('nik,nkd->nid', A, Jp)
-    return pix, J.reshape(-1, NUM_DOFS), depth
+    link, local, weight = corr.point_slots
+    return kin.projected_points(q, link, local, weight, pp.R, pp.t, pp.f, pp.c, jacobian)
 
 
 def reprojection_errors(kin: FastKinematics, cameras: Sequence[PinholeCamera],
@@ -128,35 +111,18 @@ def estimate_translation(kin: FastKinematics, cameras: Sequence[PinholeCamera],
     p, _ = constraint_points(kin, corr, q)
     pp = per_point_cameras(cameras, corr)
     # per correspondence and pixel axis i: (R_i - a_i R_2) (p + dt) + t_i - a_i t_2 = 0 with
-    # a the target's normalised image coordinates
-    coef = (corr.target_px - pp.c) / pp.f                                  # (K, 2)
-    G = pp.R[:, :2, :] - coef[:, :, None] * pp.R[:, 2:3, :]                 # (K, 2, 3)
-    y = -np.einsum('kij,kj->ki', G, p) - (pp.t[:, :2] - coef * pp.t[:, 2:3])
-    _, _, depth = _project_points(pp, p, None)
-    scale = pp.axis_scale(reference_focal_px)                               # (K, 2)
-    # a row's residual in reference pixels is (f / scale) / z times its value
-    w = (pp.f / scale / np.maximum(depth, min_depth_m)[:, None]) ** 2 / r_var_px2
-    A, y, w = G.reshape(-1, 3), y.reshape(-1), w.reshape(-1)
+    # a the target's normalised image coordinates; a row's residual in reference pixels is
+    # (f / scale) / z times its value (kin.kernels.translation_fit)
     reg = np.zeros((3, 3)) if prior_var is None else np.diag(1.0 / np.asarray(prior_var, float))
-    keep = np.ones(len(A), dtype=bool)
-    dt = np.zeros(3)
-    for _ in range(2 if outlier_px > 0 else 1):
-        Ak, wk = A[keep], w[keep]
-        H = (Ak.T * wk) @ Ak + reg
-        try:
-            dt = np.linalg.solve(H, (Ak.T * wk) @ y[keep])
-        except np.linalg.LinAlgError as exc:
-            raise IKError('translation is not determined by the correspondences') from exc
-        if outlier_px <= 0:
-            break
-        pix, _, _ = _project_points(pp, p + dt, None)
-        good = np.linalg.norm((pix - corr.target_px) / scale, axis=1) <= outlier_px
-        if good.all() or good.sum() < 3:
-            break
-        keep = np.repeat(good, 2)                    # rows x0, y0, x1, y1, ...
+    dt, outcome = kin.kernels.translation_fit(
+        np.ascontiguousarray(p), pp.R, pp.t, pp.f, pp.c,
+        np.ascontiguousarray(corr.target_px, dtype=float),
+        np.ascontiguousarray(pp.axis_scale(reference_focal_px)), reg, float(min_depth_m),
+        float(r_var_px2), float(outlier_px))
+    if outcome == kin.kernels.SINGULAR:
+        raise IKError('translation is not determined by the correspondences')
+    if outcome == kin.kernels.BEHIND:
+        raise IKError('translation estimate puts the hand behind a camera')
     out = np.array(q, dtype=float)
     out[0:3] = q[0:3] + dt
-    _, _, depth = _project_points(pp, p + dt, None)
-    if np.any(depth <= min_depth_m):
-        raise IKError('translation estimate puts the hand behind a camera')
     return kin.clamp(out)

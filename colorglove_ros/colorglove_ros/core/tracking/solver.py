@@ -43,14 +43,6 @@ class IKSolution:
         return np.linalg.norm(self.residual_px, axis=1)
 
 
-def _cost(r: np.ndarray, w: np.ndarray, q: np.ndarray, q_blend: np.ndarray, q_inv: np.ndarray,
-          q_prev: np.ndarray | None, p_inv: np.ndarray | None) -> float:
-    c = float(r @ (w * r)) + float(((q - q_blend) ** 2 * q_inv).sum())
-    if q_prev is not None and p_inv is not None:
-        c += float(((q - q_prev) ** 2 * p_inv).sum())
-    return c
-
-
 def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Correspondences,
              q_init: np.ndarray, q_blend: np.ndarray, cov: IKCovariances,
              q_prev: np.ndarray | None = None, max_iterations: int = 6,
@@ -69,9 +61,12 @@ def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Corres
     pixels), so the pose does not depend on the image resolution. ``extra`` adds residual
     rows of other kinds (the line features, :mod:`line_constraints`) with their own weights."""
     q = kin.clamp(np.asarray(q_init, dtype=float))
-    q_blend = np.asarray(q_blend, dtype=float)
+    q_blend = np.ascontiguousarray(q_blend, dtype=float)
     q_inv = 1.0 / cov.q_var
-    p_inv = 1.0 / cov.p_var if q_prev is not None else None
+    smoothing = q_prev is not None
+    # without smoothing the kernels ignore these two
+    q_prev = np.ascontiguousarray(q_prev, dtype=float) if smoothing else q_blend
+    p_inv = 1.0 / cov.p_var
     per_point = per_point_cameras(cameras, corr)
     w = (1.0 / cov.r_var_px2 / per_point.axis_scale(reference_focal_px) ** 2).reshape(-1)
     target = corr.target_px.reshape(-1)
@@ -88,7 +83,7 @@ def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Corres
             r_extra, J_extra = extra.residuals(qq, jacobian)
             r = np.concatenate([r, r_extra])
             J = None if J is None else np.concatenate([J, J_extra])
-        return _cost(r, w, qq, q_blend, q_inv, q_prev, p_inv), r, J
+        return kin.kernels.prior_cost(r, w, qq, q_blend, q_inv, q_prev, p_inv, smoothing), r, J
 
     cost, r, J = evaluate(q, max_iterations > 0)
     if not math.isfinite(cost):
@@ -97,36 +92,19 @@ def solve_ik(kin: FastKinematics, cameras: Sequence[PinholeCamera], corr: Corres
     lam = lambda_init
     it = 0
     converged = False
-    q_diag = np.diag(q_inv)
-    p_diag = None if p_inv is None else np.diag(p_inv)
     # a DOF is frozen at a bound when it sits there and its step would point outward
     lower, upper = kin.lower + _EPS_LIMIT, kin.upper - _EPS_LIMIT
     while it < max_iterations and J is not None:
-        JW = J.T * w
-        H = JW @ J + q_diag
-        g = JW @ r + q_inv * (q_blend - q)
-        if p_inv is not None:
-            H += p_diag
-            g += p_inv * (q_prev - q)
-        free = ~(((q <= lower) & (g < 0)) | ((q >= upper) & (g > 0)))
-        every = bool(free.all())
-        Hf = H if every else H[np.ix_(free, free)]
-        gf = g if every else g[free]
-        damping = np.diag(np.diag(Hf))
+        H, g, free = kin.kernels.normal_equations(np.ascontiguousarray(J), w, r, q, q_blend, q_inv,
+                                                q_prev, p_inv, smoothing, lower, upper)
         accepted = False
         while it < max_iterations:
             it += 1
-            A = Hf + lam * damping
             try:
-                dqf = np.linalg.solve(A, gf)
+                dq = kin.kernels.damped_step(H, g, free, lam)
             except np.linalg.LinAlgError:
                 lam *= 10.0
                 continue
-            if every:
-                dq = dqf
-            else:
-                dq = np.zeros(NUM_DOFS)
-                dq[free] = dqf
             q_new = kin.clamp(q + dq)
             # the last linear solve's pose needs no Jacobian
             cost_new, r_new, J_new = evaluate(q_new, it < max_iterations)

@@ -176,6 +176,15 @@ class Correspondences:
         mix[rows, np.arange(len(rows))] = self.weight[rows, cols]
         return self.link[rows, cols], self.local[rows, cols], mix
 
+    @cached_property
+    def point_slots(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """C-contiguous links (K, S), link-frame points (K, S, 3) and weights (K, S) of the
+        rows' points as :attr:`point_mix` mixes them (weights of one when S = 1), for the
+        compiled projection (``ik_kernel.projected_rows``)."""
+        weight = np.ones(self.link.shape) if self.link.shape[1] == 1 else self.weight
+        return (np.ascontiguousarray(self.link), np.ascontiguousarray(self.local),
+                np.ascontiguousarray(weight))
+
     def same_as(self, other: Correspondences) -> bool:
         """True if both hold the same (camera, patch, target) triples in the same order."""
         return (len(self) == len(other) and np.array_equal(self.camera, other.camera)
