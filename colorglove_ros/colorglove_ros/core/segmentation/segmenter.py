@@ -424,9 +424,10 @@ class GloveSegmenter:
     hand's half window of a patch junction (``keep_near_junctions``; 0 turns this off): the
     crop and the blobs then hold the hand and not the surface it touches. With
     ``junction_surfaces_only`` 1 only such regions whose outline runs mostly along background
-    are trimmed (a petal or a face touching the glove; a patch of the glove, however large,
-    is surrounded by its neighbours), so a share under the largest patch's can reach the
-    smaller pieces of clutter without cutting the glove's own patches. The same for the
+    are trimmed (a petal or a face touching the glove; a patch inside the glove, however
+    large, is surrounded by its neighbours, though one at the glove's silhouette may not be),
+    so a share under the largest patch's reaches the smaller pieces of clutter while sparing
+    most of the glove's own patches. The same for the
     regions that reach the image's border only, with ``sleeve_reach`` (0 off): a sleeve of a
     glove colour (a red sleeve is glove red) runs off the image, and joined to the glove it
     would pull the crop down the forearm and make the hand look cut by the border. Colours
