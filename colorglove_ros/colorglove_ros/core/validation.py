@@ -178,6 +178,8 @@ SEGMENTER_RULES: dict[str, SettingRule] = {
     'max_patch_fraction': ('float', 0.0, 1.0, False),
     'max_patch_window_share': ('float', 0.0, 1.0, False),
     'junction_reach': ('float', 0.0, 10.0, False),
+    'junction_min_share': ('float', 0.0, 1.0, False),
+    'junction_surfaces_only': ('int', 0, 1, False),
     'sleeve_reach': ('float', 0.0, 10.0, False),
     'scene_colour_min_share': ('float', 0.0, 1.0, False),
     'background_frames': ('int', 0, 100000, False),

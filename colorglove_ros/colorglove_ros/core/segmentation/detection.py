@@ -187,7 +187,8 @@ def shed_oversized_patches(labels: np.ndarray, max_window_share: float,
 def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_pixels: int,
                         max_patch_share: float = LARGEST_PATCH_WINDOW_SHARE,
                         step: int = JUNCTION_STEP,
-                        edges: tuple[bool, bool, bool, bool] | None = None) -> np.ndarray:
+                        edges: tuple[bool, bool, bool, bool] | None = None,
+                        surfaces_only: bool = False) -> np.ndarray:
     """``labels`` with the glove pixels of oversized single-colour regions that lie farther
     than ``reach`` times the hand's half window from every patch junction set to background.
 
@@ -202,7 +203,8 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
     with ``reach`` 0. With ``edges`` (left, right, top, bottom: which sides of ``labels`` are
     the image's border) only the oversized regions reaching one of those sides with an
     outline running mostly along background are trimmed (a sleeve: the forearm always runs
-    off the image; a patch of a glove cut by the border is surrounded by its neighbours)."""
+    off the image; a patch of a glove cut by the border is surrounded by its neighbours);
+    with ``surfaces_only`` every oversized region with such an outline, wherever it lies."""
     labels = np.asarray(labels, np.uint8)
     if reach <= 0 or not labels.size:
         return labels
@@ -225,8 +227,9 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
             cv2.compare(small, int(colour), cv2.CMP_EQ), connectivity=8, ltype=cv2.CV_32S)
         big = stats[:, cv2.CC_STAT_AREA] > max_pixels
         big[0] = False
-        if edges is not None and big.any():   # sleeves only: off the image, among background
+        if edges is not None and big.any():   # sleeves only: off the image
             big &= _reaching(comp, n, edges)
+        if (edges is not None or surfaces_only) and big.any():   # ... among background
             for k in np.flatnonzero(big):
                 big[k] = _is_surface(small, comp, stats, k)
         if big.any():

@@ -32,6 +32,7 @@ from colorglove_ros.core.segmentation.crop_prediction import (
     prediction_bounds,
 )
 from colorglove_ros.core.segmentation.detection import (
+    LARGEST_PATCH_WINDOW_SHARE,
     SCENE_COLOUR_BITS,
     colour_diversity,
     drop_oversized_components,
@@ -417,13 +418,19 @@ class GloveSegmenter:
     pass with the window found where three glove colours meet (``junction_window``), in the
     region of interest with the coarse window (``shed_oversized_patches``); 0, the default,
     turns this off (0.15: the palm's patch seen flat is about 0.12 of the window). In the
-    region of interest, after the border relabelling, a single-colour region larger than any
-    printed patch keeps only its pixels within ``junction_reach`` times the hand's half window
-    of a patch junction (``keep_near_junctions``; 0 turns this off): the crop and the blobs
-    then hold the hand and not the surface it touches. The same for the regions that reach
-    the image's border only, with ``sleeve_reach`` (0 off): a sleeve of a glove colour
-    (a red sleeve is glove red) runs off the image, and joined to the glove it would pull the
-    crop down the forearm and make the hand look cut by the border. Colours
+    region of interest, after the border relabelling, a single-colour region larger than
+    ``junction_min_share`` of the hand's window (by default any printed patch,
+    ``LARGEST_PATCH_WINDOW_SHARE``) keeps only its pixels within ``junction_reach`` times the
+    hand's half window of a patch junction (``keep_near_junctions``; 0 turns this off): the
+    crop and the blobs then hold the hand and not the surface it touches. With
+    ``junction_surfaces_only`` 1 only such regions whose outline runs mostly along background
+    are trimmed (a petal or a face touching the glove; a patch inside the glove, however
+    large, is surrounded by its neighbours, though one at the glove's silhouette may not be),
+    so a share under the largest patch's reaches the smaller pieces of clutter while sparing
+    most of the glove's own patches. The same for the
+    regions that reach the image's border only, with ``sleeve_reach`` (0 off): a sleeve of a
+    glove colour (a red sleeve is glove red) runs off the image, and joined to the glove it
+    would pull the crop down the forearm and make the hand look cut by the border. Colours
     the coarse pass labelled glove but found to be background (at least
     ``scene_colour_min_share`` of the coarse frame in one quantised colour: surfaces, not
     small clutter) are the scene's own colours in this frame: the region of interest labels
@@ -505,7 +512,9 @@ class GloveSegmenter:
                  max_border_contact: float = 0.1, diversity_window: int = 24,
                  min_region_colors: int = 6, diversity_density: float = 0.01,
                  max_patch_fraction: float = 0.1, max_patch_window_share: float = 0.0,
-                 junction_reach: float = 0.0, sleeve_reach: float = 0.0,
+                 junction_reach: float = 0.0,
+                 junction_min_share: float = LARGEST_PATCH_WINDOW_SHARE,
+                 junction_surfaces_only: int = 0, sleeve_reach: float = 0.0,
                  scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
                  background_memory: int = 0,
@@ -1023,7 +1032,8 @@ class GloveSegmenter:
             labels = whole
         # glove colour out of a patch's reach of every junction: a surface touching the glove
         labels = keep_near_junctions(labels, self.calibration.num_colors, self.junction_reach,
-                                     JUNCTION_MIN_PIXELS)
+                                     JUNCTION_MIN_PIXELS, self.junction_min_share,
+                                     surfaces_only=bool(self.junction_surfaces_only))
         labels = self._without_sleeve(labels, image_edges((x0, x1, y0, y1), r, w, h))
         t = tick('borders', t)
         if keep_labels:

@@ -137,6 +137,25 @@ def test_with_edges_only_a_surface_running_off_the_image_is_trimmed() -> None:
     assert (kept[110:160, 50:70] == cut[110:160, 50:70]).all()
 
 
+def test_with_surfaces_only_a_large_glove_patch_stays_and_a_touching_surface_goes() -> None:
+    """``surfaces_only``: with a share small enough to reach a large printed patch, the
+    patch (surrounded by other glove colours) keeps every pixel however far from a junction,
+    while a single-colour surface of about that size touching the glove (outline along
+    background) is still trimmed to the junctions' reach; without it the patch's middle goes
+    too."""
+    labels = np.zeros((120, 160), np.uint8)
+    labels[30:78, 30:78] = np.tile(_patchwork(), (2, 2))
+    labels[42:66, 42:66] = 9                      # a large patch among its neighbours
+    labels[40:68, 78:118] = 2                     # an orange petal touching the glove
+    out = keep_near_junctions(labels, 10, 0.15, 2, 0.05, surfaces_only=True)
+    assert (out[42:66, 42:66] == 9).all()
+    assert (out[30:78, 30:78] == labels[30:78, 30:78]).all()
+    assert out[50:58, 78:82].all() and not out[40:68, 100:118].any()
+    cut = keep_near_junctions(labels, 10, 0.15, 2, 0.05)
+    assert not (cut[42:66, 42:66] == 9).all()
+    assert not cut[40:68, 100:118].any()
+
+
 def test_a_surface_touching_the_glove_is_shed_at_the_hand_scale() -> None:
     """A single-colour surface touching a glove patchwork, too small for the image-wide
     limit but larger than any patch at the hand's scale (found from the patch junctions),
@@ -247,6 +266,43 @@ def test_an_orange_surface_touching_the_glove_is_trimmed_with_junction_reach(cal
     assert on.hand_found
     assert on.crop.half_size < 1.2 * plain.crop.half_size
     assert not off.hand_found or off.crop.half_size > 1.3 * plain.crop.half_size
+
+
+#: The junction trim of issue 14's tenth pass (docs/RESULTS.md), off in the shipped config.
+JUNCTION_TRIM = {'junction_reach': 0.35, 'junction_min_share': 0.05,
+                 'junction_surfaces_only': 1}
+
+
+def test_a_petal_smaller_than_the_palm_patch_is_trimmed_to_the_junctions(calibration) -> None:
+    """A rendered glove with an orange petal touching its side, smaller than the glove's
+    largest patch at the hand's scale: with the junction trim (``JUNCTION_TRIM``) the crop
+    keeps about the size it has without the petal; off (the class defaults, and the shipped
+    config's ``junction_reach`` 0) the petal joins the glove and the crop grows. On the glove
+    alone the trim changes nothing."""
+    from colorglove_ros.core.segmentation.color_model import read_calibration_config
+
+    shipped = read_calibration_config('config/color_calibration.yaml')['segmenter']
+    assert shipped['junction_reach'] == 0.0
+    camera = synth.default_camera()
+    rng = np.random.default_rng(4)
+    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
+    q[0:3] = [0.0, 0.0, 0.6]
+    frame = synth.render_frame(q, camera, rng, FrameConditions())
+    plain = GloveSegmenter(calibration).process(frame.image_rgb)
+    plain_on = GloveSegmenter(calibration, **JUNCTION_TRIM).process(frame.image_rgb)
+    assert plain.hand_found and plain_on.hand_found
+    assert plain_on.crop.half_size == pytest.approx(plain.crop.half_size, rel=0.02)
+    ys, xs = np.nonzero(frame.labels)
+    k = int(np.argmax(xs))
+    side = int(np.sqrt(0.14) * 2.0 * plain.crop.half_size)   # under 0.15 of the crop window
+    petal = np.zeros(frame.labels.shape, bool)
+    petal[ys[k] - side // 2:ys[k] + side // 2, xs[k] - 6:xs[k] - 6 + side] = True
+    image = frame.image_rgb.copy()
+    image[petal & (frame.labels == 0)] = GLOVE_PALETTE_RGB[6]
+    off = GloveSegmenter(calibration).process(image)
+    on = GloveSegmenter(calibration, **JUNCTION_TRIM).process(image)
+    assert off.crop.half_size > 1.12 * plain.crop.half_size
+    assert on.hand_found and on.crop.half_size < 1.03 * plain.crop.half_size
 
 
 def _glove_with_a_red_sleeve() -> tuple[np.ndarray, np.ndarray]:
