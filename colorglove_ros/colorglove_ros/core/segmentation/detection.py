@@ -28,7 +28,7 @@ __all__ = ['SCENE_COLOUR_BITS', 'colour_diversity', 'glove_region_mask',
            'drop_oversized_components', 'PATCH_OUTLINE_GLOVE_SHARE', 'JUNCTION_WINDOW_PX',
            'JUNCTION_COLORS', 'JUNCTION_STEP', 'LARGEST_PATCH_WINDOW_SHARE', 'junction_mask',
            'junction_window', 'shed_oversized_patches', 'keep_near_junctions',
-           'scene_colour_table']
+           'scene_colour_table', 'border_lines']
 
 #: Bits per channel of the quantised colours of :func:`scene_colour_table`.
 SCENE_COLOUR_BITS = 5
@@ -247,12 +247,18 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
     return out
 
 
+def border_lines(array: np.ndarray, edges: tuple[bool, bool, bool, bool]) -> list[np.ndarray]:
+    """The outermost column or row of ``array`` on each of its sides that ``edges`` (left,
+    right, top, bottom) flags, e.g. the sides lying on the image's border."""
+    left, right, top, bottom = edges
+    return [line for on, line in ((left, array[:, 0]), (right, array[:, -1]), (top, array[0]),
+                                  (bottom, array[-1])) if on]
+
+
 def _reaching(comp: np.ndarray, n: int, edges: tuple[bool, bool, bool, bool]) -> np.ndarray:
     """(n,) bool: which of the ``n`` components of ``comp`` have a pixel on one of the sides
     ``edges`` (left, right, top, bottom) of the image ``comp`` covers."""
-    left, right, top, bottom = edges
-    sides = [side for on, side in ((left, comp[:, 0]), (right, comp[:, -1]), (top, comp[0]),
-                                   (bottom, comp[-1])) if on]
+    sides = border_lines(comp, edges)
     out = np.zeros(n, bool)
     if sides:
         out[np.concatenate(sides)] = True

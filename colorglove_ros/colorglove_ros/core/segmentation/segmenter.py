@@ -34,6 +34,7 @@ from colorglove_ros.core.segmentation.crop_prediction import (
 from colorglove_ros.core.segmentation.detection import (
     LARGEST_PATCH_WINDOW_SHARE,
     SCENE_COLOUR_BITS,
+    border_lines,
     colour_diversity,
     drop_oversized_components,
     glove_region_mask,
@@ -310,12 +311,10 @@ def border_contact_px(labels: np.ndarray, roi: tuple[int, int, int, int], reduct
     if wx1 <= wx0 or wy1 <= wy0:
         return 0
     left, right, top, bottom = image_edges(roi, reduction, width, height)
-    sides = ((left and wx0 == 0, labels[wy0:wy1, 0]),
-             (right and wx1 == cols, labels[wy0:wy1, -1]),
-             (top and wy0 == 0, labels[0, wx0:wx1]),
-             (bottom and wy1 == rows, labels[-1, wx0:wx1]))
-    return reduction * sum(int(np.count_nonzero(edge)) for on_border, edge in sides
-                           if on_border)
+    on_border = (left and wx0 == 0, right and wx1 == cols, top and wy0 == 0,
+                 bottom and wy1 == rows)
+    return reduction * sum(int(np.count_nonzero(line))
+                           for line in border_lines(labels[wy0:wy1, wx0:wx1], on_border))
 
 
 def _coarse_cells(coarse: np.ndarray, origin: tuple[int, int], r: int, shape: tuple[int, int],
@@ -902,9 +901,7 @@ class GloveSegmenter:
         only its pixels within ``sleeve_reach`` times the hand's half window of a patch
         junction (``keep_near_junctions``). Nothing is done (or spent) unless some glove
         label lies on the image's border."""
-        sides = (labels[:, 0], labels[:, -1], labels[0], labels[-1])
-        if self.sleeve_reach <= 0 or not any(
-                on and side.any() for on, side in zip(edges, sides, strict=True)):
+        if self.sleeve_reach <= 0 or not any(line.any() for line in border_lines(labels, edges)):
             return labels
         return keep_near_junctions(labels, self.calibration.num_colors, self.sleeve_reach,
                                    JUNCTION_MIN_PIXELS, edges=edges)
