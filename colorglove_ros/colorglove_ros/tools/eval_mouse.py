@@ -27,7 +27,7 @@ press: the clicks the truth, not the tracker, put through. With
 table scene (``BareHandSequence.render_empty_views``); ``none`` (default): edges only (the
 silhouettes did not raise the click figures on tuning seeds 5-7, docs/RESULTS.md);
 ``--finger-refit`` turns on the tracker's ``finger_refit``, ``--silhouette-palm`` its
-``silhouette_palm`` (both off by default).
+``silhouette_palm``, ``--retry-dofs`` its ``retry_dofs`` (all off by default).
 
 ``--source glove`` feeds it the colour-glove tracker's output (segmentation, lookup, IK with
 smoothing, as ``ik_node`` runs) on the same script rendered with the glove
@@ -284,6 +284,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--silhouette-palm', action='store_true',
                         help='edge tracker with --background empty: the tracker\'s '
                         'silhouette_palm')
+    parser.add_argument('--retry-dofs', nargs='+', default=[],
+                        help='with --source edges: the edge tracker\'s retry_dofs (e.g. '
+                        'thumb_cmc_abd)')
     args = parser.parse_args(argv)
     return run_tool('colorglove_eval_mouse', lambda: _run(args))
 
@@ -317,7 +320,8 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                   cameras: Sequence[PinholeCamera], hand_length_m: float,
                   glove: ScriptedTracker | None) -> int:
     edge_config = EdgeTrackerConfig(finger_refit=args.finger_refit,
-                                    silhouette_palm=args.silhouette_palm)
+                                    silhouette_palm=args.silhouette_palm,
+                                    retry_dofs=tuple(args.retry_dofs))
     if args.camera_weights is not None:
         edge_config = replace(edge_config, camera_weights=tuple(args.camera_weights))
     rows = []
@@ -360,7 +364,8 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'cameras': [c.name for c in cameras],
                                             'camera_weights': list(edge_config.camera_weights),
                                             'finger_refit': edge_config.finger_refit,
-                                            'silhouette_palm': edge_config.silhouette_palm},
+                                            'silhouette_palm': edge_config.silhouette_palm,
+                                            'retry_dofs': list(edge_config.retry_dofs)},
                                'rows': rows, 'total': total, 'targets': targets})
     return 0
 
