@@ -375,9 +375,8 @@ class EdgeTracker:
         """``retry_dofs``: where the fit failed or missed a usable link of a retried DOF's
         digit, fits from the previous pose with that angle ``retry_step_deg`` up and down,
         then twice that and so on (``retry_steps``; nearest first, stopping once a candidate
-        finds the whole digit);
-        the best candidate that passes every check and finds more of the digit's links,
-        else the fit as it was, with its (kind, reason)."""
+        finds the whole digit); the best candidate that passes every check and finds more of
+        the digit's links, else the fit as it was, with its (kind, reason)."""
         cfg = self.config
         assert self._q is not None
         step = np.radians(cfg.retry_step_deg)
