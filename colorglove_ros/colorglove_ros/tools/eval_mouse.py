@@ -19,12 +19,15 @@ the primary camera of ``--calibration`` looking down at the table at 45 degrees;
 camera facing the user from the far side of the table, and the tracker fits both), the edge
 tracker starts from the true first pose (a pose given to it, as from the glove tracker) and,
 after a loss, again from the true pose of the frame it was lost on (counted as
-``reinitialisations``); frames without a published pose reach the mouse as gaps. With
+``reinitialisations``); frames without a published pose reach the mouse as gaps. A loss
+during a click re-initialises the tracker at the click's true angle, so ``correct_at_reinit``
+counts the correct clicks with such a re-initialisation between the click's start and the
+press: the clicks the truth, not the tracker, put through. With
 ``--background empty`` the tracker also has the silhouettes against one frame of the empty
 table scene (``BareHandSequence.render_empty_views``); ``none`` (default): edges only (the
 silhouettes did not raise the click figures on tuning seeds 5-7, docs/RESULTS.md);
 ``--finger-refit`` turns on the tracker's ``finger_refit``, ``--silhouette-palm`` its
-``silhouette_palm`` (both off by default).
+``silhouette_palm``, ``--retry-dofs`` its ``retry_dofs`` (all off by default).
 
 ``--source glove`` feeds it the colour-glove tracker's output (segmentation, lookup, IK with
 smoothing, as ``ik_node`` runs) on the same script rendered with the glove
@@ -161,10 +164,10 @@ def noisy_poses(model: HandModel, Q: np.ndarray, seed: int, noise: dict[str, flo
 def edge_tracked_poses(Q: np.ndarray, seed: int, cameras: Sequence[PinholeCamera],
                        hand_length_m: float, silhouettes: bool = False,
                        config: EdgeTrackerConfig | None = None
-                       ) -> tuple[list[np.ndarray | None], int]:
+                       ) -> tuple[list[np.ndarray | None], list[int]]:
     """The edge tracker's published poses on the bare-hand rendering of ``Q`` seen by
-    ``cameras`` (the primary first; the poses are in its frame) and how often it was
-    re-initialised from the true pose after a loss (None where it published none);
+    ``cameras`` (the primary first; the poses are in its frame; None where it published
+    none) and the frames where it was re-initialised from the true pose after a loss;
     ``silhouettes``: with a background model per camera from the empty scene; ``config``:
     the tracker's settings (default :class:`EdgeTrackerConfig`)."""
     cameras = list(cameras)
@@ -176,11 +179,11 @@ def edge_tracked_poses(Q: np.ndarray, seed: int, cameras: Sequence[PinholeCamera
         tracker = EdgeTracker(seq.synth.model, cameras, config, backgrounds)
         tracker.initialize(Q[0])
         out: list[np.ndarray | None] = []
-        restarts = 0
+        restarts: list[int] = []
         for i in range(len(Q)):
             if tracker.state == 'waiting':
                 tracker.initialize(Q[i])
-                restarts += 1
+                restarts.append(i)
             views = seq.render_views(i, cameras)
             out.append(tracker.update([v.image_rgb for v in views]).q)
         return out, restarts
@@ -201,9 +204,13 @@ def glove_tracked_poses(model: HandModel, Q: np.ndarray, seed: int, tracker: Scr
 
 def evaluate_seed(model: HandModel, config: MouseConfig, seed: int,
                   poses: list[np.ndarray | None], tolerance: int,
-                  Q: np.ndarray, spans: list[list[tuple[int, int]]]) -> dict[str, Any]:
+                  Q: np.ndarray, spans: list[list[tuple[int, int]]],
+                  reinitialised: Sequence[int] = ()) -> dict[str, Any]:
     """Run the mouse over one scripted sequence (true poses ``Q``, click ``spans``) fed with
-    ``poses`` (one per frame, None = no pose that frame); counts and errors."""
+    ``poses`` (one per frame, None = no pose that frame); counts and errors.
+    ``reinitialised``: frames where the tracker was re-initialised from the true pose;
+    ``correct_at_reinit`` counts the correct clicks with one of them between the click's
+    start (less ``tolerance``) and the press."""
     mouse = Mouse3D(model, config)
     rest = raw_mouse_values(model, Q[0], config)
     presses: list[list[int]] = [[], []]
@@ -218,7 +225,8 @@ def evaluate_seed(model: HandModel, config: MouseConfig, seed: int,
         errors.append(np.linalg.norm(state.cursor - raw_mouse_values(model, q, config)[:3]))
     out: dict[str, Any] = {'seed': seed, 'frames': len(Q),
                            'frames_with_pose': sum(p is not None for p in poses)}
-    tp = fp = truth = 0
+    tp = fp = truth = at_reinit = 0
+    restarts = np.asarray(sorted(reinitialised), dtype=np.int64)
     for k in range(2):
         used = set()
         for frame in presses[k]:
@@ -229,8 +237,11 @@ def evaluate_seed(model: HandModel, config: MouseConfig, seed: int,
             else:
                 used.add(hit)
                 tp += 1
+                start = spans[k][hit][0] - tolerance
+                at_reinit += bool(np.any((restarts >= start) & (restarts <= frame)))
         truth += len(spans[k])
     out.update({'scripted_clicks': truth, 'detected': tp + fp, 'correct': tp,
+                'correct_at_reinit': at_reinit,
                 'precision': tp / (tp + fp) if tp + fp else 0.0, 'recall': tp / truth,
                 'cursor_error_mm': 1e3 * float(np.mean(errors)) if errors else math.nan,
                 'cursor_p95_mm': 1e3 * float(np.percentile(errors, 95)) if errors else math.nan,
@@ -273,6 +284,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--silhouette-palm', action='store_true',
                         help='edge tracker with --background empty: the tracker\'s '
                         'silhouette_palm')
+    parser.add_argument('--retry-dofs', nargs='+', default=[],
+                        help='with --source edges: the edge tracker\'s retry_dofs (e.g. '
+                        'thumb_cmc_abd)')
     args = parser.parse_args(argv)
     return run_tool('colorglove_eval_mouse', lambda: _run(args))
 
@@ -306,28 +320,31 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                   cameras: Sequence[PinholeCamera], hand_length_m: float,
                   glove: ScriptedTracker | None) -> int:
     edge_config = EdgeTrackerConfig(finger_refit=args.finger_refit,
-                                    silhouette_palm=args.silhouette_palm)
+                                    silhouette_palm=args.silhouette_palm,
+                                    retry_dofs=tuple(args.retry_dofs))
     if args.camera_weights is not None:
         edge_config = replace(edge_config, camera_weights=tuple(args.camera_weights))
     rows = []
     for seed in args.seeds:
         Q, spans = scripted_sequence(model, config, seed, args.seconds)
         extra: dict[str, Any] = {}
+        restarts: list[int] = []
         if args.source == 'edges':
             poses, restarts = edge_tracked_poses(Q, seed, cameras, hand_length_m,
                                                  args.background == 'empty', edge_config)
-            extra['reinitialisations'] = restarts
+            extra['reinitialisations'] = len(restarts)
         elif glove is not None:
             poses = glove_tracked_poses(model, Q, seed, glove)
         else:
             poses = noisy_poses(model, Q, seed, noise)
         rows.append({**evaluate_seed(model, config, seed, poses, args.tolerance_frames, Q,
-                                     spans), **extra})
+                                     spans, restarts), **extra})
         print(f'seed {seed}: {rows[-1]}', flush=True)
     tp = sum(r['correct'] for r in rows)
     det = sum(r['detected'] for r in rows)
     truth = sum(r['scripted_clicks'] for r in rows)
     total = {'precision': tp / det if det else 0.0, 'recall': tp / truth,
+             'correct_at_reinit': sum(r['correct_at_reinit'] for r in rows),
              'cursor_error_mm': float(np.mean([r['cursor_error_mm'] for r in rows]))}
     source = {'noise': f'noise {noise}',
               'edges': f'the edge tracker ({len(cameras)} camera(s): '
@@ -347,7 +364,8 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'cameras': [c.name for c in cameras],
                                             'camera_weights': list(edge_config.camera_weights),
                                             'finger_refit': edge_config.finger_refit,
-                                            'silhouette_palm': edge_config.silhouette_palm},
+                                            'silhouette_palm': edge_config.silhouette_palm,
+                                            'retry_dofs': list(edge_config.retry_dofs)},
                                'rows': rows, 'total': total, 'targets': targets})
     return 0
 

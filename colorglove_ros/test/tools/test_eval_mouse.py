@@ -31,9 +31,21 @@ def test_true_poses_detect_every_scripted_click_and_no_pose_detects_none() -> No
     assert perfect['scripted_clicks'] == 8 and perfect['correct'] == 8
     assert perfect['precision'] == 1.0 and perfect['recall'] == 1.0
     assert perfect['cursor_error_mm'] < 5.0            # only the smoothing's lag
+    assert perfect['correct_at_reinit'] == 0
     blind = evaluate_seed(MODEL, CONFIG, 3, [None] * len(Q), 0, Q, spans)
     assert blind['detected'] == 0 and blind['recall'] == 0.0
     assert math.isnan(blind['cursor_error_mm'])
+
+
+def test_clicks_with_a_reinitialisation_from_the_truth_before_the_press_are_counted() -> None:
+    Q, spans = scripted_sequence(MODEL, CONFIG, seed=3, seconds=12.0, clicks=4)
+    (a, _), (c, _) = spans[0][2], spans[0][3]
+    gap = (spans[0][2][1] + c) // 2
+    assert all(not s <= gap < e for s, e in spans[1])
+    row = evaluate_seed(MODEL, CONFIG, 3, list(Q), 0, Q, spans, reinitialised=[0, a, gap])
+    # the third click's start counts (the press comes after it); a frame before any click
+    # or between clicks does not
+    assert row['correct'] == 8 and row['correct_at_reinit'] == 1
 
 
 def test_noise_model_drops_frames_and_perturbs_the_rest() -> None:
@@ -55,7 +67,7 @@ def test_edge_tracker_output_is_one_pose_or_none_per_frame() -> None:
     runs = {sil: edge_tracked_poses(Q, 0, calibration.cameras[:1], calibration.hand_length_m,
                                     silhouettes=sil) for sil in (False, True)}
     for poses, restarts in runs.values():
-        assert len(poses) == len(Q) and restarts >= 0
+        assert len(poses) == len(Q) and all(0 <= i < len(Q) for i in restarts)
         assert all(p is None or (p.shape == (26,) and np.all(np.isfinite(p))) for p in poses)
     # the silhouettes of the empty table scene reach the tracker and change its fits
     assert any((a is None) != (b is None) or (a is not None and not np.allclose(a, b))
@@ -68,7 +80,7 @@ def test_edge_tracker_fits_the_second_table_camera_when_asked() -> None:
     Q, _ = scripted_sequence(MODEL, CONFIG, seed=0, seconds=2.5, clicks=1)
     one, _ = edge_tracked_poses(Q, 0, calibration.cameras[:1], calibration.hand_length_m)
     two, restarts = edge_tracked_poses(Q, 0, calibration.cameras[:2], calibration.hand_length_m)
-    assert len(two) == len(Q) and restarts >= 0
+    assert len(two) == len(Q) and all(0 <= i < len(Q) for i in restarts)
     assert all(p is None or (p.shape == (26,) and np.all(np.isfinite(p))) for p in two)
     # the front camera's edges change the fits
     assert any((a is None) != (b is None) or (a is not None and not np.allclose(a, b))

@@ -46,6 +46,7 @@ from colorglove_ros.core.hand.keypoints import FINGERTIP_INDICES
 from colorglove_ros.core.hand.mesh import build_hand_mesh
 from colorglove_ros.core.hand.model import (
     DIGITS,
+    DOF_NAMES,
     LINK_NAMES,
     NUM_DOFS,
     HandModel,
@@ -143,6 +144,17 @@ class EdgeTrackerConfig:
     pose, the track kept (the finger drifted: the fitted finger lies over the background).
     The thumb is left out by default: its model axis lies off its silhouette even at the true
     pose.
+    ``retry_dofs`` (DOF names; empty, the default: off): a tracked frame whose fit fails a
+    check (too few links found, residual or silhouette drift) or misses a usable link of
+    the digit of one of these DOFs is fitted again from the previous pose with that angle
+    moved ``retry_step_deg`` up and down, then twice and up to ``retry_steps`` times that
+    (nearest first, until a candidate finds the whole digit); a candidate that passes every
+    check and finds more of that digit's links (then more links, then a smaller residual)
+    replaces the fit: a digit that moved faster than the edge search reaches (the 3-D
+    mouse's thumb clicks) is looked for where it went instead of being left behind. On the
+    mouse's table views it lets the tracker follow the thumb's clicks itself but also puts
+    a drifted hand's thumb on wrong edges (docs/RESULTS.md, DigitEyes tenth pass), so it is
+    off.
     """
 
     search: EdgeSearchConfig = field(default_factory=EdgeSearchConfig)
@@ -184,6 +196,9 @@ class EdgeTrackerConfig:
     finger_refit_burst: int = 6
     max_finger_off_silhouette: float = 1.0
     finger_check_digits: tuple[str, ...] = ('index', 'middle', 'ring', 'little')
+    retry_dofs: tuple[str, ...] = ()
+    retry_step_deg: float = 12.0
+    retry_steps: int = 3
     silhouette_margin_px: float = 60.0
     loss_patience: int = 3
     coast_patience: int = 0
@@ -239,6 +254,11 @@ class EdgeTrackerConfig:
                                    f'finger_check_digits among {DIGITS}')
         if self.loss_patience < 1 or self.init_hold_frames < 1:
             raise EdgeTrackerError('loss_patience and init_hold_frames must be >= 1')
+        if any(n not in DOF_NAMES[6:] for n in self.retry_dofs) or not self.retry_step_deg > 0 \
+                or self.retry_steps < 1:
+            raise EdgeTrackerError(f'retry_dofs must be joint DOF names, retry_step_deg > 0 and '
+                                   f'retry_steps >= 1, got {self.retry_dofs}, '
+                                   f'{self.retry_step_deg}, {self.retry_steps}')
 
     def stabilizer_diagonal(self) -> np.ndarray:
         """The (26,) diagonal of S."""
@@ -1055,7 +1075,8 @@ class EdgeFit:
     NaN without silhouettes) and, with ``finger_refit``, per digit the largest over the
     cameras of the share of the foreground left unexplained nearest to that digit and, with
     ``max_finger_off_silhouette`` < 1, per digit the largest over the cameras of the share of
-    its axis points off the foreground."""
+    its axis points off the foreground; per digit the links found and usable over the
+    cameras (the last round's)."""
 
     q: np.ndarray
     rms_px: float
@@ -1068,6 +1089,8 @@ class EdgeFit:
     unexplained: float = math.nan
     finger_unexplained: tuple[float, ...] = (math.nan,) * len(DIGITS)
     finger_off_silhouette: tuple[float, ...] = (math.nan,) * len(DIGITS)
+    digit_links_found: tuple[int, ...] = (0,) * len(DIGITS)
+    digit_links_usable: tuple[int, ...] = (0,) * len(DIGITS)
 
     @property
     def found_fraction(self) -> float:
@@ -1165,8 +1188,10 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
         usable = tuple(0 if m is None else int(m.prediction.link_usable.sum())
                        for m in measured)
         tips = tuple(0 if m is None else int(m.tip_found.sum()) for m in measured)
+        digit_found, digit_usable = _digit_counts(points, measured)
         if sum(found) == 0:
-            return EdgeFit(q, math.nan, found, usable, tips, iterations)
+            return EdgeFit(q, math.nan, found, usable, tips, iterations,
+                           digit_links_found=digit_found, digit_links_usable=digit_usable)
         q, steps = _gauss_newton(kin, points, cameras, measured, world, q, q_anchor, S, C,
                                  config)
         iterations += steps
@@ -1195,4 +1220,16 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
         shares = np.max(per_camera, axis=0)
     return EdgeFit(q, rms, found, usable, tips, iterations, disagreement, float(shares[0]),
                    float(shares[1]), tuple(float(v) for v in shares[2:2 + D]),
-                   tuple(float(v) for v in shares[2 + D:]))
+                   tuple(float(v) for v in shares[2 + D:]), digit_found, digit_usable)
+
+
+def _digit_counts(points: FeaturePoints, measured: Sequence[EdgeMeasurement | None]
+                  ) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """Per digit, the links found and the links usable over the cameras."""
+    digit = (np.asarray(points.links) - 1) // 3
+    found, usable = np.zeros(len(DIGITS), np.int64), np.zeros(len(DIGITS), np.int64)
+    for m in measured:
+        if m is not None:
+            np.add.at(found, digit[m.link_found], 1)
+            np.add.at(usable, digit[m.prediction.link_usable], 1)
+    return tuple(int(v) for v in found), tuple(int(v) for v in usable)

@@ -105,6 +105,8 @@ class EdgeTracker:
             self.set_backgrounds(backgrounds)
         self._digit_dofs = [np.array([i for i, n in enumerate(model.dof_names)
                                       if n.startswith(f'{d}_')]) for d in DIGITS]
+        self._retry_dofs = [model.dof_names.index(n) for n in self.config.retry_dofs]
+        self._retry_digits = [DIGITS.index(n.split('_')[0]) for n in self.config.retry_dofs]
         self._q: np.ndarray | None = None
         self._start_track()
 
@@ -285,6 +287,8 @@ class EdgeTracker:
         if cfg.finger_refit:
             fit = self._refit_digits(greys, silhouettes, fit)
         kind, reason = self._check_fit(fit)
+        if self._retry_dofs:
+            fit, kind, reason = self._retry(greys, silhouettes, fit, kind, reason)
         if not np.all(np.isfinite(fit.q)):
             self.reset()
             return EdgeTrackResult('waiting', None, 'lost: non-finite pose', fit, lost=True)
@@ -365,6 +369,42 @@ class EdgeTracker:
                 self._refit_failures[d] = 0
                 self._refit_next[d] = 0
         return fit
+
+    def _retry(self, greys: list[np.ndarray | None], silhouettes: list[Silhouette | None],
+               fit: EdgeFit, kind: str, reason: str) -> tuple[EdgeFit, str, str]:
+        """``retry_dofs``: where the fit failed or missed a usable link of a retried DOF's
+        digit, fits from the previous pose with that angle ``retry_step_deg`` up and down,
+        then twice that and so on (``retry_steps``; nearest first, stopping once a candidate
+        finds the whole digit); the best candidate that passes every check and finds more of
+        the digit's links, else the fit as it was, with its (kind, reason)."""
+        cfg = self.config
+        assert self._q is not None
+        step = np.radians(cfg.retry_step_deg)
+        for dof, digit in zip(self._retry_dofs, self._retry_digits, strict=True):
+            found, usable = fit.digit_links_found[digit], fit.digit_links_usable[digit]
+            if not kind and found >= usable:
+                continue
+            best, best_key = None, (found if not kind else -1, sum(fit.links_found),
+                                    -fit.rms_px)
+            tried: list[float] = []
+            for k in range(1, cfg.retry_steps + 1):
+                for sign in (1.0, -1.0):
+                    q0 = self._q.copy()
+                    q0[dof] += sign * k * step
+                    q0 = self.kin.clamp(q0)
+                    if any(abs(q0[dof] - t) < 1e-9 for t in (self._q[dof], *tried)):
+                        continue            # past the joint limit: already tried
+                    tried.append(q0[dof])
+                    cand = fit_pose(self.kin, self.points, self.cameras, greys, q0, cfg,
+                                    cfg.measurement_rounds, silhouettes=silhouettes)
+                    key = (cand.digit_links_found[digit], sum(cand.links_found), -cand.rms_px)
+                    if not self._check_fit(cand)[0] and key > best_key:
+                        best, best_key = cand, key
+                if best is not None and best_key[0] >= best.digit_links_usable[digit]:
+                    break                   # the digit found whole: no farther start
+            if best is not None:
+                fit, kind, reason = best, '', ''
+        return fit, kind, reason
 
     def _refit_due(self, digit: int, fixed: bool) -> None:
         """After a re-fit of ``digit``: a re-fit that left it unexplained makes it wait

@@ -14,7 +14,9 @@ finger that leaves part of the hand's silhouette unexplained; ``silhouette_palm`
 default) lets the unexplained foreground next to the palm pull the whole hand.
 With ``max_finger_off_silhouette`` below 1 (off by default) a frame where a finger's axis lies
 off the silhouette (not the thumb) publishes no pose and says which finger on the status
-topic; the track is kept.
+topic; the track is kept. ``retry_dofs`` (empty by default; the 3-D mouse's buttons are
+``[thumb_cmc_abd]``) names joints re-tried from farther starts, ``retry_step_deg`` apart,
+when the fit misses their digit's links or fails (a fast click out of the edge search's reach).
 
 Start: hold the flat hand still, palm to the (primary) camera, at the marked spot
 ``init_wrist_position``; or publish a starting pose on ``edge_tracker/init_joint_states`` +
@@ -142,6 +144,13 @@ class EdgeTrackerNode(Node):
                                  '(not the thumb\'s) off the silhouette in any camera before '
                                  'the frame is withheld (track kept, no pose; 1: never)',
                                  0.0, 1.0)
+        retry_dofs = declare_topic_list(self, 'retry_dofs', list(defaults.retry_dofs),
+                                        'joints re-tried from farther starts when the fit '
+                                        'misses their digit\'s links or fails; empty: none',
+                                        'edge_tracker_node', 'joint DOF names')
+        retry_step = declare(self, 'retry_step_deg', defaults.retry_step_deg,
+                             'retry_dofs: step between the starts tried (up to '
+                             f'{defaults.retry_steps} steps each way), degrees', 1.0, 90.0)
         with startup_errors('edge_tracker_node', ValueError):
             if len(init_wrist) != 3:
                 raise ColorGloveError(f'init_wrist_position needs 3 values, got {init_wrist}')
@@ -158,7 +167,8 @@ class EdgeTrackerNode(Node):
                 max_unexplained=float(max_unexplained), finger_refit=bool(finger_refit),
                 max_finger_unexplained=float(max_finger_unexplained),
                 silhouette_palm=bool(silhouette_palm),
-                max_finger_off_silhouette=float(max_finger_off))
+                max_finger_off_silhouette=float(max_finger_off),
+                retry_dofs=tuple(retry_dofs), retry_step_deg=float(retry_step))
             self.backgrounds = [read_background(resolve_path(f), SilhouetteConfig(
                 threshold=float(threshold))) for f in backgrounds]
             cameras: tuple[PinholeCamera, ...] = ()

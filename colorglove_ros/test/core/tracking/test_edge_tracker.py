@@ -572,3 +572,41 @@ def test_a_finger_off_its_silhouette_is_withheld(rig) -> None:
     assert max(results['true'].fit.finger_off_silhouette[1:]) <= 0.15
     assert results['true'].q is not None and results['off'].q is not None
     assert np.all(np.isnan(results['off'].fit.finger_off_silhouette))
+
+
+def test_a_thumb_click_faster_than_the_edge_search_is_found_by_the_retry() -> None:
+    """The 3-D mouse's table view: the thumb abducted 35 degrees since the last pose, out of
+    reach of the edge search; without ``retry_dofs`` the fit leaves it at rest (or fails),
+    with the thumb's abduction retried from farther starts it is found; its counts per digit
+    say the thumb's links were missing."""
+    from colorglove_ros.core.tracking.mouse import MouseConfig
+    from colorglove_ros.tools.eval_mouse import scripted_sequence
+
+    calibration = load_calibration(resolve_path('config/calibration.yaml'))
+    model = HandModel(calibration.hand_length_m)
+    Q, spans = scripted_sequence(model, MouseConfig(), seed=5, seconds=3.0, clicks=1)
+    start, _ = spans[0][0]
+    frame = start + 6
+    seq = BareHandSequence(calibration.cameras[0], seed=5, poses=Q,
+                           hand_length_m=calibration.hand_length_m)
+    try:
+        image = [seq.render_views(frame, calibration.cameras[:1])[0].image_rgb]
+    finally:
+        seq.close()
+    thumb = model.dof_names.index('thumb_cmc_abd')
+    before = Q[frame].copy()
+    before[thumb] = Q[start - 1, thumb]
+    errors = {}
+    for retry in ((), ('thumb_cmc_abd',)):
+        tracker = EdgeTracker(model, calibration.cameras[:1],
+                              EdgeTrackerConfig(loss_patience=1, retry_dofs=retry))
+        tracker.initialize(before)
+        out = tracker.update(image)
+        q = out.q if out.q is not None else before
+        errors[retry] = abs(np.degrees(q[thumb] - Q[frame, thumb]))
+        if retry:
+            assert out.q is not None, out.reason
+            assert out.fit.digit_links_found[0] == out.fit.digit_links_usable[0] > 0
+    assert errors[()] > 25.0 and errors[('thumb_cmc_abd',)] < 5.0
+    with pytest.raises(EdgeTrackerError):
+        EdgeTrackerConfig(retry_dofs=('thumb_abduction',))

@@ -123,8 +123,15 @@ def test_the_node_defaults_are_the_tracker_defaults() -> None:
         config = h.nodes[0].config
     defaults = EdgeTrackerConfig()
     for name in ('finger_refit', 'silhouette_palm', 'max_finger_off_silhouette',
-                 'max_finger_unexplained', 'max_unexplained', 'silhouette_weight'):
+                 'max_finger_unexplained', 'max_unexplained', 'silhouette_weight',
+                 'retry_dofs', 'retry_step_deg'):
         assert getattr(config, name) == getattr(defaults, name), name
+
+
+def test_retry_parameters_reach_the_tracker() -> None:
+    with running(_node(retry_dofs=['thumb_cmc_abd'], retry_step_deg=15.0)) as h:
+        config = h.nodes[0].config
+    assert config.retry_dofs == ('thumb_cmc_abd',) and config.retry_step_deg == 15.0
 
 
 def test_max_finger_off_silhouette_parameter_reaches_the_tracker() -> None:
