@@ -24,7 +24,7 @@ from colorglove_ros.core.errors import ColorGloveError
 
 __all__ = [
     'GeometryError', 'vector_to_skew', 'rotvec_to_matrix', 'matrix_to_rotvec', 'so3_left_jacobian',
-    'rotvec_to_matrix_and_left_jacobian', 'rotvec_to_quaternion', 'quaternion_to_rotvec',
+    'rotvec_to_quaternion', 'quaternion_to_rotvec',
     'align_rotation_vector',
 ]
 
@@ -81,25 +81,6 @@ def so3_left_jacobian(r: np.ndarray) -> np.ndarray:
         a = (1.0 - np.cos(theta)) / theta**2
         b = (theta - np.sin(theta)) / theta**3
     return np.eye(3) + a * K + b * (K @ K)
-
-
-def rotvec_to_matrix_and_left_jacobian(r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation matrix and SO(3) left Jacobian (both (3, 3)) of one rotation vector r (3,) in
-    one pass: the scalar fast path of the tracker's kinematics, sharing the skew matrix and
-    its square (Taylor terms below an angle of 1e-5 rad). Agrees with :func:`rotvec_to_matrix`
-    and :func:`so3_left_jacobian` to rounding."""
-    theta = math.sqrt(float(r @ r))
-    K = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
-    KK = K @ K
-    if theta < 1e-5:
-        a, b = 1.0 - theta**2 / 6.0, 0.5 - theta**2 / 24.0
-        c = 1.0 / 6.0 - theta**2 / 120.0
-    else:
-        st, ct = math.sin(theta), math.cos(theta)
-        a, b = st / theta, (1.0 - ct) / theta**2
-        c = (theta - st) / theta**3
-    eye = np.eye(3)
-    return eye + a * K + b * KK, eye + b * K + c * KK
 
 
 def rotvec_to_quaternion(r: np.ndarray) -> np.ndarray:

@@ -11,7 +11,6 @@ from colorglove_ros.core.geometry import (
     matrix_to_rotvec,
     quaternion_to_rotvec,
     rotvec_to_matrix,
-    rotvec_to_matrix_and_left_jacobian,
     rotvec_to_quaternion,
     so3_left_jacobian,
     vector_to_skew,
@@ -71,13 +70,6 @@ def test_left_jacobian_is_the_derivative_of_exp() -> None:
             dR = (rotvec_to_matrix(r + d) - rotvec_to_matrix(r - d)) / (2 * eps) @ R0.T
             omega = np.array([dR[2, 1], dR[0, 2], dR[1, 0]])
             np.testing.assert_allclose(omega, Jl[:, k], atol=1e-7)
-
-
-def test_combined_matrix_and_jacobian_agree_with_the_separate_ones() -> None:
-    for r in _rotvecs(3, 50):
-        R, Jl = rotvec_to_matrix_and_left_jacobian(r)
-        np.testing.assert_allclose(R, rotvec_to_matrix(r), atol=1e-15)
-        np.testing.assert_allclose(Jl, so3_left_jacobian(r), atol=1e-15)
 
 
 def test_quaternions_match_scipy_and_round_trip() -> None:

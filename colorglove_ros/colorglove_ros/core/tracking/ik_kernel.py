@@ -40,7 +40,9 @@ def _matmul3(A: np.ndarray, B: np.ndarray) -> np.ndarray:
 
 @numba.njit(**_JIT)
 def _rotvec_and_left_jacobian(r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``core.geometry.rotvec_to_matrix_and_left_jacobian``, compiled."""
+    """Rotation matrix and SO(3) left Jacobian of one rotation vector in one pass, sharing the
+    skew matrix and its square (Taylor terms below 1e-5 rad): ``core.geometry``'s
+    ``rotvec_to_matrix`` and ``so3_left_jacobian`` to rounding (``test_ik_kernel``)."""
     theta = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
     K = np.zeros((3, 3))
     K[0, 1], K[0, 2] = -r[2], r[1]

@@ -181,3 +181,19 @@ def test_kernels_compiled_before_the_first_frame_and_never_again(recorded) -> No
     with pytest.raises(TypeError):
         ik_kernel.link_points(Rs, ts, jl, kin._axis, kin._ancestors, kin._dof, NUM_DOFS,
                               np.zeros(4, np.int64)[::2], np.zeros((2, 3)), False)
+
+
+def test_wrist_rotation_and_left_jacobian_match_the_geometry_module():
+    """The compiled wrist rotation and its SO(3) left Jacobian (one pass, Taylor terms below
+    1e-5 rad) equal ``core.geometry``'s separate functions, on both branches."""
+    from colorglove_ros.core.geometry import rotvec_to_matrix, so3_left_jacobian
+
+    kin = FastKinematics(default_hand()[0])
+    rng = np.random.default_rng(3)
+    rotvecs = [rng.normal(size=3) * scale for scale in (1.0, 0.3, 1e-6, 0.0) for _ in range(10)]
+    for r in rotvecs:
+        q = np.zeros(NUM_DOFS)
+        q[3:6] = r
+        Rs, _, jl = kin.frames(q)
+        np.testing.assert_allclose(Rs[0], rotvec_to_matrix(r), atol=1e-15)
+        np.testing.assert_allclose(jl, so3_left_jacobian(r), atol=1e-15)
