@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from pose_samples import random_poses
 from repo_paths import CONFIG_DIR
 
 from colorglove_ros.core.camera import load_calibration
@@ -29,15 +30,7 @@ def hand():
 
 
 def _poses(model, count: int, seed: int) -> list[np.ndarray]:
-    rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(count):
-        q = model.rest_pose()
-        q[:3] = [rng.normal(0.0, 0.05), rng.normal(0.0, 0.05), rng.uniform(0.35, 0.8)]
-        q[3:6] = rng.normal(0.0, 0.6, 3)
-        q[6:] = rng.uniform(model.lower_limits[6:], model.upper_limits[6:])
-        out.append(model.clamp(q))
-    return out
+    return random_poses(model, count, seed, rotation_sd=0.6)
 
 
 def test_posed_elements_are_each_elements_frame_transform(hand):

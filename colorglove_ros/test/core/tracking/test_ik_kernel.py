@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pose_samples import random_poses
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.hand.glove import default_hand
@@ -105,14 +106,7 @@ def test_patch_points_on_recorded_poses_match_the_numpy_code(recorded) -> None:
 
 
 def _random_poses(model, count: int, seed: int) -> list[np.ndarray]:
-    rng = np.random.default_rng(seed)
-    poses = []
-    for _ in range(count):
-        q = model.rest_pose()
-        q[:3] = [rng.normal(0.0, 0.05), rng.normal(0.0, 0.05), rng.uniform(0.35, 0.8)]
-        q[3:6] = rng.normal(0.0, 1.2, 3)
-        q[6:] = rng.uniform(model.lower_limits[6:], model.upper_limits[6:])
-        poses.append(model.clamp(q))
+    poses = random_poses(model, count, seed, rotation_sd=1.2)
     # a rotation vector on the small-angle branch
     poses.append(model.clamp(np.concatenate([[0.0, 0.0, 0.5], [1e-7, -2e-7, 0.0],
                                              poses[0][6:]])))
