@@ -21,10 +21,12 @@ from colorglove_ros.core.segmentation.color_model import (
     ColorCalibrationError,
     GaussianMixtureParams,
     compile_lut,
+    read_calibration_config,
     rgb_features,
     save_calibration,
 )
 from colorglove_ros.core.segmentation.light import planckian_illuminants
+from colorglove_ros.paths import resolve_path
 
 __all__ = ['RESIDUAL_TEMPERATURES_K', 'DEFAULT_LUT_BITS', 'DEFAULT_MAX_PIXELS_PER_CLASS',
            'MIN_FRAMES', 'MASK_SUFFIX', 'SYNTHETIC_FRAMES_DIR', 'fit_color_calibration',
@@ -334,7 +336,6 @@ def calibrate_synthetic(count: int, output: str | Path, frames_out: str | Path, 
                             seed=seed, **options)
 
 
-
 def prepared_color_config(color_config: str | Path | None = None,
                           progress: Callable[[str], None] = print) -> Path:
     """The colour config to run with: ``color_config`` as given (its calibration file is the
@@ -342,9 +343,6 @@ def prepared_color_config(color_config: str | Path | None = None,
     :data:`DEFAULT_COLOR_CONFIG`, whose calibration file is fitted first on
     :data:`FIRST_USE_FRAMES` rendered training frames (seed 0, :func:`calibrate_synthetic`) if it
     is missing, saying so through ``progress``."""
-    from colorglove_ros.core.segmentation.color_model import read_calibration_config
-    from colorglove_ros.paths import resolve_path
-
     if color_config:
         return Path(color_config)
     config = resolve_path(DEFAULT_COLOR_CONFIG)
