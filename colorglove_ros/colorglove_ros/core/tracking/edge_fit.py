@@ -1226,7 +1226,7 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
 def _digit_counts(points: FeaturePoints, measured: Sequence[EdgeMeasurement | None]
                   ) -> tuple[tuple[int, ...], tuple[int, ...]]:
     """Per digit, the links found and the links usable over the cameras."""
-    digit = (np.asarray(points.links) - 1) // 3
+    digit = points.outline_digit[:points.num_links]
     found, usable = np.zeros(len(DIGITS), np.int64), np.zeros(len(DIGITS), np.int64)
     for m in measured:
         if m is not None:
