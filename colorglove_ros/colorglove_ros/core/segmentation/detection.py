@@ -234,7 +234,9 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
     far = cv2.distanceTransform((~junctions).view(np.uint8), cv2.DIST_L2, 3) > (
         reach * window[1])
     drop = np.zeros(small.shape, bool)
-    for colour in big_colours:
+    # (a colour with no pixel that far keeps every pixel: its regions need not be found)
+    reaching_far = np.bincount(small[far], minlength=num_colors + 1)[big_colours] > 0
+    for colour in big_colours[reaching_far]:
         n, comp, stats, _ = cv2.connectedComponentsWithStats(
             cv2.compare(small, int(colour), cv2.CMP_EQ), connectivity=8, ltype=cv2.CV_32S)
         big = stats[:, cv2.CC_STAT_AREA] > max_pixels

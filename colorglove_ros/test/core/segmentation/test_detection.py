@@ -287,21 +287,21 @@ def test_an_orange_surface_touching_the_glove_is_trimmed_with_junction_reach(cal
     assert not off.hand_found or off.crop.half_size > 1.3 * plain.crop.half_size
 
 
-#: The junction trim of issue 14's tenth pass (docs/RESULTS.md), off in the shipped config.
+#: The junction trim of issue 14's tenth pass (docs/RESULTS.md), ungated.
 JUNCTION_TRIM = {'junction_reach': 0.35, 'junction_min_share': 0.05,
                  'junction_surfaces_only': 1}
 
 
 def test_a_petal_smaller_than_the_palm_patch_is_trimmed_to_the_junctions(calibration) -> None:
     """A rendered glove with an orange petal touching its side, smaller than the glove's
-    largest patch at the hand's scale: with the junction trim (``JUNCTION_TRIM``) the crop
-    keeps about the size it has without the petal; off (the class defaults, and the shipped
-    config's ``junction_reach`` 0) the petal joins the glove and the crop grows. On the glove
-    alone the trim changes nothing."""
+    largest patch at the hand's scale: with the junction trim (``JUNCTION_TRIM``, and with
+    the shipped config's, which is it with the gates) the crop keeps about the size it has
+    without the petal; off (the class defaults) the petal joins the glove and the crop grows.
+    On the glove alone the trim changes nothing."""
     from colorglove_ros.core.segmentation.color_model import read_calibration_config
 
     shipped = read_calibration_config('config/color_calibration.yaml')['segmenter']
-    assert shipped['junction_reach'] == 0.0
+    assert {name: shipped[name] for name in JUNCTION_TRIM} == JUNCTION_TRIM
     camera = synth.default_camera()
     rng = np.random.default_rng(4)
     q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
