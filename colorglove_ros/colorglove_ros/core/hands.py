@@ -13,7 +13,10 @@ with both lookups again every few frames (``HandsSettings.recheck_frames``). Eac
 has its own tracker (a left hand tracked as the mirrored right hand, its pose mirrored back),
 so losing one hand never resets the other. A frame in which a region's hand cannot be told
 with enough evidence gives that hand no pose (``NoHand``). With one pose lookup per region slot
-(:func:`slot_lookups`) the two slots, and then the two hands, run on two threads.
+(:func:`slot_lookups`) the two slots, and then the two hands, run on two threads; a region that
+plainly continues a hand has that hand tracked in its own slot's thread before the assignment
+(``HandsSettings.early_tracking``; undone when the assignment disagrees), so a frame of two
+settled hands waits for the other thread once.
 
 Limitations: two gloves within ``join_px`` coarse pixels of each other (touching) are one
 region, whose lookups match neither hand well: neither hand gets a pose until they part. A glove
@@ -23,6 +26,8 @@ less well than alone. No rclpy import.
 from __future__ import annotations
 
 import math
+import threading
+import time
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
@@ -48,8 +53,9 @@ from colorglove_ros.core.segmentation.segmenter import keep_multicolor_component
 from colorglove_ros.core.tracking.types import Blobs, CameraObservation
 
 __all__ = ['MAX_HANDS', 'HandsSettings', 'GloveRegion', 'HandCandidate', 'HandOutcome',
-           'find_glove_regions', 'mask_regions', 'region_window', 'shift_observation',
-           'assign_hands', 'slot_lookups', 'TwoHandPipeline', 'DEFAULT_THREADS']
+           'FrameTiming', 'find_glove_regions', 'mask_regions', 'region_window',
+           'shift_observation', 'assign_hands', 'slot_lookups', 'TwoHandPipeline',
+           'DEFAULT_THREADS']
 
 MAX_HANDS = 2
 #: Threads of the two-hand layer by default (:func:`slot_lookups`): one per region slot.
@@ -71,7 +77,11 @@ class HandsSettings:
     centre lies within ``continuity_scale`` crop half sizes of one hand's previous centre and at
     most ``settled_ratio`` times as far from it as from the other hand's is looked up as that
     hand only (continuity is its evidence), except on every ``recheck_frames``-th frame, when
-    every region is looked up both ways again (0: always both ways)."""
+    every region is looked up both ways again (0: always both ways). With ``early_tracking``
+    such a region's hand is tracked in the region's own thread right after its lookups, before
+    the assignment; if the assignment then gives that hand another region (or none), the
+    tracker goes back to its state before and the hand is tracked as without (the same
+    outcomes either way)."""
 
     coarse_factor: int = 4
     join_px: int = 1
@@ -84,6 +94,7 @@ class HandsSettings:
     window_margin: float = 0.5
     settled_ratio: float = 0.5
     recheck_frames: int = 5
+    early_tracking: bool = True
 
 
 @dataclass(frozen=True)
@@ -106,6 +117,9 @@ class HandCandidate:
     observation: CameraObservation
     tiny: TinyCrop | None
     lookups: dict[str, LookupResult | NoHand] = field(default_factory=dict)
+    #: the hand this region plainly continues (both hands tracked in the previous frame and
+    #: this region's crop centre by one of them; ``HandsSettings``), else None
+    continues: str | None = None
 
     def distance(self, hand: str) -> float:
         """Nearest database image distance of the query as ``hand`` (inf when none)."""
@@ -145,6 +159,31 @@ class HandOutcome:
     region: GloveRegion | None = None
     evidence: float = math.nan
     q: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class FrameTiming:
+    """Thread CPU time of one :meth:`TwoHandPipeline.process` call (ms): the caller's outside
+    the jobs it ran beside the worker (``serial_ms``), and each parallel phase's jobs (one per
+    region slot or hand, each on its own thread when ``parallel``). The critical path is what
+    the frame would take with a free core per thread and no wait on the other thread:
+    ``serial_ms`` plus the slowest job of every phase (the sum of all, one thread)."""
+
+    serial_ms: float
+    phases: tuple[tuple[float, ...], ...]
+    parallel: bool
+
+    @property
+    def cpu_ms(self) -> float:
+        """The frame's CPU time over both threads."""
+        return self.serial_ms + sum(sum(p) for p in self.phases)
+
+    @property
+    def critical_path_ms(self) -> float:
+        """``serial_ms`` plus each phase's slowest job (with one thread: :attr:`cpu_ms`)."""
+        if not self.parallel:
+            return self.cpu_ms
+        return self.serial_ms + sum(max(p, default=0.0) for p in self.phases)
 
 
 def find_glove_regions(segmenter: Any, image_rgb: np.ndarray,
@@ -291,6 +330,24 @@ def slot_lookups(database: Any, threads: int = DEFAULT_THREADS) -> Any:
     return [PoseLookup(database, threads=1) for _ in range(MAX_HANDS)]
 
 
+@dataclass(frozen=True)
+class _Early:
+    """A hand tracked in its region's slot before the assignment (the region plainly continues
+    it), and its tracker's state before, to go back to if the assignment gives the hand another
+    region or none."""
+
+    hand: str
+    before: Any
+    outcome: HandOutcome
+
+
+def _thread_timed(job: Any, *args: Any) -> tuple[Any, float]:
+    """``job(*args)`` and the thread CPU time it took (ms) in the thread that ran it."""
+    started = time.thread_time()
+    result = job(*args)
+    return result, 1e3 * (time.thread_time() - started)
+
+
 class TwoHandPipeline:
     """Segment -> look up -> track for up to two hands (a right and a left glove) in one
     camera's frames. ``segmenter`` is copied once per region slot (``fresh``, no learnt
@@ -321,6 +378,13 @@ class TwoHandPipeline:
         self.previous: dict[str, np.ndarray | None] = {hand: None for hand in HANDS}
         self._missing = {hand: 0 for hand in HANDS}
         self._settled_frames = 0
+        self._phases: list[tuple[float, ...]] = []
+        self._caller_jobs_ms = 0.0
+        # hands tracked early this frame (_slot) and their trackers' states before
+        self._claimed: dict[str, Any] = {}
+        self._claim_lock = threading.Lock()
+        #: thread CPU time of the last :meth:`process` call (None before the first)
+        self.last_timing: FrameTiming | None = None
 
     @property
     def parallel(self) -> bool:
@@ -342,21 +406,28 @@ class TwoHandPipeline:
 
     def _both(self, job: Any, args: Sequence[tuple[Any, ...]]) -> list[Any]:
         """``[job(*a) for a in args]``, the second on the worker thread when there is one (the
-        job of item k uses slot k's lookup and segmenter only)."""
+        job of item k uses slot k's lookup and segmenter only); each job's thread CPU time is
+        one entry of a phase of the frame's :class:`FrameTiming`."""
+        if not args:
+            return []
         if self._pool is None or len(args) < 2:
-            return [job(*a) for a in args]
-        pending = self._pool.submit(job, *args[1])
-        try:
-            first = job(*args[0])
-        finally:
-            second = pending.result()
-        return [first, second]
+            done = [_thread_timed(job, *a) for a in args]
+            in_caller = done
+        else:
+            pending = self._pool.submit(_thread_timed, job, *args[1])
+            try:
+                first = _thread_timed(job, *args[0])
+            finally:
+                second = pending.result()
+            done, in_caller = [first, second], [first]
+        self._phases.append(tuple(ms for _, ms in done))
+        self._caller_jobs_ms += sum(ms for _, ms in in_caller)
+        return [result for result, _ in done]
 
-    def _settled_hand(self, center: np.ndarray, half_size: float) -> str | None:
+    def _continued_hand(self, center: np.ndarray, half_size: float) -> str | None:
         """The hand a region at ``center`` continues without doubt (both hands tracked in the
-        previous frame, not a recheck frame; :class:`HandsSettings`), else None."""
-        every = self.settings.recheck_frames
-        if every <= 0 or self._settled_frames == 0 or self._settled_frames % every == 0:
+        previous frame; :class:`HandsSettings`), else None."""
+        if self._settled_frames == 0:
             return None
         d = {h: float(np.linalg.norm(center - p)) for h, p in self.previous.items()
              if p is not None}
@@ -386,7 +457,8 @@ class TwoHandPipeline:
     def _candidate(self, image_rgb: np.ndarray, regions: Sequence[GloveRegion], k: int
                    ) -> HandCandidate | None:
         """Region ``k`` segmented in its window with the other regions painted out, and
-        looked up (both ways, or as the hand it plainly continues); None without a hand."""
+        looked up (both ways, or, but on a recheck frame, as the hand it plainly continues:
+        ``HandCandidate.continues``); None without a hand."""
         from colorglove_ros.core.pipeline import observe_image
 
         region = regions[k]
@@ -398,21 +470,44 @@ class TwoHandPipeline:
         if tiny is None or not seen.hand_found:
             return None
         candidate = HandCandidate(region, seen, tiny)
-        settled = self._settled_hand(candidate.center, candidate.half_size)
-        for hand in HANDS if settled is None else (settled,):
+        candidate.continues = self._continued_hand(candidate.center, candidate.half_size)
+        every = self.settings.recheck_frames
+        recheck = every <= 0 or self._settled_frames % every == 0
+        for hand in HANDS if recheck or candidate.continues is None else (candidate.continues,):
             self._look_up(candidate, hand, k)
         return candidate
 
-    def candidates(self, image_rgb: np.ndarray) -> list[HandCandidate]:
-        """Every glove region's observation and its lookups as a right and as a left hand."""
-        regions = find_glove_regions(self.segmenter, image_rgb, self.settings)
-        found = self._both(self._candidate, [(image_rgb, regions, k)
-                                             for k in range(len(regions))])
-        return [c for c in found if c is not None]
+    def _slot(self, image_rgb: np.ndarray, regions: Sequence[GloveRegion], k: int,
+              stamp: float | None) -> tuple[HandCandidate | None, _Early | None]:
+        """Region slot ``k``'s candidate (:meth:`_candidate`) and, with a ``stamp`` and
+        ``HandsSettings.early_tracking``, the hand it plainly continues tracked at once in this
+        slot's thread (:class:`_Early`; at most one slot a hand)."""
+        candidate = self._candidate(image_rgb, regions, k)
+        hand = None if candidate is None else candidate.continues
+        if stamp is None or hand is None or not self.settings.early_tracking:
+            return candidate, None
+        before = self.trackers[hand].state()
+        with self._claim_lock:
+            if hand in self._claimed:
+                return candidate, None
+            self._claimed[hand] = before
+        return candidate, _Early(hand, before, self._track(hand, candidate, stamp, k))
 
-    def _track(self, hand: str, candidate: HandCandidate, stamp: float) -> HandOutcome:
-        """``hand``'s outcome from its candidate (its lookup as that hand, then its tracker)."""
-        found = self._look_up(candidate, hand, HANDS.index(hand))
+    def candidates(self, image_rgb: np.ndarray) -> list[HandCandidate]:
+        """Every glove region's observation and its lookups as a right and as a left hand (as
+        seen and mirrored; one way only for a region that plainly continues a hand, but on a
+        recheck frame)."""
+        regions = find_glove_regions(self.segmenter, image_rgb, self.settings)
+        found = self._both(self._slot, [(image_rgb, regions, k, None)
+                                        for k in range(len(regions))])
+        return [c for c, _ in found if c is not None]
+
+    def _track(self, hand: str, candidate: HandCandidate, stamp: float,
+               slot: int | None = None) -> HandOutcome:
+        """``hand``'s outcome from its candidate (its lookup as that hand, with region slot
+        ``slot``'s lookup if it is not made yet (default: the hand's own slot), then its
+        tracker)."""
+        found = self._look_up(candidate, hand, HANDS.index(hand) if slot is None else slot)
         obs = candidate.observation if hand == 'right' else mirror_camera_observation(
             candidate.observation, self.camera.cx)
         prior = None if isinstance(found, NoHand) else found
@@ -427,14 +522,35 @@ class TwoHandPipeline:
         """One frame: each hand's outcome (its own tracker; a hand without a region, or
         whose region's handedness is not decided, is 'no hand' and its tracker starts again
         when it comes back)."""
-        candidates = self.candidates(image_rgb)
+        started = time.thread_time()
+        self._phases, self._caller_jobs_ms, self._claimed = [], 0.0, {}
+        regions = find_glove_regions(self.segmenter, image_rgb, self.settings)
+        try:
+            slots = self._both(self._slot, [(image_rgb, regions, k, stamp)
+                                            for k in range(len(regions))])
+        except BaseException:   # a slot failed: the frame leaves no trace in either tracker
+            for hand, before in self._claimed.items():
+                self.trackers[hand].restore(before)
+            raise
+        candidates = [c for c, _ in slots if c is not None]
+        early = {e.hand: (c, e) for c, e in slots if e is not None}
         assignment, margin = assign_hands(candidates, self.previous, self.settings)
         decided = margin >= self.settings.min_margin
         out = {}
         given = []
         for hand in HANDS:
             i = assignment.get(hand)
-            if i is None or not decided:
+            tracked_early = early.get(hand)
+            if tracked_early is not None and (i is None or not decided
+                                              or candidates[i] is not tracked_early[0]):
+                # tracked on a region the assignment does not give it: as if never tracked
+                self.trackers[hand].restore(tracked_early[1].before)
+                tracked_early = None
+            if tracked_early is not None:
+                out[hand] = tracked_early[1].outcome
+                self.previous[hand] = candidates[i].center
+                self._missing[hand] = 0
+            elif i is None or not decided:
                 reason = ('no glove region' if i is None else
                           f'handedness not decided (score margin {margin:.2f} < '
                           f'{self.settings.min_margin:g})')
@@ -450,6 +566,9 @@ class TwoHandPipeline:
             out[outcome.hand] = outcome
         both = all(isinstance(out[h].outcome, Tracked) for h in HANDS)
         self._settled_frames = self._settled_frames + 1 if both else 0
+        self.last_timing = FrameTiming(
+            1e3 * (time.thread_time() - started) - self._caller_jobs_ms, tuple(self._phases),
+            self.parallel)
         return {h: out[h] for h in HANDS}
 
     def _forget(self, hand: str) -> None:
