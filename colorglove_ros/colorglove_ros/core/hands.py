@@ -13,10 +13,7 @@ with both lookups again every few frames (``HandsSettings.recheck_frames``). Eac
 has its own tracker (a left hand tracked as the mirrored right hand, its pose mirrored back),
 so losing one hand never resets the other. A frame in which a region's hand cannot be told
 with enough evidence gives that hand no pose (``NoHand``). With one pose lookup per region slot
-(:func:`slot_lookups`) the two slots, and then the two hands, run on two threads; a region that
-plainly continues a hand has that hand tracked in its own slot's thread before the assignment
-(``HandsSettings.early_tracking``; undone when the assignment disagrees), so a frame of two
-settled hands waits for the other thread once.
+(:func:`slot_lookups`) the two slots, and then the two hands, run on two threads.
 
 Limitations: two gloves within ``join_px`` coarse pixels of each other (touching) are one
 region, whose lookups match neither hand well: neither hand gets a pose until they part. A glove
@@ -26,7 +23,6 @@ less well than alone. No rclpy import.
 from __future__ import annotations
 
 import math
-import threading
 import time
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -77,11 +73,7 @@ class HandsSettings:
     centre lies within ``continuity_scale`` crop half sizes of one hand's previous centre and at
     most ``settled_ratio`` times as far from it as from the other hand's is looked up as that
     hand only (continuity is its evidence), except on every ``recheck_frames``-th frame, when
-    every region is looked up both ways again (0: always both ways). With ``early_tracking``
-    such a region's hand is tracked in the region's own thread right after its lookups, before
-    the assignment; if the assignment then gives that hand another region (or none), the
-    tracker goes back to its state before and the hand is tracked as without (the same
-    outcomes either way)."""
+    every region is looked up both ways again (0: always both ways)."""
 
     coarse_factor: int = 4
     join_px: int = 1
@@ -94,7 +86,6 @@ class HandsSettings:
     window_margin: float = 0.5
     settled_ratio: float = 0.5
     recheck_frames: int = 5
-    early_tracking: bool = True
 
 
 @dataclass(frozen=True)
@@ -117,9 +108,6 @@ class HandCandidate:
     observation: CameraObservation
     tiny: TinyCrop | None
     lookups: dict[str, LookupResult | NoHand] = field(default_factory=dict)
-    #: the hand this region plainly continues (both hands tracked in the previous frame and
-    #: this region's crop centre by one of them; ``HandsSettings``), else None
-    continues: str | None = None
 
     def distance(self, hand: str) -> float:
         """Nearest database image distance of the query as ``hand`` (inf when none)."""
@@ -165,9 +153,9 @@ class HandOutcome:
 class FrameTiming:
     """Thread CPU time of one :meth:`TwoHandPipeline.process` call (ms): the caller's outside
     the jobs it ran beside the worker (``serial_ms``), and each parallel phase's jobs (one per
-    region slot or hand, each on its own thread when ``parallel``). The critical path is what
-    the frame would take with a free core per thread and no wait on the other thread:
-    ``serial_ms`` plus the slowest job of every phase (the sum of all, one thread)."""
+    region slot, then one per hand; each on its own thread when ``parallel``). The critical
+    path is what the frame would take with a free core per thread and no wait on the other
+    thread's GIL: ``serial_ms`` plus the slowest job of every phase (with one thread, all)."""
 
     serial_ms: float
     phases: tuple[tuple[float, ...], ...]
@@ -330,17 +318,6 @@ def slot_lookups(database: Any, threads: int = DEFAULT_THREADS) -> Any:
     return [PoseLookup(database, threads=1) for _ in range(MAX_HANDS)]
 
 
-@dataclass(frozen=True)
-class _Early:
-    """A hand tracked in its region's slot before the assignment (the region plainly continues
-    it), and its tracker's state before, to go back to if the assignment gives the hand another
-    region or none."""
-
-    hand: str
-    before: Any
-    outcome: HandOutcome
-
-
 def _thread_timed(job: Any, *args: Any) -> tuple[Any, float]:
     """``job(*args)`` and the thread CPU time it took (ms) in the thread that ran it."""
     started = time.thread_time()
@@ -378,11 +355,8 @@ class TwoHandPipeline:
         self.previous: dict[str, np.ndarray | None] = {hand: None for hand in HANDS}
         self._missing = {hand: 0 for hand in HANDS}
         self._settled_frames = 0
-        self._phases: list[tuple[float, ...]] = []
+        self._phases: list[tuple[float, ...]] = []   # this frame's, for last_timing
         self._caller_jobs_ms = 0.0
-        # hands tracked early this frame (_slot) and their trackers' states before
-        self._claimed: dict[str, Any] = {}
-        self._claim_lock = threading.Lock()
         #: thread CPU time of the last :meth:`process` call (None before the first)
         self.last_timing: FrameTiming | None = None
 
@@ -406,10 +380,8 @@ class TwoHandPipeline:
 
     def _both(self, job: Any, args: Sequence[tuple[Any, ...]]) -> list[Any]:
         """``[job(*a) for a in args]``, the second on the worker thread when there is one (the
-        job of item k uses slot k's lookup and segmenter only); each job's thread CPU time is
-        one entry of a phase of the frame's :class:`FrameTiming`."""
-        if not args:
-            return []
+        job of item k uses slot k's lookup and segmenter only); the jobs' thread CPU times are
+        a phase of the frame's :class:`FrameTiming`."""
         if self._pool is None or len(args) < 2:
             done = [_thread_timed(job, *a) for a in args]
             in_caller = done
@@ -420,14 +392,16 @@ class TwoHandPipeline:
             finally:
                 second = pending.result()
             done, in_caller = [first, second], [first]
-        self._phases.append(tuple(ms for _, ms in done))
-        self._caller_jobs_ms += sum(ms for _, ms in in_caller)
+        if done:
+            self._phases.append(tuple(ms for _, ms in done))
+            self._caller_jobs_ms += sum(ms for _, ms in in_caller)
         return [result for result, _ in done]
 
-    def _continued_hand(self, center: np.ndarray, half_size: float) -> str | None:
+    def _settled_hand(self, center: np.ndarray, half_size: float) -> str | None:
         """The hand a region at ``center`` continues without doubt (both hands tracked in the
-        previous frame; :class:`HandsSettings`), else None."""
-        if self._settled_frames == 0:
+        previous frame, not a recheck frame; :class:`HandsSettings`), else None."""
+        every = self.settings.recheck_frames
+        if every <= 0 or self._settled_frames == 0 or self._settled_frames % every == 0:
             return None
         d = {h: float(np.linalg.norm(center - p)) for h, p in self.previous.items()
              if p is not None}
@@ -457,8 +431,7 @@ class TwoHandPipeline:
     def _candidate(self, image_rgb: np.ndarray, regions: Sequence[GloveRegion], k: int
                    ) -> HandCandidate | None:
         """Region ``k`` segmented in its window with the other regions painted out, and
-        looked up (both ways, or, but on a recheck frame, as the hand it plainly continues:
-        ``HandCandidate.continues``); None without a hand."""
+        looked up (both ways, or as the hand it plainly continues); None without a hand."""
         from colorglove_ros.core.pipeline import observe_image
 
         region = regions[k]
@@ -470,44 +443,21 @@ class TwoHandPipeline:
         if tiny is None or not seen.hand_found:
             return None
         candidate = HandCandidate(region, seen, tiny)
-        candidate.continues = self._continued_hand(candidate.center, candidate.half_size)
-        every = self.settings.recheck_frames
-        recheck = every <= 0 or self._settled_frames % every == 0
-        for hand in HANDS if recheck or candidate.continues is None else (candidate.continues,):
+        settled = self._settled_hand(candidate.center, candidate.half_size)
+        for hand in HANDS if settled is None else (settled,):
             self._look_up(candidate, hand, k)
         return candidate
 
-    def _slot(self, image_rgb: np.ndarray, regions: Sequence[GloveRegion], k: int,
-              stamp: float | None) -> tuple[HandCandidate | None, _Early | None]:
-        """Region slot ``k``'s candidate (:meth:`_candidate`) and, with a ``stamp`` and
-        ``HandsSettings.early_tracking``, the hand it plainly continues tracked at once in this
-        slot's thread (:class:`_Early`; at most one slot a hand)."""
-        candidate = self._candidate(image_rgb, regions, k)
-        hand = None if candidate is None else candidate.continues
-        if stamp is None or hand is None or not self.settings.early_tracking:
-            return candidate, None
-        before = self.trackers[hand].state()
-        with self._claim_lock:
-            if hand in self._claimed:
-                return candidate, None
-            self._claimed[hand] = before
-        return candidate, _Early(hand, before, self._track(hand, candidate, stamp, k))
-
     def candidates(self, image_rgb: np.ndarray) -> list[HandCandidate]:
-        """Every glove region's observation and its lookups as a right and as a left hand (as
-        seen and mirrored; one way only for a region that plainly continues a hand, but on a
-        recheck frame)."""
+        """Every glove region's observation and its lookups as a right and as a left hand."""
         regions = find_glove_regions(self.segmenter, image_rgb, self.settings)
-        found = self._both(self._slot, [(image_rgb, regions, k, None)
-                                        for k in range(len(regions))])
-        return [c for c, _ in found if c is not None]
+        found = self._both(self._candidate, [(image_rgb, regions, k)
+                                             for k in range(len(regions))])
+        return [c for c in found if c is not None]
 
-    def _track(self, hand: str, candidate: HandCandidate, stamp: float,
-               slot: int | None = None) -> HandOutcome:
-        """``hand``'s outcome from its candidate (its lookup as that hand, with region slot
-        ``slot``'s lookup if it is not made yet (default: the hand's own slot), then its
-        tracker)."""
-        found = self._look_up(candidate, hand, HANDS.index(hand) if slot is None else slot)
+    def _track(self, hand: str, candidate: HandCandidate, stamp: float) -> HandOutcome:
+        """``hand``'s outcome from its candidate (its lookup as that hand, then its tracker)."""
+        found = self._look_up(candidate, hand, HANDS.index(hand))
         obs = candidate.observation if hand == 'right' else mirror_camera_observation(
             candidate.observation, self.camera.cx)
         prior = None if isinstance(found, NoHand) else found
@@ -523,34 +473,15 @@ class TwoHandPipeline:
         whose region's handedness is not decided, is 'no hand' and its tracker starts again
         when it comes back)."""
         started = time.thread_time()
-        self._phases, self._caller_jobs_ms, self._claimed = [], 0.0, {}
-        regions = find_glove_regions(self.segmenter, image_rgb, self.settings)
-        try:
-            slots = self._both(self._slot, [(image_rgb, regions, k, stamp)
-                                            for k in range(len(regions))])
-        except BaseException:   # a slot failed: the frame leaves no trace in either tracker
-            for hand, before in self._claimed.items():
-                self.trackers[hand].restore(before)
-            raise
-        candidates = [c for c, _ in slots if c is not None]
-        early = {e.hand: (c, e) for c, e in slots if e is not None}
+        self._phases, self._caller_jobs_ms = [], 0.0
+        candidates = self.candidates(image_rgb)
         assignment, margin = assign_hands(candidates, self.previous, self.settings)
         decided = margin >= self.settings.min_margin
         out = {}
         given = []
         for hand in HANDS:
             i = assignment.get(hand)
-            tracked_early = early.get(hand)
-            if tracked_early is not None and (i is None or not decided
-                                              or candidates[i] is not tracked_early[0]):
-                # tracked on a region the assignment does not give it: as if never tracked
-                self.trackers[hand].restore(tracked_early[1].before)
-                tracked_early = None
-            if tracked_early is not None:
-                out[hand] = tracked_early[1].outcome
-                self.previous[hand] = candidates[i].center
-                self._missing[hand] = 0
-            elif i is None or not decided:
+            if i is None or not decided:
                 reason = ('no glove region' if i is None else
                           f'handedness not decided (score margin {margin:.2f} < '
                           f'{self.settings.min_margin:g})')

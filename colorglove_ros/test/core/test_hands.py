@@ -12,6 +12,7 @@ import pytest
 from colorglove_ros.core.hand.handedness import HANDS, mirror_pose
 from colorglove_ros.core.hands import (
     MAX_HANDS,
+    FrameTiming,
     GloveRegion,
     HandCandidate,
     TwoHandPipeline,
@@ -194,7 +195,16 @@ def test_two_threads_track_as_one_does(node_assets, small_database):
             h: HandTracker(synth.model, synth.mesh, [camera], config, glove=synth.glove)
             for h in HANDS}, limits=UNGATED)     # the small database's matches are far
         assert pipeline.parallel == (threads == 2) and len(pipeline.lookups) == threads
-        runs[threads] = [pipeline.process(f, i / 30.0) for i, f in enumerate(frames)]
+        runs[threads] = []
+        for i, f in enumerate(frames):
+            runs[threads].append(pipeline.process(f, i / 30.0))
+            timing = pipeline.last_timing     # this frame's thread CPU
+            assert timing.parallel == (threads == 2) and timing.serial_ms >= 0.0
+            assert timing.phases and all(len(p) <= MAX_HANDS for p in timing.phases)
+            if threads == 1 or all(len(p) == 1 for p in timing.phases):
+                assert timing.critical_path_ms == pytest.approx(timing.cpu_ms)
+            else:
+                assert timing.critical_path_ms < timing.cpu_ms
         pipeline.close()
     assert any(isinstance(o.outcome, Tracked) for out in runs[1] for o in out.values())
     for one, two in zip(runs[1], runs[2], strict=True):
@@ -209,91 +219,9 @@ def test_two_threads_track_as_one_does(node_assets, small_database):
     assert MAX_HANDS == len(HANDS)
 
 
-def _two_hand_frames(seed: int, count: int) -> tuple[Synthesizer, list[np.ndarray]]:
-    """``count`` rendered frames of two-hand sequence ``seed`` (each hand on its side) and the
-    synthesizer's hand (released)."""
-    camera = default_camera()
-    synth = Synthesizer()
-    try:
-        poses = two_hand_sequences(seed, count, camera=camera, model=synth.model)
-        conditions = sample_conditions(np.random.default_rng(2), 'test')
-        frames = [synth.render_hands([(poses[h][i], h) for h in HANDS], camera,
-                                     np.random.default_rng(i), conditions)[0].image_rgb
-                  for i in range(count)]
-    finally:
-        synth.release()
-    return synth, frames
-
-
-def test_hands_tracked_early_give_the_outcomes_of_hands_tracked_after_the_assignment(
-        node_assets, small_database, monkeypatch):
-    # A region that plainly continues a hand has that hand tracked in its own slot before the
-    # assignment; where the assignment then gives the hand another region (frame 3: swapped
-    # here) or none (frame 4: not decided), its tracker goes back and the frame is tracked as
-    # without early tracking: every outcome is the same, on one thread or two.
-    from repo_paths import CONFIG_DIR
-
-    import colorglove_ros.core.hands as hands
-    from colorglove_ros.core.hands import HandsSettings
-    from colorglove_ros.core.segmentation.segmenter import load_segmenter
-    from colorglove_ros.core.tracking.config import load_ik_config
-    from colorglove_ros.core.tracking.tracker import HandTracker
-
-    camera = default_camera()
-    synth, frames = _two_hand_frames(1003, 7)
-    frame_index = {'i': -1}
-    real_assign = hands.assign_hands
-
-    def assign(candidates, previous, settings):
-        assignment, margin = real_assign(candidates, previous, settings)
-        if frame_index['i'] == 3 and len(assignment) == 2:
-            assignment = {'right': assignment['left'], 'left': assignment['right']}
-        if frame_index['i'] == 4:
-            margin = 0.0
-        return assignment, margin
-    monkeypatch.setattr(hands, 'assign_hands', assign)
-    segmenter = load_segmenter(str(node_assets.color_config))
-    config = load_ik_config(CONFIG_DIR / 'ik.yaml')
-    runs, restores = {}, {}
-    for early, threads in ((False, 2), (True, 2), (True, 1)):
-        trackers = {h: HandTracker(synth.model, synth.mesh, [camera], config, glove=synth.glove)
-                    for h in HANDS}
-        restores[early, threads] = 0
-        for tracker in trackers.values():
-            real_restore = tracker.restore
-
-            def counted(state, real_restore=real_restore, key=(early, threads)):
-                restores[key] += 1
-                real_restore(state)
-            tracker.restore = counted
-        pipeline = TwoHandPipeline(segmenter, slot_lookups(small_database, threads), camera,
-                                   trackers, limits=UNGATED,
-                                   settings=HandsSettings(early_tracking=early))
-        runs[early, threads] = []
-        for i, frame in enumerate(frames):
-            frame_index['i'] = i
-            out = pipeline.process(frame, i / 30.0)
-            timing = pipeline.last_timing
-            both = all(isinstance(o.outcome, Tracked) for o in out.values())
-            runs[early, threads].append((out, timing, both))
-            assert timing.serial_ms >= 0.0 and timing.critical_path_ms <= timing.cpu_ms + 1e-9
-            if threads == 1:
-                assert timing.critical_path_ms == timing.cpu_ms
-        pipeline.close()
-    late = runs[False, 2]
-    assert sum(both for _, _, both in late) >= 4   # the small database tracks these frames
-    # tracked early: both hands within the slots' phase on a frame after one with both hands
-    assert any(len(t.phases) == 1 and both and late[i - 1][2]
-               for i, (_, t, both) in enumerate(runs[True, 2]) if i)
-    assert all(len(t.phases) == 2 for _, t, both in late if both)
-    assert restores[False, 2] == 0 and restores[True, 2] >= 1 and restores[True, 1] >= 1
-    for key in ((True, 2), (True, 1)):
-        for (a, _, _), (b, _, _) in zip(late, runs[key], strict=True):
-            for h in HANDS:
-                assert getattr(a[h].outcome, 'reason', None) == getattr(b[h].outcome, 'reason',
-                                                                        None)
-                assert a[h].region == b[h].region and (a[h].q is None) == (b[h].q is None)
-                if a[h].q is not None:
-                    np.testing.assert_array_equal(a[h].q, b[h].q)
-                assert a[h].evidence == b[h].evidence or (np.isnan(a[h].evidence)
-                                                          and np.isnan(b[h].evidence))
+def test_the_critical_path_is_the_serial_part_and_each_phase_s_slowest_job():
+    two = FrameTiming(1.0, ((3.0, 2.0), (0.5, 1.5)), parallel=True)
+    assert two.cpu_ms == 8.0 and two.critical_path_ms == 1.0 + 3.0 + 1.5
+    one = FrameTiming(1.0, ((3.0, 2.0), (0.5, 1.5)), parallel=False)
+    assert one.critical_path_ms == one.cpu_ms == 8.0
+    assert FrameTiming(0.5, ((2.0,),), parallel=True).critical_path_ms == 2.5

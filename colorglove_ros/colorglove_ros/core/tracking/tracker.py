@@ -237,15 +237,6 @@ class HandTracker:
         self._q_prev = None
         self._stamp_prev = None
 
-    def state(self) -> tuple[np.ndarray | None, float | None]:
-        """What this tracker carries from frame to frame (the last output pose and its stamp),
-        for :meth:`restore`: a frame tracked and then restored leaves no trace."""
-        return self._q_prev, self._stamp_prev
-
-    def restore(self, state: tuple[np.ndarray | None, float | None]) -> None:
-        """Go back to a :meth:`state` taken earlier (the frames tracked since are forgotten)."""
-        self._q_prev, self._stamp_prev = state
-
     @property
     def previous_pose(self) -> np.ndarray | None:
         """The last output pose, or None after a reset."""
