@@ -38,8 +38,18 @@ from colorglove_ros.core.hand.handedness import (
     mirror_camera_observation,
     mirror_tiny_crop,
 )
-from colorglove_ros.core.lookup.types import LookupResult
-from colorglove_ros.core.pipeline import NODE_LIMITS, NoHand, StageLimits, Tracked, look_up, track
+from colorglove_ros.core.lookup.types import LookupResult, Neighbours
+from colorglove_ros.core.pipeline import (
+    NODE_LIMITS,
+    NoHand,
+    StageLimits,
+    Tracked,
+    blend,
+    look_up,
+    search,
+    too_far,
+    track,
+)
 from colorglove_ros.core.segmentation.crop import CropTransform, TinyCrop
 from colorglove_ros.core.segmentation.detection import (
     drop_oversized_components,
@@ -48,7 +58,7 @@ from colorglove_ros.core.segmentation.detection import (
 from colorglove_ros.core.segmentation.segmenter import keep_multicolor_components
 from colorglove_ros.core.tracking.types import Blobs, CameraObservation
 
-__all__ = ['MAX_HANDS', 'HandsSettings', 'GloveRegion', 'HandCandidate', 'HandOutcome',
+__all__ = ['MAX_HANDS', 'HandsSettings', 'GloveRegion', 'Searched', 'HandCandidate', 'HandOutcome',
            'FrameTiming', 'find_glove_regions', 'mask_regions', 'region_window',
            'shift_observation', 'assign_hands', 'slot_lookups', 'TwoHandPipeline',
            'DEFAULT_THREADS']
@@ -100,18 +110,32 @@ class GloveRegion:
     cell_px: int = 1
 
 
+@dataclass(frozen=True)
+class Searched:
+    """A lookup searched but not blended yet (``core.pipeline.search``): its candidates, the
+    blobs its blend will weigh the fingers by, and its nearest database image distance (inf
+    when that is too far for a hand, as the whole lookup would say)."""
+
+    neighbours: Neighbours
+    blobs: Any
+    nearest: float
+
+
 @dataclass
 class HandCandidate:
-    """One region's observation and its two lookups (as seen: right hand; mirrored: left)."""
+    """One region's observation and its two lookups (as seen: right hand; mirrored: left),
+    each done, or only searched (:class:`Searched`) until a hand is tracked from it."""
 
     region: GloveRegion
     observation: CameraObservation
     tiny: TinyCrop | None
-    lookups: dict[str, LookupResult | NoHand] = field(default_factory=dict)
+    lookups: dict[str, LookupResult | NoHand | Searched] = field(default_factory=dict)
 
     def distance(self, hand: str) -> float:
         """Nearest database image distance of the query as ``hand`` (inf when none)."""
         found = self.lookups.get(hand)
+        if isinstance(found, Searched):
+            return found.nearest
         if found is None or isinstance(found, NoHand) or not len(found.distances):
             return math.inf
         return float(found.distances[0])
@@ -397,11 +421,10 @@ class TwoHandPipeline:
             self._caller_jobs_ms += sum(ms for _, ms in in_caller)
         return [result for result, _ in done]
 
-    def _settled_hand(self, center: np.ndarray, half_size: float) -> str | None:
+    def _continued_hand(self, center: np.ndarray, half_size: float) -> str | None:
         """The hand a region at ``center`` continues without doubt (both hands tracked in the
-        previous frame, not a recheck frame; :class:`HandsSettings`), else None."""
-        every = self.settings.recheck_frames
-        if every <= 0 or self._settled_frames == 0 or self._settled_frames % every == 0:
+        previous frame; :class:`HandsSettings`), else None."""
+        if self._settled_frames == 0:
             return None
         d = {h: float(np.linalg.norm(center - p)) for h, p in self.previous.items()
              if p is not None}
@@ -413,20 +436,36 @@ class TwoHandPipeline:
             return own
         return None
 
+    def _query(self, candidate: HandCandidate, hand: str) -> tuple[TinyCrop, Blobs | None]:
+        """``candidate``'s lookup query as ``hand`` (a left hand's mirrored) and the blobs its
+        fingers are blended by (None without ``finger_evidence``)."""
+        obs, tiny = candidate.observation, candidate.tiny
+        if hand != 'right':
+            cx = self.camera.cx
+            obs, tiny = mirror_camera_observation(obs, cx), mirror_tiny_crop(tiny, cx)
+        return tiny, obs.blobs if self.finger_evidence else None
+
     def _look_up(self, candidate: HandCandidate, hand: str, slot: int
                  ) -> LookupResult | NoHand:
-        """``candidate``'s query looked up as ``hand`` (a left hand's mirrored) with slot
-        ``slot``'s lookup, kept."""
-        if hand not in candidate.lookups:
-            obs, tiny = candidate.observation, candidate.tiny
-            if hand != 'right':
-                cx = self.camera.cx
-                obs, tiny = mirror_camera_observation(obs, cx), mirror_tiny_crop(tiny, cx)
-            lookup = self.lookups[slot % len(self.lookups)]
-            candidate.lookups[hand] = look_up(lookup, tiny, self.camera,
-                                              obs.blobs if self.finger_evidence else None,
-                                              self.limits)
+        """``candidate``'s query looked up as ``hand`` with slot ``slot``'s lookup (or its
+        search blended), kept."""
+        lookup = self.lookups[slot % len(self.lookups)]
+        found = candidate.lookups.get(hand)
+        if isinstance(found, Searched):
+            candidate.lookups[hand] = blend(lookup, found.neighbours, self.camera, found.blobs,
+                                            self.limits)
+        elif found is None:
+            tiny, blobs = self._query(candidate, hand)
+            candidate.lookups[hand] = look_up(lookup, tiny, self.camera, blobs, self.limits)
         return candidate.lookups[hand]
+
+    def _search(self, candidate: HandCandidate, hand: str, slot: int) -> None:
+        """``candidate``'s query as ``hand`` searched with slot ``slot``'s lookup, its blend
+        left to :meth:`_look_up` (if a hand is tracked from it)."""
+        tiny, blobs = self._query(candidate, hand)
+        found = search(self.lookups[slot % len(self.lookups)], tiny)
+        candidate.lookups[hand] = found if isinstance(found, NoHand) else Searched(
+            found, blobs, math.inf if too_far(found.nearest, self.limits) else found.nearest)
 
     def _candidate(self, image_rgb: np.ndarray, regions: Sequence[GloveRegion], k: int
                    ) -> HandCandidate | None:
@@ -443,9 +482,16 @@ class TwoHandPipeline:
         if tiny is None or not seen.hand_found:
             return None
         candidate = HandCandidate(region, seen, tiny)
-        settled = self._settled_hand(candidate.center, candidate.half_size)
-        for hand in HANDS if settled is None else (settled,):
-            self._look_up(candidate, hand, k)
+        continued = self._continued_hand(candidate.center, candidate.half_size)
+        every = self.settings.recheck_frames
+        if continued is not None and every > 0 and self._settled_frames % every:
+            self._look_up(candidate, continued, k)      # a settled hand: that way only
+            return candidate
+        for hand in HANDS:   # both ways; blended now only as the hand it likely is
+            if hand == continued:
+                self._look_up(candidate, hand, k)
+            else:
+                self._search(candidate, hand, k)
         return candidate
 
     def candidates(self, image_rgb: np.ndarray) -> list[HandCandidate]:
