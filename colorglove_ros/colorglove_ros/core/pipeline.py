@@ -277,6 +277,8 @@ def too_far(nearest: float, limits: StageLimits) -> bool:
 def _near_enough(result: LookupResult, limits: StageLimits) -> LookupResult | NoHand:
     """``result``, or :class:`NoHand` when its nearest database image is too far
     (:func:`too_far`; ``partial`` is the result)."""
+    if limits.max_image_distance >= math.inf:   # (ungated: a stand-in may have no distances)
+        return result
     nearest = float(result.distances[0]) if len(result.distances) else math.inf
     if too_far(nearest, limits):
         return NoHand(f'lookup: nearest database image {nearest:.2f} tiny px away (more '
