@@ -9,7 +9,8 @@ evidence (:func:`assign_hands`): the nearest database image of the mirrored agai
 unmirrored query (a right glove matches unmirrored, a left one mirrored), and continuity (each
 hand's previous crop centre); with two regions they are a left and a right hand. While both
 hands are tracked, a region that plainly continues one hand is looked up as that hand only,
-with both lookups again every few frames (``HandsSettings.recheck_frames``). Each hand
+with both lookups again every few frames (``HandsSettings.recheck_frames``); a lookup only the
+evidence reads is searched, not blended (:class:`Searched`). Each hand
 has its own tracker (a left hand tracked as the mirrored right hand, its pose mirrored back),
 so losing one hand never resets the other. A frame in which a region's hand cannot be told
 with enough evidence gives that hand no pose (``NoHand``). With one pose lookup per region slot
