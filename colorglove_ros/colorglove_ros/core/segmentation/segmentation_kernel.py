@@ -24,24 +24,79 @@ _NO_KEY = np.int32(np.iinfo(np.int32).max)   # larger than every sort key; label
 _JIT = {'cache': True, 'nogil': True}
 
 
-@numba.njit(**_JIT)
-def _inner_borders(box: np.ndarray, border: np.ndarray, pad: int) -> None:
-    """``border`` (box's shape, uint8) 1 at the pixels of ``box`` less its ``pad`` wide frame
-    with a 4-neighbour of another label inside that region (pixels outside it are ignored, as
-    an erosion and a dilation of the region alone see them), else 0."""
+@numba.njit(inline='always', **_JIT)
+def _on_border(box: np.ndarray, y: int, x: int, pad: int) -> bool:
+    """Whether pixel (``y``, ``x``) of ``box`` has a 4-neighbour of another label inside
+    ``box`` less its ``pad`` wide frame (pixels outside it are ignored, as an erosion and a
+    dilation of that region alone see them)."""
     rows, cols = box.shape
-    for y in range(pad, rows - pad):
-        for x in range(pad, cols - pad):
-            v = box[y, x]
-            b = ((y > pad and box[y - 1, x] != v) or (y < rows - pad - 1 and box[y + 1, x] != v)
-                 or (x > pad and box[y, x - 1] != v)
-                 or (x < cols - pad - 1 and box[y, x + 1] != v))
-            border[y, x] = 1 if b else 0
+    v = box[y, x]
+    return ((y > pad and box[y - 1, x] != v) or (y < rows - pad - 1 and box[y + 1, x] != v)
+            or (x > pad and box[y, x - 1] != v) or (x < cols - pad - 1 and box[y, x + 1] != v))
 
 
-@numba.njit(**_JIT)
+@numba.njit(inline='always', **_JIT)
 def _colour(rgb: np.ndarray, table: np.ndarray, i: int, c: int) -> np.float32:
     return table[rgb[i, c]]
+
+
+@numba.njit(inline='always', **_JIT)
+def _decide(current: np.uint8, sure: np.ndarray, rgb: np.ndarray, table: np.ndarray,
+            steps: np.ndarray, i: int, mix2: np.float32, residual2: np.float32,
+            dists: np.ndarray, bits: np.ndarray, keys: np.ndarray) -> np.uint8:
+    """The new label of border pixel ``i`` (label ``current``): that of the sure reference
+    (``sure``: the labels, ``UNSURE`` on a border and in the padding) whose linear RGB is
+    nearest its own, unless none is sure, or the pixel is glove and its colour no mix of that
+    reference's and the nearest other label's."""
+    n_steps = len(steps)
+    o0, o1, o2 = (_colour(rgb, table, i, 0), _colour(rgb, table, i, 1),
+                  _colour(rgb, table, i, 2))
+    # sort keys: the float32 distance's bits with the label in the lowest 8 bits
+    best = _NO_KEY
+    nearest = 0
+    for s in range(n_steps):
+        r = i + steps[s]
+        d0 = _colour(rgb, table, r, 0) - o0
+        d1 = _colour(rgb, table, r, 1) - o1
+        d2 = _colour(rgb, table, r, 2) - o2
+        dist = d0 * d0 + d1 * d1
+        dists[s] = dist + d2 * d2
+        label = sure[r]
+        key = _NO_KEY if label == UNSURE else (bits[s] & ~0xFF) | np.int32(label)
+        keys[s] = key
+        if key < best:
+            best = key
+            nearest = s
+    label_a = best & 0xFF
+    if label_a == UNSURE or label_a == current or current == 0:
+        return current if label_a == UNSURE else np.uint8(label_a)
+    # a glove label keeps its label when its colour is no mix of a and the nearest other b
+    second = 0
+    second_key = _NO_KEY
+    for s in range(n_steps):
+        r = i + steps[s]
+        key = _NO_KEY if sure[r] == label_a else keys[s]
+        if s == 0 or key < second_key:
+            second_key = key
+            second = s
+    if (second_key & 0xFF) == UNSURE:   # no other label: b = a
+        second = nearest
+    ra, rb = i + steps[nearest], i + steps[second]
+    zero = np.float32(0.0)
+    length2, along, off2 = zero, zero, zero
+    for c in range(3):
+        a = _colour(rgb, table, ra, c)
+        span = _colour(rgb, table, rb, c) - a
+        rel = _colour(rgb, table, i, c) - a
+        length2 = length2 + span * span
+        along = along + rel * span
+        off2 = off2 + rel * rel
+    t = along / max(length2, np.float32(1e-6))
+    t = min(max(t, zero), np.float32(1.0))
+    off2 = off2 - t * (np.float32(2.0) * along - t * length2)
+    if off2 > max(mix2 * length2, residual2):
+        return current
+    return np.uint8(label_a)
 
 
 @numba.njit(**_JIT)
@@ -54,109 +109,98 @@ def relabel_passes(box: np.ndarray, rgb: np.ndarray, table: np.ndarray, border: 
     (H * W, 3) uint8: the image's bytes there (0 in the frame); ``table`` (256,) float32: a
     byte's linear value; ``border`` (H, W) uint8: 1 at the first pass's border pixels (it is
     overwritten); ``steps`` (S,) int64: flat offsets to the reference pixels; ``mix2``,
-    ``residual2``: the squared mix tolerance and minimal residual."""
+    ``residual2``: the squared mix tolerance and minimal residual.
+
+    Each pass decides its border pixels independently (from the labels before it, in any
+    order). A label changes only where the last pass relabelled, so only there and at their
+    4-neighbours can a pixel join or leave the border, and the pixels to re-decide are the
+    new border pixels and those with such a pixel among their references."""
     rows, cols = box.shape
     size = rows * cols
     flat = box.ravel()
     bflat = border.ravel()
     n_steps = len(steps)
-    sure = np.empty(size, np.uint8)
-    was = np.zeros(size, np.uint8)
-    moved = np.zeros(size, np.uint8)
-    changed = np.zeros(size, np.uint8)   # the pixels the last pass relabelled
-    at = np.empty(size, np.int64)
+    at = np.empty(size, np.int64)          # this pass's border pixels
+    count = 0
+    for i in range(size):
+        if bflat[i]:
+            at[count] = i
+            count += 1
+    sure = flat.copy()                     # the labels, UNSURE on the border
+    for j in range(count):
+        sure[at[j]] = UNSURE
+    todo = np.empty(size, np.int64)        # ... of them, those to decide
+    new = np.empty(size, np.uint8)
+    changed = np.empty(size, np.int64)     # the pixels the last pass relabelled
+    n_changed = 0
+    moved = np.zeros(size, np.uint8)       # relabelled, or joined or left the border
+    fresh = np.zeros(size, np.uint8)       # joined the border in this pass
+    touched = np.empty(2 * size, np.int64)   # moved: (changed) + (border changed)
     dists = np.empty(n_steps, np.float32)
     bits = dists.view(np.int32)   # non-negative float32 values order like their int32 bits
     keys = np.empty(n_steps, np.int32)
-    two = np.float32(2.0)
-    tiny = np.float32(1e-6)
-    zero, one = np.float32(0.0), np.float32(1.0)
     for k in range(passes):
+        n_todo = 0
+        n_touched = 0
         if k:
-            was[:] = bflat
-            _inner_borders(box, border, pad)
-            for i in range(size):
-                moved[i] = 1 if (bflat[i] != was[i] or changed[i]) else 0
-        count = 0
-        for i in range(size):
-            if bflat[i]:
-                at[count] = i
-                count += 1
-        if count == 0:
-            break
-        sure[:] = flat
-        for j in range(count):
-            sure[at[j]] = UNSURE
-        if k:
-            # a pixel decided in the last pass whose references kept their labels and
-            # sureness would be decided the same again: it keeps its label
+            for j in range(n_changed):
+                i = changed[j]
+                moved[i] = 1
+                touched[n_touched] = i
+                n_touched += 1
+                for q in (i - cols, i + cols, i - 1, i + 1, i):
+                    y, x = q // cols, q % cols
+                    if y < pad or y >= rows - pad or x < pad or x >= cols - pad:
+                        continue
+                    b = 1 if _on_border(box, y, x, pad) else 0
+                    if b != bflat[q]:
+                        if b:
+                            fresh[q] = 1
+                        bflat[q] = b
+                        moved[q] = 1
+                        touched[n_touched] = q
+                        n_touched += 1
             kept = 0
-            for j in range(count):
-                i = at[j]
-                redo = was[i] == 0
-                if not redo:
-                    for s in range(n_steps):
-                        if moved[i + steps[s]]:
-                            redo = True
-                            break
-                if redo:
-                    at[kept] = i
+            for j in range(count):          # left the border: dropped
+                if bflat[at[j]]:
+                    at[kept] = at[j]
                     kept += 1
             count = kept
-            if count == 0:
-                break
-        changed[:] = 0
+            for j in range(n_touched):      # joined it: added (once)
+                q = touched[j]
+                sure[q] = UNSURE if bflat[q] else flat[q]
+                if fresh[q] == 1:
+                    at[count] = q
+                    count += 1
+                    fresh[q] = 2
+        if count == 0:
+            break
         for j in range(count):
             i = at[j]
-            o0, o1, o2 = (_colour(rgb, table, i, 0), _colour(rgb, table, i, 1),
-                          _colour(rgb, table, i, 2))
-            # sort keys: the float32 distance's bits with the label in the lowest 8 bits
-            best = _NO_KEY
-            nearest = 0
-            for s in range(n_steps):
-                r = i + steps[s]
-                d0 = _colour(rgb, table, r, 0) - o0
-                d1 = _colour(rgb, table, r, 1) - o1
-                d2 = _colour(rgb, table, r, 2) - o2
-                dist = d0 * d0 + d1 * d1
-                dists[s] = dist + d2 * d2
-                label = sure[r]
-                key = _NO_KEY if label == UNSURE else (bits[s] & ~0xFF) | np.int32(label)
-                keys[s] = key
-                if key < best:
-                    best = key
-                    nearest = s
-            label_a = best & 0xFF
-            current = flat[i]
-            new = current if label_a == UNSURE else np.uint8(label_a)
-            if new != current and current != 0:
-                # keep a glove label whose colour is no mix of a and the nearest other b
-                second = 0
-                second_key = _NO_KEY if sure[i + steps[0]] == label_a else keys[0]
-                for s in range(1, n_steps):
-                    key = _NO_KEY if sure[i + steps[s]] == label_a else keys[s]
-                    if key < second_key:
-                        second_key = key
-                        second = s
-                if (second_key & 0xFF) == UNSURE:   # no other label: b = a
-                    second = nearest
-                ra, rb = i + steps[nearest], i + steps[second]
-                length2, along, off2 = zero, zero, zero
-                for c in range(3):
-                    a = _colour(rgb, table, ra, c)
-                    span = _colour(rgb, table, rb, c) - a
-                    rel = _colour(rgb, table, i, c) - a
-                    length2 = length2 + span * span
-                    along = along + rel * span
-                    off2 = off2 + rel * rel
-                t = along / max(length2, tiny)
-                t = min(max(t, zero), one)
-                off2 = off2 - t * (two * along - t * length2)
-                if off2 > max(mix2 * length2, residual2):
-                    new = current
-            if new != current:
-                changed[i] = 1
-                flat[i] = new
+            redo = k == 0 or fresh[i] != 0
+            if not redo:
+                for s in range(n_steps):
+                    if moved[i + steps[s]]:
+                        redo = True
+                        break
+            if redo:
+                todo[n_todo] = i
+                n_todo += 1
+        for j in range(n_touched):
+            moved[touched[j]] = 0
+            fresh[touched[j]] = 0
+        if n_todo == 0:
+            break
+        for j in range(n_todo):
+            new[j] = _decide(flat[todo[j]], sure, rgb, table, steps, todo[j], mix2, residual2,
+                             dists, bits, keys)
+        n_changed = 0
+        for j in range(n_todo):
+            i = todo[j]
+            if new[j] != flat[i]:
+                flat[i] = new[j]
+                changed[n_changed] = i
+                n_changed += 1
 
 
 @numba.njit(**_JIT)
@@ -231,6 +275,9 @@ _SIGNATURES = {
                      _array(numba.float32, 1), _array(numba.uint8, 2, False),
                      _array(numba.int64, 1), numba.int64, numba.int64, numba.float32,
                      numba.float32),
+    mean_shift: (_array(numba.int32, 2), numba.float64, numba.float64, numba.float64,
+                 _array(numba.float64, 1), numba.int64, numba.int64, numba.float64,
+                 numba.float64),
 }
 
 

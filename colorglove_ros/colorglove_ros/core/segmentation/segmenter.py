@@ -480,6 +480,7 @@ class GloveSegmenter:
         # the shared worker while the region of interest is segmented (done before
         # :meth:`process` returns)
         self._learning: Future[None] | None = None
+        compiled_kernels()   # (compiled or loaded now, not on the first frame)
 
     def lose_track(self) -> None:
         """Forget the followed hand: the next frame is searched whole (for frames that do not
