@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 
 from colorglove_ros.core.conventions import NUM_COLORS
+from colorglove_ros.core.segmentation.crop import compiled_kernels
 from colorglove_ros.core.tracking.types import Blobs, IKError
 
 __all__ = ['color_components', 'extract_blobs']
@@ -22,7 +23,10 @@ def color_components(labels: np.ndarray, min_pixels: int, num_colors: int = NUM_
     With ``crop_to_color`` (faster) each colour is labelled inside its bounding rectangle and
     its centroids shifted back, which agrees with labelling the whole image up to the
     rounding of that shift."""
-    counts = np.bincount(labels.ravel(), minlength=num_colors + 1)[:num_colors + 1]
+    if labels.dtype == np.uint8 and labels.ndim == 2:
+        counts = compiled_kernels().label_counts(labels, num_colors + 1)[:num_colors + 1]
+    else:
+        counts = np.bincount(labels.ravel(), minlength=num_colors + 1)[:num_colors + 1]
     colors: list[int] = []
     cents: list[np.ndarray] = []
     areas: list[int] = []

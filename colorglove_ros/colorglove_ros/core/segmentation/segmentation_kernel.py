@@ -16,7 +16,8 @@ import time
 import numba
 import numpy as np
 
-__all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'compile_kernels']
+__all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_counts', 'classify',
+           'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
 UNSURE = 255
@@ -265,9 +266,56 @@ def mean_shift(sat: np.ndarray, cx: float, cy: float, h: float, factors: np.ndar
     return n >= min_pixels, cx, cy, h
 
 
-def _array(dtype: object, ndim: int, readonly: bool = True) -> object:
-    """A C-contiguous array type (read-only: writable arrays convert to it)."""
-    return numba.types.Array(dtype, ndim, 'C', readonly=readonly)
+@numba.njit(**_JIT)
+def label_counts(labels: np.ndarray, size: int) -> np.ndarray:
+    """(max(``size``, largest label + 1),) int64: how many pixels of the 2-D uint8 ``labels``
+    (any strides) hold each label, as ``np.bincount(labels.ravel(), minlength=size)``."""
+    # four histograms, so that runs of one label do not wait on one counter
+    partial = np.zeros((4, 256), np.int64)
+    rows, cols = labels.shape
+    quads = cols - cols % 4
+    for y in range(rows):
+        for x in range(0, quads, 4):
+            partial[0, labels[y, x]] += 1
+            partial[1, labels[y, x + 1]] += 1
+            partial[2, labels[y, x + 2]] += 1
+            partial[3, labels[y, x + 3]] += 1
+        for x in range(quads, cols):
+            partial[0, labels[y, x]] += 1
+    counts = partial[0] + partial[1] + partial[2] + partial[3]
+    top = 0
+    for v in range(256):
+        if counts[v]:
+            top = v + 1
+    return counts[:max(size, top)].copy()
+
+
+@numba.njit(**_JIT)
+def classify(image: np.ndarray, lut: np.ndarray, index: np.ndarray, scene: np.ndarray,
+             scene_index: np.ndarray) -> np.ndarray:
+    """(H, W) uint8: the label ``lut[i]`` of each pixel of the (H, W, 3) uint8 ``image`` (any
+    strides), its table index ``i = index[0, r] | index[1, g] | index[2, b]``
+    (``color_model.lut_index`` with its per-channel tables ``index`` (3, 256) int32); 0
+    where ``scene`` (the scene colours: bool, by the index of ``scene_index`` likewise; empty
+    for none) holds the pixel's colour."""
+    rows, cols = image.shape[:2]
+    out = np.empty((rows, cols), np.uint8)
+    with_scene = len(scene) > 0
+    for y in range(rows):
+        for x in range(cols):
+            r, g, b = image[y, x, 0], image[y, x, 1], image[y, x, 2]
+            label = lut[index[0, r] | index[1, g] | index[2, b]]
+            if with_scene and label and scene[scene_index[0, r] | scene_index[1, g]
+                                              | scene_index[2, b]]:
+                label = 0
+            out[y, x] = label
+    return out
+
+
+def _array(dtype: object, ndim: int, readonly: bool = True, layout: str = 'C') -> object:
+    """An array type, C-contiguous or of any strides (``layout`` 'A'); read-only ones take
+    writable arrays too."""
+    return numba.types.Array(dtype, ndim, layout, readonly=readonly)
 
 
 _SIGNATURES = {
@@ -278,6 +326,9 @@ _SIGNATURES = {
     mean_shift: (_array(numba.int32, 2), numba.float64, numba.float64, numba.float64,
                  _array(numba.float64, 1), numba.int64, numba.int64, numba.float64,
                  numba.float64),
+    label_counts: (_array(numba.uint8, 2, layout='A'), numba.int64),
+    classify: (_array(numba.uint8, 3, layout='A'), _array(numba.uint8, 1),
+               _array(numba.int32, 2), _array(numba.boolean, 1), _array(numba.int32, 2)),
 }
 
 

@@ -15,8 +15,8 @@ from colorglove_ros.core.segmentation.background import StaticBackground
 from colorglove_ros.core.segmentation.blobs import color_components
 from colorglove_ros.core.segmentation.color_model import (
     ColorCalibration,
+    index_tables,
     load_calibration,
-    lut_index,
     read_calibration_config,
 )
 from colorglove_ros.core.segmentation.color_processing import (
@@ -155,6 +155,7 @@ def keep_reaching_components(labels: np.ndarray, reached: np.ndarray, removed: n
 #: sRGB byte -> linear RGB in 0..255 (float32): mixed pixels are linear mixes there.
 _LINEAR_RGB = (255.0 * srgb_to_linear(np.arange(256) / 255.0)).astype(np.float32)
 _CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+_NO_SCENE = np.zeros(0, bool)   # no scene colours (the classification's empty table)
 
 
 @functools.lru_cache(maxsize=64)
@@ -499,12 +500,15 @@ class GloveSegmenter:
                               source=self.source)
 
     # ------------------------------------------------------------------ helpers
-    def _classify(self, image: np.ndarray, table: np.ndarray | None) -> np.ndarray:
+    def _classify(self, image: np.ndarray, table: np.ndarray | None,
+                  scene: np.ndarray | None = None) -> np.ndarray:
         """The calibration's labels of ``image`` after the light ``table``, with the
-        camera's settled saturation undone (``saturation_rate`` > 0)."""
-        if self._saturation is None:
-            return self.calibration.classify(image, table)
-        return self._saturation.lut().take(lut_index(image, self.calibration.bits, table))
+        camera's settled saturation undone (``saturation_rate`` > 0); 0 where ``scene`` (the
+        frame's scene colours, :func:`scene_colour_table`) holds the pixel's colour."""
+        lut = self.calibration.lut if self._saturation is None else self._saturation.lut()
+        return compiled_kernels().classify(
+            image, lut, index_tables(self.calibration.bits, table),
+            _NO_SCENE if scene is None else scene, index_tables(SCENE_COLOUR_BITS))
 
     def _reference(self) -> np.ndarray:
         """The glove's reference colours (linear RGB) as this camera shows them: through its
@@ -570,15 +574,13 @@ class GloveSegmenter:
         colour outside the predicted window, the frame's scene colours, the learnt static
         background."""
         table, scene, static, prediction = masks
-        labels = self._classify(roi, table)
+        labels = self._classify(roi, table, scene)
         if prediction is not None:   # glove colour outside the predicted window is not the hand
             px0, px1, py0, py1 = prediction_bounds(prediction, self.prediction_margin,
                                                    origin, r, labels.shape)
             inside = labels[py0:py1, px0:px1].copy()
             labels[...] = 0
             labels[py0:py1, px0:px1] = inside
-        if scene is not None:
-            labels[scene.take(lut_index(roi, SCENE_COLOUR_BITS))] = 0
         if static is not None:
             labels[_coarse_cells(static, origin, r, labels.shape, image_hw)] = 0
         return labels
