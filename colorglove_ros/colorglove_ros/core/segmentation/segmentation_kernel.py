@@ -23,6 +23,7 @@ __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_counts', 'classify',
 UNSURE = 255
 _NO_KEY = np.int32(np.iinfo(np.int32).max)   # larger than every sort key; label bits 255
 _JIT = {'cache': True, 'nogil': True}
+_COMPILED = False   # every kernel compiled (compile_kernels)
 
 
 @numba.njit(inline='always', **_JIT)
@@ -334,11 +335,15 @@ _SIGNATURES = {
 
 def compile_kernels() -> float:
     """Compile every kernel for its one signature (or load it from numba's on-disk cache)
-    and allow no other; returns the seconds it took (about none once done in this
-    process)."""
+    and allow no other; returns the seconds it took (none once done in this process: a
+    flag, not the dispatchers' signatures, which cost tens of microseconds to list)."""
+    global _COMPILED
+    if _COMPILED:
+        return 0.0
     started = time.perf_counter()
     for kernel, signature in _SIGNATURES.items():
         if not kernel.signatures:
             kernel.compile(signature)
             kernel.disable_compile()
+    _COMPILED = True
     return time.perf_counter() - started
