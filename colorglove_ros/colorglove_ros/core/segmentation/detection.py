@@ -45,19 +45,19 @@ def colour_diversity(labels: np.ndarray, num_colors: int, window: int,
     # the fewest pixels of a colour in the box, as an integer count: the box sums are exact
     # in 32-bit integers, and a colour with fewer pixels in the whole image is never dense
     need = max(int(np.ceil(min_density * window * window - 1e-9)), 1)
-    present = compiled_kernels().label_counts(labels, num_colors + 1)
+    present, boxes = compiled_kernels().label_boxes(labels, num_colors + 1)
     h, w = labels.shape
     before = window // 2            # a pixel's box: this many pixels before it (OpenCV's
     after = window - 1 - before     # anchor) and this many after, on each axis
     for color in np.flatnonzero(present[1:num_colors + 1] >= need) + 1:
-        same = cv2.compare(labels, int(color), cv2.CMP_EQ)
         # only the pixels whose box reaches the colour's bounding rectangle can count it:
         # the box sums there, of the rectangle grown by the box (nothing of it outside)
-        x, y, bw, bh = cv2.boundingRect(same)
+        x, y, bw, bh = boxes[color]
         x0, x1 = max(x - after, 0), min(x + bw + before, w)
         y0, y1 = max(y - after, 0), min(y + bh + before, h)
-        inside = cv2.boxFilter(same[y0:y1, x0:x1] >> 7, cv2.CV_32S, (window, window),
-                               normalize=False, borderType=cv2.BORDER_CONSTANT)
+        same = np.equal(labels[y0:y1, x0:x1], color).view(np.uint8)
+        inside = cv2.boxFilter(same, cv2.CV_32S, (window, window), normalize=False,
+                               borderType=cv2.BORDER_CONSTANT)
         counts[y0:y1, x0:x1] += (inside >= need).view(np.uint8)
     return counts
 
@@ -90,7 +90,7 @@ def drop_oversized_components(labels: np.ndarray, max_pixels: float) -> np.ndarr
     if not labels.size or max_pixels <= 0:
         return labels
     out = labels
-    for color in np.flatnonzero(compiled_kernels().label_counts(labels, 1)[1:] > max_pixels) + 1:
+    for color in np.flatnonzero(compiled_kernels().label_boxes(labels, 1)[0][1:] > max_pixels) + 1:
         n, comp, stats, _ = cv2.connectedComponentsWithStats(
             (labels == color).view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
         big = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] > max_pixels) + 1

@@ -16,7 +16,7 @@ import time
 import numba
 import numpy as np
 
-__all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_counts', 'classify',
+__all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
            'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
@@ -268,27 +268,63 @@ def mean_shift(sat: np.ndarray, cx: float, cy: float, h: float, factors: np.ndar
 
 
 @numba.njit(**_JIT)
-def label_counts(labels: np.ndarray, size: int) -> np.ndarray:
-    """(max(``size``, largest label + 1),) int64: how many pixels of the 2-D uint8 ``labels``
-    (any strides) hold each label, as ``np.bincount(labels.ravel(), minlength=size)``."""
-    # four histograms, so that runs of one label do not wait on one counter
+def label_boxes(labels: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """How many pixels of the 2-D uint8 ``labels`` (any strides) hold each label (max(``size``,
+    largest label + 1),) int64, as ``np.bincount(labels.ravel(), minlength=size)``, and the
+    bounding rectangle (x, y, width, height; ``cv2.boundingRect`` of its pixels, zeros when
+    none) of each label below min(``size``, 64): (``size``, 4) int64."""
+    # four histograms, so that runs of one label do not wait on one counter; a bit per label
+    # in each row's and each column's mask of the labels seen there
     partial = np.zeros((4, 256), np.int64)
     rows, cols = labels.shape
+    row_seen = np.zeros(rows, np.uint64)
+    col_seen = np.zeros(cols, np.uint64)
     quads = cols - cols % 4
+    one, none = np.uint64(1), np.uint64(0)
     for y in range(rows):
+        seen = none
         for x in range(0, quads, 4):
-            partial[0, labels[y, x]] += 1
-            partial[1, labels[y, x + 1]] += 1
-            partial[2, labels[y, x + 2]] += 1
-            partial[3, labels[y, x + 3]] += 1
+            v0, v1, v2, v3 = labels[y, x], labels[y, x + 1], labels[y, x + 2], labels[y, x + 3]
+            partial[0, v0] += 1
+            partial[1, v1] += 1
+            partial[2, v2] += 1
+            partial[3, v3] += 1
+            b0, b1 = one << np.uint64(v0 & 63), one << np.uint64(v1 & 63)
+            b2, b3 = one << np.uint64(v2 & 63), one << np.uint64(v3 & 63)
+            if (v0 | v1 | v2 | v3) >= 64:    # (a label of 64 or more sets no bit)
+                b0, b1 = b0 if v0 < 64 else none, b1 if v1 < 64 else none
+                b2, b3 = b2 if v2 < 64 else none, b3 if v3 < 64 else none
+            col_seen[x] |= b0
+            col_seen[x + 1] |= b1
+            col_seen[x + 2] |= b2
+            col_seen[x + 3] |= b3
+            seen |= b0 | b1 | b2 | b3
         for x in range(quads, cols):
-            partial[0, labels[y, x]] += 1
+            v = labels[y, x]
+            partial[0, v] += 1
+            if v < 64:
+                col_seen[x] |= one << np.uint64(v)
+                seen |= one << np.uint64(v)
+        row_seen[y] = seen
     counts = partial[0] + partial[1] + partial[2] + partial[3]
     top = 0
     for v in range(256):
         if counts[v]:
             top = v + 1
-    return counts[:max(size, top)].copy()
+    boxes = np.zeros((size, 4), np.int64)
+    for v in range(min(size, 64)):
+        if not counts[v]:
+            continue
+        bit = one << np.uint64(v)
+        x0, x1, y0, y1 = cols, -1, rows, -1
+        for x in range(cols):
+            if col_seen[x] & bit:
+                x0, x1 = min(x0, x), x
+        for y in range(rows):
+            if row_seen[y] & bit:
+                y0, y1 = min(y0, y), y
+        boxes[v, 0], boxes[v, 1], boxes[v, 2], boxes[v, 3] = x0, y0, x1 - x0 + 1, y1 - y0 + 1
+    return counts[:max(size, top)].copy(), boxes
 
 
 @numba.njit(**_JIT)
@@ -327,7 +363,7 @@ _SIGNATURES = {
     mean_shift: (_array(numba.int32, 2), numba.float64, numba.float64, numba.float64,
                  _array(numba.float64, 1), numba.int64, numba.int64, numba.float64,
                  numba.float64),
-    label_counts: (_array(numba.uint8, 2, layout='A'), numba.int64),
+    label_boxes: (_array(numba.uint8, 2, layout='A'), numba.int64),
     classify: (_array(numba.uint8, 3, layout='A'), _array(numba.uint8, 1),
                _array(numba.int32, 2), _array(numba.boolean, 1), _array(numba.int32, 2)),
 }

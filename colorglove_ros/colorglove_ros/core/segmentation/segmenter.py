@@ -551,14 +551,15 @@ class GloveSegmenter:
         if window is None or not mixed.any():
             return out
         max_area = GLOVE_LIKE_PATCH_SHARE * (2.0 * window[1]) ** 2
+        boxes = compiled_kernels().label_boxes(labels, self.calibration.num_colors + 1)[1]
         for colour in np.unique(labels[mixed]):
             if colour == 0:
                 continue
             # each colour's components lie inside its bounding rectangle: label only that
-            same = cv2.compare(labels, int(colour), cv2.CMP_EQ)
-            x, y, w, h = cv2.boundingRect(same)
+            x, y, w, h = (int(v) for v in boxes[colour])
             n, comp, stats, _ = cv2.connectedComponentsWithStats(
-                same[y:y + h, x:x + w], connectivity=8, ltype=cv2.CV_32S)
+                np.equal(labels[y:y + h, x:x + w], colour).view(np.uint8), connectivity=8,
+                ltype=cv2.CV_32S)
             patch = np.zeros(n, bool)
             patch[comp[mixed[y:y + h, x:x + w]]] = True
             patch &= stats[:, cv2.CC_STAT_AREA] <= max_area
