@@ -200,10 +200,8 @@ def crop_window(labels: np.ndarray, transform: CropTransform,
         ky0, ky1 = np.searchsorted(cell_y, 0), np.searchsorted(cell_y, size)
         sub = lab[y0 + ky0:y0 + ky1, x0 + kx0:x0 + kx1]
         if sub.size:
-            nl = max(int(sub.max()) + 1, 2)
-            flat = ((cell_y[ky0:ky1] * size)[:, None] + cell_x[kx0:kx1][None, :]
-                    + sub.astype(np.intp) * ncell)
-            counts = np.bincount(flat.ravel(), minlength=nl * ncell).reshape(nl, ncell)
+            counts = compiled_kernels().cell_votes(sub, cell_y[ky0:ky1], cell_x[kx0:kx1], size,
+                                                   max(int(sub.max()) + 1, 2))
     glove = counts[1:]
     glove_total = glove.sum(axis=0)
     total = glove_total + counts[0]

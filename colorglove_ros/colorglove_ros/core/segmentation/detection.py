@@ -273,11 +273,17 @@ def _reaching(comp: np.ndarray, n: int, edges: tuple[bool, bool, bool, bool]) ->
     return out
 
 
-def scene_colour_table(rgb: np.ndarray, bits: int, min_pixels: float) -> np.ndarray:
+def scene_colour_table(rgb: np.ndarray, bits: int, min_pixels: float,
+                       where: np.ndarray | None = None) -> np.ndarray:
     """(2^(3 bits),) bool: the quantised colours (``color_model.lut_index``) that at least
-    ``min_pixels`` of the uint8 (N, 3) colours ``rgb`` fall in."""
-    from colorglove_ros.core.segmentation.color_model import lut_index
+    ``min_pixels`` of the uint8 (N, 3) colours ``rgb`` fall in; with ``where`` ((H, W) bool)
+    ``rgb`` is an (H, W, 3) image, and its pixels there count."""
+    from colorglove_ros.core.segmentation.color_model import index_tables, lut_index
 
-    counts = np.bincount(lut_index(np.asarray(rgb, np.uint8).reshape(-1, 3), bits),
-                         minlength=1 << (3 * bits))
+    if where is not None:
+        counts = compiled_kernels().colour_histogram(rgb, where, index_tables(bits),
+                                                     1 << (3 * bits))
+    else:
+        counts = np.bincount(lut_index(np.asarray(rgb, np.uint8).reshape(-1, 3), bits),
+                             minlength=1 << (3 * bits))
     return counts >= max(float(min_pixels), 1.0)

@@ -17,7 +17,7 @@ import numba
 import numpy as np
 
 __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
-           'compile_kernels']
+           'colour_histogram', 'cell_votes', 'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
 UNSURE = 255
@@ -349,6 +349,36 @@ def classify(image: np.ndarray, lut: np.ndarray, index: np.ndarray, scene: np.nd
     return out
 
 
+@numba.njit(**_JIT)
+def colour_histogram(image: np.ndarray, where: np.ndarray, index: np.ndarray,
+                     size: int) -> np.ndarray:
+    """(``size``,) int64: how many pixels of the (H, W, 3) uint8 ``image`` where ``where``
+    ((H, W) bool) holds fall in each quantised colour (``index`` as :func:`classify`'s)."""
+    counts = np.zeros(size, np.int64)
+    rows, cols = where.shape
+    for y in range(rows):
+        for x in range(cols):
+            if where[y, x]:
+                counts[index[0, image[y, x, 0]] | index[1, image[y, x, 1]]
+                       | index[2, image[y, x, 2]]] += 1
+    return counts
+
+
+@numba.njit(**_JIT)
+def cell_votes(labels: np.ndarray, cell_y: np.ndarray, cell_x: np.ndarray, size: int,
+               num_labels: int) -> np.ndarray:
+    """(``num_labels``, ``size`` * ``size``) int64: how many pixels of each label (below
+    ``num_labels``) of the 2-D uint8 ``labels`` (any strides) fall in each cell of a
+    ``size`` x ``size`` grid, pixel (y, x) in cell (``cell_y[y]``, ``cell_x[x]``)."""
+    votes = np.zeros((num_labels, size * size), np.int64)
+    rows, cols = labels.shape
+    for y in range(rows):
+        row = cell_y[y] * size
+        for x in range(cols):
+            votes[labels[y, x], row + cell_x[x]] += 1
+    return votes
+
+
 def _array(dtype: object, ndim: int, readonly: bool = True, layout: str = 'C') -> object:
     """An array type, C-contiguous or of any strides (``layout`` 'A'); read-only ones take
     writable arrays too."""
@@ -366,6 +396,10 @@ _SIGNATURES = {
     label_boxes: (_array(numba.uint8, 2, layout='A'), numba.int64),
     classify: (_array(numba.uint8, 3, layout='A'), _array(numba.uint8, 1),
                _array(numba.int32, 2), _array(numba.boolean, 1), _array(numba.int32, 2)),
+    colour_histogram: (_array(numba.uint8, 3, layout='A'), _array(numba.boolean, 2, layout='A'),
+                       _array(numba.int32, 2), numba.int64),
+    cell_votes: (_array(numba.uint8, 2, layout='A'), _array(numba.int64, 1),
+                 _array(numba.int64, 1), numba.int64, numba.int64),
 }
 
 

@@ -739,8 +739,8 @@ class GloveSegmenter:
         x0, x1, y0, y1 = region
         rejected = self._classify(small, table) > 0
         rejected[y0:y1, x0:x1] &= labels == 0
-        return scene_colour_table(small[rejected], SCENE_COLOUR_BITS,
-                                  self.scene_colour_min_share * rejected.size)
+        return scene_colour_table(small, SCENE_COLOUR_BITS,
+                                  self.scene_colour_min_share * rejected.size, rejected)
 
     def _small(self, image: np.ndarray) -> tuple[np.ndarray, float, float]:
         """The coarse frame (``image`` downsampled by ``coarse_factor``) and its x and y
