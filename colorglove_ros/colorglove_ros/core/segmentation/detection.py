@@ -77,10 +77,7 @@ def glove_region_mask(labels: np.ndarray, num_colors: int, window: int, min_colo
                          borderType=cv2.BORDER_CONSTANT) > 0
     n, comp = cv2.connectedComponents((np.asarray(labels) > 0).view(np.uint8), connectivity=8,
                                       ltype=cv2.CV_32S)
-    reached = np.zeros(n, bool)
-    reached[comp[rich]] = True
-    reached[0] = False
-    return near | reached.take(comp)   # (take: faster than reached[comp])
+    return compiled_kernels().near_or_reaching(comp, n, rich, near)
 
 
 def drop_oversized_components(labels: np.ndarray, max_pixels: float) -> np.ndarray:

@@ -18,7 +18,7 @@ import numpy as np
 
 __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
            'colour_histogram', 'cell_votes', 'component_colours', 'kept_components',
-           'compile_kernels']
+           'near_or_reaching', 'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
 UNSURE = 255
@@ -408,6 +408,25 @@ def kept_components(labels: np.ndarray, comp: np.ndarray, keep: np.ndarray) -> n
     return out
 
 
+@numba.njit(**_JIT)
+def near_or_reaching(comp: np.ndarray, components: int, reach: np.ndarray,
+                     near: np.ndarray) -> np.ndarray:
+    """(H, W) bool: ``near`` or in a component of ``comp`` ((H, W) int32, 0 the background,
+    ``components`` of them) that holds a ``reach`` pixel ((H, W) bool)."""
+    rows, cols = comp.shape
+    reached = np.zeros(components, np.bool_)
+    for y in range(rows):
+        for x in range(cols):
+            if reach[y, x]:
+                reached[comp[y, x]] = True
+    reached[0] = False
+    out = np.empty((rows, cols), np.bool_)
+    for y in range(rows):
+        for x in range(cols):
+            out[y, x] = near[y, x] or reached[comp[y, x]]
+    return out
+
+
 def _array(dtype: object, ndim: int, readonly: bool = True, layout: str = 'C') -> object:
     """An array type, C-contiguous or of any strides (``layout`` 'A'); read-only ones take
     writable arrays too."""
@@ -433,6 +452,8 @@ _SIGNATURES = {
                         numba.int64, numba.int64),
     kept_components: (_array(numba.uint8, 2, layout='A'), _array(numba.int32, 2),
                       _array(numba.boolean, 1)),
+    near_or_reaching: (_array(numba.int32, 2), numba.int64, _array(numba.boolean, 2, layout='A'),
+                       _array(numba.boolean, 2, layout='A')),
 }
 
 
