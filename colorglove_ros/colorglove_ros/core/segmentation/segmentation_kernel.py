@@ -17,8 +17,8 @@ import numba
 import numpy as np
 
 __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
-           'colour_histogram', 'cell_votes', 'component_colours', 'kept_components',
-           'near_or_reaching', 'compile_kernels']
+           'colour_histogram', 'cell_votes', 'near_or_reaching',
+           'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
 UNSURE = 255
@@ -381,34 +381,6 @@ def cell_votes(labels: np.ndarray, cell_y: np.ndarray, cell_x: np.ndarray, size:
 
 
 @numba.njit(**_JIT)
-def component_colours(comp: np.ndarray, labels: np.ndarray, components: int,
-                      size: int) -> np.ndarray:
-    """(``components``, ``size``) int64: how many pixels of each label 1..``size`` - 1 each
-    component of ``comp`` ((H, W) int32) holds among the 2-D uint8 ``labels`` (column 0,
-    the background, stays 0)."""
-    hist = np.zeros((components, size), np.int64)
-    rows, cols = labels.shape
-    for y in range(rows):
-        for x in range(cols):
-            v = labels[y, x]
-            if v:
-                hist[comp[y, x], v] += 1
-    return hist
-
-
-@numba.njit(**_JIT)
-def kept_components(labels: np.ndarray, comp: np.ndarray, keep: np.ndarray) -> np.ndarray:
-    """The 2-D uint8 ``labels`` where ``keep`` holds the pixel's component of ``comp``
-    ((H, W) int32), else 0 (a new array)."""
-    rows, cols = labels.shape
-    out = np.empty((rows, cols), np.uint8)
-    for y in range(rows):
-        for x in range(cols):
-            out[y, x] = labels[y, x] if keep[comp[y, x]] else 0
-    return out
-
-
-@numba.njit(**_JIT)
 def near_or_reaching(comp: np.ndarray, components: int, reach: np.ndarray,
                      near: np.ndarray) -> np.ndarray:
     """(H, W) bool: ``near`` or in a component of ``comp`` ((H, W) int32, 0 the background,
@@ -448,10 +420,6 @@ _SIGNATURES = {
                        _array(numba.int32, 2), numba.int64),
     cell_votes: (_array(numba.uint8, 2, layout='A'), _array(numba.int64, 1),
                  _array(numba.int64, 1), numba.int64, numba.int64),
-    component_colours: (_array(numba.int32, 2), _array(numba.uint8, 2, layout='A'),
-                        numba.int64, numba.int64),
-    kept_components: (_array(numba.uint8, 2, layout='A'), _array(numba.int32, 2),
-                      _array(numba.boolean, 1)),
     near_or_reaching: (_array(numba.int32, 2), numba.int64, _array(numba.boolean, 2, layout='A'),
                        _array(numba.boolean, 2, layout='A')),
 }
