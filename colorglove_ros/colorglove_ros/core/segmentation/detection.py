@@ -45,7 +45,8 @@ def colour_diversity(labels: np.ndarray, num_colors: int, window: int,
     # the fewest pixels of a colour in the box, as an integer count: the box sums are exact
     # in 32-bit integers, and a colour with fewer pixels in the whole image is never dense
     need = max(int(np.ceil(min_density * window * window - 1e-9)), 1)
-    present, boxes = compiled_kernels().label_boxes(labels, num_colors + 1)
+    kernels = compiled_kernels()
+    present, boxes = kernels.label_boxes(labels, num_colors + 1)
     h, w = labels.shape
     before = window // 2            # a pixel's box: this many pixels before it (OpenCV's
     after = window - 1 - before     # anchor) and this many after, on each axis
@@ -58,7 +59,7 @@ def colour_diversity(labels: np.ndarray, num_colors: int, window: int,
         same = np.equal(labels[y0:y1, x0:x1], color).view(np.uint8)
         inside = cv2.boxFilter(same, cv2.CV_32S, (window, window), normalize=False,
                                borderType=cv2.BORDER_CONSTANT)
-        counts[y0:y1, x0:x1] += (inside >= need).view(np.uint8)
+        kernels.add_dense(counts[y0:y1, x0:x1], inside, need)
     return counts
 
 

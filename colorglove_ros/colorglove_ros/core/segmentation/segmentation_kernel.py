@@ -18,7 +18,7 @@ import numpy as np
 
 __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
            'colour_histogram', 'cell_votes', 'near_or_reaching',
-           'compile_kernels']
+           'add_dense', 'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
 UNSURE = 255
@@ -399,6 +399,17 @@ def near_or_reaching(comp: np.ndarray, components: int, reach: np.ndarray,
     return out
 
 
+@numba.njit(**_JIT)
+def add_dense(counts: np.ndarray, sums: np.ndarray, need: int) -> None:
+    """``counts`` (2-D uint8, any strides) += 1 where the box ``sums`` (int32, its shape)
+    are at least ``need``, in place."""
+    rows, cols = counts.shape
+    for y in range(rows):
+        for x in range(cols):
+            if sums[y, x] >= need:
+                counts[y, x] += 1
+
+
 def _array(dtype: object, ndim: int, readonly: bool = True, layout: str = 'C') -> object:
     """An array type, C-contiguous or of any strides (``layout`` 'A'); read-only ones take
     writable arrays too."""
@@ -422,6 +433,7 @@ _SIGNATURES = {
                  _array(numba.int64, 1), numba.int64, numba.int64),
     near_or_reaching: (_array(numba.int32, 2), numba.int64, _array(numba.boolean, 2, layout='A'),
                        _array(numba.boolean, 2, layout='A')),
+    add_dense: (_array(numba.uint8, 2, False, 'A'), _array(numba.int32, 2), numba.int64),
 }
 
 
