@@ -31,7 +31,8 @@ start and the press (with ``truth``: the clicks the truth, not the tracker, put 
 table scene (``BareHandSequence.render_empty_views``); ``none`` (default): edges only (the
 silhouettes did not raise the click figures on tuning seeds 5-7, docs/RESULTS.md);
 ``--finger-refit`` turns on the tracker's ``finger_refit``, ``--silhouette-palm`` its
-``silhouette_palm``, ``--retry-dofs`` its ``retry_dofs`` (all off by default).
+``silhouette_palm``, ``--retry-dofs`` its ``retry_dofs`` (all off by default), with
+``--retry-max-wrist-move-mm`` and ``--retry-rest-margin-px`` its retry guards.
 
 ``--source glove`` feeds it the colour-glove tracker's output (segmentation, lookup, IK with
 smoothing, as ``ik_node`` runs) on the same script rendered with the glove
@@ -328,6 +329,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--retry-dofs', nargs='+', default=[],
                         help='with --source edges: the edge tracker\'s retry_dofs (e.g. '
                         'thumb_cmc_abd)')
+    parser.add_argument('--retry-max-wrist-move-mm', type=float,
+                        help='with --retry-dofs: the tracker\'s retry_max_wrist_move_m, in mm '
+                        '(default: EdgeTrackerConfig\'s, off)')
+    parser.add_argument('--retry-rest-margin-px', type=float,
+                        help='with --retry-dofs: the tracker\'s retry_rest_margin_px (default: '
+                        'EdgeTrackerConfig\'s, off)')
     args = parser.parse_args(argv)
     return run_tool('colorglove_eval_mouse', lambda: _run(args))
 
@@ -365,6 +372,11 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                     retry_dofs=tuple(args.retry_dofs))
     if args.camera_weights is not None:
         edge_config = replace(edge_config, camera_weights=tuple(args.camera_weights))
+    if args.retry_max_wrist_move_mm is not None:
+        edge_config = replace(edge_config,
+                              retry_max_wrist_move_m=args.retry_max_wrist_move_mm / 1e3)
+    if args.retry_rest_margin_px is not None:
+        edge_config = replace(edge_config, retry_rest_margin_px=args.retry_rest_margin_px)
     rows = []
     for seed in args.seeds:
         Q, spans = scripted_sequence(model, config, seed, args.seconds)
@@ -408,7 +420,11 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'camera_weights': list(edge_config.camera_weights),
                                             'finger_refit': edge_config.finger_refit,
                                             'silhouette_palm': edge_config.silhouette_palm,
-                                            'retry_dofs': list(edge_config.retry_dofs)},
+                                            'retry_dofs': list(edge_config.retry_dofs),
+                                            'retry_max_wrist_move_m':
+                                                edge_config.retry_max_wrist_move_m,
+                                            'retry_rest_margin_px':
+                                                edge_config.retry_rest_margin_px},
                                'rows': rows, 'total': total, 'targets': targets})
     return 0
 
