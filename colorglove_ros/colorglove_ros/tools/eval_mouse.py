@@ -21,10 +21,11 @@ tracker starts from the first pose (a pose given to it, as from the glove tracke
 after a loss, again from the pose of the frame it was lost on (counted as
 ``reinitialisations``); frames without a published pose reach the mouse as gaps. That pose
 (``--reinit``, :func:`reinitialisation_pose`) is by default (``rest``) the true pose with the
-joints the buttons read (``BUTTON_DOFS``) at the scripted hand's rest angles, as a user's
-system would re-initialise it (it does not know that a click is under way): a click must be
-followed by the tracker itself. ``--reinit truth`` (earlier passes' figures, for comparison)
-gives the tracker the true pose itself, so a loss during a click hands it the click's angle;
+joints the buttons read (``core.tracking.mouse.BUTTON_DOFS``) at the scripted hand's rest
+angles, as a user's system would re-initialise it (it does not know that a click is under
+way): a click must be followed by the tracker itself. ``--reinit truth`` (earlier passes'
+figures, for comparison) gives the tracker the true pose itself, so a loss during a click
+hands it the click's angle;
 ``correct_at_reinit`` counts the correct clicks with a re-initialisation between the click's
 start and the press (with ``truth``: the clicks the truth, not the tracker, put through). With
 ``--background empty`` the tracker also has the silhouettes against one frame of the empty
