@@ -152,10 +152,12 @@ class EdgeTrackerConfig:
     check and finds more of that digit's links (then more links, then a smaller residual)
     replaces the fit: a digit that moved faster than the edge search reaches (the 3-D
     mouse's thumb clicks) is looked for where it went instead of being left behind. On the
-    mouse's table views it lets the tracker follow the thumb's clicks itself but also puts
-    a drifted hand's thumb on wrong edges (docs/RESULTS.md, DigitEyes tenth pass), so it is
-    off. Two guards (inf: off) keep a candidate only when the rest of the hand stays as it
-    was: ``retry_max_wrist_move_m``, its wrist within that distance of the previous pose's;
+    mouse's table views it lets the tracker follow the thumb's clicks itself (with one camera
+    it makes most of them), but it keeps drifted hands tracked (a larger cursor error), costs
+    CPU and is not measured on the bare-hand sequences (docs/RESULTS.md, DigitEyes tenth and
+    eleventh passes), so it is off. Two guards (inf: off) keep a candidate only when the rest
+    of the hand stays as it was: ``retry_max_wrist_move_m``, its wrist within that distance
+    of the previous pose's;
     ``retry_rest_margin_px``, it finds at least as many links outside the retried digit as
     the last good frame's fit and its edge residual is at most that much above that fit's.
     """
