@@ -422,10 +422,12 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'finger_refit': edge_config.finger_refit,
                                             'silhouette_palm': edge_config.silhouette_palm,
                                             'retry_dofs': list(edge_config.retry_dofs),
-                                            'retry_max_wrist_move_m':
-                                                edge_config.retry_max_wrist_move_m,
-                                            'retry_rest_margin_px':
-                                                edge_config.retry_rest_margin_px},
+                                            **{name: value if math.isfinite(value) else None
+                                               for name, value in (
+                                                   ('retry_max_wrist_move_m',
+                                                    edge_config.retry_max_wrist_move_m),
+                                                   ('retry_rest_margin_px',
+                                                    edge_config.retry_rest_margin_px))}},
                                'rows': rows, 'total': total, 'targets': targets})
     return 0
 
