@@ -9,7 +9,8 @@ evidence (:func:`assign_hands`): the nearest database image of the mirrored agai
 unmirrored query (a right glove matches unmirrored, a left one mirrored), and continuity (each
 hand's previous crop centre); with two regions they are a left and a right hand. While both
 hands are tracked, a region that plainly continues one hand is looked up as that hand only,
-with both lookups again every few frames (``HandsSettings.recheck_frames``). Each hand
+with both lookups again every few frames (``HandsSettings.recheck_frames``); a lookup only the
+evidence reads is searched, not blended (:class:`Searched`). Each hand
 has its own tracker (a left hand tracked as the mirrored right hand, its pose mirrored back),
 so losing one hand never resets the other. A frame in which a region's hand cannot be told
 with enough evidence gives that hand no pose (``NoHand``). With one pose lookup per region slot
@@ -23,6 +24,7 @@ less well than alone. No rclpy import.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
@@ -37,8 +39,18 @@ from colorglove_ros.core.hand.handedness import (
     mirror_camera_observation,
     mirror_tiny_crop,
 )
-from colorglove_ros.core.lookup.types import LookupResult
-from colorglove_ros.core.pipeline import NODE_LIMITS, NoHand, StageLimits, Tracked, look_up, track
+from colorglove_ros.core.lookup.types import LookupResult, Neighbours
+from colorglove_ros.core.pipeline import (
+    NODE_LIMITS,
+    NoHand,
+    StageLimits,
+    Tracked,
+    blend,
+    look_up,
+    search,
+    too_far,
+    track,
+)
 from colorglove_ros.core.segmentation.crop import CropTransform, TinyCrop
 from colorglove_ros.core.segmentation.detection import (
     drop_oversized_components,
@@ -47,9 +59,10 @@ from colorglove_ros.core.segmentation.detection import (
 from colorglove_ros.core.segmentation.segmenter import keep_multicolor_components
 from colorglove_ros.core.tracking.types import Blobs, CameraObservation
 
-__all__ = ['MAX_HANDS', 'HandsSettings', 'GloveRegion', 'HandCandidate', 'HandOutcome',
-           'find_glove_regions', 'mask_regions', 'region_window', 'shift_observation',
-           'assign_hands', 'slot_lookups', 'TwoHandPipeline', 'DEFAULT_THREADS']
+__all__ = ['MAX_HANDS', 'HandsSettings', 'GloveRegion', 'Searched', 'HandCandidate', 'HandOutcome',
+           'FrameTiming', 'find_glove_regions', 'mask_regions', 'region_window',
+           'shift_observation', 'assign_hands', 'slot_lookups', 'TwoHandPipeline',
+           'DEFAULT_THREADS']
 
 MAX_HANDS = 2
 #: Threads of the two-hand layer by default (:func:`slot_lookups`): one per region slot.
@@ -98,18 +111,32 @@ class GloveRegion:
     cell_px: int = 1
 
 
+@dataclass(frozen=True)
+class Searched:
+    """A lookup searched but not blended yet (``core.pipeline.search``): its candidates, the
+    blobs its blend will weigh the fingers by, and its nearest database image distance (inf
+    when that is too far for a hand, as the whole lookup would say)."""
+
+    neighbours: Neighbours
+    blobs: Any
+    nearest: float
+
+
 @dataclass
 class HandCandidate:
-    """One region's observation and its two lookups (as seen: right hand; mirrored: left)."""
+    """One region's observation and its two lookups (as seen: right hand; mirrored: left),
+    each done, or only searched (:class:`Searched`) until a hand is tracked from it."""
 
     region: GloveRegion
     observation: CameraObservation
     tiny: TinyCrop | None
-    lookups: dict[str, LookupResult | NoHand] = field(default_factory=dict)
+    lookups: dict[str, LookupResult | NoHand | Searched] = field(default_factory=dict)
 
     def distance(self, hand: str) -> float:
         """Nearest database image distance of the query as ``hand`` (inf when none)."""
         found = self.lookups.get(hand)
+        if isinstance(found, Searched):
+            return found.nearest
         if found is None or isinstance(found, NoHand) or not len(found.distances):
             return math.inf
         return float(found.distances[0])
@@ -145,6 +172,31 @@ class HandOutcome:
     region: GloveRegion | None = None
     evidence: float = math.nan
     q: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class FrameTiming:
+    """Thread CPU time of one :meth:`TwoHandPipeline.process` call (ms): the caller's outside
+    the jobs it ran beside the worker (``serial_ms``), and each parallel phase's jobs (one per
+    region slot, then one per hand; each on its own thread when ``parallel``). The critical
+    path is what the frame would take with a free core per thread and no wait on the other
+    thread's GIL: ``serial_ms`` plus the slowest job of every phase (with one thread, all)."""
+
+    serial_ms: float
+    phases: tuple[tuple[float, ...], ...]
+    parallel: bool
+
+    @property
+    def cpu_ms(self) -> float:
+        """The frame's CPU time over both threads."""
+        return self.serial_ms + sum(sum(p) for p in self.phases)
+
+    @property
+    def critical_path_ms(self) -> float:
+        """``serial_ms`` plus each phase's slowest job (with one thread: :attr:`cpu_ms`)."""
+        if not self.parallel:
+            return self.cpu_ms
+        return self.serial_ms + sum(max(p, default=0.0) for p in self.phases)
 
 
 def find_glove_regions(segmenter: Any, image_rgb: np.ndarray,
@@ -291,6 +343,13 @@ def slot_lookups(database: Any, threads: int = DEFAULT_THREADS) -> Any:
     return [PoseLookup(database, threads=1) for _ in range(MAX_HANDS)]
 
 
+def _thread_timed(job: Any, *args: Any) -> tuple[Any, float]:
+    """``job(*args)`` and the thread CPU time it took (ms) in the thread that ran it."""
+    started = time.thread_time()
+    result = job(*args)
+    return result, 1e3 * (time.thread_time() - started)
+
+
 class TwoHandPipeline:
     """Segment -> look up -> track for up to two hands (a right and a left glove) in one
     camera's frames. ``segmenter`` is copied once per region slot (``fresh``, no learnt
@@ -321,6 +380,10 @@ class TwoHandPipeline:
         self.previous: dict[str, np.ndarray | None] = {hand: None for hand in HANDS}
         self._missing = {hand: 0 for hand in HANDS}
         self._settled_frames = 0
+        self._phases: list[tuple[float, ...]] = []   # this frame's, for last_timing
+        self._caller_jobs_ms = 0.0
+        #: thread CPU time of the last :meth:`process` call (None before the first)
+        self.last_timing: FrameTiming | None = None
 
     @property
     def parallel(self) -> bool:
@@ -342,21 +405,27 @@ class TwoHandPipeline:
 
     def _both(self, job: Any, args: Sequence[tuple[Any, ...]]) -> list[Any]:
         """``[job(*a) for a in args]``, the second on the worker thread when there is one (the
-        job of item k uses slot k's lookup and segmenter only)."""
+        job of item k uses slot k's lookup and segmenter only); the jobs' thread CPU times are
+        a phase of the frame's :class:`FrameTiming`."""
         if self._pool is None or len(args) < 2:
-            return [job(*a) for a in args]
-        pending = self._pool.submit(job, *args[1])
-        try:
-            first = job(*args[0])
-        finally:
-            second = pending.result()
-        return [first, second]
+            done = [_thread_timed(job, *a) for a in args]
+            in_caller = done
+        else:
+            pending = self._pool.submit(_thread_timed, job, *args[1])
+            try:
+                first = _thread_timed(job, *args[0])
+            finally:
+                second = pending.result()
+            done, in_caller = [first, second], [first]
+        if done:
+            self._phases.append(tuple(ms for _, ms in done))
+            self._caller_jobs_ms += sum(ms for _, ms in in_caller)
+        return [result for result, _ in done]
 
-    def _settled_hand(self, center: np.ndarray, half_size: float) -> str | None:
+    def _continued_hand(self, center: np.ndarray, half_size: float) -> str | None:
         """The hand a region at ``center`` continues without doubt (both hands tracked in the
-        previous frame, not a recheck frame; :class:`HandsSettings`), else None."""
-        every = self.settings.recheck_frames
-        if every <= 0 or self._settled_frames == 0 or self._settled_frames % every == 0:
+        previous frame; :class:`HandsSettings`), else None."""
+        if self._settled_frames == 0:
             return None
         d = {h: float(np.linalg.norm(center - p)) for h, p in self.previous.items()
              if p is not None}
@@ -368,20 +437,36 @@ class TwoHandPipeline:
             return own
         return None
 
+    def _query(self, candidate: HandCandidate, hand: str) -> tuple[TinyCrop, Blobs | None]:
+        """``candidate``'s lookup query as ``hand`` (a left hand's mirrored) and the blobs its
+        fingers are blended by (None without ``finger_evidence``)."""
+        obs, tiny = candidate.observation, candidate.tiny
+        if hand != 'right':
+            cx = self.camera.cx
+            obs, tiny = mirror_camera_observation(obs, cx), mirror_tiny_crop(tiny, cx)
+        return tiny, obs.blobs if self.finger_evidence else None
+
     def _look_up(self, candidate: HandCandidate, hand: str, slot: int
                  ) -> LookupResult | NoHand:
-        """``candidate``'s query looked up as ``hand`` (a left hand's mirrored) with slot
-        ``slot``'s lookup, kept."""
-        if hand not in candidate.lookups:
-            obs, tiny = candidate.observation, candidate.tiny
-            if hand != 'right':
-                cx = self.camera.cx
-                obs, tiny = mirror_camera_observation(obs, cx), mirror_tiny_crop(tiny, cx)
-            lookup = self.lookups[slot % len(self.lookups)]
-            candidate.lookups[hand] = look_up(lookup, tiny, self.camera,
-                                              obs.blobs if self.finger_evidence else None,
-                                              self.limits)
+        """``candidate``'s query looked up as ``hand`` with slot ``slot``'s lookup (or its
+        search blended), kept."""
+        lookup = self.lookups[slot % len(self.lookups)]
+        found = candidate.lookups.get(hand)
+        if isinstance(found, Searched):
+            candidate.lookups[hand] = blend(lookup, found.neighbours, self.camera, found.blobs,
+                                            self.limits)
+        elif found is None:
+            tiny, blobs = self._query(candidate, hand)
+            candidate.lookups[hand] = look_up(lookup, tiny, self.camera, blobs, self.limits)
         return candidate.lookups[hand]
+
+    def _search(self, candidate: HandCandidate, hand: str, slot: int) -> None:
+        """``candidate``'s query as ``hand`` searched with slot ``slot``'s lookup, its blend
+        left to :meth:`_look_up` (if a hand is tracked from it)."""
+        tiny, blobs = self._query(candidate, hand)
+        found = search(self.lookups[slot % len(self.lookups)], tiny)
+        candidate.lookups[hand] = found if isinstance(found, NoHand) else Searched(
+            found, blobs, math.inf if too_far(found.nearest, self.limits) else found.nearest)
 
     def _candidate(self, image_rgb: np.ndarray, regions: Sequence[GloveRegion], k: int
                    ) -> HandCandidate | None:
@@ -398,9 +483,16 @@ class TwoHandPipeline:
         if tiny is None or not seen.hand_found:
             return None
         candidate = HandCandidate(region, seen, tiny)
-        settled = self._settled_hand(candidate.center, candidate.half_size)
-        for hand in HANDS if settled is None else (settled,):
-            self._look_up(candidate, hand, k)
+        continued = self._continued_hand(candidate.center, candidate.half_size)
+        every = self.settings.recheck_frames
+        if continued is not None and every > 0 and self._settled_frames % every:
+            self._look_up(candidate, continued, k)      # a settled hand: that way only
+            return candidate
+        for hand in HANDS:   # both ways; blended now only as the hand it likely is
+            if hand == continued:
+                self._look_up(candidate, hand, k)
+            else:
+                self._search(candidate, hand, k)
         return candidate
 
     def candidates(self, image_rgb: np.ndarray) -> list[HandCandidate]:
@@ -427,6 +519,8 @@ class TwoHandPipeline:
         """One frame: each hand's outcome (its own tracker; a hand without a region, or
         whose region's handedness is not decided, is 'no hand' and its tracker starts again
         when it comes back)."""
+        started = time.thread_time()
+        self._phases, self._caller_jobs_ms = [], 0.0
         candidates = self.candidates(image_rgb)
         assignment, margin = assign_hands(candidates, self.previous, self.settings)
         decided = margin >= self.settings.min_margin
@@ -450,6 +544,9 @@ class TwoHandPipeline:
             out[outcome.hand] = outcome
         both = all(isinstance(out[h].outcome, Tracked) for h in HANDS)
         self._settled_frames = self._settled_frames + 1 if both else 0
+        self.last_timing = FrameTiming(
+            1e3 * (time.thread_time() - started) - self._caller_jobs_ms, tuple(self._phases),
+            self.parallel)
         return {h: out[h] for h in HANDS}
 
     def _forget(self, hand: str) -> None:

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from colorglove_ros.core.lookup.types import LookupResult
+from colorglove_ros.core.lookup.types import LookupResult, Neighbours
 from colorglove_ros.core.segmentation.crop import TinyCrop
 from colorglove_ros.core.segmentation.crop_prediction import (
     CropFeedback,
@@ -49,7 +49,8 @@ __all__ = [
     'DEFAULT_MAX_IMAGE_DISTANCE', 'CUT_BY_BORDER', 'StageLimits', 'NODE_LIMITS', 'UNGATED',
     'NoHand', 'Tracked', 'glove_seen',
     'TemporalPrior', 'Observer', 'FrameObservations', 'FrameLookup', 'FramePipeline',
-    'segment_frame', 'bad_image', 'observe_image', 'image_observer', 'look_up', 'track',
+    'segment_frame', 'bad_image', 'observe_image', 'image_observer', 'look_up', 'search',
+    'blend', 'too_far', 'track',
     'bad_prior', 'hand_keypoints_at_plausible_depth', 'weak_evidence', 'poor_fit',
     'missing_glove',
     'tracked_crop', 'glove_outside',
@@ -264,13 +265,50 @@ def look_up(lookup: Any, tiny: TinyCrop, camera: Any, blobs: Blobs | None = None
         result = lookup.lookup(tiny.labels, tiny.transform, camera, blobs)
     except (SearchError, ValueError) as exc:
         return NoHand(f'lookup: {exc}', warn=True)
-    if limits.max_image_distance < math.inf:
-        nearest = float(result.distances[0]) if len(result.distances) else math.inf
-        if not nearest <= limits.max_image_distance:
-            return NoHand(f'lookup: nearest database image {nearest:.2f} tiny px away (more '
-                          f'than max_image_distance {limits.max_image_distance:g}): not a hand',
-                          partial=result)
+    return _near_enough(result, limits)
+
+
+def too_far(nearest: float, limits: StageLimits) -> bool:
+    """Whether a lookup whose nearest database image is ``nearest`` tiny px away is no hand
+    (farther than ``limits.max_image_distance``)."""
+    return limits.max_image_distance < math.inf and not nearest <= limits.max_image_distance
+
+
+def _near_enough(result: LookupResult, limits: StageLimits) -> LookupResult | NoHand:
+    """``result``, or :class:`NoHand` when its nearest database image is too far
+    (:func:`too_far`; ``partial`` is the result)."""
+    if limits.max_image_distance >= math.inf:   # (ungated: a stand-in may have no distances)
+        return result
+    nearest = float(result.distances[0]) if len(result.distances) else math.inf
+    if too_far(nearest, limits):
+        return NoHand(f'lookup: nearest database image {nearest:.2f} tiny px away (more '
+                      f'than max_image_distance {limits.max_image_distance:g}): not a hand',
+                      partial=result)
     return result
+
+
+def search(lookup: Any, tiny: TinyCrop) -> Neighbours | NoHand:
+    """The first part of :func:`look_up` (``PoseLookup.search``): a tiny crop's re-ranked
+    candidates, before their poses are blended; :class:`NoHand` when the search fails."""
+    from colorglove_ros.core.lookup.search import SearchError
+
+    try:
+        return lookup.search(tiny.labels, tiny.transform)
+    except (SearchError, ValueError) as exc:
+        return NoHand(f'lookup: {exc}', warn=True)
+
+
+def blend(lookup: Any, found: Neighbours, camera: Any, blobs: Blobs | None = None,
+          limits: StageLimits = NODE_LIMITS) -> LookupResult | NoHand:
+    """The rest of :func:`look_up` on :func:`search` 's candidates ``found``
+    (``PoseLookup.blend``): ``search`` then ``blend`` give what ``look_up`` gives."""
+    from colorglove_ros.core.lookup.search import SearchError
+
+    try:
+        result = lookup.blend(found, camera, blobs)
+    except (SearchError, ValueError) as exc:
+        return NoHand(f'lookup: {exc}', warn=True)
+    return _near_enough(result, limits)
 
 
 # ---------------------------------------------------------------------------- track

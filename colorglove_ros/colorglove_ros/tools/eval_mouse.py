@@ -17,17 +17,23 @@ noise model: each scripted sequence is rendered as a bare hand (core.synthetic.b
 the primary camera of ``--calibration`` looking down at the table at 45 degrees; with
 ``--cameras 2`` also its second camera, e.g. ``config/calibration_table_stereo.yaml``'s
 camera facing the user from the far side of the table, and the tracker fits both), the edge
-tracker starts from the true first pose (a pose given to it, as from the glove tracker) and,
-after a loss, again from the true pose of the frame it was lost on (counted as
-``reinitialisations``); frames without a published pose reach the mouse as gaps. A loss
-during a click re-initialises the tracker at the click's true angle, so ``correct_at_reinit``
-counts the correct clicks with such a re-initialisation between the click's start and the
-press: the clicks the truth, not the tracker, put through. With
+tracker starts from the first pose (a pose given to it, as from the glove tracker) and,
+after a loss, again from the pose of the frame it was lost on (counted as
+``reinitialisations``); frames without a published pose reach the mouse as gaps. That pose
+(``--reinit``, :func:`reinitialisation_pose`) is by default (``rest``) the true pose with the
+joints the buttons read (``core.tracking.mouse.BUTTON_DOFS``) at the scripted hand's rest
+angles, as a user's system would re-initialise it (it does not know that a click is under
+way): a click must be followed by the tracker itself. ``--reinit truth`` (earlier passes'
+figures, for comparison) gives the tracker the true pose itself, so a loss during a click
+hands it the click's angle;
+``correct_at_reinit`` counts the correct clicks with a re-initialisation between the click's
+start and the press (with ``truth``: the clicks the truth, not the tracker, put through). With
 ``--background empty`` the tracker also has the silhouettes against one frame of the empty
 table scene (``BareHandSequence.render_empty_views``); ``none`` (default): edges only (the
 silhouettes did not raise the click figures on tuning seeds 5-7, docs/RESULTS.md);
 ``--finger-refit`` turns on the tracker's ``finger_refit``, ``--silhouette-palm`` its
-``silhouette_palm``, ``--retry-dofs`` its ``retry_dofs`` (all off by default).
+``silhouette_palm``, ``--retry-dofs`` its ``retry_dofs`` (all off by default), with
+``--retry-max-wrist-move-mm`` and ``--retry-rest-margin-px`` its retry guards.
 
 ``--source glove`` feeds it the colour-glove tracker's output (segmentation, lookup, IK with
 smoothing, as ``ik_node`` runs) on the same script rendered with the glove
@@ -38,7 +44,7 @@ poses are cached in data/scripted_tracking/); frames it did not track reach the 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -56,23 +62,33 @@ from colorglove_ros.core.hand.model import DOF_NAMES, KEYPOINT_NAMES, HandModel
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.synthetic.bare_hand import BareHandSequence
 from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
-from colorglove_ros.core.tracking.edge_tracker import EdgeTracker
-from colorglove_ros.core.tracking.mouse import Mouse3D, MouseConfig, raw_mouse_values
+from colorglove_ros.core.tracking.edge_tracker import EdgeTracker, EdgeTrackResult
+from colorglove_ros.core.tracking.mouse import (
+    BUTTON_DOFS,
+    Mouse3D,
+    MouseConfig,
+    raw_mouse_values,
+)
 from colorglove_ros.core.tracking.silhouette import BackgroundModel
 from colorglove_ros.paths import data_dir, resolve_path, share_dir
 from colorglove_ros.tools._cli import run_tool, tool_parser
 
 __all__ = ['main', 'scripted_sequence', 'evaluate_seed', 'noisy_poses', 'edge_tracked_poses',
-           'glove_tracked_poses', 'RELAXED_FINGERS_DEG']
+           'glove_tracked_poses', 'reinitialisation_pose', 'track_scripted', 'REINIT_MODES',
+           'RELAXED_FINGERS_DEG']
 
 FPS = 30.0
 # relaxed hand on a table: (mcp, pip, dip) flexion of the four fingers, degrees
 RELAXED_FINGERS_DEG = (35.0, 40.0, 27.0)
-_THUMB = DOF_NAMES.index('thumb_cmc_abd')
-_LITTLE = DOF_NAMES.index('little_mcp_abd')
 _INDEX_MCP = DOF_NAMES.index('index_mcp_flex')
 _INDEX_PIP = DOF_NAMES.index('index_pip_flex')
 _INDEX_DIP = DOF_NAMES.index('index_dip_flex')
+# the joints the mouse's buttons read, their scripted angles at rest and added at the top of
+# a click (degrees; the little finger's abduction away from the hand is negative)
+_BUTTONS = [DOF_NAMES.index(n) for n in BUTTON_DOFS]
+_BUTTON_REST_DEG = np.array([5.0, -1.0])
+_BUTTON_CLICK_DEG = np.array([35.0, -14.0])
+REINIT_MODES: tuple[str, ...] = ('rest', 'truth')
 
 
 def _smooth_step(n: int) -> np.ndarray:
@@ -138,9 +154,39 @@ def scripted_sequence(model: HandModel, config: MouseConfig, seed: int, seconds:
     Q[:, _INDEX_DIP] = dip * (1 - index_lift)
     thumb, thumb_spans = _pulses(rng, n, clicks)
     little, little_spans = _pulses(rng, n, clicks)
-    Q[:, _THUMB] = np.radians(5.0 + 35.0 * thumb)
-    Q[:, _LITTLE] = -np.radians(1.0 + 14.0 * little)
+    Q[:, _BUTTONS] = np.radians(_BUTTON_REST_DEG + np.stack([thumb, little], axis=1)
+                                * _BUTTON_CLICK_DEG)
     return model.clamp(Q), [thumb_spans, little_spans]
+
+
+def reinitialisation_pose(q: np.ndarray, reinit: str = 'rest') -> np.ndarray:
+    """The pose the evaluation (re-)initialises the edge tracker from at a frame whose true
+    pose is ``q``: with ``reinit`` 'rest' ``q`` with the buttons' joints (``BUTTON_DOFS``) at
+    the scripted hand's rest angles (no button down, whatever the frame's click), with
+    'truth' ``q`` itself."""
+    if reinit not in REINIT_MODES:
+        raise ColorGloveError(f'reinit must be one of {REINIT_MODES}, got {reinit!r}')
+    out = np.array(q, dtype=float)
+    if reinit == 'rest':
+        out[_BUTTONS] = np.radians(_BUTTON_REST_DEG)
+    return out
+
+
+def track_scripted(tracker: EdgeTracker, Q: np.ndarray,
+                   views: Callable[[int], Sequence[np.ndarray | None]], reinit: str = 'rest'
+                   ) -> tuple[list[EdgeTrackResult], list[int]]:
+    """``tracker`` over the frames ``views(i)`` (one image per camera) of the scripted poses
+    ``Q``, started from :func:`reinitialisation_pose` of the first and, after a loss, of the
+    frame it is re-initialised on; each frame's result and the re-initialised frames."""
+    tracker.initialize(reinitialisation_pose(Q[0], reinit))
+    results: list[EdgeTrackResult] = []
+    restarts: list[int] = []
+    for i in range(len(Q)):
+        if tracker.state == 'waiting':
+            tracker.initialize(reinitialisation_pose(Q[i], reinit))
+            restarts.append(i)
+        results.append(tracker.update(views(i)))
+    return results, restarts
 
 
 def noisy_poses(model: HandModel, Q: np.ndarray, seed: int, noise: dict[str, float]
@@ -163,13 +209,13 @@ def noisy_poses(model: HandModel, Q: np.ndarray, seed: int, noise: dict[str, flo
 
 def edge_tracked_poses(Q: np.ndarray, seed: int, cameras: Sequence[PinholeCamera],
                        hand_length_m: float, silhouettes: bool = False,
-                       config: EdgeTrackerConfig | None = None
+                       config: EdgeTrackerConfig | None = None, reinit: str = 'rest'
                        ) -> tuple[list[np.ndarray | None], list[int]]:
     """The edge tracker's published poses on the bare-hand rendering of ``Q`` seen by
     ``cameras`` (the primary first; the poses are in its frame; None where it published
-    none) and the frames where it was re-initialised from the true pose after a loss;
-    ``silhouettes``: with a background model per camera from the empty scene; ``config``:
-    the tracker's settings (default :class:`EdgeTrackerConfig`)."""
+    none) and the frames where it was re-initialised after a loss (:func:`track_scripted`,
+    ``reinit``); ``silhouettes``: with a background model per camera from the empty scene;
+    ``config``: the tracker's settings (default :class:`EdgeTrackerConfig`)."""
     cameras = list(cameras)
     seq = BareHandSequence(cameras[0], seed=seed, poses=Q, hand_length_m=hand_length_m,
                            views=len(cameras))
@@ -177,16 +223,9 @@ def edge_tracked_poses(Q: np.ndarray, seed: int, cameras: Sequence[PinholeCamera
         backgrounds = [BackgroundModel.from_frames([e]) for e in
                        seq.render_empty_views(cameras)] if silhouettes else None
         tracker = EdgeTracker(seq.synth.model, cameras, config, backgrounds)
-        tracker.initialize(Q[0])
-        out: list[np.ndarray | None] = []
-        restarts: list[int] = []
-        for i in range(len(Q)):
-            if tracker.state == 'waiting':
-                tracker.initialize(Q[i])
-                restarts.append(i)
-            views = seq.render_views(i, cameras)
-            out.append(tracker.update([v.image_rgb for v in views]).q)
-        return out, restarts
+        results, restarts = track_scripted(
+            tracker, Q, lambda i: [v.image_rgb for v in seq.render_views(i, cameras)], reinit)
+        return [r.q for r in results], restarts
     finally:
         seq.close()
 
@@ -284,9 +323,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--silhouette-palm', action='store_true',
                         help='edge tracker with --background empty: the tracker\'s '
                         'silhouette_palm')
+    parser.add_argument('--reinit', choices=REINIT_MODES, default='rest',
+                        help='with --source edges: (re-)initialise the edge tracker from the '
+                        'true pose with the buttons\' joints at rest (default), or from the '
+                        'true pose itself (truth: a loss during a click hands it the click)')
     parser.add_argument('--retry-dofs', nargs='+', default=[],
                         help='with --source edges: the edge tracker\'s retry_dofs (e.g. '
                         'thumb_cmc_abd)')
+    parser.add_argument('--retry-max-wrist-move-mm', type=float,
+                        help='with --retry-dofs: the tracker\'s retry_max_wrist_move_m, in mm '
+                        '(default: EdgeTrackerConfig\'s, off)')
+    parser.add_argument('--retry-rest-margin-px', type=float,
+                        help='with --retry-dofs: the tracker\'s retry_rest_margin_px (default: '
+                        'EdgeTrackerConfig\'s, off)')
     args = parser.parse_args(argv)
     return run_tool('colorglove_eval_mouse', lambda: _run(args))
 
@@ -324,6 +373,11 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                     retry_dofs=tuple(args.retry_dofs))
     if args.camera_weights is not None:
         edge_config = replace(edge_config, camera_weights=tuple(args.camera_weights))
+    if args.retry_max_wrist_move_mm is not None:
+        edge_config = replace(edge_config,
+                              retry_max_wrist_move_m=args.retry_max_wrist_move_mm / 1e3)
+    if args.retry_rest_margin_px is not None:
+        edge_config = replace(edge_config, retry_rest_margin_px=args.retry_rest_margin_px)
     rows = []
     for seed in args.seeds:
         Q, spans = scripted_sequence(model, config, seed, args.seconds)
@@ -331,7 +385,8 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
         restarts: list[int] = []
         if args.source == 'edges':
             poses, restarts = edge_tracked_poses(Q, seed, cameras, hand_length_m,
-                                                 args.background == 'empty', edge_config)
+                                                 args.background == 'empty', edge_config,
+                                                 args.reinit)
             extra['reinitialisations'] = len(restarts)
         elif glove is not None:
             poses = glove_tracked_poses(model, Q, seed, glove)
@@ -360,12 +415,19 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'tolerance_frames': args.tolerance_frames,
                                             'source': args.source, 'seconds': args.seconds,
                                             'background': args.background,
+                                            'reinit': args.reinit,
                                             'calibration': args.calibration,
                                             'cameras': [c.name for c in cameras],
                                             'camera_weights': list(edge_config.camera_weights),
                                             'finger_refit': edge_config.finger_refit,
                                             'silhouette_palm': edge_config.silhouette_palm,
-                                            'retry_dofs': list(edge_config.retry_dofs)},
+                                            'retry_dofs': list(edge_config.retry_dofs),
+                                            **{name: value if math.isfinite(value) else None
+                                               for name, value in (
+                                                   ('retry_max_wrist_move_m',
+                                                    edge_config.retry_max_wrist_move_m),
+                                                   ('retry_rest_margin_px',
+                                                    edge_config.retry_rest_margin_px))}},
                                'rows': rows, 'total': total, 'targets': targets})
     return 0
 

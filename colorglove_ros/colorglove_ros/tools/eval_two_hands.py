@@ -16,7 +16,8 @@ the renderer's ground truth), identity swaps (a hand's output taken from the oth
 after being right), fingertip error on the frames both runs tracked, beside the one-hand run's
 (on the fully visible frames, and on all), why frames gave no pose, and the layer's time per
 frame: CPU time of all threads and of the calling thread (with ``--threads 2`` the layer runs
-the two hands on two threads), wall time, and the load average. Seeds O..O+S-1: the settings
+the two hands on two threads), the critical path (``core.hands.FrameTiming``), wall time, and
+the load average. Seeds O..O+S-1: the settings
 (core.hands.HandsSettings) were tuned on seeds >= 1000; the reported figures use O = 0.
 """
 from __future__ import annotations
@@ -103,6 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     layer_lookups = slot_lookups(db, args.threads)
     stats = {h: _new_stats() for h in HANDS}
     frame_ms, frame_cpu_ms, frame_thread_ms, loads = [], [], [], []
+    frame_critical_ms, frame_serial_ms = [], []
 
     def tracker() -> Any:
         return HandTracker(synth.model, synth.mesh, [camera], config.with_mode(MODE),
@@ -131,6 +133,8 @@ def main(argv: list[str] | None = None) -> int:
             frame_ms.append(1e3 * (time.perf_counter() - c0))
             frame_cpu_ms.append(1e3 * (time.process_time() - p0))
             frame_thread_ms.append(1e3 * (time.thread_time() - t0))
+            frame_critical_ms.append(pipeline.last_timing.critical_path_ms)
+            frame_serial_ms.append(pipeline.last_timing.serial_ms)
             if i % 10 == 0:
                 loads.append(os.getloadavg()[0])
             for k, h in enumerate(HANDS):
@@ -169,6 +173,7 @@ def main(argv: list[str] | None = None) -> int:
               f'{time.perf_counter() - ts:.1f} s', flush=True)
     synth.release()
     ms, cpu_ms, thread_ms = np.array(frame_ms), np.array(frame_cpu_ms), np.array(frame_thread_ms)
+    critical_ms, serial_ms = np.array(frame_critical_ms), np.array(frame_serial_ms)
     rate = 1e3 / float(ms.mean())
     rows, reasons = [], []
     for h in HANDS:
@@ -210,6 +215,10 @@ def main(argv: list[str] | None = None) -> int:
           f'ms, p95 {np.percentile(ms, 95):.1f} ms: {rate:.1f} frames/s, i.e. JointStates/s per '
           f'hand, at load average {load:.1f} (1 min, mean over the run) on '
           f'{os.cpu_count()} cores')
+    print(f'critical path (thread CPU: the serial part plus the slower thread of each parallel '
+          f'phase, i.e. the wall time with a free core per thread and no wait on the other '
+          f'thread): mean {critical_ms.mean():.1f} ms, p95 {np.percentile(critical_ms, 95):.1f} '
+          f'ms (serial part {serial_ms.mean():.1f} ms)')
     targets = []
     for r in rows:
         targets += [target_row(f'{r["hand"]}: tracked when both fully visible',
@@ -229,6 +238,9 @@ def main(argv: list[str] | None = None) -> int:
             'frame_ms_mean': float(ms.mean()), 'frame_ms_p95': float(np.percentile(ms, 95)),
             'frame_cpu_ms_mean': float(cpu_ms.mean()),
             'frame_calling_thread_cpu_ms_mean': float(thread_ms.mean()),
+            'frame_critical_path_ms_mean': float(critical_ms.mean()),
+            'frame_critical_path_ms_p95': float(np.percentile(critical_ms, 95)),
+            'frame_serial_ms_mean': float(serial_ms.mean()),
             'threads': args.threads, 'load_average_mean': load,
             'fully_visible_share': FULLY_VISIBLE_SHARE,
             'wall_s': time.perf_counter() - t0}, 'rows': rows, 'reasons': reasons,

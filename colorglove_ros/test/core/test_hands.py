@@ -12,6 +12,7 @@ import pytest
 from colorglove_ros.core.hand.handedness import HANDS, mirror_pose
 from colorglove_ros.core.hands import (
     MAX_HANDS,
+    FrameTiming,
     GloveRegion,
     HandCandidate,
     TwoHandPipeline,
@@ -194,7 +195,16 @@ def test_two_threads_track_as_one_does(node_assets, small_database):
             h: HandTracker(synth.model, synth.mesh, [camera], config, glove=synth.glove)
             for h in HANDS}, limits=UNGATED)     # the small database's matches are far
         assert pipeline.parallel == (threads == 2) and len(pipeline.lookups) == threads
-        runs[threads] = [pipeline.process(f, i / 30.0) for i, f in enumerate(frames)]
+        runs[threads] = []
+        for i, f in enumerate(frames):
+            runs[threads].append(pipeline.process(f, i / 30.0))
+            timing = pipeline.last_timing     # this frame's thread CPU
+            assert timing.parallel == (threads == 2) and timing.serial_ms >= 0.0
+            assert timing.phases and all(len(p) <= MAX_HANDS for p in timing.phases)
+            if threads == 1 or all(len(p) == 1 for p in timing.phases):
+                assert timing.critical_path_ms == pytest.approx(timing.cpu_ms)
+            else:
+                assert timing.critical_path_ms < timing.cpu_ms
         pipeline.close()
     assert any(isinstance(o.outcome, Tracked) for out in runs[1] for o in out.values())
     for one, two in zip(runs[1], runs[2], strict=True):
@@ -207,3 +217,48 @@ def test_two_threads_track_as_one_does(node_assets, small_database):
     with pytest.raises(ValueError, match='threads'):
         slot_lookups(small_database, 3)
     assert MAX_HANDS == len(HANDS)
+
+
+def test_the_critical_path_is_the_serial_part_and_each_phase_s_slowest_job():
+    two = FrameTiming(1.0, ((3.0, 2.0), (0.5, 1.5)), parallel=True)
+    assert two.cpu_ms == 8.0 and two.critical_path_ms == 1.0 + 3.0 + 1.5
+    one = FrameTiming(1.0, ((3.0, 2.0), (0.5, 1.5)), parallel=False)
+    assert one.critical_path_ms == one.cpu_ms == 8.0
+    assert FrameTiming(0.5, ((2.0,),), parallel=True).critical_path_ms == 2.5
+
+
+def test_the_lookups_no_hand_is_tracked_from_are_searched_not_blended(node_assets,
+                                                                       small_database):
+    # a region of a frame with no hand known is looked up both ways for the assignment's
+    # evidence, which needs the nearest distances only: both are searched, and the lookup a
+    # hand is then tracked from is blended (as the whole lookup would have made it)
+    from colorglove_ros.core.hands import Searched
+    from colorglove_ros.core.lookup.search import PoseLookup
+    from colorglove_ros.core.pipeline import look_up
+    from colorglove_ros.core.segmentation.segmenter import load_segmenter
+
+    camera = default_camera()
+    synth = Synthesizer()
+    try:
+        poses = two_hand_sequences(1003, 1, camera=camera, model=synth.model)
+        frame = synth.render_hands([(poses[h][0], h) for h in HANDS], camera,
+                                   np.random.default_rng(0),
+                                   sample_conditions(np.random.default_rng(2), 'test')
+                                   )[0].image_rgb
+    finally:
+        synth.release()
+    pipeline = TwoHandPipeline(load_segmenter(str(node_assets.color_config)),
+                               slot_lookups(small_database, 1), camera, {}, limits=UNGATED)
+    found = pipeline.candidates(frame)
+    assert len(found) == 2
+    whole = PoseLookup(small_database)
+    for candidate in found:
+        assert all(isinstance(candidate.lookups[h], Searched) for h in HANDS)
+        for h in HANDS:
+            tiny, blobs = pipeline._query(candidate, h)
+            expected = look_up(whole, tiny, camera, blobs, UNGATED)
+            assert candidate.distance(h) == expected.distances[0]
+            blended = pipeline._look_up(candidate, h, 0)
+            assert candidate.lookups[h] is blended
+            np.testing.assert_array_equal(blended.blended, expected.blended)
+            np.testing.assert_array_equal(blended.indices, expected.indices)

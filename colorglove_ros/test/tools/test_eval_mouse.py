@@ -8,14 +8,16 @@ import pytest
 
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.hand.model import HandModel
-from colorglove_ros.core.tracking.mouse import MouseConfig
+from colorglove_ros.core.tracking.mouse import BUTTON_DOFS, MouseConfig, raw_mouse_values
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.tools.eval_mouse import (
     edge_tracked_poses,
     evaluate_seed,
     glove_tracked_poses,
     noisy_poses,
+    reinitialisation_pose,
     scripted_sequence,
+    track_scripted,
 )
 from colorglove_ros.tools.eval_mouse import (
     main as eval_mouse_main,
@@ -46,6 +48,56 @@ def test_clicks_with_a_reinitialisation_from_the_truth_before_the_press_are_coun
     # the third click's start counts (the press comes after it); a frame before any click
     # or between clicks does not
     assert row['correct'] == 8 and row['correct_at_reinit'] == 1
+
+
+class _FakeEdgeTracker:
+    """Stands in for EdgeTracker: records its initialisations, publishes the pose it was
+    given and loses the hand at the frames in ``lose_at``."""
+
+    def __init__(self, lose_at: set[int]) -> None:
+        self.lose_at, self.frame, self.starts = lose_at, 0, []
+        self.state = 'waiting'
+
+    def initialize(self, q: np.ndarray) -> None:
+        self.starts.append((self.frame, q.copy()))
+        self.q, self.state = q.copy(), 'tracking'
+
+    def update(self, images):
+        assert images == ['frame', self.frame]
+        lost = self.frame in self.lose_at
+        self.state = 'waiting' if lost else 'tracking'
+        self.frame += 1
+        return type('Result', (), {'q': None if lost else self.q.copy()})()
+
+
+def test_a_reinitialisation_during_a_click_does_not_hand_the_tracker_the_click() -> None:
+    Q, spans = scripted_sequence(MODEL, CONFIG, seed=3, seconds=12.0, clicks=4)
+    (a, b), (c, d) = spans[0][1], spans[1][2]
+    top_thumb, top_little = (a + b) // 2, (c + d) // 2
+    views = lambda i: ['frame', i]  # noqa: E731
+    starts = {}
+    for reinit in ('rest', 'truth'):
+        tracker = _FakeEdgeTracker({top_thumb - 1, top_little - 1})
+        poses, restarts = track_scripted(tracker, Q, views, reinit)
+        assert restarts == [top_thumb, top_little] and len(poses) == len(Q)
+        starts[reinit] = dict(tracker.starts)
+        row = evaluate_seed(MODEL, CONFIG, 3, [r.q for r in poses], 0, Q, spans, restarts)
+        starts[reinit]['clicks'] = row['correct']
+    # the truth at the top of a click presses the button; the same pose with the buttons'
+    # joints at rest presses none, and keeps every other joint true
+    for frame, button, joint in ((top_thumb, 3, 'thumb_cmc_abd'),
+                                 (top_little, 4, 'little_mcp_abd')):
+        assert raw_mouse_values(MODEL, starts['truth'][frame], CONFIG)[button] \
+            > CONFIG.press_deg[button - 3]
+        rest = raw_mouse_values(MODEL, starts['rest'][frame], CONFIG)
+        assert rest[3] < CONFIG.release_deg[0] and rest[4] < CONFIG.release_deg[1]
+        assert np.array_equal(starts['truth'][frame], Q[frame])
+        moved = np.flatnonzero(starts['rest'][frame] != Q[frame])
+        moved_names = {MODEL.dof_names[i] for i in moved}
+        assert joint in moved_names and moved_names <= set(BUTTON_DOFS)
+    # a tracker that only repeats its start makes no click from a rest start
+    assert starts['rest']['clicks'] == 0 and starts['truth']['clicks'] == 2
+    assert np.array_equal(reinitialisation_pose(Q[0]), Q[0])      # the script starts at rest
 
 
 def test_noise_model_drops_frames_and_perturbs_the_rest() -> None:

@@ -22,7 +22,7 @@ from colorglove_ros.core.lookup.finger_evidence import (
     patch_digits,
     weighted_fingers,
 )
-from colorglove_ros.core.lookup.types import LookupResult, ProjectionConstraints
+from colorglove_ros.core.lookup.types import LookupResult, Neighbours, ProjectionConstraints
 from colorglove_ros.core.segmentation.crop import tiny_to_full
 
 __all__ = ['SearchError', 'PoseLookup', 'DEFAULT_THREADS',
@@ -300,6 +300,12 @@ class PoseLookup:
         match the blobs (:mod:`core.lookup.finger_evidence`) and the result carries the fingers'
         spread (``finger_std``); without, every DOF is blended with the image weights (the
         paper)."""
+        return self.blend(self.search(tiny_labels, crop_transform), camera, blobs)
+
+    def search(self, tiny_labels: np.ndarray, crop_transform: object) -> Neighbours:
+        """The first part of :meth:`lookup`: the query's candidates by Hamming distance,
+        re-ranked by exact image distance (what the handedness evidence of two lookups of
+        one region needs); :meth:`blend` makes the lookup's result from them."""
         t0 = time.perf_counter()
         crop = _crop_tuple(crop_transform)
         try:
@@ -313,13 +319,24 @@ class PoseLookup:
         cand = top_k_with_ties(ham, self.num_candidates)
         t2 = time.perf_counter()
         dist = self.rerank(query, cand)
+        t3 = time.perf_counter()
+        return Neighbours(cand, dist, crop, {'encode_ms': 1e3 * (t1 - t0),
+                                             'hamming_ms': 1e3 * (t2 - t1),
+                                             'rerank_ms': 1e3 * (t3 - t2)})
+
+    def blend(self, found: Neighbours, camera: PinholeCamera, blobs: object = None
+              ) -> LookupResult:
+        """The second part of :meth:`lookup`: the nearest of the :meth:`search` 's candidates
+        ``found`` blended into the pose prior (with ``blobs``, per finger) and the nearest
+        entry's projection constraints, in ``camera``'s view of the query."""
+        t3 = time.perf_counter()
+        cand, dist, crop = found.candidates, found.distances, found.crop
         wide = min(max(self.num_blend, self.finger_evidence.num_neighbours
                        if blobs is not None else 0), len(cand))
         near = np.argpartition(dist, wide - 1)[:wide] if wide < len(cand) else np.arange(len(cand))
         near = near[np.lexsort((cand[near], dist[near]))]
         k = min(self.num_blend, len(cand))
         idx, d = cand[near[:k]], dist[near[:k]]
-        t3 = time.perf_counter()
         weights = blend_weights(d)
         poses = self._a['poses'][idx].astype(np.float64)
         terms = self._place_table[idx]
@@ -338,9 +355,8 @@ class PoseLookup:
             finger_entries = np.where(seen, finger_entries, idx[0])
         constraints = self._constraints(int(idx[0]), crop, finger_entries)
         t4 = time.perf_counter()
-        timings = {'encode_ms': 1e3 * (t1 - t0), 'hamming_ms': 1e3 * (t2 - t1),
-                   'rerank_ms': 1e3 * (t3 - t2), 'blend_ms': 1e3 * (t4 - t3),
-                   'total_ms': 1e3 * (t4 - t0)}
+        timings = {**found.timings_ms, 'blend_ms': 1e3 * (t4 - t3)}
+        timings['total_ms'] = sum(timings.values())
         return LookupResult(idx, d, weights, poses, blended, constraints, len(cand), timings,
                             finger_std)
 

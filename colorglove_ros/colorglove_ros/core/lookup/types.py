@@ -8,7 +8,7 @@ import numpy as np
 
 from colorglove_ros.core.validation import InvalidPriorError, as_rows
 
-__all__ = ['ProjectionConstraints', 'LookupResult']
+__all__ = ['ProjectionConstraints', 'LookupResult', 'Neighbours']
 
 
 @dataclass(frozen=True)
@@ -66,3 +66,22 @@ class LookupResult:
     # (20,) weighted spread (rad) of each finger DOF over the neighbours when the fingers
     # were blended per finger from the observed blobs (core.lookup.finger_evidence); else None
     finger_std: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Neighbours:
+    """The re-ranked candidates of one query, before their poses are blended
+    (``PoseLookup.search``; ``PoseLookup.blend`` makes the :class:`LookupResult`): database
+    entries and their exact image distances (px), the query's crop (scale, offset_x,
+    offset_y) and the search's timings."""
+
+    candidates: np.ndarray      # (n,) database entries re-ranked (top by Hamming, ties kept)
+    distances: np.ndarray       # (n,) their image distances (px), in the same order
+    crop: tuple[float, float, float]
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def nearest(self) -> float:
+        """The nearest candidate's image distance (the result's ``distances[0]``; inf when
+        there is none)."""
+        return float(self.distances.min()) if len(self.distances) else float('inf')

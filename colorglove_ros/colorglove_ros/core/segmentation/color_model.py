@@ -4,6 +4,7 @@ per class, the RGB lookup table compiled from them, and its versioned file.
 Fitting the model lives in ``calibration_fit.py``, the light-colour correction in ``light.py``."""
 from __future__ import annotations
 
+import functools
 import json
 import zipfile
 from dataclasses import dataclass, field
@@ -20,7 +21,7 @@ __all__ = [
     'CALIBRATION_FORMAT', 'CALIBRATION_FORMAT_VERSION', 'CGZ_A', 'CGZ_B', 'CGZ_EPS',
     'FEATURE_KINDS', 'ColorCalibrationError', 'ColorCalibration', 'GaussianMixtureParams',
     'xyz_to_cgz', 'rgb_to_cgz', 'cgz_intensity_axis', 'cgz_chroma', 'rgb_features',
-    'lut_index', 'compile_lut', 'save_calibration', 'load_calibration',
+    'lut_index', 'index_tables', 'compile_lut', 'save_calibration', 'load_calibration',
     'read_calibration_config',
 ]
 
@@ -133,6 +134,21 @@ def _index_bits(channel_table: np.ndarray, channel: int, bits: int) -> np.ndarra
     """int32 table: byte -> its mapped, quantised value at ``channel``'s place in the index."""
     quantised = channel_table[0, :, channel] >> (8 - bits)
     return quantised.astype(np.int32) << ((2 - channel) * bits)
+
+
+def index_tables(bits: int, channel_table: np.ndarray | None = None) -> np.ndarray:
+    """(3, 256) int32: per channel, a byte's part of :func:`lut_index`'s index (after
+    ``channel_table``), so that a pixel's index is the OR of its three channels' parts."""
+    if channel_table is None:
+        return _identity_index_tables(bits)
+    return np.stack([_index_bits(channel_table, channel, bits) for channel in range(3)])
+
+
+@functools.lru_cache(maxsize=8)
+def _identity_index_tables(bits: int) -> np.ndarray:
+    tables = index_tables(bits, _IDENTITY_TABLE)
+    tables.flags.writeable = False
+    return tables
 
 
 @dataclass(frozen=True)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import ModuleType
 
 import cv2
 import numpy as np
@@ -13,7 +14,7 @@ __all__ = [
     'CROP_ALGORITHM_VERSION', 'crop_signature',
     'CropError', 'CropTransform', 'tiny_to_full', 'TinyCrop', 'mean_shift_crop', 'crop_to_tiny',
     'crop_window', 'DEFAULT_BANDWIDTH_FACTOR', 'DEFAULT_MIN_PIXELS', 'DEFAULT_GLOVE_FRACTION',
-    'DEFAULT_RESCUE_SHARE', 'DEFAULT_INITIAL_BANDWIDTH_FACTOR',
+    'DEFAULT_RESCUE_SHARE', 'DEFAULT_INITIAL_BANDWIDTH_FACTOR', 'compiled_kernels',
 ]
 
 DEFAULT_BANDWIDTH_FACTOR = 2.5
@@ -104,28 +105,21 @@ def _as_mask(image: np.ndarray) -> np.ndarray:
     return arr != 0
 
 
+def compiled_kernels() -> ModuleType:
+    """The segmentation's compiled per-pixel kernels (:mod:`segmentation_kernel`): numba is
+    imported, and the kernels compiled or loaded from their on-disk cache, on the first call
+    (so importing this module, or the light modules that import it, loads no numba)."""
+    from colorglove_ros.core.segmentation import segmentation_kernel
+
+    segmentation_kernel.compile_kernels()
+    return segmentation_kernel
+
+
 def _window_bounds(c: float, h: float, n: int) -> tuple[int, int]:
     """Integer index range [lo, hi) of pixel centres within c +- h, clipped to [0, n)."""
     lo = max(int(np.ceil(c - h)), 0)
     hi = min(int(np.floor(c + h)) + 1, n)
     return lo, hi
-
-
-def _moments(sat: np.ndarray, xs: np.ndarray, ys: np.ndarray,
-             x0: int, x1: int, y0: int, y1: int) -> tuple[float, float, float, float, float]:
-    """Count, means and variances of mask pixels in the box [x0,x1) x [y0,y1)."""
-    n = float(sat[y1, x1] - sat[y0, x1] - sat[y1, x0] + sat[y0, x0])
-    if n <= 0.0:
-        return 0.0, 0.0, 0.0, 0.0, 0.0
-    col_counts = np.diff(sat[y1, x0:x1 + 1] - sat[y0, x0:x1 + 1]).astype(np.float64)
-    row_counts = np.diff(sat[y0:y1 + 1, x1] - sat[y0:y1 + 1, x0]).astype(np.float64)
-    xv = xs[x0:x1]
-    yv = ys[y0:y1]
-    mx = float(col_counts @ xv) / n
-    my = float(row_counts @ yv) / n
-    vx = max(float(col_counts @ (xv * xv)) / n - mx * mx, 0.0)
-    vy = max(float(row_counts @ (yv * yv)) / n - my * my, 0.0)
-    return n, mx, my, vx, vy
 
 
 def mean_shift_crop(mask: np.ndarray, bandwidth_factor: float = DEFAULT_BANDWIDTH_FACTOR,
@@ -155,31 +149,16 @@ def mean_shift_crop(mask: np.ndarray, bandwidth_factor: float = DEFAULT_BANDWIDT
     sat = cv2.integral(m.view(np.uint8), sdepth=cv2.CV_32S)
     if sat[H, W] < min_pixels:
         return None
-    xs = np.arange(W, dtype=np.float64)
-    ys = np.arange(H, dtype=np.float64)
     cx, cy = 0.5 * (W - 1), 0.5 * (H - 1)
     h = 0.5 * max(W, H)
     if start is not None:
         (cx, cy), h = start
     factors = (initial_bandwidth_factor, bandwidth_factor) \
         if initial_bandwidth_factor != bandwidth_factor else (bandwidth_factor,)
-    for factor in factors:
-        for _ in range(max_iterations):
-            x0, x1 = _window_bounds(cx, h, W)
-            y0, y1 = _window_bounds(cy, h, H)
-            n, mx, my, vx, vy = _moments(sat, xs, ys, x0, x1, y0, y1)
-            if n < min_pixels:
-                return None
-            new_h = max(factor * float(np.sqrt(max(vx, vy))), min_half_size)
-            done = (abs(mx - cx) < tolerance and abs(my - cy) < tolerance
-                    and abs(new_h - h) < tolerance)
-            cx, cy, h = mx, my, new_h
-            if done:
-                break
-    x0, x1 = _window_bounds(cx, h, W)
-    y0, y1 = _window_bounds(cy, h, H)
-    n = _moments(sat, xs, ys, x0, x1, y0, y1)[0]
-    if n < min_pixels:
+    found, cx, cy, h = compiled_kernels().mean_shift(
+        sat, float(cx), float(cy), float(h), np.array(factors, np.float64), int(min_pixels),
+        int(max_iterations), float(tolerance), float(min_half_size))
+    if not found:
         return None
     return (cx, cy), h
 
@@ -221,10 +200,8 @@ def crop_window(labels: np.ndarray, transform: CropTransform,
         ky0, ky1 = np.searchsorted(cell_y, 0), np.searchsorted(cell_y, size)
         sub = lab[y0 + ky0:y0 + ky1, x0 + kx0:x0 + kx1]
         if sub.size:
-            nl = max(int(sub.max()) + 1, 2)
-            flat = ((cell_y[ky0:ky1] * size)[:, None] + cell_x[kx0:kx1][None, :]
-                    + sub.astype(np.intp) * ncell)
-            counts = np.bincount(flat.ravel(), minlength=nl * ncell).reshape(nl, ncell)
+            counts = compiled_kernels().cell_votes(sub, cell_y[ky0:ky1], cell_x[kx0:kx1], size,
+                                                   max(int(sub.max()) + 1, 2))
     glove = counts[1:]
     glove_total = glove.sum(axis=0)
     total = glove_total + counts[0]

@@ -22,7 +22,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from colorglove_ros.core.segmentation.crop import mean_shift_crop
+from colorglove_ros.core.segmentation.crop import compiled_kernels, mean_shift_crop
 
 __all__ = ['SCENE_COLOUR_BITS', 'colour_diversity', 'glove_region_mask',
            'drop_oversized_components', 'PATCH_OUTLINE_GLOVE_SHARE', 'JUNCTION_WINDOW_PX',
@@ -45,12 +45,21 @@ def colour_diversity(labels: np.ndarray, num_colors: int, window: int,
     # the fewest pixels of a colour in the box, as an integer count: the box sums are exact
     # in 32-bit integers, and a colour with fewer pixels in the whole image is never dense
     need = max(int(np.ceil(min_density * window * window - 1e-9)), 1)
-    present = np.bincount(labels.ravel(), minlength=num_colors + 1)
+    kernels = compiled_kernels()
+    present, boxes = kernels.label_boxes(labels, num_colors + 1)
+    h, w = labels.shape
+    before = window // 2            # a pixel's box: this many pixels before it (OpenCV's
+    after = window - 1 - before     # anchor) and this many after, on each axis
     for color in np.flatnonzero(present[1:num_colors + 1] >= need) + 1:
-        inside = cv2.boxFilter(cv2.compare(labels, int(color), cv2.CMP_EQ) >> 7, cv2.CV_32S,
-                               (window, window), normalize=False,
+        # only the pixels whose box reaches the colour's bounding rectangle can count it:
+        # the box sums there, of the rectangle grown by the box (nothing of it outside)
+        x, y, bw, bh = boxes[color]
+        x0, x1 = max(x - after, 0), min(x + bw + before, w)
+        y0, y1 = max(y - after, 0), min(y + bh + before, h)
+        same = np.equal(labels[y0:y1, x0:x1], color).view(np.uint8)
+        inside = cv2.boxFilter(same, cv2.CV_32S, (window, window), normalize=False,
                                borderType=cv2.BORDER_CONSTANT)
-        counts += (inside >= need).view(np.uint8)
+        kernels.add_dense(counts[y0:y1, x0:x1], inside, need)
     return counts
 
 
@@ -69,10 +78,7 @@ def glove_region_mask(labels: np.ndarray, num_colors: int, window: int, min_colo
                          borderType=cv2.BORDER_CONSTANT) > 0
     n, comp = cv2.connectedComponents((np.asarray(labels) > 0).view(np.uint8), connectivity=8,
                                       ltype=cv2.CV_32S)
-    reached = np.zeros(n, bool)
-    reached[comp[rich]] = True
-    reached[0] = False
-    return near | reached.take(comp)   # (take: faster than reached[comp])
+    return compiled_kernels().near_or_reaching(comp, n, rich, near)
 
 
 def drop_oversized_components(labels: np.ndarray, max_pixels: float) -> np.ndarray:
@@ -82,7 +88,7 @@ def drop_oversized_components(labels: np.ndarray, max_pixels: float) -> np.ndarr
     if not labels.size or max_pixels <= 0:
         return labels
     out = labels
-    for color in np.flatnonzero(np.bincount(labels.ravel())[1:] > max_pixels) + 1:
+    for color in np.flatnonzero(compiled_kernels().label_boxes(labels, 1)[0][1:] > max_pixels) + 1:
         n, comp, stats, _ = cv2.connectedComponentsWithStats(
             (labels == color).view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
         big = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] > max_pixels) + 1
@@ -290,11 +296,17 @@ def _reaching(comp: np.ndarray, n: int, edges: tuple[bool, bool, bool, bool]) ->
     return out
 
 
-def scene_colour_table(rgb: np.ndarray, bits: int, min_pixels: float) -> np.ndarray:
+def scene_colour_table(rgb: np.ndarray, bits: int, min_pixels: float,
+                       where: np.ndarray | None = None) -> np.ndarray:
     """(2^(3 bits),) bool: the quantised colours (``color_model.lut_index``) that at least
-    ``min_pixels`` of the uint8 (N, 3) colours ``rgb`` fall in."""
-    from colorglove_ros.core.segmentation.color_model import lut_index
+    ``min_pixels`` of the uint8 (N, 3) colours ``rgb`` fall in; with ``where`` ((H, W) bool)
+    ``rgb`` is an (H, W, 3) image, and its pixels there count."""
+    from colorglove_ros.core.segmentation.color_model import index_tables, lut_index
 
-    counts = np.bincount(lut_index(np.asarray(rgb, np.uint8).reshape(-1, 3), bits),
-                         minlength=1 << (3 * bits))
+    if where is not None:
+        counts = compiled_kernels().colour_histogram(rgb, where, index_tables(bits),
+                                                     1 << (3 * bits))
+    else:
+        counts = np.bincount(lut_index(np.asarray(rgb, np.uint8).reshape(-1, 3), bits),
+                             minlength=1 << (3 * bits))
     return counts >= max(float(min_pixels), 1.0)

@@ -15,8 +15,8 @@ from colorglove_ros.core.segmentation.background import StaticBackground
 from colorglove_ros.core.segmentation.blobs import color_components
 from colorglove_ros.core.segmentation.color_model import (
     ColorCalibration,
+    index_tables,
     load_calibration,
-    lut_index,
     read_calibration_config,
 )
 from colorglove_ros.core.segmentation.color_processing import (
@@ -24,7 +24,12 @@ from colorglove_ros.core.segmentation.color_processing import (
     estimate_saturation,
     saturation_matrix,
 )
-from colorglove_ros.core.segmentation.crop import CropTransform, crop_to_tiny, mean_shift_crop
+from colorglove_ros.core.segmentation.crop import (
+    CropTransform,
+    compiled_kernels,
+    crop_to_tiny,
+    mean_shift_crop,
+)
 from colorglove_ros.core.segmentation.crop_prediction import (
     CropPrediction,
     covers,
@@ -150,26 +155,17 @@ def keep_reaching_components(labels: np.ndarray, reached: np.ndarray, removed: n
 #: sRGB byte -> linear RGB in 0..255 (float32): mixed pixels are linear mixes there.
 _LINEAR_RGB = (255.0 * srgb_to_linear(np.arange(256) / 255.0)).astype(np.float32)
 _CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
-_UNSURE = 255
-_NO_KEY = np.int32(np.iinfo(np.int32).max)   # larger than every sort key; label bits 255
-#: label -> its bits in a sort key; _UNSURE -> _NO_KEY (OR-ing it in gives _NO_KEY)
-_KEY_LABEL = np.append(np.arange(_UNSURE, dtype=np.int32), _NO_KEY)
+_NO_SCENE = np.zeros(0, bool)   # no scene colours (the classification's empty table)
 
 
 @functools.lru_cache(maxsize=64)
 def _reference_steps(distances: tuple[int, ...], row_stride: int) -> np.ndarray:
-    """Flat index steps (references, 1) to the pixels ``distances`` away along the 8 compass
-    directions (cached: read only)."""
+    """Flat index steps (S,) to the pixels ``distances`` away along the 8 compass directions
+    (cached: read only)."""
     steps = np.array([d * (sy * row_stride + sx) for d in distances
-                      for sy in (-1, 0, 1) for sx in (-1, 0, 1) if sy or sx])[:, None]
+                      for sy in (-1, 0, 1) for sx in (-1, 0, 1) if sy or sx], np.int64)
     steps.flags.writeable = False
     return steps
-
-
-def _gather(colours: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """Colours (at.shape + (4,)) float32 (R, G, B and a fourth channel to ignore) of the
-    pixels ``at`` (flat indices) of ``colours`` (one complex128 per pixel)."""
-    return colours.take(at).view(np.float32).reshape(*at.shape, 4)
 
 
 def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
@@ -199,89 +195,23 @@ def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
     bx, by, bw, bh = cv2.boundingRect(border.view(np.uint8))
     if not bw:
         return labels
+    kernels = compiled_kernels()
     pad = max(distances)
     h, w = labels.shape
     y0, y1 = max(by - pad, 0), min(by + bh + pad, h)
     x0, x1 = max(bx - pad, 0), min(bx + bw + pad, w)
-    # Work on the bounding box padded by the reach, as flat arrays: a step is an offset.
+    # The bounding box padded by the reach (its frame not sure): a step is a flat offset.
     box = cv2.copyMakeBorder(labels[y0:y1, x0:x1], pad, pad, pad, pad, cv2.BORDER_CONSTANT,
-                             value=_UNSURE)
-    # Linear RGB (and alpha) as one 16-byte item per pixel, a complex128: one take gathers a
-    # pixel's whole colour, on numpy's fast path for a native type (a 12-byte void is slower).
-    rgba = cv2.copyMakeBorder(cv2.cvtColor(np.ascontiguousarray(image[y0:y1, x0:x1]),
-                                           cv2.COLOR_RGB2RGBA), pad, pad, pad, pad,
-                              cv2.BORDER_CONSTANT)
-    colours = cv2.LUT(rgba, _LINEAR_RGB).view(np.complex128).ravel()
-    steps = _reference_steps(tuple(distances), box.shape[1])
-    inner = box[pad:-pad, pad:-pad]   # a view of the box without the padding
-    flat = box.ravel()
-    border_box = np.zeros(box.shape, bool)
-    border_inner = border_box[pad:-pad, pad:-pad]
-    border_inner[...] = border[y0:y1, x0:x1]
-    changed = np.zeros(0, np.intp)   # flat indices of the pixels the last pass relabelled
-    for k in range(passes):
-        if k:
-            was_border = border_box.copy()
-            np.not_equal(cv2.erode(inner, _CROSS), cv2.dilate(inner, _CROSS), out=border_inner)
-            moved = border_box != was_border   # pixels whose label or sureness changed
-            moved.ravel()[changed] = True
-        at = np.flatnonzero(border_box)
-        if not len(at):
-            break
-        sure = flat.copy()
-        sure[at] = _UNSURE
-        ref = at + steps                      # (references, border pixels)
-        if k:
-            # A pixel decided in the last pass whose references kept their labels and
-            # sureness would be decided the same again: it keeps its label.
-            redo = moved.ravel().take(ref).any(axis=0)
-            redo |= ~was_border.ravel().take(at)
-            at, ref = at[redo], ref.compress(redo, axis=1)
-            if not len(at):   # then no later pass changes anything either
-                break
-        ref_labels = sure.take(ref)
-        own = _gather(colours, at)
-        diff = _gather(colours, ref)
-        diff -= own
-        diff *= diff
-        dist = diff[..., 0] + diff[..., 1]
-        dist += diff[..., 2]
-        # Non-negative float32 values order like their int32 bit patterns: put the label in
-        # the lowest 8 mantissa bits, and one min over the references gives the nearest
-        # reference's label; a reference that is not sure (or is padding) gets the largest
-        # key, label 255.
-        key = dist.view(np.int32)
-        key &= ~0xFF
-        key |= cv2.LUT(ref_labels, _KEY_LABEL)
-        label_a = (key.min(axis=0) & 0xFF).astype(np.uint8)
-        current = flat[at]
-        new = np.where(label_a == _UNSURE, current, label_a)
-        # Glove pixels about to change: keep their label if their colour is no mix of a and b.
-        check = np.flatnonzero((new != current) & (current != 0))
-        if len(check):
-            key = key[:, check]
-            nearest = key.argmin(axis=0)
-            others = np.where(ref_labels[:, check] == label_a[check], _NO_KEY, key)
-            second = others.argmin(axis=0)
-            columns = np.arange(len(check))
-            has_b = (others[second, columns] & 0xFF) != _UNSURE
-            second = np.where(has_b, second, nearest)   # no other label: b = a
-            a = _gather(colours, ref[nearest, check])
-            span = _gather(colours, ref[second, check]) - a
-            rel = own[check] - a
-            # squared distance of c from the segment a-b, and the segment's squared length
-            length2, along, off2 = (np.zeros(len(check), np.float32) for _ in range(3))
-            for channel in range(3):
-                span_c, rel_c = span[:, channel], rel[:, channel]
-                length2 += span_c * span_c
-                along += rel_c * span_c
-                off2 += rel_c * rel_c
-            t = np.clip(along / np.maximum(length2, 1e-6), 0.0, 1.0)
-            off2 -= t * (2.0 * along - t * length2)   # |rel - t span|^2
-            not_a_mix = off2 > np.maximum(mix_tolerance ** 2 * length2, min_residual ** 2)
-            new[check[not_a_mix]] = current[check[not_a_mix]]
-        changed = at[new != current]
-        flat[at] = new
+                             value=kernels.UNSURE)
+    rgb = cv2.copyMakeBorder(np.ascontiguousarray(image[y0:y1, x0:x1]), pad, pad, pad, pad,
+                             cv2.BORDER_CONSTANT)
+    border_box = np.zeros(box.shape, np.uint8)
+    border_box[pad:-pad, pad:-pad] = border[y0:y1, x0:x1]
+    kernels.relabel_passes(
+        box, rgb.reshape(-1, 3), _LINEAR_RGB, border_box,
+        _reference_steps(tuple(distances), box.shape[1]), pad, passes,
+        np.float32(mix_tolerance ** 2), np.float32(min_residual ** 2))
+    inner = box[pad:-pad, pad:-pad]
     out = labels.copy()
     out[y0:y1, x0:x1] = inner
     return out
@@ -556,6 +486,7 @@ class GloveSegmenter:
         # the shared worker while the region of interest is segmented (done before
         # :meth:`process` returns)
         self._learning: Future[None] | None = None
+        compiled_kernels()   # (compiled or loaded now, not on the first frame)
 
     def lose_track(self) -> None:
         """Forget the followed hand: the next frame is searched whole (for frames that do not
@@ -574,12 +505,15 @@ class GloveSegmenter:
                               source=self.source)
 
     # ------------------------------------------------------------------ helpers
-    def _classify(self, image: np.ndarray, table: np.ndarray | None) -> np.ndarray:
+    def _classify(self, image: np.ndarray, table: np.ndarray | None,
+                  scene: np.ndarray | None = None) -> np.ndarray:
         """The calibration's labels of ``image`` after the light ``table``, with the
-        camera's settled saturation undone (``saturation_rate`` > 0)."""
-        if self._saturation is None:
-            return self.calibration.classify(image, table)
-        return self._saturation.lut().take(lut_index(image, self.calibration.bits, table))
+        camera's settled saturation undone (``saturation_rate`` > 0); 0 where ``scene`` (the
+        frame's scene colours, :func:`scene_colour_table`) holds the pixel's colour."""
+        lut = self.calibration.lut if self._saturation is None else self._saturation.lut()
+        return compiled_kernels().classify(
+            image, lut, index_tables(self.calibration.bits, table),
+            _NO_SCENE if scene is None else scene, index_tables(SCENE_COLOUR_BITS))
 
     def _reference(self) -> np.ndarray:
         """The glove's reference colours (linear RGB) as this camera shows them: through its
@@ -622,14 +556,15 @@ class GloveSegmenter:
         if window is None or not mixed.any():
             return out
         max_area = GLOVE_LIKE_PATCH_SHARE * (2.0 * window[1]) ** 2
+        boxes = compiled_kernels().label_boxes(labels, self.calibration.num_colors + 1)[1]
         for colour in np.unique(labels[mixed]):
             if colour == 0:
                 continue
             # each colour's components lie inside its bounding rectangle: label only that
-            same = cv2.compare(labels, int(colour), cv2.CMP_EQ)
-            x, y, w, h = cv2.boundingRect(same)
+            x, y, w, h = (int(v) for v in boxes[colour])
             n, comp, stats, _ = cv2.connectedComponentsWithStats(
-                same[y:y + h, x:x + w], connectivity=8, ltype=cv2.CV_32S)
+                np.equal(labels[y:y + h, x:x + w], colour).view(np.uint8), connectivity=8,
+                ltype=cv2.CV_32S)
             patch = np.zeros(n, bool)
             patch[comp[mixed[y:y + h, x:x + w]]] = True
             patch &= stats[:, cv2.CC_STAT_AREA] <= max_area
@@ -645,15 +580,13 @@ class GloveSegmenter:
         colour outside the predicted window, the frame's scene colours, the learnt static
         background."""
         table, scene, static, prediction = masks
-        labels = self._classify(roi, table)
+        labels = self._classify(roi, table, scene)
         if prediction is not None:   # glove colour outside the predicted window is not the hand
             px0, px1, py0, py1 = prediction_bounds(prediction, self.prediction_margin,
                                                    origin, r, labels.shape)
             inside = labels[py0:py1, px0:px1].copy()
             labels[...] = 0
             labels[py0:py1, px0:px1] = inside
-        if scene is not None:
-            labels[scene.take(lut_index(roi, SCENE_COLOUR_BITS))] = 0
         if static is not None:
             labels[_coarse_cells(static, origin, r, labels.shape, image_hw)] = 0
         return labels
@@ -811,8 +744,8 @@ class GloveSegmenter:
         x0, x1, y0, y1 = region
         rejected = self._classify(small, table) > 0
         rejected[y0:y1, x0:x1] &= labels == 0
-        return scene_colour_table(small[rejected], SCENE_COLOUR_BITS,
-                                  self.scene_colour_min_share * rejected.size)
+        return scene_colour_table(small, SCENE_COLOUR_BITS,
+                                  self.scene_colour_min_share * rejected.size, rejected)
 
     def _small(self, image: np.ndarray) -> tuple[np.ndarray, float, float]:
         """The coarse frame (``image`` downsampled by ``coarse_factor``) and its x and y

@@ -152,9 +152,14 @@ class EdgeTrackerConfig:
     check and finds more of that digit's links (then more links, then a smaller residual)
     replaces the fit: a digit that moved faster than the edge search reaches (the 3-D
     mouse's thumb clicks) is looked for where it went instead of being left behind. On the
-    mouse's table views it lets the tracker follow the thumb's clicks itself but also puts
-    a drifted hand's thumb on wrong edges (docs/RESULTS.md, DigitEyes tenth pass), so it is
-    off.
+    mouse's table views it lets the tracker follow the thumb's clicks itself (with one camera
+    it makes most of them), but it keeps drifted hands tracked (a larger cursor error), costs
+    CPU and is not measured on the bare-hand sequences (docs/RESULTS.md, DigitEyes tenth and
+    eleventh passes), so it is off. Two guards (inf: off) keep a candidate only when the rest
+    of the hand stays as it was: ``retry_max_wrist_move_m``, its wrist within that distance
+    of the previous pose's;
+    ``retry_rest_margin_px``, it finds at least as many links outside the retried digit as
+    the last good frame's fit and its edge residual is at most that much above that fit's.
     """
 
     search: EdgeSearchConfig = field(default_factory=EdgeSearchConfig)
@@ -199,6 +204,8 @@ class EdgeTrackerConfig:
     retry_dofs: tuple[str, ...] = ()
     retry_step_deg: float = 12.0
     retry_steps: int = 3
+    retry_max_wrist_move_m: float = math.inf
+    retry_rest_margin_px: float = math.inf
     silhouette_margin_px: float = 60.0
     loss_patience: int = 3
     coast_patience: int = 0
@@ -255,10 +262,14 @@ class EdgeTrackerConfig:
         if self.loss_patience < 1 or self.init_hold_frames < 1:
             raise EdgeTrackerError('loss_patience and init_hold_frames must be >= 1')
         if any(n not in DOF_NAMES[6:] for n in self.retry_dofs) or not self.retry_step_deg > 0 \
-                or self.retry_steps < 1:
-            raise EdgeTrackerError(f'retry_dofs must be joint DOF names, retry_step_deg > 0 and '
-                                   f'retry_steps >= 1, got {self.retry_dofs}, '
-                                   f'{self.retry_step_deg}, {self.retry_steps}')
+                or self.retry_steps < 1 or not self.retry_max_wrist_move_m > 0 \
+                or not self.retry_rest_margin_px >= 0:
+            raise EdgeTrackerError(f'retry_dofs must be joint DOF names, retry_step_deg > 0, '
+                                   f'retry_steps >= 1, retry_max_wrist_move_m > 0 and '
+                                   f'retry_rest_margin_px >= 0, got {self.retry_dofs}, '
+                                   f'{self.retry_step_deg}, {self.retry_steps}, '
+                                   f'{self.retry_max_wrist_move_m}, '
+                                   f'{self.retry_rest_margin_px}')
 
     def stabilizer_diagonal(self) -> np.ndarray:
         """The (26,) diagonal of S."""

@@ -132,6 +132,7 @@ class EdgeTracker:
         self._refit_next = np.zeros(len(DIGITS), dtype=np.int64)
         self._frame = 0
         self._refit_tokens = float(self.config.finger_refit_burst)
+        self._last_good: EdgeFit | None = None
 
     def reset(self) -> None:
         """Drop the track and wait for an initialisation."""
@@ -313,6 +314,7 @@ class EdgeTracker:
             return EdgeTrackResult('tracking', None, f'poor fit: {reason}', fit)
         self._bad_frames = 0
         self._coast_frames = 0
+        self._last_good = fit
         if self._resume > 0:
             self._resume -= 1
             return EdgeTrackResult('tracking', None, 'resuming after coasting: '
@@ -376,7 +378,8 @@ class EdgeTracker:
         digit, fits from the previous pose with that angle ``retry_step_deg`` up and down,
         then twice that and so on (``retry_steps``; nearest first, stopping once a candidate
         finds the whole digit); the best candidate that passes every check and finds more of
-        the digit's links, else the fit as it was, with its (kind, reason)."""
+        the digit's links and keeps the rest of the hand as it was (:meth:`_retry_guard`),
+        else the fit as it was, with its (kind, reason)."""
         cfg = self.config
         assert self._q is not None
         step = np.radians(cfg.retry_step_deg)
@@ -398,13 +401,31 @@ class EdgeTracker:
                     cand = fit_pose(self.kin, self.points, self.cameras, greys, q0, cfg,
                                     cfg.measurement_rounds, silhouettes=silhouettes)
                     key = (cand.digit_links_found[digit], sum(cand.links_found), -cand.rms_px)
-                    if not self._check_fit(cand)[0] and key > best_key:
+                    if not self._check_fit(cand)[0] and key > best_key \
+                            and self._retry_guard(cand, digit):
                         best, best_key = cand, key
                 if best is not None and best_key[0] >= best.digit_links_usable[digit]:
                     break                   # the digit found whole: no farther start
             if best is not None:
                 fit, kind, reason = best, '', ''
         return fit, kind, reason
+
+    def _retry_guard(self, cand: EdgeFit, digit: int) -> bool:
+        """Whether a retried candidate leaves the rest of the hand as it was: its wrist within
+        ``retry_max_wrist_move_m`` of the previous pose's and, with ``retry_rest_margin_px``
+        finite and a good frame since the track started, at least as many links found
+        outside ``digit`` as that frame's fit and an edge residual at most the margin above
+        its."""
+        cfg = self.config
+        assert self._q is not None
+        if not np.linalg.norm(cand.q[0:3] - self._q[0:3]) <= cfg.retry_max_wrist_move_m:
+            return False
+        ref = self._last_good
+        if not np.isfinite(cfg.retry_rest_margin_px) or ref is None:
+            return True
+        rest = sum(cand.links_found) - cand.digit_links_found[digit]
+        return rest >= sum(ref.links_found) - ref.digit_links_found[digit] \
+            and cand.rms_px <= ref.rms_px + cfg.retry_rest_margin_px
 
     def _refit_due(self, digit: int, fixed: bool) -> None:
         """After a re-fit of ``digit``: a re-fit that left it unexplained makes it wait

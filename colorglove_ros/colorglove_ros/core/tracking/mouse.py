@@ -28,14 +28,14 @@ from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import DOF_NAMES, KEYPOINT_NAMES, NUM_DOFS, HandModel
 
 __all__ = ['MouseError', 'TablePlane', 'MouseConfig', 'MouseState', 'Mouse3D', 'BUTTON_NAMES',
-           'palm_centre', 'raw_mouse_values']
+           'BUTTON_DOFS', 'palm_centre', 'raw_mouse_values']
 
 BUTTON_NAMES: tuple[str, ...] = ('thumb', 'little')
+BUTTON_DOFS: tuple[str, ...] = ('thumb_cmc_abd', 'little_mcp_abd')   # the joints they read
 _PALM_KEYPOINTS = [KEYPOINT_NAMES.index(n) for n in
                    ('wrist', 'index_mcp', 'middle_mcp', 'ring_mcp', 'little_mcp')]
 _INDEX_TIP = KEYPOINT_NAMES.index('index_tip')
-_THUMB_ABD = DOF_NAMES.index('thumb_cmc_abd')
-_LITTLE_ABD = DOF_NAMES.index('little_mcp_abd')
+_THUMB_ABD, _LITTLE_ABD = (DOF_NAMES.index(n) for n in BUTTON_DOFS)
 
 
 class MouseError(ColorGloveError):

@@ -62,8 +62,12 @@ def test_default_hand_from_cache_equals_a_fresh_build(tmp_path: Path) -> None:
 
 
 def test_segmentation_node_imports_neither_trimesh_nor_scipy() -> None:
+    """Importing the node loads none of the heavy modules: numba (which loads scipy) comes
+    with the segmenter's compiled kernels when the node builds its segmenter
+    (``crop.compiled_kernels``), not with the import."""
     code = ('import sys, colorglove_ros.ros.nodes.segmentation_node\n'
-            'print(sorted(m for m in ("trimesh", "scipy", "sklearn") if m in sys.modules))')
+            'print(sorted(m for m in ("trimesh", "scipy", "sklearn", "numba")'
+            ' if m in sys.modules))')
     run = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                          timeout=120)
     assert run.returncode == 0, run.stderr

@@ -198,3 +198,36 @@ def test_lookup_poses_match_estimate_global_pose(blob_db) -> None:
         np.testing.assert_allclose(res.poses[:, 0:6], want, rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(res.poses[:, 6:], lookup._a['poses'][idx, 6:])
         assert np.ptp(want[:, 0]) > 1e-3                   # the rotated anchors differ
+
+
+def test_a_search_blended_is_the_lookup(blob_db) -> None:
+    """``search`` then ``blend`` give what ``lookup`` gives (the two-hand layer blends only the
+    lookups a hand is tracked from); the search's nearest distance is the result's first, and
+    ``core.pipeline``'s ``search`` and ``blend`` refuse a far match as ``look_up`` does."""
+    from colorglove_ros.core.pipeline import NoHand, StageLimits, blend, look_up, search
+    from colorglove_ros.core.segmentation.crop import CropTransform, TinyCrop
+
+    lookup = PoseLookup(blob_db, num_candidates=60, num_blend=10)
+    cam = PinholeCamera(640, 480, 600.0, 600.0, 320.0, 240.0)
+    crop = (1.2, 40.0, 41.0)
+    shifted = np.roll(blob_db.tiny[3], (1, 1), axis=(0, 1))
+    for tiny in (blob_db.tiny[37], shifted):
+        whole = lookup.lookup(tiny, crop, cam)
+        found = lookup.search(tiny, crop)
+        assert found.nearest == whole.distances[0]
+        parts = lookup.blend(found, cam)
+        for name in ('indices', 'distances', 'weights', 'poses', 'blended'):
+            np.testing.assert_array_equal(getattr(parts, name), getattr(whole, name))
+        np.testing.assert_array_equal(parts.constraints.full_xy, whole.constraints.full_xy)
+        assert parts.num_candidates == whole.num_candidates
+        query = TinyCrop(tiny, CropTransform(*crop))
+        for limit in (np.inf, 0.5 * whole.distances[0]):
+            limits = StageLimits(max_image_distance=limit)
+            one, two = look_up(lookup, query, cam, None, limits), blend(
+                lookup, search(lookup, query), cam, None, limits)
+            assert isinstance(one, NoHand) == isinstance(two, NoHand) == (limit < np.inf
+                                                                          and limit > 0)
+            if isinstance(one, NoHand):
+                assert one.reason == two.reason
+    assert isinstance(search(lookup, TinyCrop(np.zeros((40, 40), np.uint8),
+                                              CropTransform(*crop))), NoHand)

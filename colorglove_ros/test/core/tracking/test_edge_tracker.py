@@ -597,16 +597,54 @@ def test_a_thumb_click_faster_than_the_edge_search_is_found_by_the_retry() -> No
     before = Q[frame].copy()
     before[thumb] = Q[start - 1, thumb]
     errors = {}
-    for retry in ((), ('thumb_cmc_abd',)):
+    # the last setting: a guard no candidate passes (the wrist must stay within 10 um)
+    for name, retry, guard in (('off', (), {}), ('on', ('thumb_cmc_abd',), {}),
+                               ('guarded', ('thumb_cmc_abd',), {'retry_max_wrist_move_m': 1e-5})):
         tracker = EdgeTracker(model, calibration.cameras[:1],
-                              EdgeTrackerConfig(loss_patience=1, retry_dofs=retry))
+                              EdgeTrackerConfig(loss_patience=1, retry_dofs=retry, **guard))
         tracker.initialize(before)
         out = tracker.update(image)
         q = out.q if out.q is not None else before
-        errors[retry] = abs(np.degrees(q[thumb] - Q[frame, thumb]))
-        if retry:
+        errors[name] = abs(np.degrees(q[thumb] - Q[frame, thumb]))
+        if name == 'on':
             assert out.q is not None, out.reason
             assert out.fit.digit_links_found[0] == out.fit.digit_links_usable[0] > 0
-    assert errors[()] > 25.0 and errors[('thumb_cmc_abd',)] < 5.0
+    assert errors['off'] > 25.0 and errors['on'] < 5.0 and errors['guarded'] > 25.0
     with pytest.raises(EdgeTrackerError):
         EdgeTrackerConfig(retry_dofs=('thumb_abduction',))
+
+
+def _fit(q: np.ndarray, rms: float, found: int, thumb_found: int) -> EdgeFit:
+    return EdgeFit(q, rms, (found,), (20,), (5,), 3, digit_links_found=(thumb_found, 4, 4, 4, 4),
+                   digit_links_usable=(3, 4, 4, 4, 4))
+
+
+def test_the_retry_guards_keep_a_candidate_only_when_the_rest_of_the_hand_stays() -> None:
+    """A retried candidate must keep the wrist near the previous pose and, once a frame was
+    good, find as many links outside the retried digit as that frame's fit with a residual
+    at most the margin above its."""
+    calibration = load_calibration(resolve_path('config/calibration.yaml'))
+    model = HandModel(calibration.hand_length_m)
+    q = initialisation_pose(model, (0.0, 0.05, 0.5))
+    tracker = EdgeTracker(model, calibration.cameras[:1], EdgeTrackerConfig(
+        retry_dofs=('thumb_cmc_abd',), retry_max_wrist_move_m=0.01, retry_rest_margin_px=0.5))
+    tracker.initialize(q)
+    near, far = q.copy(), q.copy()
+    near[0] += 0.005
+    far[0] += 0.02
+    # no good frame yet: only the wrist is checked
+    assert tracker._retry_guard(_fit(near, 2.9, 17, 3), 0)
+    assert not tracker._retry_guard(_fit(far, 1.0, 20, 3), 0)
+    tracker._last_good = _fit(q, 1.0, 17, 1)           # 16 links outside the thumb
+    assert tracker._retry_guard(_fit(near, 1.5, 19, 3), 0)
+    assert not tracker._retry_guard(_fit(near, 1.6, 19, 3), 0)    # residual 0.6 px above
+    assert not tracker._retry_guard(_fit(near, 1.0, 18, 3), 0)    # 15 links outside the thumb
+    off = EdgeTracker(model, calibration.cameras[:1], EdgeTrackerConfig(
+        retry_dofs=('thumb_cmc_abd',)))
+    off.initialize(q)
+    off._last_good = tracker._last_good
+    assert off._retry_guard(_fit(far, 2.9, 5, 3), 0)              # both guards off (inf)
+    with pytest.raises(EdgeTrackerError):
+        EdgeTrackerConfig(retry_max_wrist_move_m=0.0)
+    with pytest.raises(EdgeTrackerError):
+        EdgeTrackerConfig(retry_rest_margin_px=-1.0)

@@ -1,0 +1,453 @@
+"""Compiled (numba) kernels of the segmenter's per-pixel loops: the border relabelling's passes
+(:func:`segmenter.relabel_borders`).
+
+The same arithmetic as the numpy code they replaced (float32 colour distances in the same
+order, the same tie rules), as loops over the pixels, so one call replaces the dozens of
+whole-array numpy passes per relabelling pass. Every kernel is compiled once and cached on disk
+(``cache=True``); :func:`compile_kernels` makes (or loads) them ahead of the first frame and
+allows no other signature. Arrays passed in must be C-contiguous, of the dtypes in
+``_SIGNATURES``.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numba
+import numpy as np
+
+__all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
+           'colour_histogram', 'cell_votes', 'near_or_reaching',
+           'add_dense', 'compile_kernels']
+
+#: The label of a reference pixel that is not sure (on a label border, or padding).
+UNSURE = 255
+_NO_KEY = np.int32(np.iinfo(np.int32).max)   # larger than every sort key; label bits 255
+_JIT = {'cache': True, 'nogil': True}
+_COMPILED = False   # every kernel compiled (compile_kernels)
+
+
+@numba.njit(inline='always', **_JIT)
+def _on_border(box: np.ndarray, y: int, x: int, pad: int) -> bool:
+    """Whether pixel (``y``, ``x``) of ``box`` has a 4-neighbour of another label inside
+    ``box`` less its ``pad`` wide frame (pixels outside it are ignored, as an erosion and a
+    dilation of that region alone see them)."""
+    rows, cols = box.shape
+    v = box[y, x]
+    return ((y > pad and box[y - 1, x] != v) or (y < rows - pad - 1 and box[y + 1, x] != v)
+            or (x > pad and box[y, x - 1] != v) or (x < cols - pad - 1 and box[y, x + 1] != v))
+
+
+@numba.njit(inline='always', **_JIT)
+def _colour(rgb: np.ndarray, table: np.ndarray, i: int, c: int) -> np.float32:
+    return table[rgb[i, c]]
+
+
+@numba.njit(inline='always', **_JIT)
+def _decide(current: np.uint8, sure: np.ndarray, rgb: np.ndarray, table: np.ndarray,
+            steps: np.ndarray, i: int, mix2: np.float32, residual2: np.float32,
+            dists: np.ndarray, bits: np.ndarray, keys: np.ndarray) -> np.uint8:
+    """The new label of border pixel ``i`` (label ``current``): that of the sure reference
+    (``sure``: the labels, ``UNSURE`` on a border and in the padding) whose linear RGB is
+    nearest its own, unless none is sure, or the pixel is glove and its colour no mix of that
+    reference's and the nearest other label's."""
+    n_steps = len(steps)
+    o0, o1, o2 = (_colour(rgb, table, i, 0), _colour(rgb, table, i, 1),
+                  _colour(rgb, table, i, 2))
+    # sort keys: the float32 distance's bits with the label in the lowest 8 bits
+    best = _NO_KEY
+    nearest = 0
+    for s in range(n_steps):
+        r = i + steps[s]
+        d0 = _colour(rgb, table, r, 0) - o0
+        d1 = _colour(rgb, table, r, 1) - o1
+        d2 = _colour(rgb, table, r, 2) - o2
+        dist = d0 * d0 + d1 * d1
+        dists[s] = dist + d2 * d2
+        label = sure[r]
+        key = _NO_KEY if label == UNSURE else (bits[s] & ~0xFF) | np.int32(label)
+        keys[s] = key
+        if key < best:
+            best = key
+            nearest = s
+    label_a = best & 0xFF
+    if label_a == UNSURE or label_a == current or current == 0:
+        return current if label_a == UNSURE else np.uint8(label_a)
+    # a glove label keeps its label when its colour is no mix of a and the nearest other b
+    second = 0
+    second_key = _NO_KEY
+    for s in range(n_steps):
+        r = i + steps[s]
+        key = _NO_KEY if sure[r] == label_a else keys[s]
+        if s == 0 or key < second_key:
+            second_key = key
+            second = s
+    if (second_key & 0xFF) == UNSURE:   # no other label: b = a
+        second = nearest
+    ra, rb = i + steps[nearest], i + steps[second]
+    zero = np.float32(0.0)
+    length2, along, off2 = zero, zero, zero
+    for c in range(3):
+        a = _colour(rgb, table, ra, c)
+        span = _colour(rgb, table, rb, c) - a
+        rel = _colour(rgb, table, i, c) - a
+        length2 = length2 + span * span
+        along = along + rel * span
+        off2 = off2 + rel * rel
+    t = along / max(length2, np.float32(1e-6))
+    t = min(max(t, zero), np.float32(1.0))
+    off2 = off2 - t * (np.float32(2.0) * along - t * length2)
+    if off2 > max(mix2 * length2, residual2):
+        return current
+    return np.uint8(label_a)
+
+
+@numba.njit(**_JIT)
+def relabel_passes(box: np.ndarray, rgb: np.ndarray, table: np.ndarray, border: np.ndarray,
+                   steps: np.ndarray, pad: int, passes: int, mix2: np.float32,
+                   residual2: np.float32) -> None:
+    """The passes of :func:`segmenter.relabel_borders` on its padded box, in place.
+
+    ``box`` (H, W) uint8: the labels, with a ``pad`` wide frame of ``UNSURE``; ``rgb``
+    (H * W, 3) uint8: the image's bytes there (0 in the frame); ``table`` (256,) float32: a
+    byte's linear value; ``border`` (H, W) uint8: 1 at the first pass's border pixels (it is
+    overwritten); ``steps`` (S,) int64: flat offsets to the reference pixels; ``mix2``,
+    ``residual2``: the squared mix tolerance and minimal residual.
+
+    Each pass decides its border pixels independently (from the labels before it, in any
+    order). A label changes only where the last pass relabelled, so only there and at their
+    4-neighbours can a pixel join or leave the border, and the pixels to re-decide are the
+    new border pixels and those with such a pixel among their references."""
+    rows, cols = box.shape
+    size = rows * cols
+    flat = box.ravel()
+    bflat = border.ravel()
+    n_steps = len(steps)
+    at = np.empty(size, np.int64)          # this pass's border pixels
+    count = 0
+    for i in range(size):
+        if bflat[i]:
+            at[count] = i
+            count += 1
+    sure = flat.copy()                     # the labels, UNSURE on the border
+    for j in range(count):
+        sure[at[j]] = UNSURE
+    todo = np.empty(size, np.int64)        # ... of them, those to decide
+    new = np.empty(size, np.uint8)
+    changed = np.empty(size, np.int64)     # the pixels the last pass relabelled
+    n_changed = 0
+    moved = np.zeros(size, np.uint8)       # relabelled, or joined or left the border
+    fresh = np.zeros(size, np.uint8)       # joined the border in this pass
+    touched = np.empty(2 * size, np.int64)   # moved: (changed) + (border changed)
+    dists = np.empty(n_steps, np.float32)
+    bits = dists.view(np.int32)   # non-negative float32 values order like their int32 bits
+    keys = np.empty(n_steps, np.int32)
+    for k in range(passes):
+        n_todo = 0
+        n_touched = 0
+        if k:
+            for j in range(n_changed):
+                i = changed[j]
+                moved[i] = 1
+                touched[n_touched] = i
+                n_touched += 1
+                for q in (i - cols, i + cols, i - 1, i + 1, i):
+                    y, x = q // cols, q % cols
+                    if y < pad or y >= rows - pad or x < pad or x >= cols - pad:
+                        continue
+                    b = 1 if _on_border(box, y, x, pad) else 0
+                    if b != bflat[q]:
+                        if b:
+                            fresh[q] = 1
+                        bflat[q] = b
+                        moved[q] = 1
+                        touched[n_touched] = q
+                        n_touched += 1
+            kept = 0
+            for j in range(count):          # left the border: dropped
+                if bflat[at[j]]:
+                    at[kept] = at[j]
+                    kept += 1
+            count = kept
+            for j in range(n_touched):      # joined it: added (once)
+                q = touched[j]
+                sure[q] = UNSURE if bflat[q] else flat[q]
+                if fresh[q] == 1:
+                    at[count] = q
+                    count += 1
+                    fresh[q] = 2
+        if count == 0:
+            break
+        for j in range(count):
+            i = at[j]
+            redo = k == 0 or fresh[i] != 0
+            if not redo:
+                for s in range(n_steps):
+                    if moved[i + steps[s]]:
+                        redo = True
+                        break
+            if redo:
+                todo[n_todo] = i
+                n_todo += 1
+        for j in range(n_touched):
+            moved[touched[j]] = 0
+            fresh[touched[j]] = 0
+        if n_todo == 0:
+            break
+        for j in range(n_todo):
+            new[j] = _decide(flat[todo[j]], sure, rgb, table, steps, todo[j], mix2, residual2,
+                             dists, bits, keys)
+        n_changed = 0
+        for j in range(n_todo):
+            i = todo[j]
+            if new[j] != flat[i]:
+                flat[i] = new[j]
+                changed[n_changed] = i
+                n_changed += 1
+
+
+@numba.njit(**_JIT)
+def _window_bounds(c: float, h: float, n: int) -> tuple[int, int]:
+    """Integer index range [lo, hi) of pixel centres within c +- h, clipped to [0, n)."""
+    return max(int(math.ceil(c - h)), 0), min(int(math.floor(c + h)) + 1, n)
+
+
+@numba.njit(**_JIT)
+def _moments(sat: np.ndarray, x0: int, x1: int, y0: int, y1: int
+             ) -> tuple[float, float, float, float, float]:
+    """Count, means and variances of the mask pixels in the box [x0, x1) x [y0, y1) from
+    the mask's summed-area table ``sat``. Every sum is of whole numbers (exact in float64,
+    in any order), so these are the numpy code's values to the bit."""
+    n = float(sat[y1, x1] - sat[y0, x1] - sat[y1, x0] + sat[y0, x0])
+    if n <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0
+    sx = sxx = 0.0
+    below = sat[y1, x0] - sat[y0, x0]
+    for x in range(x0, x1):
+        above = sat[y1, x + 1] - sat[y0, x + 1]
+        count = float(above - below)
+        below = above
+        sx += count * x
+        sxx += count * (float(x) * float(x))
+    sy = syy = 0.0
+    left = sat[y0, x1] - sat[y0, x0]
+    for y in range(y0, y1):
+        right = sat[y + 1, x1] - sat[y + 1, x0]
+        count = float(right - left)
+        left = right
+        sy += count * y
+        syy += count * (float(y) * float(y))
+    mx, my = sx / n, sy / n
+    return n, mx, my, max(sxx / n - mx * mx, 0.0), max(syy / n - my * my, 0.0)
+
+
+@numba.njit(**_JIT)
+def mean_shift(sat: np.ndarray, cx: float, cy: float, h: float, factors: np.ndarray,
+               min_pixels: int, max_iterations: int, tolerance: float, min_half_size: float
+               ) -> tuple[bool, float, float, float]:
+    """The iterations of :func:`crop.mean_shift_crop` on the mask's summed-area table ``sat``
+    ((H + 1, W + 1) int32) from the window ((``cx``, ``cy``), ``h``), with each bandwidth
+    factor of ``factors`` in turn: (found, cx, cy, half)."""
+    rows, cols = sat.shape[0] - 1, sat.shape[1] - 1
+    for factor in factors:
+        for _ in range(max_iterations):
+            x0, x1 = _window_bounds(cx, h, cols)
+            y0, y1 = _window_bounds(cy, h, rows)
+            n, mx, my, vx, vy = _moments(sat, x0, x1, y0, y1)
+            if n < min_pixels:
+                return False, cx, cy, h
+            new_h = max(factor * math.sqrt(max(vx, vy)), min_half_size)
+            done = (abs(mx - cx) < tolerance and abs(my - cy) < tolerance
+                    and abs(new_h - h) < tolerance)
+            cx, cy, h = mx, my, new_h
+            if done:
+                break
+    x0, x1 = _window_bounds(cx, h, cols)
+    y0, y1 = _window_bounds(cy, h, rows)
+    n = _moments(sat, x0, x1, y0, y1)[0]
+    return n >= min_pixels, cx, cy, h
+
+
+@numba.njit(**_JIT)
+def label_boxes(labels: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """How many pixels of the 2-D uint8 ``labels`` (any strides) hold each label (max(``size``,
+    largest label + 1),) int64, as ``np.bincount(labels.ravel(), minlength=size)``, and the
+    bounding rectangle (x, y, width, height; ``cv2.boundingRect`` of its pixels, zeros when
+    none) of each label below min(``size``, 64): (``size``, 4) int64."""
+    # four histograms, so that runs of one label do not wait on one counter; a bit per label
+    # in each row's and each column's mask of the labels seen there
+    partial = np.zeros((4, 256), np.int64)
+    rows, cols = labels.shape
+    row_seen = np.zeros(rows, np.uint64)
+    col_seen = np.zeros(cols, np.uint64)
+    quads = cols - cols % 4
+    one, none = np.uint64(1), np.uint64(0)
+    for y in range(rows):
+        seen = none
+        for x in range(0, quads, 4):
+            v0, v1, v2, v3 = labels[y, x], labels[y, x + 1], labels[y, x + 2], labels[y, x + 3]
+            partial[0, v0] += 1
+            partial[1, v1] += 1
+            partial[2, v2] += 1
+            partial[3, v3] += 1
+            b0, b1 = one << np.uint64(v0 & 63), one << np.uint64(v1 & 63)
+            b2, b3 = one << np.uint64(v2 & 63), one << np.uint64(v3 & 63)
+            if (v0 | v1 | v2 | v3) >= 64:    # (a label of 64 or more sets no bit)
+                b0, b1 = b0 if v0 < 64 else none, b1 if v1 < 64 else none
+                b2, b3 = b2 if v2 < 64 else none, b3 if v3 < 64 else none
+            col_seen[x] |= b0
+            col_seen[x + 1] |= b1
+            col_seen[x + 2] |= b2
+            col_seen[x + 3] |= b3
+            seen |= b0 | b1 | b2 | b3
+        for x in range(quads, cols):
+            v = labels[y, x]
+            partial[0, v] += 1
+            if v < 64:
+                col_seen[x] |= one << np.uint64(v)
+                seen |= one << np.uint64(v)
+        row_seen[y] = seen
+    counts = partial[0] + partial[1] + partial[2] + partial[3]
+    top = 0
+    for v in range(256):
+        if counts[v]:
+            top = v + 1
+    boxes = np.zeros((size, 4), np.int64)
+    for v in range(min(size, 64)):
+        if not counts[v]:
+            continue
+        bit = one << np.uint64(v)
+        x0, x1, y0, y1 = cols, -1, rows, -1
+        for x in range(cols):
+            if col_seen[x] & bit:
+                x0, x1 = min(x0, x), x
+        for y in range(rows):
+            if row_seen[y] & bit:
+                y0, y1 = min(y0, y), y
+        boxes[v, 0], boxes[v, 1], boxes[v, 2], boxes[v, 3] = x0, y0, x1 - x0 + 1, y1 - y0 + 1
+    return counts[:max(size, top)].copy(), boxes
+
+
+@numba.njit(**_JIT)
+def classify(image: np.ndarray, lut: np.ndarray, index: np.ndarray, scene: np.ndarray,
+             scene_index: np.ndarray) -> np.ndarray:
+    """(H, W) uint8: the label ``lut[i]`` of each pixel of the (H, W, 3) uint8 ``image`` (any
+    strides), its table index ``i = index[0, r] | index[1, g] | index[2, b]``
+    (``color_model.lut_index`` with its per-channel tables ``index`` (3, 256) int32); 0
+    where ``scene`` (the scene colours: bool, by the index of ``scene_index`` likewise; empty
+    for none) holds the pixel's colour."""
+    rows, cols = image.shape[:2]
+    out = np.empty((rows, cols), np.uint8)
+    with_scene = len(scene) > 0
+    for y in range(rows):
+        for x in range(cols):
+            r, g, b = image[y, x, 0], image[y, x, 1], image[y, x, 2]
+            label = lut[index[0, r] | index[1, g] | index[2, b]]
+            if with_scene and label and scene[scene_index[0, r] | scene_index[1, g]
+                                              | scene_index[2, b]]:
+                label = 0
+            out[y, x] = label
+    return out
+
+
+@numba.njit(**_JIT)
+def colour_histogram(image: np.ndarray, where: np.ndarray, index: np.ndarray,
+                     size: int) -> np.ndarray:
+    """(``size``,) int64: how many pixels of the (H, W, 3) uint8 ``image`` where ``where``
+    ((H, W) bool) holds fall in each quantised colour (``index`` as :func:`classify`'s)."""
+    counts = np.zeros(size, np.int64)
+    rows, cols = where.shape
+    for y in range(rows):
+        for x in range(cols):
+            if where[y, x]:
+                counts[index[0, image[y, x, 0]] | index[1, image[y, x, 1]]
+                       | index[2, image[y, x, 2]]] += 1
+    return counts
+
+
+@numba.njit(**_JIT)
+def cell_votes(labels: np.ndarray, cell_y: np.ndarray, cell_x: np.ndarray, size: int,
+               num_labels: int) -> np.ndarray:
+    """(``num_labels``, ``size`` * ``size``) int64: how many pixels of each label (below
+    ``num_labels``) of the 2-D uint8 ``labels`` (any strides) fall in each cell of a
+    ``size`` x ``size`` grid, pixel (y, x) in cell (``cell_y[y]``, ``cell_x[x]``)."""
+    votes = np.zeros((num_labels, size * size), np.int64)
+    rows, cols = labels.shape
+    for y in range(rows):
+        row = cell_y[y] * size
+        for x in range(cols):
+            votes[labels[y, x], row + cell_x[x]] += 1
+    return votes
+
+
+@numba.njit(**_JIT)
+def near_or_reaching(comp: np.ndarray, components: int, reach: np.ndarray,
+                     near: np.ndarray) -> np.ndarray:
+    """(H, W) bool: ``near`` or in a component of ``comp`` ((H, W) int32, 0 the background,
+    ``components`` of them) that holds a ``reach`` pixel ((H, W) bool)."""
+    rows, cols = comp.shape
+    reached = np.zeros(components, np.bool_)
+    for y in range(rows):
+        for x in range(cols):
+            if reach[y, x]:
+                reached[comp[y, x]] = True
+    reached[0] = False
+    out = np.empty((rows, cols), np.bool_)
+    for y in range(rows):
+        for x in range(cols):
+            out[y, x] = near[y, x] or reached[comp[y, x]]
+    return out
+
+
+@numba.njit(**_JIT)
+def add_dense(counts: np.ndarray, sums: np.ndarray, need: int) -> None:
+    """``counts`` (2-D uint8, any strides) += 1 where the box ``sums`` (int32, its shape)
+    are at least ``need``, in place."""
+    rows, cols = counts.shape
+    for y in range(rows):
+        for x in range(cols):
+            if sums[y, x] >= need:
+                counts[y, x] += 1
+
+
+def _array(dtype: object, ndim: int, readonly: bool = True, layout: str = 'C') -> object:
+    """An array type, C-contiguous or of any strides (``layout`` 'A'); read-only ones take
+    writable arrays too."""
+    return numba.types.Array(dtype, ndim, layout, readonly=readonly)
+
+
+_SIGNATURES = {
+    relabel_passes: (_array(numba.uint8, 2, False), _array(numba.uint8, 2),
+                     _array(numba.float32, 1), _array(numba.uint8, 2, False),
+                     _array(numba.int64, 1), numba.int64, numba.int64, numba.float32,
+                     numba.float32),
+    mean_shift: (_array(numba.int32, 2), numba.float64, numba.float64, numba.float64,
+                 _array(numba.float64, 1), numba.int64, numba.int64, numba.float64,
+                 numba.float64),
+    label_boxes: (_array(numba.uint8, 2, layout='A'), numba.int64),
+    classify: (_array(numba.uint8, 3, layout='A'), _array(numba.uint8, 1),
+               _array(numba.int32, 2), _array(numba.boolean, 1), _array(numba.int32, 2)),
+    colour_histogram: (_array(numba.uint8, 3, layout='A'), _array(numba.boolean, 2, layout='A'),
+                       _array(numba.int32, 2), numba.int64),
+    cell_votes: (_array(numba.uint8, 2, layout='A'), _array(numba.int64, 1),
+                 _array(numba.int64, 1), numba.int64, numba.int64),
+    near_or_reaching: (_array(numba.int32, 2), numba.int64, _array(numba.boolean, 2, layout='A'),
+                       _array(numba.boolean, 2, layout='A')),
+    add_dense: (_array(numba.uint8, 2, False, 'A'), _array(numba.int32, 2), numba.int64),
+}
+
+
+def compile_kernels() -> float:
+    """Compile every kernel for its one signature (or load it from numba's on-disk cache)
+    and allow no other; returns the seconds it took (none once done in this process: a
+    flag, not the dispatchers' signatures, which cost tens of microseconds to list)."""
+    global _COMPILED
+    if _COMPILED:
+        return 0.0
+    started = time.perf_counter()
+    for kernel, signature in _SIGNATURES.items():
+        if not kernel.signatures:
+            kernel.compile(signature)
+            kernel.disable_compile()
+    _COMPILED = True
+    return time.perf_counter() - started

@@ -1,0 +1,157 @@
+"""Plain per-pixel references of the segmenter's compiled loops, written from their docstrings
+(slow: for small test images only): the border relabelling and the mean shift."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from colorglove_ros.core.segmentation.segmenter import _LINEAR_RGB
+
+__all__ = ['relabel_borders_reference', 'mean_shift_reference']
+
+_F32 = np.float32
+
+
+def _borders(labels: np.ndarray, x0: int, x1: int, y0: int, y1: int) -> set[tuple[int, int]]:
+    """The pixels of the box [x0, x1) x [y0, y1) with a 4-neighbour of another label inside
+    the box."""
+    out = set()
+    for y in range(y0, y1):
+        for x in range(x0, x1):
+            for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+                ny, nx = y + dy, x + dx
+                if y0 <= ny < y1 and x0 <= nx < x1 and labels[ny, nx] != labels[y, x]:
+                    out.add((y, x))
+                    break
+    return out
+
+
+def relabel_borders_reference(image: np.ndarray, labels: np.ndarray, passes: int,
+                              distances: tuple[int, ...], mix_tolerance: float,
+                              min_residual: float) -> np.ndarray:
+    """``segmenter.relabel_borders``, one pixel at a time: each pass re-decides the border
+    pixels (a pixel decided in the last pass whose references all kept their labels and
+    sureness keeps its label), from the sure pixels ``distances`` away in the 8 compass
+    directions (in the order of ``segmenter._reference_steps``; the nearest colour in float32
+    linear RGB, the first of equals; the label's bits break ties of equal distances the same
+    way as the compiled loop's sort key)."""
+    labels = np.asarray(labels, np.uint8).copy()
+    h, w = labels.shape
+    if passes < 1 or not distances or min(h, w) < 3:
+        return labels
+    border = _borders(labels, 0, w, 0, h)
+    if not border:
+        return labels
+    pad = max(distances)
+    ys, xs = zip(*border, strict=True)
+    y0, y1 = max(min(ys) - pad, 0), min(max(ys) + 1 + pad, h)
+    x0, x1 = max(min(xs) - pad, 0), min(max(xs) + 1 + pad, w)
+    border = {p for p in border if y0 <= p[0] < y1 and x0 <= p[1] < x1}
+    colour = _LINEAR_RGB[image]
+    offsets = [(d * sy, d * sx) for d in distances for sy in (-1, 0, 1) for sx in (-1, 0, 1)
+               if sy or sx]
+    mix2, residual2 = _F32(mix_tolerance ** 2), _F32(min_residual ** 2)
+    previous: set[tuple[int, int]] | None = None
+    changed: set[tuple[int, int]] = set()
+    for k in range(passes):
+        if k:
+            previous, border = border, _borders(labels, x0, x1, y0, y1)
+            moved = (border ^ previous) | changed
+        todo = sorted(border)
+        if not todo:
+            break
+        if k:
+            todo = [p for p in todo if p not in previous
+                    or any((p[0] + dy, p[1] + dx) in moved for dy, dx in offsets)]
+            if not todo:
+                break
+
+        def sure(y: int, x: int, border: set[tuple[int, int]] = border) -> int | None:
+            inside = y0 <= y < y1 and x0 <= x < x1
+            return None if not inside or (y, x) in border else int(labels[y, x])
+
+        decided = {}
+        for y, x in todo:
+            own = colour[y, x]
+            refs = []    # (sort key, offset index, label) of the sure references
+            for s, (dy, dx) in enumerate(offsets):
+                label = sure(y + dy, x + dx)
+                if label is None:
+                    continue
+                d = colour[y + dy, x + dx] - own
+                dist = _F32(d[0] * d[0] + d[1] * d[1]) + _F32(d[2] * d[2])
+                key = (int(np.array(dist, np.float32).view(np.int32)) & ~0xFF) | label
+                refs.append((key, s, label))
+            current = int(labels[y, x])
+            if not refs:
+                continue
+            _, nearest, label_a = min(refs)
+            if label_a == current:
+                continue
+            if current != 0:
+                others = [r for r in refs if r[2] != label_a]
+                second = min(others)[1] if others else nearest
+                a = colour[y + offsets[nearest][0], x + offsets[nearest][1]]
+                b = colour[y + offsets[second][0], x + offsets[second][1]]
+                span, rel = b - a, own - a
+                length2 = _F32(_F32(span[0] * span[0] + span[1] * span[1]) + span[2] * span[2])
+                along = _F32(_F32(rel[0] * span[0] + rel[1] * span[1]) + rel[2] * span[2])
+                off2 = _F32(_F32(rel[0] * rel[0] + rel[1] * rel[1]) + rel[2] * rel[2])
+                t = min(max(_F32(along / max(length2, _F32(1e-6))), _F32(0)), _F32(1))
+                off2 = _F32(off2 - t * (_F32(2) * along - t * length2))
+                if off2 > max(mix2 * length2, residual2):
+                    continue
+            decided[(y, x)] = label_a
+        changed = {p for p, label in decided.items() if label != labels[p]}
+        for (y, x), label in decided.items():
+            labels[y, x] = label
+    return labels
+
+
+def mean_shift_reference(mask: np.ndarray, bandwidth_factor: float,
+                         initial_bandwidth_factor: float, min_pixels: int,
+                         start: tuple[tuple[float, float], float] | None = None,
+                         max_iterations: int = 50, tolerance: float = 0.05,
+                         min_half_size: float = 2.0
+                         ) -> tuple[tuple[float, float], float] | None:
+    """``crop.mean_shift_crop`` with the window's moments summed over its pixels."""
+    m = np.asarray(mask) != 0
+    H, W = m.shape
+    if m.sum() < min_pixels:
+        return None
+
+    def bounds(c: float, h: float, n: int) -> tuple[int, int]:
+        return max(math.ceil(c - h), 0), min(math.floor(c + h) + 1, n)
+
+    def moments(cx: float, cy: float, h: float) -> tuple[float, float, float, float, float]:
+        x0, x1 = bounds(cx, h, W)
+        y0, y1 = bounds(cy, h, H)
+        ys, xs = np.nonzero(m[y0:max(y1, y0), x0:max(x1, x0)])
+        n = float(len(xs))
+        if not n:
+            return 0.0, 0.0, 0.0, 0.0, 0.0
+        xs, ys = xs.astype(float) + x0, ys.astype(float) + y0
+        mx, my = float(xs.sum()) / n, float(ys.sum()) / n
+        return (n, mx, my, max(float((xs * xs).sum()) / n - mx * mx, 0.0),
+                max(float((ys * ys).sum()) / n - my * my, 0.0))
+
+    cx, cy, h = 0.5 * (W - 1), 0.5 * (H - 1), 0.5 * max(W, H)
+    if start is not None:
+        (cx, cy), h = start
+    factors = (initial_bandwidth_factor, bandwidth_factor) \
+        if initial_bandwidth_factor != bandwidth_factor else (bandwidth_factor,)
+    for factor in factors:
+        for _ in range(max_iterations):
+            n, mx, my, vx, vy = moments(cx, cy, h)
+            if n < min_pixels:
+                return None
+            new_h = max(factor * math.sqrt(max(vx, vy)), min_half_size)
+            done = abs(mx - cx) < tolerance and abs(my - cy) < tolerance \
+                and abs(new_h - h) < tolerance
+            cx, cy, h = mx, my, new_h
+            if done:
+                break
+    if moments(cx, cy, h)[0] < min_pixels:
+        return None
+    return (cx, cy), h
