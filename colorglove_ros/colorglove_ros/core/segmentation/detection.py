@@ -194,7 +194,8 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
                         max_patch_share: float = LARGEST_PATCH_WINDOW_SHARE,
                         step: int = JUNCTION_STEP,
                         edges: tuple[bool, bool, bool, bool] | None = None,
-                        surfaces_only: bool = False) -> np.ndarray:
+                        surfaces_only: bool = False, min_pull: float = 0.0,
+                        max_window_kept: float = 0.0) -> np.ndarray:
     """``labels`` with the glove pixels of oversized single-colour regions that lie farther
     than ``reach`` times the hand's half window from every patch junction set to background.
 
@@ -210,7 +211,14 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
     the image's border) only the oversized regions reaching one of those sides with an
     outline running mostly along background are trimmed (a sleeve: the forearm always runs
     off the image; a patch of a glove cut by the border is surrounded by its neighbours);
-    with ``surfaces_only`` every oversized region with such an outline, wherever it lies."""
+    with ``surfaces_only`` every oversized region with such an outline, wherever it lies.
+    Two gates keep a glove without clutter whole: with ``min_pull`` > 0 nothing is trimmed (or
+    spent past the junctions' window) unless the crop is pulled, the window of every glove
+    pixel (:func:`mean_shift_crop`, as the crop finds it) more than ``min_pull`` times the
+    junctions' (on a glove alone the two differ by the fingers beyond the junctions); with
+    ``max_window_kept`` > 0 the trim is kept only when it shrinks that window to at most
+    ``max_window_kept`` of its size (clutter pulling the crop out; a finger cut back at the
+    silhouette moves it little)."""
     labels = np.asarray(labels, np.uint8)
     if reach <= 0 or not labels.size:
         return labels
@@ -220,6 +228,10 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
     window = mean_shift_crop(junctions, min_pixels=min_pixels)
     if window is None:
         return labels
+    crop = (mean_shift_crop(small, min_pixels=min_pixels)
+            if min_pull > 0 or max_window_kept > 0 else None)
+    if min_pull > 0 and (crop is None or crop[1] <= min_pull * window[1]):
+        return labels
     max_pixels = max_patch_share * (2.0 * window[1]) ** 2
     big_colours = np.flatnonzero(np.bincount(small.ravel(), minlength=num_colors + 1)[1:]
                                  > max_pixels) + 1
@@ -228,7 +240,9 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
     far = cv2.distanceTransform((~junctions).view(np.uint8), cv2.DIST_L2, 3) > (
         reach * window[1])
     drop = np.zeros(small.shape, bool)
-    for colour in big_colours:
+    # (a colour with no pixel that far keeps every pixel: its regions need not be found)
+    reaching_far = np.bincount(small[far], minlength=num_colors + 1)[big_colours] > 0
+    for colour in big_colours[reaching_far]:
         n, comp, stats, _ = cv2.connectedComponentsWithStats(
             cv2.compare(small, int(colour), cv2.CMP_EQ), connectivity=8, ltype=cv2.CV_32S)
         big = stats[:, cv2.CC_STAT_AREA] > max_pixels
@@ -241,7 +255,8 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
         if big.any():
             drop |= big.take(comp)
     drop &= far
-    if not drop.any():
+    if not drop.any() or (max_window_kept > 0 and not _shrinks(small, drop, crop,
+                                                                max_window_kept, min_pixels)):
         return labels
     if step > 1:
         h, w = labels.shape
@@ -251,6 +266,16 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
     out = labels.copy()
     out[drop & oversized[labels]] = 0     # (a pixel of another colour in the cell stays)
     return out
+
+
+def _shrinks(labels: np.ndarray, drop: np.ndarray,
+             crop: tuple[tuple[float, float], float] | None, max_window_kept: float,
+             min_pixels: int) -> bool:
+    """Whether setting the ``drop`` pixels of ``labels`` to background shrinks the window of
+    every glove pixel (``crop``, ((cx, cy), half), that of ``labels``) to at most
+    ``max_window_kept`` of its half size."""
+    kept = mean_shift_crop(np.where(drop, 0, labels), min_pixels=min_pixels)
+    return crop is not None and kept is not None and kept[1] <= max_window_kept * crop[1]
 
 
 def border_lines(array: np.ndarray, edges: tuple[bool, bool, bool, bool]) -> list[np.ndarray]:

@@ -356,7 +356,11 @@ class GloveSegmenter:
     are trimmed (a petal or a face touching the glove; a patch inside the glove, however
     large, is surrounded by its neighbours, though one at the glove's silhouette may not be),
     so a share under the largest patch's reaches the smaller pieces of clutter while sparing
-    most of the glove's own patches. The same for the
+    most of the glove's own patches. Two gates keep a glove without clutter whole: the trim
+    runs only on a frame whose crop is pulled, the window of every glove pixel more than
+    ``junction_min_pull`` times the junctions' own (0: every frame), and is kept only where it
+    shrinks that window to at most ``junction_max_window_kept`` of its size (0: always kept;
+    a finger cut back at the silhouette moves it little). The same for the
     regions that reach the image's border only, with ``sleeve_reach`` (0 off): a sleeve of a
     glove colour (a red sleeve is glove red) runs off the image, and joined to the glove it
     would pull the crop down the forearm and make the hand look cut by the border. Colours
@@ -443,7 +447,8 @@ class GloveSegmenter:
                  max_patch_fraction: float = 0.1, max_patch_window_share: float = 0.0,
                  junction_reach: float = 0.0,
                  junction_min_share: float = LARGEST_PATCH_WINDOW_SHARE,
-                 junction_surfaces_only: int = 0, sleeve_reach: float = 0.0,
+                 junction_surfaces_only: int = 0, junction_min_pull: float = 0.0,
+                 junction_max_window_kept: float = 0.0, sleeve_reach: float = 0.0,
                  scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
                  background_memory: int = 0,
@@ -963,7 +968,9 @@ class GloveSegmenter:
         # glove colour out of a patch's reach of every junction: a surface touching the glove
         labels = keep_near_junctions(labels, self.calibration.num_colors, self.junction_reach,
                                      JUNCTION_MIN_PIXELS, self.junction_min_share,
-                                     surfaces_only=bool(self.junction_surfaces_only))
+                                     surfaces_only=bool(self.junction_surfaces_only),
+                                     min_pull=self.junction_min_pull,
+                                     max_window_kept=self.junction_max_window_kept)
         labels = self._without_sleeve(labels, image_edges((x0, x1, y0, y1), r, w, h))
         t = tick('borders', t)
         if keep_labels:

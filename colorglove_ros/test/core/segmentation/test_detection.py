@@ -156,6 +156,25 @@ def test_with_surfaces_only_a_large_glove_patch_stays_and_a_touching_surface_goe
     assert not cut[40:68, 100:118].any()
 
 
+def test_with_min_pull_only_a_pulled_crop_is_trimmed() -> None:
+    """``min_pull``: a glove alone (its window about the junctions') keeps every pixel, even
+    a one-colour finger at its silhouette that the trim would cut back without the gate;
+    with a surface joined to it (the glove's window several times the junctions') the
+    surface is trimmed as without the gate and the glove stays."""
+    labels = np.zeros((160, 200), np.uint8)
+    labels[60:84, 60:84] = _patchwork()
+    labels[68:74, 84:116] = 9                     # a finger: background along its sides
+    trim = {'max_patch_share': 0.05, 'surfaces_only': True}
+    assert not (keep_near_junctions(labels, 10, 0.35, 2, **trim)[68:74, 84:116] == 9).all()
+    assert keep_near_junctions(labels, 10, 0.35, 2, **trim, min_pull=1.5) is labels
+    pulled = labels.copy()
+    pulled[20:158, 20:60] = 2                     # an orange surface along the glove's side
+    out = keep_near_junctions(pulled, 10, 0.35, 2, **trim, min_pull=1.5)
+    assert (out == keep_near_junctions(pulled, 10, 0.35, 2, **trim)).all()
+    assert not out[20:40, 20:60].any() and not out[130:158, 20:60].any()
+    assert (out[60:84, 60:84] == labels[60:84, 60:84]).all()
+
+
 def test_a_surface_touching_the_glove_is_shed_at_the_hand_scale() -> None:
     """A single-colour surface touching a glove patchwork, too small for the image-wide
     limit but larger than any patch at the hand's scale (found from the patch junctions),
@@ -268,21 +287,21 @@ def test_an_orange_surface_touching_the_glove_is_trimmed_with_junction_reach(cal
     assert not off.hand_found or off.crop.half_size > 1.3 * plain.crop.half_size
 
 
-#: The junction trim of issue 14's tenth pass (docs/RESULTS.md), off in the shipped config.
+#: The junction trim of issue 14's tenth pass (docs/RESULTS.md), ungated.
 JUNCTION_TRIM = {'junction_reach': 0.35, 'junction_min_share': 0.05,
                  'junction_surfaces_only': 1}
 
 
 def test_a_petal_smaller_than_the_palm_patch_is_trimmed_to_the_junctions(calibration) -> None:
     """A rendered glove with an orange petal touching its side, smaller than the glove's
-    largest patch at the hand's scale: with the junction trim (``JUNCTION_TRIM``) the crop
-    keeps about the size it has without the petal; off (the class defaults, and the shipped
-    config's ``junction_reach`` 0) the petal joins the glove and the crop grows. On the glove
-    alone the trim changes nothing."""
+    largest patch at the hand's scale: with the junction trim (``JUNCTION_TRIM``, and with
+    the shipped config's, which is it with the gates) the crop keeps about the size it has
+    without the petal; off (the class defaults) the petal joins the glove and the crop grows.
+    On the glove alone the trim changes nothing."""
     from colorglove_ros.core.segmentation.color_model import read_calibration_config
 
     shipped = read_calibration_config('config/color_calibration.yaml')['segmenter']
-    assert shipped['junction_reach'] == 0.0
+    assert {name: shipped[name] for name in JUNCTION_TRIM} == JUNCTION_TRIM
     camera = synth.default_camera()
     rng = np.random.default_rng(4)
     q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
@@ -300,9 +319,41 @@ def test_a_petal_smaller_than_the_palm_patch_is_trimmed_to_the_junctions(calibra
     image = frame.image_rgb.copy()
     image[petal & (frame.labels == 0)] = GLOVE_PALETTE_RGB[6]
     off = GloveSegmenter(calibration).process(image)
-    on = GloveSegmenter(calibration, **JUNCTION_TRIM).process(image)
     assert off.crop.half_size > 1.12 * plain.crop.half_size
-    assert on.hand_found and on.crop.half_size < 1.03 * plain.crop.half_size
+    for trim in (JUNCTION_TRIM, _gated_trim()):     # the gates let this trim through
+        on = GloveSegmenter(calibration, **trim).process(image)
+        assert on.hand_found and on.crop.half_size < 1.03 * plain.crop.half_size
+
+
+def _gated_trim() -> dict[str, float]:
+    """``JUNCTION_TRIM`` with the shipped config's gates (``junction_min_pull``,
+    ``junction_max_window_kept``)."""
+    from colorglove_ros.core.segmentation.color_model import read_calibration_config
+
+    shipped = read_calibration_config('config/color_calibration.yaml')['segmenter']
+    gates = {name: shipped[name] for name in ('junction_min_pull', 'junction_max_window_kept')}
+    assert all(value > 0 for value in gates.values())
+    return {**JUNCTION_TRIM, **gates}
+
+
+@pytest.mark.parametrize('seed', [3, 12])
+def test_the_gated_trim_leaves_a_glove_without_clutter_whole(calibration, seed: int) -> None:
+    """Rendered gloves alone whose silhouette patches the ungated trim (``JUNCTION_TRIM``)
+    cuts back (glove pixels lost, the crop shrunk): with the shipped gates
+    (:func:`_gated_trim`) the label image and the observation are the trim-off ones, pixel
+    for pixel."""
+    camera = synth.default_camera()
+    rng = np.random.default_rng(seed)
+    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
+    q[0:3] = [0.0, 0.0, 0.6]
+    image = synth.render_frame(q, camera, rng, FrameConditions()).image_rgb
+    off, cut, gated = (GloveSegmenter(calibration, **settings).process(image, keep_labels=True)
+                       for settings in ({}, JUNCTION_TRIM, _gated_trim()))
+    assert off.hand_found and gated.hand_found
+    assert np.count_nonzero((off.label_image > 0) & (cut.label_image == 0)) > 500
+    assert cut.crop.half_size < off.crop.half_size
+    assert np.array_equal(gated.label_image, off.label_image)
+    assert gated.crop == off.crop and np.array_equal(gated.tiny_labels, off.tiny_labels)
 
 
 def _glove_with_a_red_sleeve() -> tuple[np.ndarray, np.ndarray]:
