@@ -1,6 +1,7 @@
 """Compiled (numba) kernels of the IK's inner loop: the hand's forward kinematics, link-fixed
 points with their analytic Jacobians, the projected residual rows of the correspondences, and
-the glove's surface elements posed and weighted as a camera sees them (:mod:`patch_surface`).
+the glove's surface elements posed and weighted as a camera sees them, and the patch sums
+over them (the patch points of the constraints, each patch's visible area; :mod:`patch_surface`).
 
 The same arithmetic as the numpy code they replaced, written as loops over small fixed-size
 arrays, so one call replaces the dozens of numpy calls whose per-call overhead dominated the
