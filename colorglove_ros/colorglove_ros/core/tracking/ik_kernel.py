@@ -1,6 +1,7 @@
 """Compiled (numba) kernels of the IK's inner loop: the hand's forward kinematics, link-fixed
 points with their analytic Jacobians, the projected residual rows of the correspondences, and
-the glove's surface elements posed and weighted as a camera sees them (:mod:`patch_surface`).
+the glove's surface elements posed and weighted as a camera sees them, and the patch sums
+over them (the patch points of the constraints, each patch's visible area; :mod:`patch_surface`).
 
 The same arithmetic as the numpy code they replaced, written as loops over small fixed-size
 arrays, so one call replaces the dozens of numpy calls whose per-call overhead dominated the
@@ -19,7 +20,8 @@ import numpy as np
 
 __all__ = ['forward_frames', 'link_points', 'projected_rows', 'prior_cost', 'normal_equations',
            'damped_step', 'translation_fit',
-           'posed_elements', 'element_weights', 'compile_kernels', 'SINGULAR', 'BEHIND']
+           'posed_elements', 'element_weights', 'patch_points', 'patch_areas', 'compile_kernels',
+           'SINGULAR', 'BEHIND']
 
 #: :func:`translation_fit` outcomes besides 0 (solved): the normal equations are singular,
 #: the solution puts a point behind its camera.
@@ -474,6 +476,92 @@ def element_weights(centre: np.ndarray, normal: np.ndarray, cam_R: np.ndarray,
     return pc, w, w_vis
 
 
+@numba.njit(**_JIT)
+def patch_points(w: np.ndarray, w_vis: np.ndarray, elem_patch: np.ndarray, group: np.ndarray,
+                 centre: np.ndarray, num_patches: int, group_link: np.ndarray,
+                 table: np.ndarray, patch_id: np.ndarray, camera_index: np.ndarray,
+                 min_visible_fraction: float, min_link_weight: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``PatchSurface.points_by_camera`` after the element weights: the front weights ``w``
+    and visible weights ``w_vis`` (C * E,) of the E elements (patch ``elem_patch``, patch-link
+    group ``group``, link-frame ``centre``) in each of C cameras; per row k (patch
+    ``patch_id[k]`` seen by camera ``camera_index[k]``, its groups ``table[patch_id[k]]``,
+    -1 padded) the links (K, S), their weighted mean element centres (K, S, 3), the weights
+    (K, S) and whether any of it faces the camera (K,). Sums run in element order, and over a
+    row's S groups in order (numpy's ``bincount`` and, for S < 8, its row sums)."""
+    ne, ng = len(elem_patch), len(group_link)
+    nc = len(w) // ne
+    front = np.zeros(nc * num_patches)
+    vis = np.zeros(nc * num_patches)
+    for i in range(nc * ne):
+        p = (i // ne) * num_patches + elem_patch[i % ne]
+        vis[p] += w_vis[i]
+        front[p] += w[i]
+    wg = np.zeros(nc * ng)
+    acc = np.zeros((nc * ng, 3))
+    for i in range(nc * ne):
+        e = i % ne
+        p = (i // ne) * num_patches + elem_patch[e]
+        d = front[p] if front[p] >= 1e-300 or front[p] != front[p] else 1e-300
+        we = w[i] if vis[p] / d < min_visible_fraction else w_vis[i]
+        g = (i // ne) * ng + group[e]
+        wg[g] += we
+        for a in range(3):
+            acc[g, a] += we * centre[e, a]
+    k_rows, s_cols = len(patch_id), table.shape[1]
+    link = np.empty((k_rows, s_cols), np.int64)
+    point = np.empty((k_rows, s_cols, 3))
+    weight = np.empty((k_rows, s_cols))
+    seen = np.empty(k_rows, np.bool_)
+    for k in range(k_rows):
+        total = 0.0
+        for s in range(s_cols):
+            gid = table[patch_id[k], s]
+            g = gid if gid >= 0 else 0
+            gc = g + camera_index[k] * ng
+            link[k, s] = group_link[g]
+            d = wg[gc] if wg[gc] >= 1e-300 or wg[gc] != wg[gc] else 1e-300
+            for a in range(3):
+                point[k, s, a] = acc[gc, a] / d
+            weight[k, s] = wg[gc] if gid >= 0 else 0.0
+            total += weight[k, s]
+        seen[k] = total > 0
+        kept = 0.0
+        for s in range(s_cols):
+            weight[k, s] = weight[k, s] / (total if seen[k] else 1.0)
+            if weight[k, s] < min_link_weight:
+                weight[k, s] = 0.0
+            kept += weight[k, s]
+        for s in range(s_cols):
+            weight[k, s] /= kept if seen[k] else 1.0
+    return link, point, weight, seen
+
+
+@numba.njit(**_JIT)
+def patch_areas(pc: np.ndarray, w_vis: np.ndarray, elem_patch: np.ndarray, num_patches: int,
+                fx: float, fy: float, cx: float, cy: float) -> tuple[np.ndarray, np.ndarray]:
+    """``PatchSurface.visible_patches`` from a camera's element centres ``pc`` (E, 3) and
+    visible weights ``w_vis`` (E,) (``element_weights``): each patch's visible area (P,
+    pixels) and the undistorted pixel centroid of it (P, 2; NaN where none is visible),
+    summed in element order."""
+    area = np.zeros(num_patches)
+    moment = np.zeros((num_patches, 2))
+    scale = fx * fy
+    for e in range(len(w_vis)):
+        if w_vis[e] > 0:
+            p = elem_patch[e]
+            a = w_vis[e] * scale
+            area[p] += a
+            moment[p, 0] += a * (pc[e, 0] / pc[e, 2] * fx + cx)
+            moment[p, 1] += a * (pc[e, 1] / pc[e, 2] * fy + cy)
+    centroid = np.full((num_patches, 2), np.nan)
+    for p in range(num_patches):
+        if area[p] > 0:
+            centroid[p, 0] = moment[p, 0] / area[p]
+            centroid[p, 1] = moment[p, 1] / area[p]
+    return area, centroid
+
+
 def _array(dtype: object, ndim: int) -> object:
     """A read-only C-contiguous array type (writable arrays convert to it)."""
     return numba.types.Array(dtype, ndim, 'C', readonly=True)
@@ -494,6 +582,10 @@ _SIGNATURES = {
     posed_elements: (_F3, _F2, _I1, _F2, _F2),
     element_weights: (_F2, _F2, _F2, _F1, numba.float64, numba.float64, numba.float64,
                       numba.float64),
+    patch_points: (_F1, _F1, _I1, _I1, _F2, numba.int64, _I1, _I2, _I1, _I1, numba.float64,
+                   numba.float64),
+    patch_areas: (_F2, _F1, _I1, numba.int64, numba.float64, numba.float64, numba.float64,
+                  numba.float64),
 }
 
 

@@ -61,7 +61,7 @@ class PatchSurface:
                                       for i in range(3)], axis=1)
         frame, elem_patch, elem_link = keys[:, 0], keys[:, 1], keys[:, 2]
         self._element_frame = np.ascontiguousarray(frame)
-        self._elem_patch = elem_patch
+        self._elem_patch = np.ascontiguousarray(elem_patch)
         self._kin = kin
         pairs, self._group = np.unique(np.stack([elem_patch, elem_link], axis=1), axis=0,
                                        return_inverse=True)
@@ -73,14 +73,13 @@ class PatchSurface:
         first = np.concatenate([[0], np.cumsum(slots)[:-1]])
         for g, (p, _) in enumerate(pairs):
             self._table[p, g - first[p]] = g
-        self._group_link = pairs[:, 1]
+        self._group_link = np.ascontiguousarray(pairs[:, 1])
         self.num_patches = num_patches
         self.cell_m = float(cell_m)
         self.depth_tol_m = float(depth_tol_m)
         self.min_visible_fraction = float(min_visible_fraction)
         self.min_link_weight = float(min_link_weight)
         self._posed_cache: tuple[bytes, tuple[np.ndarray, np.ndarray]] | None = None
-        self._bins: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
 
     def _posed(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Element centres and area normals (E, 3) in the primary camera frame at pose ``q``
@@ -114,28 +113,13 @@ class PatchSurface:
             pc, normal, np.asarray(camera.rotation, float), np.asarray(camera.translation, float),
             float(camera.fx), float(camera.fy), self.cell_m, self.depth_tol_m)
 
-    def _camera_bins(self, num_cameras: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                      np.ndarray]:
-        """Per element of every camera: patch bin, group bin, group xyz bins and centre,
-        the bins of camera c offset past those of cameras 0..c-1 (kept per camera count)."""
-        hit = self._bins.get(num_cameras)
-        if hit is None:
-            nc, ne, ng = num_cameras, len(self._centre), len(self._group_link)
-            cam = np.repeat(np.arange(nc), ne)
-            group = cam * ng + np.tile(self._group, nc)
-            hit = (cam * self.num_patches + np.tile(self._elem_patch, nc), group,
-                   (3 * group[:, None] + np.arange(3)).reshape(-1),
-                   np.tile(self._centre, (nc, 1)))
-            self._bins[num_cameras] = hit
-        return hit
-
     def points_by_camera(self, q: np.ndarray, cameras: Sequence[PinholeCamera],
                          camera_index: np.ndarray, patch_id: np.ndarray
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`points` for rows seen by different cameras (row k by
         ``cameras[camera_index[k]]``) in one pass over the posed glove."""
-        patch_id = np.asarray(patch_id, np.int64)
-        camera_index = np.asarray(camera_index, np.int64)
+        patch_id = np.ascontiguousarray(patch_id, np.int64)
+        camera_index = np.ascontiguousarray(camera_index, np.int64)
         if len(patch_id) and (patch_id.min() < 0 or patch_id.max() >= self.num_patches):
             raise IKError(f'patch id outside [0, {self.num_patches})')
         if len(camera_index) != len(patch_id) or (
@@ -143,31 +127,15 @@ class PatchSurface:
                                        or camera_index.max() >= len(cameras))):
             raise IKError(f'camera index outside [0, {len(cameras)}) or not one per patch id')
         pc, normal = self._posed(q)
-        nc, ng, np_ = len(cameras), len(self._group_link), self.num_patches
-        # per camera: all front weights and the visible ones, all cameras summed in one call
+        # per camera: all front weights and the visible ones; patches mostly hidden in the
+        # depth buffer fall back to all their front faces, and links holding a sliver of the
+        # visible patch are dropped (fewer points to move): ik_kernel.patch_points
         weights = [self._element_weights(pc, normal, cam) for cam in cameras]
-        w = np.concatenate([front for _, front, _ in weights])
-        w_vis = np.concatenate([vis for _, _, vis in weights])
-        elem_patch, group, group_xyz, centre = self._camera_bins(nc)
-        # patches mostly hidden in the depth buffer fall back to all their front faces
-        vis_frac = (np.bincount(elem_patch, w_vis, nc * np_)
-                    / np.maximum(np.bincount(elem_patch, w, nc * np_), 1e-300))
-        w = np.where(vis_frac[elem_patch] < self.min_visible_fraction, w, w_vis)
-        wg = np.bincount(group, w, nc * ng)
-        mean = (np.bincount(group_xyz, (w[:, None] * centre).reshape(-1), 3 * nc * ng)
-                .reshape(nc * ng, 3) / np.maximum(wg, 1e-300)[:, None])
-        groups = self._table[patch_id]                                       # (K, S)
-        valid = groups >= 0
-        g = np.where(valid, groups, 0)
-        gc = g + (camera_index * ng)[:, None]
-        weight = np.where(valid, wg[gc], 0.0)
-        total = weight.sum(axis=1)
-        seen = total > 0
-        weight = weight / np.where(seen, total, 1.0)[:, None]
-        # links holding a sliver of the visible patch are dropped (fewer points to move)
-        weight[weight < self.min_link_weight] = 0.0
-        weight /= np.where(seen, weight.sum(axis=1), 1.0)[:, None]
-        return self._group_link[g], mean[gc], weight, seen
+        return self._kin.kernels.patch_points(
+            np.concatenate([front for _, front, _ in weights]),
+            np.concatenate([vis for _, _, vis in weights]), self._elem_patch, self._group,
+            self._centre, self.num_patches, self._group_link, self._table, patch_id,
+            camera_index, self.min_visible_fraction, self.min_link_weight)
 
     def visible_faces(self, q: np.ndarray, camera: PinholeCamera
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -185,12 +153,7 @@ class PatchSurface:
         pixels; hidden and back-facing faces count nothing) and the undistorted pixel
         centroid of that area (num_patches, 2; NaN where nothing is visible): what the
         segmenter should see of the glove if the pose is right."""
-        patch, uv, weight = self.visible_faces(q, camera)
-        n = self.num_patches
-        area = np.bincount(patch, weight, n)
-        centroid = np.stack([np.bincount(patch, weight * uv[:, i], n) for i in range(2)],
-                            axis=1)
-        with np.errstate(invalid='ignore', divide='ignore'):
-            centroid = centroid / area[:, None]
-        centroid[area <= 0] = np.nan
-        return area, centroid
+        pc, _, w_vis = self._element_weights(*self._posed(q), camera)
+        return self._kin.kernels.patch_areas(pc, w_vis, self._elem_patch, self.num_patches,
+                                             float(camera.fx), float(camera.fy),
+                                             float(camera.cx), float(camera.cy))

@@ -1,5 +1,5 @@
-"""Exact speed cuts of the IK (issue 19, ninth pass): the same bits as the code they replace,
-with fewer numpy calls per frame."""
+"""Exact speed cuts of the IK (issue 19, ninth and twelfth passes): the same bits as the code
+they replace, with fewer numpy calls per frame."""
 from __future__ import annotations
 
 import math
@@ -135,3 +135,88 @@ def test_solve_is_the_old_loops_pose(hand, at_bounds, smoothing):
         q, iterations, cost = _solve_reference(*args)
         assert np.abs(sol.q - q).max() <= 1e-9 and sol.iterations == iterations
         assert sol.cost == pytest.approx(cost, rel=1e-9)
+
+
+def _points_reference(surface, q, cameras, camera_index, patch_id):
+    """``PatchSurface.points_by_camera``'s numpy aggregation before ``ik_kernel.patch_points``
+    (twelfth pass): bincounts over every camera's elements, then the rows' link weights."""
+    pc, normal = surface._posed(q)
+    nc, ng, np_ = len(cameras), len(surface._group_link), surface.num_patches
+    weights = [surface._element_weights(pc, normal, cam) for cam in cameras]
+    w = np.concatenate([front for _, front, _ in weights])
+    w_vis = np.concatenate([vis for _, _, vis in weights])
+    ne = len(surface._centre)
+    cam = np.repeat(np.arange(nc), ne)
+    group = cam * ng + np.tile(surface._group, nc)
+    elem_patch = cam * np_ + np.tile(surface._elem_patch, nc)
+    group_xyz = (3 * group[:, None] + np.arange(3)).reshape(-1)
+    centre = np.tile(surface._centre, (nc, 1))
+    vis_frac = (np.bincount(elem_patch, w_vis, nc * np_)
+                / np.maximum(np.bincount(elem_patch, w, nc * np_), 1e-300))
+    w = np.where(vis_frac[elem_patch] < surface.min_visible_fraction, w, w_vis)
+    wg = np.bincount(group, w, nc * ng)
+    mean = (np.bincount(group_xyz, (w[:, None] * centre).reshape(-1), 3 * nc * ng)
+            .reshape(nc * ng, 3) / np.maximum(wg, 1e-300)[:, None])
+    groups = surface._table[patch_id]
+    valid = groups >= 0
+    g = np.where(valid, groups, 0)
+    gc = g + (camera_index * ng)[:, None]
+    weight = np.where(valid, wg[gc], 0.0)
+    total = weight.sum(axis=1)
+    seen = total > 0
+    weight = weight / np.where(seen, total, 1.0)[:, None]
+    weight[weight < surface.min_link_weight] = 0.0
+    weight /= np.where(seen, weight.sum(axis=1), 1.0)[:, None]
+    return surface._group_link[g], mean[gc], weight, seen
+
+
+def _visible_reference(surface, q, camera):
+    """``PatchSurface.visible_patches``' numpy sums before ``ik_kernel.patch_areas``."""
+    patch, uv, weight = surface.visible_faces(q, camera)
+    n = surface.num_patches
+    area = np.bincount(patch, weight, n)
+    centroid = np.stack([np.bincount(patch, weight * uv[:, i], n) for i in range(2)], axis=1)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        centroid = centroid / area[:, None]
+    centroid[area <= 0] = np.nan
+    return area, centroid
+
+
+def test_patch_sums_are_the_numpy_codes_bits(hand):
+    """The compiled patch-point aggregation and visible-patch sums (twelfth pass) give the
+    numpy code's bits, with one camera and two, every row's patch drawn at random."""
+    model, _, _, surface, camera = hand
+    stereo = load_calibration(CONFIG_DIR / 'calibration_stereo.yaml').cameras
+    assert surface.max_links < 8       # row sums in order are numpy's below 8 terms
+    rng = np.random.default_rng(4)
+    rows_seen = 0
+    for q in _poses(model, 30, 6):
+        for cameras in ([camera], list(stereo)):
+            patch_id = rng.integers(0, surface.num_patches, 24)
+            camera_index = rng.integers(0, len(cameras), 24)
+            got = surface.points_by_camera(q, cameras, camera_index, patch_id)
+            expected = _points_reference(surface, q, cameras, camera_index, patch_id)
+            for a, b in zip(got, expected, strict=True):
+                assert a.dtype == b.dtype and a.shape == b.shape
+                np.testing.assert_array_equal(a, b)
+            rows_seen += int(got[3].sum())
+        for a, b in zip(surface.visible_patches(q, camera), _visible_reference(surface, q, camera),
+                        strict=True):
+            np.testing.assert_array_equal(a, b)
+    assert rows_seen > 500              # the poses show the glove
+
+
+def test_patch_kernels_have_one_signature(hand):
+    """The patch sums run compiled (one signature each, compiling off): a strided patch id
+    array is made contiguous by the caller, one of another dtype raises."""
+    from colorglove_ros.core.tracking import ik_kernel
+
+    model, _, _, surface, camera = hand
+    for kernel in (ik_kernel.patch_points, ik_kernel.patch_areas):
+        assert len(kernel.signatures) == 1
+    q = _poses(model, 1, 7)[0]
+    strided = np.arange(40, dtype=np.int64)[::2] % surface.num_patches
+    surface.points(q, camera, strided)
+    with pytest.raises(TypeError):
+        ik_kernel.patch_areas(np.zeros((3, 3)), np.zeros(3), np.zeros(3, np.int32), 2,
+                              1.0, 1.0, 0.0, 0.0)
