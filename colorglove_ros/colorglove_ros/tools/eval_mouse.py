@@ -33,7 +33,10 @@ table scene (``BareHandSequence.render_empty_views``); ``none`` (default): edges
 silhouettes did not raise the click figures on tuning seeds 5-7, docs/RESULTS.md);
 ``--finger-refit`` turns on the tracker's ``finger_refit``, ``--silhouette-palm`` its
 ``silhouette_palm``, ``--retry-dofs`` its ``retry_dofs`` (all off by default), with
-``--retry-max-wrist-move-mm`` and ``--retry-rest-margin-px`` its retry guards.
+``--retry-max-wrist-move-mm`` and ``--retry-rest-margin-px`` its retry guards. The mouse is
+fed each pose's edge residual (as ``edge_tracker_node``'s status line gives it to
+``mouse_node``), so ``--press-max-residual-ratio`` sets its press gate
+(``core.tracking.mouse``).
 
 ``--source glove`` feeds it the colour-glove tracker's output (segmentation, lookup, IK with
 smoothing, as ``ik_node`` runs) on the same script rendered with the glove

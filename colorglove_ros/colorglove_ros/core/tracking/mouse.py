@@ -104,7 +104,7 @@ class MouseConfig:
     smoothing_s: float = 0.05
     max_gap_s: float = 0.5
     press_max_residual_ratio: float = math.inf
-    residual_window_s: float = 5.0
+    residual_window_s: float = 2.0
 
     def __post_init__(self) -> None:
         if len(self.press_deg) != 2 or len(self.release_deg) != 2 or not all(
