@@ -169,7 +169,7 @@ class Mouse3D:
         """Current button states (thumb, little)."""
         return self._buttons[0], self._buttons[1]
 
-    def press_allowed(self, residual_px: float, stamp: float) -> bool:
+    def _press_allowed(self, residual_px: float, stamp: float) -> bool:
         """Whether a pose of fit residual ``residual_px`` at ``stamp`` may press a button
         (``press_max_residual_ratio``); records the residual for the later poses."""
         cfg = self.config
@@ -190,7 +190,7 @@ class Mouse3D:
         tracker's fit residual of it if known (``press_max_residual_ratio``)."""
         cfg = self.config
         raw = raw_mouse_values(self.model, q, cfg)
-        may_press = self.press_allowed(residual_px, stamp)
+        may_press = self._press_allowed(residual_px, stamp)
         before = tuple(self._buttons)
         gap = None if self._stamp is None else stamp - self._stamp
         if gap is None or not 0.0 <= gap <= cfg.max_gap_s or self._filtered is None:
