@@ -33,7 +33,10 @@ table scene (``BareHandSequence.render_empty_views``); ``none`` (default): edges
 silhouettes did not raise the click figures on tuning seeds 5-7, docs/RESULTS.md);
 ``--finger-refit`` turns on the tracker's ``finger_refit``, ``--silhouette-palm`` its
 ``silhouette_palm``, ``--retry-dofs`` its ``retry_dofs`` (all off by default), with
-``--retry-max-wrist-move-mm`` and ``--retry-rest-margin-px`` its retry guards.
+``--retry-max-wrist-move-mm`` and ``--retry-rest-margin-px`` its retry guards. The mouse is
+fed each pose's edge residual (as ``edge_tracker_node``'s status line gives it to
+``mouse_node``), so ``--press-max-residual-ratio`` sets its press gate
+(``core.tracking.mouse``).
 
 ``--source glove`` feeds it the colour-glove tracker's output (segmentation, lookup, IK with
 smoothing, as ``ik_node`` runs) on the same script rendered with the glove
@@ -210,12 +213,13 @@ def noisy_poses(model: HandModel, Q: np.ndarray, seed: int, noise: dict[str, flo
 def edge_tracked_poses(Q: np.ndarray, seed: int, cameras: Sequence[PinholeCamera],
                        hand_length_m: float, silhouettes: bool = False,
                        config: EdgeTrackerConfig | None = None, reinit: str = 'rest'
-                       ) -> tuple[list[np.ndarray | None], list[int]]:
+                       ) -> tuple[list[np.ndarray | None], list[int], list[float]]:
     """The edge tracker's published poses on the bare-hand rendering of ``Q`` seen by
     ``cameras`` (the primary first; the poses are in its frame; None where it published
-    none) and the frames where it was re-initialised after a loss (:func:`track_scripted`,
-    ``reinit``); ``silhouettes``: with a background model per camera from the empty scene;
-    ``config``: the tracker's settings (default :class:`EdgeTrackerConfig`)."""
+    none), the frames where it was re-initialised after a loss (:func:`track_scripted`,
+    ``reinit``) and each frame's edge residual (px, NaN without a fit, as ``edge_tracker_node``
+    puts it on its status line); ``silhouettes``: with a background model per camera from
+    the empty scene; ``config``: the tracker's settings (default :class:`EdgeTrackerConfig`)."""
     cameras = list(cameras)
     seq = BareHandSequence(cameras[0], seed=seed, poses=Q, hand_length_m=hand_length_m,
                            views=len(cameras))
@@ -225,7 +229,8 @@ def edge_tracked_poses(Q: np.ndarray, seed: int, cameras: Sequence[PinholeCamera
         tracker = EdgeTracker(seq.synth.model, cameras, config, backgrounds)
         results, restarts = track_scripted(
             tracker, Q, lambda i: [v.image_rgb for v in seq.render_views(i, cameras)], reinit)
-        return [r.q for r in results], restarts
+        return ([r.q for r in results], restarts,
+                [math.nan if r.fit is None else r.fit.rms_px for r in results])
     finally:
         seq.close()
 
@@ -244,9 +249,12 @@ def glove_tracked_poses(model: HandModel, Q: np.ndarray, seed: int, tracker: Scr
 def evaluate_seed(model: HandModel, config: MouseConfig, seed: int,
                   poses: list[np.ndarray | None], tolerance: int,
                   Q: np.ndarray, spans: list[list[tuple[int, int]]],
-                  reinitialised: Sequence[int] = ()) -> dict[str, Any]:
+                  reinitialised: Sequence[int] = (),
+                  residuals: Sequence[float] | None = None) -> dict[str, Any]:
     """Run the mouse over one scripted sequence (true poses ``Q``, click ``spans``) fed with
-    ``poses`` (one per frame, None = no pose that frame); counts and errors.
+    ``poses`` (one per frame, None = no pose that frame) and, if given, each pose's fit
+    ``residuals`` (px, NaN = unknown; the mouse's ``press_max_residual_ratio``); counts and
+    errors.
     ``reinitialised``: frames where the tracker was re-initialised from the true pose;
     ``correct_at_reinit`` counts the correct clicks with one of them between the click's
     start (less ``tolerance``) and the press."""
@@ -254,10 +262,12 @@ def evaluate_seed(model: HandModel, config: MouseConfig, seed: int,
     rest = raw_mouse_values(model, Q[0], config)
     presses: list[list[int]] = [[], []]
     errors = []
-    for i, (q, tracked) in enumerate(zip(Q, poses, strict=True)):
+    if residuals is None:
+        residuals = [math.nan] * len(poses)
+    for i, (q, tracked, residual) in enumerate(zip(Q, poses, residuals, strict=True)):
         if tracked is None:
             continue
-        state = mouse.update(tracked, i / FPS)
+        state = mouse.update(tracked, i / FPS, residual)
         for k in range(2):
             if state.pressed[k]:
                 presses[k].append(i)
@@ -336,6 +346,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--retry-rest-margin-px', type=float,
                         help='with --retry-dofs: the tracker\'s retry_rest_margin_px (default: '
                         'EdgeTrackerConfig\'s, off)')
+    parser.add_argument('--press-max-residual-ratio', type=float,
+                        help='with --source edges: the mouse\'s press_max_residual_ratio (a '
+                        'press needs an edge residual at most this many times the recent '
+                        'median; default: MouseConfig\'s)')
     args = parser.parse_args(argv)
     return run_tool('colorglove_eval_mouse', lambda: _run(args))
 
@@ -348,6 +362,8 @@ def _run(args: Any) -> int:
     cameras = calibration.cameras[:args.cameras]
     model = HandModel(calibration.hand_length_m) if args.source != 'noise' else HandModel()
     config = MouseConfig()
+    if args.press_max_residual_ratio is not None:
+        config = replace(config, press_max_residual_ratio=args.press_max_residual_ratio)
     noise = {'joint_deg': args.joint_noise_deg, 'position_mm': args.position_noise_mm,
              'rotation_deg': args.rotation_noise_deg, 'drop': args.drop}
     glove: ScriptedTracker | None = None
@@ -383,17 +399,18 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
         Q, spans = scripted_sequence(model, config, seed, args.seconds)
         extra: dict[str, Any] = {}
         restarts: list[int] = []
+        residuals: list[float] | None = None
         if args.source == 'edges':
-            poses, restarts = edge_tracked_poses(Q, seed, cameras, hand_length_m,
-                                                 args.background == 'empty', edge_config,
-                                                 args.reinit)
+            poses, restarts, residuals = edge_tracked_poses(
+                Q, seed, cameras, hand_length_m, args.background == 'empty', edge_config,
+                args.reinit)
             extra['reinitialisations'] = len(restarts)
         elif glove is not None:
             poses = glove_tracked_poses(model, Q, seed, glove)
         else:
             poses = noisy_poses(model, Q, seed, noise)
         rows.append({**evaluate_seed(model, config, seed, poses, args.tolerance_frames, Q,
-                                     spans, restarts), **extra})
+                                     spans, restarts, residuals), **extra})
         print(f'seed {seed}: {rows[-1]}', flush=True)
     tp = sum(r['correct'] for r in rows)
     det = sum(r['detected'] for r in rows)
@@ -416,6 +433,10 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'source': args.source, 'seconds': args.seconds,
                                             'background': args.background,
                                             'reinit': args.reinit,
+                                            'press_max_residual_ratio':
+                                                config.press_max_residual_ratio
+                                                if math.isfinite(
+                                                    config.press_max_residual_ratio) else None,
                                             'calibration': args.calibration,
                                             'cameras': [c.name for c in cameras],
                                             'camera_weights': list(edge_config.camera_weights),

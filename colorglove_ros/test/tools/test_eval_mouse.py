@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -48,6 +49,19 @@ def test_clicks_with_a_reinitialisation_from_the_truth_before_the_press_are_coun
     # the third click's start counts (the press comes after it); a frame before any click
     # or between clicks does not
     assert row['correct'] == 8 and row['correct_at_reinit'] == 1
+
+
+def test_the_mouse_holds_presses_back_on_the_frames_of_a_poor_fit() -> None:
+    Q, spans = scripted_sequence(MODEL, CONFIG, seed=3, seconds=12.0, clicks=4)
+    a, b = spans[0][1]
+    residuals = np.ones(len(Q))
+    residuals[a:b] = 4.0                      # the second thumb click seen by a poor fit
+    gated = replace(CONFIG, press_max_residual_ratio=2.0)
+    row = evaluate_seed(MODEL, gated, 3, list(Q), 0, Q, spans, residuals=list(residuals))
+    assert row['correct'] == 7 and row['detected'] == 7
+    assert evaluate_seed(MODEL, CONFIG, 3, list(Q), 0, Q, spans,
+                         residuals=list(residuals))['correct'] == 8
+    assert evaluate_seed(MODEL, gated, 3, list(Q), 0, Q, spans)['correct'] == 8
 
 
 class _FakeEdgeTracker:
@@ -118,8 +132,10 @@ def test_edge_tracker_output_is_one_pose_or_none_per_frame() -> None:
     Q, _ = scripted_sequence(MODEL, CONFIG, seed=0, seconds=3.0, clicks=1)
     runs = {sil: edge_tracked_poses(Q, 0, calibration.cameras[:1], calibration.hand_length_m,
                                     silhouettes=sil) for sil in (False, True)}
-    for poses, restarts in runs.values():
+    for poses, restarts, residuals in runs.values():
         assert len(poses) == len(Q) and all(0 <= i < len(Q) for i in restarts)
+        assert len(residuals) == len(Q)
+        assert all(r > 0 for p, r in zip(poses, residuals, strict=True) if p is not None)
         assert all(p is None or (p.shape == (26,) and np.all(np.isfinite(p))) for p in poses)
     # the silhouettes of the empty table scene reach the tracker and change its fits
     assert any((a is None) != (b is None) or (a is not None and not np.allclose(a, b))
@@ -130,8 +146,8 @@ def test_edge_tracker_output_is_one_pose_or_none_per_frame() -> None:
 def test_edge_tracker_fits_the_second_table_camera_when_asked() -> None:
     calibration = load_calibration(resolve_path('config/calibration_table_stereo.yaml'))
     Q, _ = scripted_sequence(MODEL, CONFIG, seed=0, seconds=2.5, clicks=1)
-    one, _ = edge_tracked_poses(Q, 0, calibration.cameras[:1], calibration.hand_length_m)
-    two, restarts = edge_tracked_poses(Q, 0, calibration.cameras[:2], calibration.hand_length_m)
+    one, _, _ = edge_tracked_poses(Q, 0, calibration.cameras[:1], calibration.hand_length_m)
+    two, restarts, _ = edge_tracked_poses(Q, 0, calibration.cameras[:2], calibration.hand_length_m)
     assert len(two) == len(Q) and all(0 <= i < len(Q) for i in restarts)
     assert all(p is None or (p.shape == (26,) and np.all(np.isfinite(p))) for p in two)
     # the front camera's edges change the fits

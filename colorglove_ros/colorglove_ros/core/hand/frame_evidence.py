@@ -9,13 +9,17 @@ order), and an :class:`EvidenceGate` sets aside the frames whose pose the image 
 poorly: such a frame neither starts nor ends anything (it is skipped, not a lost hand), so a
 whole hold the tracker misreads with few or badly fitting constraints starts no gesture,
 while a good hold with a few weak frames is not cut. Frames without evidence (another
-tracker's status, a line lost, or none) always count. No rclpy import.
+tracker's status, a line lost, or none) always count. ``edge_tracker_node``'s line
+(:func:`edge_tracking_status`: the links found and the edge residual, on another scale than
+the glove IK's reprojection) is read by :func:`parse_edge_tracking_status` only (the mouse).
+No rclpy import.
 """
 from __future__ import annotations
 
 import math
 import re
 from collections import OrderedDict
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
@@ -25,7 +29,8 @@ from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.validation import check_number
 
 __all__ = ['FrameEvidenceError', 'FrameEvidence', 'EvidenceGate', 'EvidencePairer',
-           'Stamp', 'tracking_status', 'parse_tracking_status']
+           'Stamp', 'tracking_status', 'parse_tracking_status', 'edge_tracking_status',
+           'parse_edge_tracking_status']
 
 Stamp = tuple[int, int]          # a frame's header stamp (sec, nanosec)
 Frame = TypeVar('Frame')
@@ -101,6 +106,38 @@ def parse_tracking_status(text: str) -> FrameEvidence | None:
         reprojection = math.nan
     stamp = _STAMP.search(text)
     return FrameEvidence(float(match.group(1)), reprojection,
+                         None if stamp is None else (int(stamp.group(1)), int(stamp.group(2))))
+
+
+_EDGE_STATUS = re.compile(r'^tracking: links found (.*?), edge residual (\S+) px\b')
+_EDGE_CAMERA = re.compile(r'\S+ (\d+)$')
+
+
+def edge_tracking_status(links_found: Sequence[tuple[str, int]], residual_px: float,
+                         time_ms: float, stamp: Stamp | None = None) -> str:
+    """edge_tracker_node's status line of a tracked frame: the links found per camera
+    (name, count), the fit's edge residual and time, and the frame's header stamp (``frame
+    <sec>.<nanosec>``) when given."""
+    per_camera = ', '.join(f'{name} {n}' for name, n in links_found)
+    line = f'tracking: links found {per_camera}, edge residual {residual_px:.2f} px, ' \
+           f'{time_ms:.1f} ms'
+    return line if stamp is None else f'{line}, frame {stamp[0]}.{stamp[1]:09d}'
+
+
+def parse_edge_tracking_status(text: str) -> FrameEvidence | None:
+    """The evidence in an :func:`edge_tracking_status` line (constraints: the links found
+    over the cameras; reprojection: the edge residual); None for any other line."""
+    match = _EDGE_STATUS.match(text)
+    if match is None:
+        return None
+    counts = [_EDGE_CAMERA.search(part.strip()) for part in match.group(1).split(',')]
+    try:
+        residual = float(match.group(2))
+    except ValueError:
+        residual = math.nan
+    stamp = _STAMP.search(text)
+    return FrameEvidence(float(sum(int(c.group(1)) for c in counts if c is not None)),
+                         residual,
                          None if stamp is None else (int(stamp.group(1)), int(stamp.group(2))))
 
 

@@ -15,11 +15,18 @@ Mapping (all lengths in metres, in the calibrated table frame):
   ``release_deg[k]`` (hysteresis);
 * the cursor and the two angles are smoothed by a first-order low-pass filter with time
   constant ``smoothing_s`` (0 = none), stepped by the messages' stamps; a gap longer than
-  ``max_gap_s`` restarts the filter and releases the buttons.
+  ``max_gap_s`` restarts the filter and releases the buttons;
+* a press needs evidence (``press_max_residual_ratio``, off by default): given the tracker's
+  fit residual of each pose (e.g. the edge tracker's edge residual), a button may go down only
+  on a pose whose residual is at most that many times the median residual of the poses of the
+  last ``residual_window_s`` before it (a drifted fit explains its frame worse than the
+  track usually does); unknown residuals (NaN, or no earlier pose) never hold a press back,
+  and a button already down is released as usual.
 """
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -96,6 +103,8 @@ class MouseConfig:
     release_deg: tuple[float, float] = (15.0, 5.0)
     smoothing_s: float = 0.05
     max_gap_s: float = 0.5
+    press_max_residual_ratio: float = math.inf
+    residual_window_s: float = 2.0
 
     def __post_init__(self) -> None:
         if len(self.press_deg) != 2 or len(self.release_deg) != 2 or not all(
@@ -104,6 +113,8 @@ class MouseConfig:
                              f'{self.press_deg}, one value per button')
         if self.smoothing_s < 0 or self.max_gap_s <= 0:
             raise MouseError('smoothing_s must be >= 0 and max_gap_s > 0')
+        if not self.press_max_residual_ratio > 0 or not self.residual_window_s > 0:
+            raise MouseError('press_max_residual_ratio and residual_window_s must be > 0')
 
 
 @dataclass(frozen=True)
@@ -144,22 +155,42 @@ class Mouse3D:
         self._filtered: np.ndarray | None = None
         self._stamp: float | None = None
         self._buttons = [False, False]
+        self._residuals: deque[tuple[float, float]] = deque()   # (stamp, residual px)
 
     def reset(self) -> None:
-        """Forget the filter state and release the buttons."""
+        """Forget the filter state and the residuals seen, release the buttons."""
         self._filtered = None
         self._stamp = None
         self._buttons = [False, False]
+        self._residuals.clear()
 
     @property
     def buttons(self) -> tuple[bool, bool]:
         """Current button states (thumb, little)."""
         return self._buttons[0], self._buttons[1]
 
-    def update(self, q: np.ndarray, stamp: float) -> MouseState:
-        """Feed one hand pose (camera frame) at time ``stamp`` (seconds)."""
+    def _press_allowed(self, residual_px: float, stamp: float) -> bool:
+        """Whether a pose of fit residual ``residual_px`` at ``stamp`` may press a button
+        (``press_max_residual_ratio``); records the residual for the later poses."""
+        cfg = self.config
+        window = self._residuals
+        while window and not 0.0 <= stamp - window[0][0] <= cfg.residual_window_s:
+            window.popleft()
+        allowed = True
+        if math.isfinite(residual_px) and window and cfg.press_max_residual_ratio < math.inf:
+            allowed = residual_px <= cfg.press_max_residual_ratio * float(
+                np.median([r for _, r in window]))
+        if math.isfinite(residual_px):
+            window.append((stamp, residual_px))
+        return allowed
+
+    def update(self, q: np.ndarray, stamp: float, residual_px: float = math.nan
+               ) -> MouseState:
+        """Feed one hand pose (camera frame) at time ``stamp`` (seconds), with the
+        tracker's fit residual of it if known (``press_max_residual_ratio``)."""
         cfg = self.config
         raw = raw_mouse_values(self.model, q, cfg)
+        may_press = self._press_allowed(residual_px, stamp)
         before = tuple(self._buttons)
         gap = None if self._stamp is None else stamp - self._stamp
         if gap is None or not 0.0 <= gap <= cfg.max_gap_s or self._filtered is None:
@@ -171,7 +202,7 @@ class Mouse3D:
             self._filtered = self._filtered + a * (raw - self._filtered)
         self._stamp = stamp
         for k, angle in enumerate(self._filtered[3:5]):
-            if not self._buttons[k] and angle > cfg.press_deg[k]:
+            if not self._buttons[k] and angle > cfg.press_deg[k] and may_press:
                 self._buttons[k] = True
             elif self._buttons[k] and angle < cfg.release_deg[k]:
                 self._buttons[k] = False

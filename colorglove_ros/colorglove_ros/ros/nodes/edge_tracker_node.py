@@ -34,6 +34,7 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 
 from colorglove_ros.core.camera import PinholeCamera, load_calibration
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.frame_evidence import edge_tracking_status
 from colorglove_ros.core.hand.frames import finger_joint_names
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
@@ -41,7 +42,7 @@ from colorglove_ros.core.tracking.edge_tracker import EdgeTracker
 from colorglove_ros.core.tracking.silhouette import SilhouetteConfig, read_background
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.bags import camera_info_to_pinhole
-from colorglove_ros.ros.conversions import pose_from_msgs, stamp_to_seconds
+from colorglove_ros.ros.conversions import pose_from_msgs
 from colorglove_ros.ros.diagnostics import FrameStats
 from colorglove_ros.ros.image import ImageEncodingError, image_to_array
 from colorglove_ros.ros.nodes.common import (
@@ -277,13 +278,10 @@ class EdgeTrackerNode(Node):
         header.frame_id = self.tracker.cameras[0].frame_id
         self.outputs.publish_pose(result.q, self.model.keypoints(result.q), header)
         fit = result.fit
-        per_camera = ', '.join(f'{c.name} {n}' for c, n in
-                               zip(self.tracker.cameras, fit.links_found, strict=True))
-        self.stats.hand(latency_s, **{f'links found {c.name}': n for c, n in
-                                      zip(self.tracker.cameras, fit.links_found, strict=True)})
-        self.outputs.publish_status(
-            f'tracking: links found {per_camera}, edge residual {fit.rms_px:.1f} px, '
-            f'{result.time_ms:.1f} ms, stamp {stamp_to_seconds(header.stamp):.3f}')
+        links = [(c.name, n) for c, n in zip(self.tracker.cameras, fit.links_found, strict=True)]
+        self.stats.hand(latency_s, **{f'links found {name}': n for name, n in links})
+        self.outputs.publish_status(edge_tracking_status(
+            links, fit.rms_px, result.time_ms, (header.stamp.sec, header.stamp.nanosec)))
 
 
 def main(args: list[str] | None = None) -> int:

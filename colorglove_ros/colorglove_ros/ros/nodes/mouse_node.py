@@ -7,22 +7,37 @@ cursor), smoothed; the mapping is documented in ``core.tracking.mouse``.
 The table plane is ``table_origin`` + ``table_x_axis`` / ``table_y_axis`` (camera optical
 frame, orthonormal) or, with ``table_tilt_deg`` > 0, the table seen by a camera tilted that
 far from the vertical whose optical axis meets it ``table_distance_m`` away.
+
+With ``press_max_residual_ratio`` > 0 a press needs evidence (``core.tracking.mouse``): each
+pose waits for its frame's ``edge_tracker_node`` status line on ``hand/tracking_status``
+(``core.hand.frame_evidence``, paired by the frame's stamp) and a button goes down only on a
+pose whose edge residual is at most that many times the median of the last
+``residual_window_s``; poses without such a line (another tracker's) press as before.
 """
 from __future__ import annotations
 
+import math
 import sys
 
+import numpy as np
 from geometry_msgs.msg import Point, PointStamped, PoseStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState, Joy
+from std_msgs.msg import Header, String
 
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.frame_evidence import (
+    EvidencePairer,
+    FrameEvidence,
+    parse_edge_tracking_status,
+)
 from colorglove_ros.core.hand.frames import finger_joint_names
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.tracking.mouse import Mouse3D, MouseConfig, TablePlane
 from colorglove_ros.ros.conversions import pose_from_msgs, stamp_to_seconds
 from colorglove_ros.ros.nodes.common import (
     JOINT_STATES_TOPIC,
+    TRACKING_STATUS_TOPIC,
     WRIST_POSE_TOPIC,
     declare,
     declare_frame_prefix,
@@ -69,6 +84,14 @@ class MouseNode(Node):
         max_gap = declare(self, 'max_gap_s', defaults.max_gap_s,
                           'a longer gap between poses restarts the filter and releases the '
                           'buttons, s', 0.01, 10.0)
+        ratio = declare(self, 'press_max_residual_ratio',
+                        _off_as_zero(defaults.press_max_residual_ratio),
+                        'a button goes down only on a pose whose edge residual (edge_tracker '
+                        'status line) is at most this many times the recent median (0: off)',
+                        0.0, 100.0)
+        window = declare(self, 'residual_window_s', defaults.residual_window_s,
+                         'the recent residuals press_max_residual_ratio compares with, s',
+                         0.1, 600.0)
         hand_length = declare_hand_length(self, 'hand length of the tracker, m')
         self.joint_names = finger_joint_names(declare_frame_prefix(self, 'mouse_node'))
         self.stamp_tolerance = declare(self, 'stamp_tolerance_s', 0.005,
@@ -78,9 +101,14 @@ class MouseNode(Node):
             plane = (TablePlane.from_camera_tilt(tilt, distance) if tilt > 0 else
                      TablePlane(tuple(origin), tuple(x_axis), tuple(y_axis)))
             config = MouseConfig(plane, plane_gain, height_gain, rest, tuple(press),
-                                 tuple(release), smoothing, max_gap)
+                                 tuple(release), smoothing, max_gap,
+                                 ratio if ratio > 0 else math.inf, window)
             self.mouse = Mouse3D(HandModel(hand_length), config)
         self.wrist: PoseStamped | None = None
+        self.pairer: EvidencePairer[tuple[np.ndarray, Header]] | None = None
+        if ratio > 0:
+            self.pairer = EvidencePairer()
+            self.create_subscription(String, TRACKING_STATUS_TOPIC, self.on_status, 10)
         self.create_subscription(PoseStamped, WRIST_POSE_TOPIC, self.on_wrist, 10)
         self.create_subscription(JointState, JOINT_STATES_TOPIC, self.on_joints, 10)
         self.cursor_pub = self.create_publisher(PointStamped, 'mouse/cursor', 10)
@@ -97,16 +125,41 @@ class MouseNode(Node):
                 > self.stamp_tolerance:
             return
         try:
-            state = self.mouse.update(pose_from_msgs(msg, self.wrist, self.joint_names), stamp)
+            q = pose_from_msgs(msg, self.wrist, self.joint_names)
         except (ColorGloveError, ValueError, KeyError) as exc:
             self.get_logger().warn(f'pose dropped: {exc}', throttle_duration_sec=1.0)
             return
-        header = msg.header
+        if self.pairer is None:
+            self._update(q, msg.header, None)
+            return
+        stamp_msg = msg.header.stamp
+        for (q_ready, header), evidence in self.pairer.add_frame(
+                (stamp_msg.sec, stamp_msg.nanosec), (q, msg.header)):
+            self._update(q_ready, header, evidence)
+
+    def on_status(self, msg: String) -> None:
+        """Pair the edge tracker's evidence with its frame's pose."""
+        if self.pairer is not None:
+            for (q, header), evidence in self.pairer.add_status(
+                    parse_edge_tracking_status(msg.data)):
+                self._update(q, header, evidence)
+
+    def _update(self, q: np.ndarray, header: Header, evidence: FrameEvidence | None) -> None:
+        residual = math.nan if evidence is None else float(evidence.reprojection_px)
+        try:
+            state = self.mouse.update(q, stamp_to_seconds(header.stamp), residual)
+        except (ColorGloveError, ValueError) as exc:
+            self.get_logger().warn(f'pose dropped: {exc}', throttle_duration_sec=1.0)
+            return
         header.frame_id = self.frame_id
         x, y, z = (float(v) for v in state.cursor)
         self.cursor_pub.publish(PointStamped(header=header, point=Point(x=x, y=y, z=z)))
         self.buttons_pub.publish(Joy(header=header, axes=[x, y, z],
                                      buttons=[int(b) for b in state.buttons]))
+
+
+def _off_as_zero(value: float) -> float:
+    return value if math.isfinite(value) else 0.0
 
 
 def main(args: list[str] | None = None) -> int:

@@ -11,6 +11,8 @@ from colorglove_ros.core.hand.frame_evidence import (
     EvidencePairer,
     FrameEvidence,
     FrameEvidenceError,
+    edge_tracking_status,
+    parse_edge_tracking_status,
     parse_tracking_status,
     tracking_status,
 )
@@ -26,6 +28,19 @@ def test_status_line_round_trip() -> None:
     assert stamped == ('tracking: 12 constraints (cam0 12), reprojection 2.1 px, IK 4.5 ms, '
                        'frame 100.033333333')
     assert parse_tracking_status(stamped) == FrameEvidence(12.0, 2.1, (100, 33333333))
+
+
+def test_edge_tracker_status_line_carries_its_links_residual_and_stamp() -> None:
+    line = edge_tracking_status([('cam0', 9), ('cam1', 12)], 1.234, 8.5, (100, 33333333))
+    assert line == ('tracking: links found cam0 9, cam1 12, edge residual 1.23 px, 8.5 ms, '
+                    'frame 100.033333333')
+    assert parse_edge_tracking_status(line) == FrameEvidence(21.0, 1.23, (100, 33333333))
+    assert parse_edge_tracking_status(edge_tracking_status([('cam0', 4)], 0.5, 1.0)) \
+        == FrameEvidence(4.0, 0.5)
+    # the glove gates read ik_node's lines only, the mouse the edge tracker's only
+    assert parse_tracking_status(line) is None
+    assert parse_edge_tracking_status(tracking_status(12, 'cam0 12', 2.1, 4.5)) is None
+    assert parse_edge_tracking_status('no hand: lost') is None
 
 
 @pytest.mark.parametrize('line', [

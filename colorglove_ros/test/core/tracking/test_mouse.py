@@ -70,11 +70,50 @@ def test_smoothing_lags_and_a_gap_restarts() -> None:
     assert c[0] - a[0] == pytest.approx(0.1, rel=1e-6)
 
 
+def test_a_press_waits_for_a_residual_near_the_tracks_usual_one() -> None:
+    cfg = MouseConfig(plane=PLANE, smoothing_s=0.0, press_max_residual_ratio=1.5,
+                      residual_window_s=1.0)
+    mouse, ungated = Mouse3D(MODEL, cfg), Mouse3D(MODEL, MouseConfig(plane=PLANE,
+                                                                     smoothing_s=0.0))
+    q = _pose()
+    # a good track (residual 1 px), then the thumb abducted on a fit three times as poor,
+    # then on a fit as good as before
+    script = [(5, 1.0)] * 5 + [(40, 3.0)] * 3 + [(40, 1.2), (40, 1.2)]
+    pressed, free = [], []
+    for t, (deg, residual) in enumerate(script):
+        q[THUMB] = math.radians(deg)
+        pressed.append(mouse.update(q, 0.1 * t, residual).pressed[0])
+        free.append(ungated.update(q, 0.1 * t, residual).pressed[0])
+    assert free.index(True) == 5                 # without the gate: the poor fit presses
+    assert pressed.index(True) == 8 and sum(pressed) == 1
+    # a button already down is released as usual on a poor fit
+    q[THUMB] = 0.0
+    assert mouse.update(q, 1.0, 9.0).released[0]
+    # unknown residuals and the first pose never hold a press back
+    q[THUMB] = math.radians(40)
+    fresh = Mouse3D(MODEL, cfg)
+    assert fresh.update(q, 0.0, 50.0).pressed[0]
+    fresh.reset()
+    assert fresh.update(q, 0.0).pressed[0]
+    # the window forgets old residuals: a slow rise of the residual is the new usual
+    slow = Mouse3D(MODEL, cfg)
+    q[THUMB] = 0.0
+    for t in range(10):
+        slow.update(q, 0.1 * t, 1.0)
+    q[THUMB] = math.radians(40)
+    for t in range(10, 22):
+        state = slow.update(q, 0.1 * t, 3.0)
+    assert slow.buttons[0] and not state.pressed[0]
+
+
 def test_bad_settings_are_refused() -> None:
     with pytest.raises(MouseError):
         MouseConfig(press_deg=(10.0, 10.0), release_deg=(20.0, 5.0))
     with pytest.raises(MouseError):
         TablePlane((0, 0, 0), (1, 0, 0), (1, 0, 0))
+    for bad in ({'press_max_residual_ratio': 0.0}, {'residual_window_s': -1.0}):
+        with pytest.raises(MouseError):
+            MouseConfig(**bad)
     with pytest.raises(MouseError):
         raw_mouse_values(MODEL, np.full(26, np.nan), MouseConfig())
     plane = TablePlane.from_camera_tilt(45.0, 0.6)
