@@ -255,7 +255,7 @@ def evaluate_seed(model: HandModel, config: MouseConfig, seed: int,
     ``poses`` (one per frame, None = no pose that frame) and, if given, each pose's fit
     ``residuals`` (px, NaN = unknown; the mouse's ``press_max_residual_ratio``); counts and
     errors.
-    ``reinitialised``: frames where the tracker was re-initialised from the true pose;
+    ``reinitialised``: frames where the tracker was re-initialised (``reinitialisation_pose``);
     ``correct_at_reinit`` counts the correct clicks with one of them between the click's
     start (less ``tolerance``) and the press."""
     mouse = Mouse3D(model, config)
@@ -349,7 +349,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--press-max-residual-ratio', type=float,
                         help='with --source edges: the mouse\'s press_max_residual_ratio (a '
                         'press needs an edge residual at most this many times the recent '
-                        'median; default: MouseConfig\'s)')
+                        'median; 0: off, as mouse_node reads it; default: MouseConfig\'s)')
     args = parser.parse_args(argv)
     return run_tool('colorglove_eval_mouse', lambda: _run(args))
 
@@ -363,7 +363,8 @@ def _run(args: Any) -> int:
     model = HandModel(calibration.hand_length_m) if args.source != 'noise' else HandModel()
     config = MouseConfig()
     if args.press_max_residual_ratio is not None:
-        config = replace(config, press_max_residual_ratio=args.press_max_residual_ratio)
+        ratio = args.press_max_residual_ratio
+        config = replace(config, press_max_residual_ratio=ratio if ratio > 0 else math.inf)
     noise = {'joint_deg': args.joint_noise_deg, 'position_mm': args.position_noise_mm,
              'rotation_deg': args.rotation_noise_deg, 'drop': args.drop}
     glove: ScriptedTracker | None = None

@@ -1,11 +1,13 @@
 """Compiled (numba) kernels of the segmenter's per-pixel loops: the border relabelling's passes
-(:func:`segmenter.relabel_borders`).
+(:func:`segmenter.relabel_borders`), the mean-shift crop, the colour classification, label
+counts and boxes, the scene colours' histogram, the tiny image's cell votes and the glove
+region's reached components.
 
 The same arithmetic as the numpy code they replaced (float32 colour distances in the same
 order, the same tie rules), as loops over the pixels, so one call replaces the dozens of
 whole-array numpy passes per relabelling pass. Every kernel is compiled once and cached on disk
 (``cache=True``); :func:`compile_kernels` makes (or loads) them ahead of the first frame and
-allows no other signature. Arrays passed in must be C-contiguous, of the dtypes in
+allows no other signature. Arrays passed in must have the dtypes and layouts in
 ``_SIGNATURES``.
 """
 from __future__ import annotations

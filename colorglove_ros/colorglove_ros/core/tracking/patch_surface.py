@@ -69,6 +69,10 @@ class PatchSurface:
         num_patches = int(elem_patch.max()) + 1
         slots = np.bincount(pairs[:, 0], minlength=num_patches)
         self.max_links = int(slots.max())
+        if not 0.0 <= min_link_weight < 1.0 / self.max_links:
+            # a seen patch must keep its largest link (weight >= 1 / max_links)
+            raise IKError(f'min_link_weight must be in [0, 1/{self.max_links}) for a glove '
+                          f'with up to {self.max_links} links per patch, got {min_link_weight}')
         self._table = np.full((num_patches, self.max_links), -1, np.int64)
         first = np.concatenate([[0], np.cumsum(slots)[:-1]])
         for g, (p, _) in enumerate(pairs):

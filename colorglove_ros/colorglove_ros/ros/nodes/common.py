@@ -2,6 +2,7 @@
 topics (publishing a pose, subscribing to one) and the Jazzy ``main`` pattern."""
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from functools import partial
@@ -54,7 +55,8 @@ from colorglove_ros.ros.frame_camera import FrameCamera
 from colorglove_ros.ros.pose_pairing import PosePairer
 from colorglove_ros.ros.shm_cleanup import clean_stale_fastdds_segments
 
-__all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'ending_on_shutdown', 'run_node',
+__all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'declare_limit', 'ending_on_shutdown',
+           'run_node',
            'DEFAULT_CALIBRATION_FILE', 'DEFAULT_DATABASE_CONFIG', 'declare_database',
            'HAND_LENGTH_RANGE_M', 'startup_errors',
            'declare_calibration_file', 'declare_hand_length', 'declare_hand',
@@ -103,6 +105,17 @@ def declare(node: Node, name: str, default: Any, description: str,
                 from_value=float(minimum), to_value=float(maximum), step=0.0)]
     return node.declare_parameter(name, default, descriptor).value
 
+
+
+def declare_limit(node: Node, name: str, default: float, description: str,
+                  maximum: float, off: float = 0.0) -> float:
+    """Declare a limit that is off when infinite: the parameter reads ``off`` (0, or -1 where
+    0 is a limit of its own) for off, as ROS parameters hold no infinity (``description``
+    should say so), and is declared in [``off``, ``maximum``]; return the limit, ``math.inf``
+    for ``off``."""
+    value = declare(node, name, float(default) if math.isfinite(default) else float(off),
+                    description, float(off), maximum)
+    return float(value) if value > off else math.inf
 
 #: Default of the ``opencv_threads`` parameter of the nodes that run OpenCV per frame: one
 #: thread. Their images are small (a coarse frame, a region of interest, 40x40 tiny images),

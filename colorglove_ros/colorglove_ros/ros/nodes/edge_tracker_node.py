@@ -54,6 +54,7 @@ from colorglove_ros.ros.nodes.common import (
     declare_calibration_file,
     declare_frame_prefix,
     declare_hand_length,
+    declare_limit,
     declare_topic_list,
     run_node,
     startup_errors,
@@ -152,6 +153,13 @@ class EdgeTrackerNode(Node):
         retry_step = declare(self, 'retry_step_deg', defaults.retry_step_deg,
                              'retry_dofs: step between the starts tried (up to '
                              f'{defaults.retry_steps} steps each way), degrees', 1.0, 90.0)
+        retry_wrist = declare_limit(self, 'retry_max_wrist_move_m', defaults.retry_max_wrist_move_m,
+                                    'retry_dofs: a retried fit is kept only with its wrist '
+                                    'within this of the previous pose, m (0: off)', 1.0)
+        retry_margin = declare_limit(self, 'retry_rest_margin_px', defaults.retry_rest_margin_px,
+                                     'retry_dofs: a retried fit is kept only when the rest of '
+                                     'the hand fits as well as the last good frame, within '
+                                     'this, px (-1: off)', 100.0, off=-1.0)
         with startup_errors('edge_tracker_node', ValueError):
             if len(init_wrist) != 3:
                 raise ColorGloveError(f'init_wrist_position needs 3 values, got {init_wrist}')
@@ -169,7 +177,8 @@ class EdgeTrackerNode(Node):
                 max_finger_unexplained=float(max_finger_unexplained),
                 silhouette_palm=bool(silhouette_palm),
                 max_finger_off_silhouette=float(max_finger_off),
-                retry_dofs=tuple(retry_dofs), retry_step_deg=float(retry_step))
+                retry_dofs=tuple(retry_dofs), retry_step_deg=float(retry_step),
+                retry_max_wrist_move_m=retry_wrist, retry_rest_margin_px=retry_margin)
             self.backgrounds = [read_background(resolve_path(f), SilhouetteConfig(
                 threshold=float(threshold))) for f in backgrounds]
             cameras: tuple[PinholeCamera, ...] = ()

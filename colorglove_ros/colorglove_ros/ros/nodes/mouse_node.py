@@ -42,6 +42,7 @@ from colorglove_ros.ros.nodes.common import (
     declare,
     declare_frame_prefix,
     declare_hand_length,
+    declare_limit,
     run_node,
     startup_errors,
 )
@@ -84,11 +85,11 @@ class MouseNode(Node):
         max_gap = declare(self, 'max_gap_s', defaults.max_gap_s,
                           'a longer gap between poses restarts the filter and releases the '
                           'buttons, s', 0.01, 10.0)
-        ratio = declare(self, 'press_max_residual_ratio',
-                        _off_as_zero(defaults.press_max_residual_ratio),
-                        'a button goes down only on a pose whose edge residual (edge_tracker '
-                        'status line) is at most this many times the recent median (0: off)',
-                        0.0, 100.0)
+        ratio = declare_limit(self, 'press_max_residual_ratio',
+                              defaults.press_max_residual_ratio,
+                              'a button goes down only on a pose whose edge residual '
+                              '(edge_tracker status line) is at most this many times the '
+                              'recent median (0: off)', 100.0)
         window = declare(self, 'residual_window_s', defaults.residual_window_s,
                          'the recent residuals press_max_residual_ratio compares with, s',
                          0.1, 600.0)
@@ -102,11 +103,11 @@ class MouseNode(Node):
                      TablePlane(tuple(origin), tuple(x_axis), tuple(y_axis)))
             config = MouseConfig(plane, plane_gain, height_gain, rest, tuple(press),
                                  tuple(release), smoothing, max_gap,
-                                 ratio if ratio > 0 else math.inf, window)
+                                 ratio, window)
             self.mouse = Mouse3D(HandModel(hand_length), config)
         self.wrist: PoseStamped | None = None
         self.pairer: EvidencePairer[tuple[np.ndarray, Header]] | None = None
-        if ratio > 0:
+        if math.isfinite(ratio):
             self.pairer = EvidencePairer()
             self.create_subscription(String, TRACKING_STATUS_TOPIC, self.on_status, 10)
         self.create_subscription(PoseStamped, WRIST_POSE_TOPIC, self.on_wrist, 10)
@@ -157,9 +158,6 @@ class MouseNode(Node):
         self.buttons_pub.publish(Joy(header=header, axes=[x, y, z],
                                      buttons=[int(b) for b in state.buttons]))
 
-
-def _off_as_zero(value: float) -> float:
-    return value if math.isfinite(value) else 0.0
 
 
 def main(args: list[str] | None = None) -> int:

@@ -137,3 +137,14 @@ def test_points_by_camera_match_each_camera_alone(scene):
     assert got[3].any() and not got[3].all()     # some rows seen, some not: not vacuous
     with pytest.raises(IKError, match='camera index'):
         surface.points_by_camera(q, stereo, np.full(40, 2), ids)
+
+
+def test_a_min_link_weight_that_could_drop_every_link_of_a_patch_is_refused(scene):
+    synth = scene[0]
+    kin = FastKinematics(synth.model)
+    surface = PatchSurface(kin, synth.mesh, synth.glove.face_patch)
+    too_high = 1.0 / surface.max_links
+    with pytest.raises(IKError, match='min_link_weight'):
+        PatchSurface(kin, synth.mesh, synth.glove.face_patch, min_link_weight=too_high)
+    with pytest.raises(IKError, match='min_link_weight'):
+        PatchSurface(kin, synth.mesh, synth.glove.face_patch, min_link_weight=-0.1)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -124,7 +125,8 @@ def test_the_node_defaults_are_the_tracker_defaults() -> None:
     defaults = EdgeTrackerConfig()
     for name in ('finger_refit', 'silhouette_palm', 'max_finger_off_silhouette',
                  'max_finger_unexplained', 'max_unexplained', 'silhouette_weight',
-                 'retry_dofs', 'retry_step_deg'):
+                 'retry_dofs', 'retry_step_deg', 'retry_max_wrist_move_m',
+                 'retry_rest_margin_px'):
         assert getattr(config, name) == getattr(defaults, name), name
 
 
@@ -132,6 +134,15 @@ def test_retry_parameters_reach_the_tracker() -> None:
     with running(_node(retry_dofs=['thumb_cmc_abd'], retry_step_deg=15.0)) as h:
         config = h.nodes[0].config
     assert config.retry_dofs == ('thumb_cmc_abd',) and config.retry_step_deg == 15.0
+
+
+def test_the_retry_guards_reach_the_tracker_and_0_is_a_rest_margin() -> None:
+    with running(_node(retry_max_wrist_move_m=0.005, retry_rest_margin_px=0.0)) as h:
+        config = h.nodes[0].config
+    assert config.retry_max_wrist_move_m == 0.005 and config.retry_rest_margin_px == 0.0
+    with running(_node(retry_max_wrist_move_m=0.0, retry_rest_margin_px=-1.0)) as h:
+        config = h.nodes[0].config
+    assert config.retry_max_wrist_move_m == math.inf and config.retry_rest_margin_px == math.inf
 
 
 def test_max_finger_off_silhouette_parameter_reaches_the_tracker() -> None:
