@@ -78,6 +78,7 @@ from colorglove_ros.tools._cli import run_tool, tool_parser
 
 __all__ = ['main', 'scripted_sequence', 'evaluate_seed', 'noisy_poses', 'edge_tracked_poses',
            'glove_tracked_poses', 'reinitialisation_pose', 'track_scripted', 'REINIT_MODES',
+           'DEFAULT_REINIT',
            'RELAXED_FINGERS_DEG']
 
 FPS = 30.0
@@ -92,6 +93,8 @@ _BUTTONS = [DOF_NAMES.index(n) for n in BUTTON_DOFS]
 _BUTTON_REST_DEG = np.array([5.0, -1.0])
 _BUTTON_CLICK_DEG = np.array([35.0, -14.0])
 REINIT_MODES: tuple[str, ...] = ('rest', 'truth')
+#: How the evaluation (re-)initialises the edge tracker by default (:func:`reinitialisation_pose`).
+DEFAULT_REINIT = REINIT_MODES[0]
 
 
 def _smooth_step(n: int) -> np.ndarray:
@@ -162,7 +165,7 @@ def scripted_sequence(model: HandModel, config: MouseConfig, seed: int, seconds:
     return model.clamp(Q), [thumb_spans, little_spans]
 
 
-def reinitialisation_pose(q: np.ndarray, reinit: str = 'rest') -> np.ndarray:
+def reinitialisation_pose(q: np.ndarray, reinit: str = DEFAULT_REINIT) -> np.ndarray:
     """The pose the evaluation (re-)initialises the edge tracker from at a frame whose true
     pose is ``q``: with ``reinit`` 'rest' ``q`` with the buttons' joints (``BUTTON_DOFS``) at
     the scripted hand's rest angles (no button down, whatever the frame's click), with
@@ -176,7 +179,8 @@ def reinitialisation_pose(q: np.ndarray, reinit: str = 'rest') -> np.ndarray:
 
 
 def track_scripted(tracker: EdgeTracker, Q: np.ndarray,
-                   views: Callable[[int], Sequence[np.ndarray | None]], reinit: str = 'rest'
+                   views: Callable[[int], Sequence[np.ndarray | None]],
+                   reinit: str = DEFAULT_REINIT
                    ) -> tuple[list[EdgeTrackResult], list[int]]:
     """``tracker`` over the frames ``views(i)`` (one image per camera) of the scripted poses
     ``Q``, started from :func:`reinitialisation_pose` of the first and, after a loss, of the
@@ -212,7 +216,8 @@ def noisy_poses(model: HandModel, Q: np.ndarray, seed: int, noise: dict[str, flo
 
 def edge_tracked_poses(Q: np.ndarray, seed: int, cameras: Sequence[PinholeCamera],
                        hand_length_m: float, silhouettes: bool = False,
-                       config: EdgeTrackerConfig | None = None, reinit: str = 'rest'
+                       config: EdgeTrackerConfig | None = None,
+                       reinit: str = DEFAULT_REINIT
                        ) -> tuple[list[np.ndarray | None], list[int], list[float]]:
     """The edge tracker's published poses on the bare-hand rendering of ``Q`` seen by
     ``cameras`` (the primary first; the poses are in its frame; None where it published
@@ -333,7 +338,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--silhouette-palm', action='store_true',
                         help='edge tracker with --background empty: the tracker\'s '
                         'silhouette_palm')
-    parser.add_argument('--reinit', choices=REINIT_MODES, default='rest',
+    parser.add_argument('--reinit', choices=REINIT_MODES, default=DEFAULT_REINIT,
                         help='with --source edges: (re-)initialise the edge tracker from the '
                         'true pose with the buttons\' joints at rest (default), or from the '
                         'true pose itself (truth: a loss during a click hands it the click)')
