@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 
 from colorglove_ros.core.conventions import NUM_COLORS
+from colorglove_ros.core.segmentation.color_model import MAX_GLOVE_COLORS
 from colorglove_ros.core.segmentation.crop import compiled_kernels
 from colorglove_ros.core.tracking.types import Blobs, IKError
 
@@ -24,7 +25,8 @@ def color_components(labels: np.ndarray, min_pixels: int, num_colors: int = NUM_
     its centroids shifted back, which agrees with labelling the whole image up to the
     rounding of that shift."""
     boxes = None
-    if labels.dtype == np.uint8 and labels.ndim == 2 and crop_to_color and num_colors < 64:
+    if (labels.dtype == np.uint8 and labels.ndim == 2 and crop_to_color
+            and num_colors <= MAX_GLOVE_COLORS):
         counts, boxes = compiled_kernels().label_boxes(labels, num_colors + 1)
     else:
         counts = np.bincount(labels.ravel(), minlength=num_colors + 1)

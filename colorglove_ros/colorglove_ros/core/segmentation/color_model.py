@@ -18,7 +18,8 @@ from colorglove_ros.core.colorimetry import linear_rgb_to_xyz, srgb_to_linear
 from colorglove_ros.core.errors import ColorGloveError
 
 __all__ = [
-    'CALIBRATION_FORMAT', 'CALIBRATION_FORMAT_VERSION', 'CGZ_A', 'CGZ_B', 'CGZ_EPS',
+    'MAX_GLOVE_COLORS', 'CALIBRATION_FORMAT',
+    'CALIBRATION_FORMAT_VERSION', 'CGZ_A', 'CGZ_B', 'CGZ_EPS',
     'FEATURE_KINDS', 'ColorCalibrationError', 'ColorCalibration', 'GaussianMixtureParams',
     'xyz_to_cgz', 'rgb_to_cgz', 'cgz_intensity_axis', 'cgz_chroma', 'rgb_features',
     'lut_index', 'index_tables', 'compile_lut', 'save_calibration', 'load_calibration',
@@ -45,6 +46,10 @@ class ColorCalibrationError(ColorGloveError):
     """A colour calibration cannot be fitted, or its file is missing, corrupt or of another
     version."""
 
+
+#: Most glove colours a calibration may have: the segmentation kernels keep a bit per label
+#: in a 64-bit mask (``segmentation_kernel.label_boxes``), and label 0 is the background.
+MAX_GLOVE_COLORS = 63
 
 def xyz_to_cgz(xyz: np.ndarray, eps: float = CGZ_EPS) -> np.ndarray:
     """CIE XYZ (..., 3) -> CGZ space ``A ln(B x)``; XYZ and ``B x`` are clamped to >= eps."""
@@ -274,6 +279,9 @@ def load_calibration(path: str | Path) -> ColorCalibration:
     try:
         bits = int(data['bits'])
         num_colors = int(data['num_colors'])
+        if not 1 <= num_colors <= MAX_GLOVE_COLORS:
+            raise ColorCalibrationError(f'{path} has {num_colors} glove colours; the segmenter '
+                                        f'takes 1 to at most {MAX_GLOVE_COLORS}')
         mixtures = [GaussianMixtureParams(data[f'gmm{c}_weights'], data[f'gmm{c}_means'],
                                           data[f'gmm{c}_covariances'])
                     for c in range(num_colors + 1)]

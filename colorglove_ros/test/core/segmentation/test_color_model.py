@@ -226,6 +226,17 @@ def test_save_load_roundtrip(calibration, tmp_path: Path) -> None:
     np.testing.assert_array_equal(loaded.reference_linear_rgb, calibration.reference_linear_rgb)
 
 
+@pytest.mark.parametrize('num_colors', [0, 64])
+def test_a_calibration_with_more_colours_than_the_kernels_take_is_refused(
+        calibration, tmp_path: Path, num_colors: int) -> None:
+    path = save_calibration(calibration, tmp_path / 'cal.npz')
+    arrays = dict(np.load(path, allow_pickle=False))
+    arrays['num_colors'] = np.array(num_colors)
+    np.savez(path, **arrays)
+    with pytest.raises(ColorCalibrationError, match='at most 63'):
+        load_calibration(path)
+
+
 def test_reference_colours_are_the_training_colours(calibration) -> None:
     ref = calibration.reference_linear_rgb
     assert ref.shape == (10, 3)
