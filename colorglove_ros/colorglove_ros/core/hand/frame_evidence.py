@@ -90,9 +90,8 @@ def tracking_status(constraints: int, per_camera: str, reprojection_px: float,
                     ik_ms: float, stamp: Stamp | None = None) -> str:
     """ik_node's status line of a tracked frame (``per_camera``: e.g. ``'cam0 12, cam1 4'``),
     ending with the frame's header stamp (``frame <sec>.<nanosec>``) when given."""
-    line = (f'tracking: {constraints} constraints ({per_camera}), reprojection '
-            f'{reprojection_px:.1f} px, IK {ik_ms:.1f} ms')
-    return line if stamp is None else f'{line}, frame {stamp[0]}.{stamp[1]:09d}'
+    return _stamped(f'tracking: {constraints} constraints ({per_camera}), reprojection '
+                    f'{reprojection_px:.1f} px, IK {ik_ms:.1f} ms', stamp)
 
 
 def parse_tracking_status(text: str) -> FrameEvidence | None:
@@ -100,12 +99,24 @@ def parse_tracking_status(text: str) -> FrameEvidence | None:
     match = _STATUS.match(text)
     if match is None:
         return None
+    return _evidence(float(match.group(1)), match.group(2), text)
+
+
+def _stamped(line: str, stamp: Stamp | None) -> str:
+    """A status ``line`` ending with the frame's header stamp (``frame <sec>.<nanosec>``)
+    when given."""
+    return line if stamp is None else f'{line}, frame {stamp[0]}.{stamp[1]:09d}'
+
+
+def _evidence(constraints: float, residual_text: str, text: str) -> FrameEvidence:
+    """The evidence of a status line ``text`` whose residual reads ``residual_text`` (NaN
+    when it is no number) and whose stamp, if any, ends it (:func:`_stamped`)."""
     try:
-        reprojection = float(match.group(2))
+        residual = float(residual_text)
     except ValueError:
-        reprojection = math.nan
+        residual = math.nan
     stamp = _STAMP.search(text)
-    return FrameEvidence(float(match.group(1)), reprojection,
+    return FrameEvidence(constraints, residual,
                          None if stamp is None else (int(stamp.group(1)), int(stamp.group(2))))
 
 
@@ -119,9 +130,8 @@ def edge_tracking_status(links_found: Sequence[tuple[str, int]], residual_px: fl
     (name, count), the fit's edge residual and time, and the frame's header stamp (``frame
     <sec>.<nanosec>``) when given."""
     per_camera = ', '.join(f'{name} {n}' for name, n in links_found)
-    line = f'tracking: links found {per_camera}, edge residual {residual_px:.2f} px, ' \
-           f'{time_ms:.1f} ms'
-    return line if stamp is None else f'{line}, frame {stamp[0]}.{stamp[1]:09d}'
+    return _stamped(f'tracking: links found {per_camera}, edge residual {residual_px:.2f} px, '
+                    f'{time_ms:.1f} ms', stamp)
 
 
 def parse_edge_tracking_status(text: str) -> FrameEvidence | None:
@@ -131,14 +141,8 @@ def parse_edge_tracking_status(text: str) -> FrameEvidence | None:
     if match is None:
         return None
     counts = [_EDGE_CAMERA.search(part.strip()) for part in match.group(1).split(',')]
-    try:
-        residual = float(match.group(2))
-    except ValueError:
-        residual = math.nan
-    stamp = _STAMP.search(text)
-    return FrameEvidence(float(sum(int(c.group(1)) for c in counts if c is not None)),
-                         residual,
-                         None if stamp is None else (int(stamp.group(1)), int(stamp.group(2))))
+    return _evidence(float(sum(int(c.group(1)) for c in counts if c is not None)),
+                     match.group(2), text)
 
 
 class EvidencePairer(Generic[Frame]):

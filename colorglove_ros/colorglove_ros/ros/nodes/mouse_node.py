@@ -159,7 +159,6 @@ class MouseNode(Node):
                                      buttons=[int(b) for b in state.buttons]))
 
 
-
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``mouse_node``."""
     return run_node(MouseNode, args)
