@@ -259,13 +259,19 @@ def look_up(lookup: Any, tiny: TinyCrop, camera: Any, blobs: Blobs | None = None
     ``blobs`` the fingers are blended per finger). :class:`NoHand` when the lookup fails
     ('lookup: ...') or its nearest database image is more than
     ``limits.max_image_distance`` tiny pixels away (not a hand; ``partial`` is the result)."""
+    result = _lookup_call(lookup.lookup, tiny.labels, tiny.transform, camera, blobs)
+    return result if isinstance(result, NoHand) else _near_enough(result, limits)
+
+
+def _lookup_call(call: Callable[..., Any], *args: Any) -> Any:
+    """``call(*args)`` (a step of ``PoseLookup``), or the 'no hand' of a lookup that failed
+    ('lookup: ...')."""
     from colorglove_ros.core.lookup.search import SearchError
 
     try:
-        result = lookup.lookup(tiny.labels, tiny.transform, camera, blobs)
+        return call(*args)
     except (SearchError, ValueError) as exc:
         return NoHand(f'lookup: {exc}', warn=True)
-    return _near_enough(result, limits)
 
 
 def too_far(nearest: float, limits: StageLimits) -> bool:
@@ -290,25 +296,15 @@ def _near_enough(result: LookupResult, limits: StageLimits) -> LookupResult | No
 def search(lookup: Any, tiny: TinyCrop) -> Neighbours | NoHand:
     """The first part of :func:`look_up` (``PoseLookup.search``): a tiny crop's re-ranked
     candidates, before their poses are blended; :class:`NoHand` when the search fails."""
-    from colorglove_ros.core.lookup.search import SearchError
-
-    try:
-        return lookup.search(tiny.labels, tiny.transform)
-    except (SearchError, ValueError) as exc:
-        return NoHand(f'lookup: {exc}', warn=True)
+    return _lookup_call(lookup.search, tiny.labels, tiny.transform)
 
 
 def blend(lookup: Any, found: Neighbours, camera: Any, blobs: Blobs | None = None,
           limits: StageLimits = NODE_LIMITS) -> LookupResult | NoHand:
     """The rest of :func:`look_up` on :func:`search` 's candidates ``found``
     (``PoseLookup.blend``): ``search`` then ``blend`` give what ``look_up`` gives."""
-    from colorglove_ros.core.lookup.search import SearchError
-
-    try:
-        result = lookup.blend(found, camera, blobs)
-    except (SearchError, ValueError) as exc:
-        return NoHand(f'lookup: {exc}', warn=True)
-    return _near_enough(result, limits)
+    result = _lookup_call(lookup.blend, found, camera, blobs)
+    return result if isinstance(result, NoHand) else _near_enough(result, limits)
 
 
 # ---------------------------------------------------------------------------- track
