@@ -13,10 +13,11 @@ allows no other signature. Arrays passed in must have the dtypes and layouts in
 from __future__ import annotations
 
 import math
-import time
 
 import numba
 import numpy as np
+
+from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
            'colour_histogram', 'cell_votes', 'near_or_reaching',
@@ -446,10 +447,6 @@ def compile_kernels() -> float:
     global _COMPILED
     if _COMPILED:
         return 0.0
-    started = time.perf_counter()
-    for kernel, signature in _SIGNATURES.items():
-        if not kernel.signatures:
-            kernel.compile(signature)
-            kernel.disable_compile()
+    seconds = compile_signatures(_SIGNATURES)
     _COMPILED = True
-    return time.perf_counter() - started
+    return seconds

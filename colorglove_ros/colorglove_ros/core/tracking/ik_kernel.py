@@ -13,10 +13,11 @@ int64, as the callers (:mod:`kinematics`, :mod:`projection`, :mod:`solver`,
 from __future__ import annotations
 
 import math
-import time
 
 import numba
 import numpy as np
+
+from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['forward_frames', 'link_points', 'projected_rows', 'prior_cost', 'normal_equations',
            'damped_step', 'translation_fit',
@@ -594,9 +595,4 @@ def compile_kernels() -> float:
     numba's on-disk cache) and allow no other, so no frame pays for a compilation (and an
     argument of another type or layout raises rather than compiles); returns the seconds it
     took (about none once done in this process)."""
-    started = time.perf_counter()
-    for kernel, signature in _SIGNATURES.items():
-        if not kernel.signatures:
-            kernel.compile(signature)
-            kernel.disable_compile()
-    return time.perf_counter() - started
+    return compile_signatures(_SIGNATURES)

@@ -1,0 +1,23 @@
+"""Compiling numba kernels ahead of the first frame, for the compiled inner loops of the IK
+(``core.tracking.ik_kernel``) and the segmenter (``core.segmentation.segmentation_kernel``):
+each kernel for its one signature (or loaded from numba's on-disk cache), then no other, so
+no frame pays for a compilation and an argument of another type or layout raises. Imports no
+numba itself."""
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from typing import Any
+
+__all__ = ['compile_signatures']
+
+
+def compile_signatures(signatures: Mapping[Any, Any]) -> float:
+    """Compile each numba dispatcher of ``signatures`` for its signature unless it has one,
+    then disable compiling it; returns the seconds it took."""
+    started = time.perf_counter()
+    for kernel, signature in signatures.items():
+        if not kernel.signatures:
+            kernel.compile(signature)
+            kernel.disable_compile()
+    return time.perf_counter() - started
