@@ -439,10 +439,6 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'source': args.source, 'seconds': args.seconds,
                                             'background': args.background,
                                             'reinit': args.reinit,
-                                            'press_max_residual_ratio':
-                                                config.press_max_residual_ratio
-                                                if math.isfinite(
-                                                    config.press_max_residual_ratio) else None,
                                             'calibration': args.calibration,
                                             'cameras': [c.name for c in cameras],
                                             'camera_weights': list(edge_config.camera_weights),
@@ -451,6 +447,8 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'retry_dofs': list(edge_config.retry_dofs),
                                             **{name: value if math.isfinite(value) else None
                                                for name, value in (
+                                                   ('press_max_residual_ratio',
+                                                    config.press_max_residual_ratio),
                                                    ('retry_max_wrist_move_m',
                                                     edge_config.retry_max_wrist_move_m),
                                                    ('retry_rest_margin_px',
