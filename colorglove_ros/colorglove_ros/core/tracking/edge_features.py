@@ -18,20 +18,19 @@ often brighter than it on the lit side and darker on the other).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import ModuleType
 
 import cv2
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 
 from colorglove_ros.core.errors import ColorGloveError
 
 __all__ = [
     'EdgeFeatureError', 'EdgeSearchConfig', 'LinkAxes', 'TipPoints', 'measure_link_axes',
-    'measure_outline_edges', 'measure_tips', 'to_grey', 'segment_distances',
+    'measure_outline_edges', 'measure_tips', 'to_grey', 'segment_distances', 'compiled_kernels',
 ]
 
 
-_NO_EDGE = -1.0e9   # strength of a sample that is no edge: any pair using it scores < 0
 
 
 class EdgeFeatureError(ColorGloveError):
@@ -122,30 +121,24 @@ def _sample(grey: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return out.reshape(shape)
 
 
+def compiled_kernels() -> ModuleType:
+    """The edge searches' compiled kernels (:mod:`edge_kernel`): numba is imported, and the
+    kernels compiled or loaded from their on-disk cache, on the first call (so importing this
+    module, or the nodes that import it, loads no numba)."""
+    from colorglove_ros.core.tracking import edge_kernel
+
+    edge_kernel.compile_kernels()
+    return edge_kernel
+
+
 def _derivative(profile: np.ndarray, step: np.ndarray) -> np.ndarray:
-    """Smoothed ([1 2 1] / 4) central-difference derivative along the last axis, per pixel
-    (``step`` broadcast against the leading axes); the end samples get 0."""
-    p = profile.copy()
-    p[..., 1:-1] = 0.25 * profile[..., :-2] + 0.5 * profile[..., 1:-1] + 0.25 * profile[..., 2:]
-    d = np.zeros_like(p)
-    d[..., 1:-1] = (p[..., 2:] - p[..., :-2]) / (2.0 * step[..., None])
-    d[np.isnan(d)] = 0.0
-    return d
-
-
-def _subpixel(score: np.ndarray, index: np.ndarray, sign: np.ndarray | None = None
-              ) -> np.ndarray:
-    """Parabolic refinement of the peak ``index`` of ``score`` along the last axis (of
-    ``-score`` where ``sign`` < 0)."""
-    n = score.shape[-1]
-    i = np.clip(index, 1, n - 2)
-    abc = np.take_along_axis(score, i[..., None] + np.arange(-1, 2), -1)
-    if sign is not None:
-        abc = np.where(sign[..., None] >= 0, abc, -abc)
-    a, b, c = abc[..., 0], abc[..., 1], abc[..., 2]
-    den = a - 2.0 * b + c
-    shift = np.where(np.abs(den) > 1e-9, 0.5 * (a - c) / np.where(den == 0, 1.0, den), 0.0)
-    return i + np.clip(shift, -0.5, 0.5)
+    """Smoothed ([1 2 1] / 4) central-difference derivative along the last axis of float32
+    samples, per pixel (``step``: the leading axes' spacing); the end samples get 0, NaN 0
+    (``edge_kernel.derivative``)."""
+    shape = profile.shape
+    rows = np.ascontiguousarray(profile, dtype=np.float32).reshape(-1, shape[-1])
+    spacing = np.ascontiguousarray(np.broadcast_to(step, shape[:-1]), dtype=float).reshape(-1)
+    return compiled_kernels().derivative(rows, spacing).reshape(shape)
 
 
 def _check_segments(base: np.ndarray, end: np.ndarray, half_width: np.ndarray
@@ -227,41 +220,22 @@ def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
     # edge strengths: a link brighter than its surroundings rises then falls (+1), a darker
     # one falls then rises (-1); with polarity 0 each edge may have either sign, since a
     # shaded cylinder before a mid-grey background can be brighter on one side and darker
-    # on the other
-    if np.all(pol == 0):
-        enter = leave = np.abs(d)
-    else:
-        enter = np.where(pol == 0, np.abs(d), pol * d)                        # (R, W)
-        leave = np.where(pol == 0, np.abs(d), -pol * d)
-    enter = np.where(enter > cfg.min_gradient, enter, _NO_EDGE)
-    leave = np.where(leave > cfg.min_gradient, leave, _NO_EDGE)
-    # pairs: entering edge at sample i, leaving edge at i + g for the gaps g that give a
-    # width within the ratio for some link, scored by their strength discounted by how far
-    # the width is from the predicted one (a shaded finger's inner brightness ramp must not
-    # beat its true, slightly weaker rim)
+    # on the other. Pairs: entering edge at sample i, leaving edge at i + g for the gaps g
+    # that give a width within the ratio for some link, scored by their strength discounted
+    # by how far the width is from the predicted one (a shaded finger's inner brightness
+    # ramp must not beat its true, slightly weaker rim): edge_kernel.pair_search
     lo, hi = cfg.width_ratio
     g_lo = max(1, int(np.floor((2.0 * hw * lo / step).min())))
     g_hi = max(g_lo, min(W - 1, int(np.ceil((2.0 * hw * hi / step).max()))))
     gaps = np.arange(g_lo, g_hi + 1)                                           # (G,)
-    padded = np.concatenate([leave[:, g_lo:], np.full((len(rows), g_hi), _NO_EDGE)], axis=1)
-    later = sliding_window_view(padded, len(gaps), axis=1)[:, :W]             # (R, W, G)
     width = gaps[None, :] * step[:, None]                                      # (L, G)
     ok_width = (width >= 2.0 * hw[:, None] * lo) & (width <= 2.0 * hw[:, None] * hi)
     agree = np.where(ok_width, np.exp(-0.5 * ((width - 2.0 * hw[:, None])
                                               / (cfg.width_sigma * 2.0 * hw[:, None])) ** 2),
                      0.0)
-    pair = np.add(enter[..., None], later)                                     # (R, W, G)
-    pair *= agree[li][:, None, :]
-    flat = pair.reshape(len(rows), W * len(gaps))
-    k = np.argmax(flat, axis=1) if len(rows) else np.zeros(0, dtype=np.int64)
-    best_score = np.take_along_axis(flat, k[:, None], 1)[:, 0]
-    best_i = k // len(gaps)
-    best_j = best_i + gaps[k % len(gaps)]
-    found_pair = (best_score > 0) & (best_j < W)
-    sign_i = np.sign(np.take_along_axis(d, best_i[:, None], 1)[:, 0]).astype(np.int64)
-    sign_j = np.sign(np.take_along_axis(d, best_j[:, None], 1)[:, 0]).astype(np.int64)
-    ei = _subpixel(d, best_i, sign_i)
-    ej = _subpixel(d, best_j, sign_j)
+    found_pair, sign_i, sign_j, ei, ej = compiled_kernels().pair_search(
+        d, np.ascontiguousarray(pol[:, 0]), bool(np.any(pol != 0)), float(cfg.min_gradient),
+        agree, li, g_lo)
     # back to (L, S); a slice not searched has no pair (its offset 0 is weighted 0)
     valid = np.zeros(L * S, dtype=bool)
     valid[rows] = found_pair
@@ -304,15 +278,13 @@ def measure_outline_edges(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndar
     t = np.linspace(-cfg.search_px, cfg.search_px, W)                          # (W,)
     step = np.full((L, S), 2.0 * cfg.search_px / (W - 1))
     xy = centres[:, :, None, :] + t[None, None, :, None] * n[:, None, None, :]
-    d = _derivative(_sample(grey, xy), step)                                   # (L, S, W)
-    score = np.abs(d) * np.exp(-0.5 * (t / (0.5 * cfg.search_px)) ** 2)[None, None, :]
-    score[..., 0] = score[..., -1] = 0.0
-    k = np.argmax(score, axis=2)
-    valid = np.take_along_axis(np.abs(d), k[..., None], 2)[..., 0] > cfg.min_gradient
+    d = _derivative(_sample(grey, xy), step).reshape(L * S, W)
+    # the strongest edge, discounted by its distance from the prediction (edge_kernel)
+    valid, sign, refined = compiled_kernels().edge_peaks(
+        d, np.exp(-0.5 * (t / (0.5 * cfg.search_px)) ** 2), float(cfg.min_gradient))
+    valid, sign, refined = valid.reshape(L, S), sign.reshape(L, S), refined.reshape(L, S)
     if slice_valid is not None:
         valid &= np.asarray(slice_valid, dtype=bool).reshape(L, S)
-    sign = np.sign(np.take_along_axis(d, k[..., None], 2)[..., 0])
-    refined = _subpixel(d, k, sign)
     off = -cfg.search_px + refined * step
     normal, offset, w, points = _fit_lines(base, end, centres, n, frac, off, valid, cfg)
     # re-orient the fitted normals outward (they follow the direction of n)
@@ -353,28 +325,18 @@ def measure_tips(grey: np.ndarray, axis_point_px: np.ndarray, direction_px: np.n
     profile = _sample(grey, xy)
     step = span / (cfg.tip_samples - 1)
     d = _derivative(profile, step)
-    pol = np.broadcast_to(np.asarray(polarity, dtype=np.int64), (len(p0),))
-    leave_bright = np.where((pol >= 0)[:, None], -d, -np.inf)   # brighter finger: drops
-    leave_dark = np.where((pol <= 0)[:, None], d, -np.inf)
-    score = np.maximum(leave_bright, leave_dark)
-    sign = np.where(leave_bright >= leave_dark, -1.0, 1.0)
-    k = np.argmax(score, axis=1)
-    best = np.take_along_axis(score, k[:, None], 1)[:, 0]
-    row_sign = np.take_along_axis(sign, k[:, None], 1)
-    refined = _subpixel(row_sign * d, k)
+    pol = np.ascontiguousarray(np.broadcast_to(np.asarray(polarity, dtype=np.int64), (len(p0),)))
+    # a brighter finger's grey level drops past its end, a darker one's rises (edge_kernel)
+    found, refined = compiled_kernels().tip_peaks(d, pol, float(cfg.min_gradient))
     edge = start + (refined * step)[:, None] * u
-    found = best > cfg.min_gradient
     return TipPoints(edge - r[:, None] * u, found)
 
 
 def segment_distances(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray]:
     """Distance from each of (P, 2) points to each of (M, 2)->(M, 2) segments, (P, M), and
-    the position of the closest point along each segment in [0, 1], (P, M)."""
-    p = np.asarray(points, dtype=float)[:, None, :]
-    a = np.asarray(seg_a, dtype=float)[None]
-    ab = np.asarray(seg_b, dtype=float)[None] - a
-    den = np.maximum((ab * ab).sum(-1), 1e-12)
-    s = np.clip(((p - a) * ab).sum(-1) / den, 0.0, 1.0)
-    closest = a + s[..., None] * ab
-    return np.linalg.norm(p - closest, axis=-1), s
+    the position of the closest point along each segment in [0, 1], (P, M)
+    (``edge_kernel.segment_distances``)."""
+    p, a, b = (np.ascontiguousarray(x, dtype=float).reshape(-1, 2)
+               for x in (points, seg_a, seg_b))
+    return compiled_kernels().segment_distances(p, a, b)

@@ -1,0 +1,230 @@
+"""Compiled (numba) kernels of the edge tracker's 1-D edge searches (:mod:`edge_features`):
+the smoothed derivative of the sampled slices, the link slices' edge-pair search, the palm
+outline's single-edge and the fingertips' end-edge searches with their sub-pixel peaks, and
+the distances of points to segments (:func:`segment_distances`, the
+occlusion tests and the silhouette targets of :mod:`edge_fit`).
+
+The same arithmetic as the numpy code they replaced, in the same dtypes (the slices' float32
+derivative, float64 pair scores, the first of equal maxima) and order, so the measurements are
+the same bits; the transcendental parts (the width discount's ``exp``) stay in numpy. Every
+kernel is compiled once and cached on disk (``cache=True``); :func:`compile_kernels` makes (or
+loads) them ahead of the first frame and allows no other signature. Arrays passed in must be
+C-contiguous and of the dtypes in ``_SIGNATURES``, as :mod:`edge_features` makes them.
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from colorglove_ros.core.kernel_compile import compile_signatures
+
+__all__ = ['derivative', 'pair_search', 'edge_peaks', 'tip_peaks', 'segment_distances',
+           'compile_kernels']
+
+_JIT = {'cache': True, 'nogil': True}
+_COMPILED = False   # every kernel compiled (compile_kernels)
+_NO_EDGE = -1.0e9   # edge_features._NO_EDGE: any pair using such a sample scores < 0
+
+
+@numba.njit(**_JIT)
+def derivative(profile: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """``edge_features._derivative`` of (R, W) float32 slices with per-slice sample spacing
+    ``step`` (R,): the [1 2 1] / 4 smoothing in float32, the central difference over
+    ``2 step`` in float64 rounded to float32, 0 at the ends and where NaN."""
+    rows, width = profile.shape
+    out = np.zeros((rows, width), np.float32)
+    quarter, half = np.float32(0.25), np.float32(0.5)
+    for r in range(rows):
+        p = profile[r]
+        s = np.empty(width, np.float32)
+        s[0], s[width - 1] = p[0], p[width - 1]
+        for i in range(1, width - 1):
+            s[i] = quarter * p[i - 1] + half * p[i] + quarter * p[i + 1]
+        twice = 2.0 * step[r]
+        for i in range(1, width - 1):
+            v = np.float32(np.float64(s[i + 1] - s[i - 1]) / twice)
+            out[r, i] = np.float32(0.0) if np.isnan(v) else v
+    return out
+
+
+@numba.njit(**_JIT)
+def _subpixel(d: np.ndarray, index: int, sign: int) -> float:
+    """``edge_features._subpixel`` of one float32 row at peak ``index`` (of ``-d`` where
+    ``sign`` < 0): the parabola's vertex in float32, clipped to half a sample."""
+    n = len(d)
+    i = min(max(index, 1), n - 2)
+    a, b, c = d[i - 1], d[i], d[i + 1]
+    if sign < 0:
+        a, b, c = -a, -b, -c
+    den = a - np.float32(2.0) * b + c
+    shift = np.float32(0.0)
+    if abs(den) > np.float32(1e-9):
+        shift = np.float32(0.5) * (a - c) / den
+    shift = min(max(shift, np.float32(-0.5)), np.float32(0.5))
+    return np.float64(i) + np.float64(shift)
+
+
+@numba.njit(**_JIT)
+def pair_search(d: np.ndarray, polarity: np.ndarray, signed: bool, min_gradient: float,
+                agree: np.ndarray, link: np.ndarray, g_lo: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The edge-pair search of ``edge_features.measure_link_axes`` on R slices' derivatives
+    ``d`` (R, W float32): per slice the entering edge at sample i and the leaving edge at
+    i + g (gaps ``g_lo`` .. ``g_lo + G - 1``) maximising their strengths' sum times the width
+    agreement ``agree[link[r], g - g_lo]`` (L, G); edges of strength at most
+    ``min_gradient`` count as none. ``polarity`` (R,) as there; ``signed`` whether any is
+    non-zero (then the strengths are float64, else float32, as numpy's). Returns whether a
+    pair was found, the signs of the two edges (int64) and their sub-pixel positions."""
+    rows, width = d.shape
+    gaps = agree.shape[1]
+    found = np.zeros(rows, np.bool_)
+    sign_i = np.zeros(rows, np.int64)
+    sign_j = np.zeros(rows, np.int64)
+    ei = np.zeros(rows)
+    ej = np.zeros(rows)
+    enter = np.empty(width)
+    leave = np.empty(width)
+    low32 = np.float32(min_gradient)
+    for r in range(rows):
+        pol = polarity[r]
+        for i in range(width):
+            v = d[r, i]
+            if signed:
+                a = abs(np.float64(v)) if pol == 0 else np.float64(pol) * np.float64(v)
+                b = abs(np.float64(v)) if pol == 0 else -np.float64(pol) * np.float64(v)
+                enter[i] = a if a > min_gradient else _NO_EDGE
+                leave[i] = b if b > min_gradient else _NO_EDGE
+            else:
+                a32 = abs(v)
+                enter[i] = np.float64(a32) if a32 > low32 else _NO_EDGE
+                leave[i] = enter[i]
+        row = agree[link[r]]
+        best, bi, bj = -np.inf, 0, 0
+        for i in range(width):
+            for k in range(gaps):
+                j = i + g_lo + k
+                later = leave[j] if j < width else _NO_EDGE
+                score = (enter[i] + later) * row[k]
+                if score > best:
+                    best, bi, bj = score, i, j
+        found[r] = best > 0 and bj < width
+        bj = min(bj, width - 1)   # a pair past the slice's end is never found
+        si, sj = d[r, bi], d[r, bj]
+        sign_i[r] = 1 if si > 0 else (-1 if si < 0 else 0)
+        sign_j[r] = 1 if sj > 0 else (-1 if sj < 0 else 0)
+        ei[r] = _subpixel(d[r], bi, sign_i[r])
+        ej[r] = _subpixel(d[r], bj, sign_j[r])
+    return found, sign_i, sign_j, ei, ej
+
+
+@numba.njit(**_JIT)
+def edge_peaks(d: np.ndarray, weight: np.ndarray, min_gradient: float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The single-edge search of ``edge_features.measure_outline_edges`` on R slices'
+    derivatives ``d`` (R, W float32): per slice the sample maximising ``|d|`` times
+    ``weight`` (W,; the end samples never), whether its ``|d|`` exceeds ``min_gradient``
+    (float32, as numpy compares it), its sign and its sub-pixel position."""
+    rows, width = d.shape
+    index = np.zeros(rows, np.int64)
+    strong = np.zeros(rows, np.bool_)
+    sign = np.zeros(rows, np.int64)
+    refined = np.zeros(rows)
+    low32 = np.float32(min_gradient)
+    for r in range(rows):
+        best, k = -np.inf, 0
+        for i in range(width):
+            score = 0.0 if i == 0 or i == width - 1 else np.float64(abs(d[r, i])) * weight[i]
+            if score > best:
+                best, k = score, i
+        v = d[r, k]
+        strong[r] = abs(v) > low32
+        sign[r] = 1 if v > 0 else (-1 if v < 0 else 0)
+        refined[r] = _subpixel(d[r], k, sign[r])
+    return strong, sign, refined
+
+
+@numba.njit(**_JIT)
+def tip_peaks(d: np.ndarray, polarity: np.ndarray, min_gradient: float
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """The end-edge search of ``edge_features.measure_tips`` on T slices' derivatives ``d``
+    (T, N float32) along the distal axes: per slice the strongest drop (a brighter finger,
+    ``polarity`` >= 0) or rise (a darker one, <= 0), whether it exceeds ``min_gradient``
+    (float32) and its sub-pixel position (the parabola of the signed derivative in float64,
+    as numpy promotes it)."""
+    rows, width = d.shape
+    found = np.zeros(rows, np.bool_)
+    refined = np.zeros(rows)
+    low32 = np.float32(min_gradient)
+    row = np.empty(width)
+    for r in range(rows):
+        pol = polarity[r]
+        best, k, k_sign = np.float32(-np.inf), 0, 1.0
+        for i in range(width):
+            bright = -d[r, i] if pol >= 0 else np.float32(-np.inf)
+            dark = d[r, i] if pol <= 0 else np.float32(-np.inf)
+            score = bright if bright >= dark else dark     # np.maximum: no NaN here
+            if score > best:
+                best, k, k_sign = score, i, -1.0 if bright >= dark else 1.0
+        found[r] = best > low32
+        for i in range(width):
+            row[i] = k_sign * np.float64(d[r, i])
+        i = min(max(k, 1), width - 2)
+        a, b, c = row[i - 1], row[i], row[i + 1]
+        den = a - 2.0 * b + c
+        shift = 0.5 * (a - c) / den if abs(den) > 1e-9 else 0.0
+        refined[r] = np.float64(i) + min(max(shift, -0.5), 0.5)
+    return found, refined
+
+
+@numba.njit(**_JIT)
+def segment_distances(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """``edge_features.segment_distances``: the distance from each of (P, 2) points to each
+    of (M, 2) -> (M, 2) segments (P, M) and the closest point's place along it in [0, 1]."""
+    P, M = len(points), len(seg_a)
+    dist = np.empty((P, M))
+    along = np.empty((P, M))
+    for m in range(M):
+        ax, ay = seg_a[m, 0], seg_a[m, 1]
+        bx, by = seg_b[m, 0] - ax, seg_b[m, 1] - ay
+        den = bx * bx + by * by
+        if not (den >= 1e-12 or np.isnan(den)):      # np.maximum
+            den = 1e-12
+        for p in range(P):
+            px, py = points[p, 0], points[p, 1]
+            s = ((px - ax) * bx + (py - ay) * by) / den
+            if not (np.isnan(s) or s > 0.0):            # np.clip to [0, 1]
+                s = 0.0
+            if not (np.isnan(s) or s < 1.0):
+                s = 1.0
+            dx, dy = px - (ax + s * bx), py - (ay + s * by)
+            dist[p, m] = np.sqrt(dx * dx + dy * dy)
+            along[p, m] = s
+    return dist, along
+
+
+def _array(dtype: object, ndim: int) -> object:
+    """A read-only C-contiguous array type (writable arrays convert to it)."""
+    return numba.types.Array(dtype, ndim, 'C', readonly=True)
+
+
+_F1, _F2 = _array(numba.float64, 1), _array(numba.float64, 2)
+_SIGNATURES = {
+    derivative: (_array(numba.float32, 2), _F1),
+    pair_search: (_array(numba.float32, 2), _array(numba.int64, 1), numba.boolean,
+                  numba.float64, _F2, _array(numba.int64, 1), numba.int64),
+    edge_peaks: (_array(numba.float32, 2), _F1, numba.float64),
+    tip_peaks: (_array(numba.float32, 2), _array(numba.int64, 1), numba.float64),
+    segment_distances: (_F2, _F2, _F2),
+}
+
+
+def compile_kernels() -> float:
+    """Compile every kernel for its one signature (or load it from numba's on-disk cache)
+    and allow no other; returns the seconds it took (none once done in this process)."""
+    global _COMPILED
+    if _COMPILED:
+        return 0.0
+    seconds = compile_signatures(_SIGNATURES)
+    _COMPILED = True
+    return seconds
