@@ -56,6 +56,7 @@ from colorglove_ros.core.tracking.edge_features import (
     EdgeSearchConfig,
     LinkAxes,
     TipPoints,
+    compiled_kernels,
     measure_link_axes,
     measure_outline_edges,
     measure_tips,
@@ -538,18 +539,16 @@ def predict_features(kin: FastKinematics, points: FeaturePoints, camera: Pinhole
               & (centres[..., 1] >= margin) & (centres[..., 1] < camera.height - margin))
     # occlusion: a slice is spoilt where the silhouette of a nearer link (other than its
     # neighbours in the chain, which meet it at the joints outside the slice range) overlaps
-    # its own, widened by ``occlusion_margin_px``
-    dist, along = segment_distances(centres.reshape(-1, 2), base, end)
-    dist = dist.reshape(L, S, L)
-    z_other = zb[None, None, :] + along.reshape(L, S, L) * (ze - zb)[None, None, :]
+    # its own, widened by ``occlusion_margin_px`` (edge_kernel.occluded_slices)
     z_self = zb[:, None] + frac[None, :] * (ze - zb)[:, None]
-    covered = dist < hw[None, None, :] + hw[:, None, None] + config.occlusion_margin_px
-    nearer = z_other < z_self[:, :, None]
-    same = np.eye(L, dtype=bool)[:, None, :]
     parent = np.asarray(kin.model.link_parent)[points.links]
-    related = ((parent[:, None] == points.links[None, :])
-               | (parent[None, :] == points.links[:, None]))
-    occluded = np.any(covered & nearer & usable[None, None, :] & ~same & ~related[:, None, :], 2)
+    exempt = (np.eye(L, dtype=bool) | (parent[:, None] == points.links[None, :])
+              | (parent[None, :] == points.links[:, None]))
+    occluded = compiled_kernels().occluded_slices(
+        np.ascontiguousarray(centres.reshape(-1, 2)), S, np.ascontiguousarray(base),
+        np.ascontiguousarray(end), np.ascontiguousarray(zb), np.ascontiguousarray(ze), hw,
+        np.ascontiguousarray(z_self.reshape(-1)), float(config.occlusion_margin_px), usable,
+        exempt).reshape(L, S)
     if config.palm_occlusion_px > 0 and len(points.palm_surface):
         occluded |= _behind_palm(points, camera, config, q, centres, z_self)
     slice_valid = usable[:, None] & inside & ~occluded
@@ -593,28 +592,11 @@ def _behind_palm(points: FeaturePoints, camera: PinholeCamera, config: EdgeTrack
         return np.zeros(centres.shape[:2], dtype=bool)
     pix, depth = pix[ok], depth[ok]
     hull = cv2.convexHull(pix.astype(np.float32))[:, 0, :].astype(float)
-    flat = centres.reshape(-1, 2)
-    inside = _inside_convex(hull, flat)
-    out = np.zeros(len(flat), dtype=bool)
-    if inside.any():
-        d2 = ((flat[inside, None, :] - pix[None, :, :]) ** 2).sum(-1)
-        near = d2 <= config.palm_occlusion_px ** 2
-        near[np.arange(len(d2)), np.argmin(d2, axis=1)] = True
-        z_palm = np.where(near, depth[None, :], np.inf).min(axis=1)
-        radius = np.repeat(points.radius, centres.shape[1])[inside]
-        out[inside] = z_self.reshape(-1)[inside] > z_palm + radius
+    out = compiled_kernels().behind_palm(
+        hull, np.ascontiguousarray(centres.reshape(-1, 2)), np.ascontiguousarray(pix),
+        np.ascontiguousarray(depth), float(config.palm_occlusion_px) ** 2,
+        np.ascontiguousarray(z_self.reshape(-1)), np.repeat(points.radius, centres.shape[1]))
     return out.reshape(centres.shape[:2])
-
-
-def _inside_convex(hull: np.ndarray, px: np.ndarray) -> np.ndarray:
-    """Which of (N, 2) pixels lie inside or on the convex polygon ``hull`` (K, 2, vertices in
-    order, either direction); none when it has fewer than 3 vertices."""
-    if len(hull) < 3:
-        return np.zeros(len(px), dtype=bool)
-    edge = np.roll(hull, -1, axis=0) - hull                                  # (K, 2)
-    rel = px[:, None, :] - hull[None, :, :]                                  # (N, K, 2)
-    cross = edge[None, :, 0] * rel[..., 1] - edge[None, :, 1] * rel[..., 0]  # (N, K)
-    return np.all(cross >= 0, axis=1) | np.all(cross <= 0, axis=1)
 
 
 def palm_rows(points: FeaturePoints, generator: np.ndarray) -> tuple[np.ndarray, np.ndarray,

@@ -1,8 +1,9 @@
 """Compiled (numba) kernels of the edge tracker's 1-D edge searches (:mod:`edge_features`):
 the smoothed derivative of the sampled slices, the link slices' edge-pair search, the palm
-outline's single-edge and the fingertips' end-edge searches with their sub-pixel peaks, and
-the distances of points to segments (:func:`segment_distances`, the
-occlusion tests and the silhouette targets of :mod:`edge_fit`).
+outline's single-edge and the fingertips' end-edge searches with their sub-pixel peaks, the
+distances of points to segments (:func:`segment_distances`: the silhouette targets of
+:mod:`edge_fit`) and the prediction's occlusion tests (:func:`occluded_slices`,
+:func:`behind_palm`).
 
 The same arithmetic as the numpy code they replaced, in the same dtypes (the slices' float32
 derivative, float64 pair scores, the first of equal maxima) and order, so the measurements are
@@ -19,7 +20,7 @@ import numpy as np
 from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['derivative', 'pair_search', 'edge_peaks', 'tip_peaks', 'segment_distances',
-           'compile_kernels']
+           'occluded_slices', 'behind_palm', 'compile_kernels']
 
 _JIT = {'cache': True, 'nogil': True}
 _COMPILED = False   # every kernel compiled (compile_kernels)
@@ -125,7 +126,6 @@ def edge_peaks(d: np.ndarray, weight: np.ndarray, min_gradient: float
     ``weight`` (W,; the end samples never), whether its ``|d|`` exceeds ``min_gradient``
     (float32, as numpy compares it), its sign and its sub-pixel position."""
     rows, width = d.shape
-    index = np.zeros(rows, np.int64)
     strong = np.zeros(rows, np.bool_)
     sign = np.zeros(rows, np.int64)
     refined = np.zeros(rows)
@@ -176,6 +176,28 @@ def tip_peaks(d: np.ndarray, polarity: np.ndarray, min_gradient: float
     return found, refined
 
 
+@numba.njit(inline='always', **_JIT)
+def _closest(px: float, py: float, ax: float, ay: float, bx: float, by: float, den: float
+             ) -> tuple[float, float]:
+    """Distance from (px, py) to the segment from (ax, ay) along (bx, by) (``den``: its
+    squared length, at least 1e-12) and the closest point's place on it in [0, 1], in
+    numpy's order of operations (``np.clip`` keeps NaN)."""
+    s = ((px - ax) * bx + (py - ay) * by) / den
+    if not (np.isnan(s) or s > 0.0):
+        s = 0.0
+    if not (np.isnan(s) or s < 1.0):
+        s = 1.0
+    dx, dy = px - (ax + s * bx), py - (ay + s * by)
+    return np.sqrt(dx * dx + dy * dy), s
+
+
+@numba.njit(inline='always', **_JIT)
+def _squared_length(bx: float, by: float) -> float:
+    """``np.maximum(bx^2 + by^2, 1e-12)`` (NaN kept)."""
+    den = bx * bx + by * by
+    return den if den >= 1e-12 or np.isnan(den) else 1e-12
+
+
 @numba.njit(**_JIT)
 def segment_distances(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray]:
@@ -187,20 +209,74 @@ def segment_distances(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray
     for m in range(M):
         ax, ay = seg_a[m, 0], seg_a[m, 1]
         bx, by = seg_b[m, 0] - ax, seg_b[m, 1] - ay
-        den = bx * bx + by * by
-        if not (den >= 1e-12 or np.isnan(den)):      # np.maximum
-            den = 1e-12
+        den = _squared_length(bx, by)
         for p in range(P):
-            px, py = points[p, 0], points[p, 1]
-            s = ((px - ax) * bx + (py - ay) * by) / den
-            if not (np.isnan(s) or s > 0.0):            # np.clip to [0, 1]
-                s = 0.0
-            if not (np.isnan(s) or s < 1.0):
-                s = 1.0
-            dx, dy = px - (ax + s * bx), py - (ay + s * by)
-            dist[p, m] = np.sqrt(dx * dx + dy * dy)
-            along[p, m] = s
+            dist[p, m], along[p, m] = _closest(points[p, 0], points[p, 1], ax, ay, bx, by, den)
     return dist, along
+
+
+@numba.njit(**_JIT)
+def occluded_slices(centres: np.ndarray, slices: int, base: np.ndarray, end: np.ndarray,
+                    zb: np.ndarray, ze: np.ndarray, hw: np.ndarray, z_self: np.ndarray,
+                    margin: float, usable: np.ndarray, exempt: np.ndarray) -> np.ndarray:
+    """The link occlusion test of ``edge_fit.predict_features``: slice k (of ``slices`` per
+    link, centres (L * slices, 2), depths ``z_self``) of link l is occluded where a usable
+    link m not ``exempt[l, m]`` (itself, its parent or child) lies nearer the camera at the
+    slice's closest point (depths ``zb`` -> ``ze`` along it) and their projected capsules
+    (half-widths ``hw``) overlap, widened by ``margin``."""
+    L = len(base)
+    out = np.zeros(len(centres), np.bool_)
+    for m in range(L):
+        if not usable[m]:
+            continue
+        ax, ay = base[m, 0], base[m, 1]
+        bx, by = end[m, 0] - ax, end[m, 1] - ay
+        den = _squared_length(bx, by)
+        for k in range(len(centres)):
+            if out[k] or exempt[k // slices, m]:
+                continue
+            dist, s = _closest(centres[k, 0], centres[k, 1], ax, ay, bx, by, den)
+            if dist < hw[m] + hw[k // slices] + margin \
+                    and zb[m] + s * (ze[m] - zb[m]) < z_self[k]:
+                out[k] = True
+    return out
+
+
+@numba.njit(**_JIT)
+def behind_palm(hull: np.ndarray, centres: np.ndarray, palm_px: np.ndarray,
+                palm_depth: np.ndarray, near_px2: float, z_self: np.ndarray,
+                radius: np.ndarray) -> np.ndarray:
+    """The palm occlusion test of ``edge_fit._behind_palm``: which slice centres (N, 2)
+    inside or on the convex polygon ``hull`` (K, 2; none for fewer than 3 vertices) lie
+    farther (``z_self``) than the nearest palm point (pixels ``palm_px`` (V, 2), depths
+    ``palm_depth``) within ``sqrt(near_px2)`` pixels, or the nearest one, plus the slice's
+    link ``radius``."""
+    N, K, V = len(centres), len(hull), len(palm_px)
+    out = np.zeros(N, np.bool_)
+    if K < 3:
+        return out
+    for n in range(N):
+        px, py = centres[n, 0], centres[n, 1]
+        pos = neg = True
+        for k in range(K):
+            j = k + 1 if k + 1 < K else 0
+            ex, ey = hull[j, 0] - hull[k, 0], hull[j, 1] - hull[k, 1]
+            cross = ex * (py - hull[k, 1]) - ey * (px - hull[k, 0])
+            pos = pos and cross >= 0
+            neg = neg and cross <= 0
+        if not (pos or neg):
+            continue
+        z_palm, nearest, best = np.inf, np.inf, np.inf
+        for v in range(V):
+            dx, dy = px - palm_px[v, 0], py - palm_px[v, 1]
+            d2 = dx * dx + dy * dy
+            if d2 < best:
+                best, nearest = d2, palm_depth[v]
+            if d2 <= near_px2 and palm_depth[v] < z_palm:
+                z_palm = palm_depth[v]
+        z_palm = min(z_palm, nearest)
+        out[n] = z_self[n] > z_palm + radius[n]
+    return out
 
 
 def _array(dtype: object, ndim: int) -> object:
@@ -216,6 +292,9 @@ _SIGNATURES = {
     edge_peaks: (_array(numba.float32, 2), _F1, numba.float64),
     tip_peaks: (_array(numba.float32, 2), _array(numba.int64, 1), numba.float64),
     segment_distances: (_F2, _F2, _F2),
+    occluded_slices: (_F2, numba.int64, _F2, _F2, _F1, _F1, _F1, _F1, numba.float64,
+                      _array(numba.boolean, 1), _array(numba.boolean, 2)),
+    behind_palm: (_F2, _F2, _F2, _F1, numba.float64, _F1, _F1),
 }
 
 
