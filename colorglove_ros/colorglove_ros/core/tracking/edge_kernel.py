@@ -23,7 +23,6 @@ __all__ = ['derivative', 'pair_search', 'edge_peaks', 'tip_peaks', 'segment_dist
            'occluded_slices', 'behind_palm', 'compile_kernels']
 
 _JIT = {'cache': True, 'nogil': True}
-_COMPILED = False   # every kernel compiled (compile_kernels)
 _NO_EDGE = -1.0e9   # edge_features._NO_EDGE: any pair using such a sample scores < 0
 
 
@@ -301,9 +300,4 @@ _SIGNATURES = {
 def compile_kernels() -> float:
     """Compile every kernel for its one signature (or load it from numba's on-disk cache)
     and allow no other; returns the seconds it took (none once done in this process)."""
-    global _COMPILED
-    if _COMPILED:
-        return 0.0
-    seconds = compile_signatures(_SIGNATURES)
-    _COMPILED = True
-    return seconds
+    return compile_signatures(_SIGNATURES)
