@@ -262,7 +262,9 @@ class PoseLookup:
         nq = query.num_pixels
         kernels = self._kernels
         q_sum = np.empty(len(idx), np.uint32)
-        gather = (self._dts_all, idx, self._row, query.glove_index, q_sum)
+        # the query's pixels in ascending address order: each entry's row is read forwards
+        # (an integer sum, the same in any order)
+        gather = (self._dts_all, idx, self._row, np.sort(query.glove_index), q_sum)
         pending = (self._pool.submit(kernels.query_sums, *gather)
                    if nq and self._pool is not None else None)
         counts = self._counts[idx]
