@@ -28,8 +28,9 @@ from colorglove_ros.core.segmentation.crop import tiny_to_full
 __all__ = ['SearchError', 'PoseLookup', 'DEFAULT_THREADS',
            'top_k_with_ties', 'estimate_global_pose']
 
-DEFAULT_THREADS = 2
-"""Threads of a :class:`PoseLookup`'s re-rank: the caller and one worker."""
+DEFAULT_THREADS = 1
+"""Threads of a :class:`PoseLookup`'s re-rank: the caller only (2: the caller and one worker,
+whose hand-off and wait cost more than its share of the compiled gathers on a busy machine)."""
 
 
 class SearchError(ColorGloveError):
@@ -151,9 +152,9 @@ class PoseLookup:
 
     The Hamming scan and the re-rank's gathers are compiled (:mod:`lookup_kernel`: compiled or
     loaded from numba's cache when the first instance is made); the scan's buffers are reused,
-    so one instance is not thread-safe. ``threads=2`` (default) runs the re-rank's two gathers
-    at once, one in a worker thread: less wall time while a core is free, a little more CPU in
-    all (the hand-off); ``threads=1`` runs everything in the caller (same results)."""
+    so one instance is not thread-safe. ``threads=1`` (default) runs everything in the caller;
+    ``threads=2`` runs the re-rank's two gathers at once, one in a worker thread (the same
+    results; more CPU in all, the hand-off, and a wait for the worker when no core is free)."""
 
     def __init__(self, database: PoseDatabase, num_candidates: int = 300,
                  num_blend: int = 10, threads: int = DEFAULT_THREADS,

@@ -92,6 +92,7 @@ def test_threaded_lookup_equals_single_thread() -> None:
         np.testing.assert_array_equal(a.blended, b.blended)
     with pytest.raises(SearchError):
         PoseLookup(db, threads=3)
+    assert PoseLookup(db)._pool is None                    # one thread by default
 
 
 def test_buffer_bytes_counts_tables() -> None:
