@@ -9,24 +9,30 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.evaluation.scripted_hands import ScriptedSequence, ScriptError
-from colorglove_ros.core.evaluation.sequences import EVIDENCE_FIELDS
+from colorglove_ros.core.evaluation.sequences import EVIDENCE_FIELDS, empty_observation_record
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.lookup.database import DatabaseError, contents_tag
 
 __all__ = ['TRACKED_FORMAT_VERSION', 'TRACKER_MODE', 'ScriptedTracker', 'TrackedScript']
 
-TRACKED_FORMAT_VERSION = 2      # 2: with the tracker's evidence per frame
+# 2: with the tracker's evidence per frame; 3: and the primary camera's observation per frame
+TRACKED_FORMAT_VERSION = 3
+_READABLE_VERSIONS = (2, 3)     # a version 2 cache serves everything but the observation
+_OBSERVATION_KEYS = tuple(empty_observation_record(0))
 TRACKER_MODE = 'ik_smooth'        # the mode ik_node runs (IK and smoothing on)
 
 
 @dataclass(frozen=True)
 class TrackedScript:
-    """One scripted sequence tracked: poses (N, 26; NaN where not found), found flags (N,)
-    and the tracker's evidence per frame (``sequences.EVIDENCE_FIELDS``)."""
+    """One scripted sequence tracked: poses (N, 26; NaN where not found), found flags (N,),
+    the tracker's evidence per frame (``sequences.EVIDENCE_FIELDS``) and the primary camera's
+    observation per frame (``sequences.empty_observation_record``: the tiny label image and
+    the blobs in its frame)."""
 
     q_est: np.ndarray
     found: np.ndarray
     evidence: dict[str, np.ndarray]
+    observation: dict[str, np.ndarray]
 
 
 @dataclass
@@ -57,15 +63,23 @@ class ScriptedTracker:
                 from exc
         return Path(self.cache_dir) / f'{name}_{seed}_{frames}_{self.labels}_{tag}.npz'
 
-    def _load(self, path: Path, truth: np.ndarray) -> TrackedScript | None:
+    def _load(self, path: Path, truth: np.ndarray, observation: bool = False
+              ) -> TrackedScript | None:
+        """The cached tracking of ``truth``; None when there is none, it is of other poses or
+        of an unreadable version, or (``observation``) it holds no observation (a version 2
+        cache, read with an empty observation otherwise)."""
         try:
             with np.load(path) as data:
-                if int(data['version']) != TRACKED_FORMAT_VERSION or \
+                version = int(data['version'])
+                if version not in _READABLE_VERSIONS or \
+                        (observation and version < TRACKED_FORMAT_VERSION) or \
                         data['q_true'].shape != truth.shape or \
                         not np.allclose(data['q_true'], truth, atol=1e-9):
                     return None
+                seen = {k: data[f'observation_{k}'] for k in _OBSERVATION_KEYS} \
+                    if version >= TRACKED_FORMAT_VERSION else {}
                 return TrackedScript(data['q_est'], data['found'].astype(bool),
-                                     {k: data[f'evidence_{k}'] for k in EVIDENCE_FIELDS})
+                                     {k: data[f'evidence_{k}'] for k in EVIDENCE_FIELDS}, seen)
         except (OSError, KeyError, ValueError):
             return None
 
@@ -85,7 +99,7 @@ class ScriptedTracker:
         return SequenceEvaluator(PoseLookup(db), {'1 camera': cameras[:1]}, [TRACKER_MODE],
                                  config, make_observer(self.labels, None,
                                                        config.min_blob_pixels),
-                                 evidence=True)
+                                 evidence=True, observation=True)
 
     def observe(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
                 ) -> tuple[np.ndarray, np.ndarray]:
@@ -100,11 +114,18 @@ class ScriptedTracker:
         found) of the sequence :meth:`observe` tracks."""
         return self.track(name, seed, truth, model).evidence
 
-    def track(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
-              ) -> TrackedScript:
-        """The sequence tracked (from the cache when it holds it)."""
+    def observation(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
+                    ) -> dict[str, np.ndarray]:
+        """The primary camera's observation per frame (``sequences.empty_observation_record``)
+        of the sequence :meth:`observe` tracks."""
+        return self.track(name, seed, truth, model, observation=True).observation
+
+    def track(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel,
+              observation: bool = False) -> TrackedScript:
+        """The sequence tracked (from the cache when it holds it; with ``observation`` only
+        from a cache that holds the observation, else tracked anew)."""
         path = self._cache_path(name, seed, len(truth.poses))
-        cached = self._load(path, truth.poses)
+        cached = self._load(path, truth.poses, observation)
         if cached is not None:
             return cached
         if self._evaluator is None:
@@ -117,8 +138,9 @@ class ScriptedTracker:
         path.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(path, version=TRACKED_FORMAT_VERSION, q_true=truth.poses,
                             q_est=run.q_est, found=run.found,
-                            **{f'evidence_{k}': v for k, v in run.evidence.items()})
-        return TrackedScript(run.q_est, run.found, run.evidence)
+                            **{f'evidence_{k}': v for k, v in run.evidence.items()},
+                            **{f'observation_{k}': v for k, v in run.observation.items()})
+        return TrackedScript(run.q_est, run.found, run.evidence, run.observation)
 
     def close(self) -> None:
         """Free the renderer."""

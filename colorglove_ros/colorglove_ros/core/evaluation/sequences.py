@@ -56,7 +56,7 @@ __all__ = [
     'segmenter_observer', 'make_observer', 'TrackedSequence',
     'SequenceEvaluator', 'same_camera', 'jitter_runs_mm', 'contiguous_runs', 'summarize',
     'training_sequences', 'find_database', 'open_database', 'EvaluationSequence',
-    'EVIDENCE_FIELDS',
+    'EVIDENCE_FIELDS', 'MAX_RECORDED_BLOBS', 'empty_observation_record',
 ]
 
 # The tracker's evidence per tracked frame (SequenceEvaluator with evidence=True): the
@@ -66,6 +66,40 @@ __all__ = [
 # colour near it (the nodes' missing-glove measure, core.pipeline.glove_seen with NODE_LIMITS).
 EVIDENCE_FIELDS = ('image_distance', 'explained_blob_share', 'reprojection_px', 'constraints',
                    'missing_glove_share')
+
+# The primary camera's observation per frame (SequenceEvaluator with observation=True): the
+# tiny label image the lookup ran on (0 where no crop) and the glove blobs in the tiny image's
+# pixel frame (colour 0 pads the rows past the frame's blobs; the largest blobs kept).
+MAX_RECORDED_BLOBS = 40
+
+
+def empty_observation_record(n: int) -> dict[str, np.ndarray]:
+    """The observation record of ``n`` frames with nothing seen: ``tiny_labels`` (n, 40, 40)
+    uint8, ``blob_color`` (n, B) int, ``blob_tiny_xy`` (n, B, 2) and ``blob_tiny_pixels``
+    (n, B) (the blob's pixel count in tiny-image pixels, i.e. over the crop scale squared)."""
+    from colorglove_ros.core.segmentation.crop import TINY_SIZE
+
+    b = MAX_RECORDED_BLOBS
+    return {'tiny_labels': np.zeros((n, TINY_SIZE, TINY_SIZE), np.uint8),
+            'blob_color': np.zeros((n, b), np.int64),
+            'blob_tiny_xy': np.full((n, b, 2), np.nan),
+            'blob_tiny_pixels': np.zeros((n, b))}
+
+
+def record_observation(record: dict[str, np.ndarray], i: int, seen: Any) -> None:
+    """Frame ``i``'s primary observation (``FrameObservations``) into ``record``."""
+    tiny = seen.tiny
+    if tiny is None or not seen.cameras:
+        return
+    record['tiny_labels'][i] = np.asarray(tiny.labels, np.uint8)
+    blobs = seen.cameras[0].blobs
+    keep = np.argsort(-np.asarray(blobs.pixel_count), kind='stable')[:MAX_RECORDED_BLOBS]
+    k = len(keep)
+    scale = float(tiny.transform.scale)
+    record['blob_color'][i, :k] = blobs.color[keep]
+    record['blob_tiny_xy'][i, :k] = tiny.transform.to_tiny(blobs.centroid_px[keep])
+    record['blob_tiny_pixels'][i, :k] = blobs.pixel_count[keep] / scale ** 2
+
 
 LABEL_SOURCES = ('truth', 'segmented')
 # Sequence seeds (core.synthetic.sequences.generate_sequence): evaluation uses
@@ -202,6 +236,9 @@ class TrackedSequence:
     # the tracker's evidence per frame (:data:`EVIDENCE_FIELDS`; NaN where not found), kept
     # when the evaluator was made with ``evidence=True``
     evidence: dict[str, np.ndarray] = field(default_factory=dict)
+    # the primary camera's observation per frame (:func:`empty_observation_record`), kept when
+    # the evaluator was made with ``observation=True``
+    observation: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def same_camera(a: PinholeCamera, b: PinholeCamera) -> bool:
@@ -233,11 +270,12 @@ class SequenceEvaluator:
                  fps: float = 30.0, keep_results: bool = False,
                  temporal: TemporalPrior | None = None, finger_evidence: bool = True,
                  limits: StageLimits = UNGATED, hand: str = DEFAULT_HAND,
-                 evidence: bool = False) -> None:
+                 evidence: bool = False, observation: bool = False) -> None:
         from colorglove_ros.core.synthetic.frames import Synthesizer
 
         self.hand = check_hand(hand)
         self.evidence = bool(evidence)
+        self.observation = bool(observation)
 
         if not rigs:
             raise EvaluationError('need at least one camera rig')
@@ -309,11 +347,17 @@ class SequenceEvaluator:
         if self.evidence:
             for ts in out.values():
                 ts.evidence = {k: np.full(n, np.nan) for k in EVIDENCE_FIELDS}
+        if self.observation:
+            for ts in out.values():
+                ts.observation = empty_observation_record(n)
         for tr in self.trackers.values():
             tr.reset()
         for i in range(n):
             seen = self.pipeline.observe(sequence.render(i, self.cameras))
             found = self.pipeline.look_up(seen)
+            if self.observation:
+                for ts in out.values():
+                    record_observation(ts.observation, i, seen)
             for key, tracker in self.trackers.items():
                 c0 = time.thread_time()
                 outcome = self.pipeline.track(tracker, found, seen, i / self.fps)
