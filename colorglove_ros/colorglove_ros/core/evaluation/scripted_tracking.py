@@ -142,6 +142,48 @@ class ScriptedTracker:
                             **{f'observation_{k}': v for k, v in run.observation.items()})
         return TrackedScript(run.q_est, run.found, run.evidence, run.observation)
 
+    def hold_observations(self, name: str, seed: int, truth: ScriptedSequence, every: int = 5
+                          ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Every ``every``-th frame of each hold of sequence ``name`` / ``seed`` rendered as
+        :meth:`track` renders it and seen through the segmentation alone (no lookup, no IK;
+        training data for a classifier of the observation): the frame indices and their
+        observation record (``sequences.empty_observation_record``). Cached beside the
+        tracking (``<name>_holds<every>_...``)."""
+        import dataclasses
+
+        from colorglove_ros.core.evaluation.sequences import (
+            EvaluationSequence,
+            record_observation,
+        )
+
+        if every < 1:
+            raise ScriptError(f'every must be at least 1, got {every}')
+        frames = np.concatenate([np.flatnonzero((truth.segment == k) & truth.holding)[::every]
+                                 for k in np.unique(truth.segment)]).astype(np.int64)
+        path = self._cache_path(f'{name}_holds{every}', seed, len(truth.poses))
+        try:
+            with np.load(path) as data:
+                if int(data['version']) == TRACKED_FORMAT_VERSION and \
+                        np.array_equal(data['frames'], frames) and \
+                        np.allclose(data['q_true'], truth.poses[frames], atol=1e-9):
+                    return frames, {k: data[f'observation_{k}'] for k in _OBSERVATION_KEYS}
+        except (OSError, KeyError, ValueError):
+            pass
+        if self._evaluator is None:
+            self._evaluator = self._make_evaluator()
+        ev = self._evaluator
+        sequence = EvaluationSequence.make(seed, len(truth.poses), ev.cameras[0], ev.synth)
+        sequence = dataclasses.replace(sequence, poses=np.asarray(truth.poses, dtype=float))
+        record = empty_observation_record(len(frames))
+        for j, i in enumerate(frames):
+            record_observation(record, j, ev.pipeline.observe(sequence.render(int(i),
+                                                                              ev.cameras)))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(path, version=TRACKED_FORMAT_VERSION, frames=frames,
+                            q_true=truth.poses[frames],
+                            **{f'observation_{k}': v for k, v in record.items()})
+        return frames, record
+
     def close(self) -> None:
         """Free the renderer."""
         if self._evaluator is not None:
