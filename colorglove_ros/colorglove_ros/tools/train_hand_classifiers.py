@@ -52,15 +52,17 @@ from colorglove_ros.core.hand.pose_classifier import (
     save_pose_classifier,
     train_pose_classifier,
 )
-from colorglove_ros.core.hand.spelling import LETTER_FEATURES, TRAINED_LETTER_CLASSIFIER
+from colorglove_ros.core.hand.spelling import (
+    LETTER_FEATURES,
+    LETTER_IMAGE_CLASSIFIER,
+    TRAINED_LETTER_CLASSIFIER,
+)
 from colorglove_ros.core.report import print_table
 from colorglove_ros.paths import data_dir, share_dir
 from colorglove_ros.tools import eval_gestures, eval_spelling
 from colorglove_ros.tools._cli import run_tool, tool_parser
 
 __all__ = ['main', 'training_samples', 'image_training_samples']
-
-LETTER_IMAGE_CLASSIFIER = 'config/letter_image_classifier.npz'   # --image-output's default
 
 
 def image_training_samples(model: HandModel, scripts: Sequence[tuple[int, list]],

@@ -84,7 +84,7 @@ class _HoldRenderer:
 
     @staticmethod
     def _record(truth: ScriptedSequence, frames: np.ndarray) -> dict[str, np.ndarray]:
-        from colorglove_ros.core.evaluation.sequences import empty_observation_record
+        from colorglove_ros.core.hand.observation_features import empty_observation_record
         from colorglove_ros.core.hand.spelling import LETTERS
 
         record = empty_observation_record(len(frames))

@@ -9,8 +9,9 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.evaluation.scripted_hands import ScriptedSequence, ScriptError
-from colorglove_ros.core.evaluation.sequences import EVIDENCE_FIELDS, empty_observation_record
+from colorglove_ros.core.evaluation.sequences import EVIDENCE_FIELDS
 from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.hand.observation_features import empty_observation_record
 from colorglove_ros.core.lookup.database import DatabaseError, contents_tag
 
 __all__ = ['TRACKED_FORMAT_VERSION', 'TRACKER_MODE', 'ScriptedTracker', 'TrackedScript']
@@ -26,8 +27,8 @@ TRACKER_MODE = 'ik_smooth'        # the mode ik_node runs (IK and smoothing on)
 class TrackedScript:
     """One scripted sequence tracked: poses (N, 26; NaN where not found), found flags (N,),
     the tracker's evidence per frame (``sequences.EVIDENCE_FIELDS``) and the primary camera's
-    observation per frame (``sequences.empty_observation_record``: the tiny label image and
-    the blobs in its frame)."""
+    observation per frame (``observation_features.empty_observation_record``: the tiny label
+    image and the blobs in its frame)."""
 
     q_est: np.ndarray
     found: np.ndarray
@@ -116,8 +117,9 @@ class ScriptedTracker:
 
     def observation(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
                     ) -> dict[str, np.ndarray]:
-        """The primary camera's observation per frame (``sequences.empty_observation_record``)
-        of the sequence :meth:`observe` tracks."""
+        """The primary camera's observation per frame
+        (``observation_features.empty_observation_record``) of the sequence :meth:`observe`
+        tracks."""
         return self.track(name, seed, truth, model, observation=True).observation
 
     def track(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel,
@@ -147,7 +149,7 @@ class ScriptedTracker:
         """Every ``every``-th frame of each hold of sequence ``name`` / ``seed`` rendered as
         :meth:`track` renders it and seen through the segmentation alone (no lookup, no IK;
         training data for a classifier of the observation): the frame indices and their
-        observation record (``sequences.empty_observation_record``). Cached beside the
+        observation record (``observation_features.empty_observation_record``). Cached beside the
         tracking (``<name>_holds<every>_...``)."""
         import dataclasses
 

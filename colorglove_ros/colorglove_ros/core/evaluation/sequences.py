@@ -30,6 +30,10 @@ from colorglove_ros.core.hand.handedness import (
     to_right_frame,
 )
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
+from colorglove_ros.core.hand.observation_features import (
+    empty_observation_record,
+    write_observation,
+)
 from colorglove_ros.core.pipeline import (
     NODE_LIMITS,
     UNGATED,
@@ -56,7 +60,7 @@ __all__ = [
     'segmenter_observer', 'make_observer', 'TrackedSequence',
     'SequenceEvaluator', 'same_camera', 'jitter_runs_mm', 'contiguous_runs', 'summarize',
     'training_sequences', 'find_database', 'open_database', 'EvaluationSequence',
-    'EVIDENCE_FIELDS', 'MAX_RECORDED_BLOBS', 'empty_observation_record',
+    'EVIDENCE_FIELDS', 'record_observation',
 ]
 
 # The tracker's evidence per tracked frame (SequenceEvaluator with evidence=True): the
@@ -67,38 +71,12 @@ __all__ = [
 EVIDENCE_FIELDS = ('image_distance', 'explained_blob_share', 'reprojection_px', 'constraints',
                    'missing_glove_share')
 
-# The primary camera's observation per frame (SequenceEvaluator with observation=True): the
-# tiny label image the lookup ran on (0 where no crop) and the glove blobs in the tiny image's
-# pixel frame (colour 0 pads the rows past the frame's blobs; the largest blobs kept).
-MAX_RECORDED_BLOBS = 40
-
-
-def empty_observation_record(n: int) -> dict[str, np.ndarray]:
-    """The observation record of ``n`` frames with nothing seen: ``tiny_labels`` (n, 40, 40)
-    uint8, ``blob_color`` (n, B) int, ``blob_tiny_xy`` (n, B, 2) and ``blob_tiny_pixels``
-    (n, B) (the blob's pixel count in tiny-image pixels, i.e. over the crop scale squared)."""
-    from colorglove_ros.core.segmentation.crop import TINY_SIZE
-
-    b = MAX_RECORDED_BLOBS
-    return {'tiny_labels': np.zeros((n, TINY_SIZE, TINY_SIZE), np.uint8),
-            'blob_color': np.zeros((n, b), np.int64),
-            'blob_tiny_xy': np.full((n, b, 2), np.nan),
-            'blob_tiny_pixels': np.zeros((n, b))}
-
-
 def record_observation(record: dict[str, np.ndarray], i: int, seen: Any) -> None:
-    """Frame ``i``'s primary observation (``FrameObservations``) into ``record``."""
-    tiny = seen.tiny
-    if tiny is None or not seen.cameras:
-        return
-    record['tiny_labels'][i] = np.asarray(tiny.labels, np.uint8)
-    blobs = seen.cameras[0].blobs
-    keep = np.argsort(-np.asarray(blobs.pixel_count), kind='stable')[:MAX_RECORDED_BLOBS]
-    k = len(keep)
-    scale = float(tiny.transform.scale)
-    record['blob_color'][i, :k] = blobs.color[keep]
-    record['blob_tiny_xy'][i, :k] = tiny.transform.to_tiny(blobs.centroid_px[keep])
-    record['blob_tiny_pixels'][i, :k] = blobs.pixel_count[keep] / scale ** 2
+    """Frame ``i``'s primary observation (``FrameObservations``; nothing without a crop) into
+    an observation record (``observation_features.empty_observation_record``)."""
+    if seen.tiny is not None and seen.cameras:
+        write_observation(record, i, seen.tiny.labels, seen.tiny.transform,
+                          seen.cameras[0].blobs)
 
 
 LABEL_SOURCES = ('truth', 'segmented')

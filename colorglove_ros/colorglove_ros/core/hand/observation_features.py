@@ -19,26 +19,61 @@ T apart when the fitted pose puts the thumb elsewhere.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
-from colorglove_ros.core.conventions import NUM_COLORS
+from colorglove_ros.core.conventions import NUM_COLORS, TINY_SIZE
 from colorglove_ros.core.errors import ColorGloveError
 
 __all__ = ['GRID', 'BLOBS_PER_COLOR', 'OBSERVATION_FEATURES', 'RECORD_FIELDS',
-           'ObservationError', 'observation_features', 'record_features',
+           'MAX_RECORDED_BLOBS', 'ObservationError', 'empty_observation_record',
+           'write_observation', 'observation_features', 'record_features', 'frame_features',
            'num_observation_features']
 
 GRID = 5
 BLOBS_PER_COLOR = 2
 OBSERVATION_FEATURES = 'tiny_observation'   # the feature set's name in classifier files
-# the arrays of an observation record (``sequences.empty_observation_record``), in the order
+# the arrays of an observation record (:func:`empty_observation_record`), in the order
 # :func:`observation_features` takes them
 RECORD_FIELDS = ('tiny_labels', 'blob_color', 'blob_tiny_xy', 'blob_tiny_pixels')
+# blobs a record keeps per frame (the largest; colour 0 pads the rows past a frame's blobs)
+MAX_RECORDED_BLOBS = 40
 
 
 class ObservationError(ColorGloveError, ValueError):
     """Observation arrays of inconsistent shapes."""
+
+
+def empty_observation_record(n: int) -> dict[str, np.ndarray]:
+    """The observation record of ``n`` frames with nothing seen: ``tiny_labels`` (n, 40, 40)
+    uint8, ``blob_color`` (n, B) int, ``blob_tiny_xy`` (n, B, 2) and ``blob_tiny_pixels``
+    (n, B) (the blob's pixel count in tiny-image pixels, i.e. over the crop scale squared)."""
+    b = MAX_RECORDED_BLOBS
+    return {'tiny_labels': np.zeros((n, TINY_SIZE, TINY_SIZE), np.uint8),
+            'blob_color': np.zeros((n, b), np.int64),
+            'blob_tiny_xy': np.full((n, b, 2), np.nan),
+            'blob_tiny_pixels': np.zeros((n, b))}
+
+
+def write_observation(record: dict[str, np.ndarray], i: int, tiny_labels: np.ndarray,
+                      transform: Any, blobs: Any) -> None:
+    """Frame ``i`` of ``record``: the tiny label image (40, 40), and the full image's blobs
+    (``tracking.types.Blobs``) mapped into the tiny image by the crop ``transform``
+    (``segmentation.crop.CropTransform``), the largest :data:`MAX_RECORDED_BLOBS`."""
+    record['tiny_labels'][i] = np.asarray(tiny_labels, np.uint8)
+    keep = np.argsort(-np.asarray(blobs.pixel_count), kind='stable')[:MAX_RECORDED_BLOBS]
+    k = len(keep)
+    record['blob_color'][i, :k] = blobs.color[keep]
+    record['blob_tiny_xy'][i, :k] = transform.to_tiny(blobs.centroid_px[keep])
+    record['blob_tiny_pixels'][i, :k] = blobs.pixel_count[keep] / float(transform.scale) ** 2
+
+
+def frame_features(tiny_labels: np.ndarray, transform: Any, blobs: Any) -> np.ndarray:
+    """(F,) features of one frame's observation (as :func:`write_observation` takes it)."""
+    record = empty_observation_record(1)
+    write_observation(record, 0, tiny_labels, transform, blobs)
+    return record_features(record)[0]
 
 
 def num_observation_features() -> int:

@@ -46,7 +46,8 @@ from colorglove_ros.core.validation import check_number
 
 __all__ = [
     'LETTERS', 'THUMB_LETTERS', 'LETTER_ROLL_PITCH', 'LETTER_FEATURES',
-    'DEFAULT_LETTER_CLASSIFIER', 'TRAINED_LETTER_CLASSIFIER', 'SpellingError',
+    'DEFAULT_LETTER_CLASSIFIER', 'TRAINED_LETTER_CLASSIFIER', 'LETTER_IMAGE_CLASSIFIER',
+    'DEFAULT_LETTER_IMAGE_CLASSIFIER', 'SpellingError',
     'SpellingConfig',
     'letter_rotation', 'pointing_direction', 'LetterClassifier', 'Speller',
 ]
@@ -57,6 +58,10 @@ LETTER_FEATURES = 'hand_shape_direction'   # the classifier's feature set (pose_
 # the trained classifier, relative to the package root (the nodes' and tools' default)
 TRAINED_LETTER_CLASSIFIER = 'config/letter_classifier.npz'
 DEFAULT_LETTER_CLASSIFIER = TRAINED_LETTER_CLASSIFIER
+# the image evidence's letter classifier (colorglove_train_hand_classifiers --what
+# letter_images), and the nodes' default ('' = none: the pose alone)
+LETTER_IMAGE_CLASSIFIER = 'config/letter_image_classifier.npz'
+DEFAULT_LETTER_IMAGE_CLASSIFIER = ''
 # (roll about the camera z, then pitch toward the camera) of each letter's pointing direction,
 # degrees; letters not listed point up
 LETTER_ROLL_PITCH: dict[str, tuple[float, float]] = {
@@ -148,7 +153,7 @@ class LetterClassifier:
                         ) -> np.ndarray:
         """(26,) log-probability of each letter in ``LETTERS`` order (the templates': up to a
         constant); ``observation``: the frame's observation features (F,), used with an
-        image classifier."""
+        image classifier (a frame without one is classified from its pose alone)."""
         q = np.asarray(q, dtype=float)
         if q.shape != (NUM_DOFS,):
             raise SpellingError(f'pose must be 26 finite values, got shape {q.shape}')
@@ -158,15 +163,15 @@ class LetterClassifier:
     def log_likelihoods_batch(self, poses: np.ndarray, observations: np.ndarray | None = None
                               ) -> np.ndarray:
         """(N, 26) :meth:`log_likelihoods` of poses (N, 26) and their frames' observation
-        features (N, F; needed with an image classifier)."""
+        features (N, F; without them, with an image classifier too, the pose's part alone)."""
         poses = np.asarray(poses, dtype=float)
         if poses.ndim != 2 or poses.shape[1] != NUM_DOFS or not np.all(np.isfinite(poses)):
             raise SpellingError(f'poses must be finite (N, 26), got shape {poses.shape}')
         out = self._pose_log_likelihoods(poses)
-        if self.image_classifier is None:
+        if self.image_classifier is None or observations is None:
             return out
-        if observations is None or len(observations) != len(poses):
-            raise SpellingError('an image classifier needs each frame\'s observation features')
+        if len(observations) != len(poses):
+            raise SpellingError(f'{len(poses)} poses but {len(observations)} observations')
         image = np.atleast_2d(self.image_classifier.log_proba(observations))[:, self._image_order]
         return out + self.config.image_weight * image
 
@@ -233,7 +238,7 @@ class Speller:
 
     def update(self, q: np.ndarray | None, stamp: float,
                observation: np.ndarray | None = None) -> str | None:
-        """Feed one frame (None: no hand; ``observation``: its observation features, needed
+        """Feed one frame (None: no hand; ``observation``: its observation features, used
         with an image classifier); returns the letter committed on it, if any."""
         if q is None:
             self.reset()

@@ -10,7 +10,8 @@ from small_databases import blob_database
 
 from colorglove_ros.core.evaluation.scripted_hands import ScriptError
 from colorglove_ros.core.evaluation.scripted_tracking import TRACKED_FORMAT_VERSION, ScriptedTracker
-from colorglove_ros.core.evaluation.sequences import EVIDENCE_FIELDS, empty_observation_record
+from colorglove_ros.core.evaluation.sequences import EVIDENCE_FIELDS
+from colorglove_ros.core.hand.observation_features import empty_observation_record
 from colorglove_ros.core.lookup.database import contents_tag, save_database
 
 

@@ -414,10 +414,12 @@ def test_the_observation_record_keeps_the_tiny_image_and_the_largest_blobs_in_it
     """record_observation writes a frame's tiny label image and its blobs, largest first, in
     the tiny image's pixel frame with their pixel counts in tiny pixels; a frame without a
     crop stays empty; more blobs than the record holds keeps the largest."""
-    from colorglove_ros.core.evaluation.sequences import (
+    from colorglove_ros.core.evaluation.sequences import record_observation
+    from colorglove_ros.core.hand.observation_features import (
         MAX_RECORDED_BLOBS,
         empty_observation_record,
-        record_observation,
+        frame_features,
+        record_features,
     )
     from colorglove_ros.core.segmentation.crop import CropTransform, TinyCrop
     from colorglove_ros.core.tracking.types import Blobs, CameraObservation
@@ -442,3 +444,6 @@ def test_the_observation_record_keeps_the_tiny_image_and_the_largest_blobs_in_it
     assert record['blob_tiny_pixels'][1, 0] == pytest.approx((largest + 1.0) / 4.0)
     assert (record['blob_color'][1] > 0).sum() == MAX_RECORDED_BLOBS
     assert record['blob_tiny_pixels'][1].min() == pytest.approx(4.0 / 4.0)
+    # the spelling node's features of one frame are the record's
+    np.testing.assert_array_equal(frame_features(tiny, transform, blobs),
+                                  record_features(record)[1])

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from pose_samples import MODEL, allowed_fingers
 
-from colorglove_ros.core.evaluation.sequences import empty_observation_record
 from colorglove_ros.core.hand.observation_features import (
     GRID,
     OBSERVATION_FEATURES,
     RECORD_FIELDS,
     ObservationError,
+    empty_observation_record,
     num_observation_features,
     observation_features,
     record_features,
@@ -81,8 +81,8 @@ def _image_classifier() -> object:
 def test_the_image_classifier_adds_its_weighted_log_probabilities(tmp_path: Path) -> None:
     """With an image classifier, each frame's letter log-probabilities are the pose's plus
     image_weight times the image's: an M pose whose image says S reads as S when the image
-    weighs enough; the file round trip keeps the feature set; without the observation
-    features, or with a pose classifier in its place, it is refused."""
+    weighs enough; the file round trip keeps the feature set; a frame without its observation
+    is read from the pose alone; a pose classifier in the image one's place is refused."""
     image = load_pose_classifier(save_pose_classifier(tmp_path / 'img.npz', _image_classifier()),
                                  OBSERVATION_FEATURES)
     q = MODEL.rest_pose()
@@ -102,8 +102,9 @@ def test_the_image_classifier_adds_its_weighted_log_probabilities(tmp_path: Path
     speller = Speller(SpellingConfig(image_weight=20.0), MODEL, image_classifier=image)
     frames = [speller.update(q, k / 30.0, says_s) for k in range(20)]
     assert [x for x in frames if x] == ['S']
-    with pytest.raises(SpellingError, match='observation'):
-        both.log_likelihoods(q)
+    np.testing.assert_allclose(both.log_likelihoods(q), pose_only.log_likelihoods(q))
+    with pytest.raises(SpellingError, match='observations'):
+        both.log_likelihoods_batch(q[None], np.zeros((2, num_observation_features())))
     with pytest.raises(SpellingError, match='tiny_observation'):
         LetterClassifier(model=MODEL, image_classifier=load_pose_classifier(
             save_pose_classifier(tmp_path / 'pose.npz', train_pose_classifier(
