@@ -73,7 +73,9 @@ class ScriptedSettings:
     feature_set: str              # its feature set (core.hand.pose_classifier)
     evidence_gate: bool = False   # evaluate(...) takes evidence=EvidenceGate (--evidence-*)
     # evaluate(...) takes image_classifier= and image_weight= (--image-classifier, --image-weight)
-    image_classifier: bool = False
+    # when not None: the image classifier used with --tracker by default (package-relative;
+    # '': none)
+    image_classifier: str | None = None
 
 
 @dataclass(frozen=True)
@@ -171,11 +173,12 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
         parser.add_argument('--evidence-max-reprojection-px', type=float,
                             help='with --tracker: skip frames whose reprojection error is '
                             "larger (default: the core's, off)")
-    if settings.image_classifier:
-        parser.add_argument('--image-classifier', type=Path,
+    if settings.image_classifier is not None:
+        parser.add_argument('--image-classifier',
                             help="with --tracker: a classifier of the frames' observation "
                             '(tiny image and blobs; feature set tiny_observation) combined '
-                            'with the pose classifier (default: none)')
+                            'with the pose classifier (default: '
+                            f'{settings.image_classifier or "none"}; "" = none)')
         parser.add_argument('--image-weight', type=float,
                             help="the image classifier's weight (default: the core's)")
     args = parser.parse_args(argv)
@@ -207,12 +210,14 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
         extra['evidence'] = EvidenceGate(args.evidence_max_reprojection_px or math.inf,
                                          args.evidence_min_constraints or 0.0)
         source_settings['evidence_gate'] = asdict(extra['evidence'])
-    if settings.image_classifier and args.image_classifier is not None:
+    image_path = None if settings.image_classifier is None else args.image_classifier
+    if image_path is None and args.tracker and settings.image_classifier:
+        image_path = str(share_dir() / settings.image_classifier)
+    if image_path:
         from colorglove_ros.core.hand.observation_features import OBSERVATION_FEATURES
 
-        extra['image_classifier'] = load_pose_classifier(args.image_classifier,
-                                                         OBSERVATION_FEATURES)
-        source_settings['image_classifier'] = str(args.image_classifier)
+        extra['image_classifier'] = load_pose_classifier(image_path, OBSERVATION_FEATURES)
+        source_settings['image_classifier'] = image_path
         if args.image_weight is not None:
             extra['image_weight'] = args.image_weight
             source_settings['image_weight'] = args.image_weight

@@ -51,6 +51,7 @@ from colorglove_ros.core.hand.pose_classifier import PoseClassifier
 from colorglove_ros.core.hand.poses import LETTER_SHAPES, finger_limits
 from colorglove_ros.core.hand.spelling import (
     DEFAULT_LETTER_CLASSIFIER,
+    DEFAULT_LETTER_IMAGE_CLASSIFIER,
     LETTER_FEATURES,
     LETTERS,
     THUMB_LETTERS,
@@ -71,7 +72,7 @@ SETTINGS = ScriptedSettings(tuning_seeds=tuple(range(1100, 1110)),
                             default_seeds=tuple(range(100, 120)),
                             unit='words', default_count=8,
                             classifier=DEFAULT_LETTER_CLASSIFIER, feature_set=LETTER_FEATURES,
-                            image_classifier=True)
+                            image_classifier=DEFAULT_LETTER_IMAGE_CLASSIFIER)
 WORDS: tuple[str, ...] = (
     'THE', 'QUICK', 'BROWN', 'FOX', 'JUMPS', 'OVER', 'LAZY', 'DOG', 'MENTION', 'SENSE', 'STEM',
     'MEET', 'TEST', 'NEST', 'MUST', 'MEAN', 'TENSE', 'NAMES', 'HELLO', 'ROBOT', 'GLOVE', 'HAND',

@@ -59,9 +59,9 @@ LETTER_FEATURES = 'hand_shape_direction'   # the classifier's feature set (pose_
 TRAINED_LETTER_CLASSIFIER = 'config/letter_classifier.npz'
 DEFAULT_LETTER_CLASSIFIER = TRAINED_LETTER_CLASSIFIER
 # the image evidence's letter classifier (colorglove_train_hand_classifiers --what
-# letter_images), and the nodes' default ('' = none: the pose alone)
+# letter_images): the spelling node's and eval_spelling --tracker's default ('': the pose alone)
 LETTER_IMAGE_CLASSIFIER = 'config/letter_image_classifier.npz'
-DEFAULT_LETTER_IMAGE_CLASSIFIER = ''
+DEFAULT_LETTER_IMAGE_CLASSIFIER = LETTER_IMAGE_CLASSIFIER
 # (roll about the camera z, then pitch toward the camera) of each letter's pointing direction,
 # degrees; letters not listed point up
 LETTER_ROLL_PITCH: dict[str, tuple[float, float]] = {
@@ -93,7 +93,7 @@ class SpellingConfig:
     still_speed_m_s: float = 0.08
     still_window_s: float = 0.3
     commit_after_s: float = 0.2
-    image_weight: float = 0.5
+    image_weight: float = 1.0
 
     def __post_init__(self) -> None:
         for name, (low, high) in _SETTING_BOUNDS.items():

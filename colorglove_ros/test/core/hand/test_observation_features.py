@@ -112,3 +112,16 @@ def test_the_image_classifier_adds_its_weighted_log_probabilities(tmp_path: Path
                 'hand_shape_direction', kind='lda'))))
     with pytest.raises(SpellingError):
         SpellingConfig(image_weight=-0.1)
+
+
+def test_the_shipped_image_classifier_reads_the_26_letters_from_the_observation() -> None:
+    """config/letter_image_classifier.npz (the spelling node's and eval_spelling --tracker's
+    default) classifies tiny_observation features into the 26 letters."""
+    from colorglove_ros.core.hand.spelling import DEFAULT_LETTER_IMAGE_CLASSIFIER
+    from colorglove_ros.paths import share_dir
+
+    clf = load_pose_classifier(share_dir() / DEFAULT_LETTER_IMAGE_CLASSIFIER,
+                               OBSERVATION_FEATURES)
+    assert set(clf.classes) == set(LETTERS) and clf.mean.shape == (num_observation_features(),)
+    assert '--what letter_images' in clf.source
+    LetterClassifier(model=MODEL, image_classifier=clf)

@@ -186,7 +186,7 @@ def test_spelling_node_reads_each_poses_own_observation_with_an_image_classifier
                                                                                  ) -> None:
     """With an image_classifier_file the node subscribes to hand/observation and gives each
     pose the observation of its stamp: G poses whose tiny images an image classifier reads as
-    S (weighted far above the pose) commit S; the node without one commits G."""
+    S (weighted far above the pose) commit S; the node without one ('') commits G."""
     from array import array
 
     from colorglove_msgs.msg import HandObservation, PatchBlob
@@ -214,7 +214,8 @@ def test_spelling_node_reads_each_poses_own_observation_with_an_image_classifier
     q = _pose(LETTER_SHAPES['G'], letter_rotation('G'))
     got = {}
     for name, overrides in (('image', params(image_classifier_file=str(path),
-                                             image_weight=20.0)), ('pose', params())):
+                                             image_weight=20.0)),
+                            ('pose', params(image_classifier_file=''))):
         with running(lambda ctx, o=overrides: SpellingNode(context=ctx,
                                                            parameter_overrides=o)) as h:
             letters = h.collect(String, 'hand/spelled_letters')
