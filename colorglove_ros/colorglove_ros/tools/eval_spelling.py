@@ -8,7 +8,10 @@ the letter's canonical orientation) plus the signer's variation (4 deg Gaussian 
 The speller sees the poses through ``TrackingNoise``, a MODEL of the tracker's errors (default
 mean absolute finger-joint error 7 deg after clipping, most of it slowly varying, plus 5 deg
 per wrist orientation axis), not the tracker run on rendered frames. J and Z are static
-handshapes here, as in the speller.
+handshapes here, as in the speller. With ``--tracker`` the speller also reads each frame's
+image evidence (the observation the tracker got, recorded in the tracking cache) through the
+image classifier (``--image-classifier``, default ``config/letter_image_classifier.npz``; ''
+for the pose alone); the noise model has no image, so it is scored on the pose alone.
 
 Scores: a committed letter belongs to the scripted letter whose window (the move into it and
 its hold, plus 0.3 s) holds its commit time; a letter is right when the first letter committed
