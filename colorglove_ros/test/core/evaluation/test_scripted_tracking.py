@@ -98,3 +98,34 @@ def test_the_cache_holds_the_observation_and_reads_an_evidence_only_cache(tmp_pa
     assert old is not None and old.observation == {}
     np.testing.assert_array_equal(old.q_est, truth + 1.0)
     assert tracker._load(path, truth, observation=True) is None
+
+
+def test_hold_frames_are_rendered_through_the_segmentation_and_cached(
+        small_database_path: Path, tmp_path: Path) -> None:
+    """hold_observations renders every ``every``-th frame of each hold (renderer labels here)
+    and records its tiny image and blobs; a second call reads the cache without rendering."""
+    from repo_paths import CONFIG_DIR
+
+    from colorglove_ros.core.evaluation.scripted_hands import script_poses
+    from colorglove_ros.core.hand.model import HandModel
+    from colorglove_ros.tools.eval_spelling import spelling_script
+
+    segments = spelling_script(HandModel(), 1200, 1)[0][:2]
+    truth = script_poses(segments)
+    tracker = ScriptedTracker(small_database_path, CONFIG_DIR / 'ik.yaml',
+                              CONFIG_DIR / 'calibration.yaml', tmp_path, labels='truth')
+    try:
+        frames, record = tracker.hold_observations('spelling', 1200, truth, every=12)
+        expected = np.concatenate([np.flatnonzero((truth.segment == k) & truth.holding)[::12]
+                                   for k in (0, 1)])
+        np.testing.assert_array_equal(frames, expected)
+        assert record['tiny_labels'].shape == (len(frames), 40, 40)
+        assert all(record['tiny_labels'][j].any() for j in range(len(frames)))
+        assert (record['blob_color'] > 0).sum(axis=1).min() >= 3
+        tracker._evaluator.close()
+        tracker._evaluator = object()       # a second render would fail: it must not run
+        again_frames, again = tracker.hold_observations('spelling', 1200, truth, every=12)
+        np.testing.assert_array_equal(again_frames, frames)
+        np.testing.assert_array_equal(again['tiny_labels'], record['tiny_labels'])
+    finally:
+        tracker._evaluator = None
