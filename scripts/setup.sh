@@ -48,9 +48,10 @@ echo "==> installing colorglove_ros"
 python -m pip install --quiet --no-deps --no-build-isolation \
     --config-settings editable_mode=compat -e "$repo/colorglove_ros"
 
-echo "==> compiling the IK, segmentation and edge-search kernels (numba, cached on disk beside their modules: once, not per node)"
+echo "==> compiling the IK, segmentation, lookup and edge-search kernels (numba, cached on disk beside their modules: once, not per node)"
 python -c "from colorglove_ros.core.tracking.ik_kernel import compile_kernels as c; print(f'IK kernels compiled in {c():.1f} s')"
 python -c "from colorglove_ros.core.segmentation.segmentation_kernel import compile_kernels as c; print(f'segmentation kernels compiled in {c():.1f} s')"
+python -c "from colorglove_ros.core.lookup.lookup_kernel import compile_kernels as c; print(f'lookup kernels compiled in {c():.1f} s')"
 python -c "from colorglove_ros.core.tracking.edge_kernel import compile_kernels as c; print(f'edge-search kernels compiled in {c():.1f} s')"
 
 echo "==> installing the photos of synthetic backgrounds (Debian package, see colorglove_ros/config/photos.yaml)"

@@ -17,7 +17,11 @@ import rclpy
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 
-from colorglove_ros.ros.nodes.common import StartupError, ending_on_shutdown
+from colorglove_ros.ros.nodes.common import (
+    StartupError,
+    ending_on_shutdown,
+    freeze_startup_objects,
+)
 from colorglove_ros.ros.shm_cleanup import clean_stale_fastdds_segments
 
 __all__ = ['DEFAULT_THREADS', 'node_classes', 'main']
@@ -54,6 +58,7 @@ def main(argv: list[str] | None = None) -> int:
             for cls in node_classes(not args.no_camera):
                 nodes.append(cls())
                 executor.add_node(nodes[-1])
+            freeze_startup_objects()
             executor.spin()
     except StartupError as exc:
         print(f'[FATAL] {exc}', flush=True)

@@ -72,6 +72,10 @@ class ScriptedSettings:
     classifier: str               # default trained classifier (package-relative; '': none)
     feature_set: str              # its feature set (core.hand.pose_classifier)
     evidence_gate: bool = False   # evaluate(...) takes evidence=EvidenceGate (--evidence-*)
+    # evaluate(...) takes image_classifier= and image_weight= (--image-classifier, --image-weight)
+    # when not None: the image classifier used with --tracker by default (package-relative;
+    # '': none)
+    image_classifier: str | None = None
 
 
 @dataclass(frozen=True)
@@ -169,6 +173,14 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
         parser.add_argument('--evidence-max-reprojection-px', type=float,
                             help='with --tracker: skip frames whose reprojection error is '
                             "larger (default: the core's, off)")
+    if settings.image_classifier is not None:
+        parser.add_argument('--image-classifier',
+                            help="with --tracker: a classifier of the frames' observation "
+                            '(tiny image and blobs; feature set tiny_observation) combined '
+                            'with the pose classifier (default: '
+                            f'{settings.image_classifier or "none"}; "" = none)')
+        parser.add_argument('--image-weight', type=float,
+                            help="the image classifier's weight (default: the core's)")
     args = parser.parse_args(argv)
     from colorglove_ros.core.hand.pose_classifier import load_pose_classifier
 
@@ -198,6 +210,17 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
         extra['evidence'] = EvidenceGate(args.evidence_max_reprojection_px or math.inf,
                                          args.evidence_min_constraints or 0.0)
         source_settings['evidence_gate'] = asdict(extra['evidence'])
+    image_path = None if settings.image_classifier is None else args.image_classifier
+    if image_path is None and args.tracker and settings.image_classifier:
+        image_path = str(share_dir() / settings.image_classifier)
+    if image_path:
+        from colorglove_ros.core.hand.observation_features import OBSERVATION_FEATURES
+
+        extra['image_classifier'] = load_pose_classifier(image_path, OBSERVATION_FEATURES)
+        source_settings['image_classifier'] = image_path
+        if args.image_weight is not None:
+            extra['image_weight'] = args.image_weight
+            source_settings['image_weight'] = args.image_weight
     try:
         result = evaluate(args.seeds, getattr(args, unit), source, classifier, **extra)
     finally:

@@ -8,7 +8,10 @@ the letter's canonical orientation) plus the signer's variation (4 deg Gaussian 
 The speller sees the poses through ``TrackingNoise``, a MODEL of the tracker's errors (default
 mean absolute finger-joint error 7 deg after clipping, most of it slowly varying, plus 5 deg
 per wrist orientation axis), not the tracker run on rendered frames. J and Z are static
-handshapes here, as in the speller.
+handshapes here, as in the speller. With ``--tracker`` the speller also reads each frame's
+image evidence (the observation the tracker got, recorded in the tracking cache) through the
+image classifier (``--image-classifier``, default ``config/letter_image_classifier.npz``; ''
+for the pose alone); the noise model has no image, so it is scored on the pose alone.
 
 Scores: a committed letter belongs to the scripted letter whose window (the move into it and
 its hold, plus 0.3 s) holds its commit time; a letter is right when the first letter committed
@@ -29,6 +32,8 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Sequence
+from dataclasses import replace
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -44,15 +49,18 @@ from colorglove_ros.core.evaluation.scripted_hands import (
 )
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.hand.observation_features import record_features
 from colorglove_ros.core.hand.pose_classifier import PoseClassifier
 from colorglove_ros.core.hand.poses import LETTER_SHAPES, finger_limits
 from colorglove_ros.core.hand.spelling import (
     DEFAULT_LETTER_CLASSIFIER,
+    DEFAULT_LETTER_IMAGE_CLASSIFIER,
     LETTER_FEATURES,
     LETTERS,
     THUMB_LETTERS,
     Speller,
     SpellingConfig,
+    SpellingError,
     letter_rotation,
 )
 from colorglove_ros.core.report import print_table
@@ -66,7 +74,8 @@ TARGET = 0.90
 SETTINGS = ScriptedSettings(tuning_seeds=tuple(range(1100, 1110)),
                             default_seeds=tuple(range(100, 120)),
                             unit='words', default_count=8,
-                            classifier=DEFAULT_LETTER_CLASSIFIER, feature_set=LETTER_FEATURES)
+                            classifier=DEFAULT_LETTER_CLASSIFIER, feature_set=LETTER_FEATURES,
+                            image_classifier=DEFAULT_LETTER_IMAGE_CLASSIFIER)
 WORDS: tuple[str, ...] = (
     'THE', 'QUICK', 'BROWN', 'FOX', 'JUMPS', 'OVER', 'LAZY', 'DOG', 'MENTION', 'SENSE', 'STEM',
     'MEET', 'TEST', 'NEST', 'MUST', 'MEAN', 'TENSE', 'NAMES', 'HELLO', 'ROBOT', 'GLOVE', 'HAND',
@@ -162,12 +171,21 @@ def _accuracies(pairs: Sequence[tuple[str, str]]) -> tuple[float, float, float]:
 
 def evaluate(seeds: Sequence[int], words_per_sequence: int = 8,
              source: PoseSource | None = None, classifier: PoseClassifier | None = None,
-             config: SpellingConfig | None = None, fps: float = 30.0) -> dict:
+             config: SpellingConfig | None = None, fps: float = 30.0,
+             image_classifier: PoseClassifier | None = None,
+             image_weight: float | None = None) -> dict:
     """Letter accuracy, thumb-letter confusion and text accuracy over ``seeds``, as seen
     through ``source`` (default: the built-in ``TrackingNoise``; frames the tracker lost reach
-    the speller as 'no hand'), classified by ``classifier`` (None: the templates)."""
+    the speller as 'no hand'), classified by ``classifier`` (None: the templates) and, given,
+    ``image_classifier`` on each frame's observation (a source that records it, the tracker;
+    weighted by ``image_weight``, default the config's)."""
     model = HandModel()
     source = TrackingNoise() if source is None else source
+    if image_weight is not None:
+        config = replace(config or SpellingConfig(), image_weight=image_weight)
+    if image_classifier is not None and not hasattr(source, 'observation'):
+        raise SpellingError('an image classifier needs the frames\' observation: run on the '
+                            'tracker (--tracker)')
     pairs: list[tuple[str, str]] = []
     hold_pairs: list[tuple[str, str]] = []
     insertions = 0
@@ -179,13 +197,18 @@ def evaluate(seeds: Sequence[int], words_per_sequence: int = 8,
         truth = script_poses(segments, fps)
         seen, found = source.observe('spelling', seed, truth, model)
         maes.append(realised_joint_mae_deg(truth.poses, seen, found))
-        speller = Speller(config, model, classifier)
+        speller = Speller(config, model, classifier, image_classifier)
+        observed: Any = [None] * len(seen)
+        if image_classifier is not None:
+            record = source.observation('spelling', seed, truth, model)
+            observed = record_features(record)
         frame_log_likelihoods = np.full((len(seen), len(LETTERS)), np.nan)
-        frame_log_likelihoods[found] = speller.classifier.log_likelihoods_batch(seen[found])
+        frame_log_likelihoods[found] = speller.classifier.log_likelihoods_batch(
+            seen[found], None if image_classifier is None else observed[found])
         hold_pairs += classify_holds(truth, frame_log_likelihoods, LETTERS)
         commits = []
-        for q, ok, stamp in zip(seen, found, truth.times, strict=True):
-            letter = speller.update(q if ok else None, float(stamp))
+        for q, ok, stamp, obs in zip(seen, found, truth.times, observed, strict=True):
+            letter = speller.update(q if ok else None, float(stamp), obs)
             if letter is not None:
                 commits.append((float(stamp), letter))
         seq_pairs, seq_insertions = score_letters(truth, commits)

@@ -16,11 +16,19 @@ neutral shapes, or a letter); lost frames are left out. ``--model`` picks the cl
 ``--covariance-blend``). The classifiers are written as
 versioned ``.npz`` files, by default ``config/gesture_classifier.npz`` and
 ``config/letter_classifier.npz``, which the nodes and the evaluations read.
+
+``--what letter_images`` trains the letter classifier of the image evidence instead
+(``core/hand/observation_features.py``): every ``--image-every``-th frame of each hold of the
+spelling scripts of ``--image-seeds`` (training seeds), rendered as the evaluations'
+``--tracker`` renders them and seen through the segmentation alone (no lookup, no IK; cached in
+``data/scripted_tracking/``), its tiny label image and blobs; written to ``--image-output``
+(off by default: the evaluations and the spelling node use it when given one).
 """
 from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -36,6 +44,7 @@ from colorglove_ros.core.hand.gestures import (
     NO_GESTURE,
 )
 from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.hand.observation_features import OBSERVATION_FEATURES, record_features
 from colorglove_ros.core.hand.pose_classifier import (
     MODEL_KINDS,
     ClassifierError,
@@ -43,13 +52,30 @@ from colorglove_ros.core.hand.pose_classifier import (
     save_pose_classifier,
     train_pose_classifier,
 )
-from colorglove_ros.core.hand.spelling import LETTER_FEATURES, TRAINED_LETTER_CLASSIFIER
+from colorglove_ros.core.hand.spelling import (
+    LETTER_FEATURES,
+    LETTER_IMAGE_CLASSIFIER,
+    TRAINED_LETTER_CLASSIFIER,
+)
 from colorglove_ros.core.report import print_table
 from colorglove_ros.paths import data_dir, share_dir
 from colorglove_ros.tools import eval_gestures, eval_spelling
 from colorglove_ros.tools._cli import run_tool, tool_parser
 
-__all__ = ['main', 'training_samples']
+__all__ = ['main', 'training_samples', 'image_training_samples']
+
+
+def image_training_samples(model: HandModel, scripts: Sequence[tuple[int, list]],
+                           tracker: Any, every: int) -> tuple[np.ndarray, np.ndarray]:
+    """Observation features and letters of every ``every``-th hold frame of the spelling
+    ``(seed, segments)`` scripts (``ScriptedTracker.hold_observations``)."""
+    features, labels = [], []
+    for seed, segments in scripts:
+        truth = script_poses(segments)
+        frames, record = tracker.hold_observations('spelling', seed, truth, every)
+        features.append(record_features(record))
+        labels += list(truth.label[frames])
+    return np.concatenate(features), np.asarray(labels).astype(str)
 
 
 def training_samples(model: HandModel, scripts: list, noise, draws: int, feature_set: str,
@@ -86,7 +112,8 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``colorglove_train_hand_classifiers``."""
     config = share_dir() / 'config'
     parser = tool_parser(__doc__, raw_description=True, json_help=None)
-    parser.add_argument('--what', choices=('gestures', 'letters', 'both'), default='both')
+    parser.add_argument('--what', choices=('gestures', 'letters', 'both', 'letter_images'),
+                        default='both')
     parser.add_argument('--first-seed', type=int, default=1000)
     parser.add_argument('--gesture-sequences', type=int, default=12)
     parser.add_argument('--episodes', type=int, default=40)
@@ -115,6 +142,14 @@ def main(argv: list[str] | None = None) -> int:
                         default=share_dir() / DEFAULT_GESTURE_CLASSIFIER)
     parser.add_argument('--letter-output', type=Path,
                         default=share_dir() / TRAINED_LETTER_CLASSIFIER)
+    parser.add_argument('--image-seeds', type=int, nargs='*', default=[],
+                        help='with --what letter_images: the spelling training seeds rendered')
+    parser.add_argument('--image-words', type=int, default=4,
+                        help='words per rendered spelling sequence')
+    parser.add_argument('--image-every', type=int, default=5,
+                        help='every how many-th frame of a hold is rendered')
+    parser.add_argument('--image-output', type=Path,
+                        default=share_dir() / LETTER_IMAGE_CLASSIFIER)
     args = parser.parse_args(argv)
 
     def body() -> int:
@@ -141,6 +176,8 @@ def main(argv: list[str] | None = None) -> int:
                           for s in args.tracker_seeds],
                          f'--spelling-sequences {args.spelling_sequences} --words {args.words} '
                          f'--tracker-words {args.tracker_words}'))
+        if args.what == 'letter_images':
+            return _train_letter_images(args, model, config)
         tracker = None
         if args.tracker_seeds:
             from colorglove_ros.core.evaluation.scripted_tracking import ScriptedTracker
@@ -181,6 +218,37 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
     return run_tool('colorglove_train_hand_classifiers', body)
+
+
+def _train_letter_images(args: Any, model: HandModel, config: Path) -> int:
+    """``--what letter_images``: the image evidence's letter classifier (module docstring)."""
+    from colorglove_ros.core.evaluation.scripted_tracking import ScriptedTracker
+
+    if not args.image_seeds or any(s < args.first_seed for s in args.image_seeds):
+        raise ClassifierError(f'--image-seeds must be training seeds (>= {args.first_seed}), '
+                              f'got {args.image_seeds}')
+    tracker = ScriptedTracker(find_database(data_dir()), config / 'ik.yaml',
+                              config / 'calibration.yaml', data_dir() / 'scripted_tracking',
+                              args.labels)
+    try:
+        x, y = image_training_samples(
+            model, [(s, eval_spelling.spelling_script(model, s, args.image_words)[0])
+                    for s in args.image_seeds], tracker, args.image_every)
+    finally:
+        tracker.close()
+    seeds = ' '.join(str(s) for s in args.image_seeds)
+    source = (f'colorglove_train_hand_classifiers --what letter_images --image-seeds {seeds} '
+              f'--image-words {args.image_words} --image-every {args.image_every} --labels '
+              f'{args.labels} --model {args.model} --covariance-blend {args.covariance_blend}')
+    clf = train_pose_classifier(x, y, OBSERVATION_FEATURES, hidden=args.hidden, seed=args.seed,
+                                alpha=args.alpha, source=source, kind=args.model,
+                                covariance_blend=args.covariance_blend)
+    save_pose_classifier(args.image_output, clf)
+    accuracy = float(np.mean(np.asarray(clf.classes)[np.argmax(clf.log_proba(x), axis=1)] == y))
+    print_table([{'classifier': 'letter images', 'samples': len(y), 'classes': len(clf.classes),
+                  'training frame accuracy': accuracy, 'file': str(args.image_output)}],
+                'Trained classifiers')
+    return 0
 
 
 if __name__ == '__main__':

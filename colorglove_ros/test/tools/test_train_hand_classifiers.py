@@ -72,3 +72,74 @@ def test_the_quadratic_discriminant_is_trained_and_written(tmp_path) -> None:
     clf = load_pose_classifier(output, LETTER_FEATURES)
     assert clf.quadratic is not None and clf.quadratic.shape[0] == len(clf.classes) >= 3
     assert '--model qda' in clf.source and '--covariance-blend 0.25' in clf.source
+
+
+class _HoldRenderer:
+    """Stands in for ScriptedTracker.hold_observations: every ``every``-th hold frame, its
+    tiny image showing the frame's letter as one square of a colour and place of its own; and
+    for the evaluation, the same observation of every frame (``observation``)."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, int, int]] = []
+
+    @staticmethod
+    def _record(truth: ScriptedSequence, frames: np.ndarray) -> dict[str, np.ndarray]:
+        from colorglove_ros.core.hand.observation_features import empty_observation_record
+        from colorglove_ros.core.hand.spelling import LETTERS
+
+        record = empty_observation_record(len(frames))
+        for j, i in enumerate(frames):
+            k = LETTERS.index(truth.label[i])
+            row = 8 * (k // 10)
+            record['tiny_labels'][j, row:row + 8, :8] = 1 + k % 10
+        return record
+
+    def hold_observations(self, name: str, seed: int, truth: ScriptedSequence, every: int
+                          ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        self.calls.append((name, seed, every))
+        frames = np.concatenate([np.flatnonzero((truth.segment == k) & truth.holding)[::every]
+                                 for k in np.unique(truth.segment)])
+        return frames, self._record(truth, frames)
+
+    def observe(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
+                ) -> tuple[np.ndarray, np.ndarray]:
+        return truth.poses, np.ones(len(truth.poses), bool)
+
+    def observation(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
+                    ) -> dict[str, np.ndarray]:
+        return self._record(truth, np.arange(len(truth.poses)))
+
+
+def test_the_letter_image_classifier_learns_from_rendered_hold_frames() -> None:
+    """Image training samples are every ``every``-th hold frame's observation features with
+    its letter; the classifier trained on them, combined with the templates by the spelling
+    evaluation, reads the letters the image shows; the noise model (no observation) refuses
+    an image classifier."""
+    from colorglove_ros.core.evaluation.scripted_hands import Segment
+    from colorglove_ros.core.hand.observation_features import (
+        OBSERVATION_FEATURES,
+        record_features,
+    )
+    from colorglove_ros.core.hand.pose_classifier import train_pose_classifier
+    from colorglove_ros.core.hand.spelling import LETTERS
+
+    renderer = _HoldRenderer()
+    alphabet = [Segment(k, np.zeros(20), np.zeros(3), np.array([0.0, 0.05, 0.5]), 0.5, 0.2)
+                for k in LETTERS]
+    scripts = [(1200, eval_spelling.spelling_script(MODEL, 1200, 3)[0]), (1201, alphabet)]
+    x, y = train_hand_classifiers.image_training_samples(MODEL, scripts, renderer, 4)
+    assert renderer.calls == [('spelling', 1200, 4), ('spelling', 1201, 4)]
+    truth = script_poses(scripts[0][1])
+    frames = np.concatenate([np.flatnonzero((truth.segment == k) & truth.holding)[::4]
+                             for k in np.unique(truth.segment)])
+    np.testing.assert_array_equal(y[:len(frames)], truth.label[frames])
+    np.testing.assert_allclose(x[:len(frames)],
+                               record_features(renderer._record(truth, frames)))
+    jitter = np.random.default_rng(0).normal(0.0, 0.01, x.shape)   # no class without spread
+    image = train_pose_classifier(x + jitter, y, OBSERVATION_FEATURES, kind='lda')
+    seeds = [1200, 1201]
+    with_image = eval_spelling.evaluate(seeds, 3, renderer, None, image_classifier=image,
+                                        image_weight=5.0)
+    assert with_image['hold_letter_accuracy'] == with_image['letter_accuracy'] == 1.0
+    with pytest.raises(eval_spelling.SpellingError, match='tracker'):
+        eval_spelling.evaluate(seeds, 3, TrackingNoise(), None, image_classifier=image)

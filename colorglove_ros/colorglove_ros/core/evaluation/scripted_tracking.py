@@ -11,22 +11,29 @@ import numpy as np
 from colorglove_ros.core.evaluation.scripted_hands import ScriptedSequence, ScriptError
 from colorglove_ros.core.evaluation.sequences import EVIDENCE_FIELDS
 from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.hand.observation_features import empty_observation_record
 from colorglove_ros.core.lookup.database import DatabaseError, contents_tag
 
 __all__ = ['TRACKED_FORMAT_VERSION', 'TRACKER_MODE', 'ScriptedTracker', 'TrackedScript']
 
-TRACKED_FORMAT_VERSION = 2      # 2: with the tracker's evidence per frame
+# 2: with the tracker's evidence per frame; 3: and the primary camera's observation per frame
+TRACKED_FORMAT_VERSION = 3
+_READABLE_VERSIONS = (2, 3)     # a version 2 cache serves everything but the observation
+_OBSERVATION_KEYS = tuple(empty_observation_record(0))
 TRACKER_MODE = 'ik_smooth'        # the mode ik_node runs (IK and smoothing on)
 
 
 @dataclass(frozen=True)
 class TrackedScript:
-    """One scripted sequence tracked: poses (N, 26; NaN where not found), found flags (N,)
-    and the tracker's evidence per frame (``sequences.EVIDENCE_FIELDS``)."""
+    """One scripted sequence tracked: poses (N, 26; NaN where not found), found flags (N,),
+    the tracker's evidence per frame (``sequences.EVIDENCE_FIELDS``) and the primary camera's
+    observation per frame (``observation_features.empty_observation_record``: the tiny label
+    image and the blobs in its frame)."""
 
     q_est: np.ndarray
     found: np.ndarray
     evidence: dict[str, np.ndarray]
+    observation: dict[str, np.ndarray]
 
 
 @dataclass
@@ -57,15 +64,23 @@ class ScriptedTracker:
                 from exc
         return Path(self.cache_dir) / f'{name}_{seed}_{frames}_{self.labels}_{tag}.npz'
 
-    def _load(self, path: Path, truth: np.ndarray) -> TrackedScript | None:
+    def _load(self, path: Path, truth: np.ndarray, observation: bool = False
+              ) -> TrackedScript | None:
+        """The cached tracking of ``truth``; None when there is none, it is of other poses or
+        of an unreadable version, or (``observation``) it holds no observation (a version 2
+        cache, read with an empty observation otherwise)."""
         try:
             with np.load(path) as data:
-                if int(data['version']) != TRACKED_FORMAT_VERSION or \
+                version = int(data['version'])
+                if version not in _READABLE_VERSIONS or \
+                        (observation and version < TRACKED_FORMAT_VERSION) or \
                         data['q_true'].shape != truth.shape or \
                         not np.allclose(data['q_true'], truth, atol=1e-9):
                     return None
+                seen = {k: data[f'observation_{k}'] for k in _OBSERVATION_KEYS} \
+                    if version >= TRACKED_FORMAT_VERSION else {}
                 return TrackedScript(data['q_est'], data['found'].astype(bool),
-                                     {k: data[f'evidence_{k}'] for k in EVIDENCE_FIELDS})
+                                     {k: data[f'evidence_{k}'] for k in EVIDENCE_FIELDS}, seen)
         except (OSError, KeyError, ValueError):
             return None
 
@@ -85,7 +100,7 @@ class ScriptedTracker:
         return SequenceEvaluator(PoseLookup(db), {'1 camera': cameras[:1]}, [TRACKER_MODE],
                                  config, make_observer(self.labels, None,
                                                        config.min_blob_pixels),
-                                 evidence=True)
+                                 evidence=True, observation=True)
 
     def observe(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
                 ) -> tuple[np.ndarray, np.ndarray]:
@@ -100,11 +115,19 @@ class ScriptedTracker:
         found) of the sequence :meth:`observe` tracks."""
         return self.track(name, seed, truth, model).evidence
 
-    def track(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
-              ) -> TrackedScript:
-        """The sequence tracked (from the cache when it holds it)."""
+    def observation(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
+                    ) -> dict[str, np.ndarray]:
+        """The primary camera's observation per frame
+        (``observation_features.empty_observation_record``) of the sequence :meth:`observe`
+        tracks."""
+        return self.track(name, seed, truth, model, observation=True).observation
+
+    def track(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel,
+              observation: bool = False) -> TrackedScript:
+        """The sequence tracked (from the cache when it holds it; with ``observation`` only
+        from a cache that holds the observation, else tracked anew)."""
         path = self._cache_path(name, seed, len(truth.poses))
-        cached = self._load(path, truth.poses)
+        cached = self._load(path, truth.poses, observation)
         if cached is not None:
             return cached
         if self._evaluator is None:
@@ -117,8 +140,51 @@ class ScriptedTracker:
         path.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(path, version=TRACKED_FORMAT_VERSION, q_true=truth.poses,
                             q_est=run.q_est, found=run.found,
-                            **{f'evidence_{k}': v for k, v in run.evidence.items()})
-        return TrackedScript(run.q_est, run.found, run.evidence)
+                            **{f'evidence_{k}': v for k, v in run.evidence.items()},
+                            **{f'observation_{k}': v for k, v in run.observation.items()})
+        return TrackedScript(run.q_est, run.found, run.evidence, run.observation)
+
+    def hold_observations(self, name: str, seed: int, truth: ScriptedSequence, every: int = 5
+                          ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Every ``every``-th frame of each hold of sequence ``name`` / ``seed`` rendered as
+        :meth:`track` renders it and seen through the segmentation alone (no lookup, no IK;
+        training data for a classifier of the observation): the frame indices and their
+        observation record (``observation_features.empty_observation_record``). Cached beside the
+        tracking (``<name>_holds<every>_...``)."""
+        import dataclasses
+
+        from colorglove_ros.core.evaluation.sequences import (
+            EvaluationSequence,
+            record_observation,
+        )
+
+        if every < 1:
+            raise ScriptError(f'every must be at least 1, got {every}')
+        frames = np.concatenate([np.flatnonzero((truth.segment == k) & truth.holding)[::every]
+                                 for k in np.unique(truth.segment)]).astype(np.int64)
+        path = self._cache_path(f'{name}_holds{every}', seed, len(truth.poses))
+        try:
+            with np.load(path) as data:
+                if int(data['version']) == TRACKED_FORMAT_VERSION and \
+                        np.array_equal(data['frames'], frames) and \
+                        np.allclose(data['q_true'], truth.poses[frames], atol=1e-9):
+                    return frames, {k: data[f'observation_{k}'] for k in _OBSERVATION_KEYS}
+        except (OSError, KeyError, ValueError):
+            pass
+        if self._evaluator is None:
+            self._evaluator = self._make_evaluator()
+        ev = self._evaluator
+        sequence = EvaluationSequence.make(seed, len(truth.poses), ev.cameras[0], ev.synth)
+        sequence = dataclasses.replace(sequence, poses=np.asarray(truth.poses, dtype=float))
+        record = empty_observation_record(len(frames))
+        for j, i in enumerate(frames):
+            record_observation(record, j, ev.pipeline.observe(sequence.render(int(i),
+                                                                              ev.cameras)))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(path, version=TRACKED_FORMAT_VERSION, frames=frames,
+                            q_true=truth.poses[frames],
+                            **{f'observation_{k}': v for k, v in record.items()})
+        return frames, record
 
     def close(self) -> None:
         """Free the renderer."""

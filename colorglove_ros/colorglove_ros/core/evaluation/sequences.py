@@ -30,6 +30,10 @@ from colorglove_ros.core.hand.handedness import (
     to_right_frame,
 )
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
+from colorglove_ros.core.hand.observation_features import (
+    empty_observation_record,
+    write_observation,
+)
 from colorglove_ros.core.pipeline import (
     NODE_LIMITS,
     UNGATED,
@@ -56,7 +60,7 @@ __all__ = [
     'segmenter_observer', 'make_observer', 'TrackedSequence',
     'SequenceEvaluator', 'same_camera', 'jitter_runs_mm', 'contiguous_runs', 'summarize',
     'training_sequences', 'find_database', 'open_database', 'EvaluationSequence',
-    'EVIDENCE_FIELDS',
+    'EVIDENCE_FIELDS', 'record_observation',
 ]
 
 # The tracker's evidence per tracked frame (SequenceEvaluator with evidence=True): the
@@ -66,6 +70,14 @@ __all__ = [
 # colour near it (the nodes' missing-glove measure, core.pipeline.glove_seen with NODE_LIMITS).
 EVIDENCE_FIELDS = ('image_distance', 'explained_blob_share', 'reprojection_px', 'constraints',
                    'missing_glove_share')
+
+def record_observation(record: dict[str, np.ndarray], i: int, seen: Any) -> None:
+    """Frame ``i``'s primary observation (``FrameObservations``; nothing without a crop) into
+    an observation record (``observation_features.empty_observation_record``)."""
+    if seen.tiny is not None and seen.cameras:
+        write_observation(record, i, seen.tiny.labels, seen.tiny.transform,
+                          seen.cameras[0].blobs)
+
 
 LABEL_SOURCES = ('truth', 'segmented')
 # Sequence seeds (core.synthetic.sequences.generate_sequence): evaluation uses
@@ -202,6 +214,9 @@ class TrackedSequence:
     # the tracker's evidence per frame (:data:`EVIDENCE_FIELDS`; NaN where not found), kept
     # when the evaluator was made with ``evidence=True``
     evidence: dict[str, np.ndarray] = field(default_factory=dict)
+    # the primary camera's observation per frame (:func:`empty_observation_record`), kept when
+    # the evaluator was made with ``observation=True``
+    observation: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def same_camera(a: PinholeCamera, b: PinholeCamera) -> bool:
@@ -233,11 +248,12 @@ class SequenceEvaluator:
                  fps: float = 30.0, keep_results: bool = False,
                  temporal: TemporalPrior | None = None, finger_evidence: bool = True,
                  limits: StageLimits = UNGATED, hand: str = DEFAULT_HAND,
-                 evidence: bool = False) -> None:
+                 evidence: bool = False, observation: bool = False) -> None:
         from colorglove_ros.core.synthetic.frames import Synthesizer
 
         self.hand = check_hand(hand)
         self.evidence = bool(evidence)
+        self.observation = bool(observation)
 
         if not rigs:
             raise EvaluationError('need at least one camera rig')
@@ -309,11 +325,17 @@ class SequenceEvaluator:
         if self.evidence:
             for ts in out.values():
                 ts.evidence = {k: np.full(n, np.nan) for k in EVIDENCE_FIELDS}
+        if self.observation:
+            for ts in out.values():
+                ts.observation = empty_observation_record(n)
         for tr in self.trackers.values():
             tr.reset()
         for i in range(n):
             seen = self.pipeline.observe(sequence.render(i, self.cameras))
             found = self.pipeline.look_up(seen)
+            if self.observation:
+                for ts in out.values():
+                    record_observation(ts.observation, i, seen)
             for key, tracker in self.trackers.items():
                 c0 = time.thread_time()
                 outcome = self.pipeline.track(tracker, found, seen, i / self.fps)

@@ -17,6 +17,8 @@ layer and a softmax (``qda``: regularised discriminant analysis, each class a Ga
 own Ledoit-Wolf covariance blended with the shared one, ``covariance_blend`` the shared share:
 1 is the ``lda``, 0 a plain quadratic discriminant; a tracker whose error depends on the hand
 shape gives each class its own spread), kept as plain arrays, so running it needs numpy only.
+The same models also classify the image evidence of a frame
+(``core/hand/observation_features.py``, feature set ``tiny_observation``).
 Files are ``.npz`` with a format name and version (:data:`CLASSIFIER_FORMAT`,
 :data:`CLASSIFIER_FORMAT_VERSION`; version 1, without the quadratic layer, is still read), the
 classes, the feature set and a line saying how the model was trained.
@@ -30,6 +32,7 @@ import numpy as np
 
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, rotvec_to_matrix
+from colorglove_ros.core.hand.observation_features import OBSERVATION_FEATURES
 
 __all__ = ['CLASSIFIER_FORMAT', 'CLASSIFIER_FORMAT_VERSION', 'FEATURE_SETS', 'MODEL_KINDS',
            'ClassifierError', 'PoseClassifier', 'pose_features', 'train_pose_classifier',
@@ -226,7 +229,8 @@ def load_pose_classifier(path: str | Path, feature_set: str | None = None) -> Po
         raise ClassifierError(f'cannot read classifier file {path}: {exc}') from exc
     sizes = [clf.mean.shape[0]] + [w.shape[1] for w in clf.weights]
     quadratic_shape = (len(clf.classes), sizes[0], sizes[0])
-    if clf.feature_set not in FEATURE_SETS or sizes[-1] != len(clf.classes) or \
+    if clf.feature_set not in (*FEATURE_SETS, OBSERVATION_FEATURES) or \
+            sizes[-1] != len(clf.classes) or \
             any(w.shape[0] != n for w, n in zip(clf.weights, sizes, strict=False)) or \
             clf.quadratic is not None and (len(clf.weights) != 1 or
                                            clf.quadratic.shape != quadratic_shape):

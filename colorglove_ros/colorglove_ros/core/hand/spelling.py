@@ -13,7 +13,11 @@ Classifier: a trained classifier (``core/hand/pose_classifier.py``, feature set
 on synthetic training sequences seen through the tracking-noise model) gives each frame's
 letter probabilities. Without one, the templates do: a Gaussian likelihood per letter with a
 shared isotropic spread per feature group (finger joints in radians over ``joint_sigma_deg``,
-pointing direction over ``direction_sigma``) and a softmax.
+pointing direction over ``direction_sigma``) and a softmax. An optional image classifier
+(the same kind, on the frame's observation: ``core/hand/observation_features.py``) adds
+``image_weight`` times its log-probabilities to the pose's, a product of the two
+classifiers' probabilities (the image one's raised to the weight): the tiny image shows where
+the thumb's patches lie when the fitted pose puts the thumb elsewhere.
 Hold-to-commit: a letter is a hold, the hand still in one place (the wrist's speed over the last
 ``still_window_s`` below ``still_speed_m_s``). Each frame of the hold adds its per-letter
 log-probabilities to the hold's sum, and once the hold has lasted ``commit_after_s`` the letter
@@ -35,13 +39,15 @@ import numpy as np
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.hysteresis import HoldConfig, ScoreHysteresis
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, rotvec_to_matrix
+from colorglove_ros.core.hand.observation_features import OBSERVATION_FEATURES
 from colorglove_ros.core.hand.pose_classifier import PoseClassifier, pose_features
 from colorglove_ros.core.hand.poses import LETTER_SHAPES
 from colorglove_ros.core.validation import check_number
 
 __all__ = [
     'LETTERS', 'THUMB_LETTERS', 'LETTER_ROLL_PITCH', 'LETTER_FEATURES',
-    'DEFAULT_LETTER_CLASSIFIER', 'TRAINED_LETTER_CLASSIFIER', 'SpellingError',
+    'DEFAULT_LETTER_CLASSIFIER', 'TRAINED_LETTER_CLASSIFIER', 'LETTER_IMAGE_CLASSIFIER',
+    'DEFAULT_LETTER_IMAGE_CLASSIFIER', 'SpellingError',
     'SpellingConfig',
     'letter_rotation', 'pointing_direction', 'LetterClassifier', 'Speller',
 ]
@@ -52,6 +58,10 @@ LETTER_FEATURES = 'hand_shape_direction'   # the classifier's feature set (pose_
 # the trained classifier, relative to the package root (the nodes' and tools' default)
 TRAINED_LETTER_CLASSIFIER = 'config/letter_classifier.npz'
 DEFAULT_LETTER_CLASSIFIER = TRAINED_LETTER_CLASSIFIER
+# the image evidence's letter classifier (colorglove_train_hand_classifiers --what
+# letter_images): the spelling node's and eval_spelling --tracker's default ('': the pose alone)
+LETTER_IMAGE_CLASSIFIER = 'config/letter_image_classifier.npz'
+DEFAULT_LETTER_IMAGE_CLASSIFIER = LETTER_IMAGE_CLASSIFIER
 # (roll about the camera z, then pitch toward the camera) of each letter's pointing direction,
 # degrees; letters not listed point up
 LETTER_ROLL_PITCH: dict[str, tuple[float, float]] = {
@@ -74,7 +84,7 @@ class SpellingConfig:
     """Template spreads (without a classifier); what a hold is (the wrist slower than
     ``still_speed_m_s`` over ``still_window_s``) and how long it lasts before its letter is
     committed (``commit_after_s``); the hysteresis (``hold``) that tells a change of letter in
-    place."""
+    place; the image classifier's weight (``image_weight``, with one)."""
 
     joint_sigma_deg: float = 12.0
     direction_sigma: float = 0.3
@@ -83,11 +93,13 @@ class SpellingConfig:
     still_speed_m_s: float = 0.08
     still_window_s: float = 0.3
     commit_after_s: float = 0.2
+    image_weight: float = 1.0
 
     def __post_init__(self) -> None:
         for name, (low, high) in _SETTING_BOUNDS.items():
             check_number(name, getattr(self, name), low=low, low_open=True, high=high,
                          error=SpellingError)
+        check_number('image_weight', self.image_weight, low=0.0, error=SpellingError)
 
 
 def letter_rotation(letter: str) -> np.ndarray:
@@ -106,20 +118,28 @@ def pointing_direction(q: np.ndarray) -> np.ndarray:
 
 class LetterClassifier:
     """Per-frame log-probabilities of the 26 letters from a 26-DOF pose: the trained
-    ``classifier`` when given, else the templates (module docstring)."""
+    ``classifier`` when given, else the templates (module docstring); with an
+    ``image_classifier`` (feature set ``tiny_observation``) plus ``config.image_weight`` times
+    its log-probabilities of the frame's observation features."""
 
     def __init__(self, config: SpellingConfig | None = None, model: HandModel | None = None,
-                 classifier: PoseClassifier | None = None) -> None:
+                 classifier: PoseClassifier | None = None,
+                 image_classifier: PoseClassifier | None = None) -> None:
         self.config = SpellingConfig() if config is None else config
         self.model = HandModel() if model is None else model
-        if classifier is not None and (classifier.feature_set != LETTER_FEATURES or
-                                       set(classifier.classes) != set(LETTERS)):
-            raise SpellingError(f'a letter classifier must classify {LETTER_FEATURES!r} '
-                                f'features into the 26 letters, got {classifier.feature_set!r} '
-                                f'{classifier.classes}')
+        for clf, features in ((classifier, LETTER_FEATURES),
+                              (image_classifier, OBSERVATION_FEATURES)):
+            if clf is not None and (clf.feature_set != features or
+                                    set(clf.classes) != set(LETTERS)):
+                raise SpellingError(f'a letter classifier must classify {features!r} '
+                                    f'features into the 26 letters, got {clf.feature_set!r} '
+                                    f'{clf.classes}')
         self.classifier = classifier
+        self.image_classifier = image_classifier
         if classifier is not None:
             self._order = np.array([classifier.classes.index(k) for k in LETTERS])
+        if image_classifier is not None:
+            self._image_order = np.array([image_classifier.classes.index(k) for k in LETTERS])
         lo, hi = self.model.lower_limits[6:], self.model.upper_limits[6:]
         self._joints = np.stack([np.clip(LETTER_SHAPES[k], lo, hi) for k in LETTERS])
         rest = np.zeros(NUM_DOFS)
@@ -129,19 +149,34 @@ class LetterClassifier:
             directions.append(pointing_direction(rest))
         self._directions = np.stack(directions)
 
-    def log_likelihoods(self, q: np.ndarray) -> np.ndarray:
+    def log_likelihoods(self, q: np.ndarray, observation: np.ndarray | None = None
+                        ) -> np.ndarray:
         """(26,) log-probability of each letter in ``LETTERS`` order (the templates': up to a
-        constant)."""
+        constant); ``observation``: the frame's observation features (F,), used with an
+        image classifier (a frame without one is classified from its pose alone)."""
         q = np.asarray(q, dtype=float)
         if q.shape != (NUM_DOFS,):
             raise SpellingError(f'pose must be 26 finite values, got shape {q.shape}')
-        return self.log_likelihoods_batch(q[None])[0]
+        return self.log_likelihoods_batch(
+            q[None], None if observation is None else np.asarray(observation)[None])[0]
 
-    def log_likelihoods_batch(self, poses: np.ndarray) -> np.ndarray:
-        """(N, 26) :meth:`log_likelihoods` of poses (N, 26)."""
+    def log_likelihoods_batch(self, poses: np.ndarray, observations: np.ndarray | None = None
+                              ) -> np.ndarray:
+        """(N, 26) :meth:`log_likelihoods` of poses (N, 26) and their frames' observation
+        features (N, F; without them, with an image classifier too, the pose's part alone)."""
         poses = np.asarray(poses, dtype=float)
         if poses.ndim != 2 or poses.shape[1] != NUM_DOFS or not np.all(np.isfinite(poses)):
             raise SpellingError(f'poses must be finite (N, 26), got shape {poses.shape}')
+        out = self._pose_log_likelihoods(poses)
+        if self.image_classifier is None or observations is None:
+            return out
+        if len(observations) != len(poses):
+            raise SpellingError(f'{len(poses)} poses but {len(observations)} observations')
+        image = np.atleast_2d(self.image_classifier.log_proba(observations))[:, self._image_order]
+        return out + self.config.image_weight * image
+
+    def _pose_log_likelihoods(self, poses: np.ndarray) -> np.ndarray:
+        """(N, 26) the pose classifier's (or the templates') part."""
         if self.classifier is not None:
             features = pose_features(self.model, poses, self.classifier.feature_set)
             return np.atleast_2d(self.classifier.log_proba(features))[:, self._order]
@@ -163,9 +198,10 @@ class Speller:
     """Hold-to-commit letter stream from tracked poses (one per hand; module docstring)."""
 
     def __init__(self, config: SpellingConfig | None = None, model: HandModel | None = None,
-                 classifier: PoseClassifier | None = None) -> None:
+                 classifier: PoseClassifier | None = None,
+                 image_classifier: PoseClassifier | None = None) -> None:
         self.config = SpellingConfig() if config is None else config
-        self.classifier = LetterClassifier(self.config, model, classifier)
+        self.classifier = LetterClassifier(self.config, model, classifier, image_classifier)
         self._hysteresis = ScoreHysteresis(LETTERS, self.config.hold)
         self.reset()
 
@@ -200,13 +236,15 @@ class Speller:
         return stamp - since > 1e-9 and \
             np.linalg.norm(wrist - start) >= self.config.still_speed_m_s * (stamp - since)
 
-    def update(self, q: np.ndarray | None, stamp: float) -> str | None:
-        """Feed one frame (None: no hand); returns the letter committed on it, if any."""
+    def update(self, q: np.ndarray | None, stamp: float,
+               observation: np.ndarray | None = None) -> str | None:
+        """Feed one frame (None: no hand; ``observation``: its observation features, used
+        with an image classifier); returns the letter committed on it, if any."""
         if q is None:
             self.reset()
             return None
         q = np.asarray(q, dtype=float)
-        log_p = self.classifier.log_likelihoods(q)
+        log_p = self.classifier.log_likelihoods(q, observation)
         changes = self._hysteresis.update(dict(zip(LETTERS, _softmax(log_p), strict=True)),
                                           stamp)
         smoothed = self._hysteresis.smoothed

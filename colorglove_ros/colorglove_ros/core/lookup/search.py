@@ -28,12 +28,9 @@ from colorglove_ros.core.segmentation.crop import tiny_to_full
 __all__ = ['SearchError', 'PoseLookup', 'DEFAULT_THREADS',
            'top_k_with_ties', 'estimate_global_pose']
 
-DEFAULT_THREADS = 2
-"""Threads of a :class:`PoseLookup`'s Hamming scan and re-rank: the caller and one worker."""
-
-
-_BUFFER_CAP = 1 << 20
-"""Largest reused re-rank buffer (entries): 8 MB of indices, 20x a 300-candidate lookup."""
+DEFAULT_THREADS = 1
+"""Threads of a :class:`PoseLookup`'s re-rank: the caller only (2: the caller and one worker,
+whose hand-off and wait cost more than its share of the compiled gathers on a busy machine)."""
 
 
 class SearchError(ColorGloveError):
@@ -153,11 +150,11 @@ def _crop_tuple(crop_transform: object) -> tuple[float, float, float]:
 class PoseLookup:
     """Nearest-neighbour pose lookup in a :class:`PoseDatabase`.
 
-    Buffers for the Hamming scan and re-rank are reused; one instance is not thread-safe.
-    ``threads=2`` (default) splits the Hamming scan (two halves) and the re-rank (its two
-    gathers) between the caller and one worker thread: less wall time while a core is free,
-    a little more CPU in all (the hand-off); ``threads=1`` runs everything in the caller
-    (same results)."""
+    The Hamming scan and the re-rank's gathers are compiled (:mod:`lookup_kernel`: compiled or
+    loaded from numba's cache when the first instance is made); the scan's buffers are reused,
+    so one instance is not thread-safe. ``threads=1`` (default) runs everything in the caller;
+    ``threads=2`` runs the re-rank's two gathers at once, one in a worker thread (the same
+    results; more CPU in all, the hand-off, and a wait for the worker when no core is free)."""
 
     def __init__(self, database: PoseDatabase, num_candidates: int = 300,
                  num_blend: int = 10, threads: int = DEFAULT_THREADS,
@@ -167,7 +164,11 @@ class PoseLookup:
             raise SearchError('num_candidates and num_blend must be positive')
         if threads not in (1, 2):
             raise SearchError(f'threads must be 1 or 2, got {threads}')
-        # one worker thread for the re-rank's second gather (None: all in the caller)
+        from colorglove_ros.core.lookup import lookup_kernel
+
+        lookup_kernel.compile_kernels()
+        self._kernels = lookup_kernel
+        # one worker thread for the re-rank's query -> candidate gather (None: all in the caller)
         self._pool = ThreadPoolExecutor(1, 'pose-lookup') if threads == 2 else None
         self.db = database
         self.num_candidates = int(num_candidates)
@@ -177,24 +178,26 @@ class PoseLookup:
                              else np.asarray(vertex_link))
         n = len(database)
         self._columns = np.ascontiguousarray(database.codes)
-        # Hamming distances fit a byte up to 255 bits: uint8 accumulation halves the traffic.
-        self._ham = np.empty(n, np.uint8 if database.num_bits <= 255 else np.uint16)
-        self._xor = np.empty(min(n, HAMMING_BLOCK), np.uint64)
-        self._cnt = np.empty(min(n, HAMMING_BLOCK), np.uint8)
-        self._xor2, self._cnt2 = np.empty_like(self._xor), np.empty_like(self._cnt)
+        # Hamming distances fit a byte up to 255 bits: the compiled scan (with the distances'
+        # histogram) takes those; longer codes go through numpy (uint16 distances)
+        self._compiled_scan = database.num_bits <= 255
+        self._ham = np.empty(n, np.uint8 if self._compiled_scan else np.uint16)
+        self._hist = np.zeros(64 * self._columns.shape[0] + 1, np.int64)
+        self._selected = np.empty(n if self._compiled_scan else 0, np.intp)
+        self._xor = np.empty(0 if self._compiled_scan else min(n, HAMMING_BLOCK), np.uint64)
+        self._cnt = np.empty(len(self._xor), np.uint8)
         self._qenc = QueryEncoder(database.encoder)
         # plain ndarray views of the (memory-mapped) arrays: no np.memmap indexing overhead
         self._a = {name: np.asarray(getattr(database, name)) for name in (
             'dts', 'pixel_keys', 'poses', 'crop', 'patch_vertex', 'patch_xy', 'patch_color',
             'patch_pixels')}
-        self._dts_flat = self._a['dts'].reshape(n, -1)
-        self._row = self._dts_flat.shape[1]
-        self._dts_all = self._a['dts'].reshape(-1)
+        self._keys = np.ascontiguousarray(self._a['pixel_keys'])
+        self._row = int(np.prod(self._a['dts'].shape[1:]))
+        self._dts_all = np.ascontiguousarray(self._a['dts']).reshape(-1)
         self._counts = np.asarray(database.pixel_counts, np.float64)
         # query DT lookup table, last slot (the padding key 16000) reads zero
         self._table = np.zeros(self._row + 1, np.float32)
         self._rerank_groups = 4
-        self._buffers: dict[str, np.ndarray] = {}
         anchor = database.meta.get('hand_centre_local')
         self._anchor = None if anchor is None else np.asarray(anchor, np.float64)
         # the query-independent part of placing every entry in a query's view, once
@@ -203,24 +206,11 @@ class PoseLookup:
 
     @property
     def buffer_bytes(self) -> int:
-        """Memory held by this lookup besides the database: scan and re-rank buffers and
-        the per-entry tables computed at construction."""
-        arrays = [self._ham, self._xor, self._cnt, self._xor2, self._cnt2, self._table,
-                  self._place_table, *self._buffers.values()]
+        """Memory held by this lookup besides the database: the scan's buffers and the
+        per-entry tables computed at construction."""
+        arrays = [self._ham, self._hist, self._selected, self._xor, self._cnt, self._table,
+                  self._place_table]
         return int(sum(a.nbytes for a in arrays))
-
-    def _buffer(self, name: str, size: int, dtype: type) -> np.ndarray:
-        """A reused flat scratch array of ``size`` entries (grown as needed up to
-        :data:`_BUFFER_CAP` entries; larger requests, e.g. a re-rank of a whole database in
-        chunks, get a fresh array so the lookup does not keep it)."""
-        if size > _BUFFER_CAP:
-            return np.empty(size, dtype)
-        buf = self._buffers.get(name)
-        if buf is None or len(buf) < size:
-            buf = np.empty(min(_BUFFER_CAP, max(size, 2 * (0 if buf is None else len(buf)))),
-                           dtype)
-            self._buffers[name] = buf
-        return buf[:size]
 
     def hamming(self, tiny_labels: np.ndarray) -> np.ndarray:
         """Hamming distances (N,) of a query to every entry (a copy)."""
@@ -228,60 +218,66 @@ class PoseLookup:
         return self._hamming_dts(qd.dts).copy()
 
     def _hamming_dts(self, dts: np.ndarray) -> np.ndarray:
+        """Hamming distances of the query with distance transforms ``dts`` to every entry
+        (this lookup's buffer; the compiled scan also fills the distances' histogram)."""
         code = self._qenc.encode(dts)
-        n = self._columns.shape[1]
-        if self._pool is None or n < 2 * HAMMING_BLOCK:
-            return hamming_distances(self._columns, code, self._ham, self._xor, self._cnt)
-        # two halves, one in the worker thread (own scratch buffers), one here
-        half = n // 2
-        pending = self._pool.submit(hamming_distances, self._columns[:, :half], code,
-                                    self._ham[:half], self._xor2, self._cnt2)
-        hamming_distances(self._columns[:, half:], code, self._ham[half:], self._xor,
-                          self._cnt)
-        pending.result()
-        return self._ham
+        if self._compiled_scan:
+            self._kernels.hamming_histogram(self._columns, code, self._ham, self._hist)
+            return self._ham
+        return hamming_distances(self._columns, code, self._ham, self._xor, self._cnt)
 
-    def _query_sums(self, query: QueryDistance, idx: np.ndarray) -> np.ndarray:
-        """Sum (k,) of each candidate's stored (quantised) distance transform at the query's
-        glove pixels: the query -> candidate term, one gather of k x num_pixels bytes."""
-        nq = query.num_pixels
-        flat_idx = self._buffer('flat', len(idx) * nq, np.intp).reshape(len(idx), nq)
-        np.add((idx * self._row)[:, None], query.glove_index, out=flat_idx)
-        got = self._buffer('dt', flat_idx.size, np.uint8).reshape(flat_idx.shape)
-        self._dts_all.take(flat_idx, out=got, mode='clip')
-        return got.sum(axis=1, dtype=np.uint32)
+    def _candidates(self, dts: np.ndarray) -> np.ndarray:
+        """:func:`top_k_with_ties` of the query's Hamming distances (``num_candidates``),
+        from the compiled scan's histogram where it ran: the smallest distance with at least
+        k entries at or below it is the cut."""
+        ham = self._hamming_dts(dts)
+        if not self._compiled_scan:
+            return top_k_with_ties(ham, self.num_candidates)
+        if self.num_candidates >= len(ham):
+            return np.arange(len(ham))
+        cut = int(np.searchsorted(np.cumsum(self._hist), self.num_candidates))
+        count = self._kernels.at_most(ham, cut, self._selected)
+        return self._selected[:count].copy()
+
+    def _group_widths(self, counts: np.ndarray) -> np.ndarray:
+        """Per candidate, how many of its pixel keys the candidate -> query sum runs over:
+        candidates in ``_rerank_groups`` groups of similar glove-pixel count, each summed up
+        to its largest count (padding keys read zero; the width fixes the sum's pairwise
+        order, so the distances keep their bits)."""
+        order = np.argsort(counts, kind='stable')
+        groups = min(self._rerank_groups, max(1, len(counts)))
+        bounds = (len(counts) * np.arange(groups + 1)) // groups
+        widths = np.empty(len(counts), np.intp)
+        for g in range(groups):
+            grp = order[bounds[g]:bounds[g + 1]]
+            if len(grp):
+                widths[grp] = max(1, int(counts[grp[-1]]))
+        return np.minimum(widths, self._keys.shape[1], out=widths)
 
     def rerank(self, query: QueryDistance, indices: np.ndarray) -> np.ndarray:
         """Exact image distances (k,) from the query to database entries ``indices``.
 
-        With ``threads=2`` the query -> candidate gather runs in a worker thread while this
-        thread does the candidate -> query one (numpy releases the GIL in both)."""
-        idx = np.asarray(indices, np.intp)
+        With ``threads=2`` the query -> candidate sums run in a worker thread while this
+        thread does the candidate -> query ones (both compiled, releasing the GIL)."""
+        idx = np.ascontiguousarray(indices, np.intp)
         nq = query.num_pixels
-        pending = (self._pool.submit(self._query_sums, query, idx)
+        kernels = self._kernels
+        q_sum = np.empty(len(idx), np.uint32)
+        # the query's pixels in ascending address order: each entry's row is read forwards
+        # (an integer sum, the same in any order)
+        gather = (self._dts_all, idx, self._row, np.sort(query.glove_index), q_sum)
+        pending = (self._pool.submit(kernels.query_sums, *gather)
                    if nq and self._pool is not None else None)
         counts = self._counts[idx]
         table = self._table
         table[:-1] = query.dts.reshape(-1)
         cand_sum = np.empty(len(idx), np.float64)
-        # Candidates in groups of similar glove-pixel count, each gathered only up to its
-        # largest count: far fewer padding keys than one block as wide as the largest count.
-        # Gathers go through reused buffers (fresh megabyte temporaries cost page faults).
-        order = np.argsort(counts, kind='stable')
-        groups = min(self._rerank_groups, max(1, len(idx)))
-        bounds = (len(idx) * np.arange(groups + 1)) // groups
-        for g in range(groups):
-            grp = order[bounds[g]:bounds[g + 1]]
-            if len(grp) == 0:
-                continue
-            width = max(1, int(counts[grp[-1]]))
-            keys = self._buffer('keys', len(grp) * width, np.intp).reshape(len(grp), width)
-            np.copyto(keys, self._a['pixel_keys'][idx[grp], :width])   # padding reads zero
-            vals = self._buffer('vals', keys.size, np.float32).reshape(keys.shape)
-            table.take(keys, out=vals, mode='clip')
-            cand_sum[grp] = vals.sum(axis=1)
+        kernels.candidate_sums(table, self._keys, idx, self._group_widths(counts), cand_sum)
         if nq:
-            q_sum = pending.result() if pending is not None else self._query_sums(query, idx)
+            if pending is not None:
+                pending.result()
+            else:
+                kernels.query_sums(*gather)
             d_qc = q_sum * (1.0 / (DT_SCALE * nq))
             d_cq = np.where(counts > 0, cand_sum / np.maximum(counts, 1.0), ABSENT_PENALTY)
         else:
@@ -315,8 +311,7 @@ class PoseLookup:
         if query.num_pixels == 0:
             raise SearchError('query tiny image has no glove pixels')
         t1 = time.perf_counter()
-        ham = self._hamming_dts(query.dts)
-        cand = top_k_with_ties(ham, self.num_candidates)
+        cand = self._candidates(query.dts)
         t2 = time.perf_counter()
         dist = self.rerank(query, cand)
         t3 = time.perf_counter()

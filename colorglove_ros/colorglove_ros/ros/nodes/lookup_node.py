@@ -57,10 +57,10 @@ class LookupNode(Node):
                                  'entries re-ranked with the exact distance', 1, 100000)
         num_neighbors = declare(self, 'num_neighbors', 10, 'nearest entries blended', 1, 300)
         threads = declare(self, 'search_threads', DEFAULT_THREADS,
-                          'threads of the Hamming scan and re-rank: 2 shares them between the '
-                          'callback and a worker thread (less latency while a core is free), '
-                          '1 runs them in the callback (a little less CPU in all; the same '
-                          'results)', 1, 2)
+                          'threads of the re-rank: 1 runs it in the callback, 2 shares its two '
+                          'gathers between the callback and a worker thread (more CPU in all, '
+                          'and a wait for the worker when no core is free; the same results)',
+                          1, 2)
         self.live = LiveParameters(self)
         self.limits = StageLimits(max_image_distance=self.live.declare(
             'max_image_distance', DEFAULT_MAX_IMAGE_DISTANCE,

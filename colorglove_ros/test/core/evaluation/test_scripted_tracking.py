@@ -11,6 +11,7 @@ from small_databases import blob_database
 from colorglove_ros.core.evaluation.scripted_hands import ScriptError
 from colorglove_ros.core.evaluation.scripted_tracking import TRACKED_FORMAT_VERSION, ScriptedTracker
 from colorglove_ros.core.evaluation.sequences import EVIDENCE_FIELDS
+from colorglove_ros.core.hand.observation_features import empty_observation_record
 from colorglove_ros.core.lookup.database import contents_tag, save_database
 
 
@@ -55,6 +56,10 @@ def _write_cache(path: Path, truth: np.ndarray, version: int = TRACKED_FORMAT_VE
                  evidence: bool = True) -> None:
     fields = {f'evidence_{k}': np.arange(len(truth), dtype=float) for k in EVIDENCE_FIELDS} \
         if evidence else {}
+    if version >= 3:
+        seen = empty_observation_record(len(truth))
+        seen['tiny_labels'][:, 3, 4] = 5
+        fields.update({f'observation_{k}': v for k, v in seen.items()})
     np.savez_compressed(path, version=version, q_true=truth, q_est=truth + 1.0,
                         found=np.ones(len(truth), bool), **fields)
 
@@ -72,3 +77,55 @@ def test_the_cache_holds_the_trackers_evidence_per_frame(tmp_path: Path) -> None
     np.testing.assert_array_equal(loaded.evidence['image_distance'], [0.0, 1.0, 2.0])
     _write_cache(path, truth, version=1, evidence=False)
     assert tracker._load(path, truth) is None
+
+
+def test_the_cache_holds_the_observation_and_reads_an_evidence_only_cache(tmp_path: Path) -> None:
+    """A format 3 cache gives back the primary camera's observation per frame (tiny label
+    image, blobs); a format 2 cache (evidence, no observation) still serves the poses and the
+    evidence, but not a caller that needs the observation (tracked anew)."""
+    truth = np.zeros((3, 26))
+    tracker = ScriptedTracker(_saved(tmp_path, 'a', 0), Path('ik.yaml'), Path('cal.yaml'),
+                              tmp_path)
+    path = tracker._cache_path('spelling', 7, 3)
+    _write_cache(path, truth)
+    loaded = tracker._load(path, truth, observation=True)
+    assert loaded is not None
+    assert set(loaded.observation) == set(empty_observation_record(0))
+    assert loaded.observation['tiny_labels'].shape == (3, 40, 40)
+    assert loaded.observation['tiny_labels'][2, 3, 4] == 5
+    _write_cache(path, truth, version=2)
+    old = tracker._load(path, truth)
+    assert old is not None and old.observation == {}
+    np.testing.assert_array_equal(old.q_est, truth + 1.0)
+    assert tracker._load(path, truth, observation=True) is None
+
+
+def test_hold_frames_are_rendered_through_the_segmentation_and_cached(
+        small_database_path: Path, tmp_path: Path) -> None:
+    """hold_observations renders every ``every``-th frame of each hold (renderer labels here)
+    and records its tiny image and blobs; a second call reads the cache without rendering."""
+    from repo_paths import CONFIG_DIR
+
+    from colorglove_ros.core.evaluation.scripted_hands import script_poses
+    from colorglove_ros.core.hand.model import HandModel
+    from colorglove_ros.tools.eval_spelling import spelling_script
+
+    segments = spelling_script(HandModel(), 1200, 1)[0][:2]
+    truth = script_poses(segments)
+    tracker = ScriptedTracker(small_database_path, CONFIG_DIR / 'ik.yaml',
+                              CONFIG_DIR / 'calibration.yaml', tmp_path, labels='truth')
+    try:
+        frames, record = tracker.hold_observations('spelling', 1200, truth, every=12)
+        expected = np.concatenate([np.flatnonzero((truth.segment == k) & truth.holding)[::12]
+                                   for k in (0, 1)])
+        np.testing.assert_array_equal(frames, expected)
+        assert record['tiny_labels'].shape == (len(frames), 40, 40)
+        assert all(record['tiny_labels'][j].any() for j in range(len(frames)))
+        assert (record['blob_color'] > 0).sum(axis=1).min() >= 3
+        tracker._evaluator.close()
+        tracker._evaluator = object()       # a second render would fail: it must not run
+        again_frames, again = tracker.hold_observations('spelling', 1200, truth, every=12)
+        np.testing.assert_array_equal(again_frames, frames)
+        np.testing.assert_array_equal(again['tiny_labels'], record['tiny_labels'])
+    finally:
+        tracker._evaluator = None

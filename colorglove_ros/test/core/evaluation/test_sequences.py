@@ -408,3 +408,42 @@ def test_segmented_observer_does_not_fit_a_calibration_the_user_named(tmp_path, 
     with pytest.raises(ColorGloveError, match='mine.npz'):
         make_observer('segmented', config)
     assert calls == [] and not missing.exists()
+
+
+def test_the_observation_record_keeps_the_tiny_image_and_the_largest_blobs_in_its_frame():
+    """record_observation writes a frame's tiny label image and its blobs, largest first, in
+    the tiny image's pixel frame with their pixel counts in tiny pixels; a frame without a
+    crop stays empty; more blobs than the record holds keeps the largest."""
+    from colorglove_ros.core.evaluation.sequences import record_observation
+    from colorglove_ros.core.hand.observation_features import (
+        MAX_RECORDED_BLOBS,
+        empty_observation_record,
+        frame_features,
+        record_features,
+    )
+    from colorglove_ros.core.segmentation.crop import CropTransform, TinyCrop
+    from colorglove_ros.core.tracking.types import Blobs, CameraObservation
+
+    record = empty_observation_record(2)
+    tiny = np.zeros((40, 40), np.uint8)
+    tiny[10:20, 5:9] = 3
+    transform = CropTransform(2.0, 100.0, 50.0)
+    n = MAX_RECORDED_BLOBS + 3
+    blobs = Blobs(np.arange(n) % 10 + 1, np.stack([100.0 + 2.0 * np.arange(n),
+                                                   np.full(n, 60.0)], axis=1),
+                  np.arange(n, dtype=float) + 1.0)
+    seen = FrameObservations((CameraObservation(True, blobs, transform),),
+                             TinyCrop(tiny, transform))
+    record_observation(record, 1, seen)
+    record_observation(record, 0, FrameObservations(seen.cameras, None))
+    assert not record['tiny_labels'][0].any() and not record['blob_color'][0].any()
+    np.testing.assert_array_equal(record['tiny_labels'][1], tiny)
+    largest = n - 1
+    assert record['blob_color'][1, 0] == largest % 10 + 1
+    np.testing.assert_allclose(record['blob_tiny_xy'][1, 0], [largest, 5.0])
+    assert record['blob_tiny_pixels'][1, 0] == pytest.approx((largest + 1.0) / 4.0)
+    assert (record['blob_color'][1] > 0).sum() == MAX_RECORDED_BLOBS
+    assert record['blob_tiny_pixels'][1].min() == pytest.approx(4.0 / 4.0)
+    # the spelling node's features of one frame are the record's
+    np.testing.assert_array_equal(frame_features(tiny, transform, blobs),
+                                  record_features(record)[1])

@@ -180,3 +180,59 @@ def test_spelling_node_commits_held_letters() -> None:
         assert h.spin_until(lambda: len(text) >= 2, 10.0)
     assert [m.data for m in letters] == ['G', 'O']
     assert text[-1].data == 'GO'
+
+
+def test_spelling_node_reads_each_poses_own_observation_with_an_image_classifier(tmp_path
+                                                                                 ) -> None:
+    """With an image_classifier_file the node subscribes to hand/observation and gives each
+    pose the observation of its stamp: G poses whose tiny images an image classifier reads as
+    S (weighted far above the pose) commit S; the node without one ('') commits G."""
+    from array import array
+
+    from colorglove_msgs.msg import HandObservation, PatchBlob
+
+    from colorglove_ros.core.hand.observation_features import (
+        OBSERVATION_FEATURES,
+        num_observation_features,
+    )
+    from colorglove_ros.core.hand.pose_classifier import (
+        save_pose_classifier,
+        train_pose_classifier,
+    )
+    from colorglove_ros.core.hand.spelling import LETTERS
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(0.0, 0.05, (26 * 20, num_observation_features()))
+    y = np.repeat(np.array(LETTERS), 20)
+    for k, letter in enumerate(LETTERS):
+        x[y == letter, k] += 1.0             # letter k: colour 1 fills grid cell k
+    path = save_pose_classifier(tmp_path / 'image.npz', train_pose_classifier(
+        x, y, OBSERVATION_FEATURES, kind='lda'))
+    tiny = np.zeros((40, 40), np.uint8)
+    cell = LETTERS.index('S')
+    tiny[8 * (cell // 5):8 * (cell // 5) + 8, 8 * (cell % 5):8 * (cell % 5) + 8] = 1
+    q = _pose(LETTER_SHAPES['G'], letter_rotation('G'))
+    got = {}
+    for name, overrides in (('image', params(image_classifier_file=str(path),
+                                             image_weight=20.0)),
+                            ('pose', params(image_classifier_file=''))):
+        with running(lambda ctx, o=overrides: SpellingNode(context=ctx,
+                                                           parameter_overrides=o)) as h:
+            letters = h.collect(String, 'hand/spelled_letters')
+            observation_pub = h.publisher(HandObservation, 'hand/observation')
+            joints_pub = h.publisher(JointState, 'hand/joint_states')
+            wrist_pub = h.publisher(PoseStamped, 'hand/wrist_pose')
+            h.settle(0.3)
+            for k in range(30):
+                observation_pub.publish(HandObservation(
+                    header=_frame(k), hand_found=True, image_width=640, image_height=480,
+                    tiny_labels=array('B', tiny.tobytes()), crop_scale=4.0, crop_offset_x=100.0,
+                    crop_offset_y=80.0, blobs=[PatchBlob(color_label=1, x=220.0, y=180.0,
+                                                         pixel_count=1024)]))
+                h.settle(0.005)
+                joints_pub.publish(pose_to_joint_state_msg(q, _frame(k)))
+                wrist_pub.publish(pose_to_wrist_pose_msg(q, _frame(k)))
+                h.settle(0.005)
+            assert h.spin_until(lambda seen=letters: len(seen) >= 1, 10.0)
+            got[name] = [m.data for m in letters]
+    assert got == {'image': ['S'], 'pose': ['G']}

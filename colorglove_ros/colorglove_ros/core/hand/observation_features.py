@@ -1,0 +1,160 @@
+"""Features of what the tracker saw in one frame, for a classifier of hand shapes that reads
+the image evidence beside the fitted pose.
+
+The observation is the primary camera's tiny label image (40 x 40, colour labels 1..10, 0
+background; ``core/segmentation/crop.py``) and its glove blobs in the tiny image's pixel frame
+(``core/evaluation/sequences.py`` ``record_observation``). Features (:func:`observation_features`),
+all in the glove's own frame (centred on the tiny image's glove pixels, over their RMS radius),
+so scale-free:
+
+- a per-colour map: the share of each cell of a ``GRID`` x ``GRID`` grid over the tiny image
+  held by each glove colour (10 x GRID x GRID);
+- the ``BLOBS_PER_COLOR`` largest blobs of each colour: whether there is one, its share of the
+  frame's blob pixels, and its centroid relative to the glove's centre (x, y).
+
+Each glove colour is printed on two patches, so a colour's largest blobs name the patches that
+show most; where the thumb's patches lie relative to the fingers' is what tells E, M, N, S and
+T apart when the fitted pose puts the thumb elsewhere.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from colorglove_ros.core.conventions import NUM_COLORS, TINY_SIZE
+from colorglove_ros.core.errors import ColorGloveError
+
+__all__ = ['GRID', 'BLOBS_PER_COLOR', 'OBSERVATION_FEATURES', 'RECORD_FIELDS',
+           'MAX_RECORDED_BLOBS', 'ObservationError', 'empty_observation_record',
+           'write_observation', 'observation_features', 'record_features', 'frame_features',
+           'num_observation_features']
+
+GRID = 5
+BLOBS_PER_COLOR = 2
+OBSERVATION_FEATURES = 'tiny_observation'   # the feature set's name in classifier files
+# the arrays of an observation record (:func:`empty_observation_record`), in the order
+# :func:`observation_features` takes them
+RECORD_FIELDS = ('tiny_labels', 'blob_color', 'blob_tiny_xy', 'blob_tiny_pixels')
+# blobs a record keeps per frame (the largest; colour 0 pads the rows past a frame's blobs)
+MAX_RECORDED_BLOBS = 40
+
+
+class ObservationError(ColorGloveError, ValueError):
+    """Observation arrays of inconsistent shapes."""
+
+
+def empty_observation_record(n: int) -> dict[str, np.ndarray]:
+    """The observation record of ``n`` frames with nothing seen: ``tiny_labels`` (n, 40, 40)
+    uint8, ``blob_color`` (n, B) int, ``blob_tiny_xy`` (n, B, 2) and ``blob_tiny_pixels``
+    (n, B) (the blob's pixel count in tiny-image pixels, i.e. over the crop scale squared)."""
+    b = MAX_RECORDED_BLOBS
+    return {'tiny_labels': np.zeros((n, TINY_SIZE, TINY_SIZE), np.uint8),
+            'blob_color': np.zeros((n, b), np.int64),
+            'blob_tiny_xy': np.full((n, b, 2), np.nan),
+            'blob_tiny_pixels': np.zeros((n, b))}
+
+
+def write_observation(record: dict[str, np.ndarray], i: int, tiny_labels: np.ndarray,
+                      transform: Any, blobs: Any) -> None:
+    """Frame ``i`` of ``record``: the tiny label image (40, 40), and the full image's blobs
+    (``tracking.types.Blobs``) mapped into the tiny image by the crop ``transform``
+    (``segmentation.crop.CropTransform``), the largest :data:`MAX_RECORDED_BLOBS`."""
+    record['tiny_labels'][i] = np.asarray(tiny_labels, np.uint8)
+    keep = np.argsort(-np.asarray(blobs.pixel_count), kind='stable')[:MAX_RECORDED_BLOBS]
+    k = len(keep)
+    record['blob_color'][i, :k] = blobs.color[keep]
+    record['blob_tiny_xy'][i, :k] = transform.to_tiny(blobs.centroid_px[keep])
+    record['blob_tiny_pixels'][i, :k] = blobs.pixel_count[keep] / float(transform.scale) ** 2
+
+
+def frame_features(tiny_labels: np.ndarray, transform: Any, blobs: Any) -> np.ndarray:
+    """(F,) features of one frame's observation (as :func:`write_observation` takes it)."""
+    record = empty_observation_record(1)
+    write_observation(record, 0, tiny_labels, transform, blobs)
+    return record_features(record)[0]
+
+
+def num_observation_features() -> int:
+    """The length F of one frame's features."""
+    return NUM_COLORS * GRID * GRID + NUM_COLORS * BLOBS_PER_COLOR * 4
+
+
+def _colour_maps(tiny: np.ndarray) -> np.ndarray:
+    """(N, 10 * GRID * GRID) share of each grid cell held by each colour."""
+    n, h, w = tiny.shape
+    rows = np.minimum(np.arange(h) * GRID // h, GRID - 1)
+    cols = np.minimum(np.arange(w) * GRID // w, GRID - 1)
+    cell = (rows[:, None] * GRID + cols[None, :]).ravel()
+    cell_size = np.bincount(cell, minlength=GRID * GRID).astype(float)
+    labels = tiny.reshape(n, -1).astype(np.int64)
+    out = np.zeros((n, NUM_COLORS, GRID * GRID))
+    for k in range(1, NUM_COLORS + 1):
+        hit = labels == k
+        for c in range(GRID * GRID):
+            out[:, k - 1, c] = hit[:, cell == c].sum(axis=1)
+    return (out / cell_size).reshape(n, -1)
+
+
+def _glove_frame(tiny: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centre (N, 2) (x, y) and RMS radius (N,) of each tiny image's glove pixels (the image's
+    centre and a quarter of its side where there is none)."""
+    n, h, w = tiny.shape
+    ys, xs = np.mgrid[0:h, 0:w]
+    mask = (tiny > 0).reshape(n, -1).astype(float)
+    count = mask.sum(axis=1)
+    safe = np.maximum(count, 1.0)
+    cx = mask @ xs.ravel() / safe
+    cy = mask @ ys.ravel() / safe
+    r2 = (mask * ((xs.ravel()[None] - cx[:, None]) ** 2 + (ys.ravel()[None] - cy[:, None]) ** 2)
+          ).sum(axis=1) / safe
+    radius = np.sqrt(r2)
+    empty = (count == 0) | (radius < 1e-6)
+    cx[empty], cy[empty] = 0.5 * (w - 1), 0.5 * (h - 1)
+    radius[empty] = 0.25 * w
+    return np.stack([cx, cy], axis=1), radius
+
+
+def _blob_features(color: np.ndarray, xy: np.ndarray, pixels: np.ndarray, centre: np.ndarray,
+                   radius: np.ndarray) -> np.ndarray:
+    """(N, 10 * BLOBS_PER_COLOR * 4) per colour's largest blobs: seen, pixel share, x, y."""
+    n = len(color)
+    total = np.maximum(np.where(color > 0, pixels, 0.0).sum(axis=1), 1e-9)
+    out = np.zeros((n, NUM_COLORS, BLOBS_PER_COLOR, 4))
+    for i in range(n):
+        for k in range(1, NUM_COLORS + 1):
+            mine = np.flatnonzero(color[i] == k)
+            mine = mine[np.argsort(-pixels[i, mine], kind='stable')][:BLOBS_PER_COLOR]
+            for j, b in enumerate(mine):
+                rel = (xy[i, b] - centre[i]) / radius[i]
+                out[i, k - 1, j] = (1.0, pixels[i, b] / total[i], rel[0], rel[1])
+    return out.reshape(n, -1)
+
+
+def observation_features(tiny_labels: np.ndarray, blob_color: np.ndarray,
+                         blob_tiny_xy: np.ndarray, blob_tiny_pixels: np.ndarray) -> np.ndarray:
+    """(N, F) features (module docstring) of N frames' observations: tiny label images
+    (N, 40, 40), blob colours (N, B; 0 pads), centroids in tiny pixels (N, B, 2) and pixel
+    counts (N, B)."""
+    tiny = np.asarray(tiny_labels)
+    color = np.asarray(blob_color, dtype=np.int64)
+    xy = np.asarray(blob_tiny_xy, dtype=float)
+    pixels = np.asarray(blob_tiny_pixels, dtype=float)
+    n = len(tiny)
+    if tiny.ndim != 3 or color.shape[0] != n or xy.shape != (*color.shape, 2) or \
+            pixels.shape != color.shape:
+        raise ObservationError(f'inconsistent observation arrays: tiny {tiny.shape}, blobs '
+                               f'{color.shape} / {xy.shape} / {pixels.shape}')
+    centre, radius = _glove_frame(tiny)
+    xy = np.where(np.isfinite(xy), xy, 0.0)
+    return np.concatenate([_colour_maps(tiny), _blob_features(color, xy, pixels, centre, radius)],
+                          axis=1)
+
+
+def record_features(record: Mapping[str, np.ndarray]) -> np.ndarray:
+    """(N, F) :func:`observation_features` of an observation record's frames."""
+    missing = [k for k in RECORD_FIELDS if k not in record]
+    if missing:
+        raise ObservationError(f'the observation record lacks {", ".join(missing)}')
+    return observation_features(*(record[k] for k in RECORD_FIELDS))

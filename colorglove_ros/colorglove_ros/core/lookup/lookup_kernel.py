@@ -1,0 +1,205 @@
+"""Compiled (numba) kernels of the lookup's passes over the database (:mod:`search`): the
+Hamming scan with the histogram of its distances (the top-k cut without a second pass over the
+entries), the entries at or below a cut, and the re-rank's two gathers.
+
+The same results as the numpy code they replaced, bit for bit: the Hamming distances and the
+query -> candidate sums are integers; the candidate -> query sums add float32 values in numpy's
+pairwise order over each candidate's padded row (``np.add.reduce`` along a contiguous row:
+eight accumulators in blocks of up to 128, halves above), so the re-rank's distances keep their
+bits. Every kernel has one signature (:func:`compile_kernels`, cached on disk) and releases
+the GIL, so a worker thread can run one while the caller runs another.
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numba.core import types
+from numba.extending import intrinsic
+
+from colorglove_ros.core.kernel_compile import compile_signatures
+
+__all__ = ['hamming_histogram', 'at_most', 'query_sums', 'candidate_sums', 'compile_kernels',
+           'PAIRWISE_BLOCK']
+
+PAIRWISE_BLOCK = 128
+"""numpy's pairwise summation block (``PW_BLOCKSIZE``): rows up to this length are summed with
+eight accumulators, longer ones split in two halves (multiples of 8)."""
+
+_JIT = {'cache': True, 'nogil': True}
+
+
+@intrinsic
+def _popcount(typingctx: object, x: object) -> tuple[object, object]:
+    """Set bits of a uint64 (LLVM's ``ctpop``: one instruction where the CPU has one)."""
+    signature = types.uint64(types.uint64)
+
+    def codegen(context: object, builder: object, sig: object, args: object) -> object:
+        return builder.ctpop(args[0])
+    return signature, codegen
+
+
+@numba.njit(**_JIT)
+def hamming_histogram(columns: np.ndarray, query: np.ndarray, out: np.ndarray,
+                      hist: np.ndarray) -> None:
+    """Hamming distances ``out`` (N,) uint8 of one packed query (W,) uint64 to a database of
+    per-word columns (W, N) uint64 (codes of at most 255 bits), and their histogram ``hist``
+    (at least 64 W + 1 bins): word by word over the whole column (a loop the compiler
+    vectorises), then one pass counting into four histograms (no stall on repeated values)."""
+    words, n = columns.shape
+    if words == 0:
+        out[:] = 0
+    for w in range(words):
+        column = columns[w]
+        q = query[w]
+        if w == 0:
+            for i in range(n):
+                out[i] = np.uint8(_popcount(column[i] ^ q))
+        else:
+            for i in range(n):
+                out[i] += np.uint8(_popcount(column[i] ^ q))
+    bins = len(hist)
+    partial = np.zeros((4, bins), np.int64)
+    body = n - n % 4
+    for i in range(0, body, 4):
+        partial[0, out[i]] += 1
+        partial[1, out[i + 1]] += 1
+        partial[2, out[i + 2]] += 1
+        partial[3, out[i + 3]] += 1
+    for i in range(body, n):
+        partial[0, out[i]] += 1
+    for b in range(bins):
+        hist[b] = partial[0, b] + partial[1, b] + partial[2, b] + partial[3, b]
+
+
+@numba.njit(**_JIT)
+def at_most(values: np.ndarray, cut: int, dest: np.ndarray) -> int:
+    """Write the indices (ascending) of ``values`` at or below ``cut`` into ``dest`` (at least
+    as long as ``values``); returns how many."""
+    m = 0
+    for i in range(len(values)):
+        dest[m] = i
+        m += values[i] <= cut
+    return m
+
+
+@numba.njit(**_JIT)
+def query_sums(dts: np.ndarray, idx: np.ndarray, row: int, glove_index: np.ndarray,
+               out: np.ndarray) -> None:
+    """``out[c]`` (uint32) = sum of entry ``idx[c]``'s stored distance transform (row ``row``
+    bytes of the flat ``dts``) at the query's glove pixels ``glove_index``."""
+    for c in range(len(idx)):
+        base = idx[c] * row
+        total = 0
+        for j in range(len(glove_index)):
+            total += dts[base + glove_index[j]]
+        out[c] = total
+
+
+@numba.njit(**_JIT)
+def _block_sum(table: np.ndarray, keys: np.ndarray, start: int, n: int) -> np.float32:
+    """numpy's float32 sum of ``table[keys[start:start + n]]`` for ``n`` up to
+    :data:`PAIRWISE_BLOCK`: in order below 8 terms, else eight accumulators then the rest in
+    order (keys past the table read its last slot, as ``take(mode='clip')``)."""
+    last = len(table) - 1
+    if n < 8:
+        res = np.float32(0.0)
+        for i in range(start, start + n):
+            res += table[min(keys[i], last)]
+        return res
+    r0 = table[min(keys[start], last)]
+    r1 = table[min(keys[start + 1], last)]
+    r2 = table[min(keys[start + 2], last)]
+    r3 = table[min(keys[start + 3], last)]
+    r4 = table[min(keys[start + 4], last)]
+    r5 = table[min(keys[start + 5], last)]
+    r6 = table[min(keys[start + 6], last)]
+    r7 = table[min(keys[start + 7], last)]
+    i = start + 8
+    end = start + n - n % 8
+    while i < end:
+        r0 += table[min(keys[i], last)]
+        r1 += table[min(keys[i + 1], last)]
+        r2 += table[min(keys[i + 2], last)]
+        r3 += table[min(keys[i + 3], last)]
+        r4 += table[min(keys[i + 4], last)]
+        r5 += table[min(keys[i + 5], last)]
+        r6 += table[min(keys[i + 6], last)]
+        r7 += table[min(keys[i + 7], last)]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < start + n:
+        res += table[min(keys[i], last)]
+        i += 1
+    return res
+
+
+@numba.njit(**_JIT)
+def _pairwise(table: np.ndarray, keys: np.ndarray, n: int) -> np.float32:
+    """numpy's pairwise float32 sum of ``table[keys[:n]]``: blocks of up to
+    :data:`PAIRWISE_BLOCK` by :func:`_block_sum`, a longer run split into two halves (the first
+    a multiple of 8) whose sums are added; the recursion unrolled on an explicit stack (numba's
+    cache does not load recursive functions)."""
+    if n <= PAIRWISE_BLOCK:
+        return _block_sum(table, keys, 0, n)
+    starts = np.empty(64, np.int64)
+    sizes = np.empty(64, np.int64)
+    phases = np.zeros(64, np.int64)          # 0: left half next, 1: right half next, 2: add
+    sums = np.empty(64, np.float32)
+    starts[0], sizes[0], phases[0] = 0, n, 0
+    depth, stacked = 1, 0
+    while depth:
+        top = depth - 1
+        start, size = starts[top], sizes[top]
+        if size <= PAIRWISE_BLOCK:
+            sums[stacked] = _block_sum(table, keys, start, size)
+            stacked += 1
+            depth -= 1
+            continue
+        half = size // 2
+        half -= half % 8
+        if phases[top] == 0:
+            phases[top] = 1
+            starts[depth], sizes[depth], phases[depth] = start, half, 0
+            depth += 1
+        elif phases[top] == 1:
+            phases[top] = 2
+            starts[depth], sizes[depth], phases[depth] = start + half, size - half, 0
+            depth += 1
+        else:
+            stacked -= 1
+            sums[stacked - 1] = sums[stacked - 1] + sums[stacked]
+            depth -= 1
+    return sums[0]
+
+
+@numba.njit(**_JIT)
+def candidate_sums(table: np.ndarray, keys: np.ndarray, idx: np.ndarray, widths: np.ndarray,
+                   out: np.ndarray) -> None:
+    """``out[c]`` (float64) = the float32 sum, in numpy's pairwise order, of ``table`` at the
+    first ``widths[c]`` keys of row ``idx[c]`` of ``keys`` (N, K) uint16: what
+    ``table.take(keys[idx[c], :widths[c]], mode='clip').sum()`` gives."""
+    for c in range(len(idx)):
+        out[c] = np.float32(0.0) + _pairwise(table, keys[idx[c]], widths[c])
+
+
+def _array(dtype: object, ndim: int, readonly: bool = True) -> object:
+    """A C-contiguous array type (read-only: writable arrays convert to it)."""
+    return numba.types.Array(dtype, ndim, 'C', readonly=readonly)
+
+
+_I1 = _array(numba.intp, 1)
+_SIGNATURES = {
+    hamming_histogram: (_array(numba.uint64, 2), _array(numba.uint64, 1),
+                        _array(numba.uint8, 1, False), _array(numba.int64, 1, False)),
+    at_most: (_array(numba.uint8, 1), numba.int64, _array(numba.intp, 1, False)),
+    query_sums: (_array(numba.uint8, 1), _I1, numba.int64, _I1,
+                 _array(numba.uint32, 1, False)),
+    candidate_sums: (_array(numba.float32, 1), _array(numba.uint16, 2), _I1, _I1,
+                     _array(numba.float64, 1, False)),
+}
+
+
+def compile_kernels() -> float:
+    """Compile every kernel for its one signature (or load it from numba's on-disk cache) and
+    allow no other; returns the seconds it took."""
+    return compile_signatures(_SIGNATURES)
