@@ -34,6 +34,12 @@ __all__ = ['SCENE_COLOUR_BITS', 'colour_diversity', 'glove_region_mask',
 SCENE_COLOUR_BITS = 5
 
 
+#: :func:`colour_diversity` counts boxes up to this wide with running sums in one compiled
+#: pass (small boxes, where a call of OpenCV's box filter per colour costs more in calls than
+#: in sums), wider ones with OpenCV's vectorised box filter: the same whole-number sums.
+RUNNING_SUM_MAX_WINDOW = 32
+
+
 def colour_diversity(labels: np.ndarray, num_colors: int, window: int,
                      min_density: float) -> np.ndarray:
     """(H, W) uint8: how many of the glove colours 1..``num_colors`` cover at least
@@ -47,10 +53,14 @@ def colour_diversity(labels: np.ndarray, num_colors: int, window: int,
     need = max(int(np.ceil(min_density * window * window - 1e-9)), 1)
     kernels = compiled_kernels()
     present, boxes = kernels.label_boxes(labels, num_colors + 1)
+    colours = np.flatnonzero(present[1:num_colors + 1] >= need) + 1
+    if window <= RUNNING_SUM_MAX_WINDOW:
+        kernels.box_colour_counts(labels, colours.astype(np.int64), boxes, window, need, counts)
+        return counts
     h, w = labels.shape
     before = window // 2            # a pixel's box: this many pixels before it (OpenCV's
     after = window - 1 - before     # anchor) and this many after, on each axis
-    for color in np.flatnonzero(present[1:num_colors + 1] >= need) + 1:
+    for color in colours:
         # only the pixels whose box reaches the colour's bounding rectangle can count it:
         # the box sums there, of the rectangle grown by the box (nothing of it outside)
         x, y, bw, bh = boxes[color]
@@ -233,8 +243,9 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
     if min_pull > 0 and (crop is None or crop[1] <= min_pull * window[1]):
         return labels
     max_pixels = max_patch_share * (2.0 * window[1]) ** 2
-    big_colours = np.flatnonzero(np.bincount(small.ravel(), minlength=num_colors + 1)[1:]
-                                 > max_pixels) + 1
+    kernels = compiled_kernels()
+    counts, boxes = kernels.label_boxes(small, num_colors + 1)
+    big_colours = np.flatnonzero(counts[1:] > max_pixels) + 1
     if not len(big_colours):
         return labels
     far = cv2.distanceTransform((~junctions).view(np.uint8), cv2.DIST_L2, 3) > (
@@ -242,30 +253,34 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
     drop = np.zeros(small.shape, bool)
     # (a colour with no pixel that far keeps every pixel: its regions need not be found)
     reaching_far = np.bincount(small[far], minlength=num_colors + 1)[big_colours] > 0
+    rows, cols = small.shape
     for colour in big_colours[reaching_far]:
+        # a colour's regions lie in its bounding rectangle: labelled there, grown by the
+        # pixel that _is_surface reads around each (the image's sides stay its sides)
+        x, y, bw, bh = boxes[colour] if colour < len(boxes) else (0, 0, cols, rows)
+        x0, x1, y0, y1 = max(x - 1, 0), min(x + bw + 1, cols), max(y - 1, 0), min(y + bh + 1, rows)
+        part = small[y0:y1, x0:x1]
         n, comp, stats, _ = cv2.connectedComponentsWithStats(
-            cv2.compare(small, int(colour), cv2.CMP_EQ), connectivity=8, ltype=cv2.CV_32S)
+            np.equal(part, colour).view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
         big = stats[:, cv2.CC_STAT_AREA] > max_pixels
         big[0] = False
         if edges is not None and big.any():   # sleeves only: off the image
-            big &= _reaching(comp, n, edges)
+            left, right, top, bottom = edges
+            big &= _reaching(comp, n, (left and x0 == 0, right and x1 == cols,
+                                       top and y0 == 0, bottom and y1 == rows))
         if (edges is not None or surfaces_only) and big.any():   # ... among background
             for k in np.flatnonzero(big):
-                big[k] = _is_surface(small, comp, stats, k)
+                big[k] = _is_surface(part, comp, stats, k)
         if big.any():
-            drop |= big.take(comp)
+            drop[y0:y1, x0:x1] |= big.take(comp)
     drop &= far
     if not drop.any() or (max_window_kept > 0 and not _shrinks(small, drop, crop,
                                                                 max_window_kept, min_pixels)):
         return labels
-    if step > 1:
-        h, w = labels.shape
-        drop = np.repeat(np.repeat(drop, step, 0), step, 1)[:h, :w]
     oversized = np.zeros(256, bool)
     oversized[big_colours] = True
-    out = labels.copy()
-    out[drop & oversized[labels]] = 0     # (a pixel of another colour in the cell stays)
-    return out
+    # (a pixel of another colour in the cell stays)
+    return kernels.clear_cells(np.ascontiguousarray(labels), drop, step, oversized)
 
 
 def _shrinks(labels: np.ndarray, drop: np.ndarray,

@@ -21,7 +21,7 @@ from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
            'colour_histogram', 'cell_votes', 'near_or_reaching',
-           'add_dense', 'compile_kernels']
+           'add_dense', 'box_colour_counts', 'clear_cells', 'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
 UNSURE = 255
@@ -413,6 +413,63 @@ def add_dense(counts: np.ndarray, sums: np.ndarray, need: int) -> None:
                 counts[y, x] += 1
 
 
+@numba.njit(**_JIT)
+def box_colour_counts(labels: np.ndarray, colours: np.ndarray, boxes: np.ndarray, window: int,
+                      need: int, counts: np.ndarray) -> None:
+    """``counts`` ((H, W) uint8) += 1, for each label of ``colours`` ((K,) int64), at the pixels
+    whose ``window`` x ``window`` box (``window // 2`` pixels before the pixel on each axis,
+    the rest after; nothing outside the image) holds at least ``need`` pixels of it, in place.
+    ``boxes`` ((L, 4) int64): each label's bounding rectangle (x, y, width, height) in the 2-D
+    uint8 ``labels``, as :func:`label_boxes` gives it. Running column sums over each label's
+    rectangle and a running sum along each row of the rectangle grown by the box: the
+    box sums, whole numbers, are those of a box filter."""
+    rows, cols = labels.shape
+    before = window // 2
+    after = window - 1 - before
+    off = before + 1
+    col = np.zeros(cols + window + 2, np.int32)   # column x's sum at x + off; 0 outside
+    for c in colours:
+        bx, by, bw, bh = boxes[c, 0], boxes[c, 1], boxes[c, 2], boxes[c, 3]
+        x0, x1 = max(bx - after, 0), min(bx + bw + before, cols)
+        y0, y1 = max(by - after, 0), min(by + bh + before, rows)
+        for y in range(max(y0 - before, by), min(y0 + after + 1, by + bh)):
+            for x in range(bx, bx + bw):
+                col[x + off] += labels[y, x] == c
+        for y in range(y0, y1):
+            if y > y0:
+                enter, leave = y + after, y - before - 1
+                if by <= enter < by + bh:
+                    for x in range(bx, bx + bw):
+                        col[x + off] += labels[enter, x] == c
+                if by <= leave < by + bh:
+                    for x in range(bx, bx + bw):
+                        col[x + off] -= labels[leave, x] == c
+            total = 0
+            for x in range(x0 - before, x0 + after + 1):
+                total += col[x + off]
+            counts[y, x0] += total >= need
+            for x in range(x0 + 1, x1):
+                total += col[x + after + off] - col[x - before - 1 + off]
+                counts[y, x] += total >= need
+        for x in range(bx, bx + bw):
+            col[x + off] = 0
+
+
+@numba.njit(**_JIT)
+def clear_cells(labels: np.ndarray, cells: np.ndarray, step: int, cleared: np.ndarray
+                ) -> np.ndarray:
+    """A copy of the 2-D uint8 ``labels`` with 0 at each pixel (y, x) whose cell
+    ``cells[y // step, x // step]`` (bool) is set and whose label ``cleared`` (bool, by label)
+    holds."""
+    rows, cols = labels.shape
+    out = labels.copy()
+    for y in range(rows):
+        for x in range(cols):
+            if cells[y // step, x // step] and cleared[labels[y, x]]:
+                out[y, x] = 0
+    return out
+
+
 def _array(dtype: object, ndim: int, readonly: bool = True, layout: str = 'C') -> object:
     """An array type, C-contiguous or of any strides (``layout`` 'A'); read-only ones take
     writable arrays too."""
@@ -437,6 +494,11 @@ _SIGNATURES = {
     near_or_reaching: (_array(numba.int32, 2), numba.int64, _array(numba.boolean, 2, layout='A'),
                        _array(numba.boolean, 2, layout='A')),
     add_dense: (_array(numba.uint8, 2, False, 'A'), _array(numba.int32, 2), numba.int64),
+    box_colour_counts: (_array(numba.uint8, 2, layout='A'), _array(numba.int64, 1),
+                        _array(numba.int64, 2), numba.int64, numba.int64,
+                        _array(numba.uint8, 2, False)),
+    clear_cells: (_array(numba.uint8, 2), _array(numba.boolean, 2), numba.int64,
+                  _array(numba.boolean, 1)),
 }
 
 
