@@ -263,3 +263,15 @@ def test_the_trim_cases_include_trimmed_images() -> None:
         labels, settings = _trim_case(trial)
         trimmed += bool((keep_near_junctions(labels, **settings) != labels).any())
     assert trimmed >= 15
+
+
+@pytest.mark.parametrize('trial', range(12))
+def test_color_components_inside_each_rectangle_are_the_whole_images(trial: int) -> None:
+    """Each colour labelled inside the rectangle the kernel found: the components of the
+    whole image (the same order, areas and centroids up to the shift's rounding)."""
+    labels = _random_labels(np.random.default_rng([trial, 41]), trial)
+    colours, centroids, areas = color_components(labels, 2, 10)
+    whole = color_components(labels, 2, 10, crop_to_color=False)
+    np.testing.assert_array_equal(colours, whole[0])
+    np.testing.assert_array_equal(areas, whole[2])
+    np.testing.assert_allclose(centroids, whole[1], rtol=0, atol=1e-9)
