@@ -34,12 +34,6 @@ __all__ = ['SCENE_COLOUR_BITS', 'colour_diversity', 'glove_region_mask',
 SCENE_COLOUR_BITS = 5
 
 
-#: :func:`colour_diversity` counts boxes up to this wide with running sums in one compiled
-#: pass (small boxes, where a call of OpenCV's box filter per colour costs more in calls than
-#: in sums), wider ones with OpenCV's vectorised box filter: the same whole-number sums.
-RUNNING_SUM_MAX_WINDOW = 32
-
-
 def colour_diversity(labels: np.ndarray, num_colors: int, window: int,
                      min_density: float) -> np.ndarray:
     """(H, W) uint8: how many of the glove colours 1..``num_colors`` cover at least
@@ -48,28 +42,14 @@ def colour_diversity(labels: np.ndarray, num_colors: int, window: int,
     counts = np.zeros(labels.shape, np.uint8)
     if window < 1 or not labels.size:
         return counts
-    # the fewest pixels of a colour in the box, as an integer count: the box sums are exact
-    # in 32-bit integers, and a colour with fewer pixels in the whole image is never dense
+    # the fewest pixels of a colour in the box, as an integer count (a colour with fewer
+    # pixels in the whole image is never dense); a pixel's box: window // 2 pixels before it
+    # on each axis (OpenCV's anchor), the rest after, counted inside each colour's rectangle
     need = max(int(np.ceil(min_density * window * window - 1e-9)), 1)
     kernels = compiled_kernels()
     present, boxes = kernels.label_boxes(labels, num_colors + 1)
-    colours = np.flatnonzero(present[1:num_colors + 1] >= need) + 1
-    if window <= RUNNING_SUM_MAX_WINDOW:
-        kernels.box_colour_counts(labels, colours.astype(np.int64), boxes, window, need, counts)
-        return counts
-    h, w = labels.shape
-    before = window // 2            # a pixel's box: this many pixels before it (OpenCV's
-    after = window - 1 - before     # anchor) and this many after, on each axis
-    for color in colours:
-        # only the pixels whose box reaches the colour's bounding rectangle can count it:
-        # the box sums there, of the rectangle grown by the box (nothing of it outside)
-        x, y, bw, bh = boxes[color]
-        x0, x1 = max(x - after, 0), min(x + bw + before, w)
-        y0, y1 = max(y - after, 0), min(y + bh + before, h)
-        same = np.equal(labels[y0:y1, x0:x1], color).view(np.uint8)
-        inside = cv2.boxFilter(same, cv2.CV_32S, (window, window), normalize=False,
-                               borderType=cv2.BORDER_CONSTANT)
-        kernels.add_dense(counts[y0:y1, x0:x1], inside, need)
+    colours = np.flatnonzero(present[1:num_colors + 1] >= need).astype(np.int64) + 1
+    kernels.box_colour_counts(labels, colours, boxes, window, need, counts)
     return counts
 
 

@@ -17,7 +17,6 @@ from colorglove_ros.core.segmentation.blobs import color_components
 from colorglove_ros.core.segmentation.color_model import index_tables, lut_index
 from colorglove_ros.core.segmentation.crop import compiled_kernels, mean_shift_crop
 from colorglove_ros.core.segmentation.detection import (
-    RUNNING_SUM_MAX_WINDOW,
     colour_diversity,
     keep_near_junctions,
     scene_colour_table,
@@ -181,22 +180,23 @@ def test_colour_diversity_counts_each_pixels_whole_box(trial: int) -> None:
 
 @pytest.mark.parametrize('trial', range(24))
 def test_box_colour_counts_are_the_whole_box_counts(trial: int) -> None:
-    """The running sums (windows up to ``RUNNING_SUM_MAX_WINDOW``) and OpenCV's box filter
-    (wider) count the same boxes, from 1 pixel to wider than the image, at several
-    densities (a colour needing from 1 pixel to most of the box)."""
+    """The summed-area tables and the block bounds count the same boxes as a whole-box
+    count, windows from 1 pixel to wider than the image (blocks of 1 to 8 pixels, cut by the
+    image's edges), at densities from 1 pixel to 30 % of the box; colours above
+    ``num_colors`` are not counted."""
     rng = np.random.default_rng([trial, 43])
     labels = _random_labels(rng, trial)
     window = (1, 3, 4, 5, 9, 17, 24, 32, 33, 48, 70, 96)[trial % 12]
     density = (0.5 / window ** 2, 0.02, 0.3)[trial % 3]
-    want = _colour_diversity_reference(labels, 10, window, density)
-    np.testing.assert_array_equal(colour_diversity(labels, 10, window, density), want)
-    if window <= RUNNING_SUM_MAX_WINDOW:
-        counts = np.zeros(labels.shape, np.uint8)
-        need = max(int(np.ceil(density * window * window - 1e-9)), 1)
-        present, boxes = KERNELS.label_boxes(labels, 11)
-        colours = np.flatnonzero(present[1:11] >= need).astype(np.int64) + 1
-        KERNELS.box_colour_counts(labels, colours, boxes, window, need, counts)
-        np.testing.assert_array_equal(counts, want)
+    num_colors = (10, 4)[trial % 2]
+    want = _colour_diversity_reference(labels, num_colors, window, density)
+    np.testing.assert_array_equal(colour_diversity(labels, num_colors, window, density), want)
+    counts = np.zeros(labels.shape, np.uint8)
+    need = max(int(np.ceil(density * window * window - 1e-9)), 1)
+    present, boxes = KERNELS.label_boxes(labels, num_colors + 1)
+    colours = np.flatnonzero(present[1:num_colors + 1] >= need).astype(np.int64) + 1
+    KERNELS.box_colour_counts(labels, colours, boxes, window, need, counts)
+    np.testing.assert_array_equal(counts, want)
 
 
 @pytest.mark.parametrize('trial', range(8))
