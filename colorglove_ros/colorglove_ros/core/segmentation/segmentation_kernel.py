@@ -1,7 +1,7 @@
 """Compiled (numba) kernels of the segmenter's per-pixel loops: the border relabelling's passes
 (:func:`segmenter.relabel_borders`), the mean-shift crop, the colour classification, label
 counts and boxes, the scene colours' histogram, the tiny image's cell votes, the glove
-region's reached components, the colour diversity's small boxes and the junction trim's
+region's reached components, the colour diversity's box counts and the junction trim's
 cleared cells.
 
 The same arithmetic as the numpy code they replaced (float32 colour distances in the same
