@@ -1,5 +1,7 @@
 """Plain per-pixel references of the segmenter's compiled loops, written from their docstrings
-(slow: for small test images only): the border relabelling and the mean shift."""
+(slow: for small test images only): the border relabelling and the mean shift; and the
+junction trim as it was written before its compiled parts (whole-image components, the cells
+spread back to pixels with numpy)."""
 from __future__ import annotations
 
 import math
@@ -8,7 +10,7 @@ import numpy as np
 
 from colorglove_ros.core.segmentation.segmenter import _LINEAR_RGB
 
-__all__ = ['relabel_borders_reference', 'mean_shift_reference']
+__all__ = ['relabel_borders_reference', 'mean_shift_reference', 'keep_near_junctions_reference']
 
 _F32 = np.float32
 
@@ -155,3 +157,56 @@ def mean_shift_reference(mask: np.ndarray, bandwidth_factor: float,
     if moments(cx, cy, h)[0] < min_pixels:
         return None
     return (cx, cy), h
+
+
+def keep_near_junctions_reference(labels: np.ndarray, num_colors: int, reach: float,
+                                  min_pixels: int, max_patch_share: float, step: int,
+                                  edges: tuple[bool, bool, bool, bool] | None,
+                                  surfaces_only: bool, min_pull: float,
+                                  max_window_kept: float) -> np.ndarray:
+    """``detection.keep_near_junctions`` with each oversized colour's components found on
+    the whole (step) grid and the dropped cells spread back to pixels with numpy."""
+    import cv2
+
+    from colorglove_ros.core.segmentation.crop import mean_shift_crop
+    from colorglove_ros.core.segmentation.detection import (
+        _is_surface,
+        _reaching,
+        _shrinks,
+        junction_mask,
+    )
+
+    small = np.ascontiguousarray(labels[::step, ::step])
+    junctions = junction_mask(small, num_colors)
+    window = mean_shift_crop(junctions, min_pixels=min_pixels)
+    if window is None:
+        return labels
+    crop = mean_shift_crop(small, min_pixels=min_pixels)
+    if min_pull > 0 and (crop is None or crop[1] <= min_pull * window[1]):
+        return labels
+    max_pixels = max_patch_share * (2.0 * window[1]) ** 2
+    big_colours = np.flatnonzero(np.bincount(small.ravel(), minlength=num_colors + 1)[1:]
+                                 > max_pixels) + 1
+    far = cv2.distanceTransform((~junctions).view(np.uint8), cv2.DIST_L2, 3) > (
+        reach * window[1])
+    drop = np.zeros(small.shape, bool)
+    for colour in big_colours:
+        n, comp, stats, _ = cv2.connectedComponentsWithStats(
+            (small == colour).view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+        big = stats[:, cv2.CC_STAT_AREA] > max_pixels
+        big[0] = False
+        if edges is not None:
+            big &= _reaching(comp, n, edges)
+        if edges is not None or surfaces_only:
+            for k in np.flatnonzero(big):
+                big[k] = _is_surface(small, comp, stats, k)
+        drop |= big.take(comp)
+    drop &= far
+    if not drop.any() or (max_window_kept > 0 and not _shrinks(small, drop, crop,
+                                                                max_window_kept, min_pixels)):
+        return labels
+    h, w = labels.shape
+    drop = np.repeat(np.repeat(drop, step, 0), step, 1)[:h, :w]
+    out = labels.copy()
+    out[drop & np.isin(labels, big_colours)] = 0
+    return out

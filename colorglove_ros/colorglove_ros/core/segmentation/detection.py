@@ -42,24 +42,14 @@ def colour_diversity(labels: np.ndarray, num_colors: int, window: int,
     counts = np.zeros(labels.shape, np.uint8)
     if window < 1 or not labels.size:
         return counts
-    # the fewest pixels of a colour in the box, as an integer count: the box sums are exact
-    # in 32-bit integers, and a colour with fewer pixels in the whole image is never dense
+    # the fewest pixels of a colour in the box, as an integer count (a colour with fewer
+    # pixels in the whole image is never dense); a pixel's box: window // 2 pixels before it
+    # on each axis (OpenCV's anchor), the rest after, counted inside each colour's rectangle
     need = max(int(np.ceil(min_density * window * window - 1e-9)), 1)
     kernels = compiled_kernels()
     present, boxes = kernels.label_boxes(labels, num_colors + 1)
-    h, w = labels.shape
-    before = window // 2            # a pixel's box: this many pixels before it (OpenCV's
-    after = window - 1 - before     # anchor) and this many after, on each axis
-    for color in np.flatnonzero(present[1:num_colors + 1] >= need) + 1:
-        # only the pixels whose box reaches the colour's bounding rectangle can count it:
-        # the box sums there, of the rectangle grown by the box (nothing of it outside)
-        x, y, bw, bh = boxes[color]
-        x0, x1 = max(x - after, 0), min(x + bw + before, w)
-        y0, y1 = max(y - after, 0), min(y + bh + before, h)
-        same = np.equal(labels[y0:y1, x0:x1], color).view(np.uint8)
-        inside = cv2.boxFilter(same, cv2.CV_32S, (window, window), normalize=False,
-                               borderType=cv2.BORDER_CONSTANT)
-        kernels.add_dense(counts[y0:y1, x0:x1], inside, need)
+    colours = np.flatnonzero(present[1:num_colors + 1] >= need).astype(np.int64) + 1
+    kernels.box_colour_counts(labels, colours, boxes, window, need, counts)
     return counts
 
 
@@ -233,8 +223,9 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
     if min_pull > 0 and (crop is None or crop[1] <= min_pull * window[1]):
         return labels
     max_pixels = max_patch_share * (2.0 * window[1]) ** 2
-    big_colours = np.flatnonzero(np.bincount(small.ravel(), minlength=num_colors + 1)[1:]
-                                 > max_pixels) + 1
+    kernels = compiled_kernels()
+    counts, boxes = kernels.label_boxes(small, num_colors + 1)
+    big_colours = np.flatnonzero(counts[1:] > max_pixels) + 1
     if not len(big_colours):
         return labels
     far = cv2.distanceTransform((~junctions).view(np.uint8), cv2.DIST_L2, 3) > (
@@ -242,30 +233,34 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
     drop = np.zeros(small.shape, bool)
     # (a colour with no pixel that far keeps every pixel: its regions need not be found)
     reaching_far = np.bincount(small[far], minlength=num_colors + 1)[big_colours] > 0
+    rows, cols = small.shape
     for colour in big_colours[reaching_far]:
+        # a colour's regions lie in its bounding rectangle: labelled there, grown by the
+        # pixel that _is_surface reads around each (the image's sides stay its sides)
+        x, y, bw, bh = boxes[colour] if colour < len(boxes) else (0, 0, cols, rows)
+        x0, x1, y0, y1 = max(x - 1, 0), min(x + bw + 1, cols), max(y - 1, 0), min(y + bh + 1, rows)
+        part = small[y0:y1, x0:x1]
         n, comp, stats, _ = cv2.connectedComponentsWithStats(
-            cv2.compare(small, int(colour), cv2.CMP_EQ), connectivity=8, ltype=cv2.CV_32S)
+            np.equal(part, colour).view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
         big = stats[:, cv2.CC_STAT_AREA] > max_pixels
         big[0] = False
         if edges is not None and big.any():   # sleeves only: off the image
-            big &= _reaching(comp, n, edges)
+            left, right, top, bottom = edges
+            big &= _reaching(comp, n, (left and x0 == 0, right and x1 == cols,
+                                       top and y0 == 0, bottom and y1 == rows))
         if (edges is not None or surfaces_only) and big.any():   # ... among background
             for k in np.flatnonzero(big):
-                big[k] = _is_surface(small, comp, stats, k)
+                big[k] = _is_surface(part, comp, stats, k)
         if big.any():
-            drop |= big.take(comp)
+            drop[y0:y1, x0:x1] |= big.take(comp)
     drop &= far
     if not drop.any() or (max_window_kept > 0 and not _shrinks(small, drop, crop,
                                                                 max_window_kept, min_pixels)):
         return labels
-    if step > 1:
-        h, w = labels.shape
-        drop = np.repeat(np.repeat(drop, step, 0), step, 1)[:h, :w]
     oversized = np.zeros(256, bool)
     oversized[big_colours] = True
-    out = labels.copy()
-    out[drop & oversized[labels]] = 0     # (a pixel of another colour in the cell stays)
-    return out
+    # (a pixel of another colour in the cell stays)
+    return kernels.clear_cells(np.ascontiguousarray(labels), drop, step, oversized)
 
 
 def _shrinks(labels: np.ndarray, drop: np.ndarray,

@@ -1,7 +1,8 @@
 """Compiled (numba) kernels of the segmenter's per-pixel loops: the border relabelling's passes
 (:func:`segmenter.relabel_borders`), the mean-shift crop, the colour classification, label
-counts and boxes, the scene colours' histogram, the tiny image's cell votes and the glove
-region's reached components.
+counts and boxes, the scene colours' histogram, the tiny image's cell votes, the glove
+region's reached components, the colour diversity's box counts and the junction trim's
+cleared cells.
 
 The same arithmetic as the numpy code they replaced (float32 colour distances in the same
 order, the same tie rules), as loops over the pixels, so one call replaces the dozens of
@@ -21,7 +22,7 @@ from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
            'colour_histogram', 'cell_votes', 'near_or_reaching',
-           'add_dense', 'compile_kernels']
+           'box_colour_counts', 'clear_cells', 'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
 UNSURE = 255
@@ -402,15 +403,84 @@ def near_or_reaching(comp: np.ndarray, components: int, reach: np.ndarray,
     return out
 
 
+#: :func:`box_colour_counts` bounds the box sums of blocks of this many pixels a side.
+_BOUND_BLOCK = 8
+
+
+@numba.njit(inline='always', **_JIT)
+def _rect_sum(sat: np.ndarray, y0: int, y1: int, x0: int, x1: int, by: int, bh: int, bx: int,
+              bw: int) -> int:
+    """The pixels counted in rows [y0, y1) and columns [x0, x1) of the image, from the
+    summed-area table ``sat`` of the rectangle (``bx``, ``by``, ``bw``, ``bh``) holding them
+    all."""
+    y0, y1 = min(max(y0 - by, 0), bh), min(max(y1 - by, 0), bh)
+    x0, x1 = min(max(x0 - bx, 0), bw), min(max(x1 - bx, 0), bw)
+    if y0 >= y1 or x0 >= x1:
+        return 0
+    return sat[y1, x1] - sat[y0, x1] - sat[y1, x0] + sat[y0, x0]
+
+
 @numba.njit(**_JIT)
-def add_dense(counts: np.ndarray, sums: np.ndarray, need: int) -> None:
-    """``counts`` (2-D uint8, any strides) += 1 where the box ``sums`` (int32, its shape)
-    are at least ``need``, in place."""
-    rows, cols = counts.shape
+def box_colour_counts(labels: np.ndarray, colours: np.ndarray, boxes: np.ndarray, window: int,
+                      need: int, counts: np.ndarray) -> None:
+    """``counts`` ((H, W) uint8) += 1, for each label of ``colours`` ((K,) int64), at the pixels
+    whose ``window`` x ``window`` box (``window // 2`` pixels before the pixel on each axis,
+    the rest after; nothing outside the image) holds at least ``need`` pixels of it, in place.
+    ``boxes`` ((L, 4) int64): each label's bounding rectangle (x, y, width, height) in the 2-D
+    uint8 ``labels``, as :func:`label_boxes` gives it.
+
+    Per label, a summed-area table of its rectangle gives any box's count exactly (whole
+    numbers). Over each block of pixels (``_BOUND_BLOCK`` a side, at most the window), the box
+    common to all its pixels' boxes bounds their counts from below and the box covering them
+    all from above: a block is decided whole when the bounds agree, pixel by pixel only
+    where the label's density crosses ``need`` (the edges of its dense zone)."""
+    rows, cols = labels.shape
+    before = window // 2
+    after = window - 1 - before
+    block = min(_BOUND_BLOCK, window)
+    for c in colours:
+        bx, by, bw, bh = boxes[c, 0], boxes[c, 1], boxes[c, 2], boxes[c, 3]
+        sat = np.zeros((bh + 1, bw + 1), np.int32)
+        for y in range(bh):
+            run = 0
+            for x in range(bw):
+                run += labels[by + y, bx + x] == c
+                sat[y + 1, x + 1] = sat[y, x + 1] + run
+        x0, x1 = max(bx - after, 0), min(bx + bw + before, cols)
+        y0, y1 = max(by - after, 0), min(by + bh + before, rows)
+        for ya in range(y0, y1, block):
+            yb = min(ya + block, y1)
+            for xa in range(x0, x1, block):
+                xb = min(xa + block, x1)
+                if _rect_sum(sat, yb - 1 - before, ya + after + 1, xb - 1 - before,
+                             xa + after + 1, by, bh, bx, bw) >= need:
+                    for y in range(ya, yb):
+                        for x in range(xa, xb):
+                            counts[y, x] += 1
+                    continue
+                if _rect_sum(sat, ya - before, yb + after, xa - before, xb + after, by, bh,
+                             bx, bw) < need:
+                    continue
+                for y in range(ya, yb):
+                    for x in range(xa, xb):
+                        if _rect_sum(sat, y - before, y + after + 1, x - before,
+                                     x + after + 1, by, bh, bx, bw) >= need:
+                            counts[y, x] += 1
+
+
+@numba.njit(**_JIT)
+def clear_cells(labels: np.ndarray, cells: np.ndarray, step: int, cleared: np.ndarray
+                ) -> np.ndarray:
+    """A copy of the 2-D uint8 ``labels`` with 0 at each pixel (y, x) whose cell
+    ``cells[y // step, x // step]`` (bool) is set and whose label ``cleared`` (bool, by label)
+    holds."""
+    rows, cols = labels.shape
+    out = labels.copy()
     for y in range(rows):
         for x in range(cols):
-            if sums[y, x] >= need:
-                counts[y, x] += 1
+            if cells[y // step, x // step] and cleared[labels[y, x]]:
+                out[y, x] = 0
+    return out
 
 
 def _array(dtype: object, ndim: int, readonly: bool = True, layout: str = 'C') -> object:
@@ -436,7 +506,11 @@ _SIGNATURES = {
                  _array(numba.int64, 1), numba.int64, numba.int64),
     near_or_reaching: (_array(numba.int32, 2), numba.int64, _array(numba.boolean, 2, layout='A'),
                        _array(numba.boolean, 2, layout='A')),
-    add_dense: (_array(numba.uint8, 2, False, 'A'), _array(numba.int32, 2), numba.int64),
+    box_colour_counts: (_array(numba.uint8, 2, layout='A'), _array(numba.int64, 1),
+                        _array(numba.int64, 2), numba.int64, numba.int64,
+                        _array(numba.uint8, 2, False)),
+    clear_cells: (_array(numba.uint8, 2), _array(numba.boolean, 2), numba.int64,
+                  _array(numba.boolean, 1)),
 }
 
 

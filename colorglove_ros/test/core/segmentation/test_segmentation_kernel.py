@@ -1,18 +1,26 @@
-"""The segmenter's compiled loops (issue 19, eleventh pass): the same labels and windows as
-plain per-pixel references (``segmentation_reference``), compiled before the first frame and
-never again."""
+"""The segmenter's compiled loops (issue 19, eleventh and thirteenth passes): the same labels
+and windows as plain per-pixel references (``segmentation_reference``), compiled before the
+first frame and never again."""
 from __future__ import annotations
 
 import cv2
 import numpy as np
 import pytest
-from segmentation_reference import mean_shift_reference, relabel_borders_reference
+from segmentation_reference import (
+    keep_near_junctions_reference,
+    mean_shift_reference,
+    relabel_borders_reference,
+)
 
 from colorglove_ros.core.segmentation import segmentation_kernel
 from colorglove_ros.core.segmentation.blobs import color_components
 from colorglove_ros.core.segmentation.color_model import index_tables, lut_index
 from colorglove_ros.core.segmentation.crop import compiled_kernels, mean_shift_crop
-from colorglove_ros.core.segmentation.detection import colour_diversity, scene_colour_table
+from colorglove_ros.core.segmentation.detection import (
+    colour_diversity,
+    keep_near_junctions,
+    scene_colour_table,
+)
 from colorglove_ros.core.segmentation.segmenter import relabel_borders
 
 KERNELS = compiled_kernels()
@@ -168,6 +176,93 @@ def test_colour_diversity_counts_each_pixels_whole_box(trial: int) -> None:
     window = (1, 2, 5, 9, 24)[trial % 5]
     np.testing.assert_array_equal(colour_diversity(labels, 10, window, 0.02),
                                   _colour_diversity_reference(labels, 10, window, 0.02))
+
+
+@pytest.mark.parametrize('trial', range(24))
+def test_box_colour_counts_are_the_whole_box_counts(trial: int) -> None:
+    """The summed-area tables and the block bounds count the same boxes as a whole-box
+    count, windows from 1 pixel to wider than the image (blocks of 1 to 8 pixels, cut by the
+    image's edges), at densities from 1 pixel to 30 % of the box; colours above
+    ``num_colors`` are not counted."""
+    rng = np.random.default_rng([trial, 43])
+    labels = _random_labels(rng, trial)
+    window = (1, 3, 4, 5, 9, 17, 24, 32, 33, 48, 70, 96)[trial % 12]
+    density = (0.5 / window ** 2, 0.02, 0.3)[trial % 3]
+    num_colors = (10, 4)[trial % 2]
+    want = _colour_diversity_reference(labels, num_colors, window, density)
+    np.testing.assert_array_equal(colour_diversity(labels, num_colors, window, density), want)
+    counts = np.zeros(labels.shape, np.uint8)
+    need = max(int(np.ceil(density * window * window - 1e-9)), 1)
+    present, boxes = KERNELS.label_boxes(labels, num_colors + 1)
+    colours = np.flatnonzero(present[1:num_colors + 1] >= need).astype(np.int64) + 1
+    KERNELS.box_colour_counts(labels, colours, boxes, window, need, counts)
+    np.testing.assert_array_equal(counts, want)
+
+
+@pytest.mark.parametrize('trial', range(8))
+def test_clear_cells_clears_the_chosen_labels_of_the_set_cells(trial: int) -> None:
+    rng = np.random.default_rng([trial, 47])
+    labels = np.ascontiguousarray(_random_labels(rng, trial))
+    step = 1 + trial % 3
+    h, w = labels.shape
+    cells = rng.random(((h + step - 1) // step, (w + step - 1) // step)) < 0.4
+    cleared = rng.random(256) < 0.5
+    want = labels.copy()
+    spread = np.repeat(np.repeat(cells, step, 0), step, 1)[:h, :w]
+    want[spread & cleared[labels]] = 0
+    got = KERNELS.clear_cells(labels, cells, step, cleared)
+    np.testing.assert_array_equal(got, want)
+    assert got is not labels
+
+
+def _cluttered_glove(rng: np.random.Generator) -> np.ndarray:
+    """A patchwork glove (patches of 10 colours, 3-5 pixels) with one-colour surfaces and
+    strips touching it or not, some running off the image, some of a glove colour inside."""
+    h, w = (int(v) for v in rng.integers(90, 180, 2))
+    labels = np.zeros((h, w), np.uint8)
+    gh, gw = (int(v) for v in rng.integers(20, 40, 2))
+    gy, gx = int(rng.integers(10, h - gh - 10)), int(rng.integers(10, w - gw - 10))
+    cell = int(rng.integers(3, 6))
+    grid = rng.integers(1, 11, (gh // cell + 1, gw // cell + 1)).astype(np.uint8)
+    labels[gy:gy + gh, gx:gx + gw] = cv2.resize(grid, (gw, gh),
+                                                interpolation=cv2.INTER_NEAREST)
+    for _ in range(int(rng.integers(1, 5))):
+        y0, x0 = int(rng.integers(0, h - 4)), int(rng.integers(0, w - 4))
+        y1, x1 = y0 + int(rng.integers(4, h)), x0 + int(rng.integers(4, w))
+        labels[y0:y1, x0:x1][labels[y0:y1, x0:x1] == 0] = int(rng.integers(1, 11))
+    return labels[:, :: 1 + int(rng.integers(0, 2))]
+
+
+def _trim_case(trial: int) -> tuple[np.ndarray, dict]:
+    """A cluttered glove and trim settings: with and without edges, surfaces only, the two
+    gates and steps 1-3."""
+    rng = np.random.default_rng([trial, 53])
+    labels = _cluttered_glove(rng)
+    edges = (None, (False, False, False, True), (True, True, True, True))[trial % 3]
+    return labels, dict(num_colors=10, reach=float(rng.uniform(0.2, 0.6)), min_pixels=2,
+                        max_patch_share=float(rng.choice([0.05, 0.15])), step=1 + trial % 3,
+                        edges=edges, surfaces_only=bool(trial % 2),
+                        min_pull=(0.0, 1.3)[trial % 4 // 2],
+                        max_window_kept=(0.0, 0.92)[trial % 5 // 4])
+
+
+@pytest.mark.parametrize('trial', range(30))
+def test_keep_near_junctions_is_the_whole_image_trim(trial: int) -> None:
+    """Each oversized colour labelled inside its bounding rectangle and the dropped cells
+    cleared in one pass: the label image of the trim on the whole grid (main's before the
+    thirteenth pass)."""
+    labels, settings = _trim_case(trial)
+    np.testing.assert_array_equal(keep_near_junctions(labels, **settings),
+                                  keep_near_junctions_reference(labels, **settings))
+
+
+def test_the_trim_cases_include_trimmed_images() -> None:
+    """Most of the cases above are trimmed (the comparison is not of untouched images)."""
+    trimmed = 0
+    for trial in range(30):
+        labels, settings = _trim_case(trial)
+        trimmed += bool((keep_near_junctions(labels, **settings) != labels).any())
+    assert trimmed >= 15
 
 
 @pytest.mark.parametrize('trial', range(12))
