@@ -1,5 +1,6 @@
 """Compiling numba kernels ahead of the first frame, for the compiled inner loops of the IK
-(``core.tracking.ik_kernel``) and the segmenter (``core.segmentation.segmentation_kernel``):
+(``core.tracking.ik_kernel``), the segmenter (``core.segmentation.segmentation_kernel``), the
+lookup (``core.lookup.lookup_kernel``) and the edge tracker (``core.tracking.edge_kernel``):
 each kernel for its one signature (or loaded from numba's on-disk cache), then no other, so
 no frame pays for a compilation and an argument of another type or layout raises. Imports no
 numba itself."""

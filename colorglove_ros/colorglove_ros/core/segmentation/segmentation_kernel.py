@@ -28,9 +28,6 @@ __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
 UNSURE = 255
 _NO_KEY = np.int32(np.iinfo(np.int32).max)   # larger than every sort key; label bits 255
 _JIT = {'cache': True, 'nogil': True}
-_COMPILED = False   # every kernel compiled (compile_kernels)
-
-
 @numba.njit(inline='always', **_JIT)
 def _on_border(box: np.ndarray, y: int, x: int, pad: int) -> bool:
     """Whether pixel (``y``, ``x``) of ``box`` has a 4-neighbour of another label inside
@@ -516,11 +513,5 @@ _SIGNATURES = {
 
 def compile_kernels() -> float:
     """Compile every kernel for its one signature (or load it from numba's on-disk cache)
-    and allow no other; returns the seconds it took (none once done in this process: a
-    flag, not the dispatchers' signatures, which cost tens of microseconds to list)."""
-    global _COMPILED
-    if _COMPILED:
-        return 0.0
-    seconds = compile_signatures(_SIGNATURES)
-    _COMPILED = True
-    return seconds
+    and allow no other; returns the seconds it took (none once done in this process)."""
+    return compile_signatures(_SIGNATURES)
