@@ -31,6 +31,7 @@ from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
     blobs_from_observation_msg,
     crop_from_observation_msg,
+    stamp_key,
     stamp_to_seconds,
     tiny_labels_from_observation_msg,
 )
@@ -98,7 +99,7 @@ class SpellingNode(Node):
         except (ColorGloveError, ValueError) as exc:
             self.get_logger().warn(f'bad observation: {exc}', throttle_duration_sec=1.0)
             return
-        self.observations[(msg.header.stamp.sec, msg.header.stamp.nanosec)] = features
+        self.observations[stamp_key(msg.header.stamp)] = features
         while len(self.observations) > _KEPT_OBSERVATIONS:
             self.observations.popitem(last=False)
 
@@ -106,7 +107,7 @@ class SpellingNode(Node):
         """Feed a complete frame (with its observation, when an image classifier reads it)
         to the speller; publish a committed letter."""
         stamp = wrist.header.stamp
-        observation = self.observations.pop((stamp.sec, stamp.nanosec), None)
+        observation = self.observations.pop(stamp_key(stamp), None)
         try:
             letter = self.speller.update(q, stamp_to_seconds(stamp), observation)
         except SpellingError as exc:
