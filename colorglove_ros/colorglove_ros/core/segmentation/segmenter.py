@@ -751,25 +751,33 @@ class GloveSegmenter:
                                                         np.ndarray | None, np.ndarray]
                            ) -> tuple[tuple[tuple[float, float], float] | None,
                                       np.ndarray | None, np.ndarray]:
-        """``detected`` (:meth:`_detect` of ``region``), or, when its hand's window shows
-        fewer than ``washed_out_colors`` glove colours, the same search with the colour table
-        undoing one other settled saturation (``SaturationEstimate.trials``, one per frame in
-        turn) if that finds at least that many and more than ``detected``: the camera's
-        settled saturation is then that one (a camera that washes colours out hides most of
-        the glove from the calibration's table; one whose glove shows is left alone)."""
+        """``detected`` (:meth:`_detect` of ``region``), or the same search with the colour
+        table undoing another settled saturation (``SaturationEstimate.trials``, one per
+        frame in turn), which then becomes the camera's: when ``detected``'s hand window shows
+        fewer than ``washed_out_colors`` glove colours, a saturation that shows at least that
+        many and more (a camera that washes colours out hides most of the glove from the
+        calibration's table); when it shows that many under an undone saturation, one nearer
+        the calibration's own that shows as many (undoing a plain camera's saturation boosts
+        it, and clutter turns glove-coloured)."""
         est = self._saturation
         assert est is not None
         x0, _, y0, _ = region
         shown = window_colors(detected[2], _in_region(detected[0], x0, y0))
+        kept = est.step
         if shown >= self.washed_out_colors:
+            trials = tuple(t for t in est.trials() if kept < t <= 0)
+        else:
+            trials = est.trials()
+        if not trials:
             return detected
-        trials = est.trials()
-        step, kept = trials[self._washed_out_turn % len(trials)], est.step
+        step = trials[self._washed_out_turn % len(trials)]
         self._washed_out_turn += 1
         est.settle(step)
         tried = self._detect(small, region, reduction, pixels, static, min_px)
         found = window_colors(tried[2], _in_region(tried[0], x0, y0))
-        if found >= self.washed_out_colors and found > shown:
+        nearer = kept < step <= 0
+        if (found >= shown if nearer and shown >= self.washed_out_colors
+                else found >= self.washed_out_colors and found > shown):
             return tried
         est.settle(kept)
         return detected
