@@ -756,28 +756,24 @@ class GloveSegmenter:
         frame in turn), which then becomes the camera's: when ``detected``'s hand window shows
         fewer than ``washed_out_colors`` glove colours, a saturation that shows at least that
         many and more (a camera that washes colours out hides most of the glove from the
-        calibration's table); when it shows that many under an undone saturation, one nearer
-        the calibration's own that shows as many (undoing a plain camera's saturation boosts
-        it, and clutter turns glove-coloured)."""
+        calibration's table); when it shows that many under an undone saturation, the
+        calibration's own table if that shows as many (undoing a plain camera's saturation
+        boosts it, and clutter turns glove-coloured)."""
         est = self._saturation
         assert est is not None
         x0, _, y0, _ = region
         shown = window_colors(detected[2], _in_region(detected[0], x0, y0))
         kept = est.step
-        if shown >= self.washed_out_colors:
-            trials = tuple(t for t in est.trials() if kept < t <= 0)
-        else:
-            trials = est.trials()
-        if not trials:
+        plain = shown >= self.washed_out_colors
+        if plain and kept == 0:
             return detected
+        trials = (0,) if plain else est.trials()
         step = trials[self._washed_out_turn % len(trials)]
         self._washed_out_turn += 1
         est.settle(step)
         tried = self._detect(small, region, reduction, pixels, static, min_px)
         found = window_colors(tried[2], _in_region(tried[0], x0, y0))
-        nearer = kept < step <= 0
-        if (found >= shown if nearer and shown >= self.washed_out_colors
-                else found >= self.washed_out_colors and found > shown):
+        if found >= shown if plain else found >= self.washed_out_colors and found > shown:
             return tried
         est.settle(kept)
         return detected

@@ -204,3 +204,19 @@ def test_washed_out_search_finds_a_glove_the_table_misses(calibration) -> None:
     assert searching._saturation.step == 0
     with pytest.raises(SegmentationConfigError, match='washed_out_colors'):
         GloveSegmenter(calibration, washed_out_colors=11)
+
+
+def test_washed_out_search_returns_to_a_plain_camera(calibration) -> None:
+    """A segmenter settled on a washed-out camera (as a search on a hand entering the view
+    can leave it) that sees a plain camera's glove with all its colours returns to the
+    calibration's own table within a few frames, its observations then the plain ones."""
+    frames = _look_frames(5, 1.0)
+    searching = GloveSegmenter(calibration, washed_out_colors=8)
+    searching._saturation.settle(-WASHED_OUT_STEPS[1])
+    for image, _ in frames[:-1]:
+        searching.process(image)
+    assert searching._saturation.step == 0
+    image = frames[-1][0]
+    a = GloveSegmenter(calibration).process(image, keep_labels=True)
+    np.testing.assert_array_equal(searching.process(image, keep_labels=True).label_image,
+                                  a.label_image)
