@@ -20,6 +20,7 @@ from colorglove_ros.core.segmentation.light import colour_means, solve_light
 
 __all__ = [
     'SATURATION_RANGE', 'SATURATION_STEP', 'SATURATION_DEADBAND_STEPS', 'WASHED_OUT_STEPS',
+    'WINDOW_COLOR_SHARE',
     'saturation_matrix', 'estimate_saturation', 'resaturated_lut', 'window_colors',
     'SaturationEstimate',
 ]
@@ -34,6 +35,9 @@ SATURATION_DEADBAND_STEPS = 3
 #: The washed-out cameras a search for a glove the colour table misses tries, in
 #: ``SATURATION_STEP`` log steps below 1 (:meth:`SaturationEstimate.trials`).
 WASHED_OUT_STEPS = (4, 7, 10)
+#: A colour the search counts as shown holds at least this share of the window's glove
+#: pixels (a washed-out colour leaves a few stray pixels, a glove's patch many more).
+WINDOW_COLOR_SHARE = 0.01
 
 
 def saturation_matrix(saturation: float) -> np.ndarray:
@@ -73,17 +77,17 @@ def estimate_saturation(linear_rgb: np.ndarray, labels: np.ndarray,
 
 
 def window_colors(labels: np.ndarray, found: tuple[tuple[float, float], float] | None,
-                  min_pixels: int = 2) -> int:
-    """How many glove colours have at least ``min_pixels`` pixels of the label image
-    ``labels`` inside the hand's window ``found`` ((cx, cy), half, in its pixels; 0 for
-    None)."""
+                  min_share: float = WINDOW_COLOR_SHARE, min_pixels: int = 2) -> int:
+    """How many glove colours the label image ``labels`` shows inside the hand's window
+    ``found`` ((cx, cy), half, in its pixels; 0 for None): each with at least ``min_share``
+    of the window's glove pixels and ``min_pixels`` pixels."""
     if found is None:
         return 0
     (cx, cy), half = found
     x0, y0 = max(int(cx - half), 0), max(int(cy - half), 0)
     part = labels[y0:max(int(np.ceil(cy + half)) + 1, y0), x0:max(int(np.ceil(cx + half)) + 1, x0)]
     counts = np.bincount(part.ravel(), minlength=1)[1:]
-    return int(np.count_nonzero(counts >= min_pixels))
+    return int(np.count_nonzero(counts >= max(min_pixels, min_share * counts.sum())))
 
 
 def resaturated_lut(lut: np.ndarray, bits: int, saturation: float) -> np.ndarray:

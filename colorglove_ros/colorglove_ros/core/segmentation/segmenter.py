@@ -753,12 +753,13 @@ class GloveSegmenter:
                                       np.ndarray | None, np.ndarray]:
         """``detected`` (:meth:`_detect` of ``region``), or the same search with the colour
         table undoing another settled saturation (``SaturationEstimate.trials``, one per
-        frame in turn), which then becomes the camera's: when ``detected``'s hand window shows
-        fewer than ``washed_out_colors`` glove colours, a saturation that shows at least that
-        many and more (a camera that washes colours out hides most of the glove from the
-        calibration's table); when it shows that many under an undone saturation, the
-        calibration's own table if that shows as many (undoing a plain camera's saturation
-        boosts it, and clutter turns glove-coloured)."""
+        frame in turn), which then becomes the camera's: one whose hand window shows at
+        least ``washed_out_colors`` glove colours (``window_colors``) and more than
+        ``detected``'s (a camera that washes colours out hides most of the glove from the
+        calibration's table), or, under an undone saturation with that many shown, the
+        calibration's own table if it shows as many (undoing a plain camera's saturation
+        boosts it, and clutter turns glove-coloured). With the calibration's table and that
+        many shown, no other is tried."""
         est = self._saturation
         assert est is not None
         x0, _, y0, _ = region
@@ -767,13 +768,14 @@ class GloveSegmenter:
         plain = shown >= self.washed_out_colors
         if plain and kept == 0:
             return detected
-        trials = (0,) if plain else est.trials()
+        trials = est.trials()
         step = trials[self._washed_out_turn % len(trials)]
         self._washed_out_turn += 1
         est.settle(step)
         tried = self._detect(small, region, reduction, pixels, static, min_px)
         found = window_colors(tried[2], _in_region(tried[0], x0, y0))
-        if found >= shown if plain else found >= self.washed_out_colors and found > shown:
+        if (found >= shown if plain and step == 0
+                else found >= self.washed_out_colors and found > shown):
             return tried
         est.settle(kept)
         return detected
