@@ -152,6 +152,7 @@ def test_window_colors_counts_the_colours_inside_the_window() -> None:
     assert window_colors(labels, ((4.0, 4.0), 3.0)) == 1
     assert window_colors(labels, ((4.0, 4.0), 3.0), min_pixels=1) == 2
     assert window_colors(labels, ((10.0, 10.0), 10.0)) == 2
+    assert window_colors(labels, ((10.0, 10.0), 10.0), min_share=0.3) == 1   # 4 of 14: stray
     assert window_colors(labels, None) == 0
 
 
