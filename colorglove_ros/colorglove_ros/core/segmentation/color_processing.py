@@ -20,7 +20,7 @@ from colorglove_ros.core.segmentation.light import colour_means, solve_light
 
 __all__ = [
     'SATURATION_RANGE', 'SATURATION_STEP', 'SATURATION_DEADBAND_STEPS', 'WASHED_OUT_STEPS',
-    'WINDOW_COLOR_SHARE',
+    'WINDOW_COLOR_SHARE', 'WASHED_OUT_MAX_SATURATION',
     'saturation_matrix', 'estimate_saturation', 'resaturated_lut', 'window_colors',
     'SaturationEstimate',
 ]
@@ -35,6 +35,8 @@ SATURATION_DEADBAND_STEPS = 3
 #: The washed-out cameras a search for a glove the colour table misses tries, in
 #: ``SATURATION_STEP`` log steps below 1 (:meth:`SaturationEstimate.trials`).
 WASHED_OUT_STEPS = (4, 7, 10)
+#: The largest saturation estimate of a camera that washes colours out: below the dead band.
+WASHED_OUT_MAX_SATURATION = float(np.exp(-SATURATION_DEADBAND_STEPS * SATURATION_STEP))
 #: A colour the search counts as shown holds at least this share of the window's glove
 #: pixels (a washed-out colour leaves a few stray pixels, a glove's patch many more).
 WINDOW_COLOR_SHARE = 0.01

@@ -20,6 +20,7 @@ from colorglove_ros.core.segmentation.color_model import (
     read_calibration_config,
 )
 from colorglove_ros.core.segmentation.color_processing import (
+    WASHED_OUT_MAX_SATURATION,
     SaturationEstimate,
     estimate_saturation,
     saturation_matrix,
@@ -756,7 +757,8 @@ class GloveSegmenter:
         frame in turn), which then becomes the camera's: one whose hand window shows at
         least ``washed_out_colors`` glove colours (``window_colors``) and more than
         ``detected``'s (a camera that washes colours out hides most of the glove from the
-        calibration's table), or, under an undone saturation with that many shown, the
+        calibration's table) and whose glove's palette confirms it (:meth:`_washed_out`), or,
+        under an undone saturation with that many shown, the
         calibration's own table if it shows as many (undoing a plain camera's saturation
         boosts it, and clutter turns glove-coloured). With the calibration's table and that
         many shown, no other is tried."""
@@ -775,10 +777,23 @@ class GloveSegmenter:
         tried = self._detect(small, region, reduction, pixels, static, min_px)
         found = window_colors(tried[2], _in_region(tried[0], x0, y0))
         if (found >= shown if plain and step == 0
-                else found >= self.washed_out_colors and found > shown):
+                else found >= self.washed_out_colors and found > shown
+                and (step == 0 or self._washed_out(small, region, tried))):
             return tried
         est.settle(kept)
         return detected
+
+    def _washed_out(self, small: np.ndarray, region: tuple[int, int, int, int],
+                    tried: tuple[tuple[tuple[float, float], float] | None, np.ndarray | None,
+                                 np.ndarray]) -> bool:
+        """Whether the glove a search found under an undone saturation (``tried``,
+        :meth:`_detect` of ``region``) shows the calibration's palette washed out: its
+        saturation estimate (:meth:`_window_saturation`) below the dead band of 1 (clutter a
+        boosted table turns glove-coloured, or a camera that boosts saturation, is not)."""
+        if tried[0] is None:
+            return False
+        estimate = self._window_saturation(small, region, tried[2], tried[0])
+        return estimate is not None and estimate < WASHED_OUT_MAX_SATURATION
 
     def _scene_colours(self, small: np.ndarray, table: np.ndarray | None,
                        region: tuple[int, int, int, int], labels: np.ndarray
