@@ -221,3 +221,19 @@ def test_washed_out_search_returns_to_a_plain_camera(calibration) -> None:
     a = GloveSegmenter(calibration).process(image, keep_labels=True)
     np.testing.assert_array_equal(searching.process(image, keep_labels=True).label_image,
                                   a.label_image)
+
+
+@pytest.mark.parametrize('saturation, washed', [(0.6, True), (1.0, False), (1.4, False)])
+def test_a_switch_needs_the_palette_washed_out(calibration, saturation, washed) -> None:
+    """The glove a search finds with a washed-out camera's saturation undone counts as washed
+    out only when its palette says so: not on a plain camera, nor on one that boosts
+    saturation (undoing it there boosts it further and clutter turns glove-coloured)."""
+    image, _ = _look_frames(1, saturation)[0]
+    seg = GloveSegmenter(calibration, washed_out_colors=8)
+    small, sx, sy = seg._small(image)
+    region = (0, small.shape[1], 0, small.shape[0])
+    seg._saturation.settle(-WASHED_OUT_STEPS[1])
+    tried = seg._detect(small, region, float(np.sqrt(sx * sy)), image.shape[0] * image.shape[1],
+                        None, max(int(seg.min_glove_pixels / (sx * sy)), 1))
+    assert tried[0] is not None
+    assert seg._washed_out(small, region, tried) is washed
