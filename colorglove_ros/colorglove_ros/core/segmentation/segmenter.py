@@ -758,10 +758,10 @@ class GloveSegmenter:
         least ``washed_out_colors`` glove colours (``window_colors``) and more than
         ``detected``'s (a camera that washes colours out hides most of the glove from the
         calibration's table) and whose glove's palette confirms it (:meth:`_washed_out`), or,
-        under an undone saturation with that many shown, the
-        calibration's own table if it shows as many (undoing a plain camera's saturation
-        boosts it, and clutter turns glove-coloured). With the calibration's table and that
-        many shown, no other is tried."""
+        under an undone saturation with that many shown, the calibration's own table if it
+        shows as many (undoing a plain camera's saturation boosts it, and clutter turns
+        glove-coloured). With the calibration's table and that many shown, no other is
+        tried."""
         est = self._saturation
         assert est is not None
         x0, _, y0, _ = region
