@@ -14,6 +14,7 @@ with ``create_task`` are left to rclpy's own loop."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextlib import ExitStack
 from typing import Any
 
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor, TimeoutObject
@@ -88,16 +89,24 @@ class LeanExecutor(SingleThreadedExecutor):
         if self._tasks:             # create_task, coroutines: rclpy's own loop runs them
             super()._spin_once_impl(timeout_sec, wait_condition)
             return
-        if self._is_shutdown or wait_condition():
-            return
-        nodes = self.get_nodes()
-        if self._entities is None or self._entities.key != _entity_key(nodes):
-            self._entities = _Entities(nodes, [self._guard, self._sigint_gc])
-            self._lean_wait_set = self._entities.wait_set(self._context)
-        entities, wait_set = self._entities, self._lean_wait_set
-        entities.fill(wait_set)
-        wait_set.wait(timeout_sec_to_nsec(
-            timeout_sec.timeout if isinstance(timeout_sec, TimeoutObject) else timeout_sec))
+        with ExitStack() as valid:
+            # the executor's guard conditions and the context stay valid while waiting:
+            # shutdown() from another thread triggers the guard, then destroys it once the
+            # wait has woken
+            with self._shutdown_lock:
+                if self._is_shutdown or wait_condition():
+                    return
+                guards = [self._guard, self._sigint_gc]
+                for handle in (guards[0].handle, guards[1].handle, self._context.handle):
+                    valid.enter_context(handle)
+            nodes = self.get_nodes()
+            if self._entities is None or self._entities.key != _entity_key(nodes):
+                self._entities = _Entities(nodes, guards)
+                self._lean_wait_set = self._entities.wait_set(self._context)
+            entities, wait_set = self._entities, self._lean_wait_set
+            entities.fill(wait_set)
+            wait_set.wait(timeout_sec_to_nsec(
+                timeout_sec.timeout if isinstance(timeout_sec, TimeoutObject) else timeout_sec))
         if self._is_shutdown:
             return
         if not self._context.ok():
