@@ -54,6 +54,7 @@ from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.frame_evidence import EvidenceGate
 from colorglove_ros.core.hand.gestures import (
     DEFAULT_GESTURE_CLASSIFIER,
+    DEFAULT_GESTURE_IMAGE_CLASSIFIER,
     GESTURE_FEATURES,
     GESTURE_NAMES,
     NO_GESTURE,
@@ -84,7 +85,8 @@ TARGET = 0.95
 SETTINGS = ScriptedSettings(tuning_seeds=tuple(range(5)), default_seeds=tuple(range(100, 110)),
                             unit='episodes', default_count=60,
                             classifier=DEFAULT_GESTURE_CLASSIFIER, feature_set=GESTURE_FEATURES,
-                            evidence_gate=True, image_classifier='')
+                            evidence_gate=True,
+                            image_classifier=DEFAULT_GESTURE_IMAGE_CLASSIFIER)
 MATCH_GRACE_S = 0.3
 HOLD_SETTLE_S = 0.2
 VARIATION_DEG = 3.0
