@@ -93,7 +93,7 @@ class GestureConfig:
     hold: HoldConfig = field(default_factory=lambda: HoldConfig(
         smoothing=0.25, on_score=0.75, off_score=0.3, hold_on_s=0.1, hold_off_s=0.1))
     evidence: EvidenceGate = field(default_factory=lambda: EvidenceGate(min_constraints=11.0))
-    image_weight: float = 1.0
+    image_weight: float = 0.25
 
     def __post_init__(self) -> None:
         check_number('image_weight', self.image_weight, low=0.0, error=GestureError)

@@ -215,3 +215,20 @@ def test_the_image_classifier_is_multiplied_with_the_pose_classifier() -> None:
         GestureDetector(MODEL, classifier=_shipped(), image_classifier=_shipped())
     with pytest.raises(GestureError):
         GestureConfig(image_weight=-1.0)
+
+
+def test_the_shipped_gesture_image_classifier_reads_the_gesture_classes() -> None:
+    """config/gesture_image_classifier.npz classifies tiny_observation features into the
+    gestures and none, trained on rendered gesture holds, and the detector takes it beside the
+    shipped pose classifier."""
+    from colorglove_ros.core.hand.gestures import GESTURE_IMAGE_CLASSIFIER, GESTURE_NAMES
+    from colorglove_ros.core.hand.observation_features import (
+        OBSERVATION_FEATURES,
+        num_observation_features,
+    )
+
+    clf = load_pose_classifier(share_dir() / GESTURE_IMAGE_CLASSIFIER, OBSERVATION_FEATURES)
+    assert set(clf.classes) == {*GESTURE_NAMES, NO_GESTURE}
+    assert clf.mean.shape == (num_observation_features(),)
+    assert '--what gesture_images' in clf.source
+    GestureDetector(MODEL, classifier=_shipped(), image_classifier=clf)
