@@ -145,13 +145,13 @@ def test_the_letter_image_classifier_learns_from_rendered_hold_frames() -> None:
         eval_spelling.evaluate(seeds, 3, TrackingNoise(), None, image_classifier=image)
 
 
-class _GestureRenderer:
-    """A stand-in for the tracker on gesture scripts: every frame's pose is the flat hand (the
+class _GestureRenderer(_HoldRenderer):
+    """:class:`_HoldRenderer` on gesture scripts: every frame's pose is the flat hand (the
     pose classifier reads an open hand throughout) and its tiny image shows the frame's class
     (a gesture or none) as one square of a colour and place of its own."""
 
     def __init__(self) -> None:
-        self.calls: list[tuple[str, int, int]] = []
+        super().__init__()
         from colorglove_ros.core.hand.poses import GESTURE_SHAPES, full_pose
 
         self.flat = full_pose(MODEL, GESTURE_SHAPES['flat'])
@@ -167,20 +167,9 @@ class _GestureRenderer:
             record['tiny_labels'][j, 4 * k:4 * k + 8, :8] = 1 + k
         return record
 
-    def hold_observations(self, name: str, seed: int, truth: ScriptedSequence, every: int
-                          ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        self.calls.append((name, seed, every))
-        frames = np.concatenate([np.flatnonzero((truth.segment == k) & truth.holding)[::every]
-                                 for k in np.unique(truth.segment)])
-        return frames, self._record(truth, frames)
-
     def observe(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
                 ) -> tuple[np.ndarray, np.ndarray]:
         return np.tile(self.flat, (len(truth.poses), 1)), np.ones(len(truth.poses), bool)
-
-    def observation(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
-                    ) -> dict[str, np.ndarray]:
-        return self._record(truth, np.arange(len(truth.poses)))
 
 
 @pytest.mark.slow

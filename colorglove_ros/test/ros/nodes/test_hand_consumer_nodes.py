@@ -182,14 +182,25 @@ def test_spelling_node_commits_held_letters() -> None:
     assert text[-1].data == 'GO'
 
 
+def _observation(k: int, tiny: np.ndarray) -> object:
+    """Frame ``k``'s HandObservation of a found hand with the tiny label image ``tiny``."""
+    from array import array
+
+    from colorglove_msgs.msg import HandObservation, PatchBlob
+
+    return HandObservation(
+        header=_frame(k), hand_found=True, image_width=640, image_height=480,
+        tiny_labels=array('B', tiny.tobytes()), crop_scale=4.0, crop_offset_x=100.0,
+        crop_offset_y=80.0, blobs=[PatchBlob(color_label=1, x=220.0, y=180.0,
+                                             pixel_count=1024)])
+
+
 def test_spelling_node_reads_each_poses_own_observation_with_an_image_classifier(tmp_path
                                                                                  ) -> None:
     """With an image_classifier_file the node subscribes to hand/observation and gives each
     pose the observation of its stamp: G poses whose tiny images an image classifier reads as
     S (weighted far above the pose) commit S; the node without one ('') commits G."""
-    from array import array
-
-    from colorglove_msgs.msg import HandObservation, PatchBlob
+    from colorglove_msgs.msg import HandObservation
 
     from colorglove_ros.core.hand.observation_features import (
         OBSERVATION_FEATURES,
@@ -224,11 +235,7 @@ def test_spelling_node_reads_each_poses_own_observation_with_an_image_classifier
             wrist_pub = h.publisher(PoseStamped, 'hand/wrist_pose')
             h.settle(0.3)
             for k in range(30):
-                observation_pub.publish(HandObservation(
-                    header=_frame(k), hand_found=True, image_width=640, image_height=480,
-                    tiny_labels=array('B', tiny.tobytes()), crop_scale=4.0, crop_offset_x=100.0,
-                    crop_offset_y=80.0, blobs=[PatchBlob(color_label=1, x=220.0, y=180.0,
-                                                         pixel_count=1024)]))
+                observation_pub.publish(_observation(k, tiny))
                 h.settle(0.005)
                 joints_pub.publish(pose_to_joint_state_msg(q, _frame(k)))
                 wrist_pub.publish(pose_to_wrist_pose_msg(q, _frame(k)))
@@ -244,9 +251,7 @@ def test_gesture_node_reads_each_poses_own_observation_with_an_image_classifier(
     gives each pose the observation of its stamp: open-hand poses whose tiny images an image
     classifier reads as an index pinch (weighted far above the pose) start a pinch; the node
     without one ('', the default) starts the open hand."""
-    from array import array
-
-    from colorglove_msgs.msg import HandObservation, PatchBlob
+    from colorglove_msgs.msg import HandObservation
 
     from colorglove_ros.core.hand.gestures import GESTURE_NAMES, NO_GESTURE
     from colorglove_ros.core.hand.observation_features import (
@@ -281,11 +286,7 @@ def test_gesture_node_reads_each_poses_own_observation_with_an_image_classifier(
             joints_pub = h.publisher(JointState, 'hand/joint_states')
             h.settle(0.3)
             for k in range(15):
-                observation_pub.publish(HandObservation(
-                    header=_frame(k), hand_found=True, image_width=640, image_height=480,
-                    tiny_labels=array('B', tiny.tobytes()), crop_scale=4.0, crop_offset_x=100.0,
-                    crop_offset_y=80.0, blobs=[PatchBlob(color_label=1, x=220.0, y=180.0,
-                                                         pixel_count=1024)]))
+                observation_pub.publish(_observation(k, tiny))
                 h.settle(0.005)
                 joints_pub.publish(pose_to_joint_state_msg(q, _frame(k)))
                 h.settle(0.005)
