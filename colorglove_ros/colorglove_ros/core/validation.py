@@ -192,6 +192,7 @@ SEGMENTER_RULES: dict[str, SettingRule] = {
     'prediction_margin': ('float', 0.0, 100.0, False),
     'prediction_max_ratio': ('float', 0.0, 100.0, False),
     'saturation_rate': ('float', 0.0, 1.0, False),
+    'washed_out_colors': ('int', 0, NUM_COLORS, False),
     'cleanup_factor': ('int', 1, 8, False),
     'learn_in_thread': ('int', 0, 1, False),
     'min_blob_pixels': ('int', 1, MAX_IMAGE_SIDE ** 2, False),

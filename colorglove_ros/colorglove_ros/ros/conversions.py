@@ -28,7 +28,7 @@ from colorglove_ros.core.segmentation.types import Observation
 from colorglove_ros.core.tracking.types import Blobs, CameraObservation, PosePrior
 
 __all__ = [
-    'stamp_to_seconds', 'camera_to_camera_info_msg', 'camera_from_camera_info_msg',
+    'stamp_to_seconds', 'stamp_key', 'camera_to_camera_info_msg', 'camera_from_camera_info_msg',
     'pose_to_joint_state_msg',
     'pose_to_wrist_pose_msg', 'pose_from_joint_state_msg', 'pose_from_msgs',
     'crop_from_observation_msg',
@@ -43,6 +43,11 @@ __all__ = [
 def stamp_to_seconds(stamp: Time) -> float:
     """A header stamp as float seconds."""
     return stamp.sec + stamp.nanosec * 1e-9
+
+
+def stamp_key(stamp: Time) -> tuple[int, int]:
+    """A header stamp as an exact, hashable key (sec, nanosec): what pairs a frame's messages."""
+    return (stamp.sec, stamp.nanosec)
 
 
 # GestureEvent.event constants by core event state ('start', 'end'), and back

@@ -35,7 +35,7 @@ from colorglove_ros.core.segmentation.calibration_fit import (
     DEFAULT_COLOR_CONFIG,
     prepared_color_config,
 )
-from colorglove_ros.ros.conversions import pose_from_msgs
+from colorglove_ros.ros.conversions import pose_from_msgs, stamp_key
 from colorglove_ros.ros.frame_camera import CAMERA_REFUSAL_PREFIX
 from colorglove_ros.ros.image import image_to_rgb8
 from colorglove_ros.ros.image_codec import header_stamp_from_cdr
@@ -58,7 +58,7 @@ _BEST_EFFORT = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=200,
 
 
 def _key(msg: Any) -> tuple[int, int]:
-    return (msg.header.stamp.sec, msg.header.stamp.nanosec)
+    return stamp_key(msg.header.stamp)
 
 
 class PipelineMonitor(Node):

@@ -9,7 +9,7 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 
 from colorglove_ros.core.hand.model import FINGER_DOF_NAMES
-from colorglove_ros.ros.conversions import pose_from_msgs
+from colorglove_ros.ros.conversions import pose_from_msgs, stamp_key
 
 __all__ = ['PosePairer', 'is_no_hand_status']
 
@@ -32,7 +32,7 @@ class PosePairer:
 
     @staticmethod
     def _key(msg) -> tuple[int, int]:
-        return (msg.header.stamp.sec, msg.header.stamp.nanosec)
+        return stamp_key(msg.header.stamp)
 
     def _pair(self) -> tuple[np.ndarray, PoseStamped] | None:
         if self._joints is None or self._wrist is None or \

@@ -181,3 +181,17 @@ def test_checked_observation_returns_the_blobs_it_checked() -> None:
     observation.blobs[1].x = float('nan')
     with pytest.raises(InvalidObservationError, match='blob centroid must be finite'):
         checked_observation_msg(observation)
+
+
+def test_stamp_key_is_exact_where_float_seconds_are_not() -> None:
+    """Two stamps a nanosecond apart late in the epoch: their float seconds are equal, their
+    keys (what pairs a frame's messages across topics) are not."""
+    from builtin_interfaces.msg import Time
+
+    from colorglove_ros.ros.conversions import stamp_key, stamp_to_seconds
+
+    first, second = Time(sec=1_796_236_811, nanosec=574_676_832), Time(sec=1_796_236_811,
+                                                                       nanosec=574_676_833)
+    assert stamp_to_seconds(first) == stamp_to_seconds(second)
+    assert stamp_key(first) == (1_796_236_811, 574_676_832) != stamp_key(second)
+    assert stamp_key(Time(sec=1_796_236_811, nanosec=574_676_832)) == stamp_key(first)

@@ -19,8 +19,10 @@ from colorglove_ros.core.segmentation.color_model import lut_index
 from colorglove_ros.core.segmentation.light import colour_means, solve_light
 
 __all__ = [
-    'SATURATION_RANGE', 'SATURATION_STEP', 'SATURATION_DEADBAND_STEPS', 'saturation_matrix',
-    'estimate_saturation', 'resaturated_lut', 'SaturationEstimate',
+    'SATURATION_RANGE', 'SATURATION_STEP', 'SATURATION_DEADBAND_STEPS', 'WASHED_OUT_STEPS',
+    'WINDOW_COLOR_SHARE', 'WASHED_OUT_MAX_SATURATION',
+    'saturation_matrix', 'estimate_saturation', 'resaturated_lut', 'window_colors',
+    'SaturationEstimate',
 ]
 
 #: Saturation factors searched (a camera's processing, relative to the calibration's).
@@ -30,6 +32,14 @@ SATURATION_STEP = 0.05
 #: A settled value fewer steps than this below 1 is not undone: clutter in the hand's window
 #: moves a plain camera's estimate a step or two, and undoing that widens every glove colour.
 SATURATION_DEADBAND_STEPS = 3
+#: The washed-out cameras a search for a glove the colour table misses tries, in
+#: ``SATURATION_STEP`` log steps below 1 (:meth:`SaturationEstimate.trials`).
+WASHED_OUT_STEPS = (4, 7, 10)
+#: The largest saturation estimate of a camera that washes colours out: below the dead band.
+WASHED_OUT_MAX_SATURATION = float(np.exp(-SATURATION_DEADBAND_STEPS * SATURATION_STEP))
+#: A colour the search counts as shown holds at least this share of the window's glove
+#: pixels (a washed-out colour leaves a few stray pixels, a glove's patch many more).
+WINDOW_COLOR_SHARE = 0.01
 
 
 def saturation_matrix(saturation: float) -> np.ndarray:
@@ -66,6 +76,20 @@ def estimate_saturation(linear_rgb: np.ndarray, labels: np.ndarray,
     _, costs = solve_light(means, counts, r @ _GRID_MATRICES.transpose(0, 2, 1),
                            weight_reference=r)
     return float(_GRID[int(np.argmin(costs))])
+
+
+def window_colors(labels: np.ndarray, found: tuple[tuple[float, float], float] | None,
+                  min_share: float = WINDOW_COLOR_SHARE, min_pixels: int = 2) -> int:
+    """How many glove colours the label image ``labels`` shows inside the hand's window
+    ``found`` ((cx, cy), half, in its pixels; 0 for None): each with at least ``min_share``
+    of the window's glove pixels and ``min_pixels`` pixels."""
+    if found is None:
+        return 0
+    (cx, cy), half = found
+    x0, y0 = max(int(cx - half), 0), max(int(cy - half), 0)
+    part = labels[y0:max(int(np.ceil(cy + half)) + 1, y0), x0:max(int(np.ceil(cx + half)) + 1, x0)]
+    counts = np.bincount(part.ravel(), minlength=1)[1:]
+    return int(np.count_nonzero(counts >= max(min_pixels, min_share * counts.sum())))
 
 
 def resaturated_lut(lut: np.ndarray, bits: int, saturation: float) -> np.ndarray:
@@ -116,6 +140,16 @@ class SaturationEstimate:
     def saturation(self) -> float:
         """The settled saturation factor, at most 1 (1: the calibration's own)."""
         return float(np.exp(self.step * SATURATION_STEP))
+
+    def trials(self) -> tuple[int, ...]:
+        """The settled steps a search for a missed glove tries instead of this one: the
+        calibration's own (0) and each of ``WASHED_OUT_STEPS``, the current one left out."""
+        return tuple(s for s in (0, *(-k for k in WASHED_OUT_STEPS)) if s != self.step)
+
+    def settle(self, step: int) -> None:
+        """Settle on ``step`` log steps (0 or at most ``-SATURATION_DEADBAND_STEPS``): a
+        search found the glove with this camera's saturation undone."""
+        self._log = float(step) * SATURATION_STEP
 
     def update(self, estimate: float | None) -> None:
         """Move the running value towards one frame's estimate."""

@@ -20,9 +20,11 @@ from colorglove_ros.core.segmentation.color_model import (
     read_calibration_config,
 )
 from colorglove_ros.core.segmentation.color_processing import (
+    WASHED_OUT_MAX_SATURATION,
     SaturationEstimate,
     estimate_saturation,
     saturation_matrix,
+    window_colors,
 )
 from colorglove_ros.core.segmentation.crop import (
     CropTransform,
@@ -299,6 +301,13 @@ _LEARNER: list[ThreadPoolExecutor] = []
 _LEARNER_LOCK = threading.Lock()
 
 
+def _in_region(found: tuple[tuple[float, float], float] | None, x0: int, y0: int
+               ) -> tuple[tuple[float, float], float] | None:
+    """A coarse window ``found`` ((cx, cy), half) of the whole coarse frame in the pixels of
+    a region starting at (``x0``, ``y0``)."""
+    return None if found is None else ((found[0][0] - x0, found[0][1] - y0), found[1])
+
+
 def _learner() -> ThreadPoolExecutor:
     """The one worker thread on which segmenters with ``learn_in_thread`` learn their
     static background (started on first use, shared by every segmenter of the process)."""
@@ -454,7 +463,8 @@ class GloveSegmenter:
                  background_memory: int = 0,
                  follow_margin: float = 0.0, search_every: int = 1,
                  prediction_margin: float = 0.0, prediction_max_ratio: float = 0.0,
-                 saturation_rate: float = 0.0, cleanup_factor: int = 1,
+                 saturation_rate: float = 0.0, washed_out_colors: int = 0,
+                 cleanup_factor: int = 1,
                  learn_in_thread: int = 0,
                  source: str = 'GloveSegmenter') -> None:
         # every keyword argument but ``source`` is a setting named in SEGMENTER_RULES: checked
@@ -469,8 +479,10 @@ class GloveSegmenter:
         self.background = StaticBackground(self.background_frames, self.background_tolerance,
                                            remember=bool(self.background_memory))
         # the camera's saturation, settled over the frames with a hand (saturation_rate > 0)
-        self._saturation = (None if self.saturation_rate <= 0 else SaturationEstimate(
-            calibration.lut, calibration.bits, self.saturation_rate))
+        # or by a search for a glove the colour table misses (washed_out_colors > 0)
+        self._saturation = (None if self.saturation_rate <= 0 and self.washed_out_colors <= 0
+                            else SaturationEstimate(calibration.lut, calibration.bits,
+                                                    self.saturation_rate or 1.0))
         # the hand's coarse window of the last frame with a hand ((cx, cy), half in coarse
         # pixels, and the coarse frame's shape), which the next frame's search follows
         self._followed: tuple[tuple[tuple[float, float], float], tuple[int, int]] | None = None
@@ -482,6 +494,7 @@ class GloveSegmenter:
         self._since_search = 0
         self._window: tuple[tuple[tuple[float, float], float], tuple[int, int]] | None = None
         self._glove_like_mask: np.ndarray | None = None   # the last search's, coarse
+        self._washed_out_turn = 0   # which saturation the next search for a missed glove tries
         # learn_in_thread: the static background's learning from this frame, running on
         # the shared worker while the region of interest is segmented (done before
         # :meth:`process` returns)
@@ -733,6 +746,55 @@ class GloveSegmenter:
         return estimate_saturation(cv2.LUT(part, _LINEAR_RGB), inside,
                                    self.calibration.reference_linear_rgb)
 
+    def _washed_out_search(self, small: np.ndarray, region: tuple[int, int, int, int],
+                           reduction: float, pixels: int, static: np.ndarray | None,
+                           min_px: int, detected: tuple[tuple[tuple[float, float], float] | None,
+                                                        np.ndarray | None, np.ndarray]
+                           ) -> tuple[tuple[tuple[float, float], float] | None,
+                                      np.ndarray | None, np.ndarray]:
+        """``detected`` (:meth:`_detect` of ``region``), or the same search with the colour
+        table undoing another settled saturation (``SaturationEstimate.trials``, one per
+        frame in turn), which then becomes the camera's: one whose hand window shows at
+        least ``washed_out_colors`` glove colours (``window_colors``) and more than
+        ``detected``'s (a camera that washes colours out hides most of the glove from the
+        calibration's table) and whose glove's palette confirms it (:meth:`_washed_out`), or,
+        under an undone saturation with that many shown, the calibration's own table if it
+        shows as many (undoing a plain camera's saturation boosts it, and clutter turns
+        glove-coloured). With the calibration's table and that many shown, no other is
+        tried."""
+        est = self._saturation
+        assert est is not None
+        x0, _, y0, _ = region
+        shown = window_colors(detected[2], _in_region(detected[0], x0, y0))
+        kept = est.step
+        plain = shown >= self.washed_out_colors
+        if plain and kept == 0:
+            return detected
+        trials = est.trials()
+        step = trials[self._washed_out_turn % len(trials)]
+        self._washed_out_turn += 1
+        est.settle(step)
+        tried = self._detect(small, region, reduction, pixels, static, min_px)
+        found = window_colors(tried[2], _in_region(tried[0], x0, y0))
+        if (found >= shown if plain and step == 0
+                else found >= self.washed_out_colors and found > shown
+                and (step == 0 or self._washed_out(small, region, tried))):
+            return tried
+        est.settle(kept)
+        return detected
+
+    def _washed_out(self, small: np.ndarray, region: tuple[int, int, int, int],
+                    tried: tuple[tuple[tuple[float, float], float] | None, np.ndarray | None,
+                                 np.ndarray]) -> bool:
+        """Whether the glove a search found under an undone saturation (``tried``,
+        :meth:`_detect` of ``region``) shows the calibration's palette washed out: its
+        saturation estimate (:meth:`_window_saturation`) below the dead band of 1 (clutter a
+        boosted table turns glove-coloured, or a camera that boosts saturation, is not)."""
+        if tried[0] is None:
+            return False
+        estimate = self._window_saturation(small, region, tried[2], tried[0])
+        return estimate is not None and estimate < WASHED_OUT_MAX_SATURATION
+
     def _scene_colours(self, small: np.ndarray, table: np.ndarray | None,
                        region: tuple[int, int, int, int], labels: np.ndarray
                        ) -> np.ndarray | None:
@@ -793,8 +855,12 @@ class GloveSegmenter:
         if detected is None:
             region = (0, small.shape[1], 0, small.shape[0])
             detected = self._detect(small, region, reduction, h * w, static, min_px)
+        if learn and self.washed_out_colors > 0:
+            detected = self._washed_out_search(small, region, reduction, h * w, static, min_px,
+                                               detected)
         found, table, labels = detected
-        if learn and found is not None and self._saturation is not None:
+        if (learn and found is not None and self._saturation is not None
+                and self.saturation_rate > 0):
             self._saturation.update(self._window_saturation(small, region, labels, found))
         scene = self._scene_colours(small, table, region, labels)
         self._found = None if found is None else (found, small.shape[:2])

@@ -54,9 +54,11 @@ from colorglove_ros.ros.conversions import (
     pose_to_joint_state_msg,
     pose_to_wrist_pose_msg,
     skeleton_to_markers_msg,
+    stamp_key,
     tiny_labels_from_observation_msg,
 )
 from colorglove_ros.ros.frame_camera import FrameCamera
+from colorglove_ros.ros.lean_executor import LeanExecutor
 from colorglove_ros.ros.pose_pairing import PosePairer
 from colorglove_ros.ros.shm_cleanup import clean_stale_fastdds_segments
 
@@ -171,20 +173,26 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     A node that cannot start (bad configuration) logs the reason and exits with code 1.
     Shared-memory segments of killed Fast DDS participants are removed first (a respawned
     node must not pile them up). The start-up objects are frozen before spinning
-    (:func:`freeze_startup_objects`).
+    (:func:`freeze_startup_objects`). The node spins on a :class:`LeanExecutor` (its wait set
+    kept between wakes, ``ros.lean_executor``).
     """
     clean_stale_fastdds_segments()
     rclpy.init(args=args)
     node = None
+    executor = None
     try:
         with ending_on_shutdown():
             node = factory()
             freeze_startup_objects()
-            rclpy.spin(node)
+            executor = LeanExecutor()
+            executor.add_node(node)
+            executor.spin()
     except StartupError as exc:
         print(f'[FATAL] {exc}', flush=True)
         return 1
     finally:
+        if executor is not None:
+            executor.shutdown()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
@@ -317,14 +325,14 @@ class ObservationFeatures:
         except (ColorGloveError, ValueError) as exc:
             self.node.get_logger().warn(f'bad observation: {exc}', throttle_duration_sec=1.0)
             return
-        self.features[(msg.header.stamp.sec, msg.header.stamp.nanosec)] = features
+        self.features[stamp_key(msg.header.stamp)] = features
         while len(self.features) > self.kept:
             del self.features[next(iter(self.features))]
 
     def pop(self, stamp: Any) -> np.ndarray | None:
         """The features of the observation of ``stamp`` (a ``builtin_interfaces/Time``), taken
         out; None when it has not come."""
-        return self.features.pop((stamp.sec, stamp.nanosec), None)
+        return self.features.pop(stamp_key(stamp), None)
 
 
 CAMERA_INFO_TOPIC = 'camera/camera_info'

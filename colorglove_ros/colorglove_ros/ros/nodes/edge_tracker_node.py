@@ -42,7 +42,7 @@ from colorglove_ros.core.tracking.edge_tracker import EdgeTracker
 from colorglove_ros.core.tracking.silhouette import SilhouetteConfig, read_background
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.bags import camera_info_to_pinhole
-from colorglove_ros.ros.conversions import pose_from_msgs
+from colorglove_ros.ros.conversions import pose_from_msgs, stamp_key
 from colorglove_ros.ros.diagnostics import FrameStats
 from colorglove_ros.ros.image import ImageEncodingError, image_to_array
 from colorglove_ros.ros.nodes.common import (
@@ -290,7 +290,7 @@ class EdgeTrackerNode(Node):
         links = [(c.name, n) for c, n in zip(self.tracker.cameras, fit.links_found, strict=True)]
         self.stats.hand(latency_s, **{f'links found {name}': n for name, n in links})
         self.outputs.publish_status(edge_tracking_status(
-            links, fit.rms_px, result.time_ms, (header.stamp.sec, header.stamp.nanosec)))
+            links, fit.rms_px, result.time_ms, stamp_key(header.stamp)))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -42,6 +42,7 @@ from colorglove_ros.core.hand.poses import full_pose
 from colorglove_ros.ros.conversions import (
     gesture_event_to_msg,
     pose_from_joint_state_msg,
+    stamp_key,
     stamp_to_seconds,
 )
 from colorglove_ros.ros.nodes.common import (
@@ -126,7 +127,7 @@ class GestureNode(Node):
             return
         stamp = msg.header.stamp
         observation = None if self.observations is None else self.observations.pop(stamp)
-        self._detect(self.pairer.add_frame((stamp.sec, stamp.nanosec), (q, stamp, observation)))
+        self._detect(self.pairer.add_frame(stamp_key(stamp), (q, stamp, observation)))
 
     def _detect(self, frames: list[tuple[tuple[np.ndarray, Time, np.ndarray | None],
                                          FrameEvidence | None]]) -> None:

@@ -57,6 +57,7 @@ from colorglove_ros.ros.conversions import (
     camera_observation_from_msg,
     crop_prediction_to_msg,
     pose_prior_from_candidates_msg,
+    stamp_key,
     stamp_to_seconds,
     wrist_pose_to_tf_msg,
 )
@@ -393,7 +394,7 @@ class IKNode(Node):
                                    strict=False))
         self.outputs.publish_status(tracking_status(
             result.num_constraints, per_camera, result.reprojection_error_px, result.time_ms,
-            (msg.header.stamp.sec, msg.header.stamp.nanosec)))
+            stamp_key(msg.header.stamp)))
         self.stats.hand(self.diagnostics.latency_s(msg.header.stamp),
                         constraints=result.num_constraints,
                         **{f'constraints {camera.name}': count for camera, count in

@@ -34,7 +34,7 @@ from colorglove_ros.core.hand.frame_evidence import (
 from colorglove_ros.core.hand.frames import finger_joint_names
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.tracking.mouse import Mouse3D, MouseConfig, TablePlane
-from colorglove_ros.ros.conversions import pose_from_msgs, stamp_to_seconds
+from colorglove_ros.ros.conversions import pose_from_msgs, stamp_key, stamp_to_seconds
 from colorglove_ros.ros.nodes.common import (
     JOINT_STATES_TOPIC,
     TRACKING_STATUS_TOPIC,
@@ -133,9 +133,8 @@ class MouseNode(Node):
         if self.pairer is None:
             self._update(q, msg.header, None)
             return
-        stamp_msg = msg.header.stamp
         for (q_ready, header), evidence in self.pairer.add_frame(
-                (stamp_msg.sec, stamp_msg.nanosec), (q, msg.header)):
+                stamp_key(msg.header.stamp), (q, msg.header)):
             self._update(q_ready, header, evidence)
 
     def on_status(self, msg: String) -> None:

@@ -13,10 +13,12 @@ from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
 from colorglove_ros.core.segmentation.color_model import lut_index
 from colorglove_ros.core.segmentation.color_processing import (
     SATURATION_STEP,
+    WASHED_OUT_STEPS,
     SaturationEstimate,
     estimate_saturation,
     resaturated_lut,
     saturation_matrix,
+    window_colors,
 )
 from colorglove_ros.core.segmentation.segmenter import GloveSegmenter, SegmentationConfigError
 from colorglove_ros.core.synthetic import frames as synth
@@ -140,3 +142,102 @@ def test_segmenter_settles_on_a_washed_out_camera(calibration) -> None:
     assert adapting.settings()['saturation_rate'] == 0.5
     with pytest.raises(SegmentationConfigError, match='saturation_rate'):
         GloveSegmenter(calibration, saturation_rate=1.5)
+
+
+def test_window_colors_counts_the_colours_inside_the_window() -> None:
+    labels = np.zeros((20, 20), np.uint8)
+    labels[2:4, 2:4] = 1          # inside the window, 4 pixels
+    labels[5, 5] = 2              # inside, 1 pixel: under min_pixels
+    labels[15:18, 15:18] = 3      # outside the window
+    assert window_colors(labels, ((4.0, 4.0), 3.0)) == 1
+    assert window_colors(labels, ((4.0, 4.0), 3.0), min_pixels=1) == 2
+    assert window_colors(labels, ((10.0, 10.0), 10.0)) == 2
+    assert window_colors(labels, ((10.0, 10.0), 10.0), min_share=0.3) == 1   # 4 of 14: stray
+    assert window_colors(labels, None) == 0
+
+
+def test_saturation_estimate_trials_and_settle(calibration) -> None:
+    est = SaturationEstimate(calibration.lut, calibration.bits, 1.0)
+    assert est.trials() == tuple(-k for k in WASHED_OUT_STEPS)
+    est.settle(-WASHED_OUT_STEPS[1])
+    assert est.step == -WASHED_OUT_STEPS[1]
+    assert abs(np.log(est.saturation) + WASHED_OUT_STEPS[1] * SATURATION_STEP) < 1e-9
+    assert est.trials() == (0, -WASHED_OUT_STEPS[0], -WASHED_OUT_STEPS[2])
+
+
+def _look_frames(count: int, saturation: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Frames of the printed glove seen by a camera with ``saturation`` (1: a plain one),
+    one hand moving slightly."""
+    rng = np.random.default_rng(5)
+    camera = synth.default_camera()
+    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
+    look = replace(FrameConditions(glove_distractors=False), saturation=saturation)
+    return [(f.image_rgb, f.labels) for f in
+            (synth.render_frame(q + np.r_[0.002 * k, np.zeros(25)], camera,
+                                np.random.default_rng(k), look) for k in range(count))]
+
+
+def test_washed_out_search_finds_a_glove_the_table_misses(calibration) -> None:
+    """A camera washing colours out to 0.6 hides most glove colours from the calibration's
+    table; with ``washed_out_colors`` the segmenter searches again with a washed-out
+    camera's saturation undone, settles on it and labels every colour; a plain camera's
+    glove shows its colours and is left alone (the same observations as without)."""
+    frames = _look_frames(5, 0.6)
+    plain = GloveSegmenter(calibration)
+    from colorglove_ros.core.segmentation.color_model import read_calibration_config
+
+    shipped = read_calibration_config('config/color_calibration.yaml')['segmenter']
+    searching = GloveSegmenter(calibration, washed_out_colors=shipped['washed_out_colors'])
+    assert searching.washed_out_colors > 0        # on as shipped
+    for image, _ in frames[:-1]:
+        plain.process(image)
+        searching.process(image)
+    image, truth = frames[-1]
+    glove = truth > 0
+    recall = {}
+    for name, seg in (('plain', plain), ('searching', searching)):
+        labels = seg.process(image, keep_labels=True).label_image
+        recall[name] = float(np.mean(labels[glove] == truth[glove])) if labels is not None else 0
+    assert recall['plain'] < 0.5, recall
+    assert recall['searching'] > 0.8, recall
+    assert searching._saturation.step <= -WASHED_OUT_STEPS[0]
+    plain, searching = GloveSegmenter(calibration), GloveSegmenter(calibration, washed_out_colors=8)
+    for image, _ in _look_frames(3, 1.0):
+        a, b = plain.process(image, keep_labels=True), searching.process(image, keep_labels=True)
+        assert a.status == b.status == 'ok' and a.crop == b.crop
+        np.testing.assert_array_equal(a.label_image, b.label_image)
+    assert searching._saturation.step == 0
+    with pytest.raises(SegmentationConfigError, match='washed_out_colors'):
+        GloveSegmenter(calibration, washed_out_colors=11)
+
+
+def test_washed_out_search_returns_to_a_plain_camera(calibration) -> None:
+    """A segmenter settled on a washed-out camera (as a search on a hand entering the view
+    can leave it) that sees a plain camera's glove with all its colours returns to the
+    calibration's own table within a few frames, its observations then the plain ones."""
+    frames = _look_frames(5, 1.0)
+    searching = GloveSegmenter(calibration, washed_out_colors=8)
+    searching._saturation.settle(-WASHED_OUT_STEPS[1])
+    for image, _ in frames[:-1]:
+        searching.process(image)
+    assert searching._saturation.step == 0
+    image = frames[-1][0]
+    a = GloveSegmenter(calibration).process(image, keep_labels=True)
+    np.testing.assert_array_equal(searching.process(image, keep_labels=True).label_image,
+                                  a.label_image)
+
+
+@pytest.mark.parametrize('saturation, washed', [(0.6, True), (1.0, False), (1.4, False)])
+def test_a_switch_needs_the_palette_washed_out(calibration, saturation, washed) -> None:
+    """The glove a search finds with a washed-out camera's saturation undone counts as washed
+    out only when its palette says so: not on a plain camera, nor on one that boosts
+    saturation (undoing it there boosts it further and clutter turns glove-coloured)."""
+    image, _ = _look_frames(1, saturation)[0]
+    seg = GloveSegmenter(calibration, washed_out_colors=8)
+    small, sx, sy = seg._small(image)
+    region = (0, small.shape[1], 0, small.shape[0])
+    seg._saturation.settle(-WASHED_OUT_STEPS[1])
+    tried = seg._detect(small, region, float(np.sqrt(sx * sy)), image.shape[0] * image.shape[1],
+                        None, max(int(seg.min_glove_pixels / (sx * sy)), 1))
+    assert tried[0] is not None
+    assert seg._washed_out(small, region, tried) is washed

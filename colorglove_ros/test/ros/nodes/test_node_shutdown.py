@@ -43,9 +43,20 @@ def test_run_node_freezes_the_start_up_heap_once_before_spinning(monkeypatch) ->
     events: list[str] = []
     monkeypatch.setattr(common, 'clean_stale_fastdds_segments', lambda: None)
     monkeypatch.setattr(common.rclpy, 'init', lambda args=None: events.append('init'))
-    monkeypatch.setattr(common.rclpy, 'spin', lambda node: events.append('spin'))
     monkeypatch.setattr(common.rclpy, 'try_shutdown', lambda: events.append('shutdown'))
     monkeypatch.setattr(gc, 'freeze', lambda: events.append('freeze'))
+
+    class Executor:
+        def add_node(self, node: object) -> None:
+            events.append('added')
+
+        def spin(self) -> None:
+            events.append('spin')
+
+        def shutdown(self) -> None:
+            events.append('executor shutdown')
+
+    monkeypatch.setattr(common, 'LeanExecutor', Executor)
 
     class Built:
         def __init__(self) -> None:
@@ -55,7 +66,8 @@ def test_run_node_freezes_the_start_up_heap_once_before_spinning(monkeypatch) ->
             events.append('destroyed')
 
     assert common.run_node(Built) == 0
-    assert events == ['init', 'built', 'freeze', 'spin', 'destroyed', 'shutdown']
+    assert events == ['init', 'built', 'freeze', 'added', 'spin', 'executor shutdown',
+                      'destroyed', 'shutdown']
 
 
 def test_single_process_freezes_once_after_every_node_is_built(monkeypatch) -> None:
