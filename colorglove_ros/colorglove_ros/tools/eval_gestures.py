@@ -24,6 +24,12 @@ hysteresis, as ``colorglove_eval_spelling``'s does: each scripted hold is classi
 sum of its frames' class log-probabilities (``scripted_hands.classify_holds``), per gesture, and
 the share of neutral holds classified as a gesture.
 
+With ``--tracker`` and ``--image-classifier FILE`` (``colorglove_train_hand_classifiers --what
+gesture_images``; default none) the detector also reads each frame's observation (the tiny
+label image and blobs the tracker got, recorded in the tracking cache) through that image
+classifier, combined with the pose classifier (``--image-weight``, default the core's); the
+noise model has no image.
+
 Thresholds were tuned on seeds 0-4; the default report seeds 100-109 were not used for tuning.
 """
 from __future__ import annotations
@@ -48,16 +54,19 @@ from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.frame_evidence import EvidenceGate
 from colorglove_ros.core.hand.gestures import (
     DEFAULT_GESTURE_CLASSIFIER,
+    DEFAULT_GESTURE_IMAGE_CLASSIFIER,
     GESTURE_FEATURES,
     GESTURE_NAMES,
     NO_GESTURE,
     PINCH_FINGERS,
     GestureConfig,
     GestureDetector,
+    GestureError,
     GestureEvent,
     gesture_features,
 )
 from colorglove_ros.core.hand.model import DIP_PIP_RATIO, HandModel
+from colorglove_ros.core.hand.observation_features import record_features
 from colorglove_ros.core.hand.pose_classifier import PoseClassifier, pose_features
 from colorglove_ros.core.hand.poses import (
     GESTURE_SHAPES,
@@ -76,7 +85,8 @@ TARGET = 0.95
 SETTINGS = ScriptedSettings(tuning_seeds=tuple(range(5)), default_seeds=tuple(range(100, 110)),
                             unit='episodes', default_count=60,
                             classifier=DEFAULT_GESTURE_CLASSIFIER, feature_set=GESTURE_FEATURES,
-                            evidence_gate=True)
+                            evidence_gate=True,
+                            image_classifier=DEFAULT_GESTURE_IMAGE_CLASSIFIER)
 MATCH_GRACE_S = 0.3
 HOLD_SETTLE_S = 0.2
 VARIATION_DEG = 3.0
@@ -230,7 +240,7 @@ def _frame_counts(truth: ScriptedSequence, active: np.ndarray) -> dict[str, int]
 
 def run_sequence(model: HandModel, seed: int, episodes: int, source: PoseSource,
                  config: GestureConfig, classifier: PoseClassifier | None = None,
-                 fps: float = 30.0
+                 fps: float = 30.0, image_classifier: PoseClassifier | None = None
                  ) -> tuple[dict[str, dict[str, int]], dict[str, int], float,
                             list[tuple[str, str]]]:
     """Script, observe (noise model or tracker), detect: event counts, frame counts, the
@@ -238,23 +248,32 @@ def run_sequence(model: HandModel, seed: int, episodes: int, source: PoseSource,
     (scripted, classified) with :data:`NO_GESTURE` for the neutral shapes; empty without one).
     Frames the tracker lost reach the detector as 'no hand'; with the tracker, each frame comes
     with the evidence a node would have (``scripted_hands.evidence_seen``) for the config's
-    evidence gate."""
+    evidence gate; with ``image_classifier`` each frame's observation (a source that records
+    it: the tracker)."""
     truth = script_poses(gesture_script(model, seed, episodes), fps)
     seen, found = source.observe('gestures', seed, truth, model)
     evidence = evidence_seen(source, 'gestures', seed, truth, model)
-    detector = GestureDetector(model, config, classifier)
+    detector = GestureDetector(model, config, classifier, image_classifier)
+    observed = None
+    if image_classifier is not None:
+        if not hasattr(source, 'observation'):
+            raise GestureError("an image classifier needs the frames' observation: run on "
+                               'the tracker (--tracker)')
+        observed = record_features(source.observation('gestures', seed, truth, model))
     events: list[GestureEvent] = []
     active = np.zeros((len(seen), len(GESTURE_NAMES)), dtype=bool)
     for i, (q, ok, t) in enumerate(zip(seen, found, truth.times, strict=True)):
-        events += detector.update(q if ok else None, float(t), evidence[i])
+        events += detector.update(q if ok else None, float(t), evidence[i],
+                                  None if observed is None else observed[i])
         for name in detector.active:
             active[i, GESTURE_NAMES.index(name)] = True
     holds: list[tuple[str, str]] = []
     if classifier is not None:
         log_p = np.full((len(seen), len(classifier.classes)), np.nan)
         if found.any():
-            log_p[found] = classifier.log_proba(
-                pose_features(model, seen[found], classifier.feature_set))
+            log_p[found] = detector.log_proba(
+                pose_features(model, seen[found], classifier.feature_set),
+                None if observed is None else observed[found])
         holds = classify_holds(truth, log_p, classifier.classes, NO_GESTURE)
     return (score_events(truth, events), _frame_counts(truth, active),
             realised_joint_mae_deg(truth.poses, seen, found), holds)
@@ -262,23 +281,29 @@ def run_sequence(model: HandModel, seed: int, episodes: int, source: PoseSource,
 
 def evaluate(seeds: Sequence[int], episodes: int = 60, source: PoseSource | None = None,
              classifier: PoseClassifier | None = None, config: GestureConfig | None = None,
-             evidence: EvidenceGate | None = None) -> dict:
+             evidence: EvidenceGate | None = None,
+             image_classifier: PoseClassifier | None = None,
+             image_weight: float | None = None) -> dict:
     """Precision and recall per gesture over the sequences of ``seeds``, as seen through
     ``source`` (default: the built-in ``TrackingNoise``), scored by ``classifier`` (None: the
-    rules); ``evidence`` replaces the config's evidence gate."""
+    rules) and, given, ``image_classifier`` on each frame's observation (weighted by
+    ``image_weight``, default the config's); ``evidence`` replaces the config's evidence
+    gate."""
     model = HandModel()
     source = TrackingNoise() if source is None else source
     config = GestureConfig() if config is None else config
     if evidence is not None:
         config = dataclasses.replace(config, evidence=evidence)
+    if image_weight is not None:
+        config = dataclasses.replace(config, image_weight=image_weight)
     totals = {g: {'episodes': 0, 'detected': 0, 'starts': 0, 'true_starts': 0}
               for g in GESTURE_NAMES}
     frames = {'gesture_frames': 0, 'held_active': 0, 'settled_frames': 0, 'other_active': 0}
     maes = []
     holds: list[tuple[str, str]] = []
     for seed in seeds:
-        counts, frame_counts, mae, seq_holds = run_sequence(model, seed, episodes, source,
-                                                            config, classifier)
+        counts, frame_counts, mae, seq_holds = run_sequence(
+            model, seed, episodes, source, config, classifier, image_classifier=image_classifier)
         holds += seq_holds
         for g in GESTURE_NAMES:
             for key in totals[g]:

@@ -23,6 +23,9 @@ spelling scripts of ``--image-seeds`` (training seeds), rendered as the evaluati
 ``--tracker`` renders them and seen through the segmentation alone (no lookup, no IK; cached in
 ``data/scripted_tracking/``), its tiny label image and blobs; written to ``--image-output``
 (off by default: the evaluations and the spelling node use it when given one).
+``--what gesture_images`` does the same for the gestures: the holds of the gesture scripts of
+``--image-seeds`` (``--image-episodes`` episodes each; the neutral shapes labelled ``none``),
+written to ``--gesture-image-output``.
 """
 from __future__ import annotations
 
@@ -41,6 +44,7 @@ from colorglove_ros.core.evaluation.sequences import LABEL_SOURCES, find_databas
 from colorglove_ros.core.hand.gestures import (
     DEFAULT_GESTURE_CLASSIFIER,
     GESTURE_FEATURES,
+    GESTURE_IMAGE_CLASSIFIER,
     NO_GESTURE,
 )
 from colorglove_ros.core.hand.model import HandModel
@@ -66,15 +70,17 @@ __all__ = ['main', 'training_samples', 'image_training_samples']
 
 
 def image_training_samples(model: HandModel, scripts: Sequence[tuple[int, list]],
-                           tracker: Any, every: int) -> tuple[np.ndarray, np.ndarray]:
-    """Observation features and letters of every ``every``-th hold frame of the spelling
-    ``(seed, segments)`` scripts (``ScriptedTracker.hold_observations``)."""
+                           tracker: Any, every: int, name: str = 'spelling',
+                           none_label: str = NO_GESTURE) -> tuple[np.ndarray, np.ndarray]:
+    """Observation features and labels (what is held; ``none_label`` for a neutral shape) of
+    every ``every``-th hold frame of the ``(seed, segments)`` scripts of sequences ``name``
+    (``ScriptedTracker.hold_observations``)."""
     features, labels = [], []
     for seed, segments in scripts:
         truth = script_poses(segments)
-        frames, record = tracker.hold_observations('spelling', seed, truth, every)
+        frames, record = tracker.hold_observations(name, seed, truth, every)
         features.append(record_features(record))
-        labels += list(truth.label[frames])
+        labels += [y or none_label for y in truth.label[frames]]
     return np.concatenate(features), np.asarray(labels).astype(str)
 
 
@@ -112,7 +118,8 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``colorglove_train_hand_classifiers``."""
     config = share_dir() / 'config'
     parser = tool_parser(__doc__, raw_description=True, json_help=None)
-    parser.add_argument('--what', choices=('gestures', 'letters', 'both', 'letter_images'),
+    parser.add_argument('--what', choices=('gestures', 'letters', 'both', 'letter_images',
+                                           'gesture_images'),
                         default='both')
     parser.add_argument('--first-seed', type=int, default=1000)
     parser.add_argument('--gesture-sequences', type=int, default=12)
@@ -146,6 +153,10 @@ def main(argv: list[str] | None = None) -> int:
                         help='with --what letter_images: the spelling training seeds rendered')
     parser.add_argument('--image-words', type=int, default=4,
                         help='words per rendered spelling sequence')
+    parser.add_argument('--image-episodes', type=int, default=30,
+                        help='episodes per rendered gesture sequence')
+    parser.add_argument('--gesture-image-output', type=Path,
+                        default=share_dir() / GESTURE_IMAGE_CLASSIFIER)
     parser.add_argument('--image-every', type=int, default=5,
                         help='every how many-th frame of a hold is rendered')
     parser.add_argument('--image-output', type=Path,
@@ -176,8 +187,8 @@ def main(argv: list[str] | None = None) -> int:
                           for s in args.tracker_seeds],
                          f'--spelling-sequences {args.spelling_sequences} --words {args.words} '
                          f'--tracker-words {args.tracker_words}'))
-        if args.what == 'letter_images':
-            return _train_letter_images(args, model, config)
+        if args.what in ('letter_images', 'gesture_images'):
+            return _train_images(args, model, config)
         tracker = None
         if args.tracker_seeds:
             from colorglove_ros.core.evaluation.scripted_tracking import ScriptedTracker
@@ -220,8 +231,9 @@ def main(argv: list[str] | None = None) -> int:
     return run_tool('colorglove_train_hand_classifiers', body)
 
 
-def _train_letter_images(args: Any, model: HandModel, config: Path) -> int:
-    """``--what letter_images``: the image evidence's letter classifier (module docstring)."""
+def _train_images(args: Any, model: HandModel, config: Path) -> int:
+    """``--what letter_images`` / ``gesture_images``: the image evidence's letter or gesture
+    classifier (module docstring)."""
     from colorglove_ros.core.evaluation.scripted_tracking import ScriptedTracker
 
     if not args.image_seeds or any(s < args.first_seed for s in args.image_seeds):
@@ -230,23 +242,32 @@ def _train_letter_images(args: Any, model: HandModel, config: Path) -> int:
     tracker = ScriptedTracker(find_database(data_dir()), config / 'ik.yaml',
                               config / 'calibration.yaml', data_dir() / 'scripted_tracking',
                               args.labels)
+    letters = args.what == 'letter_images'
+    if letters:
+        name, size, output = 'spelling', f'--image-words {args.image_words}', args.image_output
+        scripts = [(s, eval_spelling.spelling_script(model, s, args.image_words)[0])
+                   for s in args.image_seeds]
+    else:
+        name, size = 'gestures', f'--image-episodes {args.image_episodes}'
+        output = args.gesture_image_output
+        scripts = [(s, eval_gestures.gesture_script(model, s, args.image_episodes))
+                   for s in args.image_seeds]
     try:
-        x, y = image_training_samples(
-            model, [(s, eval_spelling.spelling_script(model, s, args.image_words)[0])
-                    for s in args.image_seeds], tracker, args.image_every)
+        x, y = image_training_samples(model, scripts, tracker, args.image_every, name)
     finally:
         tracker.close()
     seeds = ' '.join(str(s) for s in args.image_seeds)
-    source = (f'colorglove_train_hand_classifiers --what letter_images --image-seeds {seeds} '
-              f'--image-words {args.image_words} --image-every {args.image_every} --labels '
+    source = (f'colorglove_train_hand_classifiers --what {args.what} --image-seeds {seeds} '
+              f'{size} --image-every {args.image_every} --labels '
               f'{args.labels} --model {args.model} --covariance-blend {args.covariance_blend}')
     clf = train_pose_classifier(x, y, OBSERVATION_FEATURES, hidden=args.hidden, seed=args.seed,
                                 alpha=args.alpha, source=source, kind=args.model,
                                 covariance_blend=args.covariance_blend)
-    save_pose_classifier(args.image_output, clf)
+    save_pose_classifier(output, clf)
     accuracy = float(np.mean(np.asarray(clf.classes)[np.argmax(clf.log_proba(x), axis=1)] == y))
-    print_table([{'classifier': 'letter images', 'samples': len(y), 'classes': len(clf.classes),
-                  'training frame accuracy': accuracy, 'file': str(args.image_output)}],
+    print_table([{'classifier': args.what.replace('_', ' '), 'samples': len(y),
+                  'classes': len(clf.classes), 'training frame accuracy': accuracy,
+                  'file': str(output)}],
                 'Trained classifiers')
     return 0
 

@@ -143,3 +143,72 @@ def test_the_letter_image_classifier_learns_from_rendered_hold_frames() -> None:
     assert with_image['hold_letter_accuracy'] == with_image['letter_accuracy'] == 1.0
     with pytest.raises(eval_spelling.SpellingError, match='tracker'):
         eval_spelling.evaluate(seeds, 3, TrackingNoise(), None, image_classifier=image)
+
+
+class _GestureRenderer(_HoldRenderer):
+    """:class:`_HoldRenderer` on gesture scripts: every frame's pose is the flat hand (the
+    pose classifier reads an open hand throughout) and its tiny image shows the frame's class
+    (a gesture or none) as one square of a colour and place of its own."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        from colorglove_ros.core.hand.poses import GESTURE_SHAPES, full_pose
+
+        self.flat = full_pose(MODEL, GESTURE_SHAPES['flat'])
+
+    @staticmethod
+    def _record(truth: ScriptedSequence, frames: np.ndarray) -> dict[str, np.ndarray]:
+        from colorglove_ros.core.hand.gestures import GESTURE_NAMES
+        from colorglove_ros.core.hand.observation_features import empty_observation_record
+
+        record = empty_observation_record(len(frames))
+        for j, i in enumerate(frames):
+            k = (*GESTURE_NAMES, '').index(truth.label[i])
+            record['tiny_labels'][j, 4 * k:4 * k + 8, :8] = 1 + k
+        return record
+
+    def observe(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
+                ) -> tuple[np.ndarray, np.ndarray]:
+        return np.tile(self.flat, (len(truth.poses), 1)), np.ones(len(truth.poses), bool)
+
+
+@pytest.mark.slow
+def test_the_gesture_image_classifier_learns_from_rendered_hold_frames() -> None:
+    """Gesture image samples are the gesture scripts' hold frames (neutral ones labelled
+    none); combined with the pose classifier by the gesture evaluation, the classifier trained
+    on them finds the gestures the image shows where the pose says open hand throughout; the
+    noise model (no observation) refuses an image classifier."""
+    from colorglove_ros.core.hand.gestures import (
+        DEFAULT_GESTURE_CLASSIFIER,
+        GESTURE_FEATURES,
+        NO_GESTURE,
+    )
+    from colorglove_ros.core.hand.observation_features import OBSERVATION_FEATURES
+    from colorglove_ros.core.hand.pose_classifier import (
+        load_pose_classifier,
+        train_pose_classifier,
+    )
+    from colorglove_ros.paths import share_dir
+    from colorglove_ros.tools import eval_gestures
+
+    renderer = _GestureRenderer()
+    seeds = [1300, 1301]
+    scripts = [(s, eval_gestures.gesture_script(MODEL, s, 12)) for s in seeds]
+    x, y = train_hand_classifiers.image_training_samples(MODEL, scripts, renderer, 4,
+                                                         'gestures')
+    assert renderer.calls == [('gestures', 1300, 4), ('gestures', 1301, 4)]
+    truth = script_poses(scripts[0][1])
+    frames = np.concatenate([np.flatnonzero((truth.segment == k) & truth.holding)[::4]
+                             for k in np.unique(truth.segment)])
+    np.testing.assert_array_equal(y[:len(frames)],
+                                  [c or NO_GESTURE for c in truth.label[frames]])
+    jitter = np.random.default_rng(0).normal(0.0, 0.01, x.shape)
+    image = train_pose_classifier(x + jitter, y, OBSERVATION_FEATURES, kind='lda')
+    pose = load_pose_classifier(share_dir() / DEFAULT_GESTURE_CLASSIFIER, GESTURE_FEATURES)
+    alone = eval_gestures.evaluate(seeds, 12, renderer, pose)['rows'][-1]
+    both = eval_gestures.evaluate(seeds, 12, renderer, pose, image_classifier=image,
+                                  image_weight=5.0)['rows'][-1]
+    assert alone['recall'] < 0.5
+    assert both['precision'] == both['recall'] == both['hold_accuracy'] == 1.0
+    with pytest.raises(eval_gestures.GestureError, match='tracker'):
+        eval_gestures.evaluate(seeds, 12, TrackingNoise(), pose, image_classifier=image)

@@ -19,6 +19,13 @@ A finger's curl is its MCP + PIP + DIP flexion over the sum of their upper limit
 (``core/hand/hysteresis.py``: smoothing, on / off thresholds and hold times); a lost hand
 ends every active gesture at once. The confidence of an event is the gesture's smoothed score
 on the frame that decided it (for a loss: 0).
+
+An optional image classifier (the same kind, feature set ``tiny_observation``, on the frame's
+observation: ``core/hand/observation_features.py``) adds ``image_weight`` times its
+log-probabilities to the pose classifier's, renormalised over the classes: a product of the
+two classifiers' probabilities (the image one's raised to the weight), which reads where the
+fingertips' patches lie when the fitted pose puts them elsewhere. A frame without an
+observation is scored from its pose alone.
 """
 from __future__ import annotations
 
@@ -31,12 +38,17 @@ from colorglove_ros.core.hand.frame_evidence import EvidenceGate, FrameEvidence
 from colorglove_ros.core.hand.hysteresis import HoldConfig, ScoreHysteresis
 from colorglove_ros.core.hand.keypoints import FINGERTIP_INDICES, hand_keypoints
 from colorglove_ros.core.hand.model import DOF_NAMES, HandModel
-from colorglove_ros.core.hand.pose_classifier import PoseClassifier
+from colorglove_ros.core.hand.observation_features import OBSERVATION_FEATURES
+from colorglove_ros.core.hand.pose_classifier import (
+    PoseClassifier,
+    add_image_log_proba,
+    pose_features,
+)
 from colorglove_ros.core.validation import check_number
 
 __all__ = [
     'GESTURE_NAMES', 'PINCH_FINGERS', 'EVENT_STATES', 'NO_GESTURE', 'GESTURE_FEATURES',
-    'DEFAULT_GESTURE_CLASSIFIER',
+    'DEFAULT_GESTURE_CLASSIFIER', 'GESTURE_IMAGE_CLASSIFIER', 'DEFAULT_GESTURE_IMAGE_CLASSIFIER',
     'GestureError', 'GestureConfig',
     'GestureFeatures', 'GestureEvent', 'gesture_features', 'gesture_scores',
     'GestureDetector', 'format_event', 'parse_event',
@@ -50,6 +62,11 @@ NO_GESTURE = 'none'               # the classifier's class for a hand doing none
 GESTURE_FEATURES = 'hand_shape'   # the classifier's feature set (pose_classifier.py)
 # the trained classifier, relative to the package root (the nodes' and tools' default)
 DEFAULT_GESTURE_CLASSIFIER = 'config/gesture_classifier.npz'
+# the image evidence's gesture classifier (colorglove_train_hand_classifiers --what
+# gesture_images)
+GESTURE_IMAGE_CLASSIFIER = 'config/gesture_image_classifier.npz'
+# gesture_node's and eval_gestures --tracker's image classifier ('': the pose alone)
+DEFAULT_GESTURE_IMAGE_CLASSIFIER = ''
 _CURL_DOFS = np.array([[DOF_NAMES.index(f'{f}_{j}') for j in ('mcp_flex', 'pip_flex', 'dip_flex')]
                        for f in PINCH_FINGERS])
 
@@ -63,7 +80,8 @@ class GestureConfig:
     """Rule thresholds (pinch distances as a fraction of the hand length, curls in [0, 1]) and
     the width of each logistic ramp, used without a classifier; the hysteresis (``hold``);
     the gate that skips frames of weak tracker evidence (``evidence``: frames whose pose
-    matched fewer than 11 constraints; ``EvidenceGate()`` turns it off)."""
+    matched fewer than 11 constraints; ``EvidenceGate()`` turns it off); the image
+    classifier's weight (``image_weight``, with one)."""
 
     pinch_distance: float = 0.21
     pinch_width: float = 0.025
@@ -75,10 +93,12 @@ class GestureConfig:
     hold: HoldConfig = field(default_factory=lambda: HoldConfig(
         smoothing=0.25, on_score=0.75, off_score=0.3, hold_on_s=0.1, hold_off_s=0.1))
     evidence: EvidenceGate = field(default_factory=lambda: EvidenceGate(min_constraints=11.0))
+    image_weight: float = 0.25
 
     def __post_init__(self) -> None:
+        check_number('image_weight', self.image_weight, low=0.0, error=GestureError)
         for f in fields(self):
-            if f.name not in ('hold', 'evidence'):
+            if f.name not in ('hold', 'evidence', 'image_weight'):
                 check_number(f.name, getattr(self, f.name), low=0.0, low_open=True,
                              error=GestureError)
         if self.extended >= self.curled:
@@ -141,20 +161,26 @@ def gesture_scores(features: GestureFeatures, config: GestureConfig | None = Non
 @dataclass
 class GestureDetector:
     """Turns per-frame scores into start / end events with hysteresis (one per hand); scores
-    from ``classifier`` when given, else from the rules (module docstring)."""
+    from ``classifier`` when given, else from the rules; with an ``image_classifier`` (which
+    needs ``classifier``) combined with the frame's observation (module docstring)."""
 
     model: HandModel
     config: GestureConfig = field(default_factory=GestureConfig)
     classifier: PoseClassifier | None = None
+    image_classifier: PoseClassifier | None = None
 
     def __post_init__(self) -> None:
-        if self.classifier is not None:
-            expected = {*GESTURE_NAMES, NO_GESTURE}
-            if set(self.classifier.classes) != expected or \
-                    self.classifier.feature_set != GESTURE_FEATURES:
-                raise GestureError(f'a gesture classifier must classify {GESTURE_FEATURES!r} '
+        expected = {*GESTURE_NAMES, NO_GESTURE}
+        for clf, features in ((self.classifier, GESTURE_FEATURES),
+                              (self.image_classifier, OBSERVATION_FEATURES)):
+            if clf is not None and (set(clf.classes) != expected or
+                                    clf.feature_set != features):
+                raise GestureError(f'a gesture classifier must classify {features!r} '
                                    f'features into {sorted(expected)}, got '
-                                   f'{self.classifier.feature_set!r} {self.classifier.classes}')
+                                   f'{clf.feature_set!r} {clf.classes}')
+        if self.image_classifier is not None and self.classifier is None:
+            raise GestureError('an image classifier is combined with a pose classifier: '
+                               'give one (the rules have no probabilities)')
         self._hysteresis = ScoreHysteresis(GESTURE_NAMES, self.config.hold)
 
     @property
@@ -171,19 +197,39 @@ class GestureDetector:
         """Forget the history without events (:meth:`update` with None ends the active ones)."""
         self._hysteresis.reset()
 
-    def frame_scores(self, q: np.ndarray) -> dict[str, float]:
-        """One frame's raw score of every gesture."""
+    def log_proba(self, features: np.ndarray, observations: np.ndarray | None = None
+                  ) -> np.ndarray:
+        """(N, C) class log-probabilities (the classifier's classes) of N frames' pose
+        features (``hand_shape``) and, with an image classifier, their observation features
+        (N, F; None: the pose alone), renormalised."""
+        if self.classifier is None:
+            raise GestureError('class probabilities need a classifier')
+        log_p = np.atleast_2d(self.classifier.log_proba(features))
+        if self.image_classifier is None or observations is None:
+            return log_p
+        log_p = add_image_log_proba(log_p, self.classifier.classes, self.image_classifier,
+                                    observations, self.config.image_weight)
+        top = log_p.max(axis=1, keepdims=True)
+        return log_p - top - np.log(np.exp(log_p - top).sum(axis=1, keepdims=True))
+
+    def frame_scores(self, q: np.ndarray, observation: np.ndarray | None = None
+                     ) -> dict[str, float]:
+        """One frame's raw score of every gesture (``observation``: its observation
+        features, read with an image classifier)."""
         if self.classifier is None:
             return gesture_scores(gesture_features(self.model, q), self.config)
-        p = np.exp(self.classifier.pose_log_proba(self.model, q))
+        p = np.exp(self.log_proba(pose_features(self.model, q, GESTURE_FEATURES),
+                                  None if observation is None else np.asarray(observation))[0])
         return {c: float(v) for c, v in zip(self.classifier.classes, p, strict=True)
                 if c != NO_GESTURE}
 
     def update(self, q: np.ndarray | None, stamp: float = 0.0,
-               evidence: FrameEvidence | None = None) -> list[GestureEvent]:
-        """Feed one frame's pose (None: no hand) and the tracker's evidence for it (None:
-        unknown); returns the events it decided. A frame the config's evidence gate finds weak
-        is skipped: it decides nothing."""
+               evidence: FrameEvidence | None = None,
+               observation: np.ndarray | None = None) -> list[GestureEvent]:
+        """Feed one frame's pose (None: no hand), the tracker's evidence for it (None:
+        unknown) and its observation features (None: none; read with an image classifier);
+        returns the events it decided. A frame the config's evidence gate finds weak is
+        skipped: it decides nothing."""
         if q is not None and self.config.evidence.weak(evidence):
             return []
         if q is None:
@@ -192,7 +238,7 @@ class GestureDetector:
             q = np.asarray(q, dtype=float)
             if not np.all(np.isfinite(q)):
                 raise GestureError('pose must be finite')
-            changes = self._hysteresis.update(self.frame_scores(q), stamp)
+            changes = self._hysteresis.update(self.frame_scores(q, observation), stamp)
         return [GestureEvent(t.name, t.state, t.score, t.stamp) for t in changes]
 
 

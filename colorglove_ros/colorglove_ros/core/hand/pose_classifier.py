@@ -25,6 +25,7 @@ classes, the feature set and a line saying how the model was trained.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -36,7 +37,7 @@ from colorglove_ros.core.hand.observation_features import OBSERVATION_FEATURES
 
 __all__ = ['CLASSIFIER_FORMAT', 'CLASSIFIER_FORMAT_VERSION', 'FEATURE_SETS', 'MODEL_KINDS',
            'ClassifierError', 'PoseClassifier', 'pose_features', 'train_pose_classifier',
-           'save_pose_classifier', 'load_pose_classifier']
+           'save_pose_classifier', 'load_pose_classifier', 'add_image_log_proba']
 
 CLASSIFIER_FORMAT = 'colorglove_pose_classifier'
 CLASSIFIER_FORMAT_VERSION = 2     # 2: an optional quadratic layer (``qda``)
@@ -112,6 +113,25 @@ class PoseClassifier:
     def pose_log_proba(self, model: HandModel, q: np.ndarray) -> np.ndarray:
         """Log class probabilities (C,) of one pose (26,)."""
         return self.log_proba(pose_features(model, q, self.feature_set))
+
+
+def add_image_log_proba(log_p: np.ndarray, classes: Sequence[str],
+                        image_classifier: PoseClassifier, observations: np.ndarray,
+                        weight: float) -> np.ndarray:
+    """(N, C) ``log_p`` (class log-probabilities of N frames in ``classes`` order) plus
+    ``weight`` times ``image_classifier``'s log-probabilities of the frames' observation
+    features (N, F), in the same order: a product of the two classifiers' probabilities (the
+    image one's raised to the weight), not normalised."""
+    log_p = np.atleast_2d(np.asarray(log_p, dtype=float))
+    observations = np.atleast_2d(np.asarray(observations, dtype=float))
+    if len(observations) != len(log_p):
+        raise ClassifierError(f'{len(log_p)} frames but {len(observations)} observations')
+    try:
+        order = [image_classifier.classes.index(c) for c in classes]
+    except ValueError as exc:
+        raise ClassifierError(f'the image classifier lacks a class of {tuple(classes)}: '
+                              f'{image_classifier.classes}') from exc
+    return log_p + weight * np.atleast_2d(image_classifier.log_proba(observations))[:, order]
 
 
 def _shrunk_covariance(x: np.ndarray) -> np.ndarray:

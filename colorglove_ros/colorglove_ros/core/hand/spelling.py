@@ -40,7 +40,11 @@ from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.hysteresis import HoldConfig, ScoreHysteresis
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, rotvec_to_matrix
 from colorglove_ros.core.hand.observation_features import OBSERVATION_FEATURES
-from colorglove_ros.core.hand.pose_classifier import PoseClassifier, pose_features
+from colorglove_ros.core.hand.pose_classifier import (
+    PoseClassifier,
+    add_image_log_proba,
+    pose_features,
+)
 from colorglove_ros.core.hand.poses import LETTER_SHAPES
 from colorglove_ros.core.validation import check_number
 
@@ -138,8 +142,6 @@ class LetterClassifier:
         self.image_classifier = image_classifier
         if classifier is not None:
             self._order = np.array([classifier.classes.index(k) for k in LETTERS])
-        if image_classifier is not None:
-            self._image_order = np.array([image_classifier.classes.index(k) for k in LETTERS])
         lo, hi = self.model.lower_limits[6:], self.model.upper_limits[6:]
         self._joints = np.stack([np.clip(LETTER_SHAPES[k], lo, hi) for k in LETTERS])
         rest = np.zeros(NUM_DOFS)
@@ -172,8 +174,8 @@ class LetterClassifier:
             return out
         if len(observations) != len(poses):
             raise SpellingError(f'{len(poses)} poses but {len(observations)} observations')
-        image = np.atleast_2d(self.image_classifier.log_proba(observations))[:, self._image_order]
-        return out + self.config.image_weight * image
+        return add_image_log_proba(out, LETTERS, self.image_classifier, observations,
+                                   self.config.image_weight)
 
     def _pose_log_likelihoods(self, poses: np.ndarray) -> np.ndarray:
         """(N, 26) the pose classifier's (or the templates') part."""

@@ -45,12 +45,17 @@ from colorglove_ros.core.hand.frames import (
     finger_joint_names,
 )
 from colorglove_ros.core.hand.model import HandModel, calibrated_hand_model
+from colorglove_ros.core.hand.observation_features import OBSERVATION_FEATURES, frame_features
 from colorglove_ros.core.hand.pose_classifier import PoseClassifier, load_pose_classifier
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
+    blobs_from_observation_msg,
+    crop_from_observation_msg,
     pose_to_joint_state_msg,
     pose_to_wrist_pose_msg,
     skeleton_to_markers_msg,
+    stamp_key,
+    tiny_labels_from_observation_msg,
 )
 from colorglove_ros.ros.frame_camera import FrameCamera
 from colorglove_ros.ros.lean_executor import LeanExecutor
@@ -198,7 +203,8 @@ class StartupError(ColorGloveError):
     """A node cannot start: missing device, file, database or bad configuration."""
 
 
-__all__ += ['StartupError', 'declare_classifier', 'freeze_startup_objects']
+__all__ += ['StartupError', 'declare_classifier', 'declare_image_classifier',
+            'ObservationFeatures', 'freeze_startup_objects']
 
 
 # ------------------------------------------------------------------ start-up
@@ -280,6 +286,53 @@ def declare_classifier(node: Node, executable: str, default: str, feature_set: s
         return None
     with startup_errors(executable):
         return load_pose_classifier(resolve_path(path), feature_set)
+
+
+def declare_image_classifier(node: Node, executable: str, default: str, trained_by: str
+                             ) -> PoseClassifier | None:
+    """Declare ``image_classifier_file`` (a classifier of the image evidence, feature set
+    ``tiny_observation``, trained by ``trained_by``; '' reads the pose alone); return it
+    loaded (None for ''), or stop the start if it cannot be read."""
+    path = declare(node, 'image_classifier_file', default,
+                   f'classifier of the image evidence ({trained_by}); "" reads the pose alone')
+    if not path:
+        return None
+    with startup_errors(executable):
+        return load_pose_classifier(resolve_path(path), OBSERVATION_FEATURES)
+
+
+class ObservationFeatures:
+    """Subscribes to ``hand/observation`` (segmentation_node's ``HandObservation``) and keeps
+    each found hand's observation features (``core.hand.observation_features``) by stamp until
+    the pose of that stamp takes them (:meth:`pop`); the oldest of more than ``kept`` go."""
+
+    def __init__(self, node: Node, kept: int = 30) -> None:
+        from colorglove_msgs.msg import HandObservation
+
+        self.node = node
+        self.kept = kept
+        self.features: dict[tuple[int, int], np.ndarray] = {}
+        node.create_subscription(HandObservation, OBSERVATION_TOPIC, self.on_observation, 10)
+
+    def on_observation(self, msg: Any) -> None:
+        """Keep a found hand's observation features."""
+        if not msg.hand_found or not len(msg.tiny_labels):
+            return
+        try:
+            features = frame_features(tiny_labels_from_observation_msg(msg),
+                                      crop_from_observation_msg(msg),
+                                      blobs_from_observation_msg(msg))
+        except (ColorGloveError, ValueError) as exc:
+            self.node.get_logger().warn(f'bad observation: {exc}', throttle_duration_sec=1.0)
+            return
+        self.features[stamp_key(msg.header.stamp)] = features
+        while len(self.features) > self.kept:
+            del self.features[next(iter(self.features))]
+
+    def pop(self, stamp: Any) -> np.ndarray | None:
+        """The features of the observation of ``stamp`` (a ``builtin_interfaces/Time``), taken
+        out; None when it has not come."""
+        return self.features.pop(stamp_key(stamp), None)
 
 
 CAMERA_INFO_TOPIC = 'camera/camera_info'

@@ -5,7 +5,11 @@ each as a ``colorglove_msgs/GestureEvent`` on ``hand/gestures`` and, as before, 
 The evidence of each frame's own ``tracking:`` status line (``core.hand.frame_evidence``,
 paired by the frame's stamp) gates it (``evidence_min_constraints``, default the core's;
 ``evidence_max_reprojection_px``, default off; 0 turns either off): a frame of weak evidence
-decides nothing."""
+decides nothing. With an ``image_classifier_file`` (``colorglove_train_hand_classifiers --what
+gesture_images``; default the core's, none) it also subscribes to ``hand/observation``
+(segmentation_node's ``colorglove_msgs/HandObservation``) and gives each pose the observation
+of its own stamp, combined with the pose classifier (``image_weight``); a pose whose
+observation has not come is scored from the pose alone."""
 from __future__ import annotations
 
 import math
@@ -27,6 +31,7 @@ from colorglove_ros.core.hand.frame_evidence import (
 from colorglove_ros.core.hand.frames import finger_joint_names, hand_root_frame
 from colorglove_ros.core.hand.gestures import (
     DEFAULT_GESTURE_CLASSIFIER,
+    DEFAULT_GESTURE_IMAGE_CLASSIFIER,
     GESTURE_FEATURES,
     GestureConfig,
     GestureDetector,
@@ -37,17 +42,21 @@ from colorglove_ros.core.hand.poses import full_pose
 from colorglove_ros.ros.conversions import (
     gesture_event_to_msg,
     pose_from_joint_state_msg,
+    stamp_key,
     stamp_to_seconds,
 )
 from colorglove_ros.ros.nodes.common import (
     JOINT_STATES_TOPIC,
     TRACKING_STATUS_TOPIC,
+    ObservationFeatures,
     StartupError,
     declare,
     declare_classifier,
     declare_frame_prefix,
+    declare_image_classifier,
     hand_model_from_calibration,
     run_node,
+    startup_errors,
 )
 from colorglove_ros.ros.pose_pairing import is_no_hand_status
 
@@ -82,10 +91,20 @@ class GestureNode(Node):
         max_reprojection = declare(self, 'evidence_max_reprojection_px', 0.0,
                                    'skip frames whose newest tracking status has a larger '
                                    'reprojection error, px (0: off)', 0.0, 1000.0)
+        image = declare_image_classifier(self, 'gesture_node', DEFAULT_GESTURE_IMAGE_CLASSIFIER,
+                                         'colorglove_train_hand_classifiers --what '
+                                         'gesture_images')
+        image_weight = declare(self, 'image_weight', GestureConfig().image_weight,
+                               "the image classifier's weight", 0.0, 100.0)
         gate = EvidenceGate(max_reprojection or math.inf, min_constraints)
-        self.detector = GestureDetector(self.model, GestureConfig(evidence=gate), classifier)
-        # each JointState waits for its frame's status line (same stamp)
-        self.pairer: EvidencePairer[tuple[np.ndarray, Time]] = EvidencePairer()
+        with startup_errors('gesture_node'):
+            self.detector = GestureDetector(
+                self.model, GestureConfig(evidence=gate, image_weight=float(image_weight)),
+                classifier, image)
+        self.observations = ObservationFeatures(self) if image is not None else None
+        # each JointState (with its observation's features) waits for its frame's status line
+        self.pairer: EvidencePairer[tuple[np.ndarray, Time, np.ndarray | None]] = \
+            EvidencePairer()
         self.event_pub = self.create_publisher(GestureEventMsg, 'hand/gestures', 10)
         self.text_pub = self.create_publisher(String, 'hand/gesture_events', 10) \
             if self.publish_text else None
@@ -107,13 +126,14 @@ class GestureNode(Node):
             self.get_logger().warn(f'bad JointState: {exc}', throttle_duration_sec=1.0)
             return
         stamp = msg.header.stamp
-        self._detect(self.pairer.add_frame((stamp.sec, stamp.nanosec), (q, stamp)))
+        observation = None if self.observations is None else self.observations.pop(stamp)
+        self._detect(self.pairer.add_frame(stamp_key(stamp), (q, stamp, observation)))
 
-    def _detect(self, frames: list[tuple[tuple[np.ndarray, Time], FrameEvidence | None]]
-                ) -> None:
-        for (q, stamp), evidence in frames:
+    def _detect(self, frames: list[tuple[tuple[np.ndarray, Time, np.ndarray | None],
+                                         FrameEvidence | None]]) -> None:
+        for (q, stamp, observation), evidence in frames:
             try:
-                events = self.detector.update(q, stamp_to_seconds(stamp), evidence)
+                events = self.detector.update(q, stamp_to_seconds(stamp), evidence, observation)
             except ValueError as exc:
                 self.get_logger().warn(f'bad JointState: {exc}', throttle_duration_sec=1.0)
                 continue

@@ -155,3 +155,80 @@ def test_frames_of_weak_evidence_decide_nothing() -> None:
     plain = GestureDetector(MODEL, GestureConfig(hold=hold, evidence=EvidenceGate()))
     events = [e for k in range(15) for e in plain.update(flat, k / 30, weak)]
     assert [(e.name, e.state) for e in events] == [('open_hand', 'start')]
+
+
+def _gesture_image_classifier() -> PoseClassifier:
+    """A classifier of 'tiny_observation' features that reads each gesture class (and none)
+    from one feature column (column k high: class k)."""
+    from colorglove_ros.core.hand.gestures import GESTURE_NAMES
+    from colorglove_ros.core.hand.observation_features import (
+        OBSERVATION_FEATURES,
+        num_observation_features,
+    )
+    from colorglove_ros.core.hand.pose_classifier import train_pose_classifier
+
+    classes = (*GESTURE_NAMES, NO_GESTURE)
+    rng = np.random.default_rng(0)
+    x = rng.normal(0.0, 0.1, (len(classes) * 20, num_observation_features()))
+    y = np.repeat(np.array(classes), 20)
+    for k, c in enumerate(classes):
+        x[y == c, k] += 3.0
+    return train_pose_classifier(x, y, OBSERVATION_FEATURES, kind='lda')
+
+
+def test_the_image_classifier_is_multiplied_with_the_pose_classifier() -> None:
+    """With an image classifier, a frame's gesture probabilities are the pose classifier's
+    times the image one's raised to image_weight, renormalised: an open hand whose image says
+    index pinch starts a pinch when the image weighs enough, the open hand at weight 0 and
+    without an observation; the image needs a pose classifier and gesture classes."""
+    from colorglove_ros.core.hand.gestures import GESTURE_NAMES
+    from colorglove_ros.core.hand.observation_features import num_observation_features
+
+    image = _gesture_image_classifier()
+    says_pinch = np.zeros(num_observation_features())
+    says_pinch[GESTURE_NAMES.index('pinch_index')] = 3.0
+    q = _pose('flat')
+
+    def starts(weight: float, observation: np.ndarray | None) -> list[str]:
+        detector = GestureDetector(MODEL, GestureConfig(image_weight=weight), _shipped(),
+                                   image)
+        events = []
+        for k in range(20):
+            events += detector.update(q, k / 30.0, None, observation)
+        return [e.name for e in events if e.state == 'start']
+
+    assert starts(0.0, says_pinch) == ['open_hand']
+    assert starts(20.0, None) == ['open_hand']
+    assert starts(20.0, says_pinch) == ['pinch_index']
+    detector = GestureDetector(MODEL, GestureConfig(image_weight=1.0), _shipped(), image)
+    pose_part = _shipped().pose_log_proba(MODEL, q)
+    image_part = image.log_proba(says_pinch)[[image.classes.index(c)
+                                              for c in _shipped().classes]]
+    product = np.exp(pose_part + image_part)
+    scores = detector.frame_scores(q, says_pinch)
+    for c, p in zip(_shipped().classes, product / product.sum(), strict=True):
+        if c != NO_GESTURE:
+            assert scores[c] == pytest.approx(p)
+    with pytest.raises(GestureError, match='pose classifier'):
+        GestureDetector(MODEL, image_classifier=image)
+    with pytest.raises(GestureError, match='tiny_observation'):
+        GestureDetector(MODEL, classifier=_shipped(), image_classifier=_shipped())
+    with pytest.raises(GestureError):
+        GestureConfig(image_weight=-1.0)
+
+
+def test_the_shipped_gesture_image_classifier_reads_the_gesture_classes() -> None:
+    """config/gesture_image_classifier.npz classifies tiny_observation features into the
+    gestures and none, trained on rendered gesture holds, and the detector takes it beside the
+    shipped pose classifier."""
+    from colorglove_ros.core.hand.gestures import GESTURE_IMAGE_CLASSIFIER, GESTURE_NAMES
+    from colorglove_ros.core.hand.observation_features import (
+        OBSERVATION_FEATURES,
+        num_observation_features,
+    )
+
+    clf = load_pose_classifier(share_dir() / GESTURE_IMAGE_CLASSIFIER, OBSERVATION_FEATURES)
+    assert set(clf.classes) == {*GESTURE_NAMES, NO_GESTURE}
+    assert clf.mean.shape == (num_observation_features(),)
+    assert '--what gesture_images' in clf.source
+    GestureDetector(MODEL, classifier=_shipped(), image_classifier=clf)

@@ -182,14 +182,25 @@ def test_spelling_node_commits_held_letters() -> None:
     assert text[-1].data == 'GO'
 
 
+def _observation(k: int, tiny: np.ndarray) -> object:
+    """Frame ``k``'s HandObservation of a found hand with the tiny label image ``tiny``."""
+    from array import array
+
+    from colorglove_msgs.msg import HandObservation, PatchBlob
+
+    return HandObservation(
+        header=_frame(k), hand_found=True, image_width=640, image_height=480,
+        tiny_labels=array('B', tiny.tobytes()), crop_scale=4.0, crop_offset_x=100.0,
+        crop_offset_y=80.0, blobs=[PatchBlob(color_label=1, x=220.0, y=180.0,
+                                             pixel_count=1024)])
+
+
 def test_spelling_node_reads_each_poses_own_observation_with_an_image_classifier(tmp_path
                                                                                  ) -> None:
     """With an image_classifier_file the node subscribes to hand/observation and gives each
     pose the observation of its stamp: G poses whose tiny images an image classifier reads as
     S (weighted far above the pose) commit S; the node without one ('') commits G."""
-    from array import array
-
-    from colorglove_msgs.msg import HandObservation, PatchBlob
+    from colorglove_msgs.msg import HandObservation
 
     from colorglove_ros.core.hand.observation_features import (
         OBSERVATION_FEATURES,
@@ -224,11 +235,7 @@ def test_spelling_node_reads_each_poses_own_observation_with_an_image_classifier
             wrist_pub = h.publisher(PoseStamped, 'hand/wrist_pose')
             h.settle(0.3)
             for k in range(30):
-                observation_pub.publish(HandObservation(
-                    header=_frame(k), hand_found=True, image_width=640, image_height=480,
-                    tiny_labels=array('B', tiny.tobytes()), crop_scale=4.0, crop_offset_x=100.0,
-                    crop_offset_y=80.0, blobs=[PatchBlob(color_label=1, x=220.0, y=180.0,
-                                                         pixel_count=1024)]))
+                observation_pub.publish(_observation(k, tiny))
                 h.settle(0.005)
                 joints_pub.publish(pose_to_joint_state_msg(q, _frame(k)))
                 wrist_pub.publish(pose_to_wrist_pose_msg(q, _frame(k)))
@@ -236,3 +243,53 @@ def test_spelling_node_reads_each_poses_own_observation_with_an_image_classifier
             assert h.spin_until(lambda seen=letters: len(seen) >= 1, 10.0)
             got[name] = [m.data for m in letters]
     assert got == {'image': ['S'], 'pose': ['G']}
+
+
+def test_gesture_node_reads_each_poses_own_observation_with_an_image_classifier(tmp_path
+                                                                                ) -> None:
+    """With an image_classifier_file the gesture node subscribes to hand/observation and
+    gives each pose the observation of its stamp: open-hand poses whose tiny images an image
+    classifier reads as an index pinch (weighted far above the pose) start a pinch; the node
+    without one ('', the default) starts the open hand."""
+    from colorglove_msgs.msg import HandObservation
+
+    from colorglove_ros.core.hand.gestures import GESTURE_NAMES, NO_GESTURE
+    from colorglove_ros.core.hand.observation_features import (
+        OBSERVATION_FEATURES,
+        num_observation_features,
+    )
+    from colorglove_ros.core.hand.pose_classifier import (
+        save_pose_classifier,
+        train_pose_classifier,
+    )
+
+    classes = (*GESTURE_NAMES, NO_GESTURE)
+    rng = np.random.default_rng(0)
+    x = rng.normal(0.0, 0.05, (len(classes) * 20, num_observation_features()))
+    y = np.repeat(np.array(classes), 20)
+    for k, c in enumerate(classes):
+        x[y == c, k] += 1.0                 # class k: colour 1 fills grid cell k
+    path = save_pose_classifier(tmp_path / 'image.npz', train_pose_classifier(
+        x, y, OBSERVATION_FEATURES, kind='lda'))
+    tiny = np.zeros((40, 40), np.uint8)
+    cell = classes.index('pinch_index')
+    tiny[8 * (cell // 5):8 * (cell // 5) + 8, 8 * (cell % 5):8 * (cell % 5) + 8] = 1
+    q = _pose(GESTURE_SHAPES['flat'])
+    got = {}
+    for name, overrides in (('image', params(image_classifier_file=str(path),
+                                             image_weight=20.0)),
+                            ('pose', params())):
+        with running(lambda ctx, o=overrides: GestureNode(context=ctx,
+                                                          parameter_overrides=o)) as h:
+            events = h.collect(String, 'hand/gesture_events')
+            observation_pub = h.publisher(HandObservation, 'hand/observation')
+            joints_pub = h.publisher(JointState, 'hand/joint_states')
+            h.settle(0.3)
+            for k in range(15):
+                observation_pub.publish(_observation(k, tiny))
+                h.settle(0.005)
+                joints_pub.publish(pose_to_joint_state_msg(q, _frame(k)))
+                h.settle(0.005)
+            assert h.spin_until(lambda seen=events: len(seen) >= 1, 10.0)
+            got[name] = events[0].data.split(':')[:2]
+    assert got == {'image': ['pinch_index', 'start'], 'pose': ['open_hand', 'start']}
