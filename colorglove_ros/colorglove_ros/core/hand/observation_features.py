@@ -84,17 +84,18 @@ def num_observation_features() -> int:
 def _colour_maps(tiny: np.ndarray) -> np.ndarray:
     """(N, 10 * GRID * GRID) share of each grid cell held by each colour."""
     n, h, w = tiny.shape
+    cells = GRID * GRID
     rows = np.minimum(np.arange(h) * GRID // h, GRID - 1)
     cols = np.minimum(np.arange(w) * GRID // w, GRID - 1)
     cell = (rows[:, None] * GRID + cols[None, :]).ravel()
-    cell_size = np.bincount(cell, minlength=GRID * GRID).astype(float)
+    cell_size = np.bincount(cell, minlength=cells).astype(float)
     labels = tiny.reshape(n, -1).astype(np.int64)
-    out = np.zeros((n, NUM_COLORS, GRID * GRID))
-    for k in range(1, NUM_COLORS + 1):
-        hit = labels == k
-        for c in range(GRID * GRID):
-            out[:, k - 1, c] = hit[:, cell == c].sum(axis=1)
-    return (out / cell_size).reshape(n, -1)
+    # one count of (frame, colour, cell) triples; labels outside 1..NUM_COLORS count nowhere
+    glove = (labels >= 1) & (labels <= NUM_COLORS)
+    frame = np.broadcast_to(np.arange(n)[:, None], labels.shape)
+    slot = ((frame * NUM_COLORS + labels - 1) * cells + cell[None, :])[glove]
+    out = np.bincount(slot, minlength=n * NUM_COLORS * cells).astype(float)
+    return (out.reshape(n, NUM_COLORS, cells) / cell_size).reshape(n, -1)
 
 
 def _glove_frame(tiny: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -125,3 +125,26 @@ def test_the_shipped_image_classifier_reads_the_26_letters_from_the_observation(
     assert set(clf.classes) == set(LETTERS) and clf.mean.shape == (num_observation_features(),)
     assert '--what letter_images' in clf.source
     LetterClassifier(model=MODEL, image_classifier=clf)
+
+
+def test_the_colour_maps_are_each_cells_share_of_each_colour() -> None:
+    """The per-colour map against a pixel-by-pixel count: each grid cell's pixels of each glove
+    colour over the cell's pixels, frame by frame; labels outside 1..10 count nowhere."""
+    from colorglove_ros.core.conventions import NUM_COLORS
+    from colorglove_ros.core.hand.observation_features import _colour_maps
+
+    rng = np.random.default_rng(3)
+    tiny = rng.integers(0, NUM_COLORS + 4, (5, 40, 40)).astype(np.uint8)
+    expected = np.zeros((5, NUM_COLORS, GRID, GRID))
+    cell_pixels = np.zeros((GRID, GRID))
+    for y in range(40):
+        for x in range(40):
+            row, col = min(y * GRID // 40, GRID - 1), min(x * GRID // 40, GRID - 1)
+            cell_pixels[row, col] += 1
+            for i in range(5):
+                if 1 <= tiny[i, y, x] <= NUM_COLORS:
+                    expected[i, tiny[i, y, x] - 1, row, col] += 1
+    expected /= cell_pixels
+    got = _colour_maps(tiny)
+    assert got.shape == (5, NUM_COLORS * GRID * GRID)
+    assert np.allclose(got, expected.reshape(5, -1), rtol=0, atol=1e-12)
