@@ -47,6 +47,7 @@ from colorglove_ros.core.evaluation.scripted_hands import (
     TrackingNoise,
     classify_holds,
     evidence_seen,
+    observation_seen,
     realised_joint_mae_deg,
     script_poses,
 )
@@ -66,7 +67,6 @@ from colorglove_ros.core.hand.gestures import (
     gesture_features,
 )
 from colorglove_ros.core.hand.model import DIP_PIP_RATIO, HandModel
-from colorglove_ros.core.hand.observation_features import record_features
 from colorglove_ros.core.hand.pose_classifier import PoseClassifier, pose_features
 from colorglove_ros.core.hand.poses import (
     GESTURE_SHAPES,
@@ -254,12 +254,8 @@ def run_sequence(model: HandModel, seed: int, episodes: int, source: PoseSource,
     seen, found = source.observe('gestures', seed, truth, model)
     evidence = evidence_seen(source, 'gestures', seed, truth, model)
     detector = GestureDetector(model, config, classifier, image_classifier)
-    observed = None
-    if image_classifier is not None:
-        if not hasattr(source, 'observation'):
-            raise GestureError("an image classifier needs the frames' observation: run on "
-                               'the tracker (--tracker)')
-        observed = record_features(source.observation('gestures', seed, truth, model))
+    observed = (None if image_classifier is None
+                else observation_seen(source, 'gestures', seed, truth, model, GestureError))
     events: list[GestureEvent] = []
     active = np.zeros((len(seen), len(GESTURE_NAMES)), dtype=bool)
     for i, (q, ok, t) in enumerate(zip(seen, found, truth.times, strict=True)):

@@ -44,12 +44,12 @@ from colorglove_ros.core.evaluation.scripted_hands import (
     Segment,
     TrackingNoise,
     classify_holds,
+    observation_seen,
     realised_joint_mae_deg,
     script_poses,
 )
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.model import HandModel
-from colorglove_ros.core.hand.observation_features import record_features
 from colorglove_ros.core.hand.pose_classifier import PoseClassifier
 from colorglove_ros.core.hand.poses import LETTER_SHAPES, finger_limits
 from colorglove_ros.core.hand.spelling import (
@@ -183,9 +183,6 @@ def evaluate(seeds: Sequence[int], words_per_sequence: int = 8,
     source = TrackingNoise() if source is None else source
     if image_weight is not None:
         config = replace(config or SpellingConfig(), image_weight=image_weight)
-    if image_classifier is not None and not hasattr(source, 'observation'):
-        raise SpellingError('an image classifier needs the frames\' observation: run on the '
-                            'tracker (--tracker)')
     pairs: list[tuple[str, str]] = []
     hold_pairs: list[tuple[str, str]] = []
     insertions = 0
@@ -198,10 +195,9 @@ def evaluate(seeds: Sequence[int], words_per_sequence: int = 8,
         seen, found = source.observe('spelling', seed, truth, model)
         maes.append(realised_joint_mae_deg(truth.poses, seen, found))
         speller = Speller(config, model, classifier, image_classifier)
-        observed: Any = [None] * len(seen)
-        if image_classifier is not None:
-            record = source.observation('spelling', seed, truth, model)
-            observed = record_features(record)
+        observed: Any = ([None] * len(seen) if image_classifier is None
+                         else observation_seen(source, 'spelling', seed, truth, model,
+                                              SpellingError))
         frame_log_likelihoods = np.full((len(seen), len(LETTERS)), np.nan)
         frame_log_likelihoods[found] = speller.classifier.log_likelihoods_batch(
             seen[found], None if image_classifier is None else observed[found])

@@ -38,6 +38,7 @@ from colorglove_ros.core.synthetic.sequences import min_jerk
 from colorglove_ros.core.yaml_io import load_yaml_mapping
 
 __all__ = ['ScriptError', 'Segment', 'ScriptedSequence', 'TrackingNoise', 'script_poses',
+           'observation_seen',
            'ar1_noise', 'PoseSource', 'fit_tracking_noise', 'save_tracking_noise',
            'load_tracking_noise', 'classify_holds', 'evidence_seen',
            'NOISE_FORMAT', 'NOISE_FORMAT_VERSION', 'NOISE_SEED_OFFSET', 'realised_joint_mae_deg']
@@ -149,6 +150,20 @@ def evidence_seen(source: PoseSource, name: str, seed: int, truth: ScriptedSeque
     return [FrameEvidence(float(c), float(r)) if np.isfinite(c) else None
             for c, r in zip(ev['constraints'], ev['reprojection_px'], strict=True)]
 
+
+
+def observation_seen(source: PoseSource, name: str, seed: int, truth: ScriptedSequence,
+                     model: HandModel, error: type[Exception] = ScriptError) -> np.ndarray:
+    """The observation features (N, F; ``core.hand.observation_features``) of every frame of
+    sequence ``name`` / ``seed`` as ``source`` saw it, for an image classifier; a source that
+    records no observation (the noise model) is refused with ``error``."""
+    from colorglove_ros.core.hand.observation_features import record_features
+
+    record = getattr(source, 'observation', None)
+    if record is None:
+        raise error("an image classifier needs the frames' observation: run on the "
+                          'tracker (--tracker)')
+    return record_features(record(name, seed, truth, model))
 
 @dataclass(frozen=True)
 class TrackingNoise:

@@ -89,3 +89,33 @@ def test_evidence_seen_is_each_frames_own() -> None:
     assert seen == [FrameEvidence(12.0, 2.0), None, FrameEvidence(9.0, 4.0),
                     FrameEvidence(15.0, 1.0)]
     assert evidence_seen(SimpleNamespace(), 'gestures', 1, truth, None) == [None] * 4
+
+
+def test_observation_seen_reads_the_sources_record_and_refuses_the_noise_model() -> None:
+    """The image classifiers' input in the evaluations: the recorded observation of each frame
+    as features (``record_features``); a source that records none (the noise model) is a clear
+    error, not an image-free run."""
+    from types import SimpleNamespace
+
+    from colorglove_ros.core.evaluation.scripted_hands import (
+        ScriptError,
+        TrackingNoise,
+        observation_seen,
+    )
+    from colorglove_ros.core.hand.observation_features import (
+        empty_observation_record,
+        num_observation_features,
+        record_features,
+    )
+
+    record = empty_observation_record(3)
+    record['tiny_labels'][1, 10:20, 10:20] = 4
+    asked = []
+    source = SimpleNamespace(observation=lambda name, seed, t, model: asked.append(
+        (name, seed)) or record)
+    seen = observation_seen(source, 'spelling', 7, None, None)
+    assert asked == [('spelling', 7)]
+    assert seen.shape == (3, num_observation_features())
+    assert np.array_equal(seen, record_features(record))
+    with pytest.raises(ScriptError, match="needs the frames' observation"):
+        observation_seen(TrackingNoise(), 'gestures', 1, None, None)
