@@ -288,17 +288,20 @@ def declare_classifier(node: Node, executable: str, default: str, feature_set: s
         return load_pose_classifier(resolve_path(path), feature_set)
 
 
-def declare_image_classifier(node: Node, executable: str, default: str, trained_by: str
-                             ) -> PoseClassifier | None:
+def declare_image_classifier(node: Node, executable: str, default: str, trained_by: str,
+                             default_weight: float) -> tuple[PoseClassifier | None, float]:
     """Declare ``image_classifier_file`` (a classifier of the image evidence, feature set
-    ``tiny_observation``, trained by ``trained_by``; '' reads the pose alone); return it
-    loaded (None for ''), or stop the start if it cannot be read."""
+    ``tiny_observation``, trained by ``trained_by``; '' reads the pose alone) and its
+    ``image_weight`` (default ``default_weight``, the core config's); return the classifier
+    loaded (None for '') and the weight, or stop the start if it cannot be read."""
     path = declare(node, 'image_classifier_file', default,
                    f'classifier of the image evidence ({trained_by}); "" reads the pose alone')
+    weight = float(declare(node, 'image_weight', default_weight,
+                           "the image classifier's weight", 0.0, 100.0))
     if not path:
-        return None
+        return None, weight
     with startup_errors(executable):
-        return load_pose_classifier(resolve_path(path), OBSERVATION_FEATURES)
+        return load_pose_classifier(resolve_path(path), OBSERVATION_FEATURES), weight
 
 
 class ObservationFeatures:

@@ -91,15 +91,14 @@ class GestureNode(Node):
         max_reprojection = declare(self, 'evidence_max_reprojection_px', 0.0,
                                    'skip frames whose newest tracking status has a larger '
                                    'reprojection error, px (0: off)', 0.0, 1000.0)
-        image = declare_image_classifier(self, 'gesture_node', DEFAULT_GESTURE_IMAGE_CLASSIFIER,
-                                         'colorglove_train_hand_classifiers --what '
-                                         'gesture_images')
-        image_weight = declare(self, 'image_weight', GestureConfig().image_weight,
-                               "the image classifier's weight", 0.0, 100.0)
+        image, image_weight = declare_image_classifier(
+            self, 'gesture_node', DEFAULT_GESTURE_IMAGE_CLASSIFIER,
+            'colorglove_train_hand_classifiers --what gesture_images',
+            GestureConfig().image_weight)
         gate = EvidenceGate(max_reprojection or math.inf, min_constraints)
         with startup_errors('gesture_node'):
             self.detector = GestureDetector(
-                self.model, GestureConfig(evidence=gate, image_weight=float(image_weight)),
+                self.model, GestureConfig(evidence=gate, image_weight=image_weight),
                 classifier, image)
         self.observations = ObservationFeatures(self) if image is not None else None
         # each JointState (with its observation's features) waits for its frame's status line

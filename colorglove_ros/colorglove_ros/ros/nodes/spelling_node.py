@@ -52,13 +52,12 @@ class SpellingNode(Node):
         frame_prefix = declare_frame_prefix(self, 'spelling_node')
         classifier = declare_classifier(self, 'spelling_node', DEFAULT_LETTER_CLASSIFIER,
                                         LETTER_FEATURES, 'letter templates')
-        image = declare_image_classifier(self, 'spelling_node', DEFAULT_LETTER_IMAGE_CLASSIFIER,
-                                         'colorglove_train_hand_classifiers --what '
-                                         'letter_images')
-        image_weight = declare(self, 'image_weight', SpellingConfig().image_weight,
-                               "the image classifier's weight", 0.0, 100.0)
+        image, image_weight = declare_image_classifier(
+            self, 'spelling_node', DEFAULT_LETTER_IMAGE_CLASSIFIER,
+            'colorglove_train_hand_classifiers --what letter_images',
+            SpellingConfig().image_weight)
         with startup_errors('spelling_node'):
-            config = SpellingConfig(image_weight=float(image_weight))
+            config = SpellingConfig(image_weight=image_weight)
         self.speller = Speller(config, model, classifier, image)
         self.observations = ObservationFeatures(self) if image is not None else None
         self.text = ''
