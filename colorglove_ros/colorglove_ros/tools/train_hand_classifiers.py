@@ -150,17 +150,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--letter-output', type=Path,
                         default=share_dir() / TRAINED_LETTER_CLASSIFIER)
     parser.add_argument('--image-seeds', type=int, nargs='*', default=[],
-                        help='with --what letter_images: the spelling training seeds rendered')
+                        help='with --what letter_images / gesture_images: the training '
+                        'seeds whose scripts are rendered')
     parser.add_argument('--image-words', type=int, default=4,
                         help='words per rendered spelling sequence')
     parser.add_argument('--image-episodes', type=int, default=30,
                         help='episodes per rendered gesture sequence')
     parser.add_argument('--gesture-image-output', type=Path,
-                        default=share_dir() / GESTURE_IMAGE_CLASSIFIER)
+                        default=share_dir() / GESTURE_IMAGE_CLASSIFIER,
+                        help='with --what gesture_images: the file written')
     parser.add_argument('--image-every', type=int, default=5,
                         help='every how many-th frame of a hold is rendered')
     parser.add_argument('--image-output', type=Path,
-                        default=share_dir() / LETTER_IMAGE_CLASSIFIER)
+                        default=share_dir() / LETTER_IMAGE_CLASSIFIER,
+                        help='with --what letter_images: the file written')
     args = parser.parse_args(argv)
 
     def body() -> int:
