@@ -6,24 +6,31 @@ The same results as the numpy code they replaced, bit for bit: the Hamming dista
 query -> candidate sums are integers; the candidate -> query sums add float32 values in numpy's
 pairwise order over each candidate's padded row (``np.add.reduce`` along a contiguous row:
 eight accumulators in blocks of up to 128, halves above), so the re-rank's distances keep their
-bits. Every kernel has one signature (:func:`compile_kernels`, cached on disk) and releases
-the GIL, so a worker thread can run one while the caller runs another.
+bits. The gathers read the database's rows at random (one row per candidate, much larger than
+the caches): each asks the memory for the rows :data:`PREFETCH_AHEAD` candidates ahead while it
+sums the current one (a prefetch hint: no result depends on it). Every kernel has one
+signature (:func:`compile_kernels`, cached on disk) and releases the GIL, so a worker thread
+can run one while the caller runs another.
 """
 from __future__ import annotations
 
 import numba
 import numpy as np
-from numba.core import types
+from llvmlite import ir
+from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['hamming_histogram', 'at_most', 'query_sums', 'candidate_sums', 'compile_kernels',
-           'PAIRWISE_BLOCK']
+           'PAIRWISE_BLOCK', 'PREFETCH_AHEAD']
 
 PAIRWISE_BLOCK = 128
 """numpy's pairwise summation block (``PW_BLOCKSIZE``): rows up to this length are summed with
 eight accumulators, longer ones split in two halves (multiples of 8)."""
+
+PREFETCH_AHEAD = 2
+"""How many candidates ahead the re-rank's gathers ask for a row to be read into the cache."""
 
 _JIT = {'cache': True, 'nogil': True}
 
@@ -35,6 +42,29 @@ def _popcount(typingctx: object, x: object) -> tuple[object, object]:
 
     def codegen(context: object, builder: object, sig: object, args: object) -> object:
         return builder.ctpop(args[0])
+    return signature, codegen
+
+
+@intrinsic
+def _prefetch(typingctx: object, array: object, index: object) -> tuple[object, object]:
+    """Ask for the cache line of ``array[index]`` (1-d, C-contiguous; an index inside it) to be
+    read ahead (LLVM's ``prefetch``: a hint, no load, no fault)."""
+    signature = types.void(array, index)
+
+    def codegen(context: object, builder: object, sig: object, args: object) -> object:
+        array_type = sig.args[0]
+        ary = context.make_array(array_type)(context, builder, args[0])
+        pointer = cgutils.get_item_pointer(context, builder, array_type, ary, [args[1]],
+                                           wraparound=False)
+        byte_pointer = ir.IntType(8).as_pointer()
+        i32 = ir.IntType(32)
+        function = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(ir.VoidType(), [byte_pointer, i32, i32, i32]),
+            'llvm.prefetch.p0')
+        # read, temporal locality 0 (used once), data cache
+        builder.call(function, [builder.bitcast(pointer, byte_pointer), ir.Constant(i32, 0),
+                                ir.Constant(i32, 0), ir.Constant(i32, 1)])
+        return context.get_dummy_value()
     return signature, codegen
 
 
@@ -86,11 +116,15 @@ def at_most(values: np.ndarray, cut: int, dest: np.ndarray) -> int:
 def query_sums(dts: np.ndarray, idx: np.ndarray, row: int, glove_index: np.ndarray,
                out: np.ndarray) -> None:
     """``out[c]`` (uint32) = sum of entry ``idx[c]``'s stored distance transform (row ``row``
-    bytes of the flat ``dts``) at the query's glove pixels ``glove_index``."""
-    for c in range(len(idx)):
+    bytes of the flat ``dts``) at the query's glove pixels ``glove_index``; the same pixels of
+    entry ``idx[c + PREFETCH_AHEAD]`` are prefetched meanwhile."""
+    n = len(idx)
+    for c in range(n):
         base = idx[c] * row
+        ahead = idx[min(c + PREFETCH_AHEAD, n - 1)] * row
         total = 0
         for j in range(len(glove_index)):
+            _prefetch(dts, ahead + glove_index[j])
             total += dts[base + glove_index[j]]
         out[c] = total
 
@@ -177,8 +211,15 @@ def candidate_sums(table: np.ndarray, keys: np.ndarray, idx: np.ndarray, widths:
                    out: np.ndarray) -> None:
     """``out[c]`` (float64) = the float32 sum, in numpy's pairwise order, of ``table`` at the
     first ``widths[c]`` keys of row ``idx[c]`` of ``keys`` (N, K) uint16: what
-    ``table.take(keys[idx[c], :widths[c]], mode='clip').sum()`` gives."""
-    for c in range(len(idx)):
+    ``table.take(keys[idx[c], :widths[c]], mode='clip').sum()`` gives; the keys of row
+    ``idx[c + PREFETCH_AHEAD]`` are prefetched first."""
+    n = len(idx)
+    line = 64 // keys.itemsize
+    for c in range(n):
+        ahead = min(c + PREFETCH_AHEAD, n - 1)
+        row = keys[idx[ahead]]
+        for k in range(0, widths[ahead], line):
+            _prefetch(row, k)
         out[c] = np.float32(0.0) + _pairwise(table, keys[idx[c]], widths[c])
 
 

@@ -142,6 +142,41 @@ def test_query_sums_equal_numpy_gather() -> None:
     np.testing.assert_array_equal(out, want)
 
 
+@pytest.mark.parametrize('count', [0, 1, 2, 3, 5])
+def test_gathers_with_few_candidates_and_the_last_entry(count: int) -> None:
+    """Fewer candidates than the prefetch reaches ahead, the database's last entry among them:
+    the sums are numpy's (the prefetched rows stay inside the arrays)."""
+    rng = np.random.default_rng(count)
+    dts = rng.integers(0, 256, 6 * 1600).astype(np.uint8)
+    glove = np.sort(rng.choice(1600, 300, replace=False)).astype(np.intp)
+    idx = np.append(rng.choice(5, max(count - 1, 0)), 5)[:count].astype(np.intp)
+    out = np.empty(count, np.uint32)
+    lookup_kernel.query_sums(dts, idx, 1600, glove, out)
+    np.testing.assert_array_equal(
+        out, dts.reshape(6, 1600)[idx][:, glove].sum(axis=1, dtype=np.uint32))
+    table = (rng.random(1601) * 40.0).astype(np.float32)
+    keys = rng.integers(0, 1610, (6, 700)).astype(np.uint16)
+    widths = rng.integers(1, 701, count).astype(np.intp)
+    sums = np.empty(count)
+    lookup_kernel.candidate_sums(table, keys, idx, widths, sums)
+    want = [table.take(keys[i, :w].astype(np.intp), mode='clip').sum() for i, w in
+            zip(idx, widths, strict=True)]
+    assert sums.tobytes() == np.asarray(want, np.float32).astype(np.float64).tobytes()
+
+
+def test_gathers_prefetch_the_rows_ahead() -> None:
+    """Both re-rank gathers ask for the rows ahead (the database's rows are read at random);
+    compiled afresh from their source (numba does not show cached code)."""
+    import numba
+
+    for kernel in (lookup_kernel.query_sums, lookup_kernel.candidate_sums):
+        fresh = numba.njit(kernel.py_func)
+        fresh.compile(lookup_kernel._SIGNATURES[kernel])
+        code = next(iter(fresh.inspect_llvm().values()))
+        assert 'llvm.prefetch' in code, kernel.__name__
+    assert lookup_kernel.PREFETCH_AHEAD >= 1
+
+
 def test_kernels_have_one_signature() -> None:
     """Every kernel runs compiled for one signature and refuses another (no compile per call)."""
     for kernel in lookup_kernel._SIGNATURES:
