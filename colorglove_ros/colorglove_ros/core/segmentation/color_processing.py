@@ -20,8 +20,9 @@ from colorglove_ros.core.segmentation.light import colour_means, solve_light
 
 __all__ = [
     'SATURATION_RANGE', 'SATURATION_STEP', 'SATURATION_DEADBAND_STEPS', 'WASHED_OUT_STEPS',
-    'WINDOW_COLOR_SHARE', 'WASHED_OUT_MAX_SATURATION',
+    'WINDOW_COLOR_SHARE', 'WASHED_OUT_MAX_SATURATION', 'PLAIN_PALETTE_STEPS',
     'saturation_matrix', 'estimate_saturation', 'resaturated_lut', 'window_colors',
+    'reads_plain',
     'SaturationEstimate',
 ]
 
@@ -37,6 +38,10 @@ SATURATION_DEADBAND_STEPS = 3
 WASHED_OUT_STEPS = (4, 7, 10)
 #: The largest saturation estimate of a camera that washes colours out: below the dead band.
 WASHED_OUT_MAX_SATURATION = float(np.exp(-SATURATION_DEADBAND_STEPS * SATURATION_STEP))
+#: A glove whose saturation estimate is at most this many ``SATURATION_STEP`` log steps below
+#: 1 reads the calibration's palette (:func:`reads_plain`): a camera switched to a washed-out
+#: table goes back (the band between this and ``WASHED_OUT_MAX_SATURATION`` keeps a switch).
+PLAIN_PALETTE_STEPS = 1
 #: A colour the search counts as shown holds at least this share of the window's glove
 #: pixels (a washed-out colour leaves a few stray pixels, a glove's patch many more).
 WINDOW_COLOR_SHARE = 0.01
@@ -76,6 +81,13 @@ def estimate_saturation(linear_rgb: np.ndarray, labels: np.ndarray,
     _, costs = solve_light(means, counts, r @ _GRID_MATRICES.transpose(0, 2, 1),
                            weight_reference=r)
     return float(_GRID[int(np.argmin(costs))])
+
+
+def reads_plain(estimate: float | None) -> bool:
+    """Whether a glove's saturation estimate (:func:`estimate_saturation`; None: none) reads
+    the calibration's own palette: at most ``PLAIN_PALETTE_STEPS`` steps below 1."""
+    return (estimate is not None
+            and round(float(np.log(estimate)) / SATURATION_STEP) >= -PLAIN_PALETTE_STEPS)
 
 
 def window_colors(labels: np.ndarray, found: tuple[tuple[float, float], float] | None,

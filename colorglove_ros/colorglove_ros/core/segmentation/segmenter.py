@@ -23,6 +23,7 @@ from colorglove_ros.core.segmentation.color_processing import (
     WASHED_OUT_MAX_SATURATION,
     SaturationEstimate,
     estimate_saturation,
+    reads_plain,
     saturation_matrix,
     window_colors,
 )
@@ -761,12 +762,22 @@ class GloveSegmenter:
         under an undone saturation with that many shown, the calibration's own table if it
         shows as many (undoing a plain camera's saturation boosts it, and clutter turns
         glove-coloured). With the calibration's table and that many shown, no other is
-        tried."""
+        tried. Before all that, under an undone saturation, a glove whose palette reads
+        plain (:func:`reads_plain` of its saturation estimate under the table that found
+        it) sends the camera back to the calibration's table, which searches the frame
+        again: after odd frames (noise) switched a plain camera, its boosted table shows as
+        many colours as the calibration's or more, so the colour count cannot return it."""
         est = self._saturation
         assert est is not None
         x0, _, y0, _ = region
-        shown = window_colors(detected[2], _in_region(detected[0], x0, y0))
         kept = est.step
+        if (kept != 0 and detected[0] is not None
+                and reads_plain(self._window_saturation(small, region, detected[2],
+                                                        detected[0]))):
+            kept = 0   # a plain camera's glove: back to the calibration's table
+            est.settle(kept)
+            detected = self._detect(small, region, reduction, pixels, static, min_px)
+        shown = window_colors(detected[2], _in_region(detected[0], x0, y0))
         plain = shown >= self.washed_out_colors
         if plain and kept == 0:
             return detected

@@ -16,6 +16,7 @@ from colorglove_ros.core.segmentation.color_processing import (
     WASHED_OUT_STEPS,
     SaturationEstimate,
     estimate_saturation,
+    reads_plain,
     resaturated_lut,
     saturation_matrix,
     window_colors,
@@ -221,6 +222,38 @@ def test_washed_out_search_returns_to_a_plain_camera(calibration) -> None:
     a = GloveSegmenter(calibration).process(image, keep_labels=True)
     np.testing.assert_array_equal(searching.process(image, keep_labels=True).label_image,
                                   a.label_image)
+
+
+def test_reads_plain_within_a_step_of_the_calibration() -> None:
+    """A saturation estimate reads the calibration's palette within one log step of 1 (and
+    above: a camera that boosts saturation); none, or two steps and more below, does not."""
+    step = np.exp(-SATURATION_STEP)
+    assert reads_plain(1.0) and reads_plain(step) and reads_plain(1.3)
+    assert not reads_plain(step ** 2) and not reads_plain(0.6) and not reads_plain(None)
+
+
+@pytest.mark.parametrize('washed_out', [WASHED_OUT_STEPS[1], WASHED_OUT_STEPS[2]])
+def test_a_plain_glove_returns_at_once_whatever_the_trial(calibration, washed_out) -> None:
+    """A segmenter switched to a washed-out table (as odd frames can leave a plain camera)
+    is back on the calibration's table after the first frame whose glove reads plain, even
+    when that frame's turn would try another washed-out table (the colour count alone waits
+    for the calibration's turn, and a boosted table showing more colours blocks it), and its
+    observations are then the plain ones; a washed-out camera's glove does not return it."""
+    frames = _look_frames(2, 1.0)
+    searching = GloveSegmenter(calibration, washed_out_colors=8)
+    searching._saturation.settle(-washed_out)
+    searching._washed_out_turn = 1     # the next trial: a washed-out table, not the plain one
+    searching.process(frames[0][0])
+    assert searching._saturation.step == 0
+    image = frames[1][0]
+    a = GloveSegmenter(calibration).process(image, keep_labels=True)
+    np.testing.assert_array_equal(searching.process(image, keep_labels=True).label_image,
+                                  a.label_image)
+    washed = GloveSegmenter(calibration, washed_out_colors=8)
+    washed._saturation.settle(-WASHED_OUT_STEPS[2])
+    for image, _ in _look_frames(3, 0.6):
+        washed.process(image)
+    assert washed._saturation.step <= -WASHED_OUT_STEPS[0]
 
 
 @pytest.mark.parametrize('saturation, washed', [(0.6, True), (1.0, False), (1.4, False)])
