@@ -18,6 +18,9 @@ ROSDEP_KEYS = {
     # scikit-learn's own dependency (Debian's python3-sklearn depends on it), pinned in
     # requirements.txt
     'threadpoolctl': 'python3-sklearn', 'rclpy': 'rclpy',
+    # numba's own dependency (Debian's python3-numba depends on python3-llvmlite), pinned in
+    # requirements.txt; lookup_kernel uses its intrinsic builder for the prefetch hint
+    'llvmlite': 'python3-numba',
     'rcl_interfaces': 'rcl_interfaces', 'std_msgs': 'std_msgs', 'sensor_msgs': 'sensor_msgs',
     'geometry_msgs': 'geometry_msgs', 'visualization_msgs': 'visualization_msgs',
     'builtin_interfaces': 'builtin_interfaces', 'colorglove_msgs': 'colorglove_msgs',
