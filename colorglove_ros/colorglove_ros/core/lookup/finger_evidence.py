@@ -100,19 +100,20 @@ def finger_scores(patch_xy: np.ndarray, patch_pixels: np.ndarray, patch_digit: n
     residual = np.full((k, p), cap)
     bcol = np.asarray(blob_color).reshape(-1)
     if len(bcol):
-        bxy = np.asarray(blob_xy, np.float64).reshape(-1, 2)
-        # each patch against its same-colour blobs only (in blob order, so the first of equal
-        # distances wins), padded with masked slots to the most blobs any patch colour has
-        same = np.asarray(patch_color)[:, None] == bcol[None, :]             # (P, B)
-        slots = max(1, int(same.sum(axis=1).max()))
-        blob = np.argsort(~same, axis=1, kind='stable')[:, :slots]          # (P, S)
-        dx = xy[:, :, 0, None] - bxy[blob, 0]                               # (K, P, S)
-        dy = xy[:, :, 1, None] - bxy[blob, 1]
-        dist = np.where(np.take_along_axis(same, blob, axis=1)[None],
-                        np.sqrt(dx * dx + dy * dy), np.inf)
-        nearest = np.argmin(dist, axis=2)                                   # (K, P)
-        d = np.take_along_axis(dist, nearest[..., None], axis=2)[..., 0]
-        area = np.asarray(blob_pixels, np.float64).reshape(-1)[blob[np.arange(p), nearest]]
+        # each patch against its same-colour blobs only, the first of equal distances
+        # (a compiled loop: lookup_kernel.nearest_same_colour)
+        from colorglove_ros.core.lookup import lookup_kernel
+
+        bxy = np.ascontiguousarray(np.asarray(blob_xy, np.float64).reshape(-1, 2))
+        if len(bxy) != len(bcol):
+            raise FingerEvidenceError(f'{len(bcol)} blob colours but {len(bxy)} centroids')
+        lookup_kernel.compile_kernels()
+        d = np.empty((k, p))
+        nearest = np.empty((k, p), np.int64)
+        lookup_kernel.nearest_same_colour(
+            np.ascontiguousarray(xy), np.ascontiguousarray(patch_color, np.int64),
+            np.ascontiguousarray(bcol, np.int64), bxy, d, nearest)
+        area = np.asarray(blob_pixels, np.float64).reshape(-1)[nearest]
         area_term = np.abs(np.log((np.asarray(patch_pixels, np.float64) + 1.0) / (area + 1.0)))
         with np.errstate(invalid='ignore'):
             residual = np.minimum(cap, d + config.area_weight * area_term)

@@ -10,7 +10,10 @@ bits. The gathers read the database's rows at random (one row per candidate, muc
 the caches): each asks the memory for the rows :data:`PREFETCH_AHEAD` candidates ahead while it
 sums the current one (a prefetch hint: no result depends on it). Every kernel has one
 signature (:func:`compile_kernels`, cached on disk) and releases the GIL, so a worker thread
-can run one while the caller runs another.
+can run one while the caller runs another. :func:`nearest_same_colour` is the per-finger
+blend's search (``finger_evidence.finger_scores``) of each entry patch's nearest blob of its
+colour: the same distances as numpy's (a subtraction, two products, their sum and ``sqrt``, in
+that order) and the first of equal ones.
 """
 from __future__ import annotations
 
@@ -22,8 +25,8 @@ from numba.extending import intrinsic
 
 from colorglove_ros.core.kernel_compile import compile_signatures
 
-__all__ = ['hamming_histogram', 'at_most', 'query_sums', 'candidate_sums', 'compile_kernels',
-           'PAIRWISE_BLOCK', 'PREFETCH_AHEAD']
+__all__ = ['hamming_histogram', 'at_most', 'query_sums', 'candidate_sums',
+           'nearest_same_colour', 'compile_kernels', 'PAIRWISE_BLOCK', 'PREFETCH_AHEAD']
 
 PAIRWISE_BLOCK = 128
 """numpy's pairwise summation block (``PW_BLOCKSIZE``): rows up to this length are summed with
@@ -223,6 +226,39 @@ def candidate_sums(table: np.ndarray, keys: np.ndarray, idx: np.ndarray, widths:
         out[c] = np.float32(0.0) + _pairwise(table, keys[idx[c]], widths[c])
 
 
+@numba.njit(**_JIT)
+def nearest_same_colour(patch_xy: np.ndarray, patch_color: np.ndarray, blob_color: np.ndarray,
+                        blob_xy: np.ndarray, distance: np.ndarray, nearest: np.ndarray) -> None:
+    """For every patch j of every entry i (``patch_xy`` (K, P, 2), ``patch_color`` (P,)):
+    ``distance[i, j]`` the distance to the nearest blob of its colour (``blob_color`` (B,),
+    ``blob_xy`` (B, 2)), the first of equal distances, NaN at the first NaN one (as
+    ``np.argmin``), infinity when no blob has its colour; ``nearest[i, j]`` that blob (0 when
+    none has its colour)."""
+    for i in range(distance.shape[0]):
+        for j in range(distance.shape[1]):
+            x = patch_xy[i, j, 0]
+            y = patch_xy[i, j, 1]
+            best = np.inf
+            at = 0
+            found = False
+            for b in range(len(blob_color)):
+                if blob_color[b] != patch_color[j]:
+                    continue
+                dx = x - blob_xy[b, 0]
+                dy = y - blob_xy[b, 1]
+                d = np.sqrt(dx * dx + dy * dy)
+                if np.isnan(d):
+                    best = d
+                    at = b
+                    break
+                if not found or d < best:
+                    best = d
+                    at = b
+                    found = True
+            distance[i, j] = best
+            nearest[i, j] = at
+
+
 def _array(dtype: object, ndim: int, readonly: bool = True) -> object:
     """A C-contiguous array type (read-only: writable arrays convert to it)."""
     return numba.types.Array(dtype, ndim, 'C', readonly=readonly)
@@ -237,6 +273,9 @@ _SIGNATURES = {
                  _array(numba.uint32, 1, False)),
     candidate_sums: (_array(numba.float32, 1), _array(numba.uint16, 2), _I1, _I1,
                      _array(numba.float64, 1, False)),
+    nearest_same_colour: (_array(numba.float64, 3), _array(numba.int64, 1),
+                          _array(numba.int64, 1), _array(numba.float64, 2),
+                          _array(numba.float64, 2, False), _array(numba.int64, 2, False)),
 }
 
 

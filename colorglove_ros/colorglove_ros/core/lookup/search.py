@@ -203,13 +203,18 @@ class PoseLookup:
         # the query-independent part of placing every entry in a query's view, once
         self._place_table = _entry_place_terms(self._a['poses'][:, 0:6], self._a['crop'],
                                                database.render_camera, self._anchor)
+        # every entry's patch digits (a patch vertex beyond the mesh is refused here, once)
+        try:
+            self._patch_digit = patch_digits(self._a['patch_vertex'], self._vertex_link)
+        except FingerEvidenceError as exc:
+            raise SearchError(f'per-finger blend: {exc}') from exc
 
     @property
     def buffer_bytes(self) -> int:
         """Memory held by this lookup besides the database: the scan's buffers and the
         per-entry tables computed at construction."""
         arrays = [self._ham, self._hist, self._selected, self._xor, self._cnt, self._table,
-                  self._place_table]
+                  self._place_table, self._patch_digit]
         return int(sum(a.nbytes for a in arrays))
 
     def hamming(self, tiny_labels: np.ndarray) -> np.ndarray:
@@ -378,8 +383,7 @@ class PoseLookup:
         try:
             scores = finger_scores(self._a['patch_xy'][entries],
                                    self._a['patch_pixels'][entries],
-                                   patch_digits(self._a['patch_vertex'][entries],
-                                                self._vertex_link), self._a['patch_color'],
+                                   self._patch_digit[entries], self._a['patch_color'],
                                    color[usable], (xy[usable] - (ox, oy)) / scale,
                                    pixels[usable] / scale ** 2, self.finger_evidence)
             fingers, spread, seen = finger_blend(self._a['poses'][entries], scores,
@@ -412,8 +416,7 @@ class PoseLookup:
         source = np.where(self._a['patch_vertex'][entry] >= 0, entry, -1)
         if finger_entries is not None:
             entries = np.asarray(finger_entries, np.int64)
-            digits = patch_digits(self._a['patch_vertex'][np.append(entries, entry)],
-                                  self._vertex_link)
+            digits = self._patch_digit[np.append(entries, entry)]
             for g, e in enumerate(entries):
                 if e != entry:
                     # the finger's patches all come from entry e, none from the nearest

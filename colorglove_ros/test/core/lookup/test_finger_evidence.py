@@ -241,3 +241,78 @@ def test_candidates_message_carries_the_spread() -> None:
     msg.finger_std = [0.1] * 19
     with pytest.raises(ValueError):
         pose_prior_from_candidates_msg(msg)
+
+
+def _random_patch_database(seed: int, n: int = 60, vertex_limit: int = 3):
+    """A database whose entries show random patches on vertices 0..vertex_limit - 1
+    (-1: hidden) and the (palm, thumb, index) vertex -> link table of three vertices."""
+    rng = np.random.default_rng(seed)
+    tiny = np.zeros((n, 40, 40), np.uint8)
+    for i in range(n):
+        y, x = rng.integers(5, 30, 2)
+        tiny[i, y:y + 8, x:x + 8] = 1 + i % 10
+    patch_vertex = rng.integers(-1, vertex_limit, (n, 20)).astype(np.int32)
+    patch_xy = rng.uniform(0.0, 40.0, (n, 20, 2)).astype(np.float32)
+    db = blob_database(tiny, poses_on_axis(fingers=rng.uniform(0.0, 1.0, (n, 20))),
+                       num_bits=32, num_pairs=200, patch_vertex=patch_vertex,
+                       patch_xy=patch_xy, patch_pixels=rng.uniform(1.0, 9.0, (n, 20)),
+                       patch_color=np.arange(20) % 10 + 1)
+    return db, tiny, rng
+
+
+def test_lookup_takes_patch_digits_from_its_table(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The entries' patch digits are computed once when the lookup is made (equal to
+    ``patch_digits`` on the whole database) and no lookup computes them again; the lookups'
+    results are those of a lookup that computes them per call (``patch_digits`` of the
+    chosen rows, as before)."""
+    from colorglove_ros.core.lookup import search
+
+    link = np.array([0, 1, 4])
+    db, tiny, rng = _random_patch_database(5)
+    calls = []
+    real = search.patch_digits
+    monkeypatch.setattr(search, 'patch_digits', lambda *a: calls.append(1) or real(*a))
+    lookup = PoseLookup(db, num_candidates=12, num_blend=3, threads=1,
+                        finger_evidence=FingerEvidenceConfig(num_neighbours=6), vertex_link=link)
+    made = len(calls)
+    np.testing.assert_array_equal(lookup._patch_digit, patch_digits(db.patch_vertex, link))
+    assert lookup._patch_digit.dtype == np.int8
+    cam = PinholeCamera(640, 480, 600.0, 600.0, 320.0, 240.0)
+    crop = (2.0, 100.0, 50.0)
+    queries = []
+    for i in range(8):
+        blobs = _Blobs(rng.integers(1, 11, 6), rng.uniform(100.0, 180.0, (6, 2)),
+                       rng.uniform(4.0, 40.0, 6))
+        queries.append((tiny[i], blobs))
+    got = [lookup.lookup(t, crop, cam, b) for t, b in queries]
+    assert len(calls) == made                           # none per lookup
+    # the reference: a table that is patch_digits of the rows asked for, per call
+    monkeypatch.setattr(lookup, '_patch_digit', _RowsPerCall(db.patch_vertex, link, real))
+    want = [lookup.lookup(t, crop, cam, b) for t, b in queries]
+    for a, b in zip(got, want, strict=True):
+        assert a.finger_std is not None
+        for name in ('indices', 'blended', 'finger_std', 'poses', 'weights'):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+        for name in ('patch_ids', 'colors', 'vertices', 'tiny_xy', 'pixel_counts', 'full_xy'):
+            np.testing.assert_array_equal(getattr(a.constraints, name),
+                                          getattr(b.constraints, name))
+
+
+class _RowsPerCall:
+    """``patch_digits`` of the rows an index asks for, computed at each indexing."""
+
+    def __init__(self, patch_vertex, link, digits) -> None:
+        self._pv, self._link, self._digits = np.asarray(patch_vertex), link, digits
+
+    def __getitem__(self, rows):
+        return self._digits(self._pv[rows], self._link)
+
+
+def test_lookup_refuses_a_patch_vertex_beyond_the_mesh_when_made() -> None:
+    """A database entry whose patch vertex lies beyond the vertex -> link table is refused
+    when the lookup is made, not at the first lookup that blends that entry."""
+    from colorglove_ros.core.lookup.search import SearchError
+
+    db, _, _ = _random_patch_database(6, vertex_limit=4)    # vertex 3: beyond a 3-vertex table
+    with pytest.raises(SearchError, match='beyond the mesh'):
+        PoseLookup(db, num_candidates=12, threads=1, vertex_link=np.array([0, 1, 4]))

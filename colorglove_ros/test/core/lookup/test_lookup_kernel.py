@@ -187,3 +187,91 @@ def test_kernels_have_one_signature() -> None:
     with pytest.raises(TypeError):
         lookup_kernel.query_sums(np.zeros(10, np.float32), np.zeros(1, np.intp), 10,
                                  np.zeros(1, np.intp), np.zeros(1, np.uint32))
+
+
+def _numpy_finger_scores(patch_xy, patch_pixels, patch_digit, patch_color, blob_color, blob_xy,
+                         blob_pixels, config) -> np.ndarray:
+    """finger_evidence.finger_scores as it was in numpy (the reference of the compiled search
+    for each patch's nearest same-colour blob)."""
+    cap = float(config.cap_tiny_px)
+    xy = np.asarray(patch_xy, np.float64)
+    k, p = xy.shape[:2]
+    digit = np.asarray(patch_digit)
+    residual = np.full((k, p), cap)
+    bcol = np.asarray(blob_color).reshape(-1)
+    if len(bcol):
+        bxy = np.asarray(blob_xy, np.float64).reshape(-1, 2)
+        same = np.asarray(patch_color)[:, None] == bcol[None, :]
+        slots = max(1, int(same.sum(axis=1).max()))
+        blob = np.argsort(~same, axis=1, kind='stable')[:, :slots]
+        dx = xy[:, :, 0, None] - bxy[blob, 0]
+        dy = xy[:, :, 1, None] - bxy[blob, 1]
+        dist = np.where(np.take_along_axis(same, blob, axis=1)[None],
+                        np.sqrt(dx * dx + dy * dy), np.inf)
+        nearest = np.argmin(dist, axis=2)
+        d = np.take_along_axis(dist, nearest[..., None], axis=2)[..., 0]
+        area = np.asarray(blob_pixels, np.float64).reshape(-1)[blob[np.arange(p), nearest]]
+        area_term = np.abs(np.log((np.asarray(patch_pixels, np.float64) + 1.0) / (area + 1.0)))
+        with np.errstate(invalid='ignore'):
+            residual = np.minimum(cap, d + config.area_weight * area_term)
+        residual[~np.isfinite(residual)] = cap
+    member = digit[:, None, :] == np.arange(5)[None, :, None]
+    count = member.sum(axis=2)
+    total = np.where(member, residual[:, None, :], 0.0).sum(axis=2)
+    return np.where(count > 0, total / np.maximum(count, 1), cap)
+
+
+@pytest.mark.parametrize('seed', range(40))
+def test_finger_scores_equal_numpy_bit_for_bit(seed: int) -> None:
+    """The per-finger scores with the compiled nearest-blob search are numpy's, bit for bit:
+    hidden patches (NaN centroids), colours no blob has, blobs at equal distances (copies),
+    one blob, none, no entry, float32 database centroids as the lookup passes them."""
+    from colorglove_ros.core.lookup.finger_evidence import FingerEvidenceConfig, finger_scores
+
+    rng = np.random.default_rng(seed)
+    k, p, b = int(rng.integers(0, 40)), 20, int(rng.integers(0, 25))
+    xy = rng.uniform(-2.0, 42.0, (k, p, 2)).astype(np.float32 if seed % 2 else np.float64)
+    xy[rng.random((k, p)) < 0.3] = np.nan
+    pixels = rng.uniform(0.0, 60.0, (k, p)).astype(np.float32)
+    digit = rng.integers(-1, 6, (k, p)).astype(np.int8)
+    color = rng.integers(1, 11, p).astype(np.uint8 if seed % 3 else np.int64)
+    bcol = rng.integers(1, 8, b)                             # colours 8-10 have no blob
+    bxy = rng.uniform(0.0, 40.0, (b, 2))
+    bpix = rng.uniform(0.5, 80.0, b)
+    if b > 2:                                                # a copy: two blobs equally near
+        bcol[-1], bxy[-1] = bcol[0], bxy[0]
+    if seed % 5 == 0 and k:                                   # a patch exactly on a blob
+        xy[0, 0] = bxy[0] if b else xy[0, 0]
+    config = FingerEvidenceConfig(cap_tiny_px=float(rng.uniform(2.0, 8.0)))
+    args = (xy, pixels, digit, color, bcol, bxy, bpix, config)
+    got = finger_scores(*args)
+    want = _numpy_finger_scores(*args)
+    assert got.dtype == want.dtype and got.shape == want.shape == (k, 5)
+    assert got.tobytes() == want.tobytes()
+
+
+def test_nearest_same_colour_takes_the_first_of_equals_and_nan() -> None:
+    """The first of equally near same-colour blobs, the first NaN distance (as np.argmin),
+    infinity and blob 0 where no blob has the patch's colour."""
+    d = np.empty((1, 3))
+    at = np.empty((1, 3), np.int64)
+    xy = np.array([[[0.0, 0.0], [np.nan, 1.0], [5.0, 5.0]]])
+    lookup_kernel.nearest_same_colour(xy, np.array([2, 2, 9]), np.array([1, 2, 2, 2]),
+                                      np.array([[0.0, 0.0], [3.0, 4.0], [4.0, 3.0],
+                                                [0.0, 5.0]]), d, at)
+    assert d[0, 0] == 5.0 and at[0, 0] == 1
+    assert np.isnan(d[0, 1]) and at[0, 1] == 1
+    assert d[0, 2] == np.inf and at[0, 2] == 0
+
+
+def test_finger_scores_refuse_blob_arrays_of_different_lengths() -> None:
+    from colorglove_ros.core.lookup.finger_evidence import (
+        FingerEvidenceConfig,
+        FingerEvidenceError,
+        finger_scores,
+    )
+
+    with pytest.raises(FingerEvidenceError, match='centroids'):
+        finger_scores(np.zeros((1, 20, 2)), np.ones((1, 20)), np.zeros((1, 20), np.int8),
+                      np.ones(20, np.int64), np.array([1, 2]), np.zeros((1, 2)),
+                      np.ones(2), FingerEvidenceConfig())
