@@ -42,7 +42,12 @@ from colorglove_ros.ros.frame_camera import CAMERA_REFUSAL_PREFIX
 from colorglove_ros.ros.image import image_to_rgb8
 from colorglove_ros.ros.image_codec import header_stamp_from_cdr
 from colorglove_ros.ros.latency_probe import LatencyProbe, ProbeRecord
-from colorglove_ros.ros.launcher import Launcher, NodeSpec, use_fastdds_profile
+from colorglove_ros.ros.launcher import (
+    Launcher,
+    NodeSpec,
+    process_cpu_seconds,
+    use_fastdds_profile,
+)
 from colorglove_ros.ros.lean_executor import LeanExecutor
 
 __all__ = ['BagFeed', 'CAMERA_INFO_SUBSCRIBERS', 'IMAGE_SUBSCRIBERS', 'PipelineMonitor',
@@ -200,7 +205,8 @@ class PipelineRun:
     unsegmented: list[tuple[int, int]] = field(default_factory=list)
     feed_output: str = ''                     # what the feed (e.g. the bag player) printed
     # CPU time (seconds) while the feed ran, per node process (launcher label), 'monitor' (this
-    # process: the monitor, the feed's thread) and 'player' (the feed's process, whole run)
+    # process: the monitor, the feed's thread), 'probe' (the latency probe's process) and
+    # 'player' (the feed's process, whole run)
     cpu_s: dict[str, float] = field(default_factory=dict)
 
     def missed_frames(self) -> str:
@@ -329,14 +335,16 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
                 launcher.start()
                 _wait_for_graph(monitor, startup_s, {**STAGE_INPUTS, **(extra_inputs or {})})
                 started = time.monotonic()
-                cpu_before = {**launcher.cpu_seconds(), 'monitor': time.process_time()}
+                cpu_before = {**launcher.cpu_seconds(), 'monitor': time.process_time(),
+                              'probe': process_cpu_seconds(probe.process.pid)}
                 feeder = threading.Thread(target=feed, daemon=True)
                 feeder.start()
                 feeder.join(timeout_s)
                 # the feed has ended: wait for the last outputs (no frame count needed)
                 completed = not feeder.is_alive() and monitor.wait_for_frames(0, 60.0)
                 cpu_s = _cpu_since(cpu_before, {**launcher.cpu_seconds(),
-                                                'monitor': time.process_time()})
+                                                'monitor': time.process_time(),
+                                                'probe': process_cpu_seconds(probe.process.pid)})
                 cpu_s['player'] = float(getattr(feed, 'cpu_s', float('nan')))
             else:
                 started = time.monotonic()

@@ -143,7 +143,8 @@ def dds_pass(bag: Path, parameters: dict[str, dict], frames: int, offered_hz: fl
             'ik_ms': figures['ik_compute_mean_ms'],
             'fingertip_rel_wrist_mm': figures.get('fingertip_rel_wrist_mm', float('nan')),
             # CPU time per offered frame of each process while the bag played (ms): the node
-            # processes, the benchmark's own monitor and the bag player (with its start-up)
+            # processes, the benchmark's own monitor, its latency probe and the bag player
+            # (with its start-up)
             **{key.replace('_per_frame', ''): value for key, value in figures.items()
                if key.startswith('cpu_ms_per_frame_')}}
 
