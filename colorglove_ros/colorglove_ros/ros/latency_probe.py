@@ -165,6 +165,8 @@ def main(argv: list[str] | None = None) -> int:
     from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
     from sensor_msgs.msg import JointState
 
+    from colorglove_ros.ros.lean_executor import LeanExecutor
+
     stamps: list[int] = []
     arrivals: list[int] = []
     topic_index: list[int] = []
@@ -189,10 +191,15 @@ def main(argv: list[str] | None = None) -> int:
     if args.ready_file is not None:
         args.ready_file.touch()
     deadline = time.monotonic() + args.duration if args.duration > 0 else float('inf')
+    # the nodes' executor: rclpy.spin_once would add the node to the global executor and
+    # remove it again on every wake, CPU taken from the cores the measured graph shares
+    executor = LeanExecutor()
+    executor.add_node(node)
     try:
         while not stop and time.monotonic() < deadline:
-            rclpy.spin_once(node, timeout_sec=0.1)
+            executor.spin_once(timeout_sec=0.1)
     finally:
+        executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
     tmp = args.output.with_suffix('.tmp')

@@ -6,7 +6,9 @@ Latency and rate come from a lean subscriber in its own process (``ros.latency_p
 JointState arrival minus the camera frame's header stamp); the per-stage figures are the
 processing times the stages measure themselves and carry in their messages (segmentation and
 lookup times in ``HandPoseCandidates``, the IK time in the tracking status), never arrival
-times in the monitor, which also deserialises camera images and so delays what it receives."""
+times in the monitor. The monitor learns which frames were offered from each frame's
+``CameraInfo`` (the camera node and the bag player publish one with the image's stamp for
+every frame), not from the 1 MB image, so it costs the measured graph little CPU."""
 from __future__ import annotations
 
 import os
@@ -27,7 +29,7 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import Image, JointState
+from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import String
 
 from colorglove_ros.core.evaluation.metrics import jitter_runs_mm, latency_summary_ms, pose_accuracy
@@ -40,9 +42,16 @@ from colorglove_ros.ros.frame_camera import CAMERA_REFUSAL_PREFIX
 from colorglove_ros.ros.image import image_to_rgb8
 from colorglove_ros.ros.image_codec import header_stamp_from_cdr
 from colorglove_ros.ros.latency_probe import LatencyProbe, ProbeRecord
-from colorglove_ros.ros.launcher import Launcher, NodeSpec, use_fastdds_profile
+from colorglove_ros.ros.launcher import (
+    Launcher,
+    NodeSpec,
+    process_cpu_seconds,
+    use_fastdds_profile,
+)
+from colorglove_ros.ros.lean_executor import LeanExecutor
 
-__all__ = ['BagFeed', 'PipelineMonitor', 'PipelineRun', 'bag_feed', 'node_specs', 'run_pipeline',
+__all__ = ['BagFeed', 'CAMERA_INFO_SUBSCRIBERS', 'IMAGE_SUBSCRIBERS', 'PipelineMonitor',
+           'PipelineRun', 'bag_feed', 'node_specs', 'run_pipeline',
            'summarize', 'ik_times_ms', 'DATABASE_CONFIG',
            'prepare_assets', 'pipeline_parameters', 'write_params']
 
@@ -62,7 +71,9 @@ def _key(msg: Any) -> tuple[int, int]:
 
 
 class PipelineMonitor(Node):
-    """Records, with receive times, camera frames, ground truth and the tracker's outputs."""
+    """Records, with receive times, the camera frames offered (one ``CameraInfo`` per frame,
+    stamped as its image; those stamped before the monitor started are not this run's),
+    ground truth and the tracker's outputs."""
 
     def __init__(self, keep_overlays: int = 8, overlay_stride: int = 10, **kwargs) -> None:
         super().__init__('pipeline_monitor', **kwargs)
@@ -83,9 +94,12 @@ class PipelineMonitor(Node):
         self.keep_overlays = keep_overlays
         self.overlay_stride = overlay_stride
         self.overlay_count = 0
-        # reliable: the camera_node and the bag player publish reliably, and the latency of
-        # every frame needs its arrival time (a best-effort reader loses large images)
-        self.create_subscription(Image, '/camera/image_raw', self._on_frame, _RELIABLE,
+        # system clock, as the camera and the bag player (--restamp) stamp frames: an older
+        # CameraInfo is a bag's first one, primed as recorded, or a previous run's
+        self.started = stamp_key(self.get_clock().now().to_msg())
+        # reliable, as camera_node and the bag player publish: a frame the graph drops must
+        # still count as offered
+        self.create_subscription(CameraInfo, '/camera/camera_info', self._on_frame, _RELIABLE,
                                  raw=True)
         self.create_subscription(JointState, '/hand/joint_states', self._on_joints, _RELIABLE)
         self.create_subscription(PoseStamped, '/hand/wrist_pose', self._store(self.wrists),
@@ -110,8 +124,11 @@ class PipelineMonitor(Node):
 
     def _on_frame(self, data: bytes) -> None:
         received = time.monotonic()
+        stamp = header_stamp_from_cdr(data)
+        if stamp < self.started:
+            return
         with self.lock:
-            self.frame_times.setdefault(header_stamp_from_cdr(data), received)
+            self.frame_times.setdefault(stamp, received)
 
     def _on_joints(self, msg: JointState) -> None:
         received = time.monotonic()
@@ -188,7 +205,8 @@ class PipelineRun:
     unsegmented: list[tuple[int, int]] = field(default_factory=list)
     feed_output: str = ''                     # what the feed (e.g. the bag player) printed
     # CPU time (seconds) while the feed ran, per node process (launcher label), 'monitor' (this
-    # process: the monitor, the feed's thread) and 'player' (the feed's process, whole run)
+    # process: the monitor, the feed's thread), 'probe' (the latency probe's process) and
+    # 'player' (the feed's process, whole run)
     cpu_s: dict[str, float] = field(default_factory=dict)
 
     def missed_frames(self) -> str:
@@ -301,8 +319,8 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
                                   context=context)
         # one thread: the monitor's callbacks only record, and rclpy's multi-threaded executor
         # costs more CPU per message, taken from the cores the measured graph shares
-        # (docs/RESULTS.md, issue 19, sixth pass)
-        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        # (docs/RESULTS.md, issue 19, sixth pass); the nodes' lean one costs less again
+        executor = LeanExecutor(context=context)
         executor.add_node(monitor)
         spinner = threading.Thread(target=executor.spin, daemon=True)
         spinner.start()
@@ -317,14 +335,16 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
                 launcher.start()
                 _wait_for_graph(monitor, startup_s, {**STAGE_INPUTS, **(extra_inputs or {})})
                 started = time.monotonic()
-                cpu_before = {**launcher.cpu_seconds(), 'monitor': time.process_time()}
+                cpu_before = {**launcher.cpu_seconds(), 'monitor': time.process_time(),
+                              'probe': process_cpu_seconds(probe.process.pid)}
                 feeder = threading.Thread(target=feed, daemon=True)
                 feeder.start()
                 feeder.join(timeout_s)
                 # the feed has ended: wait for the last outputs (no frame count needed)
                 completed = not feeder.is_alive() and monitor.wait_for_frames(0, 60.0)
                 cpu_s = _cpu_since(cpu_before, {**launcher.cpu_seconds(),
-                                                'monitor': time.process_time()})
+                                                'monitor': time.process_time(),
+                                                'probe': process_cpu_seconds(probe.process.pid)})
                 cpu_s['player'] = float(getattr(feed, 'cpu_s', float('nan')))
             else:
                 started = time.monotonic()
@@ -447,24 +467,37 @@ def _mean(values: list[float]) -> float:
     return float(np.mean(values)) if values else float('nan')
 
 
+# Subscribers a played bag waits for before its first frame: the camera image's
+# (segmentation_node) and its CameraInfo's (segmentation, lookup and IK each read it: one
+# matched late answers the short bag 'waiting for CameraInfo'; and the monitor, which counts
+# the frames offered by it)
+IMAGE_SUBSCRIBERS = 1
+CAMERA_INFO_SUBSCRIBERS = 4
+
+
 class BagFeed:
     """A feed for :func:`run_pipeline`: play ``bag`` with ``colorglove_play_bag`` (a separate
     process) at ``rate`` times its original timing, or paced by the tracker's output; what the
-    player printed (frames resent, warnings) is kept in ``output``."""
+    player printed (frames resent, warnings) is kept in ``output``. Before the first frame the
+    player waits for :data:`IMAGE_SUBSCRIBERS` on the image, :data:`CAMERA_INFO_SUBSCRIBERS`
+    on its CameraInfo and, for each topic of ``waits``, that many subscribers (e.g. a second
+    camera's image and CameraInfo)."""
 
-    def __init__(self, bag: Path, rate: float = 1.0, paced: bool = False) -> None:
+    def __init__(self, bag: Path, rate: float = 1.0, paced: bool = False,
+                 waits: dict[str, int] | None = None) -> None:
         import shutil
 
         player = shutil.which('colorglove_play_bag')
         if player is None:
             raise FileNotFoundError('colorglove_play_bag not on PATH (is the venv active?)')
-        # two image subscribers before the first frame (segmentation_node and the monitor)
-        # and three CameraInfo subscribers (segmentation, lookup and IK each read it: one
-        # matched late answers the whole short bag 'waiting for CameraInfo'); restamped at
-        # publish time: the latency probe takes arrival minus header stamp
-        self.command = [player, str(bag), '--rate', str(rate), '--min-subscribers', '2',
-                        '--min-info-subscribers', '3', '--restamp'] + (
-                            ['--paced'] if paced else [])
+        # restamped at publish time: the latency probe takes arrival minus header stamp, and
+        # the monitor ignores CameraInfo stamped before it started (the primed first one)
+        self.command = [player, str(bag), '--rate', str(rate),
+                        '--min-subscribers', str(IMAGE_SUBSCRIBERS),
+                        '--min-info-subscribers', str(CAMERA_INFO_SUBSCRIBERS), '--restamp'] + (
+                            ['--paced'] if paced else []) + (
+                            ['--wait-for', *(f'{topic}={count}' for topic, count in waits.items())]
+                            if waits else [])
         self.output = ''
         # CPU time of the player process (user + system, seconds), its start-up included
         self.cpu_s = float('nan')
@@ -483,6 +516,7 @@ class BagFeed:
             raise subprocess.CalledProcessError(player.returncode, self.command, self.output)
 
 
-def bag_feed(bag: Path, rate: float = 1.0, paced: bool = False) -> BagFeed:
+def bag_feed(bag: Path, rate: float = 1.0, paced: bool = False,
+             waits: dict[str, int] | None = None) -> BagFeed:
     """A :class:`BagFeed` of ``bag`` (see there)."""
-    return BagFeed(bag, rate, paced)
+    return BagFeed(bag, rate, paced, waits)

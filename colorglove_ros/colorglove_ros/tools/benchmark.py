@@ -91,19 +91,22 @@ def in_process(bag: Path, parameters: dict[str, dict], frames: int, profile: boo
     return stage_summary(times), times
 
 
-def _second_camera(parameters: dict[str, dict]) -> tuple[list[NodeSpec], dict[str, str]]:
+def _second_camera(parameters: dict[str, dict]
+                   ) -> tuple[list[NodeSpec], dict[str, str], dict[str, int]]:
     """Parameters, node and input topic of a second camera's segmentation_node (camera 1 of
-    :data:`STEREO_CALIBRATION`, in its namespace as a bag carries it)."""
+    :data:`STEREO_CALIBRATION`, in its namespace as a bag carries it), and the subscribers
+    the bag player waits for on that camera's topics (its image: segmentation2; its
+    CameraInfo: segmentation2 and ik_node)."""
     second = load_calibration(resolve_path(STEREO_CALIBRATION)).cameras[1].name
     parameters['segmentation2'] = dict(parameters['segmentation'])
     parameters['ik'] = {**parameters['ik'], 'calibration_file': STEREO_CALIBRATION,
                         'extra_observation_topics': [f'/{second}/hand/observation']}
-    image = f'/{second}/camera/image_raw'
+    image, info = f'/{second}/camera/image_raw', f'/{second}/camera/camera_info'
     spec = NodeSpec('segmentation_node', 'segmentation2', remappings={
         'camera/image_raw': image, 'hand/observation': f'/{second}/hand/observation',
-        'camera/camera_info': f'/{second}/camera/camera_info',
+        'camera/camera_info': info,
         'hand/segmentation_debug': f'/{second}/hand/segmentation_debug'})
-    return [spec], {image: 'segmentation2'}
+    return [spec], {image: 'segmentation2'}, {image: 1, info: 2}
 
 
 def dds_pass(bag: Path, parameters: dict[str, dict], frames: int, offered_hz: float,
@@ -111,12 +114,13 @@ def dds_pass(bag: Path, parameters: dict[str, dict], frames: int, offered_hz: fl
     """One run of the graph over DDS with the bag offered at ``offered_hz``: a row of the
     figures, None if it timed out."""
     parameters = {name: dict(values) for name, values in parameters.items()}
-    extra_nodes, extra_inputs = _second_camera(parameters) if two_cameras else ([], {})
+    extra_nodes, extra_inputs, waits = (_second_camera(parameters) if two_cameras
+                                        else ([], {}, {}))
     graph = 'single process' if single_process else 'separate processes'
     print(f'[benchmark] {graph}, {2 if two_cameras else 1} camera(s): bag offered at '
           f'{offered_hz:g} Hz', flush=True)
     run = run_pipeline(parameters, expected_frames=frames,
-                       feed=bag_feed(bag, rate=offered_hz / BAG_RATE_HZ),
+                       feed=bag_feed(bag, rate=offered_hz / BAG_RATE_HZ, waits=waits),
                        timeout_s=120.0 + frames / 5.0, extra_nodes=extra_nodes,
                        extra_inputs=extra_inputs, single_process=single_process)
     if run.timed_out:
@@ -125,6 +129,8 @@ def dds_pass(bag: Path, parameters: dict[str, dict], frames: int, offered_hz: fl
     figures = summarize(run, default_hand()[0])
     received = len(run.probe.stamp_ns) if run.probe is not None else 0
     return {'graph': graph, 'cameras': 2 if two_cameras else 1, 'offered_hz': offered_hz,
+            # frames the monitor counted as offered (one CameraInfo each), of the bag's
+            'frames_offered': figures['frames_seen_by_monitor'],
             # JointStates the lean probe received per second of the offered sequence
             'joint_states_per_s': received * offered_hz / frames,
             # ... and per second between its first and last arrival
@@ -137,7 +143,8 @@ def dds_pass(bag: Path, parameters: dict[str, dict], frames: int, offered_hz: fl
             'ik_ms': figures['ik_compute_mean_ms'],
             'fingertip_rel_wrist_mm': figures.get('fingertip_rel_wrist_mm', float('nan')),
             # CPU time per offered frame of each process while the bag played (ms): the node
-            # processes, the benchmark's own monitor and the bag player (with its start-up)
+            # processes, the benchmark's own monitor, its latency probe and the bag player
+            # (with its start-up)
             **{key.replace('_per_frame', ''): value for key, value in figures.items()
                if key.startswith('cpu_ms_per_frame_')}}
 

@@ -94,6 +94,16 @@ def read_stamp_log(path: str | Path) -> dict[int, int]:
     return mapping
 
 
+def _topic_count(text: str) -> tuple[str, int]:
+    """``TOPIC=COUNT`` (``--wait-for``) as (topic, count); an ArgumentTypeError otherwise."""
+    import argparse
+
+    topic, _, count = text.rpartition('=')
+    if not topic or not count.isdigit():
+        raise argparse.ArgumentTypeError(f'expected TOPIC=COUNT, got {text!r}')
+    return topic, int(count)
+
+
 def _wait_until(condition: Callable[[], bool], timeout_s: float) -> bool:
     """Poll ``condition`` until it holds (True) or ``timeout_s`` passed (False)."""
     deadline = time.monotonic() + timeout_s
@@ -339,6 +349,11 @@ def main(argv: list[str] | None = None) -> int:
                         help='play topics recorded with another definition of their message '
                         'type (an older colorglove_msgs) by converting each message field by '
                         'field by name; without it such a bag is refused, naming the fields')
+    parser.add_argument('--wait-for', nargs='+', default=[], metavar='TOPIC=COUNT',
+                        type=_topic_count,
+                        help='also wait (up to --wait-subscribers) until each TOPIC of the bag '
+                        'has COUNT subscribers before starting, e.g. a second camera\'s image '
+                        'and CameraInfo topics')
     for name, (kind, default, text) in PLAYBACK_OPTIONS.items():
         if kind is bool:
             parser.add_argument(f'--{name}', action='store_true', help=text)
@@ -374,13 +389,21 @@ def main(argv: list[str] | None = None) -> int:
             player.create_subscription(output_type, args.pace_topic,
                                        lambda _msg: player.output_answered(), 10)
         spinner.start()
+        unknown = [topic for topic, _ in args.wait_for
+                   if topic not in player.publishers_by_topic]
+        if unknown:
+            print(f'colorglove_play_bag: --wait-for: the bag plays no topic {unknown}',
+                  file=sys.stderr, flush=True)
+            return 2
+        waits = list(args.wait_for)
         if args.pace_on in player.publishers_by_topic:
             # the image's subscribers and its CameraInfo's: a node that gets images before it
             # is matched to their CameraInfo answers them 'waiting for CameraInfo'
-            waits = [(args.pace_on, args.min_subscribers)]
+            waits[:0] = [(args.pace_on, args.min_subscribers)]
             camera_info = player.camera_info_beside(args.pace_on)
             if camera_info is not None:
-                waits.append((camera_info, args.min_info_subscribers))
+                waits.insert(1, (camera_info, args.min_info_subscribers))
+        if waits:
             for topic, wanted in waits:
                 if not player.wait_for_subscribers(topic, args.wait_subscribers, wanted):
                     seen = player.publishers_by_topic[topic].get_subscription_count()

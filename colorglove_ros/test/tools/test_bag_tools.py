@@ -483,6 +483,37 @@ def test_player_says_which_subscribers_did_not_come(tmp_path: Path,
     assert 'no publisher on /hand/tracking_status' in done.stderr
 
 
+def test_player_waits_for_a_second_cameras_subscribers(tmp_path: Path,
+                                                       isolated_ros_domain: dict) -> None:
+    """--wait-for TOPIC=COUNT: the player also waits for the subscribers of topics beside the
+    paced image's (a second camera's image and CameraInfo) and says which did not come; a
+    topic the bag does not play, or no count, is refused before anything is published."""
+    from sensor_msgs.msg import CameraInfo, Image
+
+    _write_camera_bag(tmp_path / 'bag', (
+        ('/camera/image_raw', 'sensor_msgs/msg/Image', Image()),
+        ('/camera/camera_info', 'sensor_msgs/msg/CameraInfo', CameraInfo()),
+        ('/cam1/camera/image_raw', 'sensor_msgs/msg/Image', Image()),
+        ('/cam1/camera/camera_info', 'sensor_msgs/msg/CameraInfo', CameraInfo())))
+    command = [sys.executable, '-m', 'colorglove_ros.tools.play_bag', str(tmp_path / 'bag'),
+               '--wait-subscribers', '0.3', '--linger', '0', '--min-subscribers', '0',
+               '--min-info-subscribers', '0', '--wait-for']
+    done = subprocess.run(command + ['/cam1/camera/image_raw=1', '/cam1/camera/camera_info=2'],
+                          env=isolated_ros_domain, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert '/cam1/camera/image_raw has 0 of 1 subscribers' in done.stderr
+    assert '/cam1/camera/camera_info has 0 of 2 subscribers' in done.stderr
+    assert 'published 4 messages' in done.stdout
+    unknown = subprocess.run(command + ['/cam2/camera/camera_info=1'], env=isolated_ros_domain,
+                             capture_output=True, text=True, timeout=60)
+    assert unknown.returncode == 2
+    assert "--wait-for: the bag plays no topic ['/cam2/camera/camera_info']" in unknown.stderr
+    assert 'published' not in unknown.stdout
+    malformed = subprocess.run(command + ['/cam1/camera/camera_info'], env=isolated_ros_domain,
+                               capture_output=True, text=True, timeout=60)
+    assert malformed.returncode == 2 and 'expected TOPIC=COUNT' in malformed.stderr
+
+
 def test_recorder_timer_after_shutdown_does_nothing(tmp_path: Path) -> None:
     """Ctrl-C: rclpy's handler shuts the context down, and a spin already under way may still
     run the recorder's discovery timer; it must not raise (the recorder then exited 1 with
