@@ -539,7 +539,8 @@ class FramePipeline:
     ``temporal`` reweights the neighbours by each tracker's previous output. With
     ``feedback`` (the object its observer reads, :func:`image_observer`), :meth:`process`
     feeds each tracked frame's crop prediction (:func:`tracked_crop`) forward to the next
-    frames, as ik_node and segmentation_node do over the crop prediction topic."""
+    frames, as ik_node and segmentation_node do over the crop prediction topic.
+    ``last_lookup`` is the last :meth:`process` frame's lookup (None before the first)."""
 
     def __init__(self, observer: Observer, lookup: Any, camera: Any, *,
                  limits: StageLimits = NODE_LIMITS, finger_evidence: bool = True,
@@ -552,6 +553,7 @@ class FramePipeline:
         self.finger_evidence = bool(finger_evidence)
         self.temporal = temporal
         self.feedback = feedback
+        self.last_lookup: FrameLookup | None = None
 
     def observe(self, views: Sequence[Any]) -> FrameObservations:
         """Every camera's observation of one frame's views (primary first)."""
@@ -585,7 +587,8 @@ class FramePipeline:
         if self.feedback is not None:
             self.feedback.select(stamp)
         seen = self.observe(views)
-        outcome = self.track(tracker, self.look_up(seen), seen, stamp)
+        self.last_lookup = self.look_up(seen)
+        outcome = self.track(tracker, self.last_lookup, seen, stamp)
         if self.feedback is not None and isinstance(outcome, Tracked):
             self.feedback.offer(tracked_crop(tracker, outcome.result.q, stamp))
         return outcome

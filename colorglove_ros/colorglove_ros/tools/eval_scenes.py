@@ -22,6 +22,7 @@ from colorglove_ros.core.evaluation.scenes import (
     BORDER_DEPTH_MM,
     OFF_POSE_MM,
     SCENE_LADDER,
+    frame_records,
     run_scene,
     summarize_scene,
 )
@@ -113,6 +114,8 @@ def main(argv: list[str] | None = None) -> int:
                         default=NODE_LIMITS.max_outside_blob_share,
                         help='the glove-outside-the-hand gate (ik_node parameter of that name; '
                              '1: off)')
+    parser.add_argument('--frames-json', help='also write every frame\'s record here (its '
+                        'class, outcome, the gates\' evidence, fingertip errors per digit)')
     parser.add_argument('--outside-reach', type=float, default=NODE_LIMITS.outside_reach,
                         help='its reach in crop windows of the fitted hand (ik_node parameter '
                              'of that name)')
@@ -156,6 +159,7 @@ def main(argv: list[str] | None = None) -> int:
 
     started = time.perf_counter()
     rows = []
+    records: list[dict[str, Any]] = []
     for condition in SCENE_LADDER:
         if condition.name not in args.conditions:
             continue
@@ -173,6 +177,7 @@ def main(argv: list[str] | None = None) -> int:
                 return tool_error('colorglove_eval_scenes', exc)
             print(f'[eval_scenes] {condition.name} sequence {seed}: {args.frames} frames in '
                   f'{time.perf_counter() - t0:.1f} s', flush=True)
+        records.extend(r for run in runs for r in frame_records(run))
         rows.append({'condition': condition.name, 'appearance': condition.appearance,
                      'hand': condition.hand, 'motion': condition.motion,
                      **summarize_scene(runs)})
@@ -203,6 +208,8 @@ def main(argv: list[str] | None = None) -> int:
                 'wall_s': time.perf_counter() - started}
     if args.json:
         write_json(Path(args.json), {'settings': settings, 'rows': rows, 'targets': targets})
+    if args.frames_json:
+        write_json(Path(args.frames_json), {'settings': settings, 'frames': records})
     return 0
 
 

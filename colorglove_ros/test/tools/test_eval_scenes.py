@@ -84,3 +84,32 @@ def test_eval_scenes_prints_and_writes_the_ladder(node_assets, tmp_path, capsys)
 
 def test_eval_scenes_refuses_a_missing_database(tmp_path, capsys) -> None:
     assert eval_scenes.main(['--database', str(tmp_path / 'none'), '--sequences', '1']) != 0
+
+
+def test_eval_scenes_writes_every_frame_with_its_evidence(node_assets, tmp_path) -> None:
+    out, frames_out = tmp_path / 'ladder.json', tmp_path / 'frames.json'
+    code = eval_scenes.main(['--conditions', 'clean', 'proportions', '--sequences', '1',
+                             '--frames', '24', '--database', str(node_assets.database),
+                             '--color-config', str(node_assets.color_config),
+                             '--json', str(out), '--frames-json', str(frames_out)])
+    assert code == 0
+    rows = {r['condition']: r for r in json.loads(out.read_text())['rows']}
+    frames = json.loads(frames_out.read_text())['frames']
+    for name, row in rows.items():
+        mine = [f for f in frames if f['condition'] == name]
+        assert [f['frame'] for f in mine] == list(range(24))
+        assert sum(f['class'] == 'no hand' for f in mine) == row['no_hand_frames']
+        assert sum(f['class'] == 'fully visible' for f in mine) == row['fully_visible_frames']
+        posed = [f for f in mine if f['tracked'] and f['class'] != 'no hand']
+        assert len(posed) == row['tracked_frames'] > 0
+        off = sum(f['fingertip_mean_mm'] > 50.0 for f in posed)
+        assert off == round(row['off_50mm'] * row['tracked_frames'])
+        for f in posed:
+            assert f['reason'] == '' and len(f['fingertip_mm']) == 5
+            assert np.isclose(np.mean(f['fingertip_mm']), f['fingertip_mean_mm'])
+            assert f['constraints'] > 0 and f['residual_px'] > 0.0
+            assert 0.0 <= f['explained_blob_share'] <= 1.0 and f['image_distance'] >= 0.0
+        lost = [f for f in mine if not f['tracked'] and f['class'] != 'no hand']
+        assert all(f['reason'] for f in lost)
+        assert sum(f['class'] == 'fully visible' and f['tracked'] for f in mine) == round(
+            row['visible_tracked'] * row['fully_visible_frames'])

@@ -30,7 +30,14 @@ from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.evaluation.metrics import fingertip_positions, translation_errors_mm
 from colorglove_ros.core.evaluation.sequences import EvaluationError
 from colorglove_ros.core.hand.model import HandModel
-from colorglove_ros.core.pipeline import NODE_LIMITS, FramePipeline, StageLimits, Tracked
+from colorglove_ros.core.pipeline import (
+    NODE_LIMITS,
+    FramePipeline,
+    NoHand,
+    StageLimits,
+    Tracked,
+    primary_pixel_scale,
+)
 from colorglove_ros.core.segmentation.crop_prediction import (
     DEFAULT_PREDICTION_MAX_AGE_S,
     CropFeedback,
@@ -38,8 +45,9 @@ from colorglove_ros.core.segmentation.crop_prediction import (
 
 __all__ = [
     'SceneCondition', 'SCENE_LADDER', 'HAND_SHAPES', 'MOTIONS', 'FINGER_FACTOR_SPREAD',
-    'NO_HAND_TAIL_FRACTION', 'OFF_POSE_MM', 'BORDER_DEPTH_MM', 'SceneRun',
-    'varied_finger_factors', 'fully_visible', 'scene_poses', 'run_scene', 'summarize_scene',
+    'NO_HAND_TAIL_FRACTION', 'OFF_POSE_MM', 'BORDER_DEPTH_MM', 'SceneRun', 'FrameEvidence',
+    'frame_evidence', 'varied_finger_factors', 'fully_visible', 'scene_poses', 'run_scene',
+    'summarize_scene', 'frame_records',
 ]
 
 HAND_SHAPES = ('model', 'varied', 'varied_calibrated')
@@ -105,6 +113,39 @@ def scene_poses(condition: SceneCondition, seed: int, num_frames: int, camera: P
     return poses
 
 
+@dataclass(frozen=True)
+class FrameEvidence:
+    """What one frame's gates saw: the outcome's reason ('' when tracked), the nearest
+    database image's distance (tiny px; NaN without a lookup), and of the fit (NaN / 0 when
+    none was made) the share of the glove blobs explained, the mean reprojection residual at
+    the IK's reference focal length and the number of constraints."""
+
+    reason: str
+    image_distance: float
+    explained_blob_share: float
+    residual_px: float
+    constraints: int
+
+
+def frame_evidence(outcome: Tracked | NoHand, found: Any, tracker: Any) -> FrameEvidence:
+    """The :class:`FrameEvidence` of one ``FramePipeline.process`` outcome, its lookup
+    ``found`` (``FramePipeline.last_lookup``) and the ``tracker`` that fitted it."""
+    result = outcome.result if isinstance(outcome, Tracked) else outcome.partial
+    lookup = None if found is None else found.result
+    if lookup is None and found is not None:     # refused by the lookup: its result
+        lookup = getattr(found.outcome, 'partial', None)
+    distances = np.asarray(getattr(lookup, 'distances', ()), float).reshape(-1)
+    fitted = (getattr(result, 'q', None) is not None
+              and hasattr(result, 'reprojection_error_px'))
+    return FrameEvidence(
+        '' if isinstance(outcome, Tracked) else outcome.reason,
+        float(distances[0]) if len(distances) else float('nan'),
+        float(result.explained_blob_share) if fitted else float('nan'),
+        float(result.reprojection_error_px) / primary_pixel_scale(tracker) if fitted
+        else float('nan'),
+        int(result.num_constraints) if fitted else 0)
+
+
 @dataclass
 class SceneRun:
     """One sequence of one rung: truth, outputs and per-frame classes."""
@@ -120,6 +161,7 @@ class SceneRun:
     reasons: Counter                    # 'no hand' reasons on frames with a visible hand
     true_model: HandModel
     tracker_model: HandModel
+    evidence: tuple[FrameEvidence, ...] = ()   # per frame, :func:`frame_evidence`
 
 
 def fully_visible(labels: np.ndarray, keypoints_uv: np.ndarray) -> bool:
@@ -181,6 +223,7 @@ def run_scene(condition: SceneCondition, seed: int, num_frames: int, *, lookup: 
         fully = np.zeros(n, bool)
         empty = np.zeros(n, bool)
         reasons: Counter = Counter()
+        evidence: list[FrameEvidence] = []
         for i in range(n):
             frame = synth.render_frame(poses[i], camera, np.random.default_rng([seed, i, 11]),
                                        look)
@@ -188,6 +231,7 @@ def run_scene(condition: SceneCondition, seed: int, num_frames: int, *, lookup: 
                                      camera.project(true_hand[0].keypoints(poses[i])))
             empty[i] = not np.any(frame.labels)
             outcome = pipeline.process(tracker, [frame.image_rgb], i / fps)
+            evidence.append(frame_evidence(outcome, pipeline.last_lookup, tracker))
             if isinstance(outcome, Tracked):
                 tracked[i] = True
                 q_est[i] = outcome.result.q
@@ -196,7 +240,8 @@ def run_scene(condition: SceneCondition, seed: int, num_frames: int, *, lookup: 
             if progress is not None:
                 progress(i)
         return SceneRun(condition.name, seed, poses, q_est, tracked, fully, empty,
-                        np.array(timed_ms), reasons, true_hand[0], tracker_hand[0])
+                        np.array(timed_ms), reasons, true_hand[0], tracker_hand[0],
+                        tuple(evidence))
     finally:
         synth.release()
 
@@ -262,3 +307,31 @@ def summarize_scene(runs: Sequence[SceneRun]) -> dict[str, Any]:
         reasons.update(r.reasons)
     out['no_hand_reasons'] = dict(reasons.most_common(4))
     return out
+
+
+def frame_records(run: SceneRun) -> list[dict[str, Any]]:
+    """One record per frame of ``run``: its class (fully visible / partly visible / no hand),
+    whether a pose was published, :class:`FrameEvidence`, and for a published pose on a
+    frame with a hand the fingertip errors per digit (thumb..little, absolute, mm), their mean
+    (the figure ``OFF_POSE_MM`` is judged on) and the wrist depth error (estimate minus truth,
+    mm): the frame-by-frame view behind :func:`summarize_scene`."""
+    records = []
+    for i in range(len(run.q_true)):
+        kind = ('no hand' if run.no_hand[i] else
+                'fully visible' if run.fully_visible[i] else 'partly visible')
+        rec: dict[str, Any] = {'condition': run.condition, 'seed': run.seed, 'frame': i,
+                               'class': kind, 'tracked': bool(run.tracked[i])}
+        if i < len(run.evidence):
+            e = run.evidence[i]
+            rec.update({'reason': e.reason, 'image_distance': e.image_distance,
+                        'explained_blob_share': e.explained_blob_share,
+                        'residual_px': e.residual_px, 'constraints': e.constraints})
+        if run.tracked[i] and not run.no_hand[i]:
+            tips = 1e3 * np.linalg.norm(
+                fingertip_positions(run.tracker_model, run.q_est[i:i + 1])[0]
+                - fingertip_positions(run.true_model, run.q_true[i:i + 1])[0], axis=1)
+            rec.update({'fingertip_mm': [float(t) for t in tips],
+                        'fingertip_mean_mm': float(tips.mean()),
+                        'depth_error_mm': float(1e3 * (run.q_est[i, 2] - run.q_true[i, 2]))})
+        records.append(rec)
+    return records
