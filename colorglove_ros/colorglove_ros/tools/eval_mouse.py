@@ -68,6 +68,7 @@ from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
 from colorglove_ros.core.tracking.edge_tracker import EdgeTracker, EdgeTrackResult
 from colorglove_ros.core.tracking.mouse import (
     BUTTON_DOFS,
+    BUTTON_NAMES,
     Mouse3D,
     MouseConfig,
     raw_mouse_values,
@@ -251,6 +252,10 @@ def glove_tracked_poses(model: HandModel, Q: np.ndarray, seed: int, tracker: Scr
     return [q.copy() if ok else None for q, ok in zip(q_est, found, strict=True)]
 
 
+#: Per-click lists in :func:`evaluate_seed`'s row (JSON and per-seed line, not the table).
+_CLICK_LISTS = ('missed_clicks', 'false_presses')
+
+
 def evaluate_seed(model: HandModel, config: MouseConfig, seed: int,
                   poses: list[np.ndarray | None], tolerance: int,
                   Q: np.ndarray, spans: list[list[tuple[int, int]]],
@@ -262,7 +267,9 @@ def evaluate_seed(model: HandModel, config: MouseConfig, seed: int,
     errors.
     ``reinitialised``: frames where the tracker was re-initialised (``reinitialisation_pose``);
     ``correct_at_reinit`` counts the correct clicks with one of them between the click's
-    start (less ``tolerance``) and the press."""
+    start (less ``tolerance``) and the press. ``missed_clicks`` lists the scripted clicks no
+    press matched as (button, first frame, end frame), ``false_presses`` the presses outside
+    every click as (button, frame), buttons named as ``BUTTON_NAMES``."""
     mouse = Mouse3D(model, config)
     rest = raw_mouse_values(model, Q[0], config)
     presses: list[list[int]] = [[], []]
@@ -281,6 +288,8 @@ def evaluate_seed(model: HandModel, config: MouseConfig, seed: int,
                            'frames_with_pose': sum(p is not None for p in poses)}
     tp = fp = truth = at_reinit = 0
     restarts = np.asarray(sorted(reinitialised), dtype=np.int64)
+    missed: list[tuple[str, int, int]] = []
+    false: list[tuple[str, int]] = []
     for k in range(2):
         used = set()
         for frame in presses[k]:
@@ -288,11 +297,13 @@ def evaluate_seed(model: HandModel, config: MouseConfig, seed: int,
                         and a - tolerance <= frame < b + tolerance), None)
             if hit is None:
                 fp += 1
+                false.append((BUTTON_NAMES[k], frame))
             else:
                 used.add(hit)
                 tp += 1
                 start = spans[k][hit][0] - tolerance
                 at_reinit += bool(np.any((restarts >= start) & (restarts <= frame)))
+        missed += [(BUTTON_NAMES[k], a, b) for j, (a, b) in enumerate(spans[k]) if j not in used]
         truth += len(spans[k])
     out.update({'scripted_clicks': truth, 'detected': tp + fp, 'correct': tp,
                 'correct_at_reinit': at_reinit,
@@ -301,7 +312,8 @@ def evaluate_seed(model: HandModel, config: MouseConfig, seed: int,
                 'cursor_p95_mm': 1e3 * float(np.percentile(errors, 95)) if errors else math.nan,
                 'height_range_mm': 1e3 * float(np.ptp([raw_mouse_values(model, q, config)[2]
                                                        for q in Q[::5]])),
-                'rest_height_mm': 1e3 * float(rest[2])})
+                'rest_height_mm': 1e3 * float(rest[2]),
+                'missed_clicks': missed, 'false_presses': false})
     return out
 
 
@@ -428,7 +440,8 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
               'edges': f'the edge tracker ({len(cameras)} camera(s): '
                        f'{", ".join(c.name for c in cameras)})',
               'glove': 'the glove tracker (1 camera)'}[args.source]
-    print_table(rows, f'3-D mouse, scripted sequences, poses from {source}')
+    print_table([{k: v for k, v in r.items() if k not in _CLICK_LISTS} for r in rows],
+                f'3-D mouse, scripted sequences, poses from {source}')
     targets = [target_row('click precision >= 95 %', 100 * total['precision'], 95.0, '>='),
                target_row('click recall >= 95 %', 100 * total['recall'], 95.0, '>=')]
     print_table([{**total}], 'all seeds')

@@ -40,6 +40,26 @@ def test_true_poses_detect_every_scripted_click_and_no_pose_detects_none() -> No
     assert math.isnan(blind['cursor_error_mm'])
 
 
+def test_each_missed_click_and_false_press_is_listed_by_button_and_frame() -> None:
+    Q, spans = scripted_sequence(MODEL, CONFIG, seed=3, seconds=12.0, clicks=4)
+    poses = list(Q)
+    a, b = spans[1][2]                      # the third little click never seen
+    for i in range(a, b):
+        poses[i] = None
+    rest_end = spans[0][0][0] - 10          # a thumb click where there is none
+    fake = np.array(Q[rest_end - 15])
+    fake[MODEL.dof_names.index('thumb_cmc_abd')] = math.radians(40.0)
+    poses[rest_end - 15:rest_end] = [fake] * 15
+    row = evaluate_seed(MODEL, CONFIG, 3, poses, 0, Q, spans)
+    assert row['missed_clicks'] == [('little', a, b)]
+    assert len(row['false_presses']) == 1
+    button, frame = row['false_presses'][0]
+    assert button == 'thumb' and rest_end - 15 <= frame < rest_end
+    assert row['correct'] == 7 and row['detected'] == 8
+    perfect = evaluate_seed(MODEL, CONFIG, 3, list(Q), 0, Q, spans)
+    assert perfect['missed_clicks'] == [] and perfect['false_presses'] == []
+
+
 def test_clicks_with_a_reinitialisation_from_the_truth_before_the_press_are_counted() -> None:
     Q, spans = scripted_sequence(MODEL, CONFIG, seed=3, seconds=12.0, clicks=4)
     (a, _), (c, _) = spans[0][2], spans[0][3]
