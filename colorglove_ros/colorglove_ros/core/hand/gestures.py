@@ -50,7 +50,8 @@ from colorglove_ros.core.validation import check_number
 
 __all__ = [
     'GESTURE_NAMES', 'PINCH_FINGERS', 'EVENT_STATES', 'NO_GESTURE', 'GESTURE_FEATURES',
-    'DEFAULT_GESTURE_CLASSIFIER', 'GESTURE_IMAGE_CLASSIFIER', 'DEFAULT_GESTURE_IMAGE_CLASSIFIER',
+    'DEFAULT_GESTURE_CLASSIFIER', 'GESTURE_IMAGE_CLASSIFIER', 'GESTURE_UPRIGHT_IMAGE_CLASSIFIER',
+    'DEFAULT_GESTURE_IMAGE_CLASSIFIER',
     'GestureError', 'GestureConfig',
     'GestureFeatures', 'GestureEvent', 'gesture_features', 'gesture_scores',
     'GestureDetector', 'format_event', 'parse_event',
@@ -67,6 +68,8 @@ DEFAULT_GESTURE_CLASSIFIER = 'config/gesture_classifier.npz'
 # the image evidence's gesture classifier (colorglove_train_hand_classifiers --what
 # gesture_images)
 GESTURE_IMAGE_CLASSIFIER = 'config/gesture_image_classifier.npz'
+# the same of the upright features (``--image-features tiny_observation_upright``)
+GESTURE_UPRIGHT_IMAGE_CLASSIFIER = 'config/gesture_upright_image_classifier.npz'
 # gesture_node's and eval_gestures --tracker's image classifier ('': the pose alone)
 DEFAULT_GESTURE_IMAGE_CLASSIFIER = ''
 _CURL_DOFS = np.array([[DOF_NAMES.index(f'{f}_{j}') for j in ('mcp_flex', 'pip_flex', 'dip_flex')]

@@ -256,6 +256,23 @@ def test_an_upright_image_classifier_is_read_with_features_turned_by_the_seen_po
                                   record_features(record))
 
 
+def test_the_shipped_upright_gesture_image_classifier_reads_upright_features() -> None:
+    """config/gesture_upright_image_classifier.npz classifies the upright image features into
+    the gestures and none, and the detector takes it beside the shipped pose classifier."""
+    from colorglove_ros.core.hand.gestures import GESTURE_NAMES, GESTURE_UPRIGHT_IMAGE_CLASSIFIER
+    from colorglove_ros.core.hand.observation_features import (
+        OBSERVATION_UPRIGHT_FEATURES,
+        num_observation_features,
+    )
+
+    clf = load_pose_classifier(share_dir() / GESTURE_UPRIGHT_IMAGE_CLASSIFIER,
+                               OBSERVATION_UPRIGHT_FEATURES)
+    assert set(clf.classes) == {*GESTURE_NAMES, NO_GESTURE}
+    assert 'tiny_observation_upright' in clf.source
+    assert clf.mean.shape == (num_observation_features(),)
+    GestureDetector(MODEL, classifier=_shipped(), image_classifier=clf)
+
+
 def test_the_shipped_gesture_image_classifier_reads_the_gesture_classes() -> None:
     """config/gesture_image_classifier.npz classifies tiny_observation features into the
     gestures and none, trained on rendered gesture holds, and the detector takes it beside the
