@@ -255,7 +255,8 @@ def run_sequence(model: HandModel, seed: int, episodes: int, source: PoseSource,
     evidence = evidence_seen(source, 'gestures', seed, truth, model)
     detector = GestureDetector(model, config, classifier, image_classifier)
     observed = (None if image_classifier is None
-                else observation_seen(source, 'gestures', seed, truth, model, GestureError))
+                else observation_seen(source, 'gestures', seed, truth, model, GestureError,
+                                      image_classifier.feature_set, seen))
     events: list[GestureEvent] = []
     active = np.zeros((len(seen), len(GESTURE_NAMES)), dtype=bool)
     for i, (q, ok, t) in enumerate(zip(seen, found, truth.times, strict=True)):

@@ -25,7 +25,10 @@ spelling scripts of ``--image-seeds`` (training seeds), rendered as the evaluati
 (off by default: the evaluations and the spelling node use it when given one).
 ``--what gesture_images`` does the same for the gestures: the holds of the gesture scripts of
 ``--image-seeds`` (``--image-episodes`` episodes each; the neutral shapes labelled ``none``),
-written to ``--gesture-image-output``.
+written to ``--gesture-image-output``; ``--image-features tiny_observation_upright`` turns
+each frame's features upright by its true pose's in-plane angle
+(``observation_features.image_angle``; the evaluations turn the tracked frames by the fitted
+pose's).
 """
 from __future__ import annotations
 
@@ -48,7 +51,11 @@ from colorglove_ros.core.hand.gestures import (
     NO_GESTURE,
 )
 from colorglove_ros.core.hand.model import HandModel
-from colorglove_ros.core.hand.observation_features import OBSERVATION_FEATURES, record_features
+from colorglove_ros.core.hand.observation_features import (
+    IMAGE_FEATURE_SETS,
+    OBSERVATION_FEATURES,
+    feature_set_features,
+)
 from colorglove_ros.core.hand.pose_classifier import (
     MODEL_KINDS,
     ClassifierError,
@@ -71,15 +78,18 @@ __all__ = ['main', 'training_samples', 'image_training_samples']
 
 def image_training_samples(model: HandModel, scripts: Sequence[tuple[int, list]],
                            tracker: Any, every: int, name: str = 'spelling',
-                           none_label: str = NO_GESTURE) -> tuple[np.ndarray, np.ndarray]:
-    """Observation features and labels (what is held; ``none_label`` for a neutral shape) of
-    every ``every``-th hold frame of the ``(seed, segments)`` scripts of sequences ``name``
+                           none_label: str = NO_GESTURE,
+                           feature_set: str = OBSERVATION_FEATURES
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """Observation features of ``feature_set`` (the upright ones turned by the true pose) and
+    labels (what is held; ``none_label`` for a neutral shape) of every ``every``-th hold frame
+    of the ``(seed, segments)`` scripts of sequences ``name``
     (``ScriptedTracker.hold_observations``)."""
     features, labels = [], []
     for seed, segments in scripts:
         truth = script_poses(segments)
         frames, record = tracker.hold_observations(name, seed, truth, every)
-        features.append(record_features(record))
+        features.append(feature_set_features(record, feature_set, truth.poses[frames, 3:6]))
         labels += [y or none_label for y in truth.label[frames]]
     return np.concatenate(features), np.asarray(labels).astype(str)
 
@@ -161,6 +171,10 @@ def main(argv: list[str] | None = None) -> int:
                         help='with --what gesture_images: the file written')
     parser.add_argument('--image-every', type=int, default=5,
                         help='every how many-th frame of a hold is rendered')
+    parser.add_argument('--image-features', choices=IMAGE_FEATURE_SETS,
+                        default=OBSERVATION_FEATURES,
+                        help='with --what gesture_images: the image feature set (the letters '
+                        'read the plain one)')
     parser.add_argument('--image-output', type=Path,
                         default=share_dir() / LETTER_IMAGE_CLASSIFIER,
                         help='with --what letter_images: the file written')
@@ -246,6 +260,10 @@ def _train_images(args: Any, model: HandModel, config: Path) -> int:
                               config / 'calibration.yaml', data_dir() / 'scripted_tracking',
                               args.labels)
     letters = args.what == 'letter_images'
+    features = args.image_features
+    if letters and features != OBSERVATION_FEATURES:
+        raise ClassifierError(f'the letter image classifier reads {OBSERVATION_FEATURES!r} '
+                              f'features, not {features!r}')
     if letters:
         name, size, output = 'spelling', f'--image-words {args.image_words}', args.image_output
         scripts = [(s, eval_spelling.spelling_script(model, s, args.image_words)[0])
@@ -256,14 +274,15 @@ def _train_images(args: Any, model: HandModel, config: Path) -> int:
         scripts = [(s, eval_gestures.gesture_script(model, s, args.image_episodes))
                    for s in args.image_seeds]
     try:
-        x, y = image_training_samples(model, scripts, tracker, args.image_every, name)
+        x, y = image_training_samples(model, scripts, tracker, args.image_every, name,
+                                      feature_set=features)
     finally:
         tracker.close()
     seeds = ' '.join(str(s) for s in args.image_seeds)
     source = (f'colorglove_train_hand_classifiers --what {args.what} --image-seeds {seeds} '
-              f'{size} --image-every {args.image_every} --labels '
+              f'{size} --image-every {args.image_every} --image-features {features} --labels '
               f'{args.labels} --model {args.model} --covariance-blend {args.covariance_blend}')
-    clf = train_pose_classifier(x, y, OBSERVATION_FEATURES, hidden=args.hidden, seed=args.seed,
+    clf = train_pose_classifier(x, y, features, hidden=args.hidden, seed=args.seed,
                                 alpha=args.alpha, source=source, kind=args.model,
                                 covariance_blend=args.covariance_blend)
     save_pose_classifier(output, clf)

@@ -153,17 +153,25 @@ def evidence_seen(source: PoseSource, name: str, seed: int, truth: ScriptedSeque
 
 
 def observation_seen(source: PoseSource, name: str, seed: int, truth: ScriptedSequence,
-                     model: HandModel, error: type[Exception] = ScriptError) -> np.ndarray:
-    """The observation features (N, F; ``core.hand.observation_features``) of every frame of
-    sequence ``name`` / ``seed`` as ``source`` saw it, for an image classifier; a source that
-    records no observation (the noise model) is refused with ``error``."""
-    from colorglove_ros.core.hand.observation_features import record_features
+                     model: HandModel, error: type[Exception] = ScriptError,
+                     feature_set: str = 'tiny_observation', seen: np.ndarray | None = None
+                     ) -> np.ndarray:
+    """The observation features (N, F; ``core.hand.observation_features``, of ``feature_set``)
+    of every frame of sequence ``name`` / ``seed`` as ``source`` saw it, for an image
+    classifier; the upright set turns each frame by the global rotation of its ``seen`` pose
+    (N, 26; a frame without a finite one, which the detector reads as no hand, by none). A
+    source that records no observation (the noise model) is refused with ``error``."""
+    from colorglove_ros.core.hand.observation_features import feature_set_features
 
     record = getattr(source, 'observation', None)
     if record is None:
         raise error("an image classifier needs the frames' observation: run on the "
                           'tracker (--tracker)')
-    return record_features(record(name, seed, truth, model))
+    rotvec = None
+    if seen is not None:
+        rotvec = np.asarray(seen, dtype=float)[:, 3:6].copy()
+        rotvec[~np.all(np.isfinite(rotvec), axis=1)] = 0.0
+    return feature_set_features(record(name, seed, truth, model), feature_set, rotvec)
 
 @dataclass(frozen=True)
 class TrackingNoise:

@@ -20,8 +20,10 @@ A finger's curl is its MCP + PIP + DIP flexion over the sum of their upper limit
 ends every active gesture at once. The confidence of an event is the gesture's smoothed score
 on the frame that decided it (for a loss: 0).
 
-An optional image classifier (the same kind, feature set ``tiny_observation``, on the frame's
-observation: ``core/hand/observation_features.py``) adds ``image_weight`` times its
+An optional image classifier (the same kind, feature set ``tiny_observation`` or its upright
+variant ``tiny_observation_upright``, on the frame's observation:
+``core/hand/observation_features.py``; the caller computes the features, the upright ones with
+the frame's fitted global rotation) adds ``image_weight`` times its
 log-probabilities to the pose classifier's, renormalised over the classes: a product of the
 two classifiers' probabilities (the image one's raised to the weight), which reads where the
 fingertips' patches lie when the fitted pose puts them elsewhere. A frame without an
@@ -38,7 +40,7 @@ from colorglove_ros.core.hand.frame_evidence import EvidenceGate, FrameEvidence
 from colorglove_ros.core.hand.hysteresis import HoldConfig, ScoreHysteresis
 from colorglove_ros.core.hand.keypoints import FINGERTIP_INDICES, hand_keypoints
 from colorglove_ros.core.hand.model import DOF_NAMES, HandModel
-from colorglove_ros.core.hand.observation_features import OBSERVATION_FEATURES
+from colorglove_ros.core.hand.observation_features import IMAGE_FEATURE_SETS
 from colorglove_ros.core.hand.pose_classifier import (
     PoseClassifier,
     add_image_log_proba,
@@ -48,7 +50,8 @@ from colorglove_ros.core.validation import check_number
 
 __all__ = [
     'GESTURE_NAMES', 'PINCH_FINGERS', 'EVENT_STATES', 'NO_GESTURE', 'GESTURE_FEATURES',
-    'DEFAULT_GESTURE_CLASSIFIER', 'GESTURE_IMAGE_CLASSIFIER', 'DEFAULT_GESTURE_IMAGE_CLASSIFIER',
+    'DEFAULT_GESTURE_CLASSIFIER', 'GESTURE_IMAGE_CLASSIFIER', 'GESTURE_UPRIGHT_IMAGE_CLASSIFIER',
+    'DEFAULT_GESTURE_IMAGE_CLASSIFIER',
     'GestureError', 'GestureConfig',
     'GestureFeatures', 'GestureEvent', 'gesture_features', 'gesture_scores',
     'GestureDetector', 'format_event', 'parse_event',
@@ -65,6 +68,8 @@ DEFAULT_GESTURE_CLASSIFIER = 'config/gesture_classifier.npz'
 # the image evidence's gesture classifier (colorglove_train_hand_classifiers --what
 # gesture_images)
 GESTURE_IMAGE_CLASSIFIER = 'config/gesture_image_classifier.npz'
+# the same of the upright features (``--image-features tiny_observation_upright``)
+GESTURE_UPRIGHT_IMAGE_CLASSIFIER = 'config/gesture_upright_image_classifier.npz'
 # gesture_node's and eval_gestures --tracker's image classifier ('': the pose alone)
 DEFAULT_GESTURE_IMAGE_CLASSIFIER = ''
 _CURL_DOFS = np.array([[DOF_NAMES.index(f'{f}_{j}') for j in ('mcp_flex', 'pip_flex', 'dip_flex')]
@@ -171,10 +176,10 @@ class GestureDetector:
 
     def __post_init__(self) -> None:
         expected = {*GESTURE_NAMES, NO_GESTURE}
-        for clf, features in ((self.classifier, GESTURE_FEATURES),
-                              (self.image_classifier, OBSERVATION_FEATURES)):
+        for clf, features in ((self.classifier, (GESTURE_FEATURES,)),
+                              (self.image_classifier, IMAGE_FEATURE_SETS)):
             if clf is not None and (set(clf.classes) != expected or
-                                    clf.feature_set != features):
+                                    clf.feature_set not in features):
                 raise GestureError(f'a gesture classifier must classify {features!r} '
                                    f'features into {sorted(expected)}, got '
                                    f'{clf.feature_set!r} {clf.classes}')

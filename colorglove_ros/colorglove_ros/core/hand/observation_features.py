@@ -12,6 +12,13 @@ so scale-free:
 - the ``BLOBS_PER_COLOR`` largest blobs of each colour: whether there is one, its share of the
   frame's blob pixels, and its centroid relative to the glove's centre (x, y).
 
+The upright variant (:data:`OBSERVATION_UPRIGHT_FEATURES`) takes the view's in-plane angle
+out: the glove-centred pixel and blob positions are turned by the fitted pose's in-plane angle
+(:func:`image_angle`: the direction the fingers point, projected on the image) so the fingers
+point along +x, and the colour map's grid spans :data:`UPRIGHT_EXTENT` RMS radii either side of
+the glove's centre (cell shares of the glove's pixels). Gestures are held at any roll, which
+moves the plain features more than the shape does.
+
 Each glove colour is printed on two patches, so a colour's largest blobs name the patches that
 show most; where the thumb's patches lie relative to the fingers' is what tells E, M, N, S and
 T apart when the fitted pose puts the thumb elsewhere.
@@ -25,8 +32,11 @@ import numpy as np
 
 from colorglove_ros.core.conventions import NUM_COLORS, TINY_SIZE
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.geometry import rotvec_to_matrix
 
-__all__ = ['GRID', 'BLOBS_PER_COLOR', 'OBSERVATION_FEATURES', 'RECORD_FIELDS',
+__all__ = ['GRID', 'BLOBS_PER_COLOR', 'OBSERVATION_FEATURES', 'OBSERVATION_UPRIGHT_FEATURES',
+           'IMAGE_FEATURE_SETS', 'UPRIGHT_EXTENT', 'image_angle', 'feature_set_features',
+           'RECORD_FIELDS',
            'MAX_RECORDED_BLOBS', 'ObservationError', 'empty_observation_record',
            'write_observation', 'observation_features', 'record_features', 'frame_features',
            'num_observation_features']
@@ -34,6 +44,10 @@ __all__ = ['GRID', 'BLOBS_PER_COLOR', 'OBSERVATION_FEATURES', 'RECORD_FIELDS',
 GRID = 5
 BLOBS_PER_COLOR = 2
 OBSERVATION_FEATURES = 'tiny_observation'   # the feature set's name in classifier files
+# the same turned so the fitted pose's fingers point along the x axis (a pose is needed)
+OBSERVATION_UPRIGHT_FEATURES = 'tiny_observation_upright'
+IMAGE_FEATURE_SETS: tuple[str, ...] = (OBSERVATION_FEATURES, OBSERVATION_UPRIGHT_FEATURES)
+UPRIGHT_EXTENT = 2.0     # the upright colour map's half side, in RMS radii of the glove
 # the arrays of an observation record (:func:`empty_observation_record`), in the order
 # :func:`observation_features` takes them
 RECORD_FIELDS = ('tiny_labels', 'blob_color', 'blob_tiny_xy', 'blob_tiny_pixels')
@@ -133,11 +147,43 @@ def _blob_features(color: np.ndarray, xy: np.ndarray, pixels: np.ndarray, centre
     return out.reshape(n, -1)
 
 
+def _upright_colour_maps(tiny: np.ndarray, centre: np.ndarray, radius: np.ndarray,
+                         angle: np.ndarray) -> np.ndarray:
+    """(N, 10 * GRID * GRID) share of the glove pixels each colour holds in each cell of a
+    grid over the glove's upright frame (``UPRIGHT_EXTENT`` RMS radii either side of the
+    centre; pixels beyond count in the border cells)."""
+    n, h, w = tiny.shape
+    cells = GRID * GRID
+    ys, xs = np.mgrid[0:h, 0:w]
+    labels = tiny.reshape(n, -1).astype(np.int64)
+    glove = (labels >= 1) & (labels <= NUM_COLORS)
+    rel = np.stack([xs.ravel()[None] - centre[:, :1], ys.ravel()[None] - centre[:, 1:]], -1) \
+        / radius[:, None, None]
+    up = _rotate(rel, -angle)
+    index = np.clip(np.floor((up + UPRIGHT_EXTENT) / (2 * UPRIGHT_EXTENT) * GRID), 0,
+                    GRID - 1).astype(np.int64)
+    cell = index[..., 1] * GRID + index[..., 0]
+    frame = np.broadcast_to(np.arange(n)[:, None], labels.shape)
+    slot = ((frame * NUM_COLORS + labels - 1) * cells + cell)[glove]
+    out = np.bincount(slot, minlength=n * NUM_COLORS * cells).astype(float)
+    total = np.maximum(glove.sum(axis=1), 1).astype(float)
+    return (out.reshape(n, NUM_COLORS * cells) / total[:, None])
+
+
+def _rotate(xy: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Points (N, ..., 2) turned by ``angle`` (N,) radians (x towards y)."""
+    c = np.cos(angle).reshape(-1, *([1] * (xy.ndim - 2)))
+    s = np.sin(angle).reshape(-1, *([1] * (xy.ndim - 2)))
+    return np.stack([c * xy[..., 0] - s * xy[..., 1], s * xy[..., 0] + c * xy[..., 1]], -1)
+
+
 def observation_features(tiny_labels: np.ndarray, blob_color: np.ndarray,
-                         blob_tiny_xy: np.ndarray, blob_tiny_pixels: np.ndarray) -> np.ndarray:
+                         blob_tiny_xy: np.ndarray, blob_tiny_pixels: np.ndarray,
+                         angle: np.ndarray | None = None) -> np.ndarray:
     """(N, F) features (module docstring) of N frames' observations: tiny label images
     (N, 40, 40), blob colours (N, B; 0 pads), centroids in tiny pixels (N, B, 2) and pixel
-    counts (N, B)."""
+    counts (N, B); with ``angle`` (N,), each frame's fingers' direction in the image
+    (:func:`image_angle`), upright features (:data:`OBSERVATION_UPRIGHT_FEATURES`)."""
     tiny = np.asarray(tiny_labels)
     color = np.asarray(blob_color, dtype=np.int64)
     xy = np.asarray(blob_tiny_xy, dtype=float)
@@ -149,13 +195,47 @@ def observation_features(tiny_labels: np.ndarray, blob_color: np.ndarray,
                                f'{color.shape} / {xy.shape} / {pixels.shape}')
     centre, radius = _glove_frame(tiny)
     xy = np.where(np.isfinite(xy), xy, 0.0)
-    return np.concatenate([_colour_maps(tiny), _blob_features(color, xy, pixels, centre, radius)],
-                          axis=1)
+    if angle is None:
+        return np.concatenate([_colour_maps(tiny),
+                               _blob_features(color, xy, pixels, centre, radius)], axis=1)
+    angle = np.asarray(angle, dtype=float).reshape(-1)
+    if angle.shape != (n,) or not np.all(np.isfinite(angle)):
+        raise ObservationError(f'need one finite angle per frame ({n}), got {angle.shape}')
+    blobs = _blob_features(color, xy, pixels, centre, radius).reshape(n, NUM_COLORS,
+                                                                       BLOBS_PER_COLOR, 4)
+    blobs[..., 2:] = _rotate(blobs[..., 2:].reshape(n, -1, 2), -angle).reshape(
+        n, NUM_COLORS, BLOBS_PER_COLOR, 2)
+    return np.concatenate([_upright_colour_maps(tiny, centre, radius, angle),
+                           blobs.reshape(n, -1)], axis=1)
 
 
-def record_features(record: Mapping[str, np.ndarray]) -> np.ndarray:
-    """(N, F) :func:`observation_features` of an observation record's frames."""
+def image_angle(rotvec: np.ndarray) -> np.ndarray:
+    """(N,) angle (rad, from the image's x axis towards its y axis) of the direction the
+    fingers point (the hand frame's -y axis) projected on the image plane, for hands of
+    global rotation vectors (N, 3) in the camera frame."""
+    d = -rotvec_to_matrix(np.atleast_2d(np.asarray(rotvec, dtype=float)))[:, :, 1]
+    return np.arctan2(d[:, 1], d[:, 0])
+
+
+def record_features(record: Mapping[str, np.ndarray], angle: np.ndarray | None = None
+                    ) -> np.ndarray:
+    """(N, F) :func:`observation_features` of an observation record's frames (upright with
+    ``angle``)."""
     missing = [k for k in RECORD_FIELDS if k not in record]
     if missing:
         raise ObservationError(f'the observation record lacks {", ".join(missing)}')
-    return observation_features(*(record[k] for k in RECORD_FIELDS))
+    return observation_features(*(record[k] for k in RECORD_FIELDS), angle=angle)
+
+
+def feature_set_features(record: Mapping[str, np.ndarray], feature_set: str,
+                         rotvec: np.ndarray | None = None) -> np.ndarray:
+    """(N, F) features of ``feature_set`` (:data:`IMAGE_FEATURE_SETS`) of a record's frames;
+    the upright set needs each frame's fitted global rotation vector ``rotvec`` (N, 3)."""
+    if feature_set == OBSERVATION_FEATURES:
+        return record_features(record)
+    if feature_set != OBSERVATION_UPRIGHT_FEATURES:
+        raise ObservationError(f'unknown image feature set {feature_set!r}, expected one of '
+                               f'{IMAGE_FEATURE_SETS}')
+    if rotvec is None:
+        raise ObservationError(f'{feature_set!r} features need the fitted global rotations')
+    return record_features(record, image_angle(rotvec))

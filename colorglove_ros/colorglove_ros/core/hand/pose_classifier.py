@@ -33,7 +33,7 @@ import numpy as np
 
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.model import NUM_DOFS, HandModel, rotvec_to_matrix
-from colorglove_ros.core.hand.observation_features import OBSERVATION_FEATURES
+from colorglove_ros.core.hand.observation_features import IMAGE_FEATURE_SETS
 
 __all__ = ['CLASSIFIER_FORMAT', 'CLASSIFIER_FORMAT_VERSION', 'FEATURE_SETS', 'MODEL_KINDS',
            'ClassifierError', 'PoseClassifier', 'pose_features', 'train_pose_classifier',
@@ -249,7 +249,7 @@ def load_pose_classifier(path: str | Path, feature_set: str | None = None) -> Po
         raise ClassifierError(f'cannot read classifier file {path}: {exc}') from exc
     sizes = [clf.mean.shape[0]] + [w.shape[1] for w in clf.weights]
     quadratic_shape = (len(clf.classes), sizes[0], sizes[0])
-    if clf.feature_set not in (*FEATURE_SETS, OBSERVATION_FEATURES) or \
+    if clf.feature_set not in (*FEATURE_SETS, *IMAGE_FEATURE_SETS) or \
             sizes[-1] != len(clf.classes) or \
             any(w.shape[0] != n for w, n in zip(clf.weights, sizes, strict=False)) or \
             clf.quadratic is not None and (len(clf.weights) != 1 or

@@ -157,14 +157,11 @@ def test_frames_of_weak_evidence_decide_nothing() -> None:
     assert [(e.name, e.state) for e in events] == [('open_hand', 'start')]
 
 
-def _gesture_image_classifier() -> PoseClassifier:
-    """A classifier of 'tiny_observation' features that reads each gesture class (and none)
-    from one feature column (column k high: class k)."""
+def _gesture_image_classifier(feature_set: str = 'tiny_observation') -> PoseClassifier:
+    """A classifier of ``feature_set`` features (an image set) that reads each gesture class
+    (and none) from one feature column (column k high: class k)."""
     from colorglove_ros.core.hand.gestures import GESTURE_NAMES
-    from colorglove_ros.core.hand.observation_features import (
-        OBSERVATION_FEATURES,
-        num_observation_features,
-    )
+    from colorglove_ros.core.hand.observation_features import num_observation_features
     from colorglove_ros.core.hand.pose_classifier import train_pose_classifier
 
     classes = (*GESTURE_NAMES, NO_GESTURE)
@@ -173,7 +170,7 @@ def _gesture_image_classifier() -> PoseClassifier:
     y = np.repeat(np.array(classes), 20)
     for k, c in enumerate(classes):
         x[y == c, k] += 3.0
-    return train_pose_classifier(x, y, OBSERVATION_FEATURES, kind='lda')
+    return train_pose_classifier(x, y, feature_set, kind='lda')
 
 
 def test_the_image_classifier_is_multiplied_with_the_pose_classifier() -> None:
@@ -215,6 +212,65 @@ def test_the_image_classifier_is_multiplied_with_the_pose_classifier() -> None:
         GestureDetector(MODEL, classifier=_shipped(), image_classifier=_shipped())
     with pytest.raises(GestureError):
         GestureConfig(image_weight=-1.0)
+
+
+def test_an_upright_image_classifier_is_read_with_features_turned_by_the_seen_pose(
+        tmp_path) -> None:
+    """An image classifier of the upright features is saved, read back and taken by the
+    detector; the evaluation gives it each frame's features turned by that frame's seen pose
+    (a lost frame's by none), the plain classifier the plain features."""
+    from colorglove_ros.core.evaluation.scripted_hands import observation_seen
+    from colorglove_ros.core.hand.observation_features import (
+        OBSERVATION_UPRIGHT_FEATURES,
+        empty_observation_record,
+        feature_set_features,
+        record_features,
+    )
+    from colorglove_ros.core.hand.pose_classifier import save_pose_classifier
+
+    path = save_pose_classifier(tmp_path / 'upright.npz',
+                                _gesture_image_classifier(OBSERVATION_UPRIGHT_FEATURES))
+    upright = load_pose_classifier(path)
+    assert upright.feature_set == OBSERVATION_UPRIGHT_FEATURES
+    GestureDetector(MODEL, classifier=_shipped(), image_classifier=upright)
+    record = empty_observation_record(3)
+    record['tiny_labels'][:, 12:28, 18:22] = 3
+    record['tiny_labels'][:, 12:16, 18:22] = 5
+    seen = np.zeros((3, 26))
+    seen[0, 3:6] = [0.0, 0.0, 0.7]
+    seen[1, 3:6] = [0.0, 0.0, -0.7]
+    seen[2] = np.nan                            # lost
+
+    class Source:
+        def observation(self, *args: object) -> dict[str, np.ndarray]:
+            return record
+
+    turned = observation_seen(Source(), 'gestures', 0, None, MODEL,
+                              feature_set=OBSERVATION_UPRIGHT_FEATURES, seen=seen)
+    expected = seen[:, 3:6].copy()
+    expected[2] = 0.0
+    np.testing.assert_allclose(turned, feature_set_features(record, OBSERVATION_UPRIGHT_FEATURES,
+                                                            expected))
+    assert np.abs(turned[0] - turned[1]).max() > 0.1     # the same image, other angles
+    np.testing.assert_array_equal(observation_seen(Source(), 'gestures', 0, None, MODEL),
+                                  record_features(record))
+
+
+def test_the_shipped_upright_gesture_image_classifier_reads_upright_features() -> None:
+    """config/gesture_upright_image_classifier.npz classifies the upright image features into
+    the gestures and none, and the detector takes it beside the shipped pose classifier."""
+    from colorglove_ros.core.hand.gestures import GESTURE_NAMES, GESTURE_UPRIGHT_IMAGE_CLASSIFIER
+    from colorglove_ros.core.hand.observation_features import (
+        OBSERVATION_UPRIGHT_FEATURES,
+        num_observation_features,
+    )
+
+    clf = load_pose_classifier(share_dir() / GESTURE_UPRIGHT_IMAGE_CLASSIFIER,
+                               OBSERVATION_UPRIGHT_FEATURES)
+    assert set(clf.classes) == {*GESTURE_NAMES, NO_GESTURE}
+    assert 'tiny_observation_upright' in clf.source
+    assert clf.mean.shape == (num_observation_features(),)
+    GestureDetector(MODEL, classifier=_shipped(), image_classifier=clf)
 
 
 def test_the_shipped_gesture_image_classifier_reads_the_gesture_classes() -> None:

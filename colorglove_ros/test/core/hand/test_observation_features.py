@@ -7,13 +7,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 from pose_samples import MODEL, allowed_fingers
+from scipy.spatial.transform import Rotation
 
 from colorglove_ros.core.hand.observation_features import (
     GRID,
     OBSERVATION_FEATURES,
+    OBSERVATION_UPRIGHT_FEATURES,
     RECORD_FIELDS,
     ObservationError,
     empty_observation_record,
+    feature_set_features,
+    image_angle,
     num_observation_features,
     observation_features,
     record_features,
@@ -148,3 +152,39 @@ def test_the_colour_maps_are_each_cells_share_of_each_colour() -> None:
     got = _colour_maps(tiny)
     assert got.shape == (5, NUM_COLORS * GRID * GRID)
     assert np.allclose(got, expected.reshape(5, -1), rtol=0, atol=1e-12)
+
+
+def _turned(record: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The observation seen a quarter turn about the camera's axis: tiny pixel (x, y) moves to
+    (39 - y, x) (the image's x axis towards its y axis)."""
+    turned = {k: v.copy() for k, v in record.items()}
+    turned['tiny_labels'] = np.rot90(record['tiny_labels'], k=-1, axes=(1, 2)).copy()
+    xy = record['blob_tiny_xy']
+    turned['blob_tiny_xy'] = np.stack([39.0 - xy[..., 1], xy[..., 0]], axis=-1)
+    return turned
+
+
+def test_the_upright_features_take_the_in_plane_angle_out() -> None:
+    record = _frame(10)
+    rotvec = np.array([[0.3, -0.2, 0.1]])
+    # the same hand turned a quarter about the camera's z axis, seen turned
+    quarter = Rotation.from_rotvec([0.0, 0.0, np.pi / 2]) * Rotation.from_rotvec(rotvec[0])
+    turned, turned_rotvec = _turned(record), quarter.as_rotvec()[None]
+    assert image_angle(turned_rotvec)[0] == pytest.approx(image_angle(rotvec)[0] + np.pi / 2)
+    upright = feature_set_features(record, OBSERVATION_UPRIGHT_FEATURES, rotvec)
+    np.testing.assert_allclose(
+        feature_set_features(turned, OBSERVATION_UPRIGHT_FEATURES, turned_rotvec), upright,
+        atol=1e-9)
+    # the plain features move with the view; the upright ones are another set of the same size
+    plain, plain_turned = record_features(record), record_features(turned)
+    assert np.abs(plain - plain_turned).max() > 0.5
+    assert upright.shape == plain.shape
+    np.testing.assert_array_equal(feature_set_features(record, OBSERVATION_FEATURES), plain)
+    # the upright map holds each colour's share of the glove's pixels
+    assert upright[0, :10 * GRID * GRID].sum() == pytest.approx(1.0)
+    with pytest.raises(ObservationError, match='global rotations'):
+        feature_set_features(record, OBSERVATION_UPRIGHT_FEATURES)
+    with pytest.raises(ObservationError, match='unknown image feature set'):
+        feature_set_features(record, 'hand_shape', rotvec)
+    with pytest.raises(ObservationError, match='finite angle'):
+        record_features(record, np.array([np.nan]))
