@@ -182,7 +182,7 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
         parser.add_argument('--image-weight', type=float,
                             help="the image classifier's weight (default: the core's)")
     args = parser.parse_args(argv)
-    from colorglove_ros.core.hand.pose_classifier import ClassifierError, load_pose_classifier
+    from colorglove_ros.core.hand.pose_classifier import load_pose_classifier
 
     classifier = None if args.rules or args.classifier is None else load_pose_classifier(
         args.classifier, settings.feature_set)
@@ -216,12 +216,8 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
     if image_path:
         from colorglove_ros.core.hand.observation_features import IMAGE_FEATURE_SETS
 
-        # which image feature sets the evaluation reads, its detector checks
-        extra['image_classifier'] = load_pose_classifier(image_path)
-        if extra['image_classifier'].feature_set not in IMAGE_FEATURE_SETS:
-            found = extra['image_classifier'].feature_set
-            raise ClassifierError(f'{image_path} classifies {found!r} features, not the '
-                                  f'image evidence ({", ".join(IMAGE_FEATURE_SETS)})')
+        # which of the image feature sets the evaluation reads, its detector checks
+        extra['image_classifier'] = load_pose_classifier(image_path, IMAGE_FEATURE_SETS)
         source_settings['image_classifier'] = image_path
         if args.image_weight is not None:
             extra['image_weight'] = args.image_weight

@@ -226,10 +226,11 @@ def save_pose_classifier(path: str | Path, classifier: PoseClassifier) -> Path:
     return path
 
 
-def load_pose_classifier(path: str | Path, feature_set: str | None = None) -> PoseClassifier:
+def load_pose_classifier(path: str | Path,
+                         feature_set: str | tuple[str, ...] | None = None) -> PoseClassifier:
     """Read a classifier file (format version 1 or 2); :class:`ClassifierError` if it is
-    missing, of another format or version, inconsistent, or (given ``feature_set``) made for
-    other features."""
+    missing, of another format or version, inconsistent, or (given ``feature_set``: one set's
+    name, or a tuple of the sets accepted) made for other features."""
     try:
         with np.load(Path(path), allow_pickle=False) as data:
             version = int(data['version'])
@@ -256,7 +257,8 @@ def load_pose_classifier(path: str | Path, feature_set: str | None = None) -> Po
                                            clf.quadratic.shape != quadratic_shape):
         raise ClassifierError(f'{path}: inconsistent classifier (feature set '
                               f'{clf.feature_set!r}, layer sizes {sizes})')
-    if feature_set is not None and clf.feature_set != feature_set:
+    accepted = (feature_set,) if isinstance(feature_set, str) else feature_set
+    if accepted is not None and clf.feature_set not in accepted:
         raise ClassifierError(f'{path} classifies {clf.feature_set!r} features, expected '
-                              f'{feature_set!r}')
+                              f'{" or ".join(map(repr, accepted))}')
     return clf
