@@ -34,6 +34,10 @@ from scipy.spatial.transform import Rotation, Slerp
 from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.hand.frame_evidence import FrameEvidence
 from colorglove_ros.core.hand.model import NUM_DOFS, NUM_FINGER_DOFS, HandModel
+from colorglove_ros.core.hand.observation_features import (
+    OBSERVATION_FEATURES,
+    feature_set_features,
+)
 from colorglove_ros.core.synthetic.sequences import min_jerk
 from colorglove_ros.core.yaml_io import load_yaml_mapping
 
@@ -154,15 +158,13 @@ def evidence_seen(source: PoseSource, name: str, seed: int, truth: ScriptedSeque
 
 def observation_seen(source: PoseSource, name: str, seed: int, truth: ScriptedSequence,
                      model: HandModel, error: type[Exception] = ScriptError,
-                     feature_set: str = 'tiny_observation', seen: np.ndarray | None = None
+                     feature_set: str = OBSERVATION_FEATURES, seen: np.ndarray | None = None
                      ) -> np.ndarray:
     """The observation features (N, F; ``core.hand.observation_features``, of ``feature_set``)
     of every frame of sequence ``name`` / ``seed`` as ``source`` saw it, for an image
     classifier; the upright set turns each frame by the global rotation of its ``seen`` pose
     (N, 26; a frame without a finite one, which the detector reads as no hand, by none). A
     source that records no observation (the noise model) is refused with ``error``."""
-    from colorglove_ros.core.hand.observation_features import feature_set_features
-
     record = getattr(source, 'observation', None)
     if record is None:
         raise error("an image classifier needs the frames' observation: run on the "
