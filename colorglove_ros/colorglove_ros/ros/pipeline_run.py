@@ -334,17 +334,19 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
             if feed is not None:
                 launcher.start()
                 _wait_for_graph(monitor, startup_s, {**STAGE_INPUTS, **(extra_inputs or {})})
+                def cpu_now() -> dict[str, float]:
+                    # the node processes, this process (the monitor) and the latency probe
+                    return {**launcher.cpu_seconds(), 'monitor': time.process_time(),
+                            'probe': process_cpu_seconds(probe.process.pid)}
+
                 started = time.monotonic()
-                cpu_before = {**launcher.cpu_seconds(), 'monitor': time.process_time(),
-                              'probe': process_cpu_seconds(probe.process.pid)}
+                cpu_before = cpu_now()
                 feeder = threading.Thread(target=feed, daemon=True)
                 feeder.start()
                 feeder.join(timeout_s)
                 # the feed has ended: wait for the last outputs (no frame count needed)
                 completed = not feeder.is_alive() and monitor.wait_for_frames(0, 60.0)
-                cpu_s = _cpu_since(cpu_before, {**launcher.cpu_seconds(),
-                                                'monitor': time.process_time(),
-                                                'probe': process_cpu_seconds(probe.process.pid)})
+                cpu_s = _cpu_since(cpu_before, cpu_now())
                 cpu_s['player'] = float(getattr(feed, 'cpu_s', float('nan')))
             else:
                 started = time.monotonic()

@@ -395,14 +395,15 @@ def main(argv: list[str] | None = None) -> int:
             print(f'colorglove_play_bag: --wait-for: the bag plays no topic {unknown}',
                   file=sys.stderr, flush=True)
             return 2
-        waits = list(args.wait_for)
+        waits = []
         if args.pace_on in player.publishers_by_topic:
             # the image's subscribers and its CameraInfo's: a node that gets images before it
             # is matched to their CameraInfo answers them 'waiting for CameraInfo'
-            waits[:0] = [(args.pace_on, args.min_subscribers)]
+            waits.append((args.pace_on, args.min_subscribers))
             camera_info = player.camera_info_beside(args.pace_on)
             if camera_info is not None:
-                waits.insert(1, (camera_info, args.min_info_subscribers))
+                waits.append((camera_info, args.min_info_subscribers))
+        waits += args.wait_for
         if waits:
             for topic, wanted in waits:
                 if not player.wait_for_subscribers(topic, args.wait_subscribers, wanted):
