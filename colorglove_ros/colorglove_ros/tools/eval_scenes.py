@@ -177,7 +177,8 @@ def main(argv: list[str] | None = None) -> int:
                 return tool_error('colorglove_eval_scenes', exc)
             print(f'[eval_scenes] {condition.name} sequence {seed}: {args.frames} frames in '
                   f'{time.perf_counter() - t0:.1f} s', flush=True)
-        records.extend(r for run in runs for r in frame_records(run))
+        if args.frames_json:
+            records.extend(r for run in runs for r in frame_records(run))
         rows.append({'condition': condition.name, 'appearance': condition.appearance,
                      'hand': condition.hand, 'motion': condition.motion,
                      **summarize_scene(runs)})
