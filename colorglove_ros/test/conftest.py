@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -22,6 +23,7 @@ from repo_paths import PKG_DIR  # noqa: E402
 from small_databases import SMALL_BUILD  # noqa: E402
 
 if TYPE_CHECKING:
+    import rclpy
     from node_fixtures import NodeAssets
 
     from colorglove_ros.core.hand.glove import Glove
@@ -44,6 +46,17 @@ def isolated_ros_domain(monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     monkeypatch.setenv(FASTDDS_PROFILE_VARIABLE, str(PKG_DIR / 'config' / 'fastdds_profile.xml'))
     return dict(os.environ)
+
+
+@pytest.fixture
+def ros_context(isolated_ros_domain: dict[str, str]) -> Iterator[rclpy.Context]:
+    """An rclpy context of this test's own, in its own ROS domain; shut down after the test."""
+    import rclpy
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    yield context
+    rclpy.try_shutdown(context=context)
 
 
 @pytest.fixture(scope='session')

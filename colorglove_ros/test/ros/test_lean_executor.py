@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Iterator
 
 import pytest
 import rclpy
@@ -19,11 +18,9 @@ from colorglove_ros.ros.nodes.common import LATEST_ONLY, TakenOnDemand, take_mes
 
 
 @pytest.fixture
-def context(isolated_ros_domain: dict[str, str]) -> Iterator[rclpy.Context]:
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.try_shutdown(context=context)
+def context(ros_context: rclpy.Context) -> rclpy.Context:
+    """The test's own rclpy context (``ros_context``, test/conftest.py)."""
+    return ros_context
 
 
 def _spin_until(executor: LeanExecutor, done, timeout_s: float = 5.0) -> None:

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -29,11 +28,9 @@ _RELIABLE = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=10,
 
 
 @pytest.fixture
-def context(isolated_ros_domain: dict[str, str]) -> Iterator[rclpy.Context]:
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.try_shutdown(context=context)
+def context(ros_context: rclpy.Context) -> rclpy.Context:
+    """The test's own rclpy context (``ros_context``, test/conftest.py)."""
+    return ros_context
 
 
 def _wait(condition, timeout_s: float = 5.0) -> bool:
