@@ -145,8 +145,9 @@ class EdgeTrackerConfig:
     ``finger_refit_abduction`` where its abduction starts ('start', the default: with the
     other start angles; 'kept': at the frame's fit; 'both': one candidate of each;
     'spread': kept, and from the explained angles also moved ``finger_refit_spread_deg`` out
-    and in). None of these raised the 3-D mouse's clicks on its check seeds
-    (docs/RESULTS.md, DigitEyes fifteenth pass), so the defaults are the earlier re-fit's.
+    and in). None of these brought the 3-D mouse's clicks on its check seeds up to the
+    defaults' (docs/RESULTS.md, DigitEyes fifteenth pass), so the defaults are the earlier
+    re-fit's.
     ``max_finger_off_silhouette`` (with silhouettes; 1, the default: off; 0.15 removes most
     drifted fingers on the bare-hand sequences but withholds most frames of the 3-D mouse's
     table views, docs/RESULTS.md, DigitEyes ninth pass): a fit whose hand passes every
