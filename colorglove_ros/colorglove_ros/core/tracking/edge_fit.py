@@ -79,6 +79,8 @@ DEFAULT_TRACKED_LINKS: tuple[str, ...] = tuple(
 
 PALM_SIDES = ('ulnar', 'radial')
 ROBUST_LOSSES = ('huber', 'cauchy')
+REFIT_DOFS = ('hand', 'abduction', 'digit', 'flexion')   # what a re-fit candidate fits
+REFIT_ABDUCTION = ('start', 'kept', 'both', 'spread')   # where its abduction starts
 # viewing angles of the palm-side silhouette generators (see palm_outline)
 PALM_ANGLES = np.deg2rad(np.linspace(-75.0, 75.0, 7))
 _PALM_OCCLUDER_POINTS = 160       # palm mesh vertices kept as the palm occluder
@@ -137,6 +139,15 @@ class EdgeTrackerConfig:
     ``finger_refit_budget`` > 0 bounds the re-fits' CPU: each tracked frame adds that many
     re-fit candidates (fits from another start) to an allowance of at most
     ``finger_refit_burst``, each candidate takes one, and none is tried without.
+    ``finger_refit_dofs`` says what a candidate fits ('hand', the default: every DOF;
+    'abduction': all but the re-fitted digit's abduction; 'digit': that digit's DOFs alone;
+    'flexion': its flexions alone), the rest held at the frame's fit;
+    ``finger_refit_abduction`` where its abduction starts ('start', the default: with the
+    other start angles; 'kept': at the frame's fit; 'both': one candidate of each;
+    'spread': kept, and from the explained angles also moved ``finger_refit_spread_deg`` out
+    and in). None of these brought the 3-D mouse's clicks on its check seeds up to the
+    defaults' (docs/RESULTS.md, DigitEyes fifteenth pass), so the defaults are the earlier
+    re-fit's.
     ``max_finger_off_silhouette`` (with silhouettes; 1, the default: off; 0.15 removes most
     drifted fingers on the bare-hand sequences but withholds most frames of the 3-D mouse's
     table views, docs/RESULTS.md, DigitEyes ninth pass): a fit whose hand passes every
@@ -200,6 +211,9 @@ class EdgeTrackerConfig:
     finger_refit_max_wait: int = 16
     finger_refit_budget: float = 0.0
     finger_refit_burst: int = 6
+    finger_refit_dofs: str = 'hand'
+    finger_refit_abduction: str = 'start'
+    finger_refit_spread_deg: float = 8.0
     max_finger_off_silhouette: float = 1.0
     finger_check_digits: tuple[str, ...] = ('index', 'middle', 'ring', 'little')
     retry_dofs: tuple[str, ...] = ()
@@ -256,6 +270,15 @@ class EdgeTrackerConfig:
                                    'finger_refit_rounds >= 1, '
                                    '0 <= finger_refit_backoff <= finger_refit_max_wait, '
                                    'finger_refit_budget >= 0, finger_refit_burst >= 1')
+        if self.finger_refit_abduction not in REFIT_ABDUCTION \
+                or not self.finger_refit_spread_deg > 0:
+            raise EdgeTrackerError(f'finger_refit_abduction must be one of {REFIT_ABDUCTION}, '
+                                   f'finger_refit_spread_deg > 0, got '
+                                   f'{self.finger_refit_abduction!r}, '
+                                   f'{self.finger_refit_spread_deg}')
+        if self.finger_refit_dofs not in REFIT_DOFS:
+            raise EdgeTrackerError(f'finger_refit_dofs must be one of {REFIT_DOFS}, got '
+                                   f'{self.finger_refit_dofs!r}')
         if not 0.0 <= self.max_finger_off_silhouette <= 1.0 \
                 or any(d not in DIGITS for d in self.finger_check_digits):
             raise EdgeTrackerError(f'max_finger_off_silhouette must be in [0, 1] and '
@@ -1096,9 +1119,11 @@ def _gauss_newton(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[
                   measured: Sequence[EdgeMeasurement | None],
                   world: tuple[np.ndarray, np.ndarray | None], q: np.ndarray,
                   q_anchor: np.ndarray, S: np.ndarray, C: np.ndarray | None,
-                  config: EdgeTrackerConfig) -> tuple[np.ndarray, int]:
+                  config: EdgeTrackerConfig, held: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, int]:
     """``gn_iterations`` stabilised Gauss-Newton steps from ``q`` on fixed measurements
-    (``world``: the points and Jacobians at ``q``), joint limits enforced; (q, steps)."""
+    (``world``: the points and Jacobians at ``q``), joint limits enforced, the DOFs where
+    ``held`` (26,) is true left as they are; (q, steps)."""
     steps = 0
     CtC = config.coupling_weight * (C.T @ C) if C is not None else None
     for it in range(config.gn_iterations):
@@ -1113,7 +1138,7 @@ def _gauss_newton(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[
             g += config.coupling_weight * (C.T @ (C @ q))
         at_lo = (q <= kin.lower + 1e-9) & (g > 0)
         at_hi = (q >= kin.upper - 1e-9) & (g < 0)
-        free = ~(at_lo | at_hi)
+        free = ~(at_lo | at_hi) if held is None else ~(at_lo | at_hi | held)
         dq = np.zeros(NUM_DOFS)
         try:
             dq[free] = -np.linalg.solve(H[np.ix_(free, free)], g[free])
@@ -1136,7 +1161,8 @@ def fingertip_disagreement(kin: FastKinematics, q_a: np.ndarray, q_b: np.ndarray
 def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[PinholeCamera],
              greys: Sequence[np.ndarray | None], q_start: np.ndarray,
              config: EdgeTrackerConfig, rounds: int, polarity: int | None = None,
-             silhouettes: Sequence[Silhouette | None] | None = None) -> EdgeFit:
+             silhouettes: Sequence[Silhouette | None] | None = None,
+             held: np.ndarray | None = None) -> EdgeFit:
     """Fit the pose to the edges of the cameras' grey images (None: no frame from that
     camera): ``rounds`` times predict at the current pose, measure, and take
     ``gn_iterations`` stabilised Gauss-Newton steps on the concatenated residuals with the
@@ -1145,10 +1171,15 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
     whose first step is the paper's ``-(J^T J + S)^-1 J^T R``; further steps converge on the
     same measurements without letting weakly observed DOFs wander. ``silhouettes`` (one per
     camera, None where there is none) add the silhouette residuals and measures (see
-    :class:`EdgeTrackerConfig`)."""
+    :class:`EdgeTrackerConfig`). ``held`` ((26,) bool): DOFs kept at ``q_start`` (clamped)
+    while the others are fitted."""
     sils = list(silhouettes) if silhouettes is not None else [None] * len(cameras)
     if len(sils) != len(cameras):
         raise EdgeTrackerError(f'{len(cameras)} camera(s) but {len(sils)} silhouette(s)')
+    if held is not None:
+        held = np.asarray(held, dtype=bool)
+        if held.shape != (NUM_DOFS,):
+            raise EdgeTrackerError(f'held must be {NUM_DOFS} booleans, got {held.shape}')
     q = kin.clamp(np.asarray(q_start, dtype=float))
     q_anchor = q.copy()
     S = np.diag(config.stabilizer_diagonal())
@@ -1186,7 +1217,7 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
             return EdgeFit(q, math.nan, found, usable, tips, iterations,
                            digit_links_found=digit_found, digit_links_usable=digit_usable)
         q, steps = _gauss_newton(kin, points, cameras, measured, world, q, q_anchor, S, C,
-                                 config)
+                                 config, held)
         iterations += steps
         world = kin.points(q, points.point_link, points.point_local, False)
         r, _, w = stack_residuals(points, cameras, measured, world, config, jacobian=False)
@@ -1197,7 +1228,7 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
         alone = [measured[0]] + [None] * (len(cameras) - 1)
         world0 = kin.points(q_anchor, points.point_link, points.point_local, True)
         q0, _ = _gauss_newton(kin, points, cameras, alone, world0, q_anchor.copy(), q_anchor,
-                              S, C, config)
+                              S, C, config, held)
         disagreement = fingertip_disagreement(kin, q, q0)
     D = len(DIGITS)
     shares = np.full(2 + 2 * D, math.nan)

@@ -18,6 +18,7 @@ lies off its silhouette is withheld (no pose, reason ``finger withheld: ...``), 
 """
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -105,6 +106,7 @@ class EdgeTracker:
             self.set_backgrounds(backgrounds)
         self._digit_dofs = [np.array([i for i, n in enumerate(model.dof_names)
                                       if n.startswith(f'{d}_')]) for d in DIGITS]
+        self._refit_free = [self._free_dofs(d) for d in range(len(DIGITS))]
         self._retry_dofs = [model.dof_names.index(n) for n in self.config.retry_dofs]
         self._retry_digits = [DIGITS.index(n.split('_')[0]) for n in self.config.retry_dofs]
         self._q: np.ndarray | None = None
@@ -347,10 +349,9 @@ class EdgeTracker:
                         > cfg.max_finger_unexplained:
                     continue
                 dofs = self._digit_dofs[e]
+                free = self._refit_free[e]
                 best = fit
-                for angles in (self._good_digits[e], self.init_pose[dofs]):
-                    if angles is None:
-                        continue
+                for angles in self._refit_starts(e, fit.q):
                     if cfg.finger_refit_budget > 0:
                         if self._refit_tokens < 1.0:
                             break
@@ -358,7 +359,8 @@ class EdgeTracker:
                     q0 = fit.q.copy()
                     q0[dofs] = angles
                     cand = fit_pose(self.kin, self.points, self.cameras, greys, q0, cfg,
-                                    cfg.finger_refit_rounds, silhouettes=silhouettes)
+                                    cfg.finger_refit_rounds, silhouettes=silhouettes,
+                                    held=None if free.all() else ~free)
                     if not self._fit_problem(cand) and \
                             (cand.finger_unexplained[d], cand.unexplained) \
                             < (best.finger_unexplained[d], best.unexplained):
@@ -371,6 +373,55 @@ class EdgeTracker:
                 self._refit_failures[d] = 0
                 self._refit_next[d] = 0
         return fit
+
+    def _refit_starts(self, digit: int, q: np.ndarray) -> list[np.ndarray]:
+        """The angles of ``digit`` the re-fit candidates start from (``finger_refit_abduction``):
+        its angles on the last frame where it was explained (if any) and the initialisation
+        pose's, each with its abduction (the first of its DOFs) from those angles ('start'),
+        kept at pose ``q``'s ('kept'), or one candidate of each ('both'); 'spread': both kept
+        at ``q``'s, and the explained angles also with it moved ``finger_refit_spread_deg``
+        out and in (within the joint limits). Re-fits that hold the digit's abduction
+        (``finger_refit_dofs`` 'abduction', 'flexion') keep it."""
+        dofs = self._digit_dofs[digit]
+        mode = 'kept' if self.config.finger_refit_dofs in ('flexion', 'abduction') \
+            else self.config.finger_refit_abduction
+        out = []
+        for angles in (self._good_digits[digit], self.init_pose[dofs]):
+            if angles is None:
+                continue
+            kept = angles.copy()
+            kept[0] = q[dofs[0]]
+            if mode in ('kept', 'both'):
+                out.append(kept)
+            if mode == 'spread':
+                out.append(kept)
+                if angles is self._good_digits[digit]:
+                    step = math.radians(self.config.finger_refit_spread_deg)
+                    for sign in (1.0, -1.0):
+                        moved = kept.copy()
+                        moved[0] = np.clip(kept[0] + sign * step, self.kin.lower[dofs[0]],
+                                           self.kin.upper[dofs[0]])
+                        if moved[0] != kept[0]:
+                            out.append(moved)
+            if mode in ('start', 'both') and not (mode == 'both' and kept[0] == angles[0]):
+                out.append(angles)
+        return out
+
+    def _free_dofs(self, digit: int) -> np.ndarray:
+        """(26,) the DOFs a re-fit of ``digit`` fits (``finger_refit_dofs``): every DOF
+        ('hand'), all but the digit's abduction, the first of its DOFs ('abduction'), the
+        digit's own ('digit') or its flexions alone ('flexion'); the others stay at the
+        frame's fit."""
+        mode = self.config.finger_refit_dofs
+        free = np.ones(NUM_DOFS, dtype=bool)
+        if mode == 'abduction':
+            free[self._digit_dofs[digit][0]] = False
+        elif mode != 'hand':
+            free[:] = False
+            free[self._digit_dofs[digit]] = True
+            if mode == 'flexion':
+                free[self._digit_dofs[digit][0]] = False
+        return free
 
     def _retry(self, greys: list[np.ndarray | None], silhouettes: list[Silhouette | None],
                fit: EdgeFit, kind: str, reason: str) -> tuple[EdgeFit, str, str]:

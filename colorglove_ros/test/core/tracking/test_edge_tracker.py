@@ -648,3 +648,104 @@ def test_the_retry_guards_keep_a_candidate_only_when_the_rest_of_the_hand_stays(
         EdgeTrackerConfig(retry_max_wrist_move_m=0.0)
     with pytest.raises(EdgeTrackerError):
         EdgeTrackerConfig(retry_rest_margin_px=-1.0)
+
+
+def test_a_fit_leaves_the_held_dofs_at_their_start(rig) -> None:
+    """``fit_pose(held=...)`` fits the other DOFs and leaves the held ones where they
+    started: a perturbed pose with the index finger's abduction held pulls the rest back
+    (here the index flexion) and keeps that abduction to the bit."""
+    from colorglove_ros.core.tracking.edge_fit import fit_pose
+
+    cameras, seq, frames = rig
+    model, truth = seq.synth.model, seq.poses[20]
+    tracker = EdgeTracker(model, cameras)
+    abd, flex = (model.dof_names.index(n) for n in ('index_mcp_abd', 'index_mcp_flex'))
+    start = truth.copy()
+    start[abd] += 0.1
+    start[flex] += 0.15
+    held = np.zeros(len(truth), dtype=bool)
+    held[abd] = True
+    greys = tracker._greys(frames[20])
+    fit = fit_pose(tracker.kin, tracker.points, cameras, greys, start, tracker.config, 3,
+                   held=held)
+    free = fit_pose(tracker.kin, tracker.points, cameras, greys, start, tracker.config, 3)
+    assert fit.q[abd] == tracker.kin.clamp(start)[abd]
+    assert abs(free.q[abd] - start[abd]) > 1e-3          # unheld, the abduction moves
+    assert abs(fit.q[flex] - truth[flex]) < 0.5 * abs(start[flex] - truth[flex])
+    with pytest.raises(EdgeTrackerError):
+        fit_pose(tracker.kin, tracker.points, cameras, greys, start, tracker.config, 1,
+                 held=held[:5])
+
+
+def _refit_calls(monkeypatch) -> list[tuple[np.ndarray, np.ndarray | None, np.ndarray]]:
+    """(start pose, held DOFs, fitted pose) of every ``fit_pose`` call of the tracker from
+    now on."""
+    from colorglove_ros.core.tracking import edge_tracker
+
+    calls: list[tuple[np.ndarray, np.ndarray | None, np.ndarray]] = []
+    fit_pose = edge_tracker.fit_pose
+
+    def recording(*args, **kwargs):
+        fit = fit_pose(*args, **kwargs)
+        calls.append((np.array(args[4]), kwargs.get('held'), fit.q.copy()))
+        return fit
+
+    monkeypatch.setattr(edge_tracker, 'fit_pose', recording)
+    return calls
+
+
+@pytest.mark.parametrize('dofs, abduction', [('hand', 'start'), ('hand', 'kept'),
+                                             ('hand', 'both'), ('hand', 'spread'),
+                                             ('abduction', 'start'), ('digit', 'start'),
+                                             ('flexion', 'start')])
+def test_finger_refit_candidates_start_and_hold_as_configured(rig, monkeypatch, dofs: str,
+                                                               abduction: str) -> None:
+    """The index finger left unexplained (a blob beyond its tip): its re-fit candidates
+    start from the frame's fit with the index's angles of the last frame where it was
+    explained and the initialisation pose's, their abduction as ``finger_refit_abduction``
+    says (kept at the frame's fit; 'spread': also moved ``finger_refit_spread_deg`` out and
+    in), and fit what ``finger_refit_dofs`` says, the rest held where they start."""
+    cameras, seq, frames = rig
+    model, truth = seq.synth.model, seq.poses[20]
+    images = _with_blob_beyond_index_tip(model, cameras, frames[20], truth)
+    config = EdgeTrackerConfig(finger_refit=True, loss_patience=10, finger_refit_dofs=dofs,
+                               finger_refit_abduction=abduction, finger_refit_spread_deg=5.0)
+    tracker = EdgeTracker(model, cameras, config, _backgrounds(frames))
+    tracker.initialize(truth)
+    first = tracker.update(frames[20])
+    assert max(first.fit.finger_unexplained) <= config.max_finger_unexplained   # no re-fit
+    index = tracker._digit_dofs[1]
+    good = first.fit.q[index]                         # the index's explained angles
+    calls = _refit_calls(monkeypatch)
+    tracker.update(images)
+    _, _, frame_q = calls[0]                          # the frame's own fit
+    init = tracker.init_pose[index]
+    kept, step = frame_q[index[0]], np.radians(5.0)
+    out, inward = (float(np.clip(kept + s * step, tracker.kin.lower[index[0]],
+                                 tracker.kin.upper[index[0]])) for s in (1.0, -1.0))
+    expected = {
+        'start': [good, init],
+        'kept': [np.r_[kept, good[1:]], np.r_[kept, init[1:]]],
+        'both': [np.r_[kept, good[1:]], good, np.r_[kept, init[1:]], init],
+        'spread': [np.r_[kept, good[1:]], *(np.r_[a, good[1:]] for a in (out, inward)
+                                             if a != kept),      # none past the limit
+                   np.r_[kept, init[1:]]],
+    }['kept' if dofs in ('abduction', 'flexion') else abduction]
+    candidates = calls[1:1 + len(expected)]           # the index re-fitted first
+    assert len(candidates) == len(expected)
+    want = np.zeros(len(truth), dtype=bool)
+    if dofs == 'abduction':
+        want[index[0]] = True
+    elif dofs in ('digit', 'flexion'):
+        want[:] = True
+        want[index[1:] if dofs == 'flexion' else index] = False
+    others = np.setdiff1d(np.arange(len(truth)), index)
+    for (start, held, fitted), angles in zip(candidates, expected, strict=True):
+        assert np.array_equal(start[index], angles)
+        assert np.array_equal(start[others], frame_q[others])
+        assert np.array_equal(np.zeros(len(truth), bool) if held is None else held, want)
+        assert np.array_equal(fitted[want], tracker.kin.clamp(start)[want])
+    with pytest.raises(EdgeTrackerError):
+        EdgeTrackerConfig(finger_refit_dofs='wrist')
+    with pytest.raises(EdgeTrackerError):
+        EdgeTrackerConfig(finger_refit_abduction='out')
