@@ -22,7 +22,8 @@ from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
            'colour_histogram', 'cell_votes', 'near_or_reaching',
-           'box_colour_counts', 'clear_cells', 'compile_kernels']
+           'box_colour_counts', 'clear_cells', 'colour_blobs', 'small_patches_reached',
+           'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
 UNSURE = 255
@@ -480,6 +481,149 @@ def clear_cells(labels: np.ndarray, cells: np.ndarray, step: int, cleared: np.nd
     return out
 
 
+@numba.njit(**_JIT)
+def _find(parent: np.ndarray, i: int) -> int:
+    """The root of ``i`` in the union-find forest ``parent`` (its path halved)."""
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@numba.njit(**_JIT)
+def _colour_runs(labels: np.ndarray, num_colors: int
+                 ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The runs of one glove label 1..``num_colors`` along the rows of the 2-D uint8
+    ``labels`` (other labels are background), joined into 8-connected single-colour
+    components: (the run count n; per run its row, first column, end column (exclusive),
+    label and component, the index of the component's first run in raster order; arrays
+    longer than n)."""
+    rows, cols = labels.shape
+    size = rows * cols
+    ry = np.empty(size, np.int64)
+    rx0 = np.empty(size, np.int64)
+    rx1 = np.empty(size, np.int64)
+    rv = np.empty(size, np.int64)
+    parent = np.empty(size, np.int64)
+    n = 0
+    prev_lo = prev_hi = 0   # the row above's runs: [prev_lo, prev_hi)
+    for y in range(rows):
+        lo = n
+        x = 0
+        while x < cols:
+            v = labels[y, x]
+            if v == 0 or v > num_colors:
+                x += 1
+                continue
+            start = x
+            while x < cols and labels[y, x] == v:
+                x += 1
+            ry[n], rx0[n], rx1[n], rv[n], parent[n] = y, start, x, v, n
+            n += 1
+        # 8-connected: a run touches the runs above it from the column before its first to
+        # the column after its last
+        p = prev_lo
+        for r in range(lo, n):
+            while p < prev_hi and rx1[p] < rx0[r]:
+                p += 1
+            q = p
+            while q < prev_hi and rx0[q] <= rx1[r]:
+                if rv[q] == rv[r]:
+                    a, b = _find(parent, q), _find(parent, r)
+                    if a < b:
+                        parent[b] = a
+                    elif b < a:
+                        parent[a] = b
+                q += 1
+        prev_lo, prev_hi = lo, n
+    for r in range(n):
+        parent[r] = _find(parent, r)
+    return n, ry, rx0, rx1, rv, parent
+
+
+@numba.njit(**_JIT)
+def colour_blobs(labels: np.ndarray, num_colors: int, min_pixels: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The 8-connected components of each glove label 1..``num_colors`` of the 2-D uint8
+    ``labels`` with at least ``min_pixels`` pixels, as ``blobs.color_components`` finds them
+    with ``cv2.connectedComponentsWithStats`` inside each label's bounding rectangle: labels
+    (B,) int64, centroids (B, 2) float64 (x, y: the mean of the rectangle's coordinates plus
+    its corner) and pixel counts (B,) int64, label by label in ascending order and within a
+    label in OpenCV's order (by the first 2 x 2 block of the rectangle, in raster order of
+    the blocks, that holds a pixel of the component)."""
+    rows, cols = labels.shape
+    n, ry, rx0, rx1, rv, comp = _colour_runs(labels, num_colors)
+    bx = np.full(num_colors + 1, cols, np.int64)
+    by = np.full(num_colors + 1, rows, np.int64)
+    for r in range(n):
+        v = rv[r]
+        bx[v] = min(bx[v], rx0[r])
+        by[v] = min(by[v], ry[r])
+    area = np.zeros(n, np.int64)
+    sum_x = np.zeros(n, np.int64)
+    sum_y = np.zeros(n, np.int64)
+    size_key = rows * cols + cols + 1   # above every block index
+    first = np.full(n, size_key, np.int64)
+    for r in range(n):
+        c, v = comp[r], rv[r]
+        length = rx1[r] - rx0[r]
+        dx, dy = rx0[r] - bx[v], ry[r] - by[v]
+        area[c] += length
+        sum_x[c] += length * dx + length * (length - 1) // 2
+        sum_y[c] += length * dy
+        first[c] = min(first[c], (dy // 2) * cols + dx // 2)
+    count = 0
+    for r in range(n):
+        if comp[r] == r and area[r] >= min_pixels:
+            count += 1
+    keys = np.empty(count, np.int64)
+    roots = np.empty(count, np.int64)
+    count = 0
+    for r in range(n):
+        if comp[r] == r and area[r] >= min_pixels:
+            keys[count] = rv[r] * size_key + first[r]
+            roots[count] = r
+            count += 1
+    order = np.argsort(keys, kind='mergesort')
+    colours = np.empty(count, np.int64)
+    centroids = np.empty((count, 2), np.float64)
+    areas = np.empty(count, np.int64)
+    for j in range(count):
+        r = roots[order[j]]
+        v = rv[r]
+        colours[j] = v
+        centroids[j, 0] = float(sum_x[r]) / float(area[r]) + float(bx[v])
+        centroids[j, 1] = float(sum_y[r]) / float(area[r]) + float(by[v])
+        areas[j] = area[r]
+    return colours, centroids, areas
+
+
+@numba.njit(**_JIT)
+def small_patches_reached(labels: np.ndarray, num_colors: int, reached: np.ndarray,
+                          max_area: float, out: np.ndarray) -> None:
+    """``out`` ((H, W) bool) set, in place, at every pixel of each 8-connected component of
+    one glove label 1..``num_colors`` of the 2-D uint8 ``labels`` that holds a ``reached``
+    pixel ((H, W) bool) and has at most ``max_area`` pixels."""
+    n, ry, rx0, rx1, rv, comp = _colour_runs(labels, num_colors)
+    area = np.zeros(n, np.int64)
+    hit = np.zeros(n, np.bool_)
+    for r in range(n):
+        c = comp[r]
+        area[c] += rx1[r] - rx0[r]
+        if not hit[c]:
+            y = ry[r]
+            for x in range(rx0[r], rx1[r]):
+                if reached[y, x]:
+                    hit[c] = True
+                    break
+    for r in range(n):
+        c = comp[r]
+        if hit[c] and area[c] <= max_area:
+            y = ry[r]
+            for x in range(rx0[r], rx1[r]):
+                out[y, x] = True
+
+
 def _array(dtype: object, ndim: int, readonly: bool = True, layout: str = 'C') -> object:
     """An array type, C-contiguous or of any strides (``layout`` 'A'); read-only ones take
     writable arrays too."""
@@ -508,6 +652,10 @@ _SIGNATURES = {
                         _array(numba.uint8, 2, False)),
     clear_cells: (_array(numba.uint8, 2), _array(numba.boolean, 2), numba.int64,
                   _array(numba.boolean, 1)),
+    colour_blobs: (_array(numba.uint8, 2, layout='A'), numba.int64, numba.int64),
+    small_patches_reached: (_array(numba.uint8, 2, layout='A'), numba.int64,
+                            _array(numba.boolean, 2, layout='A'), numba.float64,
+                            _array(numba.boolean, 2, False, layout='A')),
 }
 
 

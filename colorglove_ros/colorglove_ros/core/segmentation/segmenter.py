@@ -569,21 +569,10 @@ class GloveSegmenter:
             cv2.MORPH_RECT, (side, side))).view(bool)
         if window is None or not mixed.any():
             return out
-        max_area = GLOVE_LIKE_PATCH_SHARE * (2.0 * window[1]) ** 2
-        boxes = compiled_kernels().label_boxes(labels, self.calibration.num_colors + 1)[1]
-        for colour in np.unique(labels[mixed]):
-            if colour == 0:
-                continue
-            # each colour's components lie inside its bounding rectangle: label only that
-            x, y, w, h = (int(v) for v in boxes[colour])
-            n, comp, stats, _ = cv2.connectedComponentsWithStats(
-                np.equal(labels[y:y + h, x:x + w], colour).view(np.uint8), connectivity=8,
-                ltype=cv2.CV_32S)
-            patch = np.zeros(n, bool)
-            patch[comp[mixed[y:y + h, x:x + w]]] = True
-            patch &= stats[:, cv2.CC_STAT_AREA] <= max_area
-            patch[0] = False
-            out[y:y + h, x:x + w] |= patch.take(comp)
+        # (one compiled pass labels every colour's regions)
+        compiled_kernels().small_patches_reached(
+            labels, self.calibration.num_colors, mixed,
+            GLOVE_LIKE_PATCH_SHARE * (2.0 * window[1]) ** 2, out)
         return out
 
     def _label_roi(self, roi: np.ndarray, origin: tuple[int, int], r: int,
