@@ -66,9 +66,7 @@ def glove_region_mask(labels: np.ndarray, num_colors: int, window: int, min_colo
     # the dilation by a size x size square, as a box sum (its cost does not grow with size)
     near = cv2.boxFilter(rich.view(np.uint8), cv2.CV_32S, (size, size), normalize=False,
                          borderType=cv2.BORDER_CONSTANT) > 0
-    n, comp = cv2.connectedComponents((np.asarray(labels) > 0).view(np.uint8), connectivity=8,
-                                      ltype=cv2.CV_32S)
-    return compiled_kernels().near_or_reaching(comp, n, rich, near)
+    return compiled_kernels().near_or_reaching(np.asarray(labels, np.uint8), rich, near)
 
 
 def drop_oversized_components(labels: np.ndarray, max_pixels: float) -> np.ndarray:

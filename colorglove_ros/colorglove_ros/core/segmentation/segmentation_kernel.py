@@ -23,6 +23,7 @@ from colorglove_ros.core.kernel_compile import compile_signatures
 __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
            'colour_histogram', 'cell_votes', 'near_or_reaching',
            'box_colour_counts', 'clear_cells', 'colour_blobs', 'small_patches_reached',
+           'glove_components',
            'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
@@ -382,25 +383,6 @@ def cell_votes(labels: np.ndarray, cell_y: np.ndarray, cell_x: np.ndarray, size:
     return votes
 
 
-@numba.njit(**_JIT)
-def near_or_reaching(comp: np.ndarray, components: int, reach: np.ndarray,
-                     near: np.ndarray) -> np.ndarray:
-    """(H, W) bool: ``near`` or in a component of ``comp`` ((H, W) int32, 0 the background,
-    ``components`` of them) that holds a ``reach`` pixel ((H, W) bool)."""
-    rows, cols = comp.shape
-    reached = np.zeros(components, np.bool_)
-    for y in range(rows):
-        for x in range(cols):
-            if reach[y, x]:
-                reached[comp[y, x]] = True
-    reached[0] = False
-    out = np.empty((rows, cols), np.bool_)
-    for y in range(rows):
-        for x in range(cols):
-            out[y, x] = near[y, x] or reached[comp[y, x]]
-    return out
-
-
 #: :func:`box_colour_counts` bounds the box sums of blocks of this many pixels a side.
 _BOUND_BLOCK = 8
 
@@ -542,6 +524,101 @@ def _colour_runs(labels: np.ndarray, num_colors: int
 
 
 @numba.njit(**_JIT)
+def _glove_runs(labels: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, np.ndarray,
+                                             np.ndarray]:
+    """The runs of glove (nonzero) pixels along the rows of the 2-D uint8 ``labels``, of any
+    labels, joined into 8-connected components: (the run count n; per run its row, first
+    column, end column (exclusive) and component, the index of the component's first run in
+    raster order; arrays longer than n)."""
+    rows, cols = labels.shape
+    size = rows * cols
+    ry = np.empty(size, np.int64)
+    rx0 = np.empty(size, np.int64)
+    rx1 = np.empty(size, np.int64)
+    parent = np.empty(size, np.int64)
+    n = 0
+    prev_lo = prev_hi = 0
+    for y in range(rows):
+        lo = n
+        x = 0
+        while x < cols:
+            if labels[y, x] == 0:
+                x += 1
+                continue
+            start = x
+            while x < cols and labels[y, x] != 0:
+                x += 1
+            ry[n], rx0[n], rx1[n], parent[n] = y, start, x, n
+            n += 1
+        p = prev_lo
+        for r in range(lo, n):
+            while p < prev_hi and rx1[p] < rx0[r]:
+                p += 1
+            q = p
+            while q < prev_hi and rx0[q] <= rx1[r]:
+                a, b = _find(parent, q), _find(parent, r)
+                if a < b:
+                    parent[b] = a
+                elif b < a:
+                    parent[a] = b
+                q += 1
+        prev_lo, prev_hi = lo, n
+    for r in range(n):
+        parent[r] = _find(parent, r)
+    return n, ry, rx0, rx1, parent
+
+
+@numba.njit(**_JIT)
+def near_or_reaching(labels: np.ndarray, reach: np.ndarray, near: np.ndarray
+                           ) -> np.ndarray:
+    """(H, W) bool: ``near`` ((H, W) bool), or in an 8-connected glove (nonzero) component of
+    the 2-D uint8 ``labels`` that holds a ``reach`` pixel ((H, W) bool)."""
+    n, ry, rx0, rx1, comp = _glove_runs(labels)
+    hit = np.zeros(n, np.bool_)
+    for r in range(n):
+        c = comp[r]
+        if not hit[c]:
+            y = ry[r]
+            for x in range(rx0[r], rx1[r]):
+                if reach[y, x]:
+                    hit[c] = True
+                    break
+    out = near.copy()
+    for r in range(n):
+        if hit[comp[r]]:
+            y = ry[r]
+            for x in range(rx0[r], rx1[r]):
+                out[y, x] = True
+    return out
+
+
+@numba.njit(**_JIT)
+def glove_components(labels: np.ndarray, num_labels: int
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """The 8-connected glove (nonzero) components of the 2-D uint8 ``labels``, of any
+    labels: each pixel's component ((H, W) int32; 0 the background, 1..n numbered by their
+    first pixel in raster order) and how many pixels of each label below ``num_labels``
+    (above every label) each holds ((n + 1, ``num_labels``) int64, row 0 zeros)."""
+    rows, cols = labels.shape
+    n, ry, rx0, rx1, comp = _glove_runs(labels)
+    number = np.zeros(n, np.int32)
+    count = 0
+    for r in range(n):
+        if comp[r] == r:
+            count += 1
+            number[r] = count
+    out = np.zeros((rows, cols), np.int32)
+    hist = np.zeros((count + 1, num_labels), np.int64)
+    for r in range(n):
+        k = number[comp[r]]
+        y = ry[r]
+        for x in range(rx0[r], rx1[r]):
+            out[y, x] = k
+            hist[k, labels[y, x]] += 1
+    return out, hist
+
+
+@numba.njit(**_JIT)
 def colour_blobs(labels: np.ndarray, num_colors: int, min_pixels: int
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The 8-connected components of each glove label 1..``num_colors`` of the 2-D uint8
@@ -645,14 +722,16 @@ _SIGNATURES = {
                        _array(numba.int32, 2), numba.int64),
     cell_votes: (_array(numba.uint8, 2, layout='A'), _array(numba.int64, 1),
                  _array(numba.int64, 1), numba.int64, numba.int64),
-    near_or_reaching: (_array(numba.int32, 2), numba.int64, _array(numba.boolean, 2, layout='A'),
-                       _array(numba.boolean, 2, layout='A')),
     box_colour_counts: (_array(numba.uint8, 2, layout='A'), _array(numba.int64, 1),
                         _array(numba.int64, 2), numba.int64, numba.int64,
                         _array(numba.uint8, 2, False)),
     clear_cells: (_array(numba.uint8, 2), _array(numba.boolean, 2), numba.int64,
                   _array(numba.boolean, 1)),
     colour_blobs: (_array(numba.uint8, 2, layout='A'), numba.int64, numba.int64),
+    near_or_reaching: (_array(numba.uint8, 2, layout='A'),
+                       _array(numba.boolean, 2, layout='A'),
+                       _array(numba.boolean, 2, layout='A')),
+    glove_components: (_array(numba.uint8, 2, layout='A'), numba.int64),
     small_patches_reached: (_array(numba.uint8, 2, layout='A'), numba.int64,
                             _array(numba.boolean, 2, layout='A'), numba.float64,
                             _array(numba.boolean, 2, False, layout='A')),

@@ -112,14 +112,14 @@ def keep_multicolor_components(labels: np.ndarray, min_colors: int = 3,
         raise SegmentationConfigError(
             f'need reattach_radius >= 0 and reattach_max_share >= 0; got {reattach_radius}, '
             f'{reattach_max_share}')
-    glove = labels > 0
-    n, comp = cv2.connectedComponents(glove.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
-    if n <= 1:
-        return labels
+    labels = np.asarray(labels, np.uint8)
     nl = int(labels.max()) + 1
-    glove = np.flatnonzero(glove)   # only glove pixels count: comp is 0 just where labels are
-    hist = np.bincount(comp.ravel().take(glove) * nl + labels.ravel().take(glove),
-                       minlength=n * nl).reshape(n, nl)[:, 1:]
+    if nl <= 1:
+        return labels
+    # the components and each one's pixels of each colour, in one compiled pass
+    comp, hist = compiled_kernels().glove_components(labels, nl)
+    n = len(hist)
+    hist = hist[:, 1:]
     size = hist.sum(axis=1, keepdims=True)
     big = (hist >= np.maximum(min_share * size, min_pixels)).sum(axis=1)
     keep = big >= min_colors
