@@ -23,7 +23,7 @@ from colorglove_ros.core.kernel_compile import compile_signatures
 __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
            'colour_histogram', 'cell_votes', 'near_or_reaching',
            'box_colour_counts', 'clear_cells', 'colour_blobs', 'small_patches_reached',
-           'glove_components',
+           'glove_components', 'cell_labels', 'colour_sums',
            'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
@@ -569,6 +569,80 @@ def _glove_runs(labels: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, np.nda
 
 
 @numba.njit(**_JIT)
+def cell_labels(counts: np.ndarray, glove_fraction: float, rescue_share: float) -> np.ndarray:
+    """(C,) int64: the label of each cell of a tiny image from its pixels' votes ``counts``
+    ((L, C) int64, label by cell; ``crop.crop_window``'s rules): the most frequent glove
+    label (the lowest of equals) where glove labels hold at least ``glove_fraction`` of its
+    pixels, else 0; then, with ``rescue_share`` > 0, each glove label that no cell took, in
+    ascending order, takes the cells where its share of pixels is at least ``rescue_share``
+    and at least half its best share, but the last cell of another label."""
+    labels, cells = counts.shape
+    out = np.zeros(cells, np.int64)
+    total = np.zeros(cells, np.int64)
+    used = np.zeros(labels, np.int64)
+    for j in range(cells):
+        glove_total = 0
+        best, best_count = 1, -1
+        for k in range(1, labels):
+            v = counts[k, j]
+            glove_total += v
+            if v > best_count:
+                best, best_count = k, v
+        total[j] = glove_total + counts[0, j]
+        if glove_total > 0 and glove_total >= glove_fraction * total[j]:
+            out[j] = best
+        used[out[j]] += 1
+    if rescue_share > 0.0:
+        missing = np.zeros(labels, np.bool_)
+        for k in range(1, labels):   # (decided before any is given cells)
+            if used[k] == 0:
+                for j in range(cells):
+                    if counts[k, j] > 0:
+                        missing[k] = True
+                        break
+        share = np.empty(cells, np.float64)
+        for k in range(1, labels):
+            if not missing[k]:
+                continue
+            top_share = -np.inf
+            for j in range(cells):
+                share[j] = counts[k, j] / max(total[j], 1)
+                top_share = max(top_share, share[j])
+            if top_share < rescue_share:
+                continue
+            need = max(rescue_share, 0.5 * top_share)
+            for j in range(cells):
+                if share[j] >= need:
+                    if out[j] > 0 and used[out[j]] <= 1:
+                        continue
+                    used[out[j]] -= 1
+                    out[j] = k
+                    used[k] += 1
+    return out
+
+
+@numba.njit(**_JIT)
+def colour_sums(image: np.ndarray, table: np.ndarray, labels: np.ndarray, size: int
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """How many pixels of the (H, W, 3) uint8 ``image`` each label 1..``size`` - 1 of the
+    (H, W) uint8 ``labels`` holds ((``size``,) int64, 0 for label 0) and the sums of their
+    channels' ``table`` values ((``size``, 3) float64; ``table`` (256,) float32), added in
+    raster order as ``np.bincount`` adds its weights."""
+    rows, cols = labels.shape
+    counts = np.zeros(size, np.int64)
+    sums = np.zeros((size, 3), np.float64)
+    for y in range(rows):
+        for x in range(cols):
+            v = labels[y, x]
+            if v == 0 or v >= size:
+                continue
+            counts[v] += 1
+            for c in range(3):
+                sums[v, c] += np.float64(table[image[y, x, c]])
+    return counts, sums
+
+
+@numba.njit(**_JIT)
 def near_or_reaching(labels: np.ndarray, reach: np.ndarray, near: np.ndarray
                            ) -> np.ndarray:
     """(H, W) bool: ``near`` ((H, W) bool), or in an 8-connected glove (nonzero) component of
@@ -728,6 +802,9 @@ _SIGNATURES = {
     clear_cells: (_array(numba.uint8, 2), _array(numba.boolean, 2), numba.int64,
                   _array(numba.boolean, 1)),
     colour_blobs: (_array(numba.uint8, 2, layout='A'), numba.int64, numba.int64),
+    cell_labels: (_array(numba.int64, 2), numba.float64, numba.float64),
+    colour_sums: (_array(numba.uint8, 3, layout='A'), _array(numba.float32, 1),
+                  _array(numba.uint8, 2, layout='A'), numba.int64),
     near_or_reaching: (_array(numba.uint8, 2, layout='A'),
                        _array(numba.boolean, 2, layout='A'),
                        _array(numba.boolean, 2, layout='A')),

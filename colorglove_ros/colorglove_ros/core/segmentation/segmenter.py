@@ -537,15 +537,17 @@ class GloveSegmenter:
             return ref
         return ref @ saturation_matrix(self._saturation.saturation).T
 
-    def _glove_only(self, labels: np.ndarray, reduction: float, image_pixels: int
-                    ) -> np.ndarray:
+    def _glove_only(self, labels: np.ndarray, reduction: float, image_pixels: int,
+                    oversized_dropped: bool = False) -> np.ndarray:
         """Background surfaces out of a label image whose pixels are ``reduction`` image
         pixels wide: single-colour regions larger than ``max_patch_fraction`` of the image
-        (``image_pixels``), then everything farther than ``diversity_window`` (coarse pixels)
-        from a window showing ``min_region_colors`` glove colours
-        (``core.segmentation.detection``)."""
-        labels = drop_oversized_components(
-            labels, self.max_patch_fraction * image_pixels / reduction ** 2)
+        (``image_pixels``; with ``oversized_dropped`` the caller has dropped them, and then
+        only set pixels to background, which leaves none), then everything farther than
+        ``diversity_window`` (coarse pixels) from a window showing ``min_region_colors``
+        glove colours (``core.segmentation.detection``)."""
+        if not oversized_dropped:
+            labels = drop_oversized_components(
+                labels, self.max_patch_fraction * image_pixels / reduction ** 2)
         if self.diversity_window > 0:
             window = max(int(round(self.diversity_window * self.coarse_factor / reduction)), 1)
             labels = labels * glove_region_mask(labels, self.calibration.num_colors, window,
@@ -660,7 +662,9 @@ class GloveSegmenter:
             labels = drop_oversized_components(
                 labels, self.max_patch_fraction * (image_pixels or labels.size) / reduction ** 2)
             labels[static] = 0
-        labels = self._glove_only(labels, reduction, image_pixels or labels.size)
+        # (removing pixels only shrinks regions: none is oversized any more)
+        labels = self._glove_only(labels, reduction, image_pixels or labels.size,
+                                  oversized_dropped=static is not None)
         if self.max_patch_window_share > 0:   # (finding the junctions costs a few loops)
             labels = shed_oversized_patches(
                 labels, self.max_patch_window_share,
@@ -710,8 +714,8 @@ class GloveSegmenter:
             if k:   # refine: classify the corrected coarse frame, estimate what is left
                 seen = cv2.LUT(part, table)
                 labels = self._coarse_labels(part, table, reduction, pixels, static_part)
-            gains = gains * estimate_light_gains(cv2.LUT(seen, _LINEAR_RGB), labels,
-                                                 self._reference())
+            gains = gains * estimate_light_gains(seen, labels, self._reference(),
+                                                 table=_LINEAR_RGB)
             table = gain_table(gains)
         found = mean_shift_crop(labels, min_pixels=min_px)
         if found is not None:
