@@ -23,7 +23,7 @@ from colorglove_ros.core.kernel_compile import compile_signatures
 __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
            'colour_histogram', 'cell_votes', 'near_or_reaching',
            'box_colour_counts', 'clear_cells', 'colour_blobs', 'small_patches_reached',
-           'glove_components', 'cell_labels', 'colour_sums',
+           'glove_components', 'cell_labels', 'colour_sums', 'clear_coarse',
            'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
@@ -478,10 +478,16 @@ def _colour_runs(labels: np.ndarray, num_colors: int
     """The runs of one glove label 1..``num_colors`` along the rows of the 2-D uint8
     ``labels`` (other labels are background), joined into 8-connected single-colour
     components: (the run count n; per run its row, first column, end column (exclusive),
-    label and component, the index of the component's first run in raster order; arrays
-    longer than n)."""
+    label and component, the index of the component's first run in raster order)."""
     rows, cols = labels.shape
-    size = rows * cols
+    size = 0   # the runs, counted first (arrays of their number, not the pixels')
+    for y in range(rows):
+        last = 0
+        for x in range(cols):
+            v = labels[y, x]
+            if v != last and v != 0 and v <= num_colors:
+                size += 1
+            last = v
     ry = np.empty(size, np.int64)
     rx0 = np.empty(size, np.int64)
     rx1 = np.empty(size, np.int64)
@@ -529,9 +535,16 @@ def _glove_runs(labels: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, np.nda
     """The runs of glove (nonzero) pixels along the rows of the 2-D uint8 ``labels``, of any
     labels, joined into 8-connected components: (the run count n; per run its row, first
     column, end column (exclusive) and component, the index of the component's first run in
-    raster order; arrays longer than n)."""
+    raster order)."""
     rows, cols = labels.shape
-    size = rows * cols
+    size = 0   # the runs, counted first
+    for y in range(rows):
+        last = False
+        for x in range(cols):
+            glove = labels[y, x] != 0
+            if glove and not last:
+                size += 1
+            last = glove
     ry = np.empty(size, np.int64)
     rx0 = np.empty(size, np.int64)
     rx1 = np.empty(size, np.int64)
@@ -640,6 +653,18 @@ def colour_sums(image: np.ndarray, table: np.ndarray, labels: np.ndarray, size: 
             for c in range(3):
                 sums[v, c] += np.float64(table[image[y, x, c]])
     return counts, sums
+
+
+@numba.njit(**_JIT)
+def clear_coarse(labels: np.ndarray, coarse: np.ndarray, rows: np.ndarray, cols: np.ndarray
+                 ) -> None:
+    """0 at each pixel (y, x) of the 2-D uint8 ``labels`` where the coarser bool mask
+    ``coarse`` holds at (``rows[y]``, ``cols[x]``), in place."""
+    for y in range(labels.shape[0]):
+        row = rows[y]
+        for x in range(labels.shape[1]):
+            if coarse[row, cols[x]]:
+                labels[y, x] = 0
 
 
 @numba.njit(**_JIT)
@@ -803,6 +828,8 @@ _SIGNATURES = {
                   _array(numba.boolean, 1)),
     colour_blobs: (_array(numba.uint8, 2, layout='A'), numba.int64, numba.int64),
     cell_labels: (_array(numba.int64, 2), numba.float64, numba.float64),
+    clear_coarse: (_array(numba.uint8, 2, False, layout='A'), _array(numba.boolean, 2, layout='A'),
+                   _array(numba.int64, 1), _array(numba.int64, 1)),
     colour_sums: (_array(numba.uint8, 3, layout='A'), _array(numba.float32, 1),
                   _array(numba.uint8, 2, layout='A'), numba.int64),
     near_or_reaching: (_array(numba.uint8, 2, layout='A'),

@@ -250,18 +250,20 @@ def border_contact_px(labels: np.ndarray, roi: tuple[int, int, int, int], reduct
                            for line in border_lines(labels[wy0:wy1, wx0:wx1], on_border))
 
 
-def _coarse_cells(coarse: np.ndarray, origin: tuple[int, int], r: int, shape: tuple[int, int],
-                  image_hw: tuple[int, int]) -> np.ndarray:
-    """``coarse`` (a mask over the downsampled frame) at the pixels of a region of interest
-    starting at full pixel ``origin`` (x, y), ``r`` full pixels a side, ``shape`` (rows,
-    cols); ``image_hw`` is the full frame's size."""
-    ch, cw = coarse.shape
+def _coarse_indices(coarse_shape: tuple[int, int], origin: tuple[int, int], r: int,
+                    shape: tuple[int, int], image_hw: tuple[int, int]
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """The coarse rows and columns (int64) of a mask over the downsampled frame (of
+    ``coarse_shape``) at the pixels of a region of interest starting at full pixel
+    ``origin`` (x, y), ``r`` full pixels a side, ``shape`` (rows, cols); ``image_hw`` is the
+    full frame's size."""
+    ch, cw = coarse_shape
     h, w = image_hw
     xs = origin[0] + r * np.arange(shape[1]) + 0.5 * (r - 1)
     ys = origin[1] + r * np.arange(shape[0]) + 0.5 * (r - 1)
-    cols = np.clip((xs + 0.5) * cw / w, 0, cw - 1).astype(np.intp)
-    rows = np.clip((ys + 0.5) * ch / h, 0, ch - 1).astype(np.intp)
-    return coarse[rows][:, cols]   # faster than coarse[np.ix_(rows, cols)]
+    cols = np.clip((xs + 0.5) * cw / w, 0, cw - 1).astype(np.int64)
+    rows = np.clip((ys + 0.5) * ch / h, 0, ch - 1).astype(np.int64)
+    return rows, cols
 
 
 #: What :meth:`GloveSegmenter._without_search` gives: the hand's window ((cx, cy), half; full
@@ -593,7 +595,8 @@ class GloveSegmenter:
             labels[...] = 0
             labels[py0:py1, px0:px1] = inside
         if static is not None:
-            labels[_coarse_cells(static, origin, r, labels.shape, image_hw)] = 0
+            rows, cols = _coarse_indices(static.shape, origin, r, labels.shape, image_hw)
+            compiled_kernels().clear_coarse(labels, static, rows, cols)
         return labels
 
     def _clean_roi(self, labels: np.ndarray, r: int, image_pixels: int, chalf: float,

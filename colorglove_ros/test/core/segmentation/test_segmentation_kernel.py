@@ -472,3 +472,21 @@ def test_a_second_oversized_drop_after_removing_pixels_drops_nothing(trial: int)
     dropped = drop_oversized_components(labels, max_pixels).copy()
     dropped[rng.random(labels.shape) < rng.uniform(0.0, 0.5)] = 0
     np.testing.assert_array_equal(drop_oversized_components(dropped, max_pixels), dropped)
+
+
+@pytest.mark.parametrize('trial', range(12))
+def test_clear_coarse_clears_the_pixels_of_the_set_coarse_cells(trial: int) -> None:
+    """The learnt static background (a coarse mask) cleared from a region's labels in
+    place: numpy's gather of the coarse cells and masked store."""
+    rng = np.random.default_rng([trial, 89])
+    labels = _large_labels(rng, trial)
+    if not labels.size:
+        return
+    coarse = rng.random((int(rng.integers(1, 40)), int(rng.integers(1, 40)))) < 0.3
+    rows = rng.integers(0, coarse.shape[0], labels.shape[0]).astype(np.int64)
+    cols = np.sort(rng.integers(0, coarse.shape[1], labels.shape[1])).astype(np.int64)
+    want = labels.copy()
+    want[coarse[rows][:, cols]] = 0
+    got = labels.copy()
+    KERNELS.clear_coarse(got, coarse, rows, cols)
+    np.testing.assert_array_equal(got, want)
