@@ -4,7 +4,8 @@ junction trim as it was written before its compiled parts (whole-image component
 spread back to pixels with numpy); and, as they were written with OpenCV's connected
 components and numpy before their compiled passes (issue 19, nineteenth pass), the blobs'
 per-colour components, the glove-like patches, the glove region's reached components, the
-multi-colour component test and the tiny image's cell labels."""
+multi-colour component test, the tiny image's cell labels and the junction trim's oversized
+surfaces."""
 from __future__ import annotations
 
 import math
@@ -17,7 +18,7 @@ from colorglove_ros.core.segmentation.segmenter import _LINEAR_RGB
 __all__ = ['relabel_borders_reference', 'mean_shift_reference', 'keep_near_junctions_reference',
            'color_components_reference', 'small_patches_reached_reference',
            'near_or_reaching_reference', 'keep_multicolor_components_reference',
-           'cell_labels_reference']
+           'cell_labels_reference', 'surface_regions_reference']
 
 _F32 = np.float32
 
@@ -178,8 +179,8 @@ def keep_near_junctions_reference(labels: np.ndarray, num_colors: int, reach: fl
     from colorglove_ros.core.segmentation.crop import mean_shift_crop
     from colorglove_ros.core.segmentation.detection import (
         _is_surface,
-        _reaching,
         _shrinks,
+        border_lines,
         junction_mask,
     )
 
@@ -202,8 +203,12 @@ def keep_near_junctions_reference(labels: np.ndarray, num_colors: int, reach: fl
             (small == colour).view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
         big = stats[:, cv2.CC_STAT_AREA] > max_pixels
         big[0] = False
-        if edges is not None:
-            big &= _reaching(comp, n, edges)
+        if edges is not None:   # a pixel on one of the flagged sides
+            sides = border_lines(comp, edges)
+            reaching = np.zeros(n, bool)
+            if sides:
+                reaching[np.concatenate(sides)] = True
+            big &= reaching
         if edges is not None or surfaces_only:
             for k in np.flatnonzero(big):
                 big[k] = _is_surface(small, comp, stats, k)
@@ -325,4 +330,34 @@ def cell_labels_reference(counts: np.ndarray, glove_fraction: float,
                 used[out[cell]] -= 1
                 out[cell] = k + 1
                 used[k + 1] += 1
+    return out
+
+
+def surface_regions_reference(labels: np.ndarray, candidate: np.ndarray, max_pixels: float,
+                              sides: np.ndarray, off_image: bool, surfaces: bool,
+                              max_glove_share: float) -> np.ndarray:
+    """``segmentation_kernel.surface_regions`` with OpenCV: each candidate label's
+    components, those on a flagged side of the image (``off_image``), those whose outline (a
+    3 x 3 dilation less the region) holds fewer than ``max_glove_share`` glove pixels."""
+    rows, cols = labels.shape
+    out = np.zeros(labels.shape, bool)
+    for colour in np.flatnonzero(candidate):
+        n, comp, stats, _ = cv2.connectedComponentsWithStats(
+            np.ascontiguousarray(labels == colour).view(np.uint8), connectivity=8,
+            ltype=cv2.CV_32S)
+        for k in range(1, n):
+            if not stats[k, cv2.CC_STAT_AREA] > max_pixels:
+                continue
+            mine = comp == k
+            if off_image:
+                lines = [line for on, line in zip(sides, (mine[:, 0], mine[:, -1], mine[0],
+                                                          mine[-1]), strict=True) if on]
+                if not any(line.any() for line in lines):
+                    continue
+            if off_image or surfaces:
+                ring = cv2.dilate(mine.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+                ring &= ~mine
+                if not np.count_nonzero(labels[ring]) < max_glove_share * np.count_nonzero(ring):
+                    continue
+            out |= mine
     return out

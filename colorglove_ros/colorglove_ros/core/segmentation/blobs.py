@@ -19,7 +19,8 @@ def color_components(labels: np.ndarray, min_pixels: int, num_colors: int = NUM_
     """8-connected components of each glove colour 1..``num_colors`` of a 2-D label image
     (0 = background) with at least ``min_pixels`` pixels: colours (B,) int64, centroids (B, 2)
     (x, y in the label image's pixels) and pixel counts (B,) int64, colour by colour in
-    ascending order and within a colour in raster order.
+    ascending order and within a colour in OpenCV's order (by the first 2 x 2 block, in raster
+    order of the blocks of the colour's rectangle, holding a pixel of the component).
 
     With ``crop_to_color`` (faster) each colour is labelled inside its bounding rectangle and
     its centroids shifted back, which agrees with labelling the whole image up to the

@@ -1,8 +1,11 @@
 """Compiled (numba) kernels of the segmenter's per-pixel loops: the border relabelling's passes
 (:func:`segmenter.relabel_borders`), the mean-shift crop, the colour classification, label
-counts and boxes, the scene colours' histogram, the tiny image's cell votes, the glove
-region's reached components, the colour diversity's box counts and the junction trim's
-cleared cells.
+counts and boxes, the scene colours' histogram, the tiny image's cell votes and cell labels,
+the colour diversity's box counts, the junction trim's cleared cells and oversized surfaces,
+the light estimate's colour sums, the static background's cleared cells, the label borders,
+and the connected components (8-connected runs of a row joined by union-find) of the blobs,
+the glove-like patches, the glove region's reached components and the multi-colour component
+test.
 
 The same arithmetic as the numpy code they replaced (float32 colour distances in the same
 order, the same tie rules), as loops over the pixels, so one call replaces the dozens of
@@ -24,6 +27,7 @@ __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
            'colour_histogram', 'cell_votes', 'near_or_reaching',
            'box_colour_counts', 'clear_cells', 'colour_blobs', 'small_patches_reached',
            'glove_components', 'cell_labels', 'colour_sums', 'clear_coarse',
+           'surface_regions', 'label_borders',
            'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
@@ -207,6 +211,30 @@ def relabel_passes(box: np.ndarray, rgb: np.ndarray, table: np.ndarray, border: 
                 flat[i] = new[j]
                 changed[n_changed] = i
                 n_changed += 1
+
+
+@numba.njit(**_JIT)
+def label_borders(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pixels of the 2-D uint8 ``labels`` with a 4-neighbour (inside the image) of another
+    label ((H, W) bool: a 3 x 3 cross's erosion differs from its dilation there) and their
+    bounding rectangle ((4,) int64: x, y, width, height as ``cv2.boundingRect``; zeros when
+    none)."""
+    rows, cols = labels.shape
+    border = np.zeros((rows, cols), np.bool_)
+    x0, x1, y0, y1 = cols, -1, rows, -1
+    for y in range(rows):
+        for x in range(cols):
+            v = labels[y, x]
+            if ((y > 0 and labels[y - 1, x] != v) or (y < rows - 1 and labels[y + 1, x] != v)
+                    or (x > 0 and labels[y, x - 1] != v)
+                    or (x < cols - 1 and labels[y, x + 1] != v)):
+                border[y, x] = True
+                x0, x1 = min(x0, x), max(x1, x)
+                y0, y1 = min(y0, y), max(y1, y)
+    box = np.zeros(4, np.int64)
+    if x1 >= 0:
+        box[0], box[1], box[2], box[3] = x0, y0, x1 - x0 + 1, y1 - y0 + 1
+    return border, box
 
 
 @numba.njit(**_JIT)
@@ -668,6 +696,68 @@ def clear_coarse(labels: np.ndarray, coarse: np.ndarray, rows: np.ndarray, cols:
 
 
 @numba.njit(**_JIT)
+def surface_regions(labels: np.ndarray, candidate: np.ndarray, max_pixels: float,
+                    sides: np.ndarray, off_image: bool, surfaces: bool,
+                    max_glove_share: float) -> np.ndarray:
+    """(H, W) bool: the pixels of the 8-connected single-label regions of the 2-D uint8
+    ``labels`` whose label ``candidate`` ((256,) bool) holds, larger than ``max_pixels``;
+    with ``off_image`` only those with a pixel on a side of the image that ``sides`` ((4,)
+    bool: left, right, top, bottom) flags, and with ``off_image`` or ``surfaces`` only those
+    whose outline (the pixels of the image outside the region 8-adjacent to it) holds fewer
+    than ``max_glove_share`` of its pixels of a glove (nonzero) label."""
+    rows, cols = labels.shape
+    out = np.zeros((rows, cols), np.bool_)
+    n, ry, rx0, rx1, rv, comp = _colour_runs(labels, 255)
+    area = np.zeros(n, np.int64)
+    for r in range(n):
+        area[comp[r]] += rx1[r] - rx0[r]
+    keep = np.zeros(n, np.bool_)
+    for r in range(n):
+        c = comp[r]
+        keep[c] = candidate[rv[r]] and area[c] > max_pixels
+    if off_image:
+        touches = np.zeros(n, np.bool_)
+        for r in range(n):
+            c = comp[r]
+            if keep[c] and ((sides[0] and rx0[r] == 0) or (sides[1] and rx1[r] == cols)
+                            or (sides[2] and ry[r] == 0) or (sides[3] and ry[r] == rows - 1)):
+                touches[c] = True
+        for r in range(n):
+            keep[r] = keep[r] and touches[r]
+    if off_image or surfaces:
+        order = np.argsort(comp[:n], kind='mergesort')   # each region's runs together
+        seen = np.full((rows, cols), -1, np.int64)   # the region whose outline counted it
+        j = 0
+        while j < n:
+            c = comp[order[j]]
+            end = j
+            while end < n and comp[order[end]] == c:
+                end += 1
+            if keep[c]:
+                ring = glove = 0
+                v = rv[c]
+                for q in range(j, end):
+                    r = order[q]
+                    y = ry[r]
+                    for x in range(rx0[r], rx1[r]):
+                        for ny in range(max(y - 1, 0), min(y + 2, rows)):
+                            for nx in range(max(x - 1, 0), min(x + 2, cols)):
+                                if labels[ny, nx] != v and seen[ny, nx] != c:
+                                    seen[ny, nx] = c
+                                    ring += 1
+                                    if labels[ny, nx] != 0:
+                                        glove += 1
+                keep[c] = glove < max_glove_share * ring
+            j = end
+    for r in range(n):
+        if keep[comp[r]]:
+            y = ry[r]
+            for x in range(rx0[r], rx1[r]):
+                out[y, x] = True
+    return out
+
+
+@numba.njit(**_JIT)
 def near_or_reaching(labels: np.ndarray, reach: np.ndarray, near: np.ndarray
                            ) -> np.ndarray:
     """(H, W) bool: ``near`` ((H, W) bool), or in an 8-connected glove (nonzero) component of
@@ -828,6 +918,10 @@ _SIGNATURES = {
                   _array(numba.boolean, 1)),
     colour_blobs: (_array(numba.uint8, 2, layout='A'), numba.int64, numba.int64),
     cell_labels: (_array(numba.int64, 2), numba.float64, numba.float64),
+    label_borders: (_array(numba.uint8, 2),),
+    surface_regions: (_array(numba.uint8, 2, layout='A'), _array(numba.boolean, 1),
+                      numba.float64, _array(numba.boolean, 1), numba.boolean, numba.boolean,
+                      numba.float64),
     clear_coarse: (_array(numba.uint8, 2, False, layout='A'), _array(numba.boolean, 2, layout='A'),
                    _array(numba.int64, 1), _array(numba.int64, 1)),
     colour_sums: (_array(numba.uint8, 3, layout='A'), _array(numba.float32, 1),

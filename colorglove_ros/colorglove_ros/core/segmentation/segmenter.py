@@ -194,11 +194,11 @@ def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
     labels = np.asarray(labels, dtype=np.uint8)
     if passes < 1 or not distances or min(labels.shape) < 3:
         return labels
-    border = cv2.erode(labels, _CROSS) != cv2.dilate(labels, _CROSS)
-    bx, by, bw, bh = cv2.boundingRect(border.view(np.uint8))
+    kernels = compiled_kernels()
+    border, rect = kernels.label_borders(np.ascontiguousarray(labels))
+    bx, by, bw, bh = (int(v) for v in rect)
     if not bw:
         return labels
-    kernels = compiled_kernels()
     pad = max(distances)
     h, w = labels.shape
     y0, y1 = max(by - pad, 0), min(by + bh + pad, h)

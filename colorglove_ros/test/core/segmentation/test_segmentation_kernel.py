@@ -16,6 +16,7 @@ from segmentation_reference import (
     near_or_reaching_reference,
     relabel_borders_reference,
     small_patches_reached_reference,
+    surface_regions_reference,
 )
 
 from colorglove_ros.core.segmentation import segmentation_kernel
@@ -490,3 +491,37 @@ def test_clear_coarse_clears_the_pixels_of_the_set_coarse_cells(trial: int) -> N
     got = labels.copy()
     KERNELS.clear_coarse(got, coarse, rows, cols)
     np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize('trial', range(30))
+def test_surface_regions_are_each_labels_opencv_components_and_outlines(trial: int) -> None:
+    """The junction trim's oversized regions from one compiled pass: OpenCV's components of
+    each candidate label, larger than the limit, off the image's flagged sides, with an
+    outline mostly of background."""
+    rng = np.random.default_rng([trial, 97])
+    labels = _cluttered_glove(rng) if trial % 2 else _large_labels(rng, trial)
+    candidate = rng.random(256) < 0.5
+    max_pixels = float(rng.choice([0.0, 5.0, 60.0]))
+    sides = rng.random(4) < 0.5
+    off_image, surfaces = bool(trial % 3 == 1), bool(trial % 3 == 2 or trial % 4 == 0)
+    share = float(rng.choice([0.3, 0.5, 0.8]))
+    want = surface_regions_reference(labels, candidate, max_pixels, sides, off_image,
+                                     surfaces, share)
+    got = KERNELS.surface_regions(labels, candidate, max_pixels, sides, off_image, surfaces,
+                                  share)
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize('trial', range(16))
+def test_label_borders_are_the_cross_erosion_against_dilation(trial: int) -> None:
+    rng = np.random.default_rng([trial, 101])
+    labels = np.ascontiguousarray(_large_labels(rng, trial))
+    if trial % 5 == 0:
+        labels[:] = 3
+    border, rect = KERNELS.label_borders(labels)
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    want = (cv2.erode(labels, cross) != cv2.dilate(labels, cross) if labels.size
+            else np.zeros(labels.shape, bool))
+    np.testing.assert_array_equal(border, want)
+    assert tuple(rect) == (cv2.boundingRect(want.view(np.uint8)) if labels.size
+                           else (0, 0, 0, 0))
