@@ -501,6 +501,7 @@ def test_surface_regions_are_each_labels_opencv_components_and_outlines(trial: i
     rng = np.random.default_rng([trial, 97])
     labels = _cluttered_glove(rng) if trial % 2 else _large_labels(rng, trial)
     candidate = rng.random(256) < 0.5
+    candidate[0] = False   # (background is no region)
     max_pixels = float(rng.choice([0.0, 5.0, 60.0]))
     sides = rng.random(4) < 0.5
     off_image, surfaces = bool(trial % 3 == 1), bool(trial % 3 == 2 or trial % 4 == 0)
