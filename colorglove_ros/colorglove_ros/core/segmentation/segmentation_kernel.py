@@ -501,21 +501,23 @@ def _find(parent: np.ndarray, i: int) -> int:
 
 
 @numba.njit(**_JIT)
-def _colour_runs(labels: np.ndarray, num_colors: int
-                 ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The runs of one glove label 1..``num_colors`` along the rows of the 2-D uint8
-    ``labels`` (other labels are background), joined into 8-connected single-colour
-    components: (the run count n; per run its row, first column, end column (exclusive),
-    label and component, the index of the component's first run in raster order)."""
+def _runs(labels: np.ndarray, num_colors: int, any_label: bool
+          ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The runs along the rows of the 2-D uint8 ``labels`` of one glove label 1..``num_colors``
+    (other labels are background), or with ``any_label`` of glove (nonzero) pixels of any
+    labels, joined into 8-connected components of one label (or of glove): (the run count n;
+    per run its row, first column, end column (exclusive), value (its label, or 1 with
+    ``any_label``) and component, the index of the component's first run in raster order)."""
     rows, cols = labels.shape
     size = 0   # the runs, counted first (arrays of their number, not the pixels')
     for y in range(rows):
         last = 0
         for x in range(cols):
             v = labels[y, x]
-            if v != last and v != 0 and v <= num_colors:
+            w = (1 if v != 0 else 0) if any_label else (v if v <= num_colors else 0)
+            if w != last and w != 0:
                 size += 1
-            last = v
+            last = w
     ry = np.empty(size, np.int64)
     rx0 = np.empty(size, np.int64)
     rx1 = np.empty(size, np.int64)
@@ -528,13 +530,15 @@ def _colour_runs(labels: np.ndarray, num_colors: int
         x = 0
         while x < cols:
             v = labels[y, x]
-            if v == 0 or v > num_colors:
+            w = (1 if v != 0 else 0) if any_label else (v if v <= num_colors else 0)
+            if w == 0:
                 x += 1
                 continue
             start = x
-            while x < cols and labels[y, x] == v:
+            x += 1
+            while x < cols and (labels[y, x] != 0 if any_label else labels[y, x] == v):
                 x += 1
-            ry[n], rx0[n], rx1[n], rv[n], parent[n] = y, start, x, v, n
+            ry[n], rx0[n], rx1[n], rv[n], parent[n] = y, start, x, w, n
             n += 1
         # 8-connected: a run touches the runs above it from the column before its first to
         # the column after its last
@@ -558,55 +562,32 @@ def _colour_runs(labels: np.ndarray, num_colors: int
 
 
 @numba.njit(**_JIT)
-def _glove_runs(labels: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, np.ndarray,
-                                             np.ndarray]:
-    """The runs of glove (nonzero) pixels along the rows of the 2-D uint8 ``labels``, of any
-    labels, joined into 8-connected components: (the run count n; per run its row, first
-    column, end column (exclusive) and component, the index of the component's first run in
-    raster order)."""
-    rows, cols = labels.shape
-    size = 0   # the runs, counted first
-    for y in range(rows):
-        last = False
-        for x in range(cols):
-            glove = labels[y, x] != 0
-            if glove and not last:
-                size += 1
-            last = glove
-    ry = np.empty(size, np.int64)
-    rx0 = np.empty(size, np.int64)
-    rx1 = np.empty(size, np.int64)
-    parent = np.empty(size, np.int64)
-    n = 0
-    prev_lo = prev_hi = 0
-    for y in range(rows):
-        lo = n
-        x = 0
-        while x < cols:
-            if labels[y, x] == 0:
-                x += 1
-                continue
-            start = x
-            while x < cols and labels[y, x] != 0:
-                x += 1
-            ry[n], rx0[n], rx1[n], parent[n] = y, start, x, n
-            n += 1
-        p = prev_lo
-        for r in range(lo, n):
-            while p < prev_hi and rx1[p] < rx0[r]:
-                p += 1
-            q = p
-            while q < prev_hi and rx0[q] <= rx1[r]:
-                a, b = _find(parent, q), _find(parent, r)
-                if a < b:
-                    parent[b] = a
-                elif b < a:
-                    parent[a] = b
-                q += 1
-        prev_lo, prev_hi = lo, n
+def _holding(n: int, ry: np.ndarray, rx0: np.ndarray, rx1: np.ndarray, comp: np.ndarray,
+             mask: np.ndarray) -> np.ndarray:
+    """(n,) bool by root run: whether the component of :func:`_runs`' runs holds a ``mask``
+    ((H, W) bool) pixel."""
+    hit = np.zeros(n, np.bool_)
     for r in range(n):
-        parent[r] = _find(parent, r)
-    return n, ry, rx0, rx1, parent
+        c = comp[r]
+        if not hit[c]:
+            y = ry[r]
+            for x in range(rx0[r], rx1[r]):
+                if mask[y, x]:
+                    hit[c] = True
+                    break
+    return hit
+
+
+@numba.njit(**_JIT)
+def _paint(out: np.ndarray, n: int, ry: np.ndarray, rx0: np.ndarray, rx1: np.ndarray,
+           comp: np.ndarray, chosen: np.ndarray) -> None:
+    """``out`` ((H, W) bool) set, in place, at the pixels of the components of :func:`_runs`'
+    runs whose root run ``chosen`` ((n,) bool) holds."""
+    for r in range(n):
+        if chosen[comp[r]]:
+            y = ry[r]
+            for x in range(rx0[r], rx1[r]):
+                out[y, x] = True
 
 
 @numba.njit(**_JIT)
@@ -707,7 +688,7 @@ def surface_regions(labels: np.ndarray, candidate: np.ndarray, max_pixels: float
     than ``max_glove_share`` of its pixels of a glove (nonzero) label."""
     rows, cols = labels.shape
     out = np.zeros((rows, cols), np.bool_)
-    n, ry, rx0, rx1, rv, comp = _colour_runs(labels, 255)
+    n, ry, rx0, rx1, rv, comp = _runs(labels, 255, False)
     area = np.zeros(n, np.int64)
     for r in range(n):
         area[comp[r]] += rx1[r] - rx0[r]
@@ -749,35 +730,17 @@ def surface_regions(labels: np.ndarray, candidate: np.ndarray, max_pixels: float
                                         glove += 1
                 keep[c] = glove < max_glove_share * ring
             j = end
-    for r in range(n):
-        if keep[comp[r]]:
-            y = ry[r]
-            for x in range(rx0[r], rx1[r]):
-                out[y, x] = True
+    _paint(out, n, ry, rx0, rx1, comp, keep)
     return out
 
 
 @numba.njit(**_JIT)
-def near_or_reaching(labels: np.ndarray, reach: np.ndarray, near: np.ndarray
-                           ) -> np.ndarray:
+def near_or_reaching(labels: np.ndarray, reach: np.ndarray, near: np.ndarray) -> np.ndarray:
     """(H, W) bool: ``near`` ((H, W) bool), or in an 8-connected glove (nonzero) component of
     the 2-D uint8 ``labels`` that holds a ``reach`` pixel ((H, W) bool)."""
-    n, ry, rx0, rx1, comp = _glove_runs(labels)
-    hit = np.zeros(n, np.bool_)
-    for r in range(n):
-        c = comp[r]
-        if not hit[c]:
-            y = ry[r]
-            for x in range(rx0[r], rx1[r]):
-                if reach[y, x]:
-                    hit[c] = True
-                    break
+    n, ry, rx0, rx1, _, comp = _runs(labels, 255, True)
     out = near.copy()
-    for r in range(n):
-        if hit[comp[r]]:
-            y = ry[r]
-            for x in range(rx0[r], rx1[r]):
-                out[y, x] = True
+    _paint(out, n, ry, rx0, rx1, comp, _holding(n, ry, rx0, rx1, comp, reach))
     return out
 
 
@@ -789,7 +752,7 @@ def glove_components(labels: np.ndarray, num_labels: int
     first pixel in raster order) and how many pixels of each label below ``num_labels``
     (above every label) each holds ((n + 1, ``num_labels``) int64, row 0 zeros)."""
     rows, cols = labels.shape
-    n, ry, rx0, rx1, comp = _glove_runs(labels)
+    n, ry, rx0, rx1, _, comp = _runs(labels, 255, True)
     number = np.zeros(n, np.int32)
     count = 0
     for r in range(n):
@@ -818,7 +781,7 @@ def colour_blobs(labels: np.ndarray, num_colors: int, min_pixels: int
     label in OpenCV's order (by the first 2 x 2 block of the rectangle, in raster order of
     the blocks, that holds a pixel of the component)."""
     rows, cols = labels.shape
-    n, ry, rx0, rx1, rv, comp = _colour_runs(labels, num_colors)
+    n, ry, rx0, rx1, rv, comp = _runs(labels, num_colors, False)
     bx = np.full(num_colors + 1, cols, np.int64)
     by = np.full(num_colors + 1, rows, np.int64)
     for r in range(n):
@@ -870,24 +833,14 @@ def small_patches_reached(labels: np.ndarray, num_colors: int, reached: np.ndarr
     """``out`` ((H, W) bool) set, in place, at every pixel of each 8-connected component of
     one glove label 1..``num_colors`` of the 2-D uint8 ``labels`` that holds a ``reached``
     pixel ((H, W) bool) and has at most ``max_area`` pixels."""
-    n, ry, rx0, rx1, rv, comp = _colour_runs(labels, num_colors)
+    n, ry, rx0, rx1, _, comp = _runs(labels, num_colors, False)
     area = np.zeros(n, np.int64)
-    hit = np.zeros(n, np.bool_)
     for r in range(n):
-        c = comp[r]
-        area[c] += rx1[r] - rx0[r]
-        if not hit[c]:
-            y = ry[r]
-            for x in range(rx0[r], rx1[r]):
-                if reached[y, x]:
-                    hit[c] = True
-                    break
+        area[comp[r]] += rx1[r] - rx0[r]
+    chosen = _holding(n, ry, rx0, rx1, comp, reached)
     for r in range(n):
-        c = comp[r]
-        if hit[c] and area[c] <= max_area:
-            y = ry[r]
-            for x in range(rx0[r], rx1[r]):
-                out[y, x] = True
+        chosen[r] = chosen[r] and area[r] <= max_area
+    _paint(out, n, ry, rx0, rx1, comp, chosen)
 
 
 def _array(dtype: object, ndim: int, readonly: bool = True, layout: str = 'C') -> object:
