@@ -500,6 +500,22 @@ def _find(parent: np.ndarray, i: int) -> int:
     return i
 
 
+@numba.njit(inline='always', **_JIT)
+def _row_values(labels: np.ndarray, y: int, num_colors: int, any_label: bool,
+                out: np.ndarray) -> None:
+    """Row ``y`` of ``labels`` as :func:`_runs` joins it, into ``out`` (W,) uint8: the label
+    where it is a glove label up to ``num_colors``, else 0; with ``any_label`` 1 where it is
+    nonzero."""
+    cols = labels.shape[1]
+    if any_label:
+        for x in range(cols):
+            out[x] = 1 if labels[y, x] != 0 else 0
+    else:
+        for x in range(cols):
+            v = labels[y, x]
+            out[x] = v if v <= num_colors else 0
+
+
 @numba.njit(**_JIT)
 def _runs(labels: np.ndarray, num_colors: int, any_label: bool
           ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -509,12 +525,13 @@ def _runs(labels: np.ndarray, num_colors: int, any_label: bool
     per run its row, first column, end column (exclusive), value (its label, or 1 with
     ``any_label``) and component, the index of the component's first run in raster order)."""
     rows, cols = labels.shape
+    row = np.empty(cols, np.uint8)
     size = 0   # the runs, counted first (arrays of their number, not the pixels')
     for y in range(rows):
+        _row_values(labels, y, num_colors, any_label, row)
         last = 0
         for x in range(cols):
-            v = labels[y, x]
-            w = (1 if v != 0 else 0) if any_label else (v if v <= num_colors else 0)
+            w = row[x]
             if w != last and w != 0:
                 size += 1
             last = w
@@ -526,17 +543,17 @@ def _runs(labels: np.ndarray, num_colors: int, any_label: bool
     n = 0
     prev_lo = prev_hi = 0   # the row above's runs: [prev_lo, prev_hi)
     for y in range(rows):
+        _row_values(labels, y, num_colors, any_label, row)
         lo = n
         x = 0
         while x < cols:
-            v = labels[y, x]
-            w = (1 if v != 0 else 0) if any_label else (v if v <= num_colors else 0)
+            w = row[x]
             if w == 0:
                 x += 1
                 continue
             start = x
             x += 1
-            while x < cols and (labels[y, x] != 0 if any_label else labels[y, x] == v):
+            while x < cols and row[x] == w:
                 x += 1
             ry[n], rx0[n], rx1[n], rv[n], parent[n] = y, start, x, w, n
             n += 1
