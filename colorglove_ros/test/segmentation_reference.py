@@ -1,16 +1,24 @@
 """Plain per-pixel references of the segmenter's compiled loops, written from their docstrings
 (slow: for small test images only): the border relabelling and the mean shift; and the
 junction trim as it was written before its compiled parts (whole-image components, the cells
-spread back to pixels with numpy)."""
+spread back to pixels with numpy); and, as they were written with OpenCV's connected
+components and numpy before their compiled passes (issue 19, nineteenth pass), the blobs'
+per-colour components, the glove-like patches, the glove region's reached components, the
+multi-colour component test, the tiny image's cell labels and the junction trim's oversized
+surfaces."""
 from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 
 from colorglove_ros.core.segmentation.segmenter import _LINEAR_RGB
 
-__all__ = ['relabel_borders_reference', 'mean_shift_reference', 'keep_near_junctions_reference']
+__all__ = ['relabel_borders_reference', 'mean_shift_reference', 'keep_near_junctions_reference',
+           'color_components_reference', 'small_patches_reached_reference',
+           'near_or_reaching_reference', 'keep_multicolor_components_reference',
+           'cell_labels_reference', 'surface_regions_reference']
 
 _F32 = np.float32
 
@@ -171,8 +179,8 @@ def keep_near_junctions_reference(labels: np.ndarray, num_colors: int, reach: fl
     from colorglove_ros.core.segmentation.crop import mean_shift_crop
     from colorglove_ros.core.segmentation.detection import (
         _is_surface,
-        _reaching,
         _shrinks,
+        border_lines,
         junction_mask,
     )
 
@@ -195,8 +203,12 @@ def keep_near_junctions_reference(labels: np.ndarray, num_colors: int, reach: fl
             (small == colour).view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
         big = stats[:, cv2.CC_STAT_AREA] > max_pixels
         big[0] = False
-        if edges is not None:
-            big &= _reaching(comp, n, edges)
+        if edges is not None:   # a pixel on one of the flagged sides
+            sides = border_lines(comp, edges)
+            reaching = np.zeros(n, bool)
+            if sides:
+                reaching[np.concatenate(sides)] = True
+            big &= reaching
         if edges is not None or surfaces_only:
             for k in np.flatnonzero(big):
                 big[k] = _is_surface(small, comp, stats, k)
@@ -209,4 +221,143 @@ def keep_near_junctions_reference(labels: np.ndarray, num_colors: int, reach: fl
     drop = np.repeat(np.repeat(drop, step, 0), step, 1)[:h, :w]
     out = labels.copy()
     out[drop & np.isin(labels, big_colours)] = 0
+    return out
+
+
+def color_components_reference(labels: np.ndarray, min_pixels: int, num_colors: int
+                               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each colour 1..``num_colors`` labelled by ``cv2.connectedComponentsWithStats`` inside
+    its bounding rectangle: colours, centroids shifted back, areas (the blobs before their
+    compiled pass)."""
+    counts = np.bincount(labels.ravel(), minlength=num_colors + 1)
+    colors, cents, areas = [], [], []
+    for c in np.flatnonzero(counts[1:num_colors + 1] >= min_pixels) + 1:
+        m = np.ascontiguousarray(labels == c).view(np.uint8)
+        bx, by, bw, bh = cv2.boundingRect(m)
+        ltype = cv2.CV_16U if bw * bh < np.iinfo(np.uint16).max else cv2.CV_32S
+        n, _, stats, centroids = cv2.connectedComponentsWithStats(
+            m[by:by + bh, bx:bx + bw], connectivity=8, ltype=ltype)
+        for k in range(1, n):
+            if stats[k, cv2.CC_STAT_AREA] >= min_pixels:
+                colors.append(int(c))
+                cents.append(centroids[k] + (bx, by))
+                areas.append(int(stats[k, cv2.CC_STAT_AREA]))
+    if not colors:
+        return np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros(0, np.int64)
+    return np.array(colors, np.int64), np.array(cents, float), np.array(areas, np.int64)
+
+
+def small_patches_reached_reference(labels: np.ndarray, num_colors: int, reached: np.ndarray,
+                                    max_area: float, out: np.ndarray) -> None:
+    """``out`` |= the single-colour components holding a ``reached`` pixel with at most
+    ``max_area`` pixels, each colour labelled by OpenCV on its own (the glove-like patches
+    before their compiled pass)."""
+    for colour in np.unique(labels[reached]):
+        if colour == 0 or colour > num_colors:
+            continue
+        n, comp, stats, _ = cv2.connectedComponentsWithStats(
+            np.ascontiguousarray(labels == colour).view(np.uint8), connectivity=8,
+            ltype=cv2.CV_32S)
+        patch = np.zeros(n, bool)
+        patch[comp[reached]] = True
+        patch &= stats[:, cv2.CC_STAT_AREA] <= max_area
+        patch[0] = False
+        out |= patch.take(comp)
+
+
+def near_or_reaching_reference(labels: np.ndarray, reach: np.ndarray, near: np.ndarray
+                               ) -> np.ndarray:
+    """``near`` or in a glove component (OpenCV's, of ``labels`` > 0) holding a ``reach``
+    pixel."""
+    n, comp = cv2.connectedComponents((labels > 0).view(np.uint8), connectivity=8,
+                                      ltype=cv2.CV_32S)
+    reached = np.zeros(n, bool)
+    reached[comp[reach]] = True
+    reached[0] = False
+    return near | reached[comp]
+
+
+def keep_multicolor_components_reference(labels: np.ndarray, min_colors: int, min_share: float,
+                                         min_pixels: int, reattach_radius: int,
+                                         reattach_max_share: float) -> np.ndarray:
+    """``segmenter.keep_multicolor_components`` as written with OpenCV's components and
+    numpy's colour counts."""
+    glove = labels > 0
+    n, comp = cv2.connectedComponents(glove.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+    if n <= 1:
+        return labels
+    nl = int(labels.max()) + 1
+    glove = np.flatnonzero(glove)
+    hist = np.bincount(comp.ravel().take(glove) * nl + labels.ravel().take(glove),
+                       minlength=n * nl).reshape(n, nl)[:, 1:]
+    size = hist.sum(axis=1, keepdims=True)
+    big = (hist >= np.maximum(min_share * size, min_pixels)).sum(axis=1)
+    keep = big >= min_colors
+    keep[0] = True
+    if keep.all():
+        return labels
+    if reattach_radius > 0 and keep[1:].any():
+        kept_table = keep.view(np.uint8).copy()
+        kept_table[0] = 0
+        kept = kept_table.take(comp)
+        width = 2 * int(reattach_radius) + 1
+        near = cv2.dilate(kept, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (width, width)))
+        reached = np.zeros(n, dtype=bool)
+        reached[comp[near > 0]] = True
+        small = size[:, 0] <= reattach_max_share * size[kept_table.view(bool), 0].sum()
+        keep |= reached & small
+    return labels * keep.view(np.uint8).take(comp)
+
+
+def cell_labels_reference(counts: np.ndarray, glove_fraction: float,
+                          rescue_share: float) -> np.ndarray:
+    """``crop.crop_window``'s cell labels from the votes, as written with numpy."""
+    glove = counts[1:]
+    glove_total = glove.sum(axis=0)
+    total = glove_total + counts[0]
+    best = np.argmax(glove, axis=0) + 1
+    out = np.where((glove_total > 0) & (glove_total >= glove_fraction * total), best, 0)
+    if rescue_share > 0.0:
+        used = np.bincount(out, minlength=len(counts))
+        for k in np.flatnonzero((used[1:] == 0) & (glove.max(axis=1) > 0)):
+            share = glove[k] / np.maximum(total, 1)
+            top_share = float(share.max())
+            if top_share < rescue_share:
+                continue
+            for cell in np.flatnonzero(share >= max(rescue_share, 0.5 * top_share)):
+                if out[cell] > 0 and used[out[cell]] <= 1:
+                    continue
+                used[out[cell]] -= 1
+                out[cell] = k + 1
+                used[k + 1] += 1
+    return out
+
+
+def surface_regions_reference(labels: np.ndarray, candidate: np.ndarray, max_pixels: float,
+                              sides: np.ndarray, off_image: bool, surfaces: bool,
+                              max_glove_share: float) -> np.ndarray:
+    """``segmentation_kernel.surface_regions`` with OpenCV: each candidate label's
+    components, those on a flagged side of the image (``off_image``), those whose outline (a
+    3 x 3 dilation less the region) holds fewer than ``max_glove_share`` glove pixels."""
+    rows, cols = labels.shape
+    out = np.zeros(labels.shape, bool)
+    for colour in np.flatnonzero(candidate):
+        n, comp, stats, _ = cv2.connectedComponentsWithStats(
+            np.ascontiguousarray(labels == colour).view(np.uint8), connectivity=8,
+            ltype=cv2.CV_32S)
+        for k in range(1, n):
+            if not stats[k, cv2.CC_STAT_AREA] > max_pixels:
+                continue
+            mine = comp == k
+            if off_image:
+                lines = [line for on, line in zip(sides, (mine[:, 0], mine[:, -1], mine[0],
+                                                          mine[-1]), strict=True) if on]
+                if not any(line.any() for line in lines):
+                    continue
+            if off_image or surfaces:
+                ring = cv2.dilate(mine.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+                ring &= ~mine
+                if not np.count_nonzero(labels[ring]) < max_glove_share * np.count_nonzero(ring):
+                    continue
+            out |= mine
     return out

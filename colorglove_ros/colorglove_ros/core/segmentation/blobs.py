@@ -19,36 +19,31 @@ def color_components(labels: np.ndarray, min_pixels: int, num_colors: int = NUM_
     """8-connected components of each glove colour 1..``num_colors`` of a 2-D label image
     (0 = background) with at least ``min_pixels`` pixels: colours (B,) int64, centroids (B, 2)
     (x, y in the label image's pixels) and pixel counts (B,) int64, colour by colour in
-    ascending order and within a colour in raster order.
+    ascending order and within a colour in OpenCV's order (by the first 2 x 2 block, in raster
+    order of the blocks of the colour's rectangle, holding a pixel of the component).
 
     With ``crop_to_color`` (faster) each colour is labelled inside its bounding rectangle and
     its centroids shifted back, which agrees with labelling the whole image up to the
-    rounding of that shift."""
-    boxes = None
+    rounding of that shift; on a uint8 image that is one compiled pass
+    (``segmentation_kernel.colour_blobs``, the same components, order and bits as OpenCV's
+    per colour)."""
     if (labels.dtype == np.uint8 and labels.ndim == 2 and crop_to_color
             and num_colors <= MAX_GLOVE_COLORS):
-        counts, boxes = compiled_kernels().label_boxes(labels, num_colors + 1)
-    else:
-        counts = np.bincount(labels.ravel(), minlength=num_colors + 1)
+        return compiled_kernels().colour_blobs(labels, int(num_colors), int(min_pixels))
+    counts = np.bincount(labels.ravel(), minlength=num_colors + 1)
     colors: list[int] = []
     cents: list[np.ndarray] = []
     areas: list[int] = []
     for c in np.flatnonzero(counts[1:num_colors + 1] >= min_pixels) + 1:
-        if boxes is not None:   # its bounding rectangle known: only that compared
-            bx, by, bw, bh = (int(v) for v in boxes[c])
-            m = np.equal(labels[by:by + bh, bx:bx + bw], c).view(np.uint8)
-            bx0 = by0 = 0
+        if labels.dtype == np.uint8:
+            m = cv2.compare(labels, int(c), cv2.CMP_EQ)
         else:
-            if labels.dtype == np.uint8:
-                m = cv2.compare(labels, int(c), cv2.CMP_EQ)
-            else:
-                m = np.equal(labels, c).view(np.uint8)
-            bx, by, bw, bh = cv2.boundingRect(m) if crop_to_color else (0, 0, *m.shape[::-1])
-            bx0, by0 = bx, by
+            m = np.equal(labels, c).view(np.uint8)
+        bx, by, bw, bh = cv2.boundingRect(m) if crop_to_color else (0, 0, *m.shape[::-1])
         # 16-bit component labels (faster) whenever they cannot overflow
         ltype = cv2.CV_16U if bw * bh < np.iinfo(np.uint16).max else cv2.CV_32S
         n, _, stats, centroids = cv2.connectedComponentsWithStats(
-            m[by0:by0 + bh, bx0:bx0 + bw], connectivity=8, ltype=ltype)
+            m[by:by + bh, bx:bx + bw], connectivity=8, ltype=ltype)
         for k in range(1, n):
             area = int(stats[k, cv2.CC_STAT_AREA])
             if area >= min_pixels:

@@ -202,27 +202,9 @@ def crop_window(labels: np.ndarray, transform: CropTransform,
         if sub.size:
             counts = compiled_kernels().cell_votes(sub, cell_y[ky0:ky1], cell_x[kx0:kx1], size,
                                                    max(int(sub.max()) + 1, 2))
-    glove = counts[1:]
-    glove_total = glove.sum(axis=0)
-    total = glove_total + counts[0]
-    best = np.argmax(glove, axis=0) + 1
-    out = np.where((glove_total > 0) & (glove_total >= glove_fraction * total), best, 0)
-    if rescue_share > 0.0:
-        # Thin patches (narrower than a cell) lose every majority vote: a colour that vanished
-        # gets back the cells where its share is >= rescue_share and >= half its best share,
-        # never taking the last cell of another colour.
-        used = np.bincount(out, minlength=len(counts))
-        for k in np.flatnonzero((used[1:] == 0) & (glove.max(axis=1) > 0)):
-            share = glove[k] / np.maximum(total, 1)
-            top_share = float(share.max())
-            if top_share < rescue_share:
-                continue
-            for cell in np.flatnonzero(share >= max(rescue_share, 0.5 * top_share)):
-                if out[cell] > 0 and used[out[cell]] <= 1:
-                    continue
-                used[out[cell]] -= 1
-                out[cell] = k + 1
-                used[k + 1] += 1
+    # the votes' majority and the thin patches' rescue, compiled
+    out = compiled_kernels().cell_labels(counts, float(glove_fraction), float(rescue_share))
+    total = counts.sum(axis=0)
     empty = total == 0
     if np.any(empty):
         idx = np.nonzero(empty)[0]

@@ -66,9 +66,7 @@ def glove_region_mask(labels: np.ndarray, num_colors: int, window: int, min_colo
     # the dilation by a size x size square, as a box sum (its cost does not grow with size)
     near = cv2.boxFilter(rich.view(np.uint8), cv2.CV_32S, (size, size), normalize=False,
                          borderType=cv2.BORDER_CONSTANT) > 0
-    n, comp = cv2.connectedComponents((np.asarray(labels) > 0).view(np.uint8), connectivity=8,
-                                      ltype=cv2.CV_32S)
-    return compiled_kernels().near_or_reaching(comp, n, rich, near)
+    return compiled_kernels().near_or_reaching(np.asarray(labels, np.uint8), rich, near)
 
 
 def drop_oversized_components(labels: np.ndarray, max_pixels: float) -> np.ndarray:
@@ -224,35 +222,22 @@ def keep_near_junctions(labels: np.ndarray, num_colors: int, reach: float, min_p
         return labels
     max_pixels = max_patch_share * (2.0 * window[1]) ** 2
     kernels = compiled_kernels()
-    counts, boxes = kernels.label_boxes(small, num_colors + 1)
+    counts = kernels.label_boxes(small, num_colors + 1)[0]
     big_colours = np.flatnonzero(counts[1:] > max_pixels) + 1
     if not len(big_colours):
         return labels
     far = cv2.distanceTransform((~junctions).view(np.uint8), cv2.DIST_L2, 3) > (
         reach * window[1])
-    drop = np.zeros(small.shape, bool)
     # (a colour with no pixel that far keeps every pixel: its regions need not be found)
     reaching_far = np.bincount(small[far], minlength=num_colors + 1)[big_colours] > 0
-    rows, cols = small.shape
-    for colour in big_colours[reaching_far]:
-        # a colour's regions lie in its bounding rectangle: labelled there, grown by the
-        # pixel that _is_surface reads around each (the image's sides stay its sides)
-        x, y, bw, bh = boxes[colour] if colour < len(boxes) else (0, 0, cols, rows)
-        x0, x1, y0, y1 = max(x - 1, 0), min(x + bw + 1, cols), max(y - 1, 0), min(y + bh + 1, rows)
-        part = small[y0:y1, x0:x1]
-        n, comp, stats, _ = cv2.connectedComponentsWithStats(
-            np.equal(part, colour).view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
-        big = stats[:, cv2.CC_STAT_AREA] > max_pixels
-        big[0] = False
-        if edges is not None and big.any():   # sleeves only: off the image
-            left, right, top, bottom = edges
-            big &= _reaching(comp, n, (left and x0 == 0, right and x1 == cols,
-                                       top and y0 == 0, bottom and y1 == rows))
-        if (edges is not None or surfaces_only) and big.any():   # ... among background
-            for k in np.flatnonzero(big):
-                big[k] = _is_surface(part, comp, stats, k)
-        if big.any():
-            drop[y0:y1, x0:x1] |= big.take(comp)
+    candidate = np.zeros(256, bool)
+    candidate[big_colours[reaching_far]] = True
+    # every candidate colour's regions labelled in one compiled pass; with edges, sleeves
+    # only (off the image), and with edges or surfaces_only, only those among background
+    sides = np.array(edges if edges is not None else (False,) * 4, bool)
+    drop = kernels.surface_regions(small, candidate, float(max_pixels), sides,
+                                   edges is not None, bool(surfaces_only),
+                                   PATCH_OUTLINE_GLOVE_SHARE)
     drop &= far
     if not drop.any() or (max_window_kept > 0 and not _shrinks(small, drop, crop,
                                                                 max_window_kept, min_pixels)):
@@ -279,16 +264,6 @@ def border_lines(array: np.ndarray, edges: tuple[bool, bool, bool, bool]) -> lis
     left, right, top, bottom = edges
     return [line for on, line in ((left, array[:, 0]), (right, array[:, -1]), (top, array[0]),
                                   (bottom, array[-1])) if on]
-
-
-def _reaching(comp: np.ndarray, n: int, edges: tuple[bool, bool, bool, bool]) -> np.ndarray:
-    """(n,) bool: which of the ``n`` components of ``comp`` have a pixel on one of the sides
-    ``edges`` (left, right, top, bottom) of the image ``comp`` covers."""
-    sides = border_lines(comp, edges)
-    out = np.zeros(n, bool)
-    if sides:
-        out[np.concatenate(sides)] = True
-    return out
 
 
 def scene_colour_table(rgb: np.ndarray, bits: int, min_pixels: float,

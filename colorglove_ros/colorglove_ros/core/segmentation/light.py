@@ -12,6 +12,7 @@ from colorglove_ros.core.colorimetry import (
     srgb_to_linear,
 )
 from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
+from colorglove_ros.core.segmentation.crop import compiled_kernels
 
 __all__ = ['LIGHT_TEMPERATURES_K', 'colour_means', 'solve_light', 'estimate_light_gains',
            'gain_table', 'planckian_illuminants']
@@ -27,14 +28,26 @@ def _log_floored(colours: np.ndarray, floor: float = 1e-3) -> np.ndarray:
 
 
 def colour_means(linear_rgb: np.ndarray, labels: np.ndarray, num_colors: int,
-                 min_pixels: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 min_pixels: int, table: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The glove colours (0-based indices, (n,)) with at least ``min_pixels`` pixels among
     ``labels`` (...; 0 not glove, 1..``num_colors``), their pixel counts (n,) and their mean
-    colours (n, 3) in ``linear_rgb`` (..., 3)."""
+    colours (n, 3) in ``linear_rgb`` (..., 3). With ``table`` ((256,) float32) ``linear_rgb``
+    is a (H, W, 3) uint8 image and a channel's linear value is ``table`` at its byte: the
+    same means as of ``table`` applied first, in one compiled pass over the (H, W) uint8
+    ``labels``."""
+    num = num_colors + 1
+    if table is not None:
+        counts, sums = compiled_kernels().colour_sums(linear_rgb, table,
+                                                      np.asarray(labels, np.uint8), num)
+        counts, sums = counts[1:], sums[1:]
+        present = np.flatnonzero(counts >= min_pixels)
+        if not len(present):
+            return present, counts[present], np.zeros((0, 3))
+        return present, counts[present], sums[present] / counts[present, None]
     labels = np.asarray(labels).ravel()
     glove = np.flatnonzero(labels != 0)   # a bool array: 4x faster than on the labels
     labels = labels[glove]
-    num = num_colors + 1
     counts = np.bincount(labels, minlength=num)[1:num]
     present = np.flatnonzero(counts >= min_pixels)
     if not len(present):
@@ -78,7 +91,8 @@ def solve_light(means: np.ndarray, counts: np.ndarray, reference: np.ndarray,
 
 def estimate_light_gains(linear_rgb: np.ndarray, labels: np.ndarray,
                          reference_linear_rgb: np.ndarray, min_pixels: int = 20,
-                         min_colors: int = 3, max_gain: float = 2.0) -> np.ndarray:
+                         min_colors: int = 3, max_gain: float = 2.0,
+                         table: np.ndarray | None = None) -> np.ndarray:
     """Von Kries correction gains (3,) for linear RGB from glove pixels of known colour.
 
     ``linear_rgb`` (..., 3) are pixels (any common scale) labelled ``labels`` (...): 0 for
@@ -87,10 +101,11 @@ def estimate_light_gains(linear_rgb: np.ndarray, labels: np.ndarray,
     mean ``m_c`` is modelled as ``s_c * light * reference_c`` (``s_c`` its own shading
     level; :func:`solve_light`). Returns ``1 / light`` normalised to
     luminance 1 (a colour, not a level, correction) and clipped to
-    ``1/max_gain .. max_gain``; ones with fewer than ``min_colors`` colours.
+    ``1/max_gain .. max_gain``; ones with fewer than ``min_colors`` colours. ``table``: as
+    :func:`colour_means`'s (``linear_rgb`` the uint8 image it maps).
     """
     ref = np.asarray(reference_linear_rgb, dtype=np.float64)
-    present, counts, means = colour_means(linear_rgb, labels, len(ref), min_pixels)
+    present, counts, means = colour_means(linear_rgb, labels, len(ref), min_pixels, table)
     if len(present) < min_colors:
         return np.ones(3)
     log_light, _ = solve_light(means, counts, ref[present])

@@ -1,8 +1,11 @@
 """Compiled (numba) kernels of the segmenter's per-pixel loops: the border relabelling's passes
 (:func:`segmenter.relabel_borders`), the mean-shift crop, the colour classification, label
-counts and boxes, the scene colours' histogram, the tiny image's cell votes, the glove
-region's reached components, the colour diversity's box counts and the junction trim's
-cleared cells.
+counts and boxes, the scene colours' histogram, the tiny image's cell votes and cell labels,
+the colour diversity's box counts, the junction trim's cleared cells and oversized surfaces,
+the light estimate's colour sums, the static background's cleared cells, the label borders,
+and the connected components (8-connected runs of a row joined by union-find) of the blobs,
+the glove-like patches, the glove region's reached components and the multi-colour component
+test.
 
 The same arithmetic as the numpy code they replaced (float32 colour distances in the same
 order, the same tie rules), as loops over the pixels, so one call replaces the dozens of
@@ -22,7 +25,10 @@ from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
            'colour_histogram', 'cell_votes', 'near_or_reaching',
-           'box_colour_counts', 'clear_cells', 'compile_kernels']
+           'box_colour_counts', 'clear_cells', 'colour_blobs', 'small_patches_reached',
+           'glove_components', 'cell_labels', 'colour_sums', 'clear_coarse',
+           'surface_regions', 'label_borders',
+           'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
 UNSURE = 255
@@ -208,6 +214,30 @@ def relabel_passes(box: np.ndarray, rgb: np.ndarray, table: np.ndarray, border: 
 
 
 @numba.njit(**_JIT)
+def label_borders(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pixels of the 2-D uint8 ``labels`` with a 4-neighbour (inside the image) of another
+    label ((H, W) bool: a 3 x 3 cross's erosion differs from its dilation there) and their
+    bounding rectangle ((4,) int64: x, y, width, height as ``cv2.boundingRect``; zeros when
+    none)."""
+    rows, cols = labels.shape
+    border = np.zeros((rows, cols), np.bool_)
+    x0, x1, y0, y1 = cols, -1, rows, -1
+    for y in range(rows):
+        for x in range(cols):
+            v = labels[y, x]
+            if ((y > 0 and labels[y - 1, x] != v) or (y < rows - 1 and labels[y + 1, x] != v)
+                    or (x > 0 and labels[y, x - 1] != v)
+                    or (x < cols - 1 and labels[y, x + 1] != v)):
+                border[y, x] = True
+                x0, x1 = min(x0, x), max(x1, x)
+                y0, y1 = min(y0, y), max(y1, y)
+    box = np.zeros(4, np.int64)
+    if x1 >= 0:
+        box[0], box[1], box[2], box[3] = x0, y0, x1 - x0 + 1, y1 - y0 + 1
+    return border, box
+
+
+@numba.njit(**_JIT)
 def _window_bounds(c: float, h: float, n: int) -> tuple[int, int]:
     """Integer index range [lo, hi) of pixel centres within c +- h, clipped to [0, n)."""
     return max(int(math.ceil(c - h)), 0), min(int(math.floor(c + h)) + 1, n)
@@ -381,25 +411,6 @@ def cell_votes(labels: np.ndarray, cell_y: np.ndarray, cell_x: np.ndarray, size:
     return votes
 
 
-@numba.njit(**_JIT)
-def near_or_reaching(comp: np.ndarray, components: int, reach: np.ndarray,
-                     near: np.ndarray) -> np.ndarray:
-    """(H, W) bool: ``near`` or in a component of ``comp`` ((H, W) int32, 0 the background,
-    ``components`` of them) that holds a ``reach`` pixel ((H, W) bool)."""
-    rows, cols = comp.shape
-    reached = np.zeros(components, np.bool_)
-    for y in range(rows):
-        for x in range(cols):
-            if reach[y, x]:
-                reached[comp[y, x]] = True
-    reached[0] = False
-    out = np.empty((rows, cols), np.bool_)
-    for y in range(rows):
-        for x in range(cols):
-            out[y, x] = near[y, x] or reached[comp[y, x]]
-    return out
-
-
 #: :func:`box_colour_counts` bounds the box sums of blocks of this many pixels a side.
 _BOUND_BLOCK = 8
 
@@ -480,6 +491,375 @@ def clear_cells(labels: np.ndarray, cells: np.ndarray, step: int, cleared: np.nd
     return out
 
 
+@numba.njit(**_JIT)
+def _find(parent: np.ndarray, i: int) -> int:
+    """The root of ``i`` in the union-find forest ``parent`` (its path halved)."""
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@numba.njit(inline='always', **_JIT)
+def _row_values(labels: np.ndarray, y: int, num_colors: int, any_label: bool,
+                out: np.ndarray) -> None:
+    """Row ``y`` of ``labels`` as :func:`_runs` joins it, into ``out`` (W,) uint8: the label
+    where it is a glove label up to ``num_colors``, else 0; with ``any_label`` 1 where it is
+    nonzero."""
+    cols = labels.shape[1]
+    if any_label:
+        for x in range(cols):
+            out[x] = 1 if labels[y, x] != 0 else 0
+    else:
+        for x in range(cols):
+            v = labels[y, x]
+            out[x] = v if v <= num_colors else 0
+
+
+@numba.njit(**_JIT)
+def _runs(labels: np.ndarray, num_colors: int, any_label: bool
+          ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The runs along the rows of the 2-D uint8 ``labels`` of one glove label 1..``num_colors``
+    (other labels are background), or with ``any_label`` of glove (nonzero) pixels of any
+    labels, joined into 8-connected components of one label (or of glove): (the run count n;
+    per run its row, first column, end column (exclusive), value (its label, or 1 with
+    ``any_label``) and component, the index of the component's first run in raster order)."""
+    rows, cols = labels.shape
+    row = np.empty(cols, np.uint8)
+    size = 0   # the runs, counted first (arrays of their number, not the pixels')
+    for y in range(rows):
+        _row_values(labels, y, num_colors, any_label, row)
+        last = 0
+        for x in range(cols):
+            w = row[x]
+            if w != last and w != 0:
+                size += 1
+            last = w
+    ry = np.empty(size, np.int64)
+    rx0 = np.empty(size, np.int64)
+    rx1 = np.empty(size, np.int64)
+    rv = np.empty(size, np.int64)
+    parent = np.empty(size, np.int64)
+    n = 0
+    prev_lo = prev_hi = 0   # the row above's runs: [prev_lo, prev_hi)
+    for y in range(rows):
+        _row_values(labels, y, num_colors, any_label, row)
+        lo = n
+        x = 0
+        while x < cols:
+            w = row[x]
+            if w == 0:
+                x += 1
+                continue
+            start = x
+            x += 1
+            while x < cols and row[x] == w:
+                x += 1
+            ry[n], rx0[n], rx1[n], rv[n], parent[n] = y, start, x, w, n
+            n += 1
+        # 8-connected: a run touches the runs above it from the column before its first to
+        # the column after its last
+        p = prev_lo
+        for r in range(lo, n):
+            while p < prev_hi and rx1[p] < rx0[r]:
+                p += 1
+            q = p
+            while q < prev_hi and rx0[q] <= rx1[r]:
+                if rv[q] == rv[r]:
+                    a, b = _find(parent, q), _find(parent, r)
+                    if a < b:
+                        parent[b] = a
+                    elif b < a:
+                        parent[a] = b
+                q += 1
+        prev_lo, prev_hi = lo, n
+    for r in range(n):
+        parent[r] = _find(parent, r)
+    return n, ry, rx0, rx1, rv, parent
+
+
+@numba.njit(**_JIT)
+def _holding(n: int, ry: np.ndarray, rx0: np.ndarray, rx1: np.ndarray, comp: np.ndarray,
+             mask: np.ndarray) -> np.ndarray:
+    """(n,) bool by root run: whether the component of :func:`_runs`' runs holds a ``mask``
+    ((H, W) bool) pixel."""
+    hit = np.zeros(n, np.bool_)
+    for r in range(n):
+        c = comp[r]
+        if not hit[c]:
+            y = ry[r]
+            for x in range(rx0[r], rx1[r]):
+                if mask[y, x]:
+                    hit[c] = True
+                    break
+    return hit
+
+
+@numba.njit(**_JIT)
+def _paint(out: np.ndarray, n: int, ry: np.ndarray, rx0: np.ndarray, rx1: np.ndarray,
+           comp: np.ndarray, chosen: np.ndarray) -> None:
+    """``out`` ((H, W) bool) set, in place, at the pixels of the components of :func:`_runs`'
+    runs whose root run ``chosen`` ((n,) bool) holds."""
+    for r in range(n):
+        if chosen[comp[r]]:
+            y = ry[r]
+            for x in range(rx0[r], rx1[r]):
+                out[y, x] = True
+
+
+@numba.njit(**_JIT)
+def cell_labels(counts: np.ndarray, glove_fraction: float, rescue_share: float) -> np.ndarray:
+    """(C,) int64: the label of each cell of a tiny image from its pixels' votes ``counts``
+    ((L, C) int64, label by cell; ``crop.crop_window``'s rules): the most frequent glove
+    label (the lowest of equals) where glove labels hold at least ``glove_fraction`` of its
+    pixels, else 0; then, with ``rescue_share`` > 0, each glove label that no cell took, in
+    ascending order, takes the cells where its share of pixels is at least ``rescue_share``
+    and at least half its best share, but the last cell of another label."""
+    labels, cells = counts.shape
+    out = np.zeros(cells, np.int64)
+    total = np.zeros(cells, np.int64)
+    used = np.zeros(labels, np.int64)
+    for j in range(cells):
+        glove_total = 0
+        best, best_count = 1, -1
+        for k in range(1, labels):
+            v = counts[k, j]
+            glove_total += v
+            if v > best_count:
+                best, best_count = k, v
+        total[j] = glove_total + counts[0, j]
+        if glove_total > 0 and glove_total >= glove_fraction * total[j]:
+            out[j] = best
+        used[out[j]] += 1
+    if rescue_share > 0.0:
+        missing = np.zeros(labels, np.bool_)
+        for k in range(1, labels):   # (decided before any is given cells)
+            if used[k] == 0:
+                for j in range(cells):
+                    if counts[k, j] > 0:
+                        missing[k] = True
+                        break
+        share = np.empty(cells, np.float64)
+        for k in range(1, labels):
+            if not missing[k]:
+                continue
+            top_share = -np.inf
+            for j in range(cells):
+                share[j] = counts[k, j] / max(total[j], 1)
+                top_share = max(top_share, share[j])
+            if top_share < rescue_share:
+                continue
+            need = max(rescue_share, 0.5 * top_share)
+            for j in range(cells):
+                if share[j] >= need:
+                    if out[j] > 0 and used[out[j]] <= 1:
+                        continue
+                    used[out[j]] -= 1
+                    out[j] = k
+                    used[k] += 1
+    return out
+
+
+@numba.njit(**_JIT)
+def colour_sums(image: np.ndarray, table: np.ndarray, labels: np.ndarray, size: int
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """How many pixels of the (H, W, 3) uint8 ``image`` each label 1..``size`` - 1 of the
+    (H, W) uint8 ``labels`` holds ((``size``,) int64, 0 for label 0) and the sums of their
+    channels' ``table`` values ((``size``, 3) float64; ``table`` (256,) float32), added in
+    raster order as ``np.bincount`` adds its weights."""
+    rows, cols = labels.shape
+    counts = np.zeros(size, np.int64)
+    sums = np.zeros((size, 3), np.float64)
+    for y in range(rows):
+        for x in range(cols):
+            v = labels[y, x]
+            if v == 0 or v >= size:
+                continue
+            counts[v] += 1
+            for c in range(3):
+                sums[v, c] += np.float64(table[image[y, x, c]])
+    return counts, sums
+
+
+@numba.njit(**_JIT)
+def clear_coarse(labels: np.ndarray, coarse: np.ndarray, rows: np.ndarray, cols: np.ndarray
+                 ) -> None:
+    """0 at each pixel (y, x) of the 2-D uint8 ``labels`` where the coarser bool mask
+    ``coarse`` holds at (``rows[y]``, ``cols[x]``), in place."""
+    for y in range(labels.shape[0]):
+        row = rows[y]
+        for x in range(labels.shape[1]):
+            if coarse[row, cols[x]]:
+                labels[y, x] = 0
+
+
+@numba.njit(**_JIT)
+def surface_regions(labels: np.ndarray, candidate: np.ndarray, max_pixels: float,
+                    sides: np.ndarray, off_image: bool, surfaces: bool,
+                    max_glove_share: float) -> np.ndarray:
+    """(H, W) bool: the pixels of the 8-connected single-label regions of the 2-D uint8
+    ``labels`` whose label ``candidate`` ((256,) bool) holds, larger than ``max_pixels``;
+    with ``off_image`` only those with a pixel on a side of the image that ``sides`` ((4,)
+    bool: left, right, top, bottom) flags, and with ``off_image`` or ``surfaces`` only those
+    whose outline (the pixels of the image outside the region 8-adjacent to it) holds fewer
+    than ``max_glove_share`` of its pixels of a glove (nonzero) label."""
+    rows, cols = labels.shape
+    out = np.zeros((rows, cols), np.bool_)
+    n, ry, rx0, rx1, rv, comp = _runs(labels, 255, False)
+    area = np.zeros(n, np.int64)
+    for r in range(n):
+        area[comp[r]] += rx1[r] - rx0[r]
+    keep = np.zeros(n, np.bool_)
+    for r in range(n):
+        c = comp[r]
+        keep[c] = candidate[rv[r]] and area[c] > max_pixels
+    if off_image:
+        touches = np.zeros(n, np.bool_)
+        for r in range(n):
+            c = comp[r]
+            if keep[c] and ((sides[0] and rx0[r] == 0) or (sides[1] and rx1[r] == cols)
+                            or (sides[2] and ry[r] == 0) or (sides[3] and ry[r] == rows - 1)):
+                touches[c] = True
+        for r in range(n):
+            keep[r] = keep[r] and touches[r]
+    if off_image or surfaces:
+        order = np.argsort(comp[:n], kind='mergesort')   # each region's runs together
+        seen = np.full((rows, cols), -1, np.int64)   # the region whose outline counted it
+        j = 0
+        while j < n:
+            c = comp[order[j]]
+            end = j
+            while end < n and comp[order[end]] == c:
+                end += 1
+            if keep[c]:
+                ring = glove = 0
+                v = rv[c]
+                for q in range(j, end):
+                    r = order[q]
+                    y = ry[r]
+                    for x in range(rx0[r], rx1[r]):
+                        for ny in range(max(y - 1, 0), min(y + 2, rows)):
+                            for nx in range(max(x - 1, 0), min(x + 2, cols)):
+                                if labels[ny, nx] != v and seen[ny, nx] != c:
+                                    seen[ny, nx] = c
+                                    ring += 1
+                                    if labels[ny, nx] != 0:
+                                        glove += 1
+                keep[c] = glove < max_glove_share * ring
+            j = end
+    _paint(out, n, ry, rx0, rx1, comp, keep)
+    return out
+
+
+@numba.njit(**_JIT)
+def near_or_reaching(labels: np.ndarray, reach: np.ndarray, near: np.ndarray) -> np.ndarray:
+    """(H, W) bool: ``near`` ((H, W) bool), or in an 8-connected glove (nonzero) component of
+    the 2-D uint8 ``labels`` that holds a ``reach`` pixel ((H, W) bool)."""
+    n, ry, rx0, rx1, _, comp = _runs(labels, 255, True)
+    out = near.copy()
+    _paint(out, n, ry, rx0, rx1, comp, _holding(n, ry, rx0, rx1, comp, reach))
+    return out
+
+
+@numba.njit(**_JIT)
+def glove_components(labels: np.ndarray, num_labels: int
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """The 8-connected glove (nonzero) components of the 2-D uint8 ``labels``, of any
+    labels: each pixel's component ((H, W) int32; 0 the background, 1..n numbered by their
+    first pixel in raster order) and how many pixels of each label below ``num_labels``
+    (above every label) each holds ((n + 1, ``num_labels``) int64, row 0 zeros)."""
+    rows, cols = labels.shape
+    n, ry, rx0, rx1, _, comp = _runs(labels, 255, True)
+    number = np.zeros(n, np.int32)
+    count = 0
+    for r in range(n):
+        if comp[r] == r:
+            count += 1
+            number[r] = count
+    out = np.zeros((rows, cols), np.int32)
+    hist = np.zeros((count + 1, num_labels), np.int64)
+    for r in range(n):
+        k = number[comp[r]]
+        y = ry[r]
+        for x in range(rx0[r], rx1[r]):
+            out[y, x] = k
+            hist[k, labels[y, x]] += 1
+    return out, hist
+
+
+@numba.njit(**_JIT)
+def colour_blobs(labels: np.ndarray, num_colors: int, min_pixels: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The 8-connected components of each glove label 1..``num_colors`` of the 2-D uint8
+    ``labels`` with at least ``min_pixels`` pixels, as ``blobs.color_components`` finds them
+    with ``cv2.connectedComponentsWithStats`` inside each label's bounding rectangle: labels
+    (B,) int64, centroids (B, 2) float64 (x, y: the mean of the rectangle's coordinates plus
+    its corner) and pixel counts (B,) int64, label by label in ascending order and within a
+    label in OpenCV's order (by the first 2 x 2 block of the rectangle, in raster order of
+    the blocks, that holds a pixel of the component)."""
+    rows, cols = labels.shape
+    n, ry, rx0, rx1, rv, comp = _runs(labels, num_colors, False)
+    bx = np.full(num_colors + 1, cols, np.int64)
+    by = np.full(num_colors + 1, rows, np.int64)
+    for r in range(n):
+        v = rv[r]
+        bx[v] = min(bx[v], rx0[r])
+        by[v] = min(by[v], ry[r])
+    area = np.zeros(n, np.int64)
+    sum_x = np.zeros(n, np.int64)
+    sum_y = np.zeros(n, np.int64)
+    size_key = rows * cols + cols + 1   # above every block index
+    first = np.full(n, size_key, np.int64)
+    for r in range(n):
+        c, v = comp[r], rv[r]
+        length = rx1[r] - rx0[r]
+        dx, dy = rx0[r] - bx[v], ry[r] - by[v]
+        area[c] += length
+        sum_x[c] += length * dx + length * (length - 1) // 2
+        sum_y[c] += length * dy
+        first[c] = min(first[c], (dy // 2) * cols + dx // 2)
+    count = 0
+    for r in range(n):
+        if comp[r] == r and area[r] >= min_pixels:
+            count += 1
+    keys = np.empty(count, np.int64)
+    roots = np.empty(count, np.int64)
+    count = 0
+    for r in range(n):
+        if comp[r] == r and area[r] >= min_pixels:
+            keys[count] = rv[r] * size_key + first[r]
+            roots[count] = r
+            count += 1
+    order = np.argsort(keys, kind='mergesort')
+    colours = np.empty(count, np.int64)
+    centroids = np.empty((count, 2), np.float64)
+    areas = np.empty(count, np.int64)
+    for j in range(count):
+        r = roots[order[j]]
+        v = rv[r]
+        colours[j] = v
+        centroids[j, 0] = float(sum_x[r]) / float(area[r]) + float(bx[v])
+        centroids[j, 1] = float(sum_y[r]) / float(area[r]) + float(by[v])
+        areas[j] = area[r]
+    return colours, centroids, areas
+
+
+@numba.njit(**_JIT)
+def small_patches_reached(labels: np.ndarray, num_colors: int, reached: np.ndarray,
+                          max_area: float, out: np.ndarray) -> None:
+    """``out`` ((H, W) bool) set, in place, at every pixel of each 8-connected component of
+    one glove label 1..``num_colors`` of the 2-D uint8 ``labels`` that holds a ``reached``
+    pixel ((H, W) bool) and has at most ``max_area`` pixels."""
+    n, ry, rx0, rx1, _, comp = _runs(labels, num_colors, False)
+    area = np.zeros(n, np.int64)
+    for r in range(n):
+        area[comp[r]] += rx1[r] - rx0[r]
+    chosen = _holding(n, ry, rx0, rx1, comp, reached)
+    for r in range(n):
+        chosen[r] = chosen[r] and area[r] <= max_area
+    _paint(out, n, ry, rx0, rx1, comp, chosen)
+
+
 def _array(dtype: object, ndim: int, readonly: bool = True, layout: str = 'C') -> object:
     """An array type, C-contiguous or of any strides (``layout`` 'A'); read-only ones take
     writable arrays too."""
@@ -501,13 +881,28 @@ _SIGNATURES = {
                        _array(numba.int32, 2), numba.int64),
     cell_votes: (_array(numba.uint8, 2, layout='A'), _array(numba.int64, 1),
                  _array(numba.int64, 1), numba.int64, numba.int64),
-    near_or_reaching: (_array(numba.int32, 2), numba.int64, _array(numba.boolean, 2, layout='A'),
-                       _array(numba.boolean, 2, layout='A')),
     box_colour_counts: (_array(numba.uint8, 2, layout='A'), _array(numba.int64, 1),
                         _array(numba.int64, 2), numba.int64, numba.int64,
                         _array(numba.uint8, 2, False)),
     clear_cells: (_array(numba.uint8, 2), _array(numba.boolean, 2), numba.int64,
                   _array(numba.boolean, 1)),
+    colour_blobs: (_array(numba.uint8, 2, layout='A'), numba.int64, numba.int64),
+    cell_labels: (_array(numba.int64, 2), numba.float64, numba.float64),
+    label_borders: (_array(numba.uint8, 2),),
+    surface_regions: (_array(numba.uint8, 2, layout='A'), _array(numba.boolean, 1),
+                      numba.float64, _array(numba.boolean, 1), numba.boolean, numba.boolean,
+                      numba.float64),
+    clear_coarse: (_array(numba.uint8, 2, False, layout='A'), _array(numba.boolean, 2, layout='A'),
+                   _array(numba.int64, 1), _array(numba.int64, 1)),
+    colour_sums: (_array(numba.uint8, 3, layout='A'), _array(numba.float32, 1),
+                  _array(numba.uint8, 2, layout='A'), numba.int64),
+    near_or_reaching: (_array(numba.uint8, 2, layout='A'),
+                       _array(numba.boolean, 2, layout='A'),
+                       _array(numba.boolean, 2, layout='A')),
+    glove_components: (_array(numba.uint8, 2, layout='A'), numba.int64),
+    small_patches_reached: (_array(numba.uint8, 2, layout='A'), numba.int64,
+                            _array(numba.boolean, 2, layout='A'), numba.float64,
+                            _array(numba.boolean, 2, False, layout='A')),
 }
 
 

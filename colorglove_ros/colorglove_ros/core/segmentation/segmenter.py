@@ -112,14 +112,14 @@ def keep_multicolor_components(labels: np.ndarray, min_colors: int = 3,
         raise SegmentationConfigError(
             f'need reattach_radius >= 0 and reattach_max_share >= 0; got {reattach_radius}, '
             f'{reattach_max_share}')
-    glove = labels > 0
-    n, comp = cv2.connectedComponents(glove.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
-    if n <= 1:
-        return labels
+    labels = np.asarray(labels, np.uint8)
     nl = int(labels.max()) + 1
-    glove = np.flatnonzero(glove)   # only glove pixels count: comp is 0 just where labels are
-    hist = np.bincount(comp.ravel().take(glove) * nl + labels.ravel().take(glove),
-                       minlength=n * nl).reshape(n, nl)[:, 1:]
+    if nl <= 1:
+        return labels
+    # the components and each one's pixels of each colour, in one compiled pass
+    comp, hist = compiled_kernels().glove_components(labels, nl)
+    n = len(hist)
+    hist = hist[:, 1:]
     size = hist.sum(axis=1, keepdims=True)
     big = (hist >= np.maximum(min_share * size, min_pixels)).sum(axis=1)
     keep = big >= min_colors
@@ -194,11 +194,11 @@ def relabel_borders(image: np.ndarray, labels: np.ndarray, passes: int = 3,
     labels = np.asarray(labels, dtype=np.uint8)
     if passes < 1 or not distances or min(labels.shape) < 3:
         return labels
-    border = cv2.erode(labels, _CROSS) != cv2.dilate(labels, _CROSS)
-    bx, by, bw, bh = cv2.boundingRect(border.view(np.uint8))
+    kernels = compiled_kernels()
+    border, rect = kernels.label_borders(np.ascontiguousarray(labels))
+    bx, by, bw, bh = (int(v) for v in rect)
     if not bw:
         return labels
-    kernels = compiled_kernels()
     pad = max(distances)
     h, w = labels.shape
     y0, y1 = max(by - pad, 0), min(by + bh + pad, h)
@@ -250,18 +250,20 @@ def border_contact_px(labels: np.ndarray, roi: tuple[int, int, int, int], reduct
                            for line in border_lines(labels[wy0:wy1, wx0:wx1], on_border))
 
 
-def _coarse_cells(coarse: np.ndarray, origin: tuple[int, int], r: int, shape: tuple[int, int],
-                  image_hw: tuple[int, int]) -> np.ndarray:
-    """``coarse`` (a mask over the downsampled frame) at the pixels of a region of interest
-    starting at full pixel ``origin`` (x, y), ``r`` full pixels a side, ``shape`` (rows,
-    cols); ``image_hw`` is the full frame's size."""
-    ch, cw = coarse.shape
+def _coarse_indices(coarse_shape: tuple[int, int], origin: tuple[int, int], r: int,
+                    shape: tuple[int, int], image_hw: tuple[int, int]
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """The coarse rows and columns (int64) of a mask over the downsampled frame (of
+    ``coarse_shape``) at the pixels of a region of interest starting at full pixel
+    ``origin`` (x, y), ``r`` full pixels a side, ``shape`` (rows, cols); ``image_hw`` is the
+    full frame's size."""
+    ch, cw = coarse_shape
     h, w = image_hw
     xs = origin[0] + r * np.arange(shape[1]) + 0.5 * (r - 1)
     ys = origin[1] + r * np.arange(shape[0]) + 0.5 * (r - 1)
-    cols = np.clip((xs + 0.5) * cw / w, 0, cw - 1).astype(np.intp)
-    rows = np.clip((ys + 0.5) * ch / h, 0, ch - 1).astype(np.intp)
-    return coarse[rows][:, cols]   # faster than coarse[np.ix_(rows, cols)]
+    cols = np.clip((xs + 0.5) * cw / w, 0, cw - 1).astype(np.int64)
+    rows = np.clip((ys + 0.5) * ch / h, 0, ch - 1).astype(np.int64)
+    return rows, cols
 
 
 #: What :meth:`GloveSegmenter._without_search` gives: the hand's window ((cx, cy), half; full
@@ -537,15 +539,17 @@ class GloveSegmenter:
             return ref
         return ref @ saturation_matrix(self._saturation.saturation).T
 
-    def _glove_only(self, labels: np.ndarray, reduction: float, image_pixels: int
-                    ) -> np.ndarray:
+    def _glove_only(self, labels: np.ndarray, reduction: float, image_pixels: int,
+                    oversized_dropped: bool = False) -> np.ndarray:
         """Background surfaces out of a label image whose pixels are ``reduction`` image
         pixels wide: single-colour regions larger than ``max_patch_fraction`` of the image
-        (``image_pixels``), then everything farther than ``diversity_window`` (coarse pixels)
-        from a window showing ``min_region_colors`` glove colours
-        (``core.segmentation.detection``)."""
-        labels = drop_oversized_components(
-            labels, self.max_patch_fraction * image_pixels / reduction ** 2)
+        (``image_pixels``; with ``oversized_dropped`` the caller has dropped them, and then
+        only set pixels to background, which leaves none), then everything farther than
+        ``diversity_window`` (coarse pixels) from a window showing ``min_region_colors``
+        glove colours (``core.segmentation.detection``)."""
+        if not oversized_dropped:
+            labels = drop_oversized_components(
+                labels, self.max_patch_fraction * image_pixels / reduction ** 2)
         if self.diversity_window > 0:
             window = max(int(round(self.diversity_window * self.coarse_factor / reduction)), 1)
             labels = labels * glove_region_mask(labels, self.calibration.num_colors, window,
@@ -569,21 +573,10 @@ class GloveSegmenter:
             cv2.MORPH_RECT, (side, side))).view(bool)
         if window is None or not mixed.any():
             return out
-        max_area = GLOVE_LIKE_PATCH_SHARE * (2.0 * window[1]) ** 2
-        boxes = compiled_kernels().label_boxes(labels, self.calibration.num_colors + 1)[1]
-        for colour in np.unique(labels[mixed]):
-            if colour == 0:
-                continue
-            # each colour's components lie inside its bounding rectangle: label only that
-            x, y, w, h = (int(v) for v in boxes[colour])
-            n, comp, stats, _ = cv2.connectedComponentsWithStats(
-                np.equal(labels[y:y + h, x:x + w], colour).view(np.uint8), connectivity=8,
-                ltype=cv2.CV_32S)
-            patch = np.zeros(n, bool)
-            patch[comp[mixed[y:y + h, x:x + w]]] = True
-            patch &= stats[:, cv2.CC_STAT_AREA] <= max_area
-            patch[0] = False
-            out[y:y + h, x:x + w] |= patch.take(comp)
+        # (one compiled pass labels every colour's regions)
+        compiled_kernels().small_patches_reached(
+            labels, self.calibration.num_colors, mixed,
+            GLOVE_LIKE_PATCH_SHARE * (2.0 * window[1]) ** 2, out)
         return out
 
     def _label_roi(self, roi: np.ndarray, origin: tuple[int, int], r: int,
@@ -602,7 +595,8 @@ class GloveSegmenter:
             labels[...] = 0
             labels[py0:py1, px0:px1] = inside
         if static is not None:
-            labels[_coarse_cells(static, origin, r, labels.shape, image_hw)] = 0
+            rows, cols = _coarse_indices(static.shape, origin, r, labels.shape, image_hw)
+            compiled_kernels().clear_coarse(labels, static, rows, cols)
         return labels
 
     def _clean_roi(self, labels: np.ndarray, r: int, image_pixels: int, chalf: float,
@@ -671,7 +665,9 @@ class GloveSegmenter:
             labels = drop_oversized_components(
                 labels, self.max_patch_fraction * (image_pixels or labels.size) / reduction ** 2)
             labels[static] = 0
-        labels = self._glove_only(labels, reduction, image_pixels or labels.size)
+        # (removing pixels only shrinks regions: none is oversized any more)
+        labels = self._glove_only(labels, reduction, image_pixels or labels.size,
+                                  oversized_dropped=static is not None)
         if self.max_patch_window_share > 0:   # (finding the junctions costs a few loops)
             labels = shed_oversized_patches(
                 labels, self.max_patch_window_share,
@@ -721,8 +717,8 @@ class GloveSegmenter:
             if k:   # refine: classify the corrected coarse frame, estimate what is left
                 seen = cv2.LUT(part, table)
                 labels = self._coarse_labels(part, table, reduction, pixels, static_part)
-            gains = gains * estimate_light_gains(cv2.LUT(seen, _LINEAR_RGB), labels,
-                                                 self._reference())
+            gains = gains * estimate_light_gains(seen, labels, self._reference(),
+                                                 table=_LINEAR_RGB)
             table = gain_table(gains)
         found = mean_shift_crop(labels, min_pixels=min_px)
         if found is not None:

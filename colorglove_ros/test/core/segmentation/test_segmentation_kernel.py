@@ -1,27 +1,46 @@
-"""The segmenter's compiled loops (issue 19, eleventh and thirteenth passes): the same labels
-and windows as plain per-pixel references (``segmentation_reference``), compiled before the
-first frame and never again."""
+"""The segmenter's compiled loops (issue 19, eleventh, thirteenth and nineteenth passes): the
+same labels, windows, components and bits as plain per-pixel references and the OpenCV and
+numpy code they replaced (``segmentation_reference``), compiled before the first frame and
+never again."""
 from __future__ import annotations
 
 import cv2
 import numpy as np
 import pytest
 from segmentation_reference import (
+    cell_labels_reference,
+    color_components_reference,
+    keep_multicolor_components_reference,
     keep_near_junctions_reference,
     mean_shift_reference,
+    near_or_reaching_reference,
     relabel_borders_reference,
+    small_patches_reached_reference,
+    surface_regions_reference,
 )
 
 from colorglove_ros.core.segmentation import segmentation_kernel
 from colorglove_ros.core.segmentation.blobs import color_components
 from colorglove_ros.core.segmentation.color_model import index_tables, lut_index
-from colorglove_ros.core.segmentation.crop import compiled_kernels, mean_shift_crop
+from colorglove_ros.core.segmentation.crop import (
+    CropTransform,
+    compiled_kernels,
+    crop_window,
+    mean_shift_crop,
+)
 from colorglove_ros.core.segmentation.detection import (
     colour_diversity,
+    drop_oversized_components,
+    glove_region_mask,
     keep_near_junctions,
     scene_colour_table,
 )
-from colorglove_ros.core.segmentation.segmenter import relabel_borders
+from colorglove_ros.core.segmentation.light import colour_means, estimate_light_gains
+from colorglove_ros.core.segmentation.segmenter import (
+    _LINEAR_RGB,
+    keep_multicolor_components,
+    relabel_borders,
+)
 
 KERNELS = compiled_kernels()
 
@@ -275,3 +294,235 @@ def test_color_components_inside_each_rectangle_are_the_whole_images(trial: int)
     np.testing.assert_array_equal(colours, whole[0])
     np.testing.assert_array_equal(areas, whole[2])
     np.testing.assert_allclose(centroids, whole[1], rtol=0, atol=1e-9)
+
+
+def _large_labels(rng: np.random.Generator, trial: int) -> np.ndarray:
+    """Label images from 1 pixel to 330 pixels a side (a colour's rectangle past 65535
+    pixels: OpenCV's 32-bit components), patches of 1 to 12 pixels with speckle, labels
+    above the glove's colours, and views with strides."""
+    h, w = (int(v) for v in rng.integers(1, (12, 60, 330)[trial % 3], 2))
+    cell = int(rng.integers(1, 13))
+    grid = rng.integers(0, 13, (h // cell + 1, w // cell + 1)).astype(np.uint8)
+    labels = cv2.resize(grid, (w, h), interpolation=cv2.INTER_NEAREST)
+    speckle = rng.random((h, w)) < rng.uniform(0.0, 0.3)
+    labels[speckle] = rng.integers(0, 11, int(speckle.sum()))
+    if trial % 7 == 0:
+        labels[:] = 0
+    if trial % 4 == 1 and w > 2:
+        labels = labels[:, 1::2]
+    return labels
+
+
+@pytest.mark.parametrize('trial', range(48))
+def test_colour_blobs_are_opencvs_components_colour_by_colour(trial: int) -> None:
+    """The compiled blobs: OpenCV's components of each colour inside its rectangle, in its
+    order (by 2 x 2 blocks, not pixels), with its areas and its centroids' bits."""
+    rng = np.random.default_rng([trial, 59])
+    labels = _large_labels(rng, trial)
+    min_pixels = int(rng.integers(1, 20))
+    want = color_components_reference(labels, min_pixels, 10)
+    for got in (KERNELS.colour_blobs(labels, 10, min_pixels),
+                color_components(labels, min_pixels, 10)):
+        for a, b in zip(got, want, strict=True):
+            assert a.dtype == b.dtype and a.shape == b.shape
+            assert a.tobytes() == b.tobytes()
+
+
+def test_colour_blobs_follow_opencvs_block_order_not_raster_order() -> None:
+    """Two blobs of a colour whose first pixels come in one order by rows and in the other
+    by 2 x 2 blocks: OpenCV's (and so the blobs') order is the blocks'."""
+    labels = np.zeros((4, 8), np.uint8)
+    labels[0, 5] = labels[0, 6] = 3    # first by rows (row 0), in block column 2
+    labels[1, 0] = labels[1, 1] = 3    # first by blocks (block column 0)
+    labels[0, 0] = 1                   # the colour's rectangle starts at column 0, row 0
+    colours, centroids, areas = KERNELS.colour_blobs(labels, 10, 1)
+    np.testing.assert_array_equal(colours, [1, 3, 3])
+    np.testing.assert_array_equal(centroids[1:], [[0.5, 1.0], [5.5, 0.0]])
+    want = color_components_reference(labels, 1, 10)
+    np.testing.assert_array_equal(centroids, want[1])
+
+
+@pytest.mark.parametrize('trial', range(30))
+def test_small_patches_reached_are_each_colours_opencv_components(trial: int) -> None:
+    rng = np.random.default_rng([trial, 61])
+    labels = _large_labels(rng, trial)
+    reached = rng.random(labels.shape) < (0.0, 0.002, 0.02)[trial % 3]
+    max_area = float(rng.choice([0.0, 3.0, 40.5, 1e9]))
+    start = rng.random(labels.shape) < 0.1
+    want, got = start.copy(), start.copy()
+    small_patches_reached_reference(labels, 10, reached, max_area, want)
+    KERNELS.small_patches_reached(labels, 10, reached, max_area, got)
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize('trial', range(30))
+def test_near_or_reaching_is_the_reach_of_opencvs_glove_components(trial: int) -> None:
+    rng = np.random.default_rng([trial, 67])
+    labels = _large_labels(rng, trial)
+    reach = rng.random(labels.shape) < (0.0, 0.001, 0.02)[trial % 3]
+    near = rng.random(labels.shape) < 0.05
+    np.testing.assert_array_equal(KERNELS.near_or_reaching(labels, reach, near),
+                                  near_or_reaching_reference(labels, reach, near))
+    for window in (3, 24):
+        rich = colour_diversity(labels, 10, window, 0.02) >= 4
+        size = 2 * window + 1
+        near = cv2.boxFilter(rich.view(np.uint8), cv2.CV_32S, (size, size), normalize=False,
+                             borderType=cv2.BORDER_CONSTANT) > 0
+        want = (near_or_reaching_reference(labels, rich, near) if rich.any()
+                else np.zeros(labels.shape, bool))
+        np.testing.assert_array_equal(glove_region_mask(labels, 10, window, 4, 0.02), want)
+
+
+@pytest.mark.parametrize('trial', range(36))
+def test_keep_multicolor_components_are_the_opencv_and_numpy_test(trial: int) -> None:
+    """The compiled components and colour counts keep and re-attach the same components."""
+    rng = np.random.default_rng([trial, 71])
+    labels = _large_labels(rng, trial)
+    labels[labels > 10] = 0
+    settings = dict(min_colors=int(rng.integers(1, 5)), min_share=float(rng.choice([0.0, 0.03])),
+                    min_pixels=int(rng.integers(1, 6)), reattach_radius=int(trial % 4),
+                    reattach_max_share=float(rng.choice([0.0, 0.2, 5.0])))
+    got = keep_multicolor_components(labels, **settings)
+    want = keep_multicolor_components_reference(labels, **settings)
+    assert got.dtype == want.dtype == np.uint8
+    np.testing.assert_array_equal(got, want)
+
+
+def test_keep_multicolor_component_cases_drop_and_reattach_some() -> None:
+    """The cases above are not all kept whole: some drop components, some re-attach."""
+    dropped = reattached = 0
+    for trial in range(36):
+        rng = np.random.default_rng([trial, 71])
+        labels = _large_labels(rng, trial)
+        labels[labels > 10] = 0
+        settings = dict(min_colors=int(rng.integers(1, 5)),
+                        min_share=float(rng.choice([0.0, 0.03])),
+                        min_pixels=int(rng.integers(1, 6)), reattach_radius=int(trial % 4),
+                        reattach_max_share=float(rng.choice([0.0, 0.2, 5.0])))
+        got = keep_multicolor_components(labels, **settings)
+        plain = keep_multicolor_components(labels, **{**settings, 'reattach_radius': 0})
+        dropped += bool((got != labels).any())
+        reattached += bool((got != plain).any())
+    assert dropped >= 8 and reattached >= 3
+
+
+@pytest.mark.parametrize('trial', range(40))
+def test_cell_labels_are_the_numpy_votes_and_rescue(trial: int) -> None:
+    """The compiled cell labels: numpy's majority (ties to the lower label), glove fraction
+    and thin-patch rescue, cell by cell; through ``crop_window`` on crops of every scale."""
+    rng = np.random.default_rng([trial, 73])
+    labels_n, cells = int(rng.integers(2, 12)), int(rng.integers(1, 50))
+    counts = rng.integers(0, 4, (labels_n, cells)) * (rng.random((labels_n, cells)) < 0.4)
+    if trial % 3 == 0:
+        counts[int(rng.integers(1, labels_n))] = rng.random(cells) < 0.1   # thin: rescued
+    counts = np.ascontiguousarray(counts, np.int64)
+    fraction, rescue = float(rng.choice([0.0, 0.4, 0.9])), float(rng.choice([0.0, 0.2, 0.5]))
+    want = cell_labels_reference(counts, fraction, rescue)
+    got = KERNELS.cell_labels(counts, fraction, rescue)
+    assert got.dtype == want.dtype and got.tobytes() == want.tobytes()
+    labels = _large_labels(rng, trial)
+    if labels.size:
+        h, w = labels.shape
+        half = float(rng.uniform(0.5, 0.7 * max(h, w)))
+        transform = CropTransform.from_window((float(rng.uniform(0, w)),
+                                               float(rng.uniform(0, h))), half)
+        np.testing.assert_array_equal(crop_window(labels, transform, rescue_share=rescue),
+                                      _crop_window_reference(labels, transform, rescue))
+
+
+def _crop_window_reference(labels: np.ndarray, transform: CropTransform,
+                           rescue_share: float) -> np.ndarray:
+    """``crop_window`` with its cell labels from the numpy reference."""
+    kernels = segmentation_kernel
+    real = kernels.cell_labels
+    try:
+        kernels.cell_labels = cell_labels_reference   # (what crop_window calls)
+        return crop_window(labels, transform, rescue_share=rescue_share)
+    finally:
+        kernels.cell_labels = real
+
+
+@pytest.mark.parametrize('trial', range(16))
+def test_colour_means_through_a_table_are_the_float_images(trial: int) -> None:
+    """Means and light gains from the bytes and the linear table: the bits of those of the
+    table applied first (``cv2.LUT``); labels above the glove's colours are not counted."""
+    rng = np.random.default_rng([trial, 79])
+    labels = _large_labels(rng, trial)
+    image = rng.integers(0, 256, (*labels.shape, 3), dtype=np.uint8)
+    if trial % 2 and labels.shape[1] > 2:
+        image, labels = image[:, ::2], labels[:, ::2]
+    linear = cv2.LUT(np.ascontiguousarray(image), _LINEAR_RGB)
+    for min_pixels in (1, 20):
+        want = colour_means(linear, labels, 10, min_pixels)
+        got = colour_means(image, labels, 10, min_pixels, table=_LINEAR_RGB)
+        for a, b in zip(got, want, strict=True):
+            assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+    reference = rng.uniform(5.0, 250.0, (10, 3))
+    np.testing.assert_array_equal(
+        estimate_light_gains(image, labels, reference, table=_LINEAR_RGB),
+        estimate_light_gains(linear, labels, reference))
+
+
+@pytest.mark.parametrize('trial', range(16))
+def test_a_second_oversized_drop_after_removing_pixels_drops_nothing(trial: int) -> None:
+    """What lets the coarse pass skip its second drop: once the oversized single-colour
+    regions are dropped, setting any pixels to background leaves none to drop."""
+    rng = np.random.default_rng([trial, 83])
+    labels = _large_labels(rng, trial)
+    max_pixels = float(rng.choice([3.0, 30.0, 400.0]))
+    dropped = drop_oversized_components(labels, max_pixels).copy()
+    dropped[rng.random(labels.shape) < rng.uniform(0.0, 0.5)] = 0
+    np.testing.assert_array_equal(drop_oversized_components(dropped, max_pixels), dropped)
+
+
+@pytest.mark.parametrize('trial', range(12))
+def test_clear_coarse_clears_the_pixels_of_the_set_coarse_cells(trial: int) -> None:
+    """The learnt static background (a coarse mask) cleared from a region's labels in
+    place: numpy's gather of the coarse cells and masked store."""
+    rng = np.random.default_rng([trial, 89])
+    labels = _large_labels(rng, trial)
+    if not labels.size:
+        return
+    coarse = rng.random((int(rng.integers(1, 40)), int(rng.integers(1, 40)))) < 0.3
+    rows = rng.integers(0, coarse.shape[0], labels.shape[0]).astype(np.int64)
+    cols = np.sort(rng.integers(0, coarse.shape[1], labels.shape[1])).astype(np.int64)
+    want = labels.copy()
+    want[coarse[rows][:, cols]] = 0
+    got = labels.copy()
+    KERNELS.clear_coarse(got, coarse, rows, cols)
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize('trial', range(30))
+def test_surface_regions_are_each_labels_opencv_components_and_outlines(trial: int) -> None:
+    """The junction trim's oversized regions from one compiled pass: OpenCV's components of
+    each candidate label, larger than the limit, off the image's flagged sides, with an
+    outline mostly of background."""
+    rng = np.random.default_rng([trial, 97])
+    labels = _cluttered_glove(rng) if trial % 2 else _large_labels(rng, trial)
+    candidate = rng.random(256) < 0.5
+    candidate[0] = False   # (background is no region)
+    max_pixels = float(rng.choice([0.0, 5.0, 60.0]))
+    sides = rng.random(4) < 0.5
+    off_image, surfaces = bool(trial % 3 == 1), bool(trial % 3 == 2 or trial % 4 == 0)
+    share = float(rng.choice([0.3, 0.5, 0.8]))
+    want = surface_regions_reference(labels, candidate, max_pixels, sides, off_image,
+                                     surfaces, share)
+    got = KERNELS.surface_regions(labels, candidate, max_pixels, sides, off_image, surfaces,
+                                  share)
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize('trial', range(16))
+def test_label_borders_are_the_cross_erosion_against_dilation(trial: int) -> None:
+    rng = np.random.default_rng([trial, 101])
+    labels = np.ascontiguousarray(_large_labels(rng, trial))
+    if trial % 5 == 0:
+        labels[:] = 3
+    border, rect = KERNELS.label_borders(labels)
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    want = (cv2.erode(labels, cross) != cv2.dilate(labels, cross) if labels.size
+            else np.zeros(labels.shape, bool))
+    np.testing.assert_array_equal(border, want)
+    assert tuple(rect) == (cv2.boundingRect(want.view(np.uint8)) if labels.size
+                           else (0, 0, 0, 0))
