@@ -323,9 +323,21 @@ def unsupported_regions(labels: np.ndarray, adjacency: np.ndarray, min_share: fl
     ``min_share`` 0."""
     labels = np.asarray(labels, np.uint8)
     out = np.zeros(labels.shape, bool)
-    if min_share <= 0 or labels.size == 0 or not labels.any():
+    if min_share <= 0 or labels.size == 0:
         return out
-    adjacency = np.asarray(adjacency, bool)
+    x, y, bw, bh = cv2.boundingRect(cv2.compare(labels, 0, cv2.CMP_GT))
+    if not bw:
+        return out
+    # the glove labels' box grown by the pixel beside it (inside the image): every contact
+    y0, y1, x0, x1 = max(y - 1, 0), min(y + bh + 1, labels.shape[0]), max(x - 1, 0), min(
+        x + bw + 1, labels.shape[1])
+    out[y0:y1, x0:x1] = _unsupported(np.ascontiguousarray(labels[y0:y1, x0:x1]),
+                                     np.asarray(adjacency, bool), min_share)
+    return out
+
+
+def _unsupported(labels: np.ndarray, adjacency: np.ndarray, min_share: float) -> np.ndarray:
+    """:func:`unsupported_regions` of a label image with a glove label."""
     counts, boxes = compiled_kernels().label_boxes(labels, adjacency.shape[0])
     comp = np.zeros(labels.shape, np.int32)
     n = 1
@@ -340,12 +352,11 @@ def unsupported_regions(labels: np.ndarray, adjacency: np.ndarray, min_share: fl
     beside = np.zeros(n, np.int64)
     for a, b, ca, cb in ((labels[:, :-1], labels[:, 1:], comp[:, :-1], comp[:, 1:]),
                          (labels[:-1], labels[1:], comp[:-1], comp[1:])):
-        differ = a != b
-        ok = differ & adjacency[a, b]          # (background borders nothing)
-        for own, contact in ((ca, ok), (cb, ok)):
-            beside += np.bincount(own[contact], minlength=n)
-        outline += np.bincount(ca[differ & (a > 0)], minlength=n)
-        outline += np.bincount(cb[differ & (b > 0)], minlength=n)
+        differ = a != b                        # the pairs of pixels across a label border
+        a, b, ca, cb = a[differ], b[differ], ca[differ], cb[differ]
+        ok = adjacency[a, b]                   # (background borders nothing)
+        beside += np.bincount(ca[ok], minlength=n) + np.bincount(cb[ok], minlength=n)
+        outline += np.bincount(ca[a > 0], minlength=n) + np.bincount(cb[b > 0], minlength=n)
     drop = beside < min_share * np.maximum(outline, 1)
     drop[0] = False
     return drop.take(comp)
