@@ -50,7 +50,7 @@ if TYPE_CHECKING:   # scipy and trimesh are imported where a glove is built (slo
 __all__ = [
     'GLOVE_PALETTE_RGB', 'GLOVE_COLOR_NAMES', 'GloveError',
     'Glove', 'make_glove', 'glove_reference_pose', 'export_glove_mesh', 'default_hand',
-    'calibrated_hand',
+    'calibrated_hand', 'colour_adjacency', 'default_colour_adjacency',
 ]
 
 GLOVE_COLOR_NAMES: tuple[str, ...] = (
@@ -217,6 +217,38 @@ def default_hand(hand_length_m: float = DEFAULT_HAND_LENGTH_M,
     factors = (NOMINAL_FINGER_LENGTH_FACTORS if finger_length_factors is None else
                check_finger_length_factors('finger_length_factors', finger_length_factors))
     return _hand(float(hand_length_m), int(seed), factors)
+
+
+def colour_adjacency(glove: Glove, faces: np.ndarray) -> np.ndarray:
+    """(NUM_COLORS + 1, NUM_COLORS + 1) bool, symmetric: which colour labels of ``glove``
+    border each other somewhere on its surface (two triangles of ``faces``, (F, 3) vertex
+    indices of the glove's mesh, sharing an edge). Label 0 (background) borders none, nor
+    does a colour itself."""
+    faces = np.asarray(faces, np.int64)
+    labels = np.asarray(glove.face_labels, np.int64)
+    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) != len(labels):
+        raise GloveError(f'need ({len(labels)}, 3) faces for the glove, got {faces.shape}')
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]),
+                    axis=1)
+    key = edges[:, 0] * (int(faces.max()) + 1) + edges[:, 1]
+    order = np.argsort(key, kind='stable')
+    owner = np.tile(np.arange(len(faces)), 3)[order]
+    shared = key[order][1:] == key[order][:-1]          # an edge of two triangles
+    a, b = labels[owner[:-1][shared]], labels[owner[1:][shared]]
+    out = np.zeros((NUM_COLORS + 1, NUM_COLORS + 1), bool)
+    out[a, b] = out[b, a] = True
+    np.fill_diagonal(out, False)
+    return out
+
+
+@lru_cache(maxsize=4)
+def default_colour_adjacency(seed: int = DEFAULT_GLOVE_SEED) -> np.ndarray:
+    """:func:`colour_adjacency` of the standard glove of ``seed`` (:func:`default_hand`;
+    the layout does not depend on the hand's length), read only."""
+    _, mesh, glove = default_hand(DEFAULT_HAND_LENGTH_M, seed)
+    out = colour_adjacency(glove, mesh.faces)
+    out.setflags(write=False)
+    return out
 
 
 def calibrated_hand(calibration: Calibration, seed: int = DEFAULT_GLOVE_SEED

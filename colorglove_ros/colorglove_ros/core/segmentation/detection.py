@@ -14,6 +14,9 @@ at a hand's size. Two filters on a label image (0 = background, 1..N glove colou
 * :func:`keep_near_junctions`: glove colour farther from every patch junction than the
   glove's largest patch reaches (at the hand's scale, from the junctions' own window) is a
   surface touching the glove, not the glove; the crop then holds the hand at its own size;
+* :func:`unsupported_regions`: a single-colour region whose outline borders almost none of
+  the colours its colour borders on the printed glove (the glove's known adjacency) is clutter:
+  skin, wood or petals shade through red, orange and pink, pairs the glove never joins;
 * :func:`scene_colour_table`: the colours of glove-labelled pixels found to be background
   in a frame are the scene's; the same colours near the hand are background too.
 """
@@ -28,7 +31,7 @@ __all__ = ['SCENE_COLOUR_BITS', 'colour_diversity', 'glove_region_mask',
            'drop_oversized_components', 'PATCH_OUTLINE_GLOVE_SHARE', 'JUNCTION_WINDOW_PX',
            'JUNCTION_COLORS', 'JUNCTION_STEP', 'LARGEST_PATCH_WINDOW_SHARE', 'junction_mask',
            'junction_window', 'shed_oversized_patches', 'keep_near_junctions',
-           'scene_colour_table', 'border_lines']
+           'scene_colour_table', 'border_lines', 'unsupported_regions']
 
 #: Bits per channel of the quantised colours of :func:`scene_colour_table`.
 SCENE_COLOUR_BITS = 5
@@ -280,3 +283,55 @@ def scene_colour_table(rgb: np.ndarray, bits: int, min_pixels: float,
         counts = np.bincount(lut_index(np.asarray(rgb, np.uint8).reshape(-1, 3), bits),
                              minlength=1 << (3 * bits))
     return counts >= max(float(min_pixels), 1.0)
+
+
+def unsupported_regions(labels: np.ndarray, adjacency: np.ndarray, min_share: float
+                        ) -> np.ndarray:
+    """(H, W) bool: the pixels of every 8-connected single-colour region of ``labels`` (0 =
+    background, 1..N glove colours) less than ``min_share`` of whose outline (its pixels'
+    4-neighbours of another label inside the image) is a colour that ``adjacency`` ((N + 1,
+    N + 1) bool, ``core.hand.glove.colour_adjacency``) says borders its colour on the glove.
+
+    A printed patch meets its neighbours along much of its outline; glove-coloured clutter
+    meets background and colours the glove never puts beside its own (a face or a petal
+    shading from red through orange to pink), so it has almost no such contacts. Empty with
+    ``min_share`` 0."""
+    labels = np.asarray(labels, np.uint8)
+    out = np.zeros(labels.shape, bool)
+    if min_share <= 0 or labels.size == 0:
+        return out
+    x, y, bw, bh = cv2.boundingRect(cv2.compare(labels, 0, cv2.CMP_GT))
+    if not bw:
+        return out
+    # the glove labels' box grown by the pixel beside it (inside the image): every contact
+    y0, y1, x0, x1 = max(y - 1, 0), min(y + bh + 1, labels.shape[0]), max(x - 1, 0), min(
+        x + bw + 1, labels.shape[1])
+    out[y0:y1, x0:x1] = _unsupported(np.ascontiguousarray(labels[y0:y1, x0:x1]),
+                                     np.asarray(adjacency, bool), min_share)
+    return out
+
+
+def _unsupported(labels: np.ndarray, adjacency: np.ndarray, min_share: float) -> np.ndarray:
+    """:func:`unsupported_regions` of a label image with a glove label."""
+    counts, boxes = compiled_kernels().label_boxes(labels, adjacency.shape[0])
+    comp = np.zeros(labels.shape, np.int32)
+    n = 1
+    for colour in np.flatnonzero(counts[1:]) + 1:
+        x, y, bw, bh = (int(v) for v in boxes[colour])
+        k, part = cv2.connectedComponents(np.equal(labels[y:y + bh, x:x + bw], colour).view(
+            np.uint8), connectivity=8, ltype=cv2.CV_32S)
+        mine = part > 0
+        comp[y:y + bh, x:x + bw][mine] = part[mine] + (n - 1)
+        n += k - 1
+    outline = np.zeros(n, np.int64)
+    beside = np.zeros(n, np.int64)
+    for a, b, ca, cb in ((labels[:, :-1], labels[:, 1:], comp[:, :-1], comp[:, 1:]),
+                         (labels[:-1], labels[1:], comp[:-1], comp[1:])):
+        differ = a != b                        # the pairs of pixels across a label border
+        a, b, ca, cb = a[differ], b[differ], ca[differ], cb[differ]
+        ok = adjacency[a, b]                   # (background borders nothing)
+        beside += np.bincount(ca[ok], minlength=n) + np.bincount(cb[ok], minlength=n)
+        outline += np.bincount(ca[a > 0], minlength=n) + np.bincount(cb[b > 0], minlength=n)
+    drop = beside < min_share * np.maximum(outline, 1)
+    drop[0] = False
+    return drop.take(comp)

@@ -50,6 +50,7 @@ from colorglove_ros.core.segmentation.detection import (
     keep_near_junctions,
     scene_colour_table,
     shed_oversized_patches,
+    unsupported_regions,
 )
 from colorglove_ros.core.segmentation.light import estimate_light_gains, gain_table
 from colorglove_ros.core.segmentation.types import Blob, Observation
@@ -379,7 +380,12 @@ class GloveSegmenter:
     the coarse pass labelled glove but found to be background (at least
     ``scene_colour_min_share`` of the coarse frame in one quantised colour: surfaces, not
     small clutter) are the scene's own colours in this frame: the region of interest labels
-    them background (0 disables).
+    them background (0 disables). Last, with ``glove_contact_share`` > 0, a single-colour
+    region of the region of interest less of whose outline than that borders a colour its
+    colour borders on the printed glove (``unsupported_regions``; the standard glove's colour
+    adjacency, ``core.hand.glove.default_colour_adjacency``) is background, and so are the
+    components left with too few colours: a face, wood or petals labelled red, orange and pink
+    meet in pairs the glove never joins, beside or touching the hand.
 
     Static background (``background_frames`` > 0, ``core.segmentation.background``): a coarse
     pixel that held its colour that many frames, outside the glove-like pixels, is background;
@@ -461,6 +467,7 @@ class GloveSegmenter:
                  junction_min_share: float = LARGEST_PATCH_WINDOW_SHARE,
                  junction_surfaces_only: int = 0, junction_min_pull: float = 0.0,
                  junction_max_window_kept: float = 0.0, sleeve_reach: float = 0.0,
+                 glove_contact_share: float = 0.0,
                  scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
                  background_memory: int = 0,
@@ -498,6 +505,8 @@ class GloveSegmenter:
         self._window: tuple[tuple[tuple[float, float], float], tuple[int, int]] | None = None
         self._glove_like_mask: np.ndarray | None = None   # the last search's, coarse
         self._washed_out_turn = 0   # which saturation the next search for a missed glove tries
+        # glove_contact_share > 0: which colours border each other on the printed glove
+        self._adjacency = self._glove_adjacency() if self.glove_contact_share > 0 else None
         # learn_in_thread: the static background's learning from this frame, running on
         # the shared worker while the region of interest is segmented (done before
         # :meth:`process` returns)
@@ -917,6 +926,34 @@ class GloveSegmenter:
         return keep_near_junctions(labels, self.calibration.num_colors, self.sleeve_reach,
                                    JUNCTION_MIN_PIXELS, edges=edges)
 
+    def _glove_adjacency(self) -> np.ndarray:
+        """Which glove colours border each other on the printed glove (the standard glove,
+        ``core.hand.glove.default_colour_adjacency``), for a calibration of its colours."""
+        from colorglove_ros.core.hand.glove import default_colour_adjacency
+
+        adjacency = default_colour_adjacency()
+        if adjacency.shape[0] != self.calibration.num_colors + 1:
+            raise SegmentationConfigError(
+                f'{self.source}: glove_contact_share needs a calibration of the glove\'s '
+                f'{adjacency.shape[0] - 1} colours, got {self.calibration.num_colors}')
+        return adjacency
+
+    def _on_glove_contacts(self, labels: np.ndarray) -> np.ndarray:
+        """The region of interest's ``labels`` without the single-colour regions that border
+        too few of the colours their colour borders on the glove (``unsupported_regions``
+        with ``glove_contact_share``), then without the components left with too few colours
+        (:func:`keep_multicolor_components`): skin, wood or petals labelled glove colours
+        beside or touching the hand. Unchanged when off."""
+        if self._adjacency is None:
+            return labels
+        drop = unsupported_regions(labels, self._adjacency, self.glove_contact_share)
+        if not drop.any():
+            return labels
+        labels = np.where(drop, np.uint8(0), labels)
+        return keep_multicolor_components(labels, self.min_component_colors, min_pixels=2,
+                                          reattach_radius=self.reattach_radius,
+                                          reattach_max_share=self.reattach_max_share)
+
     def _blobs(self, labels: np.ndarray, r: int, x0: int, y0: int,
                window: tuple[int, int, int, int]) -> list[Blob]:
         """Connected components of each colour inside ``window`` (ROI pixel bounds)."""
@@ -1045,6 +1082,7 @@ class GloveSegmenter:
                                      min_pull=self.junction_min_pull,
                                      max_window_kept=self.junction_max_window_kept)
         labels = self._without_sleeve(labels, image_edges((x0, x1, y0, y1), r, w, h))
+        labels = self._on_glove_contacts(labels)
         t = tick('borders', t)
         if keep_labels:
             full = np.zeros((h, w), np.uint8)

@@ -10,6 +10,9 @@ import trimesh
 from colorglove_ros.core.conventions import DEFAULT_HAND_LENGTH_M, NUM_COLORS, NUM_PATCHES
 from colorglove_ros.core.hand.glove import (
     GLOVE_PALETTE_RGB,
+    GloveError,
+    colour_adjacency,
+    default_colour_adjacency,
     export_glove_mesh,
     glove_reference_pose,
     make_glove,
@@ -145,3 +148,29 @@ def test_export_tool(tmp_path: Path) -> None:
     summary = json.loads((tmp_path / 'summary.json').read_text())
     assert len(summary['patches']) == NUM_PATCHES
     assert sum(p['faces'] for p in summary['patches']) == summary['faces']
+
+
+def test_colour_adjacency_is_the_colours_of_triangles_sharing_an_edge(hand) -> None:
+    """Which colours border each other on the glove: the colour pairs of every two triangles
+    sharing an edge, found here edge by edge; symmetric, no colour beside itself or the
+    background, and the standard glove's cached copy is the same and read only."""
+    model, mesh, glove = hand
+    labels = glove.face_labels
+    by_edge: dict[tuple[int, int], list[int]] = {}
+    for f, tri in enumerate(np.asarray(mesh.faces)):
+        for a, b in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
+            by_edge.setdefault((min(a, b), max(a, b)), []).append(f)
+    expected = np.zeros((NUM_COLORS + 1, NUM_COLORS + 1), bool)
+    for faces in by_edge.values():
+        for i in faces:
+            for j in faces:
+                if labels[i] != labels[j]:
+                    expected[labels[i], labels[j]] = True
+    got = colour_adjacency(glove, mesh.faces)
+    assert np.array_equal(got, expected)
+    assert np.array_equal(got, got.T) and not got.diagonal().any() and not got[0].any()
+    assert 0 < got.sum() < NUM_COLORS * (NUM_COLORS - 1)    # some pairs never meet
+    standard = default_colour_adjacency()
+    assert np.array_equal(standard, got) and not standard.flags.writeable
+    with pytest.raises(GloveError):
+        colour_adjacency(glove, mesh.faces[:-1])

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from segmentation_samples import printed_glove_calibration
 
-from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
+from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB, default_colour_adjacency
 from colorglove_ros.core.segmentation.detection import (
     colour_diversity,
     drop_oversized_components,
@@ -16,6 +16,7 @@ from colorglove_ros.core.segmentation.detection import (
     keep_near_junctions,
     scene_colour_table,
     shed_oversized_patches,
+    unsupported_regions,
 )
 from colorglove_ros.core.segmentation.segmenter import GloveSegmenter
 from colorglove_ros.core.synthetic import frames as synth
@@ -404,3 +405,79 @@ def test_a_glove_really_cut_by_the_border_stays_cut_with_sleeve_reach(calibratio
                                                                   sleeve_reach=0.1)):
         seen = segmenter.process(image)
         assert seen.hand_found and seen.cut_by_border
+
+
+def _neighbourly_patchwork(adjacency: np.ndarray) -> np.ndarray:
+    """A 3 x 3 block of 8-pixel patches whose every two side-by-side patches are colours
+    ``adjacency`` lets border each other (a search over the glove's colours)."""
+    colours = range(1, adjacency.shape[0])
+
+    def fill(cells: list[int]) -> list[int] | None:
+        k = len(cells)
+        if k == 9:
+            return cells
+        for c in colours:
+            if c in cells or (k % 3 and not adjacency[c, cells[k - 1]]) or (
+                    k >= 3 and not adjacency[c, cells[k - 3]]):
+                continue
+            done = fill([*cells, c])
+            if done:
+                return done
+        return None
+
+    cells = fill([])
+    assert cells is not None
+    return np.kron(np.array(cells, np.uint8).reshape(3, 3), np.ones((8, 8), np.uint8))
+
+
+def test_unsupported_regions_drop_clutter_whose_colours_the_glove_never_joins() -> None:
+    """A patchwork of colours that border each other on the glove stays whole; beside it,
+    and touching it, stripes of orange between red and pink (pairs the standard glove never
+    joins, as on skin or petals) are dropped; with ``min_share`` 0 nothing is."""
+    adjacency = default_colour_adjacency()
+    red, orange, pink = 1, 7, 9
+    assert not adjacency[orange, red] and not adjacency[orange, pink]
+    labels = np.zeros((40, 70), np.uint8)
+    labels[4:28, 4:28] = _neighbourly_patchwork(adjacency)
+    for k, colour in enumerate((red, orange, pink, orange, red, orange)):
+        labels[4:28, 28 + 4 * k:32 + 4 * k] = colour          # touching the patchwork
+    drop = unsupported_regions(labels, adjacency, 0.1)
+    assert not drop[4:28, 4:28].any()
+    assert drop[4:28, 32:36].all() and drop[4:28, 40:44].all()    # the orange stripes
+    assert not unsupported_regions(labels, adjacency, 0.0).any()
+    lone = np.zeros_like(labels)
+    lone[10:20, 10:20] = orange                             # no glove colour beside it
+    assert unsupported_regions(lone, adjacency, 0.1)[10:20, 10:20].all()
+
+
+def test_a_face_like_clutter_beside_the_glove_is_dropped_with_glove_contact_share(
+        calibration) -> None:
+    """A rendered glove with stripes of red, orange and pink beside it (a face, petals):
+    off (the class default) they join the glove's crop, which grows; with the shipped
+    config's ``glove_contact_share`` the crop keeps about the size it has without them. On
+    the glove alone the setting moves the crop by at most a few per cent."""
+    from colorglove_ros.core.segmentation.color_model import read_calibration_config
+
+    share = read_calibration_config('config/color_calibration.yaml')['segmenter'][
+        'glove_contact_share']
+    assert share > 0
+    camera = synth.default_camera()
+    rng = np.random.default_rng(4)
+    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
+    q[0:3] = [0.0, 0.0, 0.6]
+    frame = synth.render_frame(q, camera, rng, FrameConditions())
+    plain = GloveSegmenter(calibration).process(frame.image_rgb)
+    plain_on = GloveSegmenter(calibration, glove_contact_share=share).process(frame.image_rgb)
+    assert plain.hand_found and plain_on.hand_found
+    assert plain_on.crop.half_size == pytest.approx(plain.crop.half_size, rel=0.03)
+    ys, xs = np.nonzero(frame.labels)
+    image = frame.image_rgb.copy()
+    x0, y0 = int(xs.max()) - 4, int(np.median(ys)) - 30
+    for k, colour in enumerate((1, 7, 9, 7, 1, 7, 9, 7)):     # red, orange, pink stripes
+        stripe = np.zeros(frame.labels.shape, bool)
+        stripe[y0:y0 + 60, x0 + 7 * k:x0 + 7 * k + 7] = True
+        image[stripe & (frame.labels == 0)] = GLOVE_PALETTE_RGB[colour - 1]
+    off = GloveSegmenter(calibration).process(image)
+    on = GloveSegmenter(calibration, glove_contact_share=share).process(image)
+    assert off.crop.half_size > 1.12 * plain.crop.half_size
+    assert on.hand_found and on.crop.half_size < 1.05 * plain.crop.half_size
