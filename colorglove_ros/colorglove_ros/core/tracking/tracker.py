@@ -350,17 +350,32 @@ class HandTracker:
 
     def _fit_translation(self, corr0: Correspondences, q_blend: np.ndarray) -> np.ndarray:
         """The IK prior q_b: the blend with its wrist translation refitted to the primary
-        camera's correspondences (the blend itself if disabled, too few or the fit fails)."""
+        camera's correspondences (the blend itself if disabled, too few or the fit fails).
+
+        The refit holds the hand's rotation and fingers fixed, and the depth it finds is the
+        one at which that hand spans its matched blobs: a hand with straighter fingers must be
+        farther to span the same pixels. With ``translation_at_previous_pose`` and smoothing,
+        while tracking, the refit holds the previous output's rotation and fingers (the
+        shape the IK left the hand in) rather than the blend's: the nearest database images
+        of a close match can share the image yet differ in shape, and their shape then sets
+        a depth the image does not (the rotation and fingers of q_b stay the blend's)."""
         cfg = self.config
-        if cfg.init_translation and len(corr0) >= 3:
-            try:
-                return estimate_translation(
-                    self.kin, self.cameras, corr0, q_blend, cfg.min_depth_m,
-                    cfg.covariances.q_var[0:3], float(cfg.covariances.r_var_px2.mean()),
-                    cfg.outlier_px, cfg.reference_focal_px)
-            except IKError:
-                return q_blend
-        return q_blend
+        if not (cfg.init_translation and len(corr0) >= 3):
+            return q_blend
+        shape = q_blend
+        if cfg.translation_at_previous_pose and cfg.enable_smoothing and self._q_prev is not None:
+            shape = q_blend.copy()
+            shape[3:] = self._q_prev[3:]
+        try:
+            fitted = estimate_translation(
+                self.kin, self.cameras, corr0, shape, cfg.min_depth_m,
+                cfg.covariances.q_var[0:3], float(cfg.covariances.r_var_px2.mean()),
+                cfg.outlier_px, cfg.reference_focal_px)
+        except IKError:
+            return q_blend
+        out = q_blend.copy()
+        out[0:3] = fitted[0:3]
+        return out
 
     def _fit_frame(self, prior: PosePrior, observations: Sequence[CameraObservation],
                    corr0: Correspondences, tracked: Correspondences | None,
