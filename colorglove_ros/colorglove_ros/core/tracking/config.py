@@ -148,7 +148,7 @@ class IKConfig:
     step_tol: float = 1e-5
     cost_tol: float = 1e-4
     init_translation: bool = True
-    translation_at_previous_pose: bool = True
+    shape_at_previous_pose: bool = True
     min_constraints: int = 3
     min_blob_pixels: int = 4
     gate_tiny_px: float = 8.0
@@ -210,7 +210,7 @@ class IKConfig:
 # two homes for one switch let one silently win.
 _CALLER_SWITCHES = ('enable_ik', 'enable_smoothing')
 _SWITCHES = ('enable_ik', 'enable_smoothing', 'init_translation',
-             'translation_at_previous_pose', 'extra_rematch', 'line_features')
+             'shape_at_previous_pose', 'extra_rematch', 'line_features')
 _NUMBER_LIMITS: dict[str, tuple[type, float, float, bool]] = {
     # name: (int or float, lowest, highest, lowest excluded)
     'line_std_px': (float, 0.0, 1e3, True),
