@@ -148,7 +148,7 @@ class IKConfig:
     step_tol: float = 1e-5
     cost_tol: float = 1e-4
     init_translation: bool = True
-    shape_at_previous_pose: bool = True
+    shape_at_previous_pose: bool = False
     min_constraints: int = 3
     min_blob_pixels: int = 4
     gate_tiny_px: float = 8.0

@@ -670,7 +670,7 @@ def test_translation_prior_ignores_the_previous_shape_without_smoothing(rig):
     rng = np.random.default_rng(24)
     q = true_pose(model, rng)
     q_b = model.clamp(q - np.r_[np.zeros(6), np.full(20, 0.35)])
-    cfg = VERTEX.with_mode('ik')
+    cfg = replace(VERTEX, shape_at_previous_pose=True).with_mode('ik')
     tracker = HandTracker(model, mesh, mono, cfg)
     prior, obs = observe(rig, q, q, mono, rng, noise_px=0.3)
     tracker.update(prior, obs, 0.0)
