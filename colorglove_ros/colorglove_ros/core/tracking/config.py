@@ -148,6 +148,7 @@ class IKConfig:
     step_tol: float = 1e-5
     cost_tol: float = 1e-4
     init_translation: bool = True
+    shape_at_previous_pose: bool = False
     min_constraints: int = 3
     min_blob_pixels: int = 4
     gate_tiny_px: float = 8.0
@@ -208,8 +209,8 @@ class IKConfig:
 # Tracker switches set by the caller (ik_node parameters, the tools' --modes), never by the file:
 # two homes for one switch let one silently win.
 _CALLER_SWITCHES = ('enable_ik', 'enable_smoothing')
-_SWITCHES = ('enable_ik', 'enable_smoothing', 'init_translation', 'extra_rematch',
-             'line_features')
+_SWITCHES = ('enable_ik', 'enable_smoothing', 'init_translation',
+             'shape_at_previous_pose', 'extra_rematch', 'line_features')
 _NUMBER_LIMITS: dict[str, tuple[type, float, float, bool]] = {
     # name: (int or float, lowest, highest, lowest excluded)
     'line_std_px': (float, 0.0, 1e3, True),

@@ -346,21 +346,42 @@ class HandTracker:
                 [corr0, self._match_extras(prior, observations, self._q_prev, False)]),
                 self._q_prev)
             return tracked.select(tracked.camera == 0), tracked
-        return self._with_patch_points(corr0, q_blend), None
+        return self._with_patch_points(corr0, self._shape_source(q_blend)), None
+
+    def _shape_source(self, q_blend: np.ndarray) -> np.ndarray:
+        """The pose whose rotation and fingers the frame's set-up assumes (the visible part
+        of each patch, the translation refit): the previous output while tracking with
+        ``shape_at_previous_pose`` and smoothing, else the blend."""
+        cfg = self.config
+        if cfg.shape_at_previous_pose and cfg.enable_smoothing and self._q_prev is not None:
+            return self._q_prev
+        return q_blend
 
     def _fit_translation(self, corr0: Correspondences, q_blend: np.ndarray) -> np.ndarray:
         """The IK prior q_b: the blend with its wrist translation refitted to the primary
-        camera's correspondences (the blend itself if disabled, too few or the fit fails)."""
+        camera's correspondences (the blend itself if disabled, too few or the fit fails).
+
+        The refit holds the hand's rotation and fingers fixed, and the depth it finds is the
+        one at which that hand spans its matched blobs (a hand with straighter fingers must
+        be farther to span the same pixels). It holds those of :meth:`_shape_source`: while
+        tracking, the previous output's, since the nearest database images of a close match
+        can share the image yet differ in shape, and their shape would then set a depth the
+        image does not. The rotation and fingers of q_b stay the blend's."""
         cfg = self.config
-        if cfg.init_translation and len(corr0) >= 3:
-            try:
-                return estimate_translation(
-                    self.kin, self.cameras, corr0, q_blend, cfg.min_depth_m,
-                    cfg.covariances.q_var[0:3], float(cfg.covariances.r_var_px2.mean()),
-                    cfg.outlier_px, cfg.reference_focal_px)
-            except IKError:
-                return q_blend
-        return q_blend
+        if not (cfg.init_translation and len(corr0) >= 3):
+            return q_blend
+        shape = q_blend.copy()
+        shape[3:] = self._shape_source(q_blend)[3:]
+        try:
+            fitted = estimate_translation(
+                self.kin, self.cameras, corr0, shape, cfg.min_depth_m,
+                cfg.covariances.q_var[0:3], float(cfg.covariances.r_var_px2.mean()),
+                cfg.outlier_px, cfg.reference_focal_px)
+        except IKError:
+            return q_blend
+        out = q_blend.copy()
+        out[0:3] = fitted[0:3]
+        return out
 
     def _fit_frame(self, prior: PosePrior, observations: Sequence[CameraObservation],
                    corr0: Correspondences, tracked: Correspondences | None,

@@ -636,3 +636,71 @@ def test_ik_file_refuses_the_node_switches(tmp_path) -> None:
     path.write_text(text + '\nenable_ik: false\n')
     with pytest.raises(IKConfigError, match='enable_ik'):
         load_ik_config(path)
+
+
+@pytest.mark.parametrize('seed', [21, 22, 23])
+def test_translation_prior_holds_the_previous_shape_while_tracking(rig, seed):
+    """A close match whose blend has the hand's shape wrong (every finger straighter): the
+    translation refit at the blend's shape puts the hand at another depth; while tracking,
+    the refit at the previous output's shape keeps the depth the blobs show. The prior's
+    rotation and fingers stay the blend's either way."""
+    model, mesh, kin, mono, stereo, verts = rig
+    rng = np.random.default_rng(seed)
+    q = true_pose(model, rng)
+    q_b = q.copy()
+    q_b[6:] -= 0.35                      # straighter fingers: a larger hand in the image
+    q_b = model.clamp(q_b)
+    errors = {}
+    for on in (False, True):
+        tracker = HandTracker(model, mesh, mono, replace(VERTEX, shape_at_previous_pose=on))
+        prior, obs = observe(rig, q, q, mono, np.random.default_rng(seed), noise_px=0.3)
+        assert tracker.update(prior, obs, 0.0).found          # tracking the true shape
+        prior, obs = observe(rig, q, q_b, mono, np.random.default_rng(seed + 1), noise_px=0.3)
+        res = tracker.update(prior, obs, 1.0 / 30.0)
+        np.testing.assert_allclose(res.q_prior[3:], res.q_blend[3:], atol=1e-12)
+        errors[on] = abs(res.q_prior[2] - q[2])
+    assert errors[False] > 0.01
+    assert errors[True] < 0.2 * errors[False]
+
+
+def test_translation_prior_ignores_the_previous_shape_without_smoothing(rig):
+    """Without smoothing (the 'ik' mode: each frame on its own) the refit holds the blend's
+    shape, as on a first frame."""
+    model, mesh, kin, mono, stereo, verts = rig
+    rng = np.random.default_rng(24)
+    q = true_pose(model, rng)
+    q_b = model.clamp(q - np.r_[np.zeros(6), np.full(20, 0.35)])
+    cfg = replace(VERTEX, shape_at_previous_pose=True).with_mode('ik')
+    tracker = HandTracker(model, mesh, mono, cfg)
+    prior, obs = observe(rig, q, q, mono, rng, noise_px=0.3)
+    tracker.update(prior, obs, 0.0)
+    prior, obs = observe(rig, q, q_b, mono, rng, noise_px=0.3)
+    res = tracker.update(prior, obs, 1.0 / 30.0)
+    fresh = HandTracker(model, mesh, mono, cfg).update(prior, obs, 1.0 / 30.0)
+    np.testing.assert_allclose(res.q_prior, fresh.q_prior, atol=1e-12)
+
+
+def test_patch_points_predicted_at_the_previous_pose_while_tracking(rig):
+    """With the patch constraint model, while tracking, each constraint stands for the
+    visible part of its patch as the previous output shows it, not as the blend does (a
+    close match whose blend is turned 0.6 rad): the correspondences are those a blend at the
+    previous pose gives; with the setting off they are the turned blend's."""
+    model, mesh, kin, mono, stereo, verts = rig
+    rng = np.random.default_rng(25)
+    q = true_pose(model, rng)
+    q_b = q.copy()
+    q_b[3:6] += [0.0, 0.6, 0.0]
+    points = {}
+    for on in (False, True):
+        cfg = replace(IKConfig(), shape_at_previous_pose=on)
+        tracker = HandTracker(model, mesh, mono, cfg)
+        prior, obs = observe(rig, q, q, mono, np.random.default_rng(1), noise_px=0.3)
+        tracker.update(prior, obs, 0.0)
+        q_prev = tracker.previous_pose
+        prior, obs = observe(rig, q, q_b, mono, np.random.default_rng(2), noise_px=0.0)
+        points[on] = tracker._match_start(prior, obs, q_b)[0]
+        at = HandTracker(model, mesh, mono, cfg)._match_start(
+            prior, obs, model.clamp(q_prev) if on else q_b)[0]
+        np.testing.assert_allclose(points[on].local, at.local, atol=1e-12)
+        np.testing.assert_allclose(points[on].weight, at.weight, atol=1e-12)
+    assert np.abs(points[True].local - points[False].local).max() > 1e-3
