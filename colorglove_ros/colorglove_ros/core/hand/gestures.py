@@ -118,7 +118,8 @@ class GestureConfig:
     the gate that skips frames of weak tracker evidence (``evidence``: frames whose pose
     matched fewer than 11 constraints; ``EvidenceGate()`` turns it off); the image
     classifier's weight (``image_weight``, with one); the geometric bounds on a classifier's
-    scores (``shape``: pinches within 0.275 hand lengths; ``ShapeGate()`` turns them off)."""
+    scores (``shape``: pinches within 0.275 hand lengths, grabs with every curl above 0.55;
+    ``ShapeGate()`` turns them off)."""
 
     pinch_distance: float = 0.21
     pinch_width: float = 0.025
@@ -131,7 +132,8 @@ class GestureConfig:
         smoothing=0.25, on_score=0.75, off_score=0.3, hold_on_s=0.1, hold_off_s=0.1))
     evidence: EvidenceGate = field(default_factory=lambda: EvidenceGate(min_constraints=11.0))
     image_weight: float = 0.25
-    shape: ShapeGate = field(default_factory=lambda: ShapeGate(max_pinch_distance=0.275))
+    shape: ShapeGate = field(default_factory=lambda: ShapeGate(max_pinch_distance=0.275,
+                                                               min_grab_curl=0.55))
 
     def __post_init__(self) -> None:
         check_number('image_weight', self.image_weight, low=0.0, error=GestureError)
