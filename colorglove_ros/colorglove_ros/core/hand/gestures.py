@@ -31,10 +31,11 @@ observation is scored from its pose alone.
 
 A classifier's probabilities are bounded by the pose's geometry (:class:`ShapeGate`,
 ``GestureConfig.shape``): a pinch's score is multiplied by the logistic ramp of its
-thumb-to-fingertip distance falling below ``max_pinch_distance`` and grab's by the ramp of the
-least curled finger's curl rising above ``min_grab_curl`` (the ramps' widths are the rules'
-``pinch_width`` and ``curl_width``), so a pose whose thumb tip is far from every fingertip is
-no pinch, nor one with a straight finger a grab, whatever else the classifier reads in it.
+thumb-to-fingertip distance falling below ``max_pinch_distance``, and grab's and point's by
+the ramp of the curl rising above ``min_curl`` of the least curled of the fingers they hold
+curled (grab: all four; point: middle, ring and little); the ramps' widths are the rules'
+``pinch_width`` and ``curl_width``. A pose whose thumb tip is far from every fingertip is no
+pinch, nor one with a straight finger a grab, whatever else the classifier reads in it.
 """
 from __future__ import annotations
 
@@ -93,22 +94,23 @@ class GestureError(ColorGloveError, ValueError):
 class ShapeGate:
     """Geometric bounds on a classifier's gesture scores (module docstring): the largest
     thumb-to-fingertip distance of a pinch (hand lengths; ``inf``: no bound) and the least
-    curl of every finger in a grab (0: no bound). The defaults bound nothing (off)."""
+    curl of every finger a grab or a point holds curled (0: no bound). The defaults bound
+    nothing (off)."""
 
     max_pinch_distance: float = math.inf
-    min_grab_curl: float = 0.0
+    min_curl: float = 0.0
 
     def __post_init__(self) -> None:
         if self.max_pinch_distance != math.inf:
             check_number('max_pinch_distance', self.max_pinch_distance, low=0.0,
                          low_open=True, error=GestureError)
-        check_number('min_grab_curl', self.min_grab_curl, low=0.0, high=1.0,
+        check_number('min_curl', self.min_curl, low=0.0, high=1.0,
                      error=GestureError)
 
     @property
     def enabled(self) -> bool:
         """Whether it bounds any score."""
-        return self.max_pinch_distance < math.inf or self.min_grab_curl > 0.0
+        return self.max_pinch_distance < math.inf or self.min_curl > 0.0
 
 
 @dataclass(frozen=True)
@@ -118,8 +120,8 @@ class GestureConfig:
     the gate that skips frames of weak tracker evidence (``evidence``: frames whose pose
     matched fewer than 11 constraints; ``EvidenceGate()`` turns it off); the image
     classifier's weight (``image_weight``, with one); the geometric bounds on a classifier's
-    scores (``shape``: pinches within 0.275 hand lengths, grabs with every curl above 0.55;
-    ``ShapeGate()`` turns them off)."""
+    scores (``shape``: pinches within 0.275 hand lengths, a grab's and a point's curled fingers
+    above 0.55; ``ShapeGate()`` turns them off)."""
 
     pinch_distance: float = 0.21
     pinch_width: float = 0.025
@@ -133,7 +135,7 @@ class GestureConfig:
     evidence: EvidenceGate = field(default_factory=lambda: EvidenceGate(min_constraints=11.0))
     image_weight: float = 0.25
     shape: ShapeGate = field(default_factory=lambda: ShapeGate(max_pinch_distance=0.275,
-                                                               min_grab_curl=0.55))
+                                                               min_curl=0.55))
 
     def __post_init__(self) -> None:
         check_number('image_weight', self.image_weight, low=0.0, error=GestureError)
@@ -208,8 +210,9 @@ def shape_gate_factors(features: GestureFeatures, config: GestureConfig | None =
     if gate.max_pinch_distance < math.inf:
         near = _sigmoid((gate.max_pinch_distance - features.pinch_distance) / c.pinch_width)
         out.update({f'pinch_{f}': float(v) for f, v in zip(PINCH_FINGERS, near, strict=True)})
-    if gate.min_grab_curl > 0.0:
-        out['grab'] = float(_sigmoid((features.curl.min() - gate.min_grab_curl) / c.curl_width))
+    if gate.min_curl > 0.0:
+        for name, curled in (('grab', features.curl), ('point', features.curl[1:])):
+            out[name] = float(_sigmoid((curled.min() - gate.min_curl) / c.curl_width))
     return out
 
 

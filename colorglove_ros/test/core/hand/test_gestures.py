@@ -174,14 +174,14 @@ def _constant_classifier(gesture: str, probability: float) -> PoseClassifier:
 
 @pytest.mark.parametrize('gesture, refused, kept', [
     ('pinch_index', 'flat', 'pinch'), ('pinch_little', 'spread', None),
-    ('grab', 'point', 'fist'), ('grab', 'flat', None)])
+    ('grab', 'point', 'fist'), ('grab', 'flat', None), ('point', 'flat', 'point')])
 def test_the_shape_gate_bounds_a_classifiers_pinch_and_grab(gesture: str, refused: str,
                                                             kept: str | None) -> None:
     """A classifier that calls every pose ``gesture`` starts it on a pose whose thumb tip is
-    far from that fingertip (a pinch) or that has a straight finger (a grab) only with the
-    shape gate off; with the default gate the score there is near 0, and on a pose of the
-    gesture (the collection's pinch, fist) the gate leaves the classifier's score nearly
-    whole."""
+    far from that fingertip (a pinch) or that has a straight finger where the gesture curls
+    one (a grab, a point) only with the shape gate off; with the default gate the score there
+    is near 0, and on a pose of the gesture (the collection's pinch, fist, point) the gate
+    leaves the classifier's score nearly whole."""
     from colorglove_ros.core.hand.gestures import shape_gate_factors
 
     classifier = _constant_classifier(gesture, 0.9)
@@ -207,23 +207,27 @@ def test_the_shape_gate_bounds_a_classifiers_pinch_and_grab(gesture: str, refuse
 
 
 def test_the_shape_gate_settings() -> None:
-    """The factors are 1 for the gestures the gate does not bound and 1/2 at its bounds; off
+    """The factors are 1 for the gestures the gate does not bound (open hand) and 1/2 at its
+    bounds (a point's middle, ring and little curls, a grab's four); off
     by ShapeGate(), on by default; bad bounds refused."""
     from colorglove_ros.core.hand.gestures import GESTURE_NAMES, GestureFeatures, \
         shape_gate_factors
 
-    gate = ShapeGate(max_pinch_distance=0.3, min_grab_curl=0.5)
+    gate = ShapeGate(max_pinch_distance=0.3, min_curl=0.5)
     features = GestureFeatures(np.array([0.3, 0.0, 1.0, 0.3]), np.array([0.5, 0.9, 0.9, 0.9]))
     factors = shape_gate_factors(features, GestureConfig(shape=gate))
     assert factors['pinch_index'] == pytest.approx(0.5)
     assert factors['pinch_middle'] > 0.99 and factors['pinch_ring'] < 1e-6
     assert factors['grab'] == pytest.approx(0.5)
-    assert factors['point'] == factors['open_hand'] == 1.0
+    assert factors['point'] > 0.99 and factors['open_hand'] == 1.0   # the index is not bound
+    features = GestureFeatures(features.pinch_distance, np.array([0.0, 0.9, 0.5, 0.9]))
+    factors = shape_gate_factors(features, GestureConfig(shape=gate))
+    assert factors['point'] == pytest.approx(0.5) and factors['grab'] < 1e-4
     assert shape_gate_factors(features, GestureConfig(shape=ShapeGate())) == \
         dict.fromkeys(GESTURE_NAMES, 1.0)
     assert not ShapeGate().enabled and GestureConfig().shape.enabled
     for bad in ({'max_pinch_distance': 0.0}, {'max_pinch_distance': -1.0},
-                {'min_grab_curl': 1.5}, {'min_grab_curl': -0.1},
+                {'min_curl': 1.5}, {'min_curl': -0.1},
                 {'max_pinch_distance': float('nan')}):
         with pytest.raises(GestureError):
             ShapeGate(**bad)
