@@ -176,12 +176,15 @@ class _GestureRenderer(_HoldRenderer):
 def test_the_gesture_image_classifier_learns_from_rendered_hold_frames() -> None:
     """Gesture image samples are the gesture scripts' hold frames (neutral ones labelled
     none); combined with the pose classifier by the gesture evaluation, the classifier trained
-    on them finds the gestures the image shows where the pose says open hand throughout; the
-    noise model (no observation) refuses an image classifier."""
+    on them finds the gestures the image shows where the pose says open hand throughout (the
+    shape gate off: it refuses a pinch or a grab to an open hand whatever the image says);
+    the noise model (no observation) refuses an image classifier."""
     from colorglove_ros.core.hand.gestures import (
         DEFAULT_GESTURE_CLASSIFIER,
         GESTURE_FEATURES,
         NO_GESTURE,
+        GestureConfig,
+        ShapeGate,
     )
     from colorglove_ros.core.hand.observation_features import OBSERVATION_FEATURES
     from colorglove_ros.core.hand.pose_classifier import (
@@ -205,8 +208,9 @@ def test_the_gesture_image_classifier_learns_from_rendered_hold_frames() -> None
     jitter = np.random.default_rng(0).normal(0.0, 0.01, x.shape)
     image = train_pose_classifier(x + jitter, y, OBSERVATION_FEATURES, kind='lda')
     pose = load_pose_classifier(share_dir() / DEFAULT_GESTURE_CLASSIFIER, GESTURE_FEATURES)
-    alone = eval_gestures.evaluate(seeds, 12, renderer, pose)['rows'][-1]
-    both = eval_gestures.evaluate(seeds, 12, renderer, pose, image_classifier=image,
+    ungated = GestureConfig(shape=ShapeGate())
+    alone = eval_gestures.evaluate(seeds, 12, renderer, pose, ungated)['rows'][-1]
+    both = eval_gestures.evaluate(seeds, 12, renderer, pose, ungated, image_classifier=image,
                                   image_weight=5.0)['rows'][-1]
     assert alone['recall'] < 0.5
     assert both['precision'] == both['recall'] == both['hold_accuracy'] == 1.0

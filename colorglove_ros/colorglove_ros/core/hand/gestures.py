@@ -28,9 +28,18 @@ log-probabilities to the pose classifier's, renormalised over the classes: a pro
 two classifiers' probabilities (the image one's raised to the weight), which reads where the
 fingertips' patches lie when the fitted pose puts them elsewhere. A frame without an
 observation is scored from its pose alone.
+
+A classifier's probabilities are bounded by the pose's geometry (:class:`ShapeGate`,
+``GestureConfig.shape``): a pinch's score is multiplied by the logistic ramp of its
+thumb-to-fingertip distance falling below ``max_pinch_distance``, and grab's and point's by
+the ramp of the curl rising above ``min_curl`` of the least curled of the fingers they hold
+curled (grab: all four; point: middle, ring and little); the ramps' widths are the rules'
+``pinch_width`` and ``curl_width``. A pose whose thumb tip is far from every fingertip is no
+pinch, nor one with a straight finger a grab, whatever else the classifier reads in it.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -52,8 +61,9 @@ __all__ = [
     'GESTURE_NAMES', 'PINCH_FINGERS', 'EVENT_STATES', 'NO_GESTURE', 'GESTURE_FEATURES',
     'DEFAULT_GESTURE_CLASSIFIER', 'GESTURE_IMAGE_CLASSIFIER', 'GESTURE_UPRIGHT_IMAGE_CLASSIFIER',
     'DEFAULT_GESTURE_IMAGE_CLASSIFIER',
-    'GestureError', 'GestureConfig',
+    'GestureError', 'ShapeGate', 'GestureConfig',
     'GestureFeatures', 'GestureEvent', 'gesture_features', 'gesture_scores',
+    'shape_gate_factors',
     'GestureDetector', 'format_event', 'parse_event',
 ]
 
@@ -81,12 +91,37 @@ class GestureError(ColorGloveError, ValueError):
 
 
 @dataclass(frozen=True)
+class ShapeGate:
+    """Geometric bounds on a classifier's gesture scores (module docstring): the largest
+    thumb-to-fingertip distance of a pinch (hand lengths; ``inf``: no bound) and the least
+    curl of every finger a grab or a point holds curled (0: no bound). The defaults bound
+    nothing (off)."""
+
+    max_pinch_distance: float = math.inf
+    min_curl: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.max_pinch_distance != math.inf:
+            check_number('max_pinch_distance', self.max_pinch_distance, low=0.0,
+                         low_open=True, error=GestureError)
+        check_number('min_curl', self.min_curl, low=0.0, high=1.0,
+                     error=GestureError)
+
+    @property
+    def enabled(self) -> bool:
+        """Whether it bounds any score."""
+        return self.max_pinch_distance < math.inf or self.min_curl > 0.0
+
+
+@dataclass(frozen=True)
 class GestureConfig:
     """Rule thresholds (pinch distances as a fraction of the hand length, curls in [0, 1]) and
     the width of each logistic ramp, used without a classifier; the hysteresis (``hold``);
     the gate that skips frames of weak tracker evidence (``evidence``: frames whose pose
     matched fewer than 11 constraints; ``EvidenceGate()`` turns it off); the image
-    classifier's weight (``image_weight``, with one)."""
+    classifier's weight (``image_weight``, with one); the geometric bounds on a classifier's
+    scores (``shape``: pinches within 0.275 hand lengths, a grab's and a point's curled fingers
+    above 0.55; ``ShapeGate()`` turns them off)."""
 
     pinch_distance: float = 0.21
     pinch_width: float = 0.025
@@ -99,11 +134,13 @@ class GestureConfig:
         smoothing=0.25, on_score=0.75, off_score=0.3, hold_on_s=0.1, hold_off_s=0.1))
     evidence: EvidenceGate = field(default_factory=lambda: EvidenceGate(min_constraints=11.0))
     image_weight: float = 0.25
+    shape: ShapeGate = field(default_factory=lambda: ShapeGate(max_pinch_distance=0.275,
+                                                               min_curl=0.55))
 
     def __post_init__(self) -> None:
         check_number('image_weight', self.image_weight, low=0.0, error=GestureError)
         for f in fields(self):
-            if f.name not in ('hold', 'evidence', 'image_weight'):
+            if f.name not in ('hold', 'evidence', 'image_weight', 'shape'):
                 check_number(f.name, getattr(self, f.name), low=0.0, low_open=True,
                              error=GestureError)
         if self.extended >= self.curled:
@@ -163,6 +200,22 @@ def gesture_scores(features: GestureFeatures, config: GestureConfig | None = Non
     return scores
 
 
+def shape_gate_factors(features: GestureFeatures, config: GestureConfig | None = None
+                       ) -> dict[str, float]:
+    """The factor in [0, 1] the config's :class:`ShapeGate` multiplies each gesture's
+    classifier score by (1 for every gesture it does not bound; module docstring)."""
+    c = GestureConfig() if config is None else config
+    gate = c.shape
+    out = dict.fromkeys(GESTURE_NAMES, 1.0)
+    if gate.max_pinch_distance < math.inf:
+        near = _sigmoid((gate.max_pinch_distance - features.pinch_distance) / c.pinch_width)
+        out.update({f'pinch_{f}': float(v) for f, v in zip(PINCH_FINGERS, near, strict=True)})
+    if gate.min_curl > 0.0:
+        for name, curled in (('grab', features.curl), ('point', features.curl[1:])):
+            out[name] = float(_sigmoid((curled.min() - gate.min_curl) / c.curl_width))
+    return out
+
+
 @dataclass
 class GestureDetector:
     """Turns per-frame scores into start / end events with hysteresis (one per hand); scores
@@ -220,13 +273,18 @@ class GestureDetector:
     def frame_scores(self, q: np.ndarray, observation: np.ndarray | None = None
                      ) -> dict[str, float]:
         """One frame's raw score of every gesture (``observation``: its observation
-        features, read with an image classifier)."""
+        features, read with an image classifier); a classifier's bounded by the config's
+        shape gate."""
         if self.classifier is None:
             return gesture_scores(gesture_features(self.model, q), self.config)
         p = np.exp(self.log_proba(pose_features(self.model, q, GESTURE_FEATURES),
                                   None if observation is None else np.asarray(observation))[0])
-        return {c: float(v) for c, v in zip(self.classifier.classes, p, strict=True)
-                if c != NO_GESTURE}
+        scores = {c: float(v) for c, v in zip(self.classifier.classes, p, strict=True)
+                  if c != NO_GESTURE}
+        if self.config.shape.enabled:
+            factors = shape_gate_factors(gesture_features(self.model, q), self.config)
+            scores = {g: s * factors[g] for g, s in scores.items()}
+        return scores
 
     def update(self, q: np.ndarray | None, stamp: float = 0.0,
                evidence: FrameEvidence | None = None,

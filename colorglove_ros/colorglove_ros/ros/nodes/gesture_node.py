@@ -5,7 +5,9 @@ each as a ``colorglove_msgs/GestureEvent`` on ``hand/gestures`` and, as before, 
 The evidence of each frame's own ``tracking:`` status line (``core.hand.frame_evidence``,
 paired by the frame's stamp) gates it (``evidence_min_constraints``, default the core's;
 ``evidence_max_reprojection_px``, default off; 0 turns either off): a frame of weak evidence
-decides nothing. With an ``image_classifier_file`` (``colorglove_train_hand_classifiers --what
+decides nothing. A classifier's scores are bounded by the pose's geometry as the core's
+default ``GestureConfig().shape`` sets (``core.hand.gestures.ShapeGate``). With an
+``image_classifier_file`` (``colorglove_train_hand_classifiers --what
 gesture_images``; default the core's, none) it also subscribes to ``hand/observation``
 (segmentation_node's ``colorglove_msgs/HandObservation``) and gives each pose the observation
 of its own stamp, combined with the pose classifier (``image_weight``); a pose whose

@@ -15,6 +15,7 @@ from colorglove_ros.core.hand.gestures import (
     GestureDetector,
     GestureError,
     GestureEvent,
+    ShapeGate,
     format_event,
     gesture_features,
     gesture_scores,
@@ -157,6 +158,81 @@ def test_frames_of_weak_evidence_decide_nothing() -> None:
     assert [(e.name, e.state) for e in events] == [('open_hand', 'start')]
 
 
+def _constant_classifier(gesture: str, probability: float) -> PoseClassifier:
+    """A pose classifier (``hand_shape``) that gives every pose ``probability`` of
+    ``gesture`` and the rest to the other classes alike."""
+    from colorglove_ros.core.hand.gestures import GESTURE_NAMES
+    from colorglove_ros.core.hand.pose_classifier import pose_features
+
+    classes = (*GESTURE_NAMES, NO_GESTURE)
+    rest = (1.0 - probability) / (len(classes) - 1)
+    biases = np.log([probability if c == gesture else rest for c in classes])
+    size = pose_features(MODEL, _pose('flat'), GESTURE_FEATURES).shape[0]
+    return PoseClassifier(classes, GESTURE_FEATURES, np.zeros(size), np.ones(size),
+                          (np.zeros((size, len(classes))),), (biases,))
+
+
+@pytest.mark.parametrize('gesture, refused, kept', [
+    ('pinch_index', 'flat', 'pinch'), ('pinch_little', 'spread', None),
+    ('grab', 'point', 'fist'), ('grab', 'flat', None), ('point', 'flat', 'point')])
+def test_the_shape_gate_bounds_a_classifiers_pinch_and_grab(gesture: str, refused: str,
+                                                            kept: str | None) -> None:
+    """A classifier that calls every pose ``gesture`` starts it on a pose whose thumb tip is
+    far from that fingertip (a pinch) or that has a straight finger where the gesture curls
+    one (a grab, a point) only with the shape gate off; with the default gate the score there
+    is near 0, and on a pose of the gesture (the collection's pinch, fist, point) the gate
+    leaves the classifier's score nearly whole."""
+    from colorglove_ros.core.hand.gestures import shape_gate_factors
+
+    classifier = _constant_classifier(gesture, 0.9)
+    hold = HoldConfig(smoothing=0.5, on_score=0.7, off_score=0.3, hold_on_s=0.0,
+                      hold_off_s=0.1)
+
+    def starts(shape: str, gate: ShapeGate | None) -> list[str]:
+        config = GestureConfig(hold=hold) if gate is None else \
+            GestureConfig(hold=hold, shape=gate)
+        detector = GestureDetector(MODEL, config, classifier)
+        return [e.name for k in range(10) for e in detector.update(_pose(shape), k / 30.0)
+                if e.state == 'start']
+
+    assert starts(refused, ShapeGate()) == [gesture]
+    assert starts(refused, None) == []
+    far = GestureDetector(MODEL, GestureConfig(), classifier).frame_scores(_pose(refused))
+    assert far[gesture] < 0.05
+    assert shape_gate_factors(gesture_features(MODEL, _pose(refused)))[gesture] < 0.05
+    if kept is not None:
+        assert starts(kept, None) == [gesture]
+        near = GestureDetector(MODEL, GestureConfig(), classifier).frame_scores(_pose(kept))
+        assert near[gesture] == pytest.approx(0.9, abs=0.05)
+
+
+def test_the_shape_gate_settings() -> None:
+    """The factors are 1 for the gestures the gate does not bound (open hand) and 1/2 at its
+    bounds (a point's middle, ring and little curls, a grab's four); off
+    by ShapeGate(), on by default; bad bounds refused."""
+    from colorglove_ros.core.hand.gestures import GESTURE_NAMES, GestureFeatures, \
+        shape_gate_factors
+
+    gate = ShapeGate(max_pinch_distance=0.3, min_curl=0.5)
+    features = GestureFeatures(np.array([0.3, 0.0, 1.0, 0.3]), np.array([0.5, 0.9, 0.9, 0.9]))
+    factors = shape_gate_factors(features, GestureConfig(shape=gate))
+    assert factors['pinch_index'] == pytest.approx(0.5)
+    assert factors['pinch_middle'] > 0.99 and factors['pinch_ring'] < 1e-6
+    assert factors['grab'] == pytest.approx(0.5)
+    assert factors['point'] > 0.99 and factors['open_hand'] == 1.0   # the index is not bound
+    features = GestureFeatures(features.pinch_distance, np.array([0.0, 0.9, 0.5, 0.9]))
+    factors = shape_gate_factors(features, GestureConfig(shape=gate))
+    assert factors['point'] == pytest.approx(0.5) and factors['grab'] < 1e-4
+    assert shape_gate_factors(features, GestureConfig(shape=ShapeGate())) == \
+        dict.fromkeys(GESTURE_NAMES, 1.0)
+    assert not ShapeGate().enabled and GestureConfig().shape.enabled
+    for bad in ({'max_pinch_distance': 0.0}, {'max_pinch_distance': -1.0},
+                {'min_curl': 1.5}, {'min_curl': -0.1},
+                {'max_pinch_distance': float('nan')}):
+        with pytest.raises(GestureError):
+            ShapeGate(**bad)
+
+
 def _gesture_image_classifier(feature_set: str = 'tiny_observation') -> PoseClassifier:
     """A classifier of ``feature_set`` features (an image set) that reads each gesture class
     (and none) from one feature column (column k high: class k)."""
@@ -177,7 +253,8 @@ def test_the_image_classifier_is_multiplied_with_the_pose_classifier() -> None:
     """With an image classifier, a frame's gesture probabilities are the pose classifier's
     times the image one's raised to image_weight, renormalised: an open hand whose image says
     index pinch starts a pinch when the image weighs enough, the open hand at weight 0 and
-    without an observation; the image needs a pose classifier and gesture classes."""
+    without an observation; the image needs a pose classifier and gesture classes (the
+    geometric bounds off: they would refuse a pinch to a flat hand whatever the image says)."""
     from colorglove_ros.core.hand.gestures import GESTURE_NAMES
     from colorglove_ros.core.hand.observation_features import num_observation_features
 
@@ -187,8 +264,8 @@ def test_the_image_classifier_is_multiplied_with_the_pose_classifier() -> None:
     q = _pose('flat')
 
     def starts(weight: float, observation: np.ndarray | None) -> list[str]:
-        detector = GestureDetector(MODEL, GestureConfig(image_weight=weight), _shipped(),
-                                   image)
+        detector = GestureDetector(MODEL, GestureConfig(image_weight=weight,
+                                                        shape=ShapeGate()), _shipped(), image)
         events = []
         for k in range(20):
             events += detector.update(q, k / 30.0, None, observation)
@@ -197,7 +274,8 @@ def test_the_image_classifier_is_multiplied_with_the_pose_classifier() -> None:
     assert starts(0.0, says_pinch) == ['open_hand']
     assert starts(20.0, None) == ['open_hand']
     assert starts(20.0, says_pinch) == ['pinch_index']
-    detector = GestureDetector(MODEL, GestureConfig(image_weight=1.0), _shipped(), image)
+    detector = GestureDetector(MODEL, GestureConfig(image_weight=1.0, shape=ShapeGate()),
+                               _shipped(), image)
     pose_part = _shipped().pose_log_proba(MODEL, q)
     image_part = image.log_proba(says_pinch)[[image.classes.index(c)
                                               for c in _shipped().classes]]

@@ -248,9 +248,10 @@ def test_spelling_node_reads_each_poses_own_observation_with_an_image_classifier
 def test_gesture_node_reads_each_poses_own_observation_with_an_image_classifier(tmp_path
                                                                                 ) -> None:
     """With an image_classifier_file the gesture node subscribes to hand/observation and
-    gives each pose the observation of its stamp: open-hand poses whose tiny images an image
-    classifier reads as an index pinch (weighted far above the pose) start a pinch; the node
-    without one ('', the default) starts the open hand."""
+    gives each pose the observation of its stamp: pointing poses whose tiny images an image
+    classifier reads as an open hand (weighted far above the pose) start the open hand; the
+    node without one ('', the default) starts the point. (Not a pinch read into an open hand:
+    the core's shape gate refuses a pinch whose thumb tip is far from the fingertip.)"""
     from colorglove_msgs.msg import HandObservation
 
     from colorglove_ros.core.hand.gestures import GESTURE_NAMES, NO_GESTURE
@@ -272,9 +273,9 @@ def test_gesture_node_reads_each_poses_own_observation_with_an_image_classifier(
     path = save_pose_classifier(tmp_path / 'image.npz', train_pose_classifier(
         x, y, OBSERVATION_FEATURES, kind='lda'))
     tiny = np.zeros((40, 40), np.uint8)
-    cell = classes.index('pinch_index')
+    cell = classes.index('open_hand')
     tiny[8 * (cell // 5):8 * (cell // 5) + 8, 8 * (cell % 5):8 * (cell % 5) + 8] = 1
-    q = _pose(GESTURE_SHAPES['flat'])
+    q = _pose(GESTURE_SHAPES['point'])
     got = {}
     for name, overrides in (('image', params(image_classifier_file=str(path),
                                              image_weight=20.0)),
@@ -292,4 +293,4 @@ def test_gesture_node_reads_each_poses_own_observation_with_an_image_classifier(
                 h.settle(0.005)
             assert h.spin_until(lambda seen=events: len(seen) >= 1, 10.0)
             got[name] = events[0].data.split(':')[:2]
-    assert got == {'image': ['pinch_index', 'start'], 'pose': ['open_hand', 'start']}
+    assert got == {'image': ['open_hand', 'start'], 'pose': ['point', 'start']}
