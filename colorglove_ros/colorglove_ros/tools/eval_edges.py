@@ -27,6 +27,7 @@ use the held-out seeds ``EVALUATION_SEEDS`` (11, 12, 13) unless ``--seeds`` says
 """
 from __future__ import annotations
 
+import argparse
 import math
 import os
 import time
@@ -159,12 +160,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--background', choices=('empty', 'none'), default='empty',
                         help='empty: silhouettes against one frame of the empty scene per '
                         'camera; none: edges only')
-    parser.add_argument('--finger-refit', action='store_true',
+    parser.add_argument('--finger-refit', action=argparse.BooleanOptionalAction,
+                        default=EdgeTrackerConfig.finger_refit,
                         help='the tracker\'s finger_refit: re-fit a finger that leaves part of '
-                        'the hand\'s silhouette unexplained (needs --background empty)')
-    parser.add_argument('--silhouette-palm', action='store_true',
+                        'the hand\'s silhouette unexplained (acts with --background empty; '
+                        'default: EdgeTrackerConfig\'s, on)')
+    parser.add_argument('--silhouette-palm', action=argparse.BooleanOptionalAction,
+                        default=EdgeTrackerConfig.silhouette_palm,
                         help='the tracker\'s silhouette_palm: the unexplained foreground next '
-                        'to the palm pulls the whole hand (needs --background empty)')
+                        'to the palm pulls the whole hand (acts with --background empty; '
+                        'default: EdgeTrackerConfig\'s, on)')
     parser.add_argument('--max-finger-off-silhouette', type=float,
                         default=EdgeTrackerConfig.max_finger_off_silhouette,
                         help='the tracker\'s finger gate: a frame where a finger other than '

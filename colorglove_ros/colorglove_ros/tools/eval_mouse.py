@@ -46,6 +46,7 @@ poses are cached in data/scripted_tracking/); frames it did not track reach the 
 """
 from __future__ import annotations
 
+import argparse
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -344,12 +345,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--camera-weights', type=float, nargs='+',
                         help='with --source edges: the edge tracker\'s camera_weights '
                         '(default: EdgeTrackerConfig\'s)')
-    parser.add_argument('--finger-refit', action='store_true',
+    parser.add_argument('--finger-refit', action=argparse.BooleanOptionalAction,
+                        default=EdgeTrackerConfig.finger_refit,
                         help='with --source edges and --background empty: the edge tracker\'s '
-                        'finger_refit')
-    parser.add_argument('--silhouette-palm', action='store_true',
-                        help='edge tracker with --background empty: the tracker\'s '
-                        'silhouette_palm')
+                        'finger_refit (default: EdgeTrackerConfig\'s, on)')
+    parser.add_argument('--silhouette-palm', action=argparse.BooleanOptionalAction,
+                        default=EdgeTrackerConfig.silhouette_palm,
+                        help='with --source edges and --background empty: the edge tracker\'s '
+                        'silhouette_palm (default: EdgeTrackerConfig\'s, on)')
     parser.add_argument('--reinit', choices=REINIT_MODES, default=DEFAULT_REINIT,
                         help='with --source edges: (re-)initialise the edge tracker from the '
                         'true pose with the buttons\' joints at rest (default), or from the '

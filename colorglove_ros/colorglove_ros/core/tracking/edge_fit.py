@@ -201,10 +201,10 @@ class EdgeTrackerConfig:
     silhouette_weight: float = 0.3
     silhouette_tolerance_px: float = 4.0
     silhouette_points: int = 80
-    silhouette_palm: bool = False
+    silhouette_palm: bool = True
     max_off_silhouette: float = 1.0
     max_unexplained: float = 0.08
-    finger_refit: bool = False
+    finger_refit: bool = True
     max_finger_unexplained: float = 0.01
     finger_refit_rounds: int = 2
     finger_refit_backoff: int = 0
