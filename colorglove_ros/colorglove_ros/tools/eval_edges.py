@@ -13,10 +13,11 @@ tracker's time per frame (tracking frames, this process).
 Silhouettes (``--background empty``, default): each camera's background model is made from
 one frame of its empty scene (``BareHandSequence.render_empty_views``: what a user captures
 once with the hand out of view); ``--background none`` tracks from edges alone.
-``--finger-refit`` turns on the tracker's ``finger_refit`` (a finger that leaves part of the
-hand's silhouette unexplained is re-fitted from its last explained angles; off by default);
-``--silhouette-palm`` its ``silhouette_palm`` (the unexplained foreground next to the palm
-pulls the whole hand; off by default). With silhouettes and ``--max-finger-off-silhouette``
+The tracker's ``finger_refit`` (a finger that leaves part of the hand's silhouette
+unexplained is re-fitted from its last explained angles) and ``silhouette_palm`` (the
+unexplained foreground next to the palm pulls the whole hand) are on, as in
+``EdgeTrackerConfig``; ``--no-finger-refit`` and ``--no-silhouette-palm`` turn them off (both
+act only with silhouettes). With silhouettes and ``--max-finger-off-silhouette``
 below 1 (off by default) the tracker also withholds a frame where a finger's axis lies off the
 silhouette (the track is kept): ``finger_withheld`` counts those frames, which break the runs
 of published frames.

@@ -31,8 +31,9 @@ start and the press (with ``truth``: the clicks the truth, not the tracker, put 
 ``--background empty`` the tracker also has the silhouettes against one frame of the empty
 table scene (``BareHandSequence.render_empty_views``); ``none`` (default): edges only (the
 silhouettes did not raise the click figures on tuning seeds 5-7, docs/RESULTS.md);
-``--finger-refit`` turns on the tracker's ``finger_refit``, ``--silhouette-palm`` its
-``silhouette_palm``, ``--retry-dofs`` its ``retry_dofs`` (all off by default), with
+with them the tracker's ``finger_refit`` and ``silhouette_palm`` act (on, as in
+``EdgeTrackerConfig``; ``--no-finger-refit``, ``--no-silhouette-palm`` turn them off);
+``--retry-dofs`` sets its ``retry_dofs`` (off by default), with
 ``--retry-max-wrist-move-mm`` and ``--retry-rest-margin-px`` its retry guards. The mouse is
 fed each pose's edge residual (as ``edge_tracker_node``'s status line gives it to
 ``mouse_node``), so ``--press-max-residual-ratio`` sets its press gate
