@@ -13,10 +13,11 @@ tracker's time per frame (tracking frames, this process).
 Silhouettes (``--background empty``, default): each camera's background model is made from
 one frame of its empty scene (``BareHandSequence.render_empty_views``: what a user captures
 once with the hand out of view); ``--background none`` tracks from edges alone.
-``--finger-refit`` turns on the tracker's ``finger_refit`` (a finger that leaves part of the
-hand's silhouette unexplained is re-fitted from its last explained angles; off by default);
-``--silhouette-palm`` its ``silhouette_palm`` (the unexplained foreground next to the palm
-pulls the whole hand; off by default). With silhouettes and ``--max-finger-off-silhouette``
+The tracker's ``finger_refit`` (a finger that leaves part of the hand's silhouette
+unexplained is re-fitted from its last explained angles) and ``silhouette_palm`` (the
+unexplained foreground next to the palm pulls the whole hand) are on, as in
+``EdgeTrackerConfig``; ``--no-finger-refit`` and ``--no-silhouette-palm`` turn them off (both
+act only with silhouettes). With silhouettes and ``--max-finger-off-silhouette``
 below 1 (off by default) the tracker also withholds a frame where a finger's axis lies off the
 silhouette (the track is kept): ``finger_withheld`` counts those frames, which break the runs
 of published frames.
@@ -27,6 +28,7 @@ use the held-out seeds ``EVALUATION_SEEDS`` (11, 12, 13) unless ``--seeds`` says
 """
 from __future__ import annotations
 
+import argparse
 import math
 import os
 import time
@@ -159,12 +161,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--background', choices=('empty', 'none'), default='empty',
                         help='empty: silhouettes against one frame of the empty scene per '
                         'camera; none: edges only')
-    parser.add_argument('--finger-refit', action='store_true',
+    parser.add_argument('--finger-refit', action=argparse.BooleanOptionalAction,
+                        default=EdgeTrackerConfig.finger_refit,
                         help='the tracker\'s finger_refit: re-fit a finger that leaves part of '
-                        'the hand\'s silhouette unexplained (needs --background empty)')
-    parser.add_argument('--silhouette-palm', action='store_true',
+                        'the hand\'s silhouette unexplained (acts with --background empty; '
+                        'default: EdgeTrackerConfig\'s, on)')
+    parser.add_argument('--silhouette-palm', action=argparse.BooleanOptionalAction,
+                        default=EdgeTrackerConfig.silhouette_palm,
                         help='the tracker\'s silhouette_palm: the unexplained foreground next '
-                        'to the palm pulls the whole hand (needs --background empty)')
+                        'to the palm pulls the whole hand (acts with --background empty; '
+                        'default: EdgeTrackerConfig\'s, on)')
     parser.add_argument('--max-finger-off-silhouette', type=float,
                         default=EdgeTrackerConfig.max_finger_off_silhouette,
                         help='the tracker\'s finger gate: a frame where a finger other than '

@@ -31,8 +31,9 @@ start and the press (with ``truth``: the clicks the truth, not the tracker, put 
 ``--background empty`` the tracker also has the silhouettes against one frame of the empty
 table scene (``BareHandSequence.render_empty_views``); ``none`` (default): edges only (the
 silhouettes did not raise the click figures on tuning seeds 5-7, docs/RESULTS.md);
-``--finger-refit`` turns on the tracker's ``finger_refit``, ``--silhouette-palm`` its
-``silhouette_palm``, ``--retry-dofs`` its ``retry_dofs`` (all off by default), with
+with them the tracker's ``finger_refit`` and ``silhouette_palm`` act (on, as in
+``EdgeTrackerConfig``; ``--no-finger-refit``, ``--no-silhouette-palm`` turn them off);
+``--retry-dofs`` sets its ``retry_dofs`` (off by default), with
 ``--retry-max-wrist-move-mm`` and ``--retry-rest-margin-px`` its retry guards. The mouse is
 fed each pose's edge residual (as ``edge_tracker_node``'s status line gives it to
 ``mouse_node``), so ``--press-max-residual-ratio`` sets its press gate
@@ -46,6 +47,7 @@ poses are cached in data/scripted_tracking/); frames it did not track reach the 
 """
 from __future__ import annotations
 
+import argparse
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -344,12 +346,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--camera-weights', type=float, nargs='+',
                         help='with --source edges: the edge tracker\'s camera_weights '
                         '(default: EdgeTrackerConfig\'s)')
-    parser.add_argument('--finger-refit', action='store_true',
+    parser.add_argument('--finger-refit', action=argparse.BooleanOptionalAction,
+                        default=EdgeTrackerConfig.finger_refit,
                         help='with --source edges and --background empty: the edge tracker\'s '
-                        'finger_refit')
-    parser.add_argument('--silhouette-palm', action='store_true',
-                        help='edge tracker with --background empty: the tracker\'s '
-                        'silhouette_palm')
+                        'finger_refit (default: EdgeTrackerConfig\'s, on)')
+    parser.add_argument('--silhouette-palm', action=argparse.BooleanOptionalAction,
+                        default=EdgeTrackerConfig.silhouette_palm,
+                        help='with --source edges and --background empty: the edge tracker\'s '
+                        'silhouette_palm (default: EdgeTrackerConfig\'s, on)')
     parser.add_argument('--reinit', choices=REINIT_MODES, default=DEFAULT_REINIT,
                         help='with --source edges: (re-)initialise the edge tracker from the '
                         'true pose with the buttons\' joints at rest (default), or from the '

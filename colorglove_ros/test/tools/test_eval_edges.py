@@ -33,3 +33,14 @@ def test_tracker_options_reach_the_settings(tmp_path) -> None:
     settings = json.loads(out.read_text())['settings']
     assert settings['finger_refit'] and settings['silhouette_palm']
     assert settings['max_finger_off_silhouette'] == 0.15
+
+
+@pytest.mark.parametrize('flags, on', [([], True), (['--finger-refit', '--silhouette-palm'], True),
+                                       (['--no-finger-refit', '--no-silhouette-palm'], False)])
+def test_the_refits_and_the_palm_pull_are_on_unless_turned_off(tmp_path, flags: list[str],
+                                                                on: bool) -> None:
+    out = tmp_path / 'options.json'
+    assert main(['--seeds', '1', '--frames', '2', '--speeds', '1', '--cameras', '1', *flags,
+                 '--json', str(out)]) == 0
+    settings = json.loads(out.read_text())['settings']
+    assert settings['finger_refit'] is on and settings['silhouette_palm'] is on

@@ -1,6 +1,7 @@
 """colorglove_eval_mouse: the mouse scored on given pose streams (true, noisy, none, tracked)."""
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import replace
 
@@ -173,6 +174,17 @@ def test_edge_tracker_fits_the_second_table_camera_when_asked() -> None:
     # the front camera's edges change the fits
     assert any((a is None) != (b is None) or (a is not None and not np.allclose(a, b))
                for a, b in zip(one, two, strict=True))
+
+
+@pytest.mark.parametrize('flags, on', [([], True), (['--finger-refit', '--silhouette-palm'], True),
+                                       (['--no-finger-refit', '--no-silhouette-palm'], False)])
+def test_the_edge_trackers_refits_and_palm_pull_are_on_unless_turned_off(
+        tmp_path, flags: list[str], on: bool) -> None:
+    out = tmp_path / 'mouse.json'
+    assert eval_mouse_main(['--source', 'noise', '--seeds', '0', '--seconds', '2', *flags,
+                            '--json', str(out)]) == 0
+    settings = json.loads(out.read_text())['settings']
+    assert settings['finger_refit'] is on and settings['silhouette_palm'] is on
 
 
 def test_two_cameras_need_a_calibration_with_two() -> None:

@@ -122,12 +122,18 @@ class EdgeTrackerConfig:
     explains (farther than the tolerance from every capsule, tip and the palm); a fit
     whose share of such axis points exceeds ``max_off_silhouette`` or whose unexplained
     share of the hand's foreground exceeds ``max_unexplained`` (in any camera) counts as
-    drift (1.0: never). With ``silhouette_palm`` the unexplained pixels nearer the palm's
-    outline than to every capsule (up to ``silhouette_points`` more) pull the palm's outline
-    toward them, moving the wrist (needs a palm side: the palm's rigid feature points). Each
+    drift (1.0: never). With ``silhouette_palm`` (on by default) the unexplained pixels nearer
+    the palm's outline than to every capsule (up to ``silhouette_points`` more) pull the palm's
+    outline toward them, moving the wrist (needs a palm side: the palm's rigid feature points).
+    ``silhouette_palm`` and ``finger_refit`` are on by default: with them the held-out
+    bare-hand runs with two cameras last the whole sequence, and the 3-D mouse's clicks are
+    about as good as without (docs/RESULTS.md, DigitEyes thirteenth and sixteenth passes);
+    without silhouettes neither acts, so a tracker given no background images fits as with
+    both off. Each
     frame's silhouette is found only within
     ``silhouette_margin_px`` of the box around the pose it starts from.
-    ``finger_refit`` (with silhouettes): each fit also measures, per digit, the share of the
+    ``finger_refit`` (with silhouettes; on by default): each fit also measures, per digit, the
+    share of the
     hand's foreground left unexplained nearest to that digit's capsules
     (:func:`silhouette_measures`); a tracked frame where a digit's share exceeds
     ``max_finger_unexplained`` re-fits that digit from other starting angles (its angles on
@@ -201,10 +207,10 @@ class EdgeTrackerConfig:
     silhouette_weight: float = 0.3
     silhouette_tolerance_px: float = 4.0
     silhouette_points: int = 80
-    silhouette_palm: bool = False
+    silhouette_palm: bool = True
     max_off_silhouette: float = 1.0
     max_unexplained: float = 0.08
-    finger_refit: bool = False
+    finger_refit: bool = True
     max_finger_unexplained: float = 0.01
     finger_refit_rounds: int = 2
     finger_refit_backoff: int = 0

@@ -9,9 +9,10 @@ empty, one camera is taken from the first ``CameraInfo`` on ``camera_info_topic`
 Silhouettes: ``background_images`` names one image of the empty scene per camera (the hand
 out of view, same camera settings; PNG or JPEG, colour or grey like the camera's images).
 Each frame's foreground against it then enters the fit (``silhouette_weight``) and its drift
-checks (``max_unexplained``); empty: edges only. ``finger_refit`` (off by default) re-fits a
-finger that leaves part of the hand's silhouette unexplained; ``silhouette_palm`` (off by
-default) lets the unexplained foreground next to the palm pull the whole hand.
+checks (``max_unexplained``); empty: edges only. ``finger_refit`` (on by default) re-fits a
+finger that leaves part of the hand's silhouette unexplained; ``silhouette_palm`` (on by
+default) lets the unexplained foreground next to the palm pull the whole hand; both act only
+with ``background_images``.
 With ``max_finger_off_silhouette`` below 1 (off by default) a frame where a finger's axis lies
 off the silhouette (not the thumb) publishes no pose and says which finger on the status
 topic; the track is kept. ``retry_dofs`` (empty by default; the 3-D mouse's buttons are

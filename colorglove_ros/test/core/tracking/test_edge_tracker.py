@@ -414,6 +414,42 @@ def test_finger_refit_brings_a_drifted_finger_back(rig) -> None:
     assert unexplained[True] < 0.5 * unexplained[False]
 
 
+def test_the_defaults_refit_fingers_and_pull_the_palm_only_with_silhouettes(rig) -> None:
+    """``finger_refit`` and ``silhouette_palm`` are on by default: with silhouettes the default
+    tracker brings a drifted index finger back where the tracker with both off leaves it;
+    without background images it tracks as the tracker with both off, pose and reason to
+    the bit."""
+    cameras, seq, frames = rig
+    model, truth = seq.synth.model, seq.poses[20]
+    defaults = EdgeTrackerConfig()
+    assert defaults.finger_refit and defaults.silhouette_palm
+    off = replace(defaults, finger_refit=False, silhouette_palm=False)
+    bent = truth.copy()
+    bent[model.dof_names.index('index_mcp_abd')] += 1.0
+    bent[model.dof_names.index('index_mcp_flex')] += 0.8
+    index_tip = KEYPOINT_NAMES.index('index_tip')
+    runs = {}
+    for name, config, backgrounds in (('default', defaults, _backgrounds(frames)),
+                                      ('off', off, _backgrounds(frames)),
+                                      ('default, edges only', defaults, None),
+                                      ('off, edges only', off, None)):
+        tracker = EdgeTracker(model, cameras, config, backgrounds)
+        tracker.initialize(bent)
+        runs[name] = [tracker.update(frames[i]) for i in (20, 21, 22)]
+    errors = {}
+    for name in ('default', 'off'):
+        a, b = model.keypoints(runs[name][0].fit.q), model.keypoints(truth)
+        errors[name] = 1e3 * np.linalg.norm((a[index_tip] - a[0]) - (b[index_tip] - b[0]))
+    assert errors['default'] < 0.5 * errors['off']
+    assert not np.array_equal(runs['default'][0].fit.q, runs['off'][0].fit.q)
+    for mine, before in zip(runs['default, edges only'], runs['off, edges only'],
+                            strict=True):
+        assert mine.reason == before.reason and mine.state == before.state
+        assert mine.fit.q.tobytes() == before.fit.q.tobytes()
+        assert (mine.q is None) == (before.q is None)
+        assert mine.q is None or mine.q.tobytes() == before.q.tobytes()
+
+
 def test_palm_silhouette_targets_pull_a_displaced_hand_back(rig) -> None:
     """The whole hand 15 mm off along the palm's width, beyond short edge searches: with
     ``silhouette_palm`` the unexplained pixels nearest the palm pull the wrist back toward its

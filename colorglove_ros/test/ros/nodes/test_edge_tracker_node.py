@@ -116,6 +116,13 @@ def test_silhouette_palm_parameter_reaches_the_tracker() -> None:
         assert h.nodes[0].config.silhouette_palm
 
 
+def test_the_node_refits_fingers_and_pulls_the_palm_by_default() -> None:
+    with running(_node()) as h:
+        assert h.nodes[0].config.finger_refit and h.nodes[0].config.silhouette_palm
+    with running(_node(finger_refit=False)) as h:
+        assert not h.nodes[0].config.finger_refit
+
+
 def test_the_node_defaults_are_the_tracker_defaults() -> None:
     """The node's parameters default to EdgeTrackerConfig's (one home for each default)."""
     from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
