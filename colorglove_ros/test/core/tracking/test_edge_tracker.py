@@ -315,9 +315,11 @@ def test_a_fit_takes_its_silhouettes_around_its_own_start(rig) -> None:
 
 def test_silhouettes_measure_a_fit_that_left_the_hand(rig) -> None:
     cameras, seq, frames = rig
-    # each share is measured when its check uses it
+    # each share is measured when its check uses it (the finger re-fits, on by default, use
+    # the unexplained share too: off here)
     tracker = EdgeTracker(seq.synth.model, cameras,
-                          EdgeTrackerConfig(max_unexplained=0.5, max_off_silhouette=0.5),
+                          EdgeTrackerConfig(max_unexplained=0.5, max_off_silhouette=0.5,
+                                            finger_refit=False),
                           _backgrounds(frames))
     truth = seq.poses[20]
     good = tracker.fit(frames[20], truth)
@@ -534,8 +536,10 @@ def test_a_finger_refit_that_fails_backs_off(rig, monkeypatch) -> None:
     calls = _count_fits(monkeypatch)
     fits, poses = {}, {}
     for backoff in (0, 1):
+        # (the palm's pull, on by default, off: it moves the hand toward the blob too)
         tracker = EdgeTracker(model, cameras, EdgeTrackerConfig(
-            finger_refit=True, finger_refit_backoff=backoff, loss_patience=10),
+            finger_refit=True, silhouette_palm=False, finger_refit_backoff=backoff,
+            loss_patience=10),
             _backgrounds(frames))
         tracker.initialize(truth)
         fits[backoff], poses[backoff] = [], []
