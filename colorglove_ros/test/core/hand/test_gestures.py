@@ -210,8 +210,7 @@ def test_the_shape_gate_settings() -> None:
     """The factors are 1 for the gestures the gate does not bound (open hand) and 1/2 at its
     bounds (a point's middle, ring and little curls, a grab's four); off
     by ShapeGate(), on by default; bad bounds refused."""
-    from colorglove_ros.core.hand.gestures import GESTURE_NAMES, GestureFeatures, \
-        shape_gate_factors
+    from colorglove_ros.core.hand.gestures import GESTURE_NAMES, GestureFeatures, shape_gate_factors
 
     gate = ShapeGate(max_pinch_distance=0.3, min_curl=0.5)
     features = GestureFeatures(np.array([0.3, 0.0, 1.0, 0.3]), np.array([0.5, 0.9, 0.9, 0.9]))
