@@ -453,14 +453,10 @@ def test_unsupported_regions_drop_clutter_whose_colours_the_glove_never_joins() 
 def test_a_face_like_clutter_beside_the_glove_is_dropped_with_glove_contact_share(
         calibration) -> None:
     """A rendered glove with stripes of red, orange and pink beside it (a face, petals):
-    off (the class default) they join the glove's crop, which grows; with the shipped
-    config's ``glove_contact_share`` the crop keeps about the size it has without them. On
-    the glove alone the setting moves the crop by at most a few per cent."""
-    from colorglove_ros.core.segmentation.color_model import read_calibration_config
-
-    share = read_calibration_config('config/color_calibration.yaml')['segmenter'][
-        'glove_contact_share']
-    assert share > 0
+    off (the default) they join the glove's crop, which grows; with ``glove_contact_share``
+    0.1 (the issue-14 sixteenth pass's setting) the crop keeps about the size it has without
+    them. On the glove alone the setting moves the crop by at most a few per cent."""
+    share = 0.1
     camera = synth.default_camera()
     rng = np.random.default_rng(4)
     q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
