@@ -313,16 +313,8 @@ def unsupported_regions(labels: np.ndarray, adjacency: np.ndarray, min_share: fl
 
 def _unsupported(labels: np.ndarray, adjacency: np.ndarray, min_share: float) -> np.ndarray:
     """:func:`unsupported_regions` of a label image with a glove label."""
-    counts, boxes = compiled_kernels().label_boxes(labels, adjacency.shape[0])
-    comp = np.zeros(labels.shape, np.int32)
-    n = 1
-    for colour in np.flatnonzero(counts[1:]) + 1:
-        x, y, bw, bh = (int(v) for v in boxes[colour])
-        k, part = cv2.connectedComponents(np.equal(labels[y:y + bh, x:x + bw], colour).view(
-            np.uint8), connectivity=8, ltype=cv2.CV_32S)
-        mine = part > 0
-        comp[y:y + bh, x:x + bw][mine] = part[mine] + (n - 1)
-        n += k - 1
+    comp, count = compiled_kernels().colour_components(labels, adjacency.shape[0] - 1)
+    n = count + 1
     outline = np.zeros(n, np.int64)
     beside = np.zeros(n, np.int64)
     for a, b, ca, cb in ((labels[:, :-1], labels[:, 1:], comp[:, :-1], comp[:, 1:]),

@@ -26,7 +26,7 @@ from colorglove_ros.core.kernel_compile import compile_signatures
 __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
            'colour_histogram', 'cell_votes', 'near_or_reaching',
            'box_colour_counts', 'clear_cells', 'colour_blobs', 'small_patches_reached',
-           'glove_components', 'cell_labels', 'colour_sums', 'clear_coarse',
+           'glove_components', 'colour_components', 'cell_labels', 'colour_sums', 'clear_coarse',
            'surface_regions', 'label_borders',
            'compile_kernels']
 
@@ -762,6 +762,36 @@ def near_or_reaching(labels: np.ndarray, reach: np.ndarray, near: np.ndarray) ->
 
 
 @numba.njit(**_JIT)
+def _component_numbers(n: int, comp: np.ndarray) -> tuple[np.ndarray, int]:
+    """Each root run of :func:`_runs`' ``n`` runs numbered 1.. in raster order of the
+    components' first runs ((n,) int32, 0 for the other runs), and the components' count."""
+    number = np.zeros(n, np.int32)
+    count = 0
+    for r in range(n):
+        if comp[r] == r:
+            count += 1
+            number[r] = count
+    return number, count
+
+
+@numba.njit(**_JIT)
+def colour_components(labels: np.ndarray, num_colors: int) -> tuple[np.ndarray, int]:
+    """The 8-connected components of one glove label 1..``num_colors`` of the 2-D uint8
+    ``labels`` (other labels are background): each pixel's component ((H, W) int32; 0 the
+    background, 1..n numbered by their first pixel in raster order) and their count n."""
+    rows, cols = labels.shape
+    n, ry, rx0, rx1, _, comp = _runs(labels, num_colors, False)
+    number, count = _component_numbers(n, comp)
+    out = np.zeros((rows, cols), np.int32)
+    for r in range(n):
+        k = number[comp[r]]
+        y = ry[r]
+        for x in range(rx0[r], rx1[r]):
+            out[y, x] = k
+    return out, count
+
+
+@numba.njit(**_JIT)
 def glove_components(labels: np.ndarray, num_labels: int
                      ) -> tuple[np.ndarray, np.ndarray]:
     """The 8-connected glove (nonzero) components of the 2-D uint8 ``labels``, of any
@@ -770,12 +800,7 @@ def glove_components(labels: np.ndarray, num_labels: int
     (above every label) each holds ((n + 1, ``num_labels``) int64, row 0 zeros)."""
     rows, cols = labels.shape
     n, ry, rx0, rx1, _, comp = _runs(labels, 255, True)
-    number = np.zeros(n, np.int32)
-    count = 0
-    for r in range(n):
-        if comp[r] == r:
-            count += 1
-            number[r] = count
+    number, count = _component_numbers(n, comp)
     out = np.zeros((rows, cols), np.int32)
     hist = np.zeros((count + 1, num_labels), np.int64)
     for r in range(n):
@@ -900,6 +925,7 @@ _SIGNATURES = {
                        _array(numba.boolean, 2, layout='A'),
                        _array(numba.boolean, 2, layout='A')),
     glove_components: (_array(numba.uint8, 2, layout='A'), numba.int64),
+    colour_components: (_array(numba.uint8, 2, layout='A'), numba.int64),
     small_patches_reached: (_array(numba.uint8, 2, layout='A'), numba.int64,
                             _array(numba.boolean, 2, layout='A'), numba.float64,
                             _array(numba.boolean, 2, False, layout='A')),

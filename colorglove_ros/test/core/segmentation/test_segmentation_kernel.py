@@ -356,6 +356,29 @@ def test_small_patches_reached_are_each_colours_opencv_components(trial: int) ->
 
 
 @pytest.mark.parametrize('trial', range(30))
+def test_colour_components_are_opencvs_components_colour_by_colour(trial: int) -> None:
+    """Each single-colour 8-connected component of OpenCV's (labels above num_colors as
+    background) is one component of the kernel's, numbered 1..n by its first pixel."""
+    rng = np.random.default_rng([trial, 71])
+    labels = _large_labels(rng, trial)
+    num_colors = (10, 6)[trial % 2]
+    comp, count = KERNELS.colour_components(labels, num_colors)
+    want = np.zeros(labels.shape, np.int64)
+    n = 0
+    for colour in range(1, num_colors + 1):
+        k, part = cv2.connectedComponents(np.equal(labels, colour).view(np.uint8),
+                                          connectivity=8, ltype=cv2.CV_32S)
+        want[part > 0] = part[part > 0] + n
+        n += k - 1
+    assert count == n
+    assert (comp == 0).sum() == (want == 0).sum() and np.array_equal(comp == 0, want == 0)
+    pairs = np.unique(np.stack([comp[want > 0], want[want > 0]]), axis=1)
+    assert pairs.shape[1] == n and len(np.unique(pairs[0])) == n    # one to one
+    first = np.unique(comp.ravel(), return_index=True)[1][1:]       # numbered in raster order
+    assert np.all(np.diff(first) > 0)
+
+
+@pytest.mark.parametrize('trial', range(30))
 def test_near_or_reaching_is_the_reach_of_opencvs_glove_components(trial: int) -> None:
     rng = np.random.default_rng([trial, 67])
     labels = _large_labels(rng, trial)
