@@ -213,14 +213,20 @@ def calibration():
     return printed_glove_calibration()
 
 
-def test_a_glove_in_front_of_a_warm_wood_like_surface_is_found(calibration) -> None:
-    """A rendered glove beside a surface grained in four of the glove's colours: with the
-    detection the crop is on the hand; with it off the surface pulls the crop away."""
+def _rendered_glove(wrist_m: tuple[float, float, float]) -> synth.SyntheticFrame:
+    """A rendered glove (the pose of seed 4), fully in view, its wrist at ``wrist_m`` in the
+    camera frame."""
     camera = synth.default_camera()
     rng = np.random.default_rng(4)
     q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
-    q[0:3] = [0.12, 0.05, 0.6]
-    frame = synth.render_frame(q, camera, rng, FrameConditions())
+    q[0:3] = wrist_m
+    return synth.render_frame(q, camera, rng, FrameConditions())
+
+
+def test_a_glove_in_front_of_a_warm_wood_like_surface_is_found(calibration) -> None:
+    """A rendered glove beside a surface grained in four of the glove's colours: with the
+    detection the crop is on the hand; with it off the surface pulls the crop away."""
+    frame = _rendered_glove((0.12, 0.05, 0.6))
     image = frame.image_rgb.copy()
     yy, xx = np.mgrid[0:480, 0:260]
     grain = ((yy + 7 * np.sin(xx / 13.0)) // 9).astype(int) % 4     # wavy grain, 4 colours
@@ -240,11 +246,7 @@ def test_a_glove_in_front_of_a_warm_wood_like_surface_is_found(calibration) -> N
 
 def _glove_beside_a_surface() -> tuple[synth.SyntheticFrame, np.ndarray]:
     """A rendered glove and its image with a plain orange surface touching its side."""
-    camera = synth.default_camera()
-    rng = np.random.default_rng(4)
-    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
-    q[0:3] = [0.0, 0.0, 0.6]
-    frame = synth.render_frame(q, camera, rng, FrameConditions())
+    frame = _rendered_glove((0.0, 0.0, 0.6))
     ys, xs = np.nonzero(frame.labels)
     image = frame.image_rgb.copy()
     x0 = int(np.percentile(xs, 60))
@@ -303,11 +305,7 @@ def test_a_petal_smaller_than_the_palm_patch_is_trimmed_to_the_junctions(calibra
 
     shipped = read_calibration_config('config/color_calibration.yaml')['segmenter']
     assert {name: shipped[name] for name in JUNCTION_TRIM} == JUNCTION_TRIM
-    camera = synth.default_camera()
-    rng = np.random.default_rng(4)
-    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
-    q[0:3] = [0.0, 0.0, 0.6]
-    frame = synth.render_frame(q, camera, rng, FrameConditions())
+    frame = _rendered_glove((0.0, 0.0, 0.6))
     plain = GloveSegmenter(calibration).process(frame.image_rgb)
     plain_on = GloveSegmenter(calibration, **JUNCTION_TRIM).process(frame.image_rgb)
     assert plain.hand_found and plain_on.hand_found
@@ -457,11 +455,7 @@ def test_a_face_like_clutter_beside_the_glove_is_dropped_with_glove_contact_shar
     0.1 (the issue-14 sixteenth pass's setting) the crop keeps about the size it has without
     them. On the glove alone the setting moves the crop by at most a few per cent."""
     share = 0.1
-    camera = synth.default_camera()
-    rng = np.random.default_rng(4)
-    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
-    q[0:3] = [0.0, 0.0, 0.6]
-    frame = synth.render_frame(q, camera, rng, FrameConditions())
+    frame = _rendered_glove((0.0, 0.0, 0.6))
     plain = GloveSegmenter(calibration).process(frame.image_rgb)
     plain_on = GloveSegmenter(calibration, glove_contact_share=share).process(frame.image_rgb)
     assert plain.hand_found and plain_on.hand_found
