@@ -106,7 +106,6 @@ class EdgeTracker:
             self.set_backgrounds(backgrounds)
         self._digit_dofs = [np.array([i for i, n in enumerate(model.dof_names)
                                       if n.startswith(f'{d}_')]) for d in DIGITS]
-        self._refit_free = [self._free_dofs(d) for d in range(len(DIGITS))]
         self._retry_dofs = [model.dof_names.index(n) for n in self.config.retry_dofs]
         self._retry_digits = [DIGITS.index(n.split('_')[0]) for n in self.config.retry_dofs]
         self._q: np.ndarray | None = None
@@ -349,7 +348,7 @@ class EdgeTracker:
                         > cfg.max_finger_unexplained:
                     continue
                 dofs = self._digit_dofs[e]
-                free = self._refit_free[e]
+                free = self._free_dofs(e)
                 best = fit
                 for angles in self._refit_starts(e, fit.q):
                     if cfg.finger_refit_budget > 0:
