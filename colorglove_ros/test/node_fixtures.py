@@ -302,3 +302,17 @@ def assert_run_tracked(run, figures: dict, frames: int, min_tracked: float = 0.9
     assert not run.camera_refusals, run.camera_refusals
     assert figures['tracked_fraction'] >= min_tracked, figures
     assert figures['frames_with_truth'] >= min_tracked * frames
+
+
+#: How long a paced test feed waits for a frame's answer before resending it: long enough
+#: for a frame slowed by a loaded machine (or by compiling on its first call), since a frame
+#: resent and then overtaken by the next one in an image queue of depth 1 is never segmented.
+TEST_PACE_TIMEOUT_S = 10.0
+
+
+def paced_bag_feed(bag: Path):
+    """The tests' paced feed of ``bag`` (``ros.pipeline_run.bag_feed``): each frame played
+    after the previous one's answer, waiting up to :data:`TEST_PACE_TIMEOUT_S`."""
+    from colorglove_ros.ros.pipeline_run import bag_feed
+
+    return bag_feed(bag, paced=True, pace_timeout_s=TEST_PACE_TIMEOUT_S)

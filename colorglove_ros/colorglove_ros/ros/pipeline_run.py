@@ -483,10 +483,12 @@ class BagFeed:
     player printed (frames resent, warnings) is kept in ``output``. Before the first frame the
     player waits for :data:`IMAGE_SUBSCRIBERS` on the image, :data:`CAMERA_INFO_SUBSCRIBERS`
     on its CameraInfo and, for each topic of ``waits``, that many subscribers (e.g. a second
-    camera's image and CameraInfo)."""
+    camera's image and CameraInfo). ``pace_timeout_s`` (paced only) replaces the player's
+    longest wait for an output before it resends a frame and goes on."""
 
     def __init__(self, bag: Path, rate: float = 1.0, paced: bool = False,
-                 waits: dict[str, int] | None = None) -> None:
+                 waits: dict[str, int] | None = None,
+                 pace_timeout_s: float | None = None) -> None:
         import shutil
 
         player = shutil.which('colorglove_play_bag')
@@ -498,6 +500,8 @@ class BagFeed:
                         '--min-subscribers', str(IMAGE_SUBSCRIBERS),
                         '--min-info-subscribers', str(CAMERA_INFO_SUBSCRIBERS), '--restamp'] + (
                             ['--paced'] if paced else []) + (
+                            ['--pace-timeout', str(pace_timeout_s)]
+                            if paced and pace_timeout_s is not None else []) + (
                             ['--wait-for', *(f'{topic}={count}' for topic, count in waits.items())]
                             if waits else [])
         self.output = ''
@@ -519,6 +523,7 @@ class BagFeed:
 
 
 def bag_feed(bag: Path, rate: float = 1.0, paced: bool = False,
-             waits: dict[str, int] | None = None) -> BagFeed:
+             waits: dict[str, int] | None = None,
+             pace_timeout_s: float | None = None) -> BagFeed:
     """A :class:`BagFeed` of ``bag`` (see there)."""
-    return BagFeed(bag, rate, paced, waits)
+    return BagFeed(bag, rate, paced, waits, pace_timeout_s)

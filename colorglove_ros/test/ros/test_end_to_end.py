@@ -16,12 +16,12 @@ import os
 from pathlib import Path
 
 import pytest
-from node_fixtures import synthetic_color_config
+from node_fixtures import paced_bag_feed, synthetic_color_config
 
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.lookup.database import save_database
 from colorglove_ros.core.lookup.database_build import build_database
-from colorglove_ros.ros.pipeline_run import bag_feed, run_pipeline, summarize
+from colorglove_ros.ros.pipeline_run import run_pipeline, summarize
 from colorglove_ros.tools import build_database as build_database_tool
 from colorglove_ros.tools import make_bag
 
@@ -57,7 +57,7 @@ def test_bag_through_the_pipeline(assets: dict[str, Path], isolated_ros_domain: 
         'ik': {'publish_overlay': False, 'database_path': str(assets['database'])},
     }
     run = run_pipeline(parameters, expected_frames=E2E_FRAMES,
-                       feed=bag_feed(assets['bag'], paced=True), timeout_s=300.0)
+                       feed=paced_bag_feed(assets['bag']), timeout_s=300.0)
     figures = summarize(run, default_hand()[0])
     print(figures)
     assert not run.timed_out

@@ -56,3 +56,10 @@ def test_run_names_the_frames_without_an_observation() -> None:
     assert (run.frames, run.segmented, run.unsegmented) == (3, 2, [(1, 5)])
     assert '2 of 3 camera frames segmented; without an observation: [(1, 5)]' \
         in run.missed_frames()
+
+
+def test_a_paced_feed_passes_its_pace_timeout_to_the_player(tmp_path: Path) -> None:
+    command = bag_feed(tmp_path, paced=True, pace_timeout_s=7.5).command
+    assert command[command.index('--pace-timeout') + 1] == '7.5'
+    assert '--pace-timeout' not in bag_feed(tmp_path, paced=True).command
+    assert '--pace-timeout' not in bag_feed(tmp_path, pace_timeout_s=7.5).command

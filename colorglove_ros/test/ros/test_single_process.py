@@ -5,10 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from node_fixtures import SMALL_DATABASE_GATES, NodeAssets, assert_run_tracked
+from node_fixtures import SMALL_DATABASE_GATES, NodeAssets, assert_run_tracked, paced_bag_feed
 
 from colorglove_ros.core.hand.glove import default_hand
-from colorglove_ros.ros.pipeline_run import bag_feed, node_specs, run_pipeline, summarize
+from colorglove_ros.ros.pipeline_run import node_specs, run_pipeline, summarize
 from colorglove_ros.tools import make_bag
 
 pytestmark = [pytest.mark.dds, pytest.mark.slow, pytest.mark.usefixtures('isolated_ros_domain')]
@@ -36,7 +36,7 @@ def test_one_process_tracks_a_bag(node_assets: NodeAssets, tmp_path: Path) -> No
         'ik': {'publish_overlay': False, 'database_path': str(node_assets.database),
                **SMALL_DATABASE_GATES},
     }
-    run = run_pipeline(parameters, FRAMES, feed=bag_feed(bag, paced=True), timeout_s=300.0,
+    run = run_pipeline(parameters, FRAMES, feed=paced_bag_feed(bag), timeout_s=300.0,
                        single_process=True)
     figures = summarize(run, default_hand()[0])
     assert_run_tracked(run, figures, FRAMES)

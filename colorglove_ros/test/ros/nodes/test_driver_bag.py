@@ -9,14 +9,14 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from node_fixtures import SMALL_DATABASE_GATES, NodeAssets, assert_run_tracked
+from node_fixtures import SMALL_DATABASE_GATES, NodeAssets, assert_run_tracked, paced_bag_feed
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.synthetic.frames import default_camera
 from colorglove_ros.core.synthetic.sequences import SyntheticSequenceRenderer
 from colorglove_ros.ros.bags import SequenceBagWriter
-from colorglove_ros.ros.pipeline_run import PipelineRun, bag_feed, run_pipeline, summarize
+from colorglove_ros.ros.pipeline_run import PipelineRun, run_pipeline, summarize
 
 pytestmark = [pytest.mark.dds, pytest.mark.slow, pytest.mark.usefixtures('isolated_ros_domain')]
 
@@ -63,7 +63,7 @@ def _run(assets: NodeAssets, bag: Path) -> PipelineRun:
         'ik': {'publish_overlay': False, 'database_path': str(assets.database),
                **SMALL_DATABASE_GATES},
     }
-    return run_pipeline(parameters, FRAMES, feed=bag_feed(bag, paced=True), timeout_s=300.0)
+    return run_pipeline(parameters, FRAMES, feed=paced_bag_feed(bag), timeout_s=300.0)
 
 
 def test_driver_bag_is_tracked_as_well_as_the_package_camera(node_assets: NodeAssets,

@@ -24,6 +24,7 @@ from node_fixtures import (
     ik_node,
     node_lookup,
     observation_msg,
+    paced_bag_feed,
     running,
 )
 from repo_paths import CONFIG_DIR
@@ -38,7 +39,7 @@ from colorglove_ros.core.synthetic.conditions import sample_conditions
 from colorglove_ros.ros.conversions import camera_to_camera_info_msg
 from colorglove_ros.ros.launcher import NodeSpec
 from colorglove_ros.ros.nodes.ik_node import IKNode
-from colorglove_ros.ros.pipeline_run import PipelineRun, bag_feed, run_pipeline, summarize
+from colorglove_ros.ros.pipeline_run import PipelineRun, run_pipeline, summarize
 from colorglove_ros.tools import make_bag
 
 pytestmark = [pytest.mark.dds, pytest.mark.usefixtures('isolated_ros_domain')]
@@ -208,7 +209,7 @@ def _run(assets: NodeAssets, bag: Path, two_cameras: bool) -> PipelineRun:
             'camera/camera_info': f'/{SECOND.name}/camera/camera_info',
             'hand/segmentation_debug': f'/{SECOND.name}/hand/segmentation_debug'})]
         extra_inputs = {SECOND_IMAGE: 'segmentation2'}
-    return run_pipeline(parameters, FRAMES, feed=bag_feed(bag, paced=True), timeout_s=300.0,
+    return run_pipeline(parameters, FRAMES, feed=paced_bag_feed(bag), timeout_s=300.0,
                         extra_nodes=extra_nodes, extra_inputs=extra_inputs)
 
 
