@@ -8,7 +8,10 @@ also deserialises every camera image).
 ``python -m colorglove_ros.ros.latency_probe --output FILE [--topics T ...]`` runs it until
 SIGINT/SIGTERM (or ``--duration``) and writes ``{"stamp_ns": [...], "arrival_ns": [...],
 "topic_index": [...]}``; :class:`LatencyProbe` starts and stops such a process and reads what
-it recorded."""
+it recorded. With ``--stage-topics TOPIC=TYPE ...`` it also records the stamp and arrival of
+the messages of other topics whose messages start with a ``std_msgs/Header`` (e.g. the
+pipeline's observation and candidates: where a frame's latency goes stage by stage), taken
+serialized and only their stamp read, apart from the JointStates."""
 from __future__ import annotations
 
 import argparse
@@ -40,6 +43,10 @@ class ProbeRecord:
     stamp_ns: np.ndarray
     arrival_ns: np.ndarray
     topic_index: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    # the stage topics' messages (``--stage-topics``): stamp, arrival (ns) and topic index
+    stage_stamp_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    stage_arrival_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    stage_index: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     def of_topic(self, index: int) -> ProbeRecord:
         """The JointStates that came on the probe's topic ``index`` only."""
@@ -52,6 +59,11 @@ class ProbeRecord:
     def latencies_s(self) -> np.ndarray:
         """Arrival minus header stamp, seconds."""
         return (self.arrival_ns - self.stamp_ns) * 1e-9
+
+    def stage_latencies_s(self, index: int) -> np.ndarray:
+        """Arrival minus header stamp (seconds) of the messages of stage topic ``index``."""
+        keep = self.stage_index == index
+        return (self.stage_arrival_ns[keep] - self.stage_stamp_ns[keep]) * 1e-9
 
     @property
     def rate_hz(self) -> float:
@@ -86,9 +98,12 @@ class LatencyProbe:
     """The probe as a separate process: ``start()``, run the pipeline, ``stop()`` -> record."""
 
     def __init__(self, env: dict[str, str] | None = None,
-                 topics: Sequence[str] = (JOINT_STATES_TOPIC,)) -> None:
+                 topics: Sequence[str] = (JOINT_STATES_TOPIC,),
+                 stage_topics: Sequence[tuple[str, str]] = ()) -> None:
         self.env = env
         self.topics = tuple(topics)
+        # (topic, message type such as 'colorglove_msgs/msg/HandObservation') of the stages
+        self.stage_topics = tuple(stage_topics)
         self.folder = tempfile.TemporaryDirectory(prefix='latency_probe_')
         self.output = Path(self.folder.name) / 'record.json'
         self.process: subprocess.Popen | None = None
@@ -101,7 +116,9 @@ class LatencyProbe:
             self.process = subprocess.Popen(
                 [sys.executable, '-m', 'colorglove_ros.ros.latency_probe', '--output',
                  str(self.output), '--ready-file', str(ready), '--first-file',
-                 str(self.first_file), '--topics', *self.topics], env=self.env)
+                 str(self.first_file), '--topics', *self.topics,
+                 *(['--stage-topics', *(f'{topic}={kind}' for topic, kind in self.stage_topics)]
+                   if self.stage_topics else [])], env=self.env)
         deadline = time.monotonic() + ready_timeout_s
         while not ready.exists():
             if self.process.poll() is not None or time.monotonic() > deadline:
@@ -126,9 +143,9 @@ class LatencyProbe:
             raise RuntimeError(f'the latency probe wrote no record: {exc}') from exc
         finally:
             self.folder.cleanup()
-        return ProbeRecord(np.asarray(data['stamp_ns'], np.int64),
-                           np.asarray(data['arrival_ns'], np.int64),
-                           np.asarray(data['topic_index'], np.int64))
+        return ProbeRecord(*(np.asarray(data[key], np.int64) for key in (
+            'stamp_ns', 'arrival_ns', 'topic_index', 'stage_stamp_ns', 'stage_arrival_ns',
+            'stage_index')))
 
     def close(self, timeout_s: float = 2.0) -> None:
         """End the process without reading its record (a run that failed or was stopped):
@@ -159,6 +176,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--first-file', type=Path, help='touched on the first JointState')
     parser.add_argument('--topics', nargs='+', default=[JOINT_STATES_TOPIC],
                         help='JointState topics to record')
+    parser.add_argument('--stage-topics', nargs='*', default=[], type=_stage_topic,
+                        metavar='TOPIC=TYPE',
+                        help='also record the stamp and arrival of these topics\' messages '
+                             '(types whose messages start with a std_msgs/Header, e.g. '
+                             'colorglove_msgs/msg/HandObservation), taken serialized')
     args = parser.parse_args(argv)
 
     import rclpy
@@ -170,6 +192,13 @@ def main(argv: list[str] | None = None) -> int:
     stamps: list[int] = []
     arrivals: list[int] = []
     topic_index: list[int] = []
+    stage = {'stage_stamp_ns': [], 'stage_arrival_ns': [], 'stage_index': []}
+
+    def on_stage(data: bytes, index: int) -> None:
+        stage['stage_arrival_ns'].append(time.time_ns())
+        sec, nanosec = header_stamp_from_cdr(data)
+        stage['stage_stamp_ns'].append(sec * 1_000_000_000 + nanosec)
+        stage['stage_index'].append(index)
 
     def on_joints(msg: JointState, index: int) -> None:
         arrivals.append(time.time_ns())
@@ -188,6 +217,12 @@ def main(argv: list[str] | None = None) -> int:
     for index, topic in enumerate(args.topics):
         node.create_subscription(JointState, topic,
                                  lambda msg, index=index: on_joints(msg, index), qos)
+    if args.stage_topics:   # only then these modules (the probe starts lean without)
+        from colorglove_ros.ros.image_codec import header_stamp_from_cdr
+        from colorglove_ros.ros.typestore import message_class
+    for index, (topic, kind) in enumerate(args.stage_topics):
+        node.create_subscription(message_class(kind), topic,
+                                 lambda data, index=index: on_stage(data, index), qos, raw=True)
     if args.ready_file is not None:
         args.ready_file.touch()
     deadline = time.monotonic() + args.duration if args.duration > 0 else float('inf')
@@ -204,9 +239,17 @@ def main(argv: list[str] | None = None) -> int:
         rclpy.try_shutdown()
     tmp = args.output.with_suffix('.tmp')
     tmp.write_text(json.dumps({'stamp_ns': stamps, 'arrival_ns': arrivals,
-                               'topic_index': topic_index}))
+                               'topic_index': topic_index, **stage}))
     os.replace(tmp, args.output)
     return 0
+
+
+def _stage_topic(text: str) -> tuple[str, str]:
+    """``TOPIC=TYPE`` of ``--stage-topics`` as (topic, type)."""
+    topic, sep, kind = text.partition('=')
+    if not (sep and topic and kind):
+        raise argparse.ArgumentTypeError(f'expected TOPIC=TYPE, got {text!r}')
+    return topic, kind
 
 
 if __name__ == '__main__':

@@ -53,7 +53,7 @@ from colorglove_ros.ros.lean_executor import LeanExecutor
 __all__ = ['BagFeed', 'CAMERA_INFO_SUBSCRIBERS', 'IMAGE_SUBSCRIBERS', 'PipelineMonitor',
            'PipelineRun', 'bag_feed', 'node_specs', 'run_pipeline',
            'summarize', 'ik_times_ms', 'DATABASE_CONFIG',
-           'prepare_assets', 'pipeline_parameters', 'write_params']
+           'prepare_assets', 'pipeline_parameters', 'write_params', 'STAGE_OUTPUTS']
 
 DATABASE_CONFIG = 'config/database.yaml'
 
@@ -302,13 +302,16 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
                  feed: Any = None, timeout_s: float = 600.0, startup_s: float = 60.0,
                  keep_overlays: int = 8, extra_nodes: Sequence[NodeSpec] = (),
                  extra_inputs: dict[str, str] | None = None,
-                 single_process: bool = False) -> PipelineRun:
+                 single_process: bool = False,
+                 stage_topics: Sequence[tuple[str, str]] = ()) -> PipelineRun:
     """Start the nodes with ``parameters`` (camera_node too unless ``feed`` is given: a
     callable started once the graph is up, e.g. a bag player), monitor until
     ``expected_frames`` frames passed, stop everything, and return the measurements.
     ``extra_nodes`` (e.g. a second camera's segmentation_node) also read the parameter file;
     ``extra_inputs`` maps their input topics to their node names, awaited like the stages'.
-    With ``single_process`` the tracker's nodes run in one process (:func:`node_specs`)."""
+    With ``single_process`` the tracker's nodes run in one process (:func:`node_specs`).
+    ``stage_topics`` ((topic, type), e.g. :data:`STAGE_OUTPUTS`) are also recorded by the
+    latency probe (``ProbeRecord.stage_latencies_s``)."""
     use_fastdds_profile()
     with tempfile.TemporaryDirectory() as folder:
         params_file = write_params(parameters, Path(folder))
@@ -326,7 +329,7 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
         spinner.start()
         launcher = Launcher(node_specs(params_file, feed is None, single_process) + [
             replace(spec, parameters=[params_file, *spec.parameters]) for spec in extra_nodes])
-        probe = LatencyProbe()
+        probe = LatencyProbe(stage_topics=stage_topics)
         record = None
         cpu_s: dict[str, float] = {}
         try:
@@ -377,6 +380,12 @@ def _cpu_since(before: dict[str, float], after: dict[str, float]) -> dict[str, f
 # Each stage's input topic and the node that must subscribe to it before frames flow.
 STAGE_INPUTS = {'/camera/image_raw': 'segmentation', '/hand/observation': 'lookup',
                 '/hand/pose_candidates': 'ik'}
+
+
+# The stages' outputs (topic, type) the probe can record beside the JointStates: when a frame's
+# observation and candidates arrive, from its camera stamp.
+STAGE_OUTPUTS = (('/hand/observation', 'colorglove_msgs/msg/HandObservation'),
+                 ('/hand/pose_candidates', 'colorglove_msgs/msg/HandPoseCandidates'))
 
 
 def _wait_for_graph(monitor: PipelineMonitor, timeout_s: float, inputs: dict[str, str]) -> None:

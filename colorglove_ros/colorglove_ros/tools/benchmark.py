@@ -18,14 +18,17 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.evaluation.metrics import latency_summary_ms
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.synthetic.frames import default_camera
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.bags import write_synthetic_bag
+from colorglove_ros.ros.latency_probe import ProbeRecord
 from colorglove_ros.ros.launcher import NodeSpec
 from colorglove_ros.ros.pipeline_run import (
+    STAGE_OUTPUTS,
     bag_feed,
     pipeline_parameters,
     prepare_assets,
@@ -35,7 +38,7 @@ from colorglove_ros.ros.pipeline_run import (
 from colorglove_ros.tools._cli import add_pipeline_arguments, run_tool, tool_parser
 
 __all__ = ['TARGETS', 'BAG_RATE_HZ', 'STEREO_CALIBRATION', 'ensure_bag', 'check_targets',
-           'isolate_domain', 'main']
+           'isolate_domain', 'stage_latency_figures', 'main']
 
 BAG_RATE_HZ = 30.0     # the bags' own frame rate; offered rates are multiples of it
 STEREO_CALIBRATION = 'config/calibration_stereo.yaml'
@@ -110,9 +113,12 @@ def _second_camera(parameters: dict[str, dict]
 
 
 def dds_pass(bag: Path, parameters: dict[str, dict], frames: int, offered_hz: float,
-             single_process: bool, two_cameras: bool = False) -> dict[str, Any] | None:
+             single_process: bool, two_cameras: bool = False, stage_latency: bool = False
+             ) -> dict[str, Any] | None:
     """One run of the graph over DDS with the bag offered at ``offered_hz``: a row of the
-    figures, None if it timed out."""
+    figures, None if it timed out. With ``stage_latency`` the latency probe also records the
+    stages' outputs (:data:`STAGE_OUTPUTS`) and the row gives their latency from the camera
+    stamp too (:func:`stage_latency_figures`)."""
     parameters = {name: dict(values) for name, values in parameters.items()}
     extra_nodes, extra_inputs, waits = (_second_camera(parameters) if two_cameras
                                         else ([], {}, {}))
@@ -122,7 +128,8 @@ def dds_pass(bag: Path, parameters: dict[str, dict], frames: int, offered_hz: fl
     run = run_pipeline(parameters, expected_frames=frames,
                        feed=bag_feed(bag, rate=offered_hz / BAG_RATE_HZ, waits=waits),
                        timeout_s=120.0 + frames / 5.0, extra_nodes=extra_nodes,
-                       extra_inputs=extra_inputs, single_process=single_process)
+                       extra_inputs=extra_inputs, single_process=single_process,
+                       stage_topics=STAGE_OUTPUTS if stage_latency else ())
     if run.timed_out:
         print('[benchmark] pass timed out', flush=True)
         return None
@@ -146,7 +153,22 @@ def dds_pass(bag: Path, parameters: dict[str, dict], frames: int, offered_hz: fl
             # processes, the benchmark's own monitor, its latency probe and the bag player
             # (with its start-up)
             **{key.replace('_per_frame', ''): value for key, value in figures.items()
-               if key.startswith('cpu_ms_per_frame_')}}
+               if key.startswith('cpu_ms_per_frame_')},
+            **(stage_latency_figures(run.probe) if stage_latency and run.probe is not None
+               else {})}
+
+
+def stage_latency_figures(record: ProbeRecord) -> dict[str, float]:
+    """Arrival at the latency probe minus the camera stamp, p50 and p95 (ms), of each stage
+    output of :data:`STAGE_OUTPUTS` the probe recorded: ``observation_latency_p50_ms``, ...,
+    ``pose_candidates_latency_p95_ms`` (NaN for a stage with no message)."""
+    figures = {}
+    for index, (topic, _) in enumerate(STAGE_OUTPUTS):
+        name = topic.rsplit('/', 1)[-1]
+        summary = latency_summary_ms(record.stage_latencies_s(index))
+        figures[f'{name}_latency_p50_ms'] = summary['p50']
+        figures[f'{name}_latency_p95_ms'] = summary['p95']
+    return figures
 
 
 def _target_figures(stages: list[dict[str, Any]], runs: list[dict[str, Any]]
@@ -194,6 +216,11 @@ def main(argv: list[str] | None = None) -> int:
                         help='ik_node also draws and publishes the overlay image (it then '
                              'receives every camera image); off by default, as in '
                              'config/nodes.yaml')
+    parser.add_argument('--stage-latency', action='store_true',
+                        help='the latency probe also takes the observation and candidates '
+                             '(serialized, their stamps only) and every DDS row gives their '
+                             'latency from the camera stamp: where a frame\'s latency goes '
+                             'stage by stage (the probe then works a little more)')
     args = parser.parse_args(argv)
     if args.repeats < 1:
         parser.error('--repeats must be at least 1')
@@ -233,7 +260,8 @@ def _benchmark(args: argparse.Namespace) -> int:
                 passes.append((stereo, BAG_RATE_HZ, True))
             for repeat, (which, rate, two) in itertools.product(range(1, args.repeats + 1),
                                                                  passes):
-                row = dds_pass(which, parameters, args.frames, rate, single, two)
+                row = dds_pass(which, parameters, args.frames, rate, single, two,
+                               args.stage_latency)
                 if row is None:
                     return 1
                 row['repeat'] = repeat

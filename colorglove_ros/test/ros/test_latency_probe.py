@@ -105,3 +105,59 @@ def test_probe_records_which_topic_each_joint_state_came_on() -> None:
                            lambda k: k * 10**9)
     assert sorted(record.of_topic(0).stamp_ns // 10**9) == [1, 2, 4, 5]
     assert sorted(record.of_topic(1).stamp_ns // 10**9) == [0, 3]
+
+
+def test_stage_latencies_are_each_stage_topics_own() -> None:
+    record = ProbeRecord(np.zeros(0, np.int64), np.zeros(0, np.int64),
+                         stage_stamp_ns=np.array([0, 0, 10_000_000]),
+                         stage_arrival_ns=np.array([5_000_000, 9_000_000, 12_000_000]),
+                         stage_index=np.array([0, 1, 0]))
+    np.testing.assert_allclose(record.stage_latencies_s(0), [0.005, 0.002])
+    np.testing.assert_allclose(record.stage_latencies_s(1), [0.009])
+    assert len(ProbeRecord(np.zeros(0), np.zeros(0)).stage_latencies_s(0)) == 0
+
+
+@pytest.mark.dds
+@pytest.mark.usefixtures('isolated_ros_domain')
+def test_probe_records_the_stage_topics_stamps_apart_from_the_joint_states() -> None:
+    """With stage topics the probe takes their messages serialized and records each one's
+    header stamp and arrival under its stage index; the JointStates stay on their own."""
+    from colorglove_msgs.msg import HandObservation, HandPoseCandidates
+
+    from colorglove_ros.ros.pipeline_run import STAGE_OUTPUTS
+
+    probe = LatencyProbe(stage_topics=STAGE_OUTPUTS)
+    probe.start()
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = rclpy.create_node('probe_stage_test', context=context)
+        qos = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE)
+        pubs = [node.create_publisher(kind, topic, qos) for kind, (topic, _) in
+                zip((HandObservation, HandPoseCandidates), STAGE_OUTPUTS, strict=True)]
+        joints = node.create_publisher(JointState, '/hand/joint_states', qos)
+        deadline = time.monotonic() + 10.0
+        while (min(p.get_subscription_count() for p in [*pubs, joints]) == 0
+               and time.monotonic() < deadline):
+            time.sleep(0.05)
+        sent = []
+        for k in range(6):
+            stamp = time.time_ns() - 20_000_000          # taken 20 ms ago
+            header = Header(stamp=Time(sec=stamp // 10**9, nanosec=stamp % 10**9))
+            sent.append(stamp)
+            observation = HandObservation(header=header, hand_found=True, status='x' * k)
+            pubs[0].publish(observation)
+            pubs[1].publish(HandPoseCandidates(header=header, observation=observation))
+            joints.publish(JointState(header=header))
+            time.sleep(0.02)
+        assert probe.wait_for_first(5.0)
+        time.sleep(0.5)
+    finally:
+        record = probe.stop()
+        rclpy.try_shutdown(context=context)
+    assert list(record.stamp_ns) == sent
+    for index in (0, 1):
+        keep = record.stage_index == index
+        assert list(record.stage_stamp_ns[keep]) == sent
+        latencies = record.stage_latencies_s(index)
+        assert np.all(latencies >= 0.020) and np.all(latencies < 1.0)

@@ -1,8 +1,10 @@
-"""colorglove_benchmark's judging of issue 19's targets from its rows, and its ROS domain."""
+"""colorglove_benchmark's judging of issue 19's targets from its rows, its ROS domain and its
+stage latency figures."""
 from __future__ import annotations
 
 import os
 
+import numpy as np
 import pytest
 
 from colorglove_ros.tools import benchmark
@@ -53,3 +55,22 @@ def test_domain_given_set_or_its_own(monkeypatch: pytest.MonkeyPatch) -> None:
     assert benchmark.isolate_domain(None) == 57
     assert benchmark.isolate_domain(12) == 12
     assert os.environ['ROS_DOMAIN_ID'] == '12'
+
+
+def test_stage_latency_figures_per_stage_output() -> None:
+    from colorglove_ros.ros.latency_probe import ProbeRecord
+    from colorglove_ros.tools.benchmark import stage_latency_figures
+
+    ms = 1_000_000
+    record = ProbeRecord(np.zeros(0, np.int64), np.zeros(0, np.int64),
+                         stage_stamp_ns=np.zeros(5, np.int64),
+                         stage_arrival_ns=np.array([8, 10, 12, 20, 24]) * ms,
+                         stage_index=np.array([0, 0, 0, 1, 1]))
+    figures = stage_latency_figures(record)
+    assert set(figures) == {'observation_latency_p50_ms', 'observation_latency_p95_ms',
+                            'pose_candidates_latency_p50_ms', 'pose_candidates_latency_p95_ms'}
+    assert figures['observation_latency_p50_ms'] == pytest.approx(10.0)
+    assert figures['observation_latency_p95_ms'] == pytest.approx(11.8)
+    assert figures['pose_candidates_latency_p50_ms'] == pytest.approx(22.0)
+    assert np.isnan(stage_latency_figures(ProbeRecord(np.zeros(0), np.zeros(0)))[
+        'observation_latency_p50_ms'])
