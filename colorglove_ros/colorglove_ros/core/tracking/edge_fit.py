@@ -628,15 +628,19 @@ def _behind_palm(points: FeaturePoints, camera: PinholeCamera, config: EdgeTrack
     return out.reshape(centres.shape[:2])
 
 
-def palm_rows(points: FeaturePoints, generator: np.ndarray) -> tuple[np.ndarray, np.ndarray,
-                                                                      np.ndarray]:
-    """Point rows and weights of the palm sides' chosen generators: ``generator`` (P, 2)
-    holds per side the index k of the first of the two generators and the weight of the
-    second; returns the rows of the k-th base (P,), of the k-th end (P,) and the weight
-    (P,); the (k+1)-th are 2 rows on."""
+def palm_rows(points: FeaturePoints, generator: np.ndarray, sides: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Point rows and weights of the palm sides' chosen generators: ``generator`` (N, 2)
+    holds, for each of the palm sides ``sides`` (N indices into ``points``' sides; None:
+    every side, in order), the index k of the first of the two generators and the weight of
+    the second; returns the rows of the k-th base (N,), of the k-th end (N,) and the weight
+    (N,); the (k+1)-th are 2 rows on."""
     A = len(PALM_ANGLES)
     k = generator[:, 0].astype(np.int64)
-    first = points.palm_start + np.arange(points.num_palm_sides) * (2 * A + 1) + 2 * k
+    side = np.arange(points.num_palm_sides) if sides is None else np.asarray(sides, np.int64)
+    if side.shape != k.shape:
+        raise EdgeTrackerError(f'{len(k)} palm generator(s) for {len(side)} side(s)')
+    first = points.palm_start + side * (2 * A + 1) + 2 * k
     return first, first + 1, generator[:, 1]
 
 
@@ -1019,7 +1023,7 @@ def line_rows(points: FeaturePoints, meas: EdgeMeasurement) -> LineRows:
     normal, offset = meas.axes.normal[f], meas.axes.offset[f]
     pf = meas.palm_found
     if meas.palm is not None and pf.any():
-        rb, re, a = palm_rows(points, meas.prediction.palm_generator[pf])
+        rb, re, a = palm_rows(points, meas.prediction.palm_generator[pf], np.flatnonzero(pf))
         rows_b, rows_e = np.concatenate([rows_b, rb]), np.concatenate([rows_e, re])
         alpha = np.concatenate([alpha, a])
         normal = np.concatenate([normal, meas.palm.normal[pf]])

@@ -11,13 +11,16 @@ from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
 from colorglove_ros.core.synthetic.bare_hand import BareHandSequence
 from colorglove_ros.core.tracking.edge_features import to_grey
 from colorglove_ros.core.tracking.edge_fit import (
+    PALM_ANGLES,
     EdgeFit,
     EdgeTrackerConfig,
     EdgeTrackerError,
     _robust,
     feature_points,
+    line_rows,
     link_axis_residuals,
     measure_features,
+    palm_rows,
     predict_features,
     stack_residuals,
     tip_residuals,
@@ -135,6 +138,37 @@ def test_palm_outline_is_measured_where_the_true_pose_puts_it(rig) -> None:
                                    True)
         r, J, _ = stack_residuals(tracker.points, [cam], [meas], world, tracker.config)
         assert np.abs(J[-2:, 0:3]).sum() > 0
+
+
+@pytest.mark.parametrize('found', [(True, False), (False, True), (True, True)])
+def test_each_found_palm_side_gets_its_own_generator_rows(rig, found: tuple[bool, bool]) -> None:
+    # with both palm sides, a camera that finds only one of them gives that side's line
+    # the rows of that side's generator (not the first side's, nor one row per side)
+    cameras, seq, frames = rig
+    config = EdgeTrackerConfig(palm_sides=('ulnar', 'radial'))
+    tracker = EdgeTracker(seq.synth.model, cameras, config)
+    truth = seq.poses[20]
+    pred = predict_features(tracker.kin, tracker.points, cameras[0], truth, config)
+    meas = measure_features(to_grey(frames[20][0]), pred, config, tracker.points.tip_row)
+    mask = np.array(found)
+    meas = replace(meas, palm_found=mask)
+    lines = line_rows(tracker.points, meas)
+    n_link = lines.num_links
+    A = len(PALM_ANGLES)
+    stride = 2 * A + 1
+    sides = np.flatnonzero(mask)
+    k = pred.palm_generator[sides, 0].astype(np.int64)
+    expected = tracker.points.palm_start + sides * stride + 2 * k
+    assert np.array_equal(lines.base[n_link:], expected)
+    assert np.array_equal(lines.end[n_link:], expected + 1)
+    assert np.array_equal(lines.alpha[n_link:], pred.palm_generator[sides, 1])
+    assert np.array_equal(lines.normal[n_link:], meas.palm.normal[sides])
+    world = tracker.kin.points(truth, tracker.points.point_link, tracker.points.point_local,
+                               True)
+    r, J, w = stack_residuals(tracker.points, [cameras[0]], [meas], world, config)
+    assert len(r) == len(J) == len(w)
+    with pytest.raises(EdgeTrackerError):
+        palm_rows(tracker.points, pred.palm_generator[sides], np.arange(len(sides) + 1))
 
 
 def test_palm_sides_hold_the_wrist_tilt(rig) -> None:
