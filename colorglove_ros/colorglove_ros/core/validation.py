@@ -184,6 +184,7 @@ SEGMENTER_RULES: dict[str, SettingRule] = {
     'junction_max_window_kept': ('float', 0.0, 1.0, False),
     'sleeve_reach': ('float', 0.0, 10.0, False),
     'glove_contact_share': ('float', 0.0, 1.0, False),
+    'glove_contact_min_drop': ('float', 0.0, 1.0, False),
     'scene_colour_min_share': ('float', 0.0, 1.0, False),
     'background_frames': ('int', 0, 100000, False),
     'background_tolerance': ('float', 1.0, 255.0, False),

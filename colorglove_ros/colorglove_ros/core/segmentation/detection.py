@@ -313,17 +313,10 @@ def unsupported_regions(labels: np.ndarray, adjacency: np.ndarray, min_share: fl
 
 def _unsupported(labels: np.ndarray, adjacency: np.ndarray, min_share: float) -> np.ndarray:
     """:func:`unsupported_regions` of a label image with a glove label."""
-    comp, count = compiled_kernels().colour_components(labels, adjacency.shape[0] - 1)
-    n = count + 1
-    outline = np.zeros(n, np.int64)
-    beside = np.zeros(n, np.int64)
-    for a, b, ca, cb in ((labels[:, :-1], labels[:, 1:], comp[:, :-1], comp[:, 1:]),
-                         (labels[:-1], labels[1:], comp[:-1], comp[1:])):
-        differ = a != b                        # the pairs of pixels across a label border
-        a, b, ca, cb = a[differ], b[differ], ca[differ], cb[differ]
-        ok = adjacency[a, b]                   # (background borders nothing)
-        beside += np.bincount(ca[ok], minlength=n) + np.bincount(cb[ok], minlength=n)
-        outline += np.bincount(ca[a > 0], minlength=n) + np.bincount(cb[b > 0], minlength=n)
+    kernels = compiled_kernels()
+    comp, count = kernels.colour_components(labels, adjacency.shape[0] - 1)
+    # (background borders nothing in adjacency)
+    beside, outline = kernels.region_contacts(labels, comp, count, adjacency)
     drop = beside < min_share * np.maximum(outline, 1)
     drop[0] = False
     return drop.take(comp)

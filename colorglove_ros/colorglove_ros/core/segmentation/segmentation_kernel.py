@@ -27,7 +27,7 @@ __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
            'colour_histogram', 'cell_votes', 'near_or_reaching',
            'box_colour_counts', 'clear_cells', 'colour_blobs', 'small_patches_reached',
            'glove_components', 'colour_components', 'cell_labels', 'colour_sums', 'clear_coarse',
-           'surface_regions', 'label_borders',
+           'surface_regions', 'label_borders', 'region_contacts',
            'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
@@ -885,6 +885,39 @@ def small_patches_reached(labels: np.ndarray, num_colors: int, reached: np.ndarr
     _paint(out, n, ry, rx0, rx1, comp, chosen)
 
 
+@numba.njit(**_JIT)
+def region_contacts(labels: np.ndarray, comp: np.ndarray, count: int, adjacency: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """For each component of ``comp`` ((H, W) int32, 0..``count``, e.g.
+    :func:`colour_components` of the 2-D uint8 ``labels``): how many of its pixels'
+    4-neighbours inside the image carry another label, and how many of those a label that
+    ``adjacency`` ((L, L) bool) says borders its own (both (``count`` + 1,) int64; each pair
+    of pixels across a label border counts once for each side, for a side of label 0 in
+    entry 0)."""
+    rows, cols = labels.shape
+    outline = np.zeros(count + 1, np.int64)
+    beside = np.zeros(count + 1, np.int64)
+    for y in range(rows):
+        for x in range(cols):
+            a = labels[y, x]
+            for dy, dx in ((0, 1), (1, 0)):
+                yy, xx = y + dy, x + dx
+                if yy >= rows or xx >= cols:
+                    continue
+                b = labels[yy, xx]
+                if a == b:
+                    continue
+                ca, cb = comp[y, x], comp[yy, xx]
+                if adjacency[a, b]:
+                    beside[ca] += 1
+                    beside[cb] += 1
+                if a > 0:
+                    outline[ca] += 1
+                if b > 0:
+                    outline[cb] += 1
+    return beside, outline
+
+
 def _array(dtype: object, ndim: int, readonly: bool = True, layout: str = 'C') -> object:
     """An array type, C-contiguous or of any strides (``layout`` 'A'); read-only ones take
     writable arrays too."""
@@ -926,6 +959,8 @@ _SIGNATURES = {
                        _array(numba.boolean, 2, layout='A')),
     glove_components: (_array(numba.uint8, 2, layout='A'), numba.int64),
     colour_components: (_array(numba.uint8, 2, layout='A'), numba.int64),
+    region_contacts: (_array(numba.uint8, 2, layout='A'), _array(numba.int32, 2),
+                      numba.int64, _array(numba.boolean, 2, layout='A')),
     small_patches_reached: (_array(numba.uint8, 2, layout='A'), numba.int64,
                             _array(numba.boolean, 2, layout='A'), numba.float64,
                             _array(numba.boolean, 2, False, layout='A')),

@@ -385,7 +385,12 @@ class GloveSegmenter:
     colour borders on the printed glove (``unsupported_regions``; the standard glove's colour
     adjacency, ``core.hand.glove.default_colour_adjacency``) is background, and so are the
     components left with too few colours: a face, wood or petals labelled red, orange and pink
-    meet in pairs the glove never joins, beside or touching the hand.
+    meet in pairs the glove never joins, beside or touching the hand. With
+    ``glove_contact_min_drop`` > 0 the regions are dropped only when they hold at least that
+    share of the region of interest's glove pixels (0: always): clutter beside the hand is
+    many such pixels, while on a glove without clutter the few are its own patches at the
+    silhouette (a fingertip meeting the palm, colours the printed glove never joins), whose
+    loss makes the hand look smaller.
 
     Static background (``background_frames`` > 0, ``core.segmentation.background``): a coarse
     pixel that held its colour that many frames, outside the glove-like pixels, is background;
@@ -467,7 +472,7 @@ class GloveSegmenter:
                  junction_min_share: float = LARGEST_PATCH_WINDOW_SHARE,
                  junction_surfaces_only: int = 0, junction_min_pull: float = 0.0,
                  junction_max_window_kept: float = 0.0, sleeve_reach: float = 0.0,
-                 glove_contact_share: float = 0.0,
+                 glove_contact_share: float = 0.0, glove_contact_min_drop: float = 0.0,
                  scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
                  background_memory: int = 0,
@@ -943,11 +948,13 @@ class GloveSegmenter:
         too few of the colours their colour borders on the glove (``unsupported_regions``
         with ``glove_contact_share``), then without the components left with too few colours
         (:func:`keep_multicolor_components`): skin, wood or petals labelled glove colours
-        beside or touching the hand. Unchanged when off."""
+        beside or touching the hand. Unchanged when off, or when those regions hold less than
+        ``glove_contact_min_drop`` of the glove pixels."""
         if self._adjacency is None:
             return labels
         drop = unsupported_regions(labels, self._adjacency, self.glove_contact_share)
-        if not drop.any():
+        dropped = np.count_nonzero(drop)
+        if not dropped or dropped < self.glove_contact_min_drop * np.count_nonzero(labels):
             return labels
         labels = np.where(drop, np.uint8(0), labels)
         return keep_multicolor_components(labels, self.min_component_colors, min_pixels=2,

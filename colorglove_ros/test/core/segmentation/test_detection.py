@@ -448,6 +448,19 @@ def test_unsupported_regions_drop_clutter_whose_colours_the_glove_never_joins() 
     assert unsupported_regions(lone, adjacency, 0.1)[10:20, 10:20].all()
 
 
+def _with_face_like_stripes(frame: synth.SyntheticFrame) -> np.ndarray:
+    """``frame``'s image with stripes of red, orange and pink (a face, petals) beside and
+    touching the glove's right side."""
+    ys, xs = np.nonzero(frame.labels)
+    image = frame.image_rgb.copy()
+    x0, y0 = int(xs.max()) - 4, int(np.median(ys)) - 30
+    for k, colour in enumerate((1, 7, 9, 7, 1, 7, 9, 7)):     # red, orange, pink stripes
+        stripe = np.zeros(frame.labels.shape, bool)
+        stripe[y0:y0 + 60, x0 + 7 * k:x0 + 7 * k + 7] = True
+        image[stripe & (frame.labels == 0)] = GLOVE_PALETTE_RGB[colour - 1]
+    return image
+
+
 def test_a_face_like_clutter_beside_the_glove_is_dropped_with_glove_contact_share(
         calibration) -> None:
     """A rendered glove with stripes of red, orange and pink beside it (a face, petals):
@@ -460,14 +473,46 @@ def test_a_face_like_clutter_beside_the_glove_is_dropped_with_glove_contact_shar
     plain_on = GloveSegmenter(calibration, glove_contact_share=share).process(frame.image_rgb)
     assert plain.hand_found and plain_on.hand_found
     assert plain_on.crop.half_size == pytest.approx(plain.crop.half_size, rel=0.03)
-    ys, xs = np.nonzero(frame.labels)
-    image = frame.image_rgb.copy()
-    x0, y0 = int(xs.max()) - 4, int(np.median(ys)) - 30
-    for k, colour in enumerate((1, 7, 9, 7, 1, 7, 9, 7)):     # red, orange, pink stripes
-        stripe = np.zeros(frame.labels.shape, bool)
-        stripe[y0:y0 + 60, x0 + 7 * k:x0 + 7 * k + 7] = True
-        image[stripe & (frame.labels == 0)] = GLOVE_PALETTE_RGB[colour - 1]
+    image = _with_face_like_stripes(frame)
     off = GloveSegmenter(calibration).process(image)
     on = GloveSegmenter(calibration, glove_contact_share=share).process(image)
     assert off.crop.half_size > 1.12 * plain.crop.half_size
     assert on.hand_found and on.crop.half_size < 1.05 * plain.crop.half_size
+
+
+#: The sixteenth pass's contact filter with the frame gate of the issue-14 eighteenth pass.
+GATED_CONTACTS = {'glove_contact_share': 0.1, 'glove_contact_min_drop': 0.05}
+
+
+@pytest.mark.parametrize('seed', [1, 4])
+def test_the_gated_contact_filter_leaves_a_glove_without_clutter_whole(calibration,
+                                                                     seed: int) -> None:
+    """Rendered gloves alone one of whose silhouette patches meets only colours the glove
+    never joins to it (a finger over the palm): the ungated filter drops it (glove pixels
+    lost); with ``glove_contact_min_drop`` (the few pixels it would drop are under that share
+    of the glove's) the label image and the observation are the filter-off ones."""
+    camera = synth.default_camera()
+    rng = np.random.default_rng(seed)
+    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
+    q[0:3] = [0.0, 0.0, 0.6]
+    image = synth.render_frame(q, camera, rng, FrameConditions()).image_rgb
+    off, cut, gated = (GloveSegmenter(calibration, **settings).process(image, keep_labels=True)
+                       for settings in ({}, {'glove_contact_share': 0.1}, GATED_CONTACTS))
+    assert off.hand_found and gated.hand_found
+    assert np.count_nonzero((off.label_image > 0) & (cut.label_image == 0)) > 150
+    assert np.array_equal(gated.label_image, off.label_image)
+    assert gated.crop == off.crop and np.array_equal(gated.tiny_labels, off.tiny_labels)
+    assert gated.blobs == off.blobs
+
+
+def test_the_gated_contact_filter_still_drops_face_like_clutter(calibration) -> None:
+    """The face-like stripes beside a rendered glove (as above) are many pixels the filter
+    drops: with the gate (``GATED_CONTACTS``) they go as without it."""
+    frame = _rendered_glove((0.0, 0.0, 0.6))
+    plain = GloveSegmenter(calibration).process(frame.image_rgb)
+    image = _with_face_like_stripes(frame)
+    ungated = GloveSegmenter(calibration, glove_contact_share=0.1).process(image)
+    gated = GloveSegmenter(calibration, **GATED_CONTACTS).process(image)
+    assert GloveSegmenter(calibration).process(image).crop.half_size > 1.12 * plain.crop.half_size
+    assert gated.hand_found and gated.crop == ungated.crop
+    assert gated.crop.half_size < 1.05 * plain.crop.half_size

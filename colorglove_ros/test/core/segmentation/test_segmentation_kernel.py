@@ -549,3 +549,32 @@ def test_label_borders_are_the_cross_erosion_against_dilation(trial: int) -> Non
     np.testing.assert_array_equal(border, want)
     assert tuple(rect) == (cv2.boundingRect(want.view(np.uint8)) if labels.size
                            else (0, 0, 0, 0))
+
+
+@pytest.mark.parametrize('trial', range(20))
+def test_region_contacts_count_each_components_label_borders(trial: int) -> None:
+    """Per component of ``colour_components``: the 4-neighbour pairs across a label border
+    inside the image from each side (its outline, sides of label 0 in entry 0 and not
+    counted as outline) and those whose labels a random adjacency joins, as NumPy counts
+    them pair by pair."""
+    rng = np.random.default_rng([trial, 73])
+    labels = _large_labels(rng, trial)
+    adjacency = rng.random((13, 13)) < 0.4        # (labels up to 12; components of 1..10)
+    adjacency = adjacency | adjacency.T
+    adjacency[0] = adjacency[:, 0] = False
+    comp, count = KERNELS.colour_components(labels, 10)
+    beside, outline = KERNELS.region_contacts(labels, comp, count, adjacency)
+    want_beside = np.zeros(count + 1, np.int64)
+    want_outline = np.zeros(count + 1, np.int64)
+    for a, b, ca, cb in ((labels[:, :-1], labels[:, 1:], comp[:, :-1], comp[:, 1:]),
+                         (labels[:-1], labels[1:], comp[:-1], comp[1:])):
+        differ = a != b
+        a, b, ca, cb = a[differ], b[differ], ca[differ], cb[differ]
+        ok = adjacency[a, b]
+        np.add.at(want_beside, ca[ok], 1)
+        np.add.at(want_beside, cb[ok], 1)
+        np.add.at(want_outline, ca[a > 0], 1)
+        np.add.at(want_outline, cb[b > 0], 1)
+    np.testing.assert_array_equal(beside, want_beside)
+    np.testing.assert_array_equal(outline, want_outline)
+    assert outline.sum() > 0 or len(np.unique(labels)) < 2
