@@ -34,6 +34,14 @@ def test_ik_times_from_status_lines() -> None:
     assert ik_times_ms(statuses) == [4.5, 11.0]
 
 
+def _wait_for_subscribers(publishers: list, timeout_s: float = 10.0) -> None:
+    """Wait until every publisher has a subscriber (the probe), or ``timeout_s`` has passed."""
+    deadline = time.monotonic() + timeout_s
+    while (min(p.get_subscription_count() for p in publishers) == 0
+           and time.monotonic() < deadline):
+        time.sleep(0.05)
+
+
 def _probe_run(topics: tuple[str, ...], topic_of: list[int], stamp_of: Callable[[int], int]
                ) -> tuple[ProbeRecord, list[int]]:
     """Start a probe of ``topics``; publish JointState k on topic ``topic_of[k]``, stamped
@@ -47,10 +55,7 @@ def _probe_run(topics: tuple[str, ...], topic_of: list[int], stamp_of: Callable[
         node = rclpy.create_node('probe_test', context=context)
         qos = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE)
         pubs = [node.create_publisher(JointState, topic, qos) for topic in topics]
-        deadline = time.monotonic() + 10.0
-        while (min(p.get_subscription_count() for p in pubs) == 0
-               and time.monotonic() < deadline):
-            time.sleep(0.05)
+        _wait_for_subscribers(pubs)
         sent = []
         for k, index in enumerate(topic_of):
             stamp = stamp_of(k)
@@ -136,10 +141,7 @@ def test_probe_records_the_stage_topics_stamps_apart_from_the_joint_states() -> 
         pubs = [node.create_publisher(kind, topic, qos) for kind, (topic, _) in
                 zip((HandObservation, HandPoseCandidates), STAGE_OUTPUTS, strict=True)]
         joints = node.create_publisher(JointState, '/hand/joint_states', qos)
-        deadline = time.monotonic() + 10.0
-        while (min(p.get_subscription_count() for p in [*pubs, joints]) == 0
-               and time.monotonic() < deadline):
-            time.sleep(0.05)
+        _wait_for_subscribers([*pubs, joints])
         sent = []
         for k in range(6):
             stamp = time.time_ns() - 20_000_000          # taken 20 ms ago

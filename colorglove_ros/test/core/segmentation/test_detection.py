@@ -213,11 +213,11 @@ def calibration():
     return printed_glove_calibration()
 
 
-def _rendered_glove(wrist_m: tuple[float, float, float]) -> synth.SyntheticFrame:
-    """A rendered glove (the pose of seed 4), fully in view, its wrist at ``wrist_m`` in the
+def _rendered_glove(wrist_m: tuple[float, float, float], seed: int = 4) -> synth.SyntheticFrame:
+    """A rendered glove (the pose of ``seed``), fully in view, its wrist at ``wrist_m`` in the
     camera frame."""
     camera = synth.default_camera()
-    rng = np.random.default_rng(4)
+    rng = np.random.default_rng(seed)
     q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
     q[0:3] = wrist_m
     return synth.render_frame(q, camera, rng, FrameConditions())
@@ -341,11 +341,7 @@ def test_the_gated_trim_leaves_a_glove_without_clutter_whole(calibration, seed: 
     cuts back (glove pixels lost, the crop shrunk): with the shipped gates
     (:func:`_gated_trim`) the label image and the observation are the trim-off ones, pixel
     for pixel."""
-    camera = synth.default_camera()
-    rng = np.random.default_rng(seed)
-    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
-    q[0:3] = [0.0, 0.0, 0.6]
-    image = synth.render_frame(q, camera, rng, FrameConditions()).image_rgb
+    image = _rendered_glove((0.0, 0.0, 0.6), seed).image_rgb
     off, cut, gated = (GloveSegmenter(calibration, **settings).process(image, keep_labels=True)
                        for settings in ({}, JUNCTION_TRIM, _gated_trim()))
     assert off.hand_found and gated.hand_found
@@ -491,11 +487,7 @@ def test_the_gated_contact_filter_leaves_a_glove_without_clutter_whole(calibrati
     never joins to it (a finger over the palm): the ungated filter drops it (glove pixels
     lost); with ``glove_contact_min_drop`` (the few pixels it would drop are under that share
     of the glove's) the label image and the observation are the filter-off ones."""
-    camera = synth.default_camera()
-    rng = np.random.default_rng(seed)
-    q = synth.sample_pose(rng, camera, out_of_frame_prob=0.0)
-    q[0:3] = [0.0, 0.0, 0.6]
-    image = synth.render_frame(q, camera, rng, FrameConditions()).image_rgb
+    image = _rendered_glove((0.0, 0.0, 0.6), seed).image_rgb
     off, cut, gated = (GloveSegmenter(calibration, **settings).process(image, keep_labels=True)
                        for settings in ({}, {'glove_contact_share': 0.1}, GATED_CONTACTS))
     assert off.hand_found and gated.hand_found
