@@ -163,7 +163,8 @@ def observation_seen(source: PoseSource, name: str, seed: int, truth: ScriptedSe
     """The observation features (N, F; ``core.hand.observation_features``, of ``feature_set``)
     of every frame of sequence ``name`` / ``seed`` as ``source`` saw it, for an image
     classifier; the upright set turns each frame by the global rotation of its ``seen`` pose
-    (N, 26; a frame without a finite one, which the detector reads as no hand, by none). A
+    (N, 26; a frame without a finite one is turned as for a zero rotation vector: the detector
+    reads such a frame as no hand and never scores its features). A
     source that records no observation (the noise model) is refused with ``error``."""
     record = getattr(source, 'observation', None)
     if record is None:

@@ -295,8 +295,11 @@ def unsupported_regions(labels: np.ndarray, adjacency: np.ndarray, min_share: fl
     A printed patch meets its neighbours along much of its outline; glove-coloured clutter
     meets background and colours the glove never puts beside its own (a face or a petal
     shading from red through orange to pink), so it has almost no such contacts. Empty with
-    ``min_share`` 0."""
+    ``min_share`` 0; labels above N are background."""
+    adjacency = np.asarray(adjacency, bool)
     labels = np.asarray(labels, np.uint8)
+    if labels.max(initial=0) >= adjacency.shape[0]:
+        labels = np.where(labels < adjacency.shape[0], labels, np.uint8(0))
     out = np.zeros(labels.shape, bool)
     if min_share <= 0 or labels.size == 0:
         return out
@@ -307,7 +310,7 @@ def unsupported_regions(labels: np.ndarray, adjacency: np.ndarray, min_share: fl
     y0, y1, x0, x1 = max(y - 1, 0), min(y + bh + 1, labels.shape[0]), max(x - 1, 0), min(
         x + bw + 1, labels.shape[1])
     out[y0:y1, x0:x1] = _unsupported(np.ascontiguousarray(labels[y0:y1, x0:x1]),
-                                     np.asarray(adjacency, bool), min_share)
+                                     adjacency, min_share)
     return out
 
 

@@ -510,8 +510,9 @@ class GloveSegmenter:
         self._window: tuple[tuple[tuple[float, float], float], tuple[int, int]] | None = None
         self._glove_like_mask: np.ndarray | None = None   # the last search's, coarse
         self._washed_out_turn = 0   # which saturation the next search for a missed glove tries
-        # glove_contact_share > 0: which colours border each other on the printed glove
-        self._adjacency = self._glove_adjacency() if self.glove_contact_share > 0 else None
+        # which colours border each other on the printed glove: built when the glove-contact
+        # filter first runs (glove_contact_share > 0, a public attribute, may be set later)
+        self._adjacency: np.ndarray | None = None
         # learn_in_thread: the static background's learning from this frame, running on
         # the shared worker while the region of interest is segmented (done before
         # :meth:`process` returns)
@@ -950,8 +951,10 @@ class GloveSegmenter:
         (:func:`keep_multicolor_components`): skin, wood or petals labelled glove colours
         beside or touching the hand. Unchanged when off, or when those regions hold less than
         ``glove_contact_min_drop`` of the glove pixels."""
-        if self._adjacency is None:
+        if self.glove_contact_share <= 0:
             return labels
+        if self._adjacency is None:
+            self._adjacency = self._glove_adjacency()
         drop = unsupported_regions(labels, self._adjacency, self.glove_contact_share)
         dropped = np.count_nonzero(drop)
         if not dropped or dropped < self.glove_contact_min_drop * np.count_nonzero(labels):

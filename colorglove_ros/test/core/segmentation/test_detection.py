@@ -476,6 +476,33 @@ def test_a_face_like_clutter_beside_the_glove_is_dropped_with_glove_contact_shar
     assert on.hand_found and on.crop.half_size < 1.05 * plain.crop.half_size
 
 
+def test_unsupported_regions_take_labels_above_the_glove_colours_as_background() -> None:
+    """A label image with values past the adjacency's colours (255, as an unclassified
+    marker): those pixels count as background, as ``colour_components`` takes them, and
+    nothing past the adjacency table is read."""
+    adjacency = default_colour_adjacency()
+    labels = np.zeros((40, 70), np.uint8)
+    labels[4:28, 4:28] = _neighbourly_patchwork(adjacency)
+    labels[4:28, 28:36] = 7                                  # orange beside the patchwork
+    marked = labels.copy()
+    marked[30:38, 4:60] = 255
+    marked[4:28, 36:40] = adjacency.shape[0]                 # the first label past the table
+    assert np.array_equal(unsupported_regions(marked, adjacency, 0.1),
+                          unsupported_regions(labels, adjacency, 0.1))
+
+
+def test_the_contact_filter_turned_on_after_construction_runs(calibration) -> None:
+    """``glove_contact_share`` is a public setting: set on a segmenter built without it, the
+    filter drops the face-like stripes as one built with it does."""
+    image = _with_face_like_stripes(_rendered_glove((0.0, 0.0, 0.6)))
+    built_on = GloveSegmenter(calibration, glove_contact_share=0.1).process(image)
+    later = GloveSegmenter(calibration)
+    later.glove_contact_share = 0.1
+    turned_on = later.process(image)
+    assert turned_on.hand_found and turned_on.crop == built_on.crop
+    assert turned_on.blobs == built_on.blobs
+
+
 #: The sixteenth pass's contact filter with the frame gate of the issue-14 eighteenth pass.
 GATED_CONTACTS = {'glove_contact_share': 0.1, 'glove_contact_min_drop': 0.05}
 
