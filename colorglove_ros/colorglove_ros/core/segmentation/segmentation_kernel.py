@@ -27,7 +27,7 @@ __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
            'colour_histogram', 'cell_votes', 'near_or_reaching',
            'box_colour_counts', 'clear_cells', 'colour_blobs', 'small_patches_reached',
            'glove_components', 'colour_components', 'cell_labels', 'colour_sums', 'clear_coarse',
-           'surface_regions', 'label_borders', 'region_contacts',
+           'surface_regions', 'label_borders', 'region_contacts', 'background_match',
            'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
@@ -918,6 +918,51 @@ def region_contacts(labels: np.ndarray, comp: np.ndarray, count: int, adjacency:
     return beside, outline
 
 
+@numba.njit(inline='always', **_JIT)
+def _within(frame: np.ndarray, colour: np.ndarray, j: int, tolerance: np.float32) -> bool:
+    """Whether the three channels from flat index ``j`` of float32 ``frame`` and ``colour``
+    differ by at most ``tolerance`` each (a NaN matches nothing); no branch, so the loops
+    calling it vectorise."""
+    return ((abs(frame[j] - colour[j]) <= tolerance)
+            & (abs(frame[j + 1] - colour[j + 1]) <= tolerance)
+            & (abs(frame[j + 2] - colour[j + 2]) <= tolerance))
+
+
+@numba.njit(**_JIT)
+def background_match(small: np.ndarray, colour: np.ndarray, matched: np.ndarray, needed: int,
+                     learnt: np.ndarray, glove: np.ndarray, tolerance: np.float32,
+                     frame: np.ndarray, same: np.ndarray, background: np.ndarray) -> int:
+    """The static background's match of one coarse frame (``background.StaticBackground.match``)
+    in three flat passes: ``frame`` ((H, W, 3) float32) = ``small`` ((H, W, 3) uint8);
+    ``same`` ((H, W) bool): every channel of ``frame`` within ``tolerance`` of the running
+    ``colour`` (float32 differences, as ``cv2.absdiff``; a NaN colour matches nothing);
+    ``background`` ((H, W) bool): ``same`` and ``matched`` ((H, W) int32) at least ``needed``,
+    or (with ``learnt``, the colours last learnt, (H, W, 3) float32, or empty) matching
+    ``learnt`` and not in ``glove`` ((H, W) bool, or empty). Returns how many pixels are
+    ``same``."""
+    n = matched.size
+    small_flat, colour_flat, frame_flat = small.reshape(-1), colour.reshape(-1), frame.reshape(-1)
+    matched_flat, same_flat = matched.reshape(-1), same.reshape(-1)
+    back_flat = background.reshape(-1)
+    for i in range(3 * n):
+        frame_flat[i] = np.float32(small_flat[i])
+    count = 0
+    for i in range(n):
+        ok = _within(frame_flat, colour_flat, 3 * i, tolerance)
+        same_flat[i] = ok
+        count += ok
+        back_flat[i] = ok & (matched_flat[i] >= needed)
+    if learnt.shape[0] > 0:
+        learnt_flat, glove_flat = learnt.reshape(-1), glove.reshape(-1)
+        with_glove = glove.shape[0] > 0
+        for i in range(n):
+            uncovered = _within(frame_flat, learnt_flat, 3 * i, tolerance)
+            if with_glove:
+                uncovered = uncovered & ~glove_flat[i]
+            back_flat[i] = back_flat[i] | uncovered
+    return count
+
+
 def _array(dtype: object, ndim: int, readonly: bool = True, layout: str = 'C') -> object:
     """An array type, C-contiguous or of any strides (``layout`` 'A'); read-only ones take
     writable arrays too."""
@@ -964,6 +1009,10 @@ _SIGNATURES = {
     small_patches_reached: (_array(numba.uint8, 2, layout='A'), numba.int64,
                             _array(numba.boolean, 2, layout='A'), numba.float64,
                             _array(numba.boolean, 2, False, layout='A')),
+    background_match: (_array(numba.uint8, 3), _array(numba.float32, 3), _array(numba.int32, 2),
+                       numba.int64, _array(numba.float32, 3), _array(numba.boolean, 2),
+                       numba.float32, _array(numba.float32, 3, False),
+                       _array(numba.boolean, 2, False), _array(numba.boolean, 2, False)),
 }
 
 
