@@ -24,7 +24,7 @@ import numpy as np
 from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
-           'colour_histogram', 'cell_votes', 'near_or_reaching',
+           'colour_histogram', 'rejected_colour_histogram', 'cell_votes', 'near_or_reaching',
            'box_colour_counts', 'clear_cells', 'colour_blobs', 'small_patches_reached',
            'glove_components', 'colour_components', 'cell_labels', 'colour_sums', 'clear_coarse',
            'surface_regions', 'label_borders', 'region_contacts', 'background_match',
@@ -393,6 +393,32 @@ def colour_histogram(image: np.ndarray, where: np.ndarray, index: np.ndarray,
             if where[y, x]:
                 counts[index[0, image[y, x, 0]] | index[1, image[y, x, 1]]
                        | index[2, image[y, x, 2]]] += 1
+    return counts
+
+
+@numba.njit(**_JIT)
+def rejected_colour_histogram(image: np.ndarray, lut: np.ndarray, index: np.ndarray,
+                              kept: np.ndarray, y0: int, x0: int, scene_index: np.ndarray,
+                              size: int) -> np.ndarray:
+    """(``size``,) int64: how many pixels of the (H, W, 3) uint8 ``image`` (any strides) that
+    :func:`classify` labels glove (``lut``, ``index``; no scene colours) and the 2-D uint8
+    ``kept`` (the labels kept, placed at row ``y0``, column ``x0``) does not keep (0 there,
+    or outside it) fall in each quantised colour (``scene_index`` as :func:`classify`'s):
+    :func:`colour_histogram` of those pixels, without their label image."""
+    counts = np.zeros(size, np.int64)
+    rows, cols = image.shape[:2]
+    kept_rows, kept_cols = kept.shape
+    for y in range(rows):
+        ky = y - y0
+        inside_rows = 0 <= ky < kept_rows
+        for x in range(cols):
+            r, g, b = image[y, x, 0], image[y, x, 1], image[y, x, 2]
+            if not lut[index[0, r] | index[1, g] | index[2, b]]:
+                continue
+            kx = x - x0
+            if inside_rows and 0 <= kx < kept_cols and kept[ky, kx]:
+                continue
+            counts[scene_index[0, r] | scene_index[1, g] | scene_index[2, b]] += 1
     return counts
 
 
@@ -982,6 +1008,9 @@ _SIGNATURES = {
                _array(numba.int32, 2), _array(numba.boolean, 1), _array(numba.int32, 2)),
     colour_histogram: (_array(numba.uint8, 3, layout='A'), _array(numba.boolean, 2, layout='A'),
                        _array(numba.int32, 2), numba.int64),
+    rejected_colour_histogram: (_array(numba.uint8, 3, layout='A'), _array(numba.uint8, 1),
+                                _array(numba.int32, 2), _array(numba.uint8, 2, layout='A'),
+                                numba.int64, numba.int64, _array(numba.int32, 2), numba.int64),
     cell_votes: (_array(numba.uint8, 2, layout='A'), _array(numba.int64, 1),
                  _array(numba.int64, 1), numba.int64, numba.int64),
     box_colour_counts: (_array(numba.uint8, 2, layout='A'), _array(numba.int64, 1),
