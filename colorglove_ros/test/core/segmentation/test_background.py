@@ -89,7 +89,8 @@ def test_the_match_kernel_takes_nan_colours_and_float32_tolerances() -> None:
     background needs the count reached or the remembered colour outside the glove."""
     compiled_kernels()
     small = np.array([[[10, 20, 30], [10, 20, 30], [0, 0, 0]]], np.uint8)
-    colour = np.array([[[22.3, 20, 30], [np.nan, 20, 30], [0, 0, 0]]], np.float32)
+    # (the third pixel differs by float32(12.3) exactly: within it in float32, not in float64)
+    colour = np.array([[[22.3, 20, 30], [np.nan, 20, 30], [12.3, 0, 0]]], np.float32)
     learnt = np.array([[[np.nan] * 3, [10, 20, 30], [0, 0, 0]]], np.float32)
     matched = np.array([[5, 0, 2]], np.int32)
     frame = np.empty(small.shape, np.float32)
