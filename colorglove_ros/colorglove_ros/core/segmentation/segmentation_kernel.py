@@ -1,6 +1,7 @@
 """Compiled (numba) kernels of the segmenter's per-pixel loops: the border relabelling's passes
 (:func:`segmenter.relabel_borders`), the mean-shift crop, the colour classification, label
-counts and boxes, the scene colours' histogram, the tiny image's cell votes and cell labels,
+counts and boxes, the scene colours' histogram (of the rejected glove pixels in one pass), the
+static background's match, the tiny image's cell votes and cell labels,
 the colour diversity's box counts, the junction trim's cleared cells and oversized surfaces,
 the light estimate's colour sums, the static background's cleared cells, the label borders,
 and the connected components (8-connected runs of a row joined by union-find) of the blobs,
