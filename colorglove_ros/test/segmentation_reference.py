@@ -5,7 +5,8 @@ spread back to pixels with numpy); and, as they were written with OpenCV's conne
 components and numpy before their compiled passes (issue 19, nineteenth pass), the blobs'
 per-colour components, the glove-like patches, the glove region's reached components, the
 multi-colour component test, the tiny image's cell labels and the junction trim's oversized
-surfaces."""
+surfaces; and the static background's match as numpy wrote it before its compiled pass
+(twenty-first pass)."""
 from __future__ import annotations
 
 import math
@@ -18,7 +19,7 @@ from colorglove_ros.core.segmentation.segmenter import _LINEAR_RGB
 __all__ = ['relabel_borders_reference', 'mean_shift_reference', 'keep_near_junctions_reference',
            'color_components_reference', 'small_patches_reached_reference',
            'near_or_reaching_reference', 'keep_multicolor_components_reference',
-           'cell_labels_reference', 'surface_regions_reference']
+           'cell_labels_reference', 'surface_regions_reference', 'background_match_reference']
 
 _F32 = np.float32
 
@@ -361,3 +362,33 @@ def surface_regions_reference(labels: np.ndarray, candidate: np.ndarray, max_pix
                     continue
             out |= mine
     return out
+
+
+def _max_difference(frame: np.ndarray, colour: np.ndarray) -> np.ndarray:
+    diff = cv2.absdiff(frame, colour)
+    return np.maximum(np.maximum(diff[..., 0], diff[..., 1]), diff[..., 2])
+
+
+def background_match_reference(model: object, small: np.ndarray) -> np.ndarray | None:
+    """``StaticBackground.match`` as it was written in numpy and OpenCV (main before the
+    twenty-first pass), on ``model``'s state: the learnt background or None, and the state
+    it leaves for ``update``."""
+    model._same = model._frame = None
+    if not model.enabled:
+        return None
+    if model._colour is None or model._colour.shape != small.shape:
+        model.reset()
+        return None
+    frame = small.astype(np.float32)
+    same = _max_difference(frame, model._colour) <= model.tolerance
+    if 1.0 - float(same.mean()) > model.max_changed_share:
+        model.reset()
+        return None
+    model._same, model._frame = same, frame
+    learnt = same & (model._matched >= model.frames_needed)
+    if model._learnt is not None:
+        uncovered = _max_difference(frame, model._learnt) <= model.tolerance
+        if model._glove is not None:
+            uncovered &= ~model._glove
+        learnt |= uncovered
+    return learnt if learnt.any() else None

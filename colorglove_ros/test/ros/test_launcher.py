@@ -225,7 +225,8 @@ def test_stereo_launch_file_runs_the_two_camera_graph(monkeypatch: pytest.Monkey
     monkeypatch.setattr(ik_node, 'read_database_build', lambda path: STANDARD_BUILD)
     monkeypatch.setattr(lookup_node, 'PoseLookup', _NoLookup)
     # nor its files to read into the page cache
-    monkeypatch.setattr(lookup_node, 'start_reading_into_page_cache', lambda path: None)
+    monkeypatch.setattr(lookup_node, 'start_reading_into_page_cache',
+                        lambda path, database=None: None)
     rig = load_calibration(STEREO_CALIBRATION).cameras
     assert len(rig) == 2
     with contextlib.ExitStack() as stack:

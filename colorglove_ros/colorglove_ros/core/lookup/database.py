@@ -6,6 +6,7 @@ scikit-learn."""
 from __future__ import annotations
 
 import json
+import mmap
 import os
 import threading
 import zlib
@@ -34,7 +35,7 @@ __all__ = [
     'DATABASE_VERSION', 'MANIFEST_NAME', 'ENTRY_ARRAYS', 'DatabaseError', 'PoseDatabase',
     'DatabaseBuild', 'contents_tag', 'pixel_keys', 'manifest_entry', 'save_database',
     'load_database', 'read_database_build', 'check_hand_length', 'STANDARD_BUILD',
-    'read_into_page_cache', 'start_reading_into_page_cache',
+    'read_into_page_cache', 'start_reading_into_page_cache', 'map_into_process',
 ]
 
 DATABASE_VERSION = 1
@@ -284,22 +285,45 @@ def read_into_page_cache(path: str | Path, chunk_bytes: int = 1 << 24) -> int:
     return total
 
 
-def _read_at_lowest_priority(path: Path) -> None:
-    """:func:`read_into_page_cache` on a thread lowered to nice 19 (Linux threads have their
-    own priority; elsewhere it reads at the process's)."""
+def map_into_process(database: PoseDatabase) -> int:
+    """Read one byte of every page of ``database``'s memory-mapped arrays through their
+    mappings and return the pages read. A page in the page cache but not yet mapped into
+    this process costs a (minor) page fault on its first read, and the re-rank reads rows of
+    the largest arrays at random: in a fresh process the lookups meet tens of such faults each
+    until most rows have been read once. Arrays that are not memory maps are left alone."""
+    pages = 0
+    for name in ENTRY_ARRAYS:
+        arr = getattr(database, name)
+        if not isinstance(arr, np.memmap) or not arr.flags.c_contiguous or not arr.size:
+            continue
+        data = np.asarray(arr).reshape(-1).view(np.uint8)[::mmap.PAGESIZE]
+        data.sum(dtype=np.uint64)      # (the read maps the page; the sum is not used)
+        pages += len(data)
+    return pages
+
+
+def _read_at_lowest_priority(path: Path, database: PoseDatabase | None) -> None:
+    """:func:`map_into_process` of ``database`` (if any), then :func:`read_into_page_cache`,
+    on a thread lowered to nice 19 (Linux threads have their own priority; elsewhere it
+    reads at the process's)."""
     try:
         os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
     except (AttributeError, OSError):
         pass
+    if database is not None:
+        map_into_process(database)
     read_into_page_cache(path)
 
 
-def start_reading_into_page_cache(path: str | Path) -> threading.Thread:
+def start_reading_into_page_cache(path: str | Path, database: PoseDatabase | None = None
+                                  ) -> threading.Thread:
     """:func:`read_into_page_cache` of ``path`` on a daemon thread at the lowest CPU priority,
     started (a node calls it once its database is loaded, so its first lookups after a cold
     start do not wait for the disk, while the reading yields the CPU to the node's work; an
-    error reading is reported by the thread, the lookups are unaffected)."""
-    thread = threading.Thread(target=_read_at_lowest_priority, args=(Path(path),),
+    error reading is reported by the thread, the lookups are unaffected). With ``database``
+    (the one loaded from ``path``) its arrays' pages are first mapped into the process
+    (:func:`map_into_process`), so that the first lookups do not each take the page faults."""
+    thread = threading.Thread(target=_read_at_lowest_priority, args=(Path(path), database),
                               name='database page cache', daemon=True)
     thread.start()
     return thread

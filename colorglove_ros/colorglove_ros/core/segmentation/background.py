@@ -21,10 +21,22 @@ One model per camera stream, fed its frames in order. No rclpy import.
 """
 from __future__ import annotations
 
+from types import ModuleType
+
 import cv2
 import numpy as np
 
 __all__ = ['StaticBackground']
+
+_NO_COLOUR = np.zeros((0, 0, 3), np.float32)   # no learnt colours (the kernels' empty array)
+_NO_MASK = np.zeros((0, 0), bool)               # no glove mask
+
+
+def _kernels() -> ModuleType:
+    """The segmentation's compiled kernels (loaded on the first match, not on import)."""
+    from colorglove_ros.core.segmentation.crop import compiled_kernels
+
+    return compiled_kernels()
 
 
 class StaticBackground:
@@ -65,13 +77,6 @@ class StaticBackground:
         self._colour = self._matched = self._same = self._frame = None
         self._learnt = self._glove = None
 
-    @staticmethod
-    def _max_difference(frame: np.ndarray, colour: np.ndarray) -> np.ndarray:
-        """(h, w) float32: the largest channel difference of ``frame`` (float32 RGB) from
-        ``colour`` (NaN where ``colour`` is)."""
-        diff = cv2.absdiff(frame, colour)
-        return np.maximum(np.maximum(diff[..., 0], diff[..., 1]), diff[..., 2])
-
     def match(self, small: np.ndarray) -> np.ndarray | None:
         """(h, w) bool: the pixels of coarse frame ``small`` (uint8 RGB) that are learnt
         background and still show it; None when nothing is learnt yet (or disabled). Call
@@ -82,18 +87,20 @@ class StaticBackground:
         if self._colour is None or self._colour.shape != small.shape:
             self.reset()
             return None
-        frame = small.astype(np.float32)
-        same = self._max_difference(frame, self._colour) <= self.tolerance
-        if 1.0 - float(same.mean()) > self.max_changed_share:
+        small = np.ascontiguousarray(small, np.uint8)
+        frame = np.empty(small.shape, np.float32)
+        same = np.empty(small.shape[:2], bool)
+        learnt = np.empty(small.shape[:2], bool)
+        # (one compiled pass: the frame as float32, its match, and the learnt background)
+        count = _kernels().background_match(
+            small, self._colour, self._matched, self.frames_needed,
+            _NO_COLOUR if self._learnt is None else self._learnt,
+            _NO_MASK if self._glove is None else self._glove,
+            np.float32(self.tolerance), frame, same, learnt)
+        if 1.0 - count / same.size > self.max_changed_share:
             self.reset()
             return None
         self._same, self._frame = same, frame
-        learnt = same & (self._matched >= self.frames_needed)
-        if self._learnt is not None:    # uncovered as it was when learnt (NaN: never learnt)
-            uncovered = self._max_difference(frame, self._learnt) <= self.tolerance
-            if self._glove is not None:   # ... but not where the glove was a frame ago
-                uncovered &= ~self._glove
-            learnt |= uncovered
         return learnt if learnt.any() else None
 
     def update(self, small: np.ndarray, glove: np.ndarray | None) -> None:

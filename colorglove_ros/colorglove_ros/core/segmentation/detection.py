@@ -31,7 +31,8 @@ __all__ = ['SCENE_COLOUR_BITS', 'colour_diversity', 'glove_region_mask',
            'drop_oversized_components', 'PATCH_OUTLINE_GLOVE_SHARE', 'JUNCTION_WINDOW_PX',
            'JUNCTION_COLORS', 'JUNCTION_STEP', 'LARGEST_PATCH_WINDOW_SHARE', 'junction_mask',
            'junction_window', 'shed_oversized_patches', 'keep_near_junctions',
-           'scene_colour_table', 'border_lines', 'unsupported_regions']
+           'scene_colour_table', 'rejected_scene_colours', 'border_lines',
+           'unsupported_regions']
 
 #: Bits per channel of the quantised colours of :func:`scene_colour_table`.
 SCENE_COLOUR_BITS = 5
@@ -282,6 +283,28 @@ def scene_colour_table(rgb: np.ndarray, bits: int, min_pixels: float,
     else:
         counts = np.bincount(lut_index(np.asarray(rgb, np.uint8).reshape(-1, 3), bits),
                              minlength=1 << (3 * bits))
+    return _frequent(counts, min_pixels)
+
+
+def rejected_scene_colours(image: np.ndarray, lut: np.ndarray, index: np.ndarray,
+                           kept: np.ndarray, origin: tuple[int, int], bits: int,
+                           min_pixels: float) -> np.ndarray:
+    """:func:`scene_colour_table` of the pixels of the (H, W, 3) uint8 ``image`` that the
+    colour table ``lut`` (``color_model.lut_index`` through the per-channel ``index`` (3, 256)
+    int32: ``color_model.index_tables``) labels glove but the labels ``kept`` ((h, w) uint8,
+    0 = not kept; their pixel (0, 0) at ``origin`` (x, y) of ``image``) do not keep: the
+    colours of glove-labelled pixels found to be background. One compiled pass, no label
+    image."""
+    from colorglove_ros.core.segmentation.color_model import index_tables
+
+    counts = compiled_kernels().rejected_colour_histogram(
+        image, lut, index, np.asarray(kept, np.uint8), int(origin[1]), int(origin[0]),
+        index_tables(bits), 1 << (3 * bits))
+    return _frequent(counts, min_pixels)
+
+
+def _frequent(counts: np.ndarray, min_pixels: float) -> np.ndarray:
+    """The quantised colours that at least ``min_pixels`` (and one) pixels fall in."""
     return counts >= max(float(min_pixels), 1.0)
 
 

@@ -1,6 +1,7 @@
 """Compiled (numba) kernels of the segmenter's per-pixel loops: the border relabelling's passes
 (:func:`segmenter.relabel_borders`), the mean-shift crop, the colour classification, label
-counts and boxes, the scene colours' histogram, the tiny image's cell votes and cell labels,
+counts and boxes, the scene colours' histogram (of the rejected glove pixels in one pass), the
+static background's match, the tiny image's cell votes and cell labels,
 the colour diversity's box counts, the junction trim's cleared cells and oversized surfaces,
 the light estimate's colour sums, the static background's cleared cells, the label borders,
 and the connected components (8-connected runs of a row joined by union-find) of the blobs,
@@ -24,10 +25,10 @@ import numpy as np
 from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['UNSURE', 'relabel_passes', 'mean_shift', 'label_boxes', 'classify',
-           'colour_histogram', 'cell_votes', 'near_or_reaching',
+           'colour_histogram', 'rejected_colour_histogram', 'cell_votes', 'near_or_reaching',
            'box_colour_counts', 'clear_cells', 'colour_blobs', 'small_patches_reached',
            'glove_components', 'colour_components', 'cell_labels', 'colour_sums', 'clear_coarse',
-           'surface_regions', 'label_borders', 'region_contacts',
+           'surface_regions', 'label_borders', 'region_contacts', 'background_match',
            'compile_kernels']
 
 #: The label of a reference pixel that is not sure (on a label border, or padding).
@@ -393,6 +394,32 @@ def colour_histogram(image: np.ndarray, where: np.ndarray, index: np.ndarray,
             if where[y, x]:
                 counts[index[0, image[y, x, 0]] | index[1, image[y, x, 1]]
                        | index[2, image[y, x, 2]]] += 1
+    return counts
+
+
+@numba.njit(**_JIT)
+def rejected_colour_histogram(image: np.ndarray, lut: np.ndarray, index: np.ndarray,
+                              kept: np.ndarray, y0: int, x0: int, scene_index: np.ndarray,
+                              size: int) -> np.ndarray:
+    """(``size``,) int64: how many pixels of the (H, W, 3) uint8 ``image`` (any strides) that
+    :func:`classify` labels glove (``lut``, ``index``; no scene colours) and the 2-D uint8
+    ``kept`` (the labels kept, placed at row ``y0``, column ``x0``) does not keep (0 there,
+    or outside it) fall in each quantised colour (``scene_index`` as :func:`classify`'s):
+    :func:`colour_histogram` of those pixels, without their label image."""
+    counts = np.zeros(size, np.int64)
+    rows, cols = image.shape[:2]
+    kept_rows, kept_cols = kept.shape
+    for y in range(rows):
+        ky = y - y0
+        inside_rows = 0 <= ky < kept_rows
+        for x in range(cols):
+            r, g, b = image[y, x, 0], image[y, x, 1], image[y, x, 2]
+            if not lut[index[0, r] | index[1, g] | index[2, b]]:
+                continue
+            kx = x - x0
+            if inside_rows and 0 <= kx < kept_cols and kept[ky, kx]:
+                continue
+            counts[scene_index[0, r] | scene_index[1, g] | scene_index[2, b]] += 1
     return counts
 
 
@@ -918,6 +945,51 @@ def region_contacts(labels: np.ndarray, comp: np.ndarray, count: int, adjacency:
     return beside, outline
 
 
+@numba.njit(inline='always', **_JIT)
+def _within(frame: np.ndarray, colour: np.ndarray, j: int, tolerance: np.float32) -> bool:
+    """Whether the three channels from flat index ``j`` of float32 ``frame`` and ``colour``
+    differ by at most ``tolerance`` each (a NaN matches nothing); no branch, so the loops
+    calling it vectorise."""
+    return ((abs(frame[j] - colour[j]) <= tolerance)
+            & (abs(frame[j + 1] - colour[j + 1]) <= tolerance)
+            & (abs(frame[j + 2] - colour[j + 2]) <= tolerance))
+
+
+@numba.njit(**_JIT)
+def background_match(small: np.ndarray, colour: np.ndarray, matched: np.ndarray, needed: int,
+                     learnt: np.ndarray, glove: np.ndarray, tolerance: np.float32,
+                     frame: np.ndarray, same: np.ndarray, background: np.ndarray) -> int:
+    """The static background's match of one coarse frame (``background.StaticBackground.match``)
+    in three flat passes: ``frame`` ((H, W, 3) float32) = ``small`` ((H, W, 3) uint8);
+    ``same`` ((H, W) bool): every channel of ``frame`` within ``tolerance`` of the running
+    ``colour`` (float32 differences, as ``cv2.absdiff``; a NaN colour matches nothing);
+    ``background`` ((H, W) bool): ``same`` and ``matched`` ((H, W) int32) at least ``needed``,
+    or (with ``learnt``, the colours last learnt, (H, W, 3) float32, or empty) matching
+    ``learnt`` and not in ``glove`` ((H, W) bool, or empty). Returns how many pixels are
+    ``same``."""
+    n = matched.size
+    small_flat, colour_flat, frame_flat = small.reshape(-1), colour.reshape(-1), frame.reshape(-1)
+    matched_flat, same_flat = matched.reshape(-1), same.reshape(-1)
+    back_flat = background.reshape(-1)
+    for i in range(3 * n):
+        frame_flat[i] = np.float32(small_flat[i])
+    count = 0
+    for i in range(n):
+        ok = _within(frame_flat, colour_flat, 3 * i, tolerance)
+        same_flat[i] = ok
+        count += ok
+        back_flat[i] = ok & (matched_flat[i] >= needed)
+    if learnt.shape[0] > 0:
+        learnt_flat, glove_flat = learnt.reshape(-1), glove.reshape(-1)
+        with_glove = glove.shape[0] > 0
+        for i in range(n):
+            uncovered = _within(frame_flat, learnt_flat, 3 * i, tolerance)
+            if with_glove:
+                uncovered = uncovered & ~glove_flat[i]
+            back_flat[i] = back_flat[i] | uncovered
+    return count
+
+
 def _array(dtype: object, ndim: int, readonly: bool = True, layout: str = 'C') -> object:
     """An array type, C-contiguous or of any strides (``layout`` 'A'); read-only ones take
     writable arrays too."""
@@ -937,6 +1009,9 @@ _SIGNATURES = {
                _array(numba.int32, 2), _array(numba.boolean, 1), _array(numba.int32, 2)),
     colour_histogram: (_array(numba.uint8, 3, layout='A'), _array(numba.boolean, 2, layout='A'),
                        _array(numba.int32, 2), numba.int64),
+    rejected_colour_histogram: (_array(numba.uint8, 3, layout='A'), _array(numba.uint8, 1),
+                                _array(numba.int32, 2), _array(numba.uint8, 2, layout='A'),
+                                numba.int64, numba.int64, _array(numba.int32, 2), numba.int64),
     cell_votes: (_array(numba.uint8, 2, layout='A'), _array(numba.int64, 1),
                  _array(numba.int64, 1), numba.int64, numba.int64),
     box_colour_counts: (_array(numba.uint8, 2, layout='A'), _array(numba.int64, 1),
@@ -964,6 +1039,10 @@ _SIGNATURES = {
     small_patches_reached: (_array(numba.uint8, 2, layout='A'), numba.int64,
                             _array(numba.boolean, 2, layout='A'), numba.float64,
                             _array(numba.boolean, 2, False, layout='A')),
+    background_match: (_array(numba.uint8, 3), _array(numba.float32, 3), _array(numba.int32, 2),
+                       numba.int64, _array(numba.float32, 3), _array(numba.boolean, 2),
+                       numba.float32, _array(numba.float32, 3, False),
+                       _array(numba.boolean, 2, False), _array(numba.boolean, 2, False)),
 }
 
 

@@ -48,7 +48,7 @@ from colorglove_ros.core.segmentation.detection import (
     glove_region_mask,
     junction_window,
     keep_near_junctions,
-    scene_colour_table,
+    rejected_scene_colours,
     shed_oversized_patches,
     unsupported_regions,
 )
@@ -541,10 +541,14 @@ class GloveSegmenter:
         """The calibration's labels of ``image`` after the light ``table``, with the
         camera's settled saturation undone (``saturation_rate`` > 0); 0 where ``scene`` (the
         frame's scene colours, :func:`scene_colour_table`) holds the pixel's colour."""
-        lut = self.calibration.lut if self._saturation is None else self._saturation.lut()
         return compiled_kernels().classify(
-            image, lut, index_tables(self.calibration.bits, table),
+            image, self._lut(), index_tables(self.calibration.bits, table),
             _NO_SCENE if scene is None else scene, index_tables(SCENE_COLOUR_BITS))
+
+    def _lut(self) -> np.ndarray:
+        """The colour table :meth:`_classify` labels by: the calibration's, or with the
+        camera's settled saturation undone (``saturation_rate`` > 0)."""
+        return self.calibration.lut if self._saturation is None else self._saturation.lut()
 
     def _reference(self) -> np.ndarray:
         """The glove's reference colours (linear RGB) as this camera shows them: through its
@@ -825,11 +829,13 @@ class GloveSegmenter:
         ``region``; outside it (a followed hand) every pixel classified glove counts."""
         if self.scene_colour_min_share <= 0:
             return None
-        x0, x1, y0, y1 = region
-        rejected = self._classify(small, table) > 0
-        rejected[y0:y1, x0:x1] &= labels == 0
-        return scene_colour_table(small, SCENE_COLOUR_BITS,
-                                  self.scene_colour_min_share * rejected.size, rejected)
+        x0, _, y0, _ = region
+        # (one compiled pass: :meth:`_classify` 's glove pixels less those ``labels`` keep)
+        return rejected_scene_colours(small, self._lut(),
+                                      index_tables(self.calibration.bits, table), labels,
+                                      (x0, y0), SCENE_COLOUR_BITS,
+                                      self.scene_colour_min_share
+                                      * (small.shape[0] * small.shape[1]))
 
     def _small(self, image: np.ndarray) -> tuple[np.ndarray, float, float]:
         """The coarse frame (``image`` downsampled by ``coarse_factor``) and its x and y

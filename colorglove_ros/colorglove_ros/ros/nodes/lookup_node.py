@@ -75,9 +75,10 @@ class LookupNode(Node):
             calibration = load_calibration(resolve_path(calibration_file))
             started = time.perf_counter()
             database = load_database(path)
-            # the memory-mapped arrays into the page cache in the background: from a cold
-            # cache the first lookups would wait for random disk reads
-            self.page_cache_reader = start_reading_into_page_cache(path)
+            # the memory-mapped arrays mapped into this process and read into the page
+            # cache in the background: else the first lookups wait for page faults (and, from a
+            # cold cache, for random disk reads)
+            self.page_cache_reader = start_reading_into_page_cache(path, database)
             check_hand_length(database.build, calibration.hand_length_m, calibration_file, path)
             self.lookup = PoseLookup(database, num_candidates, num_neighbors, threads)
         self.frame_camera = declare_frame_camera(self, calibration.primary)

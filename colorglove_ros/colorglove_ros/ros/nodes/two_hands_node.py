@@ -82,9 +82,10 @@ class TwoHandsNode(Node):
             calibration = load_calibration(resolve_path(calibration_file))
             database_path = declare_database(self)
             database = load_database(database_path)
-            # the memory-mapped arrays into the page cache in the background: from a cold
-            # cache the first lookups would wait for random disk reads
-            self.page_cache_reader = start_reading_into_page_cache(database_path)
+            # the memory-mapped arrays mapped into this process and read into the page
+            # cache in the background: else the first lookups wait for page faults (and, from a
+            # cold cache, for random disk reads)
+            self.page_cache_reader = start_reading_into_page_cache(database_path, database)
             check_hand_length(database.build, calibration.hand_length_m, calibration_file,
                               database_path)
             segmenter = load_segmenter(color_config)

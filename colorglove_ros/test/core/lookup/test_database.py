@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import resource
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,7 @@ from colorglove_ros.core.lookup.database import (
     DatabaseError,
     contents_tag,
     load_database,
+    map_into_process,
     pixel_keys,
     read_into_page_cache,
     save_database,
@@ -163,6 +165,34 @@ def test_every_array_file_is_read_into_the_page_cache(tmp_path: Path) -> None:
     assert not thread.is_alive()
     with pytest.raises(DatabaseError, match='not found'):
         read_into_page_cache(tmp_path / 'nothing_here')
+
+def _faults_reading_every_page(db) -> int:
+    """This thread's minor page faults while one byte of every page of ``db``'s arrays is
+    read through their mappings."""
+    before = resource.getrusage(resource.RUSAGE_THREAD).ru_minflt
+    for name in ('dts', 'pixel_keys', 'tiny', 'codes'):
+        np.asarray(getattr(db, name)).reshape(-1).view(np.uint8)[::4096].sum()
+    return resource.getrusage(resource.RUSAGE_THREAD).ru_minflt - before
+
+
+def test_the_arrays_pages_are_mapped_into_the_process(tmp_path: Path) -> None:
+    """``map_into_process`` reads every page of the memory-mapped arrays through their
+    mappings: afterwards reading them all again takes (almost) no page fault, where a fresh
+    load of the same files (their pages in the page cache, just written) takes one per few
+    pages; so does the reader thread given the database. Arrays in memory are skipped."""
+    save_database(_small_db(1000), tmp_path / 'db')
+    fresh = load_database(tmp_path / 'db')
+    pages = map_into_process(fresh)
+    assert pages >= fresh.dts.nbytes // 4096
+    assert _faults_reading_every_page(fresh) <= 2
+    unmapped = load_database(tmp_path / 'db')
+    assert _faults_reading_every_page(unmapped) >= 5     # (the kernel maps several pages a fault)
+    threaded = load_database(tmp_path / 'db')
+    thread = start_reading_into_page_cache(tmp_path / 'db', threaded)
+    thread.join(10.0)
+    assert not thread.is_alive() and _faults_reading_every_page(threaded) <= 2
+    assert map_into_process(_small_db(5)) == 0        # in memory: nothing to map
+
 
 def _corrupt(path: Path, how: str) -> None:
     manifest = path / 'manifest.json'

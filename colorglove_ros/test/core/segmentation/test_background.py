@@ -3,12 +3,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from segmentation_reference import background_match_reference
 from segmentation_samples import blob_glove_calibration
 
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
 from colorglove_ros.core.pipeline import image_observer
+from colorglove_ros.core.segmentation import segmentation_kernel
 from colorglove_ros.core.segmentation.background import StaticBackground
-from colorglove_ros.core.segmentation.crop import crop_to_tiny
+from colorglove_ros.core.segmentation.crop import compiled_kernels, crop_to_tiny
 from colorglove_ros.core.segmentation.segmenter import GloveSegmenter, SegmentationConfigError
 from colorglove_ros.core.synthetic.blob_glove import (
     BlobConditions,
@@ -21,6 +23,88 @@ def _feed(model: StaticBackground, frame: np.ndarray, glove: np.ndarray | None =
     learnt = model.match(frame)
     model.update(frame, glove)
     return learnt
+
+
+def _frames(rng: np.random.Generator, count: int, shape: tuple[int, int]) -> list[np.ndarray]:
+    """A still scene with sensor noise, a square moving across it, and now and then a jump
+    of most of the frame (which restarts the model) or a frame of another size."""
+    scene = rng.integers(0, 256, (*shape, 3), dtype=np.uint8)
+    frames = []
+    for i in range(count):
+        noise = rng.integers(-14, 15, scene.shape)   # beyond the tolerance on some pixels
+        frame = np.clip(scene.astype(int) + noise * (rng.random(shape) < 0.1)[..., None],
+                        0, 255).astype(np.uint8)
+        y, x = (i * 3) % max(shape[0] - 4, 1), (i * 5) % max(shape[1] - 4, 1)
+        frame[y:y + 4, x:x + 4] = rng.integers(0, 256, 3, dtype=np.uint8)
+        if i % 17 == 16:
+            frame = 255 - frame
+        if i % 23 == 22:
+            frame = np.ascontiguousarray(frame[1:, 1:])
+        frames.append(frame)
+    return frames
+
+
+@pytest.mark.parametrize('seed', range(8))
+def test_the_compiled_match_is_the_numpy_match_bit_for_bit(seed: int) -> None:
+    """The match in one compiled pass (``segmentation_kernel.background_match``) against
+    main's numpy and OpenCV match, frame after frame through the same updates: the learnt
+    background (or None), the frame's match and its float copy, with or without the
+    remembered colours and the glove mask, at a tolerance that float32 cannot hold exactly
+    (the comparison is in float32, as NumPy 2 compares a float32 array with a Python float),
+    on strided frames too."""
+    rng = np.random.default_rng(seed)
+    shape = (int(rng.integers(3, 40)), int(rng.integers(3, 50)))
+    tolerance = (12.0, 12.3, 0.0, 7.7)[seed % 4]
+    settings = dict(frames_needed=int(rng.integers(1, 5)), tolerance=tolerance,
+                    remember=seed % 2 == 0, max_changed_share=(0.5, 0.95)[seed % 3 == 0])
+    model, reference = StaticBackground(**settings), StaticBackground(**settings)
+    matched = 0
+    for i, frame in enumerate(_frames(rng, 60, shape)):
+        if i % 7 == 3:
+            frame = frame[::-1]          # a view with negative strides
+        glove = None if i % 5 == 0 else rng.random(frame.shape[:2]) < 0.2
+        got, want = model.match(frame), background_match_reference(reference, frame)
+        assert (got is None) == (want is None), i
+        if want is not None:
+            matched += 1
+            assert got.dtype == want.dtype and np.array_equal(got, want), i
+        for name in ('_same', '_frame'):
+            a, b = getattr(model, name), getattr(reference, name)
+            assert (a is None) == (b is None), (i, name)
+            if b is not None:
+                assert a.dtype == b.dtype and np.array_equal(a, b), (i, name)
+        model.update(frame, glove)
+        reference.update(frame, glove)
+        for name in ('_colour', '_matched', '_learnt'):
+            a, b = getattr(model, name), getattr(reference, name)
+            assert (a is None) == (b is None)
+            if b is not None:
+                assert np.array_equal(a, b, equal_nan=True), (i, name)
+    assert matched >= 3, matched
+
+
+def test_the_match_kernel_takes_nan_colours_and_float32_tolerances() -> None:
+    """``background_match`` directly: a NaN running or remembered colour matches nothing, the
+    tolerance is compared in float32, the count is of the pixels that match, and the learnt
+    background needs the count reached or the remembered colour outside the glove."""
+    compiled_kernels()
+    small = np.array([[[10, 20, 30], [10, 20, 30], [0, 0, 0]]], np.uint8)
+    # (the third pixel differs by float32(12.3) exactly: within it in float32, not in float64)
+    colour = np.array([[[22.3, 20, 30], [np.nan, 20, 30], [12.3, 0, 0]]], np.float32)
+    learnt = np.array([[[np.nan] * 3, [10, 20, 30], [0, 0, 0]]], np.float32)
+    matched = np.array([[5, 0, 2]], np.int32)
+    frame = np.empty(small.shape, np.float32)
+    same, back = np.empty((1, 3), bool), np.empty((1, 3), bool)
+    count = segmentation_kernel.background_match(
+        small, colour, matched, 3, learnt, np.array([[False, False, True]]),
+        np.float32(12.3), frame, same, back)
+    assert count == 2 and same.tolist() == [[True, False, True]]
+    assert np.array_equal(frame, small.astype(np.float32))
+    assert back.tolist() == [[True, True, False]]     # counted; remembered; glove, count 2 < 3
+    empty3, empty2 = np.zeros((0, 0, 3), np.float32), np.zeros((0, 0), bool)
+    segmentation_kernel.background_match(small, colour, matched, 2, empty3, empty2,
+                                         np.float32(12.3), frame, same, back)
+    assert back.tolist() == [[True, False, True]]
 
 
 def test_a_pixel_that_holds_still_becomes_background_and_a_change_restarts_it() -> None:

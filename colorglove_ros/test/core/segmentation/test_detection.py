@@ -8,12 +8,15 @@ import pytest
 from segmentation_samples import printed_glove_calibration
 
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB, default_colour_adjacency
+from colorglove_ros.core.segmentation.color_model import index_tables
+from colorglove_ros.core.segmentation.crop import compiled_kernels
 from colorglove_ros.core.segmentation.detection import (
     colour_diversity,
     drop_oversized_components,
     glove_region_mask,
     junction_window,
     keep_near_junctions,
+    rejected_scene_colours,
     scene_colour_table,
     shed_oversized_patches,
     unsupported_regions,
@@ -206,6 +209,42 @@ def test_scene_colour_table_counts_quantised_colours() -> None:
     table = scene_colour_table(rgb, 5, 3)
     assert table.shape == (1 << 15,) and table.sum() == 1
     assert table[(200 >> 3) << 10 | (30 >> 3) << 5 | (30 >> 3)]
+
+
+@pytest.mark.parametrize('trial', range(24))
+def test_rejected_scene_colours_are_the_histogram_of_the_classified_less_the_kept(
+        trial: int) -> None:
+    """The scene colours in one compiled pass (``rejected_scene_colours``) against the
+    segmenter's former steps: the image classified whole (``classify``, no scene colours),
+    its glove pixels less those the region's kept labels keep, and their histogram
+    (``scene_colour_table`` with ``where``): the same table for random tables and light
+    corrections, regions anywhere (at the image's edges, the whole image, one pixel), strided
+    images, and thresholds from one pixel up."""
+    rng = np.random.default_rng(trial)
+    h, w = (int(v) for v in rng.integers(1, 50, 2))
+    image = rng.integers(0, 256, (h, w + 3, 3), dtype=np.uint8)
+    image[:, ::2] //= 8                        # repeated colours, so that some reach the count
+    image = image[:, 1:w + 1] if trial % 3 else np.ascontiguousarray(image[:, :w])
+    bits = 4
+    lut = (rng.random(1 << (3 * bits)) < 0.6).astype(np.uint8) * rng.integers(
+        1, 11, 1 << (3 * bits), dtype=np.uint8)
+    light = None if trial % 2 else rng.integers(0, 256, (1, 256, 3), dtype=np.uint8)
+    index = index_tables(bits, light)
+    y0, x0 = int(rng.integers(0, h)), int(rng.integers(0, w))
+    y1, x1 = int(rng.integers(y0 + 1, h + 1)), int(rng.integers(x0 + 1, w + 1))
+    if trial % 8 == 0:
+        y0, x0, y1, x1 = 0, 0, h, w
+    kept = np.where(rng.random((y1 - y0, x1 - x0)) < 0.5, 0,
+                    rng.integers(1, 11, (y1 - y0, x1 - x0))).astype(np.uint8)
+    min_pixels = (0.5, 1.0, 2.0, 0.001 * h * w)[trial % 4]
+    rejected = compiled_kernels().classify(image, lut, index, np.zeros(0, bool),
+                                           index_tables(5)) > 0
+    rejected[y0:y1, x0:x1] &= kept == 0
+    want = scene_colour_table(image, 5, min_pixels, rejected)
+    got = rejected_scene_colours(image, lut, index, kept, (x0, y0), 5, min_pixels)
+    assert got.dtype == want.dtype and np.array_equal(got, want)
+    if min_pixels <= 1.0:            # (not vacuous: every rejected pixel's colour is in)
+        assert want.sum() >= min(1, int(rejected.sum()))
 
 
 @pytest.fixture(scope='module')
