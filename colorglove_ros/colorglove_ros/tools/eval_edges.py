@@ -171,6 +171,15 @@ def main(argv: list[str] | None = None) -> int:
                         help='the tracker\'s silhouette_palm: the unexplained foreground next '
                         'to the palm pulls the whole hand (acts with --background empty; '
                         'default: EdgeTrackerConfig\'s, on)')
+    parser.add_argument('--measurement-rounds', type=int,
+                        default=EdgeTrackerConfig.measurement_rounds,
+                        help='the tracker\'s measurement_rounds: measure-and-fit rounds per '
+                        'tracked frame (default: EdgeTrackerConfig\'s)')
+    parser.add_argument('--fault-round', action=argparse.BooleanOptionalAction,
+                        default=EdgeTrackerConfig.fault_round,
+                        help='the tracker\'s fault_round: a tracked frame whose fit fails a '
+                        'check is measured and fitted once more from that fit (default: '
+                        'EdgeTrackerConfig\'s)')
     parser.add_argument('--max-finger-off-silhouette', type=float,
                         default=EdgeTrackerConfig.max_finger_off_silhouette,
                         help='the tracker\'s finger gate: a frame where a finger other than '
@@ -200,7 +209,9 @@ def _run(args: Any) -> int:
                 if n not in trackers:
                     trackers[n] = EdgeTracker(seq.synth.model, cams_all[:n], EdgeTrackerConfig(
                         finger_refit=args.finger_refit, silhouette_palm=args.silhouette_palm,
-                        max_finger_off_silhouette=args.max_finger_off_silhouette))
+                        max_finger_off_silhouette=args.max_finger_off_silhouette,
+                        measurement_rounds=args.measurement_rounds,
+                        fault_round=args.fault_round))
                 trackers[n].set_backgrounds([None] * n if empty is None else
                                             [BackgroundModel.from_frames([e]) for e in empty[:n]])
                 fig = evaluate_run(trackers[n], [v[:n] for v in views], seq.poses, args.init)
@@ -245,6 +256,8 @@ def _run(args: Any) -> int:
                                             'background': args.background,
                                             'finger_refit': args.finger_refit,
                                             'silhouette_palm': args.silhouette_palm,
+                                            'measurement_rounds': args.measurement_rounds,
+                                            'fault_round': args.fault_round,
                                             'max_finger_off_silhouette':
                                                 args.max_finger_off_silhouette,
                                             'python_loop_s': loop_s, 'load_average': load},

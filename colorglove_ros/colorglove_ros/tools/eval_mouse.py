@@ -354,6 +354,14 @@ def main(argv: list[str] | None = None) -> int:
                         default=EdgeTrackerConfig.silhouette_palm,
                         help='with --source edges and --background empty: the edge tracker\'s '
                         'silhouette_palm (default: EdgeTrackerConfig\'s, on)')
+    parser.add_argument('--measurement-rounds', type=int,
+                        default=EdgeTrackerConfig.measurement_rounds,
+                        help='with --source edges: the tracker\'s measurement_rounds '
+                        '(default: EdgeTrackerConfig\'s)')
+    parser.add_argument('--fault-round', action=argparse.BooleanOptionalAction,
+                        default=EdgeTrackerConfig.fault_round,
+                        help='with --source edges: the tracker\'s fault_round (default: '
+                        'EdgeTrackerConfig\'s)')
     parser.add_argument('--reinit', choices=REINIT_MODES, default=DEFAULT_REINIT,
                         help='with --source edges: (re-)initialise the edge tracker from the '
                         'true pose with the buttons\' joints at rest (default), or from the '
@@ -408,7 +416,9 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                   glove: ScriptedTracker | None) -> int:
     edge_config = EdgeTrackerConfig(finger_refit=args.finger_refit,
                                     silhouette_palm=args.silhouette_palm,
-                                    retry_dofs=tuple(args.retry_dofs))
+                                    retry_dofs=tuple(args.retry_dofs),
+                                    measurement_rounds=args.measurement_rounds,
+                                    fault_round=args.fault_round)
     if args.camera_weights is not None:
         edge_config = replace(edge_config, camera_weights=tuple(args.camera_weights))
     if args.retry_max_wrist_move_mm is not None:
@@ -461,6 +471,9 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'camera_weights': list(edge_config.camera_weights),
                                             'finger_refit': edge_config.finger_refit,
                                             'silhouette_palm': edge_config.silhouette_palm,
+                                            'measurement_rounds':
+                                                edge_config.measurement_rounds,
+                                            'fault_round': edge_config.fault_round,
                                             'retry_dofs': list(edge_config.retry_dofs),
                                             **{name: value if math.isfinite(value) else None
                                                for name, value in (

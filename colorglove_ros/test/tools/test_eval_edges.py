@@ -5,6 +5,7 @@ import json
 
 import pytest
 
+from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
 from colorglove_ros.tools.eval_edges import main
 
 
@@ -44,3 +45,27 @@ def test_the_refits_and_the_palm_pull_are_on_unless_turned_off(tmp_path, flags: 
                  '--json', str(out)]) == 0
     settings = json.loads(out.read_text())['settings']
     assert settings['finger_refit'] is on and settings['silhouette_palm'] is on
+
+
+@pytest.mark.parametrize('flags, rounds, fault', [
+    ([], EdgeTrackerConfig.measurement_rounds, EdgeTrackerConfig.fault_round),
+    (['--measurement-rounds', '1', '--no-fault-round'], 1, False),
+    (['--measurement-rounds', '3', '--fault-round'], 3, True)])
+def test_the_measurement_rounds_and_fault_round_reach_the_tracker(
+        tmp_path, monkeypatch, flags: list[str], rounds: int, fault: bool) -> None:
+    from colorglove_ros.tools import eval_edges
+
+    configs = []
+    tracker = eval_edges.EdgeTracker
+
+    def recording(model, cameras, config=None, backgrounds=None):
+        configs.append(config)
+        return tracker(model, cameras, config, backgrounds)
+
+    monkeypatch.setattr(eval_edges, 'EdgeTracker', recording)
+    out = tmp_path / 'rounds.json'
+    assert main(['--seeds', '1', '--frames', '2', '--speeds', '1', '--cameras', '1', *flags,
+                 '--json', str(out)]) == 0
+    settings = json.loads(out.read_text())['settings']
+    assert settings['measurement_rounds'] == rounds and settings['fault_round'] is fault
+    assert [(c.measurement_rounds, c.fault_round) for c in configs] == [(rounds, fault)]

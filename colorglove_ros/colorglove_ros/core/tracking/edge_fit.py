@@ -189,6 +189,8 @@ class EdgeTrackerConfig:
     camera_weights: tuple[float, ...] = (1.0, 0.25)
     polarity: int = 0
     measurement_rounds: int = 1
+    fault_round: bool = False
+    fault_round_found_fraction: float = 0.0
     gn_iterations: int = 3
     stabilizer: tuple[float, float, float] = (4.0e4, 1.0e3, 200.0)
     tip_weight: float = 1.0
@@ -1172,7 +1174,7 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
              greys: Sequence[np.ndarray | None], q_start: np.ndarray,
              config: EdgeTrackerConfig, rounds: int, polarity: int | None = None,
              silhouettes: Sequence[Silhouette | None] | None = None,
-             held: np.ndarray | None = None) -> EdgeFit:
+             held: np.ndarray | None = None, anchor: np.ndarray | None = None) -> EdgeFit:
     """Fit the pose to the edges of the cameras' grey images (None: no frame from that
     camera): ``rounds`` times predict at the current pose, measure, and take
     ``gn_iterations`` stabilised Gauss-Newton steps on the concatenated residuals with the
@@ -1182,7 +1184,9 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
     same measurements without letting weakly observed DOFs wander. ``silhouettes`` (one per
     camera, None where there is none) add the silhouette residuals and measures (see
     :class:`EdgeTrackerConfig`). ``held`` ((26,) bool): DOFs kept at ``q_start`` (clamped)
-    while the others are fitted."""
+    while the others are fitted. ``anchor`` (26,): the stabiliser's anchor instead of
+    ``q_start`` (clamped), so a fit continued from an earlier fit's pose with the earlier
+    start as anchor takes the same steps as further rounds of that fit."""
     sils = list(silhouettes) if silhouettes is not None else [None] * len(cameras)
     if len(sils) != len(cameras):
         raise EdgeTrackerError(f'{len(cameras)} camera(s) but {len(sils)} silhouette(s)')
@@ -1191,7 +1195,7 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
         if held.shape != (NUM_DOFS,):
             raise EdgeTrackerError(f'held must be {NUM_DOFS} booleans, got {held.shape}')
     q = kin.clamp(np.asarray(q_start, dtype=float))
-    q_anchor = q.copy()
+    q_anchor = q.copy() if anchor is None else kin.clamp(np.asarray(anchor, dtype=float))
     S = np.diag(config.stabilizer_diagonal())
     C = kin.model.coupling_prior() if config.coupling_weight > 0 else None
     iterations = 0

@@ -109,6 +109,7 @@ class EdgeTracker:
         self._retry_dofs = [model.dof_names.index(n) for n in self.config.retry_dofs]
         self._retry_digits = [DIGITS.index(n.split('_')[0]) for n in self.config.retry_dofs]
         self._q: np.ndarray | None = None
+        self.fault_rounds = 0       # frames given the extra measurement round (fault_round)
         self._start_track()
 
     @property
@@ -286,6 +287,11 @@ class EdgeTracker:
                 f'camera, at the marked spot): {why}', fit, hold_frames=held)
         fit = fit_pose(self.kin, self.points, self.cameras, greys, self._q, cfg,
                        cfg.measurement_rounds, silhouettes=silhouettes)
+        if cfg.fault_round and (fit.found_fraction < cfg.fault_round_found_fraction
+                                or self._check_fit(fit)[0]):
+            fit = fit_pose(self.kin, self.points, self.cameras, greys, fit.q, cfg, 1,
+                           silhouettes=silhouettes, anchor=self._q)
+            self.fault_rounds += 1
         if cfg.finger_refit:
             fit = self._refit_digits(greys, silhouettes, fit)
         kind, reason = self._check_fit(fit)
