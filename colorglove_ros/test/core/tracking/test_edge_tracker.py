@@ -886,6 +886,7 @@ def test_the_fault_round_measures_a_faulted_fit_again(rig, monkeypatch,
     out = tracker.update(half_blind)
     assert tracker._check_fit(calls[0][3])[0] == 'coverage'
     assert out.q is None and out.reason.startswith('poor fit') and not out.lost
+    assert 0.0 < out.thread_cpu_ms <= out.cpu_ms + 1.0     # the tracker's own thread
     if not fault_round:
         assert len(calls) == 1 and tracker.fault_rounds == 0
         return
