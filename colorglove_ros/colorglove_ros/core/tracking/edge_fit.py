@@ -105,6 +105,13 @@ class EdgeTrackerConfig:
     of those found is small) is coasted through, up to ``coast_patience`` frames in a row
     (no pose published, the track kept), and ``resume_frames`` good frames must follow before
     the tracker publishes again; other bad frames count toward ``loss_patience``.
+    ``measurement_rounds``: measure-and-fit rounds per tracked frame (each measures the edges
+    at the pose the previous round reached). ``fault_round``: a tracked frame whose fit fails
+    a check (too few links found, residual or silhouette drift) is measured and fitted once
+    more from that fit's pose, the stabiliser still anchored at the previous frame's pose (as
+    a further round would be), before the finger re-fits and the checks judge it: the first
+    fit is often close enough for the second measurement to find the links the first missed
+    (the 45-degree camera's above all); a fit that still fails publishes nothing.
     Link slices hidden behind the palm (:func:`_behind_palm`, points within
     ``palm_occlusion_px``; 0 turns it off) are not searched nor counted as missing.
     ``camera_weights`` scale each camera's residual weights in the fit
@@ -190,7 +197,6 @@ class EdgeTrackerConfig:
     polarity: int = 0
     measurement_rounds: int = 1
     fault_round: bool = False
-    fault_round_found_fraction: float = 0.0
     gn_iterations: int = 3
     stabilizer: tuple[float, float, float] = (4.0e4, 1.0e3, 200.0)
     tip_weight: float = 1.0

@@ -8,7 +8,8 @@ fingers slightly spread, palm to the primary camera, wrist at the marked spot
 ``init_hold_frames`` frames in a row while moving less than ``init_hold_tolerance_m`` --
 or until :meth:`EdgeTracker.initialize` gives it a pose (e.g. the glove tracker's). While
 tracking, a frame whose fit leaves too few links found or too large a residual gives no
-pose; ``loss_patience`` such frames in a row declare the track lost and the tracker waits
+pose (with ``fault_round`` only after one more measurement round from its fit has failed
+too); ``loss_patience`` such frames in a row declare the track lost and the tracker waits
 for re-initialisation. A frame whose only fault is coverage (too few links found, a small
 residual on those found) can instead be coasted through for ``coast_patience`` frames (off by
 default), publishing nothing and keeping the track. With a background model per camera
@@ -290,8 +291,8 @@ class EdgeTracker:
                 f'camera, at the marked spot): {why}', fit, hold_frames=held)
         fit = fit_pose(self.kin, self.points, self.cameras, greys, self._q, cfg,
                        cfg.measurement_rounds, silhouettes=silhouettes)
-        if cfg.fault_round and (fit.found_fraction < cfg.fault_round_found_fraction
-                                or self._check_fit(fit)[0]):
+        if cfg.fault_round and self._check_fit(fit)[0]:
+            # measured again where the first fit went, anchored where the frame started
             fit = fit_pose(self.kin, self.points, self.cameras, greys, fit.q, cfg, 1,
                            silhouettes=silhouettes, anchor=self._q)
             self.fault_rounds += 1
