@@ -183,6 +183,10 @@ def main(argv: list[str] | None = None) -> int:
                         default=EdgeTrackerConfig.measurement_rounds,
                         help='the tracker\'s measurement_rounds: measure-and-fit rounds per '
                         'tracked frame (default: EdgeTrackerConfig\'s)')
+    parser.add_argument('--min-camera-found-fraction', type=float,
+                        default=EdgeTrackerConfig.min_camera_found_fraction,
+                        help='the tracker\'s min_camera_found_fraction: share of its usable '
+                        'links each camera must find (default: EdgeTrackerConfig\'s)')
     parser.add_argument('--fault-round', action=argparse.BooleanOptionalAction,
                         default=EdgeTrackerConfig.fault_round,
                         help='the tracker\'s fault_round: a tracked frame whose fit fails a '
@@ -219,7 +223,8 @@ def _run(args: Any) -> int:
                         finger_refit=args.finger_refit, silhouette_palm=args.silhouette_palm,
                         max_finger_off_silhouette=args.max_finger_off_silhouette,
                         measurement_rounds=args.measurement_rounds,
-                        fault_round=args.fault_round))
+                        fault_round=args.fault_round,
+                        min_camera_found_fraction=args.min_camera_found_fraction))
                 trackers[n].set_backgrounds([None] * n if empty is None else
                                             [BackgroundModel.from_frames([e]) for e in empty[:n]])
                 fig = evaluate_run(trackers[n], [v[:n] for v in views], seq.poses, args.init)
@@ -268,6 +273,8 @@ def _run(args: Any) -> int:
                                             'silhouette_palm': args.silhouette_palm,
                                             'measurement_rounds': args.measurement_rounds,
                                             'fault_round': args.fault_round,
+                                            'min_camera_found_fraction':
+                                                args.min_camera_found_fraction,
                                             'max_finger_off_silhouette':
                                                 args.max_finger_off_silhouette,
                                             'python_loop_s': loop_s, 'load_average': load},

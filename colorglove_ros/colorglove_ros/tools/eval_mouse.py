@@ -358,6 +358,10 @@ def main(argv: list[str] | None = None) -> int:
                         default=EdgeTrackerConfig.measurement_rounds,
                         help='with --source edges: the tracker\'s measurement_rounds '
                         '(default: EdgeTrackerConfig\'s)')
+    parser.add_argument('--min-camera-found-fraction', type=float,
+                        default=EdgeTrackerConfig.min_camera_found_fraction,
+                        help='with --source edges: the tracker\'s min_camera_found_fraction: share of its usable '
+                        'links each camera must find (default: EdgeTrackerConfig\'s)')
     parser.add_argument('--fault-round', action=argparse.BooleanOptionalAction,
                         default=EdgeTrackerConfig.fault_round,
                         help='with --source edges: the tracker\'s fault_round (default: '
@@ -418,7 +422,8 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                     silhouette_palm=args.silhouette_palm,
                                     retry_dofs=tuple(args.retry_dofs),
                                     measurement_rounds=args.measurement_rounds,
-                                    fault_round=args.fault_round)
+                                    fault_round=args.fault_round,
+                                    min_camera_found_fraction=args.min_camera_found_fraction)
     if args.camera_weights is not None:
         edge_config = replace(edge_config, camera_weights=tuple(args.camera_weights))
     if args.retry_max_wrist_move_mm is not None:
@@ -474,6 +479,8 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'measurement_rounds':
                                                 edge_config.measurement_rounds,
                                             'fault_round': edge_config.fault_round,
+                                            'min_camera_found_fraction':
+                                                edge_config.min_camera_found_fraction,
                                             'retry_dofs': list(edge_config.retry_dofs),
                                             **{name: value if math.isfinite(value) else None
                                                for name, value in (

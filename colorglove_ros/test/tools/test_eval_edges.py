@@ -49,12 +49,16 @@ def test_the_refits_and_the_palm_pull_are_on_unless_turned_off(tmp_path, flags: 
     assert settings['finger_refit'] is on and settings['silhouette_palm'] is on
 
 
-@pytest.mark.parametrize('flags, rounds, fault', [
-    ([], EdgeTrackerConfig.measurement_rounds, EdgeTrackerConfig.fault_round),
-    (['--measurement-rounds', '1', '--no-fault-round'], 1, False),
-    (['--measurement-rounds', '3', '--fault-round'], 3, True)])
+@pytest.mark.parametrize('flags, rounds, fault, camera', [
+    ([], EdgeTrackerConfig.measurement_rounds, EdgeTrackerConfig.fault_round,
+     EdgeTrackerConfig.min_camera_found_fraction),
+    (['--measurement-rounds', '1', '--no-fault-round', '--min-camera-found-fraction', '0.25'],
+     1, False, 0.25),
+    (['--measurement-rounds', '3', '--fault-round', '--min-camera-found-fraction', '0.1'],
+     3, True, 0.1)])
 def test_the_measurement_rounds_and_fault_round_reach_the_tracker(
-        tmp_path, monkeypatch, flags: list[str], rounds: int, fault: bool) -> None:
+        tmp_path, monkeypatch, flags: list[str], rounds: int, fault: bool,
+        camera: float) -> None:
     from colorglove_ros.tools import eval_edges
 
     configs = []
@@ -71,7 +75,9 @@ def test_the_measurement_rounds_and_fault_round_reach_the_tracker(
     report = json.loads(out.read_text())
     settings = report['settings']
     assert settings['measurement_rounds'] == rounds and settings['fault_round'] is fault
-    assert [(c.measurement_rounds, c.fault_round) for c in configs] == [(rounds, fault)]
+    assert settings['min_camera_found_fraction'] == camera
+    assert [(c.measurement_rounds, c.fault_round, c.min_camera_found_fraction)
+            for c in configs] == [(rounds, fault, camera)]
     row = report['rows'][0]
     assert isinstance(row['fault_rounds'], int) and row['fault_rounds'] >= 0
     assert 'thread_cpu_ms_mean' in row

@@ -214,14 +214,18 @@ def test_glove_tracker_output_reaches_the_mouse_with_gaps_where_it_found_no_hand
     assert row['frames_with_pose'] == len(Q) - len(range(0, len(Q), 3))
 
 
-@pytest.mark.parametrize('flags, rounds, fault', [
-    ([], EdgeTrackerConfig.measurement_rounds, EdgeTrackerConfig.fault_round),
-    (['--measurement-rounds', '1', '--no-fault-round'], 1, False),
-    (['--measurement-rounds', '3', '--fault-round'], 3, True)])
+@pytest.mark.parametrize('flags, rounds, fault, camera', [
+    ([], EdgeTrackerConfig.measurement_rounds, EdgeTrackerConfig.fault_round,
+     EdgeTrackerConfig.min_camera_found_fraction),
+    (['--measurement-rounds', '1', '--no-fault-round', '--min-camera-found-fraction', '0.25'],
+     1, False, 0.25),
+    (['--measurement-rounds', '3', '--fault-round', '--min-camera-found-fraction', '0.1'],
+     3, True, 0.1)])
 def test_the_edge_trackers_rounds_reach_its_settings(tmp_path, flags: list[str], rounds: int,
-                                                     fault: bool) -> None:
+                                                     fault: bool, camera: float) -> None:
     out = tmp_path / 'mouse.json'
     assert eval_mouse_main(['--source', 'noise', '--seeds', '0', '--seconds', '2', *flags,
                             '--json', str(out)]) == 0
     settings = json.loads(out.read_text())['settings']
     assert settings['measurement_rounds'] == rounds and settings['fault_round'] is fault
+    assert settings['min_camera_found_fraction'] == camera
