@@ -360,8 +360,9 @@ def main(argv: list[str] | None = None) -> int:
                         '(default: EdgeTrackerConfig\'s)')
     parser.add_argument('--min-camera-found-fraction', type=float,
                         default=EdgeTrackerConfig.min_camera_found_fraction,
-                        help='with --source edges: the tracker\'s min_camera_found_fraction: share of its usable '
-                        'links each camera must find (default: EdgeTrackerConfig\'s)')
+                        help='with --source edges: the tracker\'s min_camera_found_fraction: '
+                        'share of its usable links each camera must find (default: '
+                        'EdgeTrackerConfig\'s)')
     parser.add_argument('--fault-round', action=argparse.BooleanOptionalAction,
                         default=EdgeTrackerConfig.fault_round,
                         help='with --source edges: the tracker\'s fault_round (default: '
