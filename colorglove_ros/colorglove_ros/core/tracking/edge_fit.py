@@ -98,7 +98,9 @@ class EdgeTrackerConfig:
     px^2 per unit^2: the larger, the smaller and steadier each Gauss-Newton step.
     ``robust_loss`` with ``huber_px`` sets the residual weights (:func:`_robust`).
     ``min_found_fraction`` of the usable links must be found over all cameras together and
-    ``min_camera_found_fraction`` in each camera for a fit to count as good.
+    ``min_camera_found_fraction`` in each camera for a fit to count as good (the 45-degree
+    camera of the stereo rig often finds one of its links while the primary finds all of
+    theirs, at poses as good as their neighbours': 0.1 lets one of up to ten pass).
     ``palm_sides`` are the palm outline sides measured (``PALM_SIDES``; empty: the paper's
     link and tip features only), on ``palm_slice_range`` of each side, weighted
     ``palm_weight``. A tracked frame whose only fault is too few links found (the residual
@@ -106,7 +108,10 @@ class EdgeTrackerConfig:
     (no pose published, the track kept), and ``resume_frames`` good frames must follow before
     the tracker publishes again; other bad frames count toward ``loss_patience``.
     ``measurement_rounds``: measure-and-fit rounds per tracked frame (each measures the edges
-    at the pose the previous round reached). ``fault_round``: a tracked frame whose fit fails
+    at the pose the previous round reached; two by default, with ``fault_round`` and
+    ``min_camera_found_fraction`` 0.1: with them the two-camera bare-hand runs and fingertips
+    and the 3-D mouse's tuning clicks were better than with one round, docs/RESULTS.md,
+    DigitEyes eighteenth pass). ``fault_round``: a tracked frame whose fit fails
     a check (too few links found, residual or silhouette drift) is measured and fitted once
     more from that fit's pose, the stabiliser still anchored at the previous frame's pose (as
     a further round would be), before the finger re-fits and the checks judge it: the first
@@ -195,8 +200,8 @@ class EdgeTrackerConfig:
     palm_weight: float = 1.0
     camera_weights: tuple[float, ...] = (1.0, 0.25)
     polarity: int = 0
-    measurement_rounds: int = 1
-    fault_round: bool = False
+    measurement_rounds: int = 2
+    fault_round: bool = True
     gn_iterations: int = 3
     stabilizer: tuple[float, float, float] = (4.0e4, 1.0e3, 200.0)
     tip_weight: float = 1.0
@@ -208,7 +213,7 @@ class EdgeTrackerConfig:
     occlusion_margin_px: float = 2.0
     palm_occlusion_px: float = 10.0
     min_found_fraction: float = 0.6
-    min_camera_found_fraction: float = 0.25
+    min_camera_found_fraction: float = 0.1
     max_rms_px: float = 3.0
     camera_check: bool = False
     max_camera_disagreement_mm: float = 10.0

@@ -895,3 +895,17 @@ def test_the_fault_round_measures_a_faulted_fit_again(rig, monkeypatch,
     assert np.allclose(start0, previous) and anchor0 is None
     assert np.allclose(start1, first.q) and rounds1 == 1 and np.allclose(anchor1, previous)
     assert out.fit is second and np.allclose(tracker.pose, second.q)
+
+
+def test_the_defaults_measure_twice_retry_faults_and_let_one_link_of_ten_pass(rig) -> None:
+    """The defaults: two measurement rounds, the fault round, and a camera that finds one of
+    up to ten of its usable links (the 45-degree camera, the primary finding all of its own)
+    passes the per-camera coverage check; one that finds none does not."""
+    cameras, seq, _ = rig
+    config = EdgeTrackerConfig()
+    assert config.measurement_rounds == 2 and config.fault_round
+    tracker = EdgeTracker(seq.synth.model, cameras, config)
+    q = seq.poses[20]
+    assert tracker._check_fit(EdgeFit(q, 1.0, (14, 1), (14, 8), (5, 1), 3)) == ('', '')
+    assert tracker._check_fit(EdgeFit(q, 1.0, (14, 1), (14, 11), (5, 1), 3))[0] == 'coverage'
+    assert tracker._check_fit(EdgeFit(q, 1.0, (14, 0), (14, 5), (5, 1), 3))[0] == 'coverage'
