@@ -22,7 +22,10 @@ unexplained foreground next to the palm pulls the whole hand) are on, as in
 act only with silhouettes). With silhouettes and ``--max-finger-off-silhouette``
 below 1 (off by default) the tracker also withholds a frame where a finger's axis lies off the
 silhouette (the track is kept): ``finger_withheld`` counts those frames, which break the runs
-of published frames.
+of published frames. ``--measurement-rounds``, ``--fault-round`` and
+``--min-camera-found-fraction`` set the tracker's rounds per frame, its extra round on a
+faulted frame (``fault_rounds`` counts those frames) and its per-camera coverage check
+(default ``EdgeTrackerConfig``'s).
 
 Seeds: the tracker was tuned on seeds 1-8 (``TUNING_SEEDS``) and checked on seeds 21-24,
 31-36, 41-46, 51-56, 61-66 and 71-74 (``CHECK_SEEDS``, a fresh set each pass); the reported figures

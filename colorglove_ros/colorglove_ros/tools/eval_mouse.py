@@ -34,7 +34,10 @@ silhouettes did not raise the click figures on tuning seeds 5-7, docs/RESULTS.md
 with them the tracker's ``finger_refit`` and ``silhouette_palm`` act (on, as in
 ``EdgeTrackerConfig``; ``--no-finger-refit``, ``--no-silhouette-palm`` turn them off);
 ``--retry-dofs`` sets its ``retry_dofs`` (off by default), with
-``--retry-max-wrist-move-mm`` and ``--retry-rest-margin-px`` its retry guards. The mouse is
+``--retry-max-wrist-move-mm`` and ``--retry-rest-margin-px`` its retry guards;
+``--measurement-rounds``, ``--fault-round`` and ``--min-camera-found-fraction`` its rounds per
+frame, its extra round on a faulted frame and its per-camera coverage check (default
+``EdgeTrackerConfig``'s). The mouse is
 fed each pose's edge residual (as ``edge_tracker_node``'s status line gives it to
 ``mouse_node``), so ``--press-max-residual-ratio`` sets its press gate
 (``core.tracking.mouse``).
