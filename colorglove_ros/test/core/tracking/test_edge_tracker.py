@@ -570,10 +570,11 @@ def test_a_finger_refit_that_fails_backs_off(rig, monkeypatch) -> None:
     calls = _count_fits(monkeypatch)
     fits, poses = {}, {}
     for backoff in (0, 1):
-        # (the palm's pull, on by default, off: it moves the hand toward the blob too)
+        # (the palm's pull, on by default, off: it moves the hand toward the blob too; the
+        # fault round off: the frame's own fit is one call)
         tracker = EdgeTracker(model, cameras, EdgeTrackerConfig(
             finger_refit=True, silhouette_palm=False, finger_refit_backoff=backoff,
-            loss_patience=10),
+            loss_patience=10, fault_round=False),
             _backgrounds(frames))
         tracker.initialize(truth)
         fits[backoff], poses[backoff] = [], []
@@ -602,7 +603,7 @@ def test_the_finger_refit_budget_bounds_the_refits(rig, monkeypatch) -> None:
     for budget in (0.0, 0.5):
         tracker = EdgeTracker(model, cameras, EdgeTrackerConfig(
             finger_refit=True, finger_refit_budget=budget, finger_refit_burst=2,
-            loss_patience=10), _backgrounds(frames))
+            loss_patience=10, fault_round=False), _backgrounds(frames))
         tracker.initialize(truth)
         calls[0] = 0
         for _ in range(5):
