@@ -8,7 +8,9 @@ tracker starts from there by itself (``--init hold``, default) or from the true 
 publishes a pose for: finger joint-angle error, fingertip 3-D error (absolute, and relative to
 the wrist: wrist translation removed, rotation kept), wrist depth error, the longest run of
 consecutive published frames, frames from the first initialisation to the first loss, and the
-tracker's time per frame (tracking frames, this process).
+tracker's time per frame (tracking frames: wall clock, this process's CPU and the CPU of the
+thread that runs the tracker, which leaves out other threads' work) and the frames given the
+tracker's ``fault_round``.
 
 Silhouettes (``--background empty``, default): each camera's background model is made from
 one frame of its empty scene (``BareHandSequence.render_empty_views``: what a user captures
@@ -20,7 +22,10 @@ unexplained foreground next to the palm pulls the whole hand) are on, as in
 act only with silhouettes). With silhouettes and ``--max-finger-off-silhouette``
 below 1 (off by default) the tracker also withholds a frame where a finger's axis lies off the
 silhouette (the track is kept): ``finger_withheld`` counts those frames, which break the runs
-of published frames.
+of published frames. ``--measurement-rounds``, ``--fault-round`` and
+``--min-camera-found-fraction`` set the tracker's rounds per frame, its extra round on a
+faulted frame (``fault_rounds`` counts those frames) and its per-camera coverage check
+(default ``EdgeTrackerConfig``'s).
 
 Seeds: the tracker was tuned on seeds 1-8 (``TUNING_SEEDS``) and checked on seeds 21-24,
 31-36, 41-46, 51-56, 61-66 and 71-74 (``CHECK_SEEDS``, a fresh set each pass); the reported figures
@@ -70,11 +75,12 @@ TARGETS = (
 
 def sequence_figures(model: HandModel, truth: np.ndarray, estimates: Sequence[np.ndarray | None],
                      times_ms: Sequence[float], lost: Sequence[bool],
-                     cpu_ms: Sequence[float] = ()) -> dict[str, Any]:
+                     cpu_ms: Sequence[float] = (),
+                     thread_cpu_ms: Sequence[float] = ()) -> dict[str, Any]:
     """Error and continuity figures of one run: ``estimates[i]`` is the published pose of
     frame i or None, ``truth`` (N, 26) the true poses, ``lost[i]`` whether frame i declared a
-    loss, ``times_ms`` and ``cpu_ms`` the tracker's wall-clock and CPU time on the frames it
-    published."""
+    loss, ``times_ms``, ``cpu_ms`` and ``thread_cpu_ms`` the tracker's wall-clock, process CPU
+    and calling-thread CPU time on the frames it published."""
     published = [i for i, q in enumerate(estimates) if q is not None]
     out: dict[str, Any] = {'frames': len(truth), 'published': len(published)}
     runs, run = [], 0
@@ -92,7 +98,7 @@ def sequence_figures(model: HandModel, truth: np.ndarray, estimates: Sequence[np
     if not published:
         out.update({k: math.nan for k in ('joint_deg', 'fingertip_mm', 'fingertip_rel_wrist_mm',
                                           'depth_mm', 'time_ms_mean', 'time_ms_p95',
-                                          'cpu_ms_mean')})
+                                          'cpu_ms_mean', 'thread_cpu_ms_mean')})
         return out
     Q = np.stack([estimates[i] for i in published])
     T = truth[published]
@@ -106,17 +112,21 @@ def sequence_figures(model: HandModel, truth: np.ndarray, estimates: Sequence[np
     out['time_ms_mean'] = float(np.mean(times_ms)) if times_ms else math.nan
     out['time_ms_p95'] = float(np.percentile(times_ms, 95)) if times_ms else math.nan
     out['cpu_ms_mean'] = float(np.mean(cpu_ms)) if len(cpu_ms) else math.nan
+    out['thread_cpu_ms_mean'] = float(np.mean(thread_cpu_ms)) if len(thread_cpu_ms) \
+        else math.nan
     return out
 
 
 def evaluate_run(tracker: EdgeTracker, images: Sequence[Sequence[np.ndarray]],
                  truth: np.ndarray, init: str) -> dict[str, Any]:
     """Run a fresh tracker over a rendered sequence (``images[i]`` one image per tracker
-    camera) and return :func:`sequence_figures`."""
+    camera) and return :func:`sequence_figures`, with the frames the tracker withheld for a
+    finger and those it gave its ``fault_round``."""
     tracker.reset()
     if init == 'pose':
         tracker.initialize(truth[0])
-    estimates, times, cpu, lost = [], [], [], []
+    fault_rounds = tracker.fault_rounds
+    estimates, times, cpu, thread_cpu, lost = [], [], [], [], []
     withheld = 0
     for frame in images:
         result = tracker.update(frame)
@@ -126,8 +136,9 @@ def evaluate_run(tracker: EdgeTracker, images: Sequence[Sequence[np.ndarray]],
         if result.q is not None:
             times.append(result.time_ms)
             cpu.append(result.cpu_ms)
-    return {**sequence_figures(tracker.model, truth, estimates, times, lost, cpu),
-            'finger_withheld': withheld}
+            thread_cpu.append(result.thread_cpu_ms)
+    return {**sequence_figures(tracker.model, truth, estimates, times, lost, cpu, thread_cpu),
+            'finger_withheld': withheld, 'fault_rounds': tracker.fault_rounds - fault_rounds}
 
 
 def _mean_rows(rows: list[dict[str, Any]], keys: Sequence[str]) -> dict[str, Any]:
@@ -171,6 +182,19 @@ def main(argv: list[str] | None = None) -> int:
                         help='the tracker\'s silhouette_palm: the unexplained foreground next '
                         'to the palm pulls the whole hand (acts with --background empty; '
                         'default: EdgeTrackerConfig\'s, on)')
+    parser.add_argument('--measurement-rounds', type=int,
+                        default=EdgeTrackerConfig.measurement_rounds,
+                        help='the tracker\'s measurement_rounds: measure-and-fit rounds per '
+                        'tracked frame (default: EdgeTrackerConfig\'s)')
+    parser.add_argument('--min-camera-found-fraction', type=float,
+                        default=EdgeTrackerConfig.min_camera_found_fraction,
+                        help='the tracker\'s min_camera_found_fraction: share of its usable '
+                        'links each camera must find (default: EdgeTrackerConfig\'s)')
+    parser.add_argument('--fault-round', action=argparse.BooleanOptionalAction,
+                        default=EdgeTrackerConfig.fault_round,
+                        help='the tracker\'s fault_round: a tracked frame whose fit fails a '
+                        'check is measured and fitted once more from that fit (default: '
+                        'EdgeTrackerConfig\'s)')
     parser.add_argument('--max-finger-off-silhouette', type=float,
                         default=EdgeTrackerConfig.max_finger_off_silhouette,
                         help='the tracker\'s finger gate: a frame where a finger other than '
@@ -200,7 +224,10 @@ def _run(args: Any) -> int:
                 if n not in trackers:
                     trackers[n] = EdgeTracker(seq.synth.model, cams_all[:n], EdgeTrackerConfig(
                         finger_refit=args.finger_refit, silhouette_palm=args.silhouette_palm,
-                        max_finger_off_silhouette=args.max_finger_off_silhouette))
+                        max_finger_off_silhouette=args.max_finger_off_silhouette,
+                        measurement_rounds=args.measurement_rounds,
+                        fault_round=args.fault_round,
+                        min_camera_found_fraction=args.min_camera_found_fraction))
                 trackers[n].set_backgrounds([None] * n if empty is None else
                                             [BackgroundModel.from_frames([e]) for e in empty[:n]])
                 fig = evaluate_run(trackers[n], [v[:n] for v in views], seq.poses, args.init)
@@ -213,7 +240,8 @@ def _run(args: Any) -> int:
             seq.close()
     keys = ('published', 'finger_withheld', 'longest_run_frames', 'frames_until_loss',
             'losses', 'joint_deg', 'fingertip_mm', 'fingertip_rel_wrist_mm', 'depth_mm',
-            'time_ms_mean', 'time_ms_p95', 'cpu_ms_mean')
+            'time_ms_mean', 'time_ms_p95', 'cpu_ms_mean', 'thread_cpu_ms_mean',
+            'fault_rounds')
     summary = []
     for n in args.cameras:
         for speed in args.speeds:
@@ -236,7 +264,8 @@ def _run(args: Any) -> int:
     load = os.getloadavg()
     print(f'conditions: python loop sum(range(3e6)) {loop_s:.3f} s; load average '
           f'{load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} CPUs; tracker '
-          f'single-threaded in this process (time: wall clock, cpu: this process)', flush=True)
+          f'single-threaded in this process (time: wall clock, cpu: this process, thread_cpu: '
+          f'the tracker\'s thread)', flush=True)
     if args.json:
         write_json(args.json, {'settings': {'seeds': args.seeds, 'tuning_seeds': TUNING_SEEDS,
                                             'check_seeds': CHECK_SEEDS,
@@ -245,6 +274,10 @@ def _run(args: Any) -> int:
                                             'background': args.background,
                                             'finger_refit': args.finger_refit,
                                             'silhouette_palm': args.silhouette_palm,
+                                            'measurement_rounds': args.measurement_rounds,
+                                            'fault_round': args.fault_round,
+                                            'min_camera_found_fraction':
+                                                args.min_camera_found_fraction,
                                             'max_finger_off_silhouette':
                                                 args.max_finger_off_silhouette,
                                             'python_loop_s': loop_s, 'load_average': load},

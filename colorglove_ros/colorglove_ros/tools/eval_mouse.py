@@ -34,7 +34,10 @@ silhouettes did not raise the click figures on tuning seeds 5-7, docs/RESULTS.md
 with them the tracker's ``finger_refit`` and ``silhouette_palm`` act (on, as in
 ``EdgeTrackerConfig``; ``--no-finger-refit``, ``--no-silhouette-palm`` turn them off);
 ``--retry-dofs`` sets its ``retry_dofs`` (off by default), with
-``--retry-max-wrist-move-mm`` and ``--retry-rest-margin-px`` its retry guards. The mouse is
+``--retry-max-wrist-move-mm`` and ``--retry-rest-margin-px`` its retry guards;
+``--measurement-rounds``, ``--fault-round`` and ``--min-camera-found-fraction`` its rounds per
+frame, its extra round on a faulted frame and its per-camera coverage check (default
+``EdgeTrackerConfig``'s). The mouse is
 fed each pose's edge residual (as ``edge_tracker_node``'s status line gives it to
 ``mouse_node``), so ``--press-max-residual-ratio`` sets its press gate
 (``core.tracking.mouse``).
@@ -354,6 +357,19 @@ def main(argv: list[str] | None = None) -> int:
                         default=EdgeTrackerConfig.silhouette_palm,
                         help='with --source edges and --background empty: the edge tracker\'s '
                         'silhouette_palm (default: EdgeTrackerConfig\'s, on)')
+    parser.add_argument('--measurement-rounds', type=int,
+                        default=EdgeTrackerConfig.measurement_rounds,
+                        help='with --source edges: the tracker\'s measurement_rounds '
+                        '(default: EdgeTrackerConfig\'s)')
+    parser.add_argument('--min-camera-found-fraction', type=float,
+                        default=EdgeTrackerConfig.min_camera_found_fraction,
+                        help='with --source edges: the tracker\'s min_camera_found_fraction: '
+                        'share of its usable links each camera must find (default: '
+                        'EdgeTrackerConfig\'s)')
+    parser.add_argument('--fault-round', action=argparse.BooleanOptionalAction,
+                        default=EdgeTrackerConfig.fault_round,
+                        help='with --source edges: the tracker\'s fault_round (default: '
+                        'EdgeTrackerConfig\'s)')
     parser.add_argument('--reinit', choices=REINIT_MODES, default=DEFAULT_REINIT,
                         help='with --source edges: (re-)initialise the edge tracker from the '
                         'true pose with the buttons\' joints at rest (default), or from the '
@@ -408,7 +424,10 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                   glove: ScriptedTracker | None) -> int:
     edge_config = EdgeTrackerConfig(finger_refit=args.finger_refit,
                                     silhouette_palm=args.silhouette_palm,
-                                    retry_dofs=tuple(args.retry_dofs))
+                                    retry_dofs=tuple(args.retry_dofs),
+                                    measurement_rounds=args.measurement_rounds,
+                                    fault_round=args.fault_round,
+                                    min_camera_found_fraction=args.min_camera_found_fraction)
     if args.camera_weights is not None:
         edge_config = replace(edge_config, camera_weights=tuple(args.camera_weights))
     if args.retry_max_wrist_move_mm is not None:
@@ -461,6 +480,11 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'camera_weights': list(edge_config.camera_weights),
                                             'finger_refit': edge_config.finger_refit,
                                             'silhouette_palm': edge_config.silhouette_palm,
+                                            'measurement_rounds':
+                                                edge_config.measurement_rounds,
+                                            'fault_round': edge_config.fault_round,
+                                            'min_camera_found_fraction':
+                                                edge_config.min_camera_found_fraction,
                                             'retry_dofs': list(edge_config.retry_dofs),
                                             **{name: value if math.isfinite(value) else None
                                                for name, value in (

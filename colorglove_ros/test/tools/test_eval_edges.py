@@ -2,9 +2,12 @@
 from __future__ import annotations
 
 import json
+import math
 
+import numpy as np
 import pytest
 
+from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
 from colorglove_ros.tools.eval_edges import main
 
 
@@ -44,3 +47,49 @@ def test_the_refits_and_the_palm_pull_are_on_unless_turned_off(tmp_path, flags: 
                  '--json', str(out)]) == 0
     settings = json.loads(out.read_text())['settings']
     assert settings['finger_refit'] is on and settings['silhouette_palm'] is on
+
+
+@pytest.mark.parametrize('flags, rounds, fault, camera', [
+    ([], EdgeTrackerConfig.measurement_rounds, EdgeTrackerConfig.fault_round,
+     EdgeTrackerConfig.min_camera_found_fraction),
+    (['--measurement-rounds', '1', '--no-fault-round', '--min-camera-found-fraction', '0.25'],
+     1, False, 0.25),
+    (['--measurement-rounds', '3', '--fault-round', '--min-camera-found-fraction', '0.1'],
+     3, True, 0.1)])
+def test_the_measurement_rounds_and_fault_round_reach_the_tracker(
+        tmp_path, monkeypatch, flags: list[str], rounds: int, fault: bool,
+        camera: float) -> None:
+    from colorglove_ros.tools import eval_edges
+
+    configs = []
+    tracker = eval_edges.EdgeTracker
+
+    def recording(model, cameras, config=None, backgrounds=None):
+        configs.append(config)
+        return tracker(model, cameras, config, backgrounds)
+
+    monkeypatch.setattr(eval_edges, 'EdgeTracker', recording)
+    out = tmp_path / 'rounds.json'
+    assert main(['--seeds', '1', '--frames', '2', '--speeds', '1', '--cameras', '1', *flags,
+                 '--json', str(out)]) == 0
+    report = json.loads(out.read_text())
+    settings = report['settings']
+    assert settings['measurement_rounds'] == rounds and settings['fault_round'] is fault
+    assert settings['min_camera_found_fraction'] == camera
+    assert [(c.measurement_rounds, c.fault_round, c.min_camera_found_fraction)
+            for c in configs] == [(rounds, fault, camera)]
+    row = report['rows'][0]
+    assert isinstance(row['fault_rounds'], int) and row['fault_rounds'] >= 0
+    assert 'thread_cpu_ms_mean' in row
+
+
+def test_the_thread_cpu_is_averaged_over_the_published_frames() -> None:
+    from colorglove_ros.core.hand.model import HandModel
+    from colorglove_ros.tools.eval_edges import sequence_figures
+
+    truth = np.zeros((3, 26))
+    fig = sequence_figures(HandModel(), truth, [truth[0], None, truth[2]], [5.0, 7.0], [False] * 3,
+                           [9.0, 11.0], [4.0, 6.0])
+    assert fig['cpu_ms_mean'] == 10.0 and fig['thread_cpu_ms_mean'] == 5.0
+    empty = sequence_figures(HandModel(), truth, [None] * 3, [], [False] * 3)
+    assert math.isnan(empty['thread_cpu_ms_mean'])

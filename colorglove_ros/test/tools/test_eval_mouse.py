@@ -10,6 +10,7 @@ import pytest
 
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
 from colorglove_ros.core.tracking.mouse import BUTTON_DOFS, MouseConfig, raw_mouse_values
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.tools.eval_mouse import (
@@ -211,3 +212,20 @@ def test_glove_tracker_output_reaches_the_mouse_with_gaps_where_it_found_no_hand
     assert all(np.array_equal(p, q) for p, q in zip(poses, Q, strict=True) if p is not None)
     row = evaluate_seed(MODEL, CONFIG, 2, poses, 3, Q, spans)
     assert row['frames_with_pose'] == len(Q) - len(range(0, len(Q), 3))
+
+
+@pytest.mark.parametrize('flags, rounds, fault, camera', [
+    ([], EdgeTrackerConfig.measurement_rounds, EdgeTrackerConfig.fault_round,
+     EdgeTrackerConfig.min_camera_found_fraction),
+    (['--measurement-rounds', '1', '--no-fault-round', '--min-camera-found-fraction', '0.25'],
+     1, False, 0.25),
+    (['--measurement-rounds', '3', '--fault-round', '--min-camera-found-fraction', '0.1'],
+     3, True, 0.1)])
+def test_the_edge_trackers_rounds_reach_its_settings(tmp_path, flags: list[str], rounds: int,
+                                                     fault: bool, camera: float) -> None:
+    out = tmp_path / 'mouse.json'
+    assert eval_mouse_main(['--source', 'noise', '--seeds', '0', '--seconds', '2', *flags,
+                            '--json', str(out)]) == 0
+    settings = json.loads(out.read_text())['settings']
+    assert settings['measurement_rounds'] == rounds and settings['fault_round'] is fault
+    assert settings['min_camera_found_fraction'] == camera

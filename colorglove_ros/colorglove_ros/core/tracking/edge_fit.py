@@ -98,13 +98,25 @@ class EdgeTrackerConfig:
     px^2 per unit^2: the larger, the smaller and steadier each Gauss-Newton step.
     ``robust_loss`` with ``huber_px`` sets the residual weights (:func:`_robust`).
     ``min_found_fraction`` of the usable links must be found over all cameras together and
-    ``min_camera_found_fraction`` in each camera for a fit to count as good.
+    ``min_camera_found_fraction`` in each camera for a fit to count as good (the 45-degree
+    camera of the stereo rig often finds one of its links while the primary finds all of
+    theirs, at poses as good as their neighbours': 0.1 lets one of up to ten pass).
     ``palm_sides`` are the palm outline sides measured (``PALM_SIDES``; empty: the paper's
     link and tip features only), on ``palm_slice_range`` of each side, weighted
     ``palm_weight``. A tracked frame whose only fault is too few links found (the residual
     of those found is small) is coasted through, up to ``coast_patience`` frames in a row
     (no pose published, the track kept), and ``resume_frames`` good frames must follow before
     the tracker publishes again; other bad frames count toward ``loss_patience``.
+    ``measurement_rounds``: measure-and-fit rounds per tracked frame (each measures the edges
+    at the pose the previous round reached; two by default, with ``fault_round`` and
+    ``min_camera_found_fraction`` 0.1: with them the two-camera bare-hand runs and fingertips
+    and the 3-D mouse's tuning clicks were better than with one round, docs/RESULTS.md,
+    DigitEyes eighteenth pass). ``fault_round``: a tracked frame whose fit fails
+    a check (too few links found, residual or silhouette drift) is measured and fitted once
+    more from that fit's pose, the stabiliser still anchored at the previous frame's pose (as
+    a further round would be), before the finger re-fits and the checks judge it: the first
+    fit is often close enough for the second measurement to find the links the first missed
+    (the 45-degree camera's above all); a fit that still fails publishes nothing.
     Link slices hidden behind the palm (:func:`_behind_palm`, points within
     ``palm_occlusion_px``; 0 turns it off) are not searched nor counted as missing.
     ``camera_weights`` scale each camera's residual weights in the fit
@@ -188,7 +200,8 @@ class EdgeTrackerConfig:
     palm_weight: float = 1.0
     camera_weights: tuple[float, ...] = (1.0, 0.25)
     polarity: int = 0
-    measurement_rounds: int = 1
+    measurement_rounds: int = 2
+    fault_round: bool = True
     gn_iterations: int = 3
     stabilizer: tuple[float, float, float] = (4.0e4, 1.0e3, 200.0)
     tip_weight: float = 1.0
@@ -200,7 +213,7 @@ class EdgeTrackerConfig:
     occlusion_margin_px: float = 2.0
     palm_occlusion_px: float = 10.0
     min_found_fraction: float = 0.6
-    min_camera_found_fraction: float = 0.25
+    min_camera_found_fraction: float = 0.1
     max_rms_px: float = 3.0
     camera_check: bool = False
     max_camera_disagreement_mm: float = 10.0
@@ -1172,7 +1185,7 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
              greys: Sequence[np.ndarray | None], q_start: np.ndarray,
              config: EdgeTrackerConfig, rounds: int, polarity: int | None = None,
              silhouettes: Sequence[Silhouette | None] | None = None,
-             held: np.ndarray | None = None) -> EdgeFit:
+             held: np.ndarray | None = None, anchor: np.ndarray | None = None) -> EdgeFit:
     """Fit the pose to the edges of the cameras' grey images (None: no frame from that
     camera): ``rounds`` times predict at the current pose, measure, and take
     ``gn_iterations`` stabilised Gauss-Newton steps on the concatenated residuals with the
@@ -1182,7 +1195,9 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
     same measurements without letting weakly observed DOFs wander. ``silhouettes`` (one per
     camera, None where there is none) add the silhouette residuals and measures (see
     :class:`EdgeTrackerConfig`). ``held`` ((26,) bool): DOFs kept at ``q_start`` (clamped)
-    while the others are fitted."""
+    while the others are fitted. ``anchor`` (26,): the stabiliser's anchor instead of
+    ``q_start`` (clamped), so a fit continued from an earlier fit's pose with the earlier
+    start as anchor takes the same steps as further rounds of that fit."""
     sils = list(silhouettes) if silhouettes is not None else [None] * len(cameras)
     if len(sils) != len(cameras):
         raise EdgeTrackerError(f'{len(cameras)} camera(s) but {len(sils)} silhouette(s)')
@@ -1191,7 +1206,7 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
         if held.shape != (NUM_DOFS,):
             raise EdgeTrackerError(f'held must be {NUM_DOFS} booleans, got {held.shape}')
     q = kin.clamp(np.asarray(q_start, dtype=float))
-    q_anchor = q.copy()
+    q_anchor = q.copy() if anchor is None else kin.clamp(np.asarray(anchor, dtype=float))
     S = np.diag(config.stabilizer_diagonal())
     C = kin.model.coupling_prior() if config.coupling_weight > 0 else None
     iterations = 0

@@ -8,7 +8,8 @@ fingers slightly spread, palm to the primary camera, wrist at the marked spot
 ``init_hold_frames`` frames in a row while moving less than ``init_hold_tolerance_m`` --
 or until :meth:`EdgeTracker.initialize` gives it a pose (e.g. the glove tracker's). While
 tracking, a frame whose fit leaves too few links found or too large a residual gives no
-pose; ``loss_patience`` such frames in a row declare the track lost and the tracker waits
+pose (with ``fault_round`` only after one more measurement round from its fit has failed
+too); ``loss_patience`` such frames in a row declare the track lost and the tracker waits
 for re-initialisation. A frame whose only fault is coverage (too few links found, a small
 residual on those found) can instead be coasted through for ``coast_patience`` frames (off by
 default), publishing nothing and keeping the track. With a background model per camera
@@ -66,7 +67,8 @@ class EdgeTrackResult:
     """One frame's output. ``q`` is the pose to publish, None when the frame gives none
     (``reason`` says why); ``state`` is the tracker's state after the frame ('waiting' for
     an initialisation or 'tracking'); ``fit`` the frame's fit (None if none was made);
-    ``time_ms`` and ``cpu_ms`` the wall-clock and CPU (this process) time it took."""
+    ``time_ms``, ``cpu_ms`` and ``thread_cpu_ms`` the wall-clock, CPU (this process, all
+    threads) and CPU (the calling thread, which runs the whole tracker) time it took."""
 
     state: str
     q: np.ndarray | None
@@ -74,6 +76,7 @@ class EdgeTrackResult:
     fit: EdgeFit | None = None
     time_ms: float = 0.0
     cpu_ms: float = 0.0
+    thread_cpu_ms: float = 0.0
     lost: bool = False
     initialised: bool = False
     hold_frames: int = 0
@@ -109,6 +112,7 @@ class EdgeTracker:
         self._retry_dofs = [model.dof_names.index(n) for n in self.config.retry_dofs]
         self._retry_digits = [DIGITS.index(n.split('_')[0]) for n in self.config.retry_dofs]
         self._q: np.ndarray | None = None
+        self.fault_rounds = 0       # frames given the extra measurement round (fault_round)
         self._start_track()
 
     @property
@@ -251,11 +255,12 @@ class EdgeTracker:
     def update(self, images: Sequence[np.ndarray | None]) -> EdgeTrackResult:
         """Process one frame: one image per camera (grey or RGB; None if a camera has no
         frame). Returns the pose to publish or the reason there is none."""
-        t0, c0 = time.perf_counter(), time.process_time()
+        t0, c0, h0 = time.perf_counter(), time.process_time(), time.thread_time()
         start = self.init_pose if self._q is None else self._q
         result = self._step(self._greys(images), self._silhouettes(images, start))
         return replace(result, time_ms=1e3 * (time.perf_counter() - t0),
-                       cpu_ms=1e3 * (time.process_time() - c0))
+                       cpu_ms=1e3 * (time.process_time() - c0),
+                       thread_cpu_ms=1e3 * (time.thread_time() - h0))
 
     def _step(self, greys: list[np.ndarray | None],
               silhouettes: list[Silhouette | None]) -> EdgeTrackResult:
@@ -286,6 +291,11 @@ class EdgeTracker:
                 f'camera, at the marked spot): {why}', fit, hold_frames=held)
         fit = fit_pose(self.kin, self.points, self.cameras, greys, self._q, cfg,
                        cfg.measurement_rounds, silhouettes=silhouettes)
+        if cfg.fault_round and self._check_fit(fit)[0]:
+            # measured again where the first fit went, anchored where the frame started
+            fit = fit_pose(self.kin, self.points, self.cameras, greys, fit.q, cfg, 1,
+                           silhouettes=silhouettes, anchor=self._q)
+            self.fault_rounds += 1
         if cfg.finger_refit:
             fit = self._refit_digits(greys, silhouettes, fit)
         kind, reason = self._check_fit(fit)

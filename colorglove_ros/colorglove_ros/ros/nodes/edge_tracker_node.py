@@ -107,6 +107,11 @@ class EdgeTrackerNode(Node):
                              'fraction of its visible links each camera must find', 0.0, 1.0)
         patience = declare(self, 'loss_patience', defaults.loss_patience,
                            'bad frames in a row that declare the track lost', 1, 100)
+        rounds = declare(self, 'measurement_rounds', defaults.measurement_rounds,
+                         'measure-and-fit rounds per tracked frame', 1, 10)
+        fault_round = declare(self, 'fault_round', defaults.fault_round,
+                              'a tracked frame whose fit fails a check is measured and '
+                              'fitted once more from that fit before it is judged')
         polarity = declare(self, 'polarity', defaults.polarity,
                            '+1 hand brighter than the background, -1 darker, 0 either', -1, 1)
         camera_check = declare(self, 'camera_check', defaults.camera_check,
@@ -171,6 +176,7 @@ class EdgeTrackerNode(Node):
                 init_hold_frames=int(hold), max_rms_px=float(max_rms),
                 min_found_fraction=float(min_found),
                 min_camera_found_fraction=float(min_camera), loss_patience=int(patience),
+                measurement_rounds=int(rounds), fault_round=bool(fault_round),
                 polarity=int(polarity), camera_check=bool(camera_check),
                 max_camera_disagreement_mm=float(max_disagreement),
                 silhouette_weight=float(silhouette_weight),

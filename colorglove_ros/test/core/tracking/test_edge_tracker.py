@@ -570,10 +570,11 @@ def test_a_finger_refit_that_fails_backs_off(rig, monkeypatch) -> None:
     calls = _count_fits(monkeypatch)
     fits, poses = {}, {}
     for backoff in (0, 1):
-        # (the palm's pull, on by default, off: it moves the hand toward the blob too)
+        # (the palm's pull, on by default, off: it moves the hand toward the blob too; the
+        # fault round off: the frame's own fit is one call)
         tracker = EdgeTracker(model, cameras, EdgeTrackerConfig(
             finger_refit=True, silhouette_palm=False, finger_refit_backoff=backoff,
-            loss_patience=10),
+            loss_patience=10, fault_round=False),
             _backgrounds(frames))
         tracker.initialize(truth)
         fits[backoff], poses[backoff] = [], []
@@ -602,7 +603,7 @@ def test_the_finger_refit_budget_bounds_the_refits(rig, monkeypatch) -> None:
     for budget in (0.0, 0.5):
         tracker = EdgeTracker(model, cameras, EdgeTrackerConfig(
             finger_refit=True, finger_refit_budget=budget, finger_refit_burst=2,
-            loss_patience=10), _backgrounds(frames))
+            loss_patience=10, fault_round=False), _backgrounds(frames))
         tracker.initialize(truth)
         calls[0] = 0
         for _ in range(5):
@@ -823,3 +824,89 @@ def test_finger_refit_candidates_start_and_hold_as_configured(rig, monkeypatch, 
         EdgeTrackerConfig(finger_refit_dofs='wrist')
     with pytest.raises(EdgeTrackerError):
         EdgeTrackerConfig(finger_refit_abduction='out')
+
+
+def test_a_fit_continued_with_its_start_as_anchor_is_one_more_round(rig) -> None:
+    """``fit_pose(anchor=...)``: one round from a 1-round fit's pose, anchored at that fit's
+    start, lands where a 2-round fit does; anchored at its own start it does not."""
+    from colorglove_ros.core.tracking.edge_fit import fit_pose
+    from colorglove_ros.core.tracking.kinematics import FastKinematics
+
+    cameras, seq, frames = rig
+    model, config = seq.synth.model, EdgeTrackerConfig()
+    kin = FastKinematics(model)
+    points = feature_points(model, config.tracked_links, config.use_tips, config.palm_sides)
+    greys = [to_grey(f) for f in frames[21]]
+    start = seq.poses[20].copy()
+    start[model.dof_names.index('index_mcp_flex')] += 0.25
+    start[0] += 0.006
+    two = fit_pose(kin, points, cameras, greys, start, config, 2)
+    one = fit_pose(kin, points, cameras, greys, start, config, 1)
+    assert not np.allclose(one.q, two.q)
+    more = fit_pose(kin, points, cameras, greys, one.q, config, 1, anchor=start)
+    assert np.allclose(more.q, two.q, atol=1e-12) and more.rms_px == pytest.approx(two.rms_px)
+    own = fit_pose(kin, points, cameras, greys, one.q, config, 1)
+    assert not np.allclose(own.q, two.q)
+
+
+def _fit_calls(monkeypatch) -> list[tuple[np.ndarray, int, np.ndarray | None, EdgeFit]]:
+    """The tracker's ``fit_pose`` calls from now on: (start, rounds, anchor, fit)."""
+    from colorglove_ros.core.tracking import edge_tracker
+
+    calls: list[tuple[np.ndarray, int, np.ndarray | None, EdgeFit]] = []
+    fit_pose = edge_tracker.fit_pose
+
+    def recording(kin, points, cameras, greys, q_start, config, rounds, **kwargs):
+        fit = fit_pose(kin, points, cameras, greys, q_start, config, rounds, **kwargs)
+        anchor = kwargs.get('anchor')
+        calls.append((np.array(q_start), rounds, None if anchor is None else np.array(anchor),
+                      fit))
+        return fit
+
+    monkeypatch.setattr(edge_tracker, 'fit_pose', recording)
+    return calls
+
+
+@pytest.mark.parametrize('fault_round', [True, False])
+def test_the_fault_round_measures_a_faulted_fit_again(rig, monkeypatch,
+                                                      fault_round: bool) -> None:
+    """``fault_round``: a tracked frame whose fit fails a check is measured and fitted once
+    more from that fit's pose, anchored at the previous pose, and the second fit is the one
+    checked (a fit still poor publishes nothing); a frame whose fit passes gets one fit."""
+    cameras, seq, frames = rig
+    config = EdgeTrackerConfig(fault_round=fault_round, finger_refit=False, loss_patience=5)
+    calls = _fit_calls(monkeypatch)
+    tracker = EdgeTracker(seq.synth.model, cameras, config)
+    tracker.initialize(seq.poses[20])
+    good = tracker.update(frames[21])
+    assert good.q is not None and len(calls) == 1 and tracker.fault_rounds == 0
+    previous = good.q
+    calls.clear()
+    # the second camera sees nothing: the first fit finds too few of its links
+    half_blind = [frames[22][0], np.full_like(frames[22][1], 90)]
+    out = tracker.update(half_blind)
+    assert tracker._check_fit(calls[0][3])[0] == 'coverage'
+    assert out.q is None and out.reason.startswith('poor fit') and not out.lost
+    assert 0.0 < out.thread_cpu_ms <= out.cpu_ms + 1.0     # the tracker's own thread
+    if not fault_round:
+        assert len(calls) == 1 and tracker.fault_rounds == 0
+        return
+    assert len(calls) == 2 and tracker.fault_rounds == 1
+    (start0, _, anchor0, first), (start1, rounds1, anchor1, second) = calls
+    assert np.allclose(start0, previous) and anchor0 is None
+    assert np.allclose(start1, first.q) and rounds1 == 1 and np.allclose(anchor1, previous)
+    assert out.fit is second and np.allclose(tracker.pose, second.q)
+
+
+def test_the_defaults_measure_twice_retry_faults_and_let_one_link_of_ten_pass(rig) -> None:
+    """The defaults: two measurement rounds, the fault round, and a camera that finds one of
+    up to ten of its usable links (the 45-degree camera, the primary finding all of its own)
+    passes the per-camera coverage check; one that finds none does not."""
+    cameras, seq, _ = rig
+    config = EdgeTrackerConfig()
+    assert config.measurement_rounds == 2 and config.fault_round
+    tracker = EdgeTracker(seq.synth.model, cameras, config)
+    q = seq.poses[20]
+    assert tracker._check_fit(EdgeFit(q, 1.0, (14, 1), (14, 8), (5, 1), 3)) == ('', '')
+    assert tracker._check_fit(EdgeFit(q, 1.0, (14, 1), (14, 11), (5, 1), 3))[0] == 'coverage'
+    assert tracker._check_fit(EdgeFit(q, 1.0, (14, 0), (14, 5), (5, 1), 3))[0] == 'coverage'

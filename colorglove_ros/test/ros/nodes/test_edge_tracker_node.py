@@ -123,6 +123,15 @@ def test_the_node_refits_fingers_and_pulls_the_palm_by_default() -> None:
         assert not h.nodes[0].config.finger_refit
 
 
+def test_the_measurement_rounds_and_fault_round_parameters_reach_the_tracker() -> None:
+    with running(_node(measurement_rounds=3, fault_round=False)) as h:
+        config = h.nodes[0].config
+        assert config.measurement_rounds == 3 and not config.fault_round
+    with running(_node(measurement_rounds=1, fault_round=True)) as h:
+        config = h.nodes[0].config
+        assert config.measurement_rounds == 1 and config.fault_round
+
+
 def test_the_node_defaults_are_the_tracker_defaults() -> None:
     """The node's parameters default to EdgeTrackerConfig's (one home for each default)."""
     from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
@@ -130,7 +139,8 @@ def test_the_node_defaults_are_the_tracker_defaults() -> None:
     with running(_node()) as h:
         config = h.nodes[0].config
     defaults = EdgeTrackerConfig()
-    for name in ('finger_refit', 'silhouette_palm', 'max_finger_off_silhouette',
+    for name in ('finger_refit', 'silhouette_palm', 'measurement_rounds', 'fault_round',
+                 'max_finger_off_silhouette',
                  'max_finger_unexplained', 'max_unexplained', 'silhouette_weight',
                  'retry_dofs', 'retry_step_deg', 'retry_max_wrist_move_m',
                  'retry_rest_margin_px'):
