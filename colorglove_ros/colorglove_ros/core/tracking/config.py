@@ -153,6 +153,7 @@ class IKConfig:
     min_blob_pixels: int = 4
     gate_tiny_px: float = 8.0
     gate_min_px: float = 10.0
+    max_blob_ratio: float = 0.0
     extra_gate_px: float = 30.0
     extra_shift_max_px: float = 150.0
     extra_inlier_px: float = 15.0
@@ -219,6 +220,7 @@ _NUMBER_LIMITS: dict[str, tuple[type, float, float, bool]] = {
     'step_tol': (float, 0.0, 1.0, True), 'cost_tol': (float, 0.0, 1.0, True),
     'min_constraints': (int, 1, 1000, False), 'min_blob_pixels': (int, 1, 1_000_000, False),
     'gate_tiny_px': (float, 0.0, 1e4, False), 'gate_min_px': (float, 0.0, 1e4, False),
+    'max_blob_ratio': (float, 0.0, 1e4, False),
     'extra_gate_px': (float, 0.0, 1e4, False), 'extra_shift_max_px': (float, 0.0, 1e4, False),
     'extra_inlier_px': (float, 0.0, 1e4, False), 'outlier_px': (float, 0.0, 1e4, False),
     'max_gap_s': (float, 0.0, 3600.0, True), 'min_depth_m': (float, 0.0, 10.0, True),

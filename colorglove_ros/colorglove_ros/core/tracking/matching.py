@@ -48,10 +48,16 @@ def _usable(blobs: Blobs, min_pixels: float) -> np.ndarray:
 
 def match_primary(constraints: ProjectionConstraints, blobs: Blobs, crop: Any,
                   camera: PinholeCamera, mesh: MeshLike, gate_tiny_px: float = 8.0,
-                  gate_min_px: float = 10.0, min_blob_pixels: float = 4) -> Correspondences:
+                  gate_min_px: float = 10.0, min_blob_pixels: float = 4,
+                  max_blob_ratio: float = 0.0, min_kept: int = 3) -> Correspondences:
     """Match the entry's constraints (tiny-image centroids mapped to full-image pixels with
     the query's crop, ``full = offset + scale * tiny``) to same-colour blobs of the primary
-    camera; targets are the undistorted blob centroids."""
+    camera; targets are the undistorted blob centroids.
+
+    With ``max_blob_ratio`` > 0 a pair whose blob holds more than that many times the
+    pixels of its constraint's patch in the entry (tiny-image pixels times the crop scale
+    squared) is dropped, as long as ``min_kept`` pairs remain (else every pair is kept):
+    glove-coloured clutter joined to a patch inflates its blob and moves its centroid."""
     if crop is None:
         raise IKError('the primary observation needs the crop transform of the lookup query')
     if len(constraints) == 0 or len(blobs) == 0:
@@ -63,6 +69,11 @@ def match_primary(constraints: ProjectionConstraints, blobs: Blobs, crop: Any,
     k, m = match_by_color(pred, constraints.colors, blobs.centroid_px[keep],
                           blobs.color[keep], gate)
     m = keep[m]
+    if max_blob_ratio > 0.0 and len(k):
+        expected = np.maximum(np.asarray(constraints.pixel_counts, float)[k] * scale ** 2, 1.0)
+        fits = blobs.pixel_count[m] <= max_blob_ratio * expected
+        if int(fits.sum()) >= min_kept:
+            k, m = k[fits], m[fits]
     return _make_corr(0, constraints, k, camera.undistort_pixels(blobs.centroid_px[m]), mesh)
 
 

@@ -337,7 +337,8 @@ class HandTracker:
         s = self._pixel_scale(0)
         corr0 = match_primary(prior.constraints, primary.blobs, primary.crop, self.cameras[0],
                               self.mesh, cfg.gate_tiny_px, cfg.gate_min_px * s,
-                              self._min_blob_pixels(0))
+                              self._min_blob_pixels(0), cfg.max_blob_ratio,
+                              cfg.min_constraints)
         # IK on several cameras, tracking: the other cameras are matched at the last pose and
         # every camera's visible patches predicted there, in one pass (the blend is the
         # coarser guess)
