@@ -156,6 +156,44 @@ def _python_loop_s() -> float:
     return time.perf_counter() - t
 
 
+#: The edge tracker's fit settings both evaluations take as flags (``EdgeTrackerConfig`` fields).
+FIT_SETTINGS = ('finger_refit', 'silhouette_palm', 'measurement_rounds',
+                'min_camera_found_fraction', 'fault_round')
+
+
+def add_fit_arguments(parser: argparse.ArgumentParser, applies: str = '') -> None:
+    """The flags of :data:`FIT_SETTINGS`, defaulting to ``EdgeTrackerConfig``'s; ``applies``
+    starts each help text (e.g. 'with --source edges: ')."""
+    parser.add_argument('--finger-refit', action=argparse.BooleanOptionalAction,
+                        default=EdgeTrackerConfig.finger_refit,
+                        help=f'{applies}the tracker\'s finger_refit: re-fit a finger that leaves '
+                        'part of the hand\'s silhouette unexplained (acts with --background '
+                        'empty; default: EdgeTrackerConfig\'s, on)')
+    parser.add_argument('--silhouette-palm', action=argparse.BooleanOptionalAction,
+                        default=EdgeTrackerConfig.silhouette_palm,
+                        help=f'{applies}the tracker\'s silhouette_palm: the unexplained '
+                        'foreground next to the palm pulls the whole hand (acts with '
+                        '--background empty; default: EdgeTrackerConfig\'s, on)')
+    parser.add_argument('--measurement-rounds', type=int,
+                        default=EdgeTrackerConfig.measurement_rounds,
+                        help=f'{applies}the tracker\'s measurement_rounds: measure-and-fit rounds '
+                        'per tracked frame (default: EdgeTrackerConfig\'s)')
+    parser.add_argument('--min-camera-found-fraction', type=float,
+                        default=EdgeTrackerConfig.min_camera_found_fraction,
+                        help=f'{applies}the tracker\'s min_camera_found_fraction: share of its '
+                        'usable links each camera must find (default: EdgeTrackerConfig\'s)')
+    parser.add_argument('--fault-round', action=argparse.BooleanOptionalAction,
+                        default=EdgeTrackerConfig.fault_round,
+                        help=f'{applies}the tracker\'s fault_round: a tracked frame whose fit '
+                        'fails a check is measured and fitted once more from that fit '
+                        '(default: EdgeTrackerConfig\'s)')
+
+
+def fit_settings(args: Any) -> dict[str, Any]:
+    """The values of :data:`FIT_SETTINGS` parsed by :func:`add_fit_arguments`."""
+    return {name: getattr(args, name) for name in FIT_SETTINGS}
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``colorglove_eval_edges``."""
     parser = tool_parser(__doc__.split('\n\n')[0])
@@ -172,29 +210,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--background', choices=('empty', 'none'), default='empty',
                         help='empty: silhouettes against one frame of the empty scene per '
                         'camera; none: edges only')
-    parser.add_argument('--finger-refit', action=argparse.BooleanOptionalAction,
-                        default=EdgeTrackerConfig.finger_refit,
-                        help='the tracker\'s finger_refit: re-fit a finger that leaves part of '
-                        'the hand\'s silhouette unexplained (acts with --background empty; '
-                        'default: EdgeTrackerConfig\'s, on)')
-    parser.add_argument('--silhouette-palm', action=argparse.BooleanOptionalAction,
-                        default=EdgeTrackerConfig.silhouette_palm,
-                        help='the tracker\'s silhouette_palm: the unexplained foreground next '
-                        'to the palm pulls the whole hand (acts with --background empty; '
-                        'default: EdgeTrackerConfig\'s, on)')
-    parser.add_argument('--measurement-rounds', type=int,
-                        default=EdgeTrackerConfig.measurement_rounds,
-                        help='the tracker\'s measurement_rounds: measure-and-fit rounds per '
-                        'tracked frame (default: EdgeTrackerConfig\'s)')
-    parser.add_argument('--min-camera-found-fraction', type=float,
-                        default=EdgeTrackerConfig.min_camera_found_fraction,
-                        help='the tracker\'s min_camera_found_fraction: share of its usable '
-                        'links each camera must find (default: EdgeTrackerConfig\'s)')
-    parser.add_argument('--fault-round', action=argparse.BooleanOptionalAction,
-                        default=EdgeTrackerConfig.fault_round,
-                        help='the tracker\'s fault_round: a tracked frame whose fit fails a '
-                        'check is measured and fitted once more from that fit (default: '
-                        'EdgeTrackerConfig\'s)')
+    add_fit_arguments(parser)
     parser.add_argument('--max-finger-off-silhouette', type=float,
                         default=EdgeTrackerConfig.max_finger_off_silhouette,
                         help='the tracker\'s finger gate: a frame where a finger other than '
@@ -223,11 +239,8 @@ def _run(args: Any) -> int:
             for n in args.cameras:
                 if n not in trackers:
                     trackers[n] = EdgeTracker(seq.synth.model, cams_all[:n], EdgeTrackerConfig(
-                        finger_refit=args.finger_refit, silhouette_palm=args.silhouette_palm,
                         max_finger_off_silhouette=args.max_finger_off_silhouette,
-                        measurement_rounds=args.measurement_rounds,
-                        fault_round=args.fault_round,
-                        min_camera_found_fraction=args.min_camera_found_fraction))
+                        **fit_settings(args)))
                 trackers[n].set_backgrounds([None] * n if empty is None else
                                             [BackgroundModel.from_frames([e]) for e in empty[:n]])
                 fig = evaluate_run(trackers[n], [v[:n] for v in views], seq.poses, args.init)
@@ -272,12 +285,7 @@ def _run(args: Any) -> int:
                                             'frames': args.frames, 'speeds': args.speeds,
                                             'cameras': args.cameras, 'init': args.init,
                                             'background': args.background,
-                                            'finger_refit': args.finger_refit,
-                                            'silhouette_palm': args.silhouette_palm,
-                                            'measurement_rounds': args.measurement_rounds,
-                                            'fault_round': args.fault_round,
-                                            'min_camera_found_fraction':
-                                                args.min_camera_found_fraction,
+                                            **fit_settings(args),
                                             'max_finger_off_silhouette':
                                                 args.max_finger_off_silhouette,
                                             'python_loop_s': loop_s, 'load_average': load},

@@ -50,7 +50,6 @@ poses are cached in data/scripted_tracking/); frames it did not track reach the 
 """
 from __future__ import annotations
 
-import argparse
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -81,6 +80,7 @@ from colorglove_ros.core.tracking.mouse import (
 from colorglove_ros.core.tracking.silhouette import BackgroundModel
 from colorglove_ros.paths import data_dir, resolve_path, share_dir
 from colorglove_ros.tools._cli import run_tool, tool_parser
+from colorglove_ros.tools.eval_edges import add_fit_arguments, fit_settings
 
 __all__ = ['main', 'scripted_sequence', 'evaluate_seed', 'noisy_poses', 'edge_tracked_poses',
            'glove_tracked_poses', 'reinitialisation_pose', 'track_scripted', 'REINIT_MODES',
@@ -349,27 +349,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--camera-weights', type=float, nargs='+',
                         help='with --source edges: the edge tracker\'s camera_weights '
                         '(default: EdgeTrackerConfig\'s)')
-    parser.add_argument('--finger-refit', action=argparse.BooleanOptionalAction,
-                        default=EdgeTrackerConfig.finger_refit,
-                        help='with --source edges and --background empty: the edge tracker\'s '
-                        'finger_refit (default: EdgeTrackerConfig\'s, on)')
-    parser.add_argument('--silhouette-palm', action=argparse.BooleanOptionalAction,
-                        default=EdgeTrackerConfig.silhouette_palm,
-                        help='with --source edges and --background empty: the edge tracker\'s '
-                        'silhouette_palm (default: EdgeTrackerConfig\'s, on)')
-    parser.add_argument('--measurement-rounds', type=int,
-                        default=EdgeTrackerConfig.measurement_rounds,
-                        help='with --source edges: the tracker\'s measurement_rounds '
-                        '(default: EdgeTrackerConfig\'s)')
-    parser.add_argument('--min-camera-found-fraction', type=float,
-                        default=EdgeTrackerConfig.min_camera_found_fraction,
-                        help='with --source edges: the tracker\'s min_camera_found_fraction: '
-                        'share of its usable links each camera must find (default: '
-                        'EdgeTrackerConfig\'s)')
-    parser.add_argument('--fault-round', action=argparse.BooleanOptionalAction,
-                        default=EdgeTrackerConfig.fault_round,
-                        help='with --source edges: the tracker\'s fault_round (default: '
-                        'EdgeTrackerConfig\'s)')
+    add_fit_arguments(parser, applies='with --source edges: ')
     parser.add_argument('--reinit', choices=REINIT_MODES, default=DEFAULT_REINIT,
                         help='with --source edges: (re-)initialise the edge tracker from the '
                         'true pose with the buttons\' joints at rest (default), or from the '
@@ -422,12 +402,7 @@ def _run(args: Any) -> int:
 def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[str, float],
                   cameras: Sequence[PinholeCamera], hand_length_m: float,
                   glove: ScriptedTracker | None) -> int:
-    edge_config = EdgeTrackerConfig(finger_refit=args.finger_refit,
-                                    silhouette_palm=args.silhouette_palm,
-                                    retry_dofs=tuple(args.retry_dofs),
-                                    measurement_rounds=args.measurement_rounds,
-                                    fault_round=args.fault_round,
-                                    min_camera_found_fraction=args.min_camera_found_fraction)
+    edge_config = EdgeTrackerConfig(retry_dofs=tuple(args.retry_dofs), **fit_settings(args))
     if args.camera_weights is not None:
         edge_config = replace(edge_config, camera_weights=tuple(args.camera_weights))
     if args.retry_max_wrist_move_mm is not None:
