@@ -267,20 +267,27 @@ def test_match_primary_uses_crop(rig):
     np.testing.assert_array_equal(corr.vertex[order], verts[:2])
 
 
+def _one_blob_with_clutter(verts: np.ndarray
+                           ) -> tuple[CropTransform, ProjectionConstraints, Blobs]:
+    """A crop at scale 4, four constraints whose entry patches hold 10 tiny pixels (160 image
+    pixels) each, and their blobs at 220,120 / 260,140 / 320,180 / 280,220, patch 9's holding
+    2.5 times its pixels (clutter)."""
+    crop = CropTransform(scale=4.0, offset_x=200.0, offset_y=100.0)
+    cons = ProjectionConstraints([4, 9, 14, 19], [5, 3, 5, 7], verts[:4],
+                                 [[5.0, 5.0], [15.0, 10.0], [30.0, 20.0], [20.0, 30.0]],
+                                 [10, 10, 10, 10])
+    blobs = Blobs([5, 3, 5, 7], [[221.0, 120.0], [262.0, 141.0], [320.0, 181.0],
+                                 [279.0, 221.0]], [150, 400, 170, 140])
+    return crop, cons, blobs
+
+
 @pytest.mark.parametrize('ratio, kept', [(0.0, [4, 9, 14, 19]), (2.0, [4, 14, 19]),
                                           (1.2, [4, 9, 14, 19])])
 def test_match_primary_drops_blobs_far_larger_than_their_patch(rig, ratio, kept):
     """A blob holding more than max_blob_ratio times its constraint's entry pixels (tiny
     pixels x crop scale^2) is not matched, unless fewer than min_kept pairs would remain."""
     model, mesh, kin, mono, stereo, verts = rig
-    crop = CropTransform(scale=4.0, offset_x=200.0, offset_y=100.0)
-    # entry patches of 10 tiny pixels = 160 image pixels at scale 4
-    cons = ProjectionConstraints([4, 9, 14, 19], [5, 3, 5, 7], verts[:4],
-                                 [[5.0, 5.0], [15.0, 10.0], [30.0, 20.0], [20.0, 30.0]],
-                                 [10, 10, 10, 10])
-    # at 220,120 / 260,140 / 320,180 / 280,220; patch 9's blob has 2.5x its pixels (clutter)
-    blobs = Blobs([5, 3, 5, 7], [[221.0, 120.0], [262.0, 141.0], [320.0, 181.0],
-                                 [279.0, 221.0]], [150, 400, 170, 140])
+    crop, cons, blobs = _one_blob_with_clutter(verts)
     min_kept = 4 if ratio == 1.2 else 3
     corr = match_primary(cons, blobs, crop, mono[0], mesh, max_blob_ratio=ratio,
                          min_kept=min_kept)
@@ -292,12 +299,7 @@ def test_tracker_passes_max_blob_ratio_to_matching(rig):
     from colorglove_ros.core.tracking.types import CameraObservation, PosePrior
 
     model, mesh, kin, mono, stereo, verts = rig
-    crop = CropTransform(scale=4.0, offset_x=200.0, offset_y=100.0)
-    cons = ProjectionConstraints([4, 9, 14, 19], [5, 3, 5, 7], verts[:4],
-                                 [[5.0, 5.0], [15.0, 10.0], [30.0, 20.0], [20.0, 30.0]],
-                                 [10, 10, 10, 10])
-    blobs = Blobs([5, 3, 5, 7], [[221.0, 120.0], [262.0, 141.0], [320.0, 181.0],
-                                 [279.0, 221.0]], [150, 400, 170, 140])
+    crop, cons, blobs = _one_blob_with_clutter(verts)
     prior = PosePrior(true_pose(model, np.random.default_rng(3)), cons)
     seen = [CameraObservation(True, blobs, crop)]
     for ratio, n in ((0.0, 4), (2.0, 3)):
