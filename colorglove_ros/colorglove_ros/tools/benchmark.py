@@ -38,7 +38,7 @@ from colorglove_ros.ros.pipeline_run import (
 from colorglove_ros.tools._cli import add_pipeline_arguments, run_tool, tool_parser
 
 __all__ = ['TARGETS', 'BAG_RATE_HZ', 'STEREO_CALIBRATION', 'ensure_bag', 'check_targets',
-           'isolate_domain', 'stage_latency_figures', 'main']
+           'isolate_domain', 'probe_failure_notes', 'stage_latency_figures', 'main']
 
 BAG_RATE_HZ = 30.0     # the bags' own frame rate; offered rates are multiples of it
 STEREO_CALIBRATION = 'config/calibration_stereo.yaml'
@@ -79,10 +79,40 @@ def ensure_bag(seed: int, frames: int, calibration: str | None = None) -> Path:
     return bag
 
 
-def check_targets(figures: dict[str, float]) -> list[dict[str, object]]:
-    """One row per target whose figure was measured: value, threshold, margin, PASS/FAIL."""
-    return [target_row(name, figures[key], bound, op)
+def check_targets(figures: dict[str, float], notes: dict[str, str] | None = None
+                  ) -> list[dict[str, object]]:
+    """One row per target whose figure was measured: value, threshold, margin, PASS/FAIL,
+    and the ``notes`` given for its figure (e.g. :func:`probe_failure_notes`)."""
+    notes = notes or {}
+    return [{**target_row(name, figures[key], bound, op),
+             **({'note': notes[key]} if key in notes else {})}
             for name, (key, op, bound) in TARGETS.items() if key in figures]
+
+
+def probe_failure_notes(runs: list[dict[str, Any]]) -> dict[str, str]:
+    """For each DDS target figure (``dds_..._rate_hz``, ``..._latency_p95_ms``) with a pass
+    whose latency probe failed (its row's ``probe_error``): how many of its passes, and the
+    first reason. Such a pass counts as one that got no JointState."""
+    failed: dict[str, list[str]] = {}
+    passes: dict[str, int] = {}
+    for row in runs:
+        if row['graph'] != 'separate processes':
+            continue
+        key = _dds_key(row)
+        passes[key] = passes.get(key, 0) + 1
+        if row.get('probe_error'):
+            failed.setdefault(key, []).append(row['probe_error'])
+    notes = {}
+    for key, reasons in failed.items():
+        note = (f'latency probe failed in {len(reasons)} of {passes[key]} passes (counted as no '
+                f'JointState): {reasons[0]}')
+        notes[f'{key}_rate_hz'] = notes[f'{key}_latency_p95_ms'] = note
+    return notes
+
+
+def _dds_key(row: dict[str, Any]) -> str:
+    """The target figures' prefix of a DDS row: ``dds_30hz``, ``dds_2cam_30hz``, ..."""
+    return f'dds_{"2cam_" if row["cameras"] == 2 else ""}{row["offered_hz"]:g}hz'
 
 
 def in_process(bag: Path, parameters: dict[str, dict], frames: int, profile: bool
@@ -133,6 +163,8 @@ def dds_pass(bag: Path, parameters: dict[str, dict], frames: int, offered_hz: fl
     if run.timed_out:
         print('[benchmark] pass timed out', flush=True)
         return None
+    if run.probe_error:
+        print(f'[benchmark] {run.probe_error}: this pass has no latency figures', flush=True)
     figures = summarize(run, default_hand()[0])
     received = len(run.probe.stamp_ns) if run.probe is not None else 0
     return {'graph': graph, 'cameras': 2 if two_cameras else 1, 'offered_hz': offered_hz,
@@ -155,7 +187,8 @@ def dds_pass(bag: Path, parameters: dict[str, dict], frames: int, offered_hz: fl
             **{key.replace('_per_frame', ''): value for key, value in figures.items()
                if key.startswith('cpu_ms_per_frame_')},
             **(stage_latency_figures(run.probe) if stage_latency and run.probe is not None
-               else {})}
+               else {}),
+            **({'probe_error': run.probe_error} if run.probe_error else {})}
 
 
 def stage_latency_figures(record: ProbeRecord) -> dict[str, float]:
@@ -180,7 +213,7 @@ def _target_figures(stages: list[dict[str, Any]], runs: list[dict[str, Any]]
     for row in runs:
         if row['graph'] != 'separate processes':
             continue
-        key = f'dds_{"2cam_" if row["cameras"] == 2 else ""}{row["offered_hz"]:g}hz'
+        key = _dds_key(row)
         repeats.setdefault(f'{key}_rate_hz', []).append(row['joint_states_per_s'])
         # a pass that got no JointState has no latency: the worst, not NaN, in the median
         p95 = row['latency_p95_ms']
@@ -269,12 +302,13 @@ def _benchmark(args: argparse.Namespace) -> int:
         report['dds'] = runs
         print_table(runs, title='over DDS (latency: lean subscriber, JointState arrival minus '
                                 'camera stamp)')
-    targets = check_targets(_target_figures(stages, runs))
+    targets = check_targets(_target_figures(stages, runs), probe_failure_notes(runs))
     report['targets'] = targets
     print_table(targets, title='issue 19 targets (measured on this machine)')
     if args.json:
         write_json(args.json, report)
-    return 0
+    # a pass without its latency probe measured nothing: the run failed, its rows say why
+    return 1 if any(row.get('probe_error') for row in runs) else 0
 
 
 if __name__ == '__main__':

@@ -74,3 +74,32 @@ def test_stage_latency_figures_per_stage_output() -> None:
     assert figures['pose_candidates_latency_p50_ms'] == pytest.approx(22.0)
     assert np.isnan(stage_latency_figures(ProbeRecord(np.zeros(0), np.zeros(0)))[
         'observation_latency_p50_ms'])
+
+
+def test_a_pass_whose_latency_probe_died_is_a_failed_row_and_verdict(
+        monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
+    """A DDS pass whose probe ended early gives a row naming it (no latency, no JointState
+    counted), and the targets of that pass FAIL with the reason in their note."""
+    from colorglove_ros.ros.latency_probe import ProbeRecord
+    from colorglove_ros.ros.pipeline_run import PipelineRun
+
+    empty = np.zeros(0, np.int64)
+    reason = 'the latency probe (pid 7) was killed by signal 9 before the run ended'
+    run = PipelineRun(frames_expected=30, frames=30, segmented=30, tracked=30, duration_s=1.0,
+                      latencies_s=[], estimated=np.zeros((0, 26)), truth=np.zeros((0, 26)),
+                      segmentation_ms=[], lookup_ms=[], probe=ProbeRecord(empty, empty),
+                      cpu_s={'probe': float('nan')}, probe_error=reason)
+    monkeypatch.setattr(benchmark, 'run_pipeline', lambda *args, **kwargs: run)
+    monkeypatch.setattr(benchmark, 'bag_feed', lambda *args, **kwargs: None)
+    row = benchmark.dds_pass(tmp_path, {'ik': {}}, 30, 60.0, single_process=False)
+    assert row['probe_error'] == reason
+    assert row['joint_states_per_s'] == 0 and np.isnan(row['latency_p95_ms'])
+    runs = [row, _run('separate processes', 1, 60.0, 59.0, 25.0),
+            _run('separate processes', 1, 30.0, 30.0, 15.0)]
+    targets = {r['target']: r for r in benchmark.check_targets(
+        benchmark._target_figures([], runs), benchmark.probe_failure_notes(runs))}
+    for name in ('60 Hz offered: >= 57 JointStates/s', '60 Hz offered: latency p95 <= 33 ms'):
+        assert targets[name]['result'] == 'FAIL'
+        assert targets[name]['note'] == ('latency probe failed in 1 of 2 passes (counted as '
+                                         f'no JointState): {reason}')
+    assert 'note' not in targets['30 Hz offered: latency p95 <= 20 ms']
