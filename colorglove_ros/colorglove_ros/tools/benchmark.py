@@ -1,11 +1,14 @@
 """Speed of the tracker on a 640x480 synthetic bag with the configured (default 100,000-entry)
 database, in one run: the in-process time per stage and per frame (``ros.stage_profile``: the
-node classes' callbacks with message conversion, median and p95), then the graph over DDS with
-the bag played at 30 Hz and at 60 Hz (JointStates per second and latency p50/p95 from the
-camera stamp, taken by a lean subscriber in its own process; the bag is restamped at publish
-time; and each process's CPU time per offered frame, which the machine's other load disturbs
-less than the wall-clock figures) and two cameras at 30 Hz. The four-process graph always;
-with ``--single-process`` also every node in one process (``colorglove_single_process``)."""
+node classes' callbacks with message conversion, median and p95; an uncounted warm-up pass,
+then three passes through fresh nodes, judged on the median of the passes' per-frame medians,
+their range printed: one pass's median moves with the machine's moment), then the graph over
+DDS with the bag played at 30 Hz and at 60 Hz (JointStates per second and latency p50/p95 from
+the camera stamp, taken by a lean subscriber in its own process; the bag is restamped at
+publish time; and each process's CPU time per offered frame, which the machine's other load
+disturbs less than the wall-clock figures) and two cameras at 30 Hz. The four-process graph
+always; with ``--single-process`` also every node in one process
+(``colorglove_single_process``)."""
 from __future__ import annotations
 
 import argparse
@@ -115,13 +118,27 @@ def _dds_key(row: dict[str, Any]) -> str:
     return f'dds_{"2cam_" if row["cameras"] == 2 else ""}{row["offered_hz"]:g}hz'
 
 
-def in_process(bag: Path, parameters: dict[str, dict], frames: int, profile: bool
-               ) -> tuple[list[dict[str, Any]], Any]:
-    """The in-process stage rows (``ros.stage_profile``) on the bag's first ``frames``."""
-    from colorglove_ros.ros.stage_profile import frames_of_bag, profile_stages, stage_summary
+def in_process(bag: Path, parameters: dict[str, dict], frames: int, profile: bool,
+               passes: int = 1, warm_up: bool = False) -> dict[str, Any]:
+    """The in-process pass (``ros.stage_profile``) on the bag's first ``frames``, ``passes``
+    times, each through fresh nodes (the same work each time), after a warm-up pass that is
+    not counted (``warm_up``). ``stages``: the stage rows, every figure the median over the
+    passes (:func:`~colorglove_ros.ros.stage_profile.passes_summary`: the frame's
+    ``node_p50_ms``, the target's figure, is the median of the passes' per-frame medians);
+    ``passes``: one row per pass; ``warm_up``: the warm-up's frame row (None without);
+    ``times``: the last pass's :class:`~colorglove_ros.ros.stage_profile.StageTimes`."""
+    from colorglove_ros.ros.stage_profile import (
+        frames_of_bag,
+        passes_summary,
+        profile_stages,
+        stage_summary,
+    )
 
-    times = profile_stages(frames_of_bag(bag, frames), parameters, profile=profile)
-    return stage_summary(times), times
+    chosen = frames_of_bag(bag, frames)
+    warm = stage_summary(profile_stages(chosen, parameters))[-1] if warm_up else None
+    runs = [profile_stages(chosen, parameters, profile=profile) for _ in range(passes)]
+    stages, per_pass = passes_summary(runs)
+    return {'stages': stages, 'passes': per_pass, 'warm_up': warm, 'times': runs[-1]}
 
 
 def _second_camera(parameters: dict[str, dict]
@@ -231,9 +248,15 @@ def main(argv: list[str] | None = None) -> int:
                         help='offered camera rates of the DDS passes, Hz (default 30 60)')
     parser.add_argument('--in-process-frames', type=int, default=150,
                         help='frames of the in-process pass (0 skips it)')
+    parser.add_argument('--in-process-passes', type=int, default=3,
+                        help='counted in-process passes over those frames, each through fresh '
+                             'nodes; the target judges the median of their per-frame medians '
+                             '(default 3)')
+    parser.add_argument('--no-warm-up', dest='warm_up', action='store_false',
+                        help='no uncounted warm-up pass before the in-process passes')
     parser.add_argument('--profile', action='store_true',
                         help='also print each stage\'s cProfile (cumulative time) of the '
-                             'in-process pass')
+                             'in-process passes (the last one\'s)')
     parser.add_argument('--no-dds', action='store_true', help='the in-process pass only')
     parser.add_argument('--no-two-cameras', action='store_true',
                         help='skip the two-camera pass')
@@ -257,6 +280,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.repeats < 1:
         parser.error('--repeats must be at least 1')
+    if args.in_process_passes < 1:
+        parser.error('--in-process-passes must be at least 1')
     return run_tool('colorglove_benchmark', lambda: _benchmark(args))
 
 
@@ -271,13 +296,28 @@ def _benchmark(args: argparse.Namespace) -> int:
     report: dict[str, Any] = {'bag': bag.name, 'database': database.name}
     stages: list[dict[str, Any]] = []
     if args.in_process_frames > 0:
-        print(f'[benchmark] in process: {args.in_process_frames} frames', flush=True)
-        stages, times = in_process(bag, parameters, args.in_process_frames, args.profile)
+        print(f'[benchmark] in process: {args.in_process_frames} frames, '
+              f'{"a warm-up pass (not counted), then " if args.warm_up else ""}'
+              f'{args.in_process_passes} pass(es), each through fresh nodes', flush=True)
+        result = in_process(bag, parameters, args.in_process_frames, args.profile,
+                            args.in_process_passes, args.warm_up)
+        stages, times, per_pass = result['stages'], result['times'], result['passes']
+        frame_p50 = [row['frame_p50_ms'] for row in per_pass]
         report['in_process'] = stages
-        report['in_process_tracked'] = sum(times.tracked)
-        print_table(stages, title=f'in process, {len(times.tracked)} frames ({sum(times.tracked)} '
-                                  'tracked): node = input deserialisation + callback; compute = '
-                                  'the stage\'s own timing')
+        report['in_process_tracked'] = min(row['tracked'] for row in per_pass)
+        report['in_process_passes'] = per_pass
+        report['in_process_frame_p50_range_ms'] = [min(frame_p50), max(frame_p50)]
+        report['in_process_warm_up'] = result['warm_up']
+        print_table(per_pass, title='in process, each pass (per-frame medians, ms)')
+        warm = result['warm_up']
+        print(f'[benchmark] frame p50 over {len(per_pass)} pass(es): median '
+              f'{np.median(frame_p50):.2f} ms, range {min(frame_p50):.2f}-{max(frame_p50):.2f}'
+              + (f' (warm-up pass, not counted: {warm["node_p50_ms"]:.2f})' if warm else ''),
+              flush=True)
+        print_table(stages, title=f'in process, {len(times.tracked)} frames '
+                                  f'({report["in_process_tracked"]} tracked), the median over '
+                                  f'{len(per_pass)} pass(es): node = input deserialisation + '
+                                  'callback; compute = the stage\'s own timing')
         if args.profile:
             from colorglove_ros.ros.stage_profile import profile_text
             for name, stats in times.profiles.items():

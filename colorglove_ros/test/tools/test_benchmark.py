@@ -103,3 +103,53 @@ def test_a_pass_whose_latency_probe_died_is_a_failed_row_and_verdict(
         assert targets[name]['note'] == ('latency probe failed in 1 of 2 passes (counted as '
                                          f'no JointState): {reason}')
     assert 'note' not in targets['30 Hz offered: latency p95 <= 20 ms']
+
+
+def test_the_in_process_verdict_is_the_median_of_counted_passes_after_a_warm_up(
+        monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
+    """``--no-dds``: a warm-up pass (not profiled, not counted), then ``--in-process-passes``
+    passes; the frame target judges the median of their per-frame medians and the JSON keeps
+    each pass, their range and the warm-up's frame row; ``--no-warm-up`` runs none."""
+    import json
+
+    from colorglove_ros.ros import stage_profile
+    from colorglove_ros.ros.stage_profile import StageTimes
+
+    medians = iter([30.0, 9.0, 7.0, 8.5, 8.2, 9.6])     # warm-up, then the counted passes
+    calls = []
+
+    def profile_stages(frames, parameters, *, profile=False):
+        frame = next(medians)
+        calls.append(profile)
+        node = {'segmentation': [frame / 2] * 3, 'lookup': [frame / 4] * 3, 'ik': [frame / 4] * 3}
+        return StageTimes(node_ms=node, cpu_ms=node, compute_ms=node, tracked=[True] * 3)
+
+    monkeypatch.setenv('ROS_DOMAIN_ID', '77')       # the benchmark sets it for its graph
+    monkeypatch.setattr(benchmark, 'prepare_assets', lambda database: tmp_path)
+    monkeypatch.setattr(benchmark, 'ensure_bag', lambda *args: tmp_path / 'bag')
+    monkeypatch.setattr(benchmark, 'pipeline_parameters',
+                        lambda *args: {'camera': {}, 'ik': {}})
+    monkeypatch.setattr(stage_profile, 'frames_of_bag', lambda bag, frames: [])
+    monkeypatch.setattr(stage_profile, 'profile_stages', profile_stages)
+    out = tmp_path / 'bench.json'
+    assert benchmark.main(['--no-dds', '--in-process-passes', '3', '--profile', '--json',
+                           str(out)]) == 0
+    assert calls == [False, True, True, True]
+    report = json.loads(out.read_text())
+    assert [row['frame_p50_ms'] for row in report['in_process_passes']] == [9.0, 7.0, 8.5]
+    assert report['in_process_frame_p50_range_ms'] == [7.0, 9.0]
+    assert report['in_process_warm_up']['node_p50_ms'] == 30.0
+    frame = next(row for row in report['in_process'] if row['stage'] == 'frame')
+    assert frame['node_p50_ms'] == 8.5
+    target = report['targets'][0]
+    assert target['measured'] == 8.5 and target['result'] == 'FAIL'
+    assert report['in_process_tracked'] == 3
+    calls.clear()
+    assert benchmark.main(['--no-dds', '--in-process-passes', '2', '--no-warm-up', '--json',
+                           str(out)]) == 0
+    assert calls == [False, False]
+    report = json.loads(out.read_text())
+    assert report['in_process_warm_up'] is None
+    assert report['in_process_frame_p50_range_ms'] == [8.2, 9.6]
+    with pytest.raises(SystemExit):
+        benchmark.main(['--in-process-passes', '0'])
