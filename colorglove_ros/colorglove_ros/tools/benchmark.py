@@ -1,8 +1,9 @@
 """Speed of the tracker on a 640x480 synthetic bag with the configured (default 100,000-entry)
 database, in one run: the in-process time per stage and per frame (``ros.stage_profile``: the
 node classes' callbacks with message conversion, median and p95; an uncounted warm-up pass,
-then three passes through fresh nodes, judged on the median of the passes' per-frame medians,
-their range printed: one pass's median moves with the machine's moment), then the graph over
+then :data:`IN_PROCESS_PASSES` passes through fresh nodes, judged on the median of the passes'
+per-frame medians, their range printed: one pass's median moves with the machine's moment),
+then the graph over
 DDS with the bag played at 30 Hz and at 60 Hz (JointStates per second and latency p50/p95 from
 the camera stamp, taken by a lean subscriber in its own process; the bag is restamped at
 publish time; and each process's CPU time per offered frame, which the machine's other load
@@ -40,10 +41,13 @@ from colorglove_ros.ros.pipeline_run import (
 )
 from colorglove_ros.tools._cli import add_pipeline_arguments, run_tool, tool_parser
 
-__all__ = ['TARGETS', 'BAG_RATE_HZ', 'STEREO_CALIBRATION', 'ensure_bag', 'check_targets',
-           'isolate_domain', 'probe_failure_notes', 'stage_latency_figures', 'main']
+__all__ = ['TARGETS', 'BAG_RATE_HZ', 'IN_PROCESS_PASSES', 'STEREO_CALIBRATION', 'ensure_bag',
+           'check_targets', 'isolate_domain', 'probe_failure_notes', 'stage_latency_figures',
+           'main']
 
 BAG_RATE_HZ = 30.0     # the bags' own frame rate; offered rates are multiples of it
+# counted in-process passes (after the warm-up): the frame target judges their median
+IN_PROCESS_PASSES = 3
 STEREO_CALIBRATION = 'config/calibration_stereo.yaml'
 
 # name: (figure, comparison, bound), issue 19
@@ -119,7 +123,7 @@ def _dds_key(row: dict[str, Any]) -> str:
 
 
 def in_process(bag: Path, parameters: dict[str, dict], frames: int, profile: bool,
-               passes: int = 1, warm_up: bool = False) -> dict[str, Any]:
+               passes: int = IN_PROCESS_PASSES, warm_up: bool = True) -> dict[str, Any]:
     """The in-process pass (``ros.stage_profile``) on the bag's first ``frames``, ``passes``
     times, each through fresh nodes (the same work each time), after a warm-up pass that is
     not counted (``warm_up``). ``stages``: the stage rows, every figure the median over the
@@ -248,10 +252,10 @@ def main(argv: list[str] | None = None) -> int:
                         help='offered camera rates of the DDS passes, Hz (default 30 60)')
     parser.add_argument('--in-process-frames', type=int, default=150,
                         help='frames of the in-process pass (0 skips it)')
-    parser.add_argument('--in-process-passes', type=int, default=3,
+    parser.add_argument('--in-process-passes', type=int, default=IN_PROCESS_PASSES,
                         help='counted in-process passes over those frames, each through fresh '
                              'nodes; the target judges the median of their per-frame medians '
-                             '(default 3)')
+                             f'(default {IN_PROCESS_PASSES})')
     parser.add_argument('--no-warm-up', dest='warm_up', action='store_false',
                         help='no uncounted warm-up pass before the in-process passes')
     parser.add_argument('--profile', action='store_true',
