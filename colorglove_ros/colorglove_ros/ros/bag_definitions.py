@@ -54,9 +54,14 @@ class DefinitionChange:
             return (f'{self.topic}: recorded with another definition of {self.msgtype} than '
                     'the installed one (its type hash differs), and the bag does not hold that '
                     'definition, so its messages cannot be converted')
-        moved = [f'{old} -> {", ".join(new)}' for old, new in _moved_in(self)]
+        moves = _moved_in(self)
+        moved = [f'{old} -> {", ".join(new)}' for old, new in moves]
+        # a moved field and its elements are converted, neither dropped nor at defaults
+        dropped = [path for path in self.dropped
+                   if not any(path == old or path.startswith(f'{old}[]') for old, _ in moves)]
+        added = [path for path in self.added if not any(path in new for _, new in moves)]
         parts = [f'{name} {", ".join(items)}' for name, items in
-                 (('dropped:', self.dropped), ('new, at defaults:', self.added),
+                 (('dropped:', dropped), ('new, at defaults:', added),
                   ('retyped:', self.retyped), ('converted:', moved)) if items]
         return (f'{self.topic}: recorded with another definition of {self.msgtype} than the '
                 f'installed one ({"; ".join(parts) or "same field names, other layout"})')

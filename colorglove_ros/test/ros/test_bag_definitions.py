@@ -290,6 +290,8 @@ def test_patch_blob_bags_convert_their_blobs_into_the_parallel_arrays(tmp_path: 
             'observation.blob_centroids, observation.blob_pixel_counts' \
             in changes[TOPIC].describe()
         assert 'converted: blobs -> blob_colors' in changes['/hand/observation'].describe()
+        assert 'dropped' not in changes[TOPIC].describe()       # the blobs are carried over
+        assert 'at defaults' not in changes['/hand/observation'].describe()
         recorded = [(c.topic, reader.deserialize(raw, c.msgtype))
                     for c, _, raw in reader.messages()]
     from colorglove_msgs.msg import HandObservation
