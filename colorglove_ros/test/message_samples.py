@@ -1,8 +1,26 @@
 """Deterministic custom messages for the DDS round-trip test (shared by both processes)."""
 from __future__ import annotations
 
+from array import array
+from collections.abc import Iterable
+
 import numpy as np
-from colorglove_msgs.msg import HandObservation, HandPoseCandidates, PatchBlob
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates
+
+
+def set_blobs(msg: HandObservation, blobs: Iterable[tuple[int, float, float, int]]) -> None:
+    """Give ``msg`` these blobs ((colour, x, y, pixel count) each) in its parallel arrays."""
+    blobs = list(blobs)
+    msg.blob_colors = array('B', [int(b[0]) for b in blobs])
+    msg.blob_centroids = array('d', [float(v) for b in blobs for v in b[1:3]])
+    msg.blob_pixel_counts = array('I', [int(b[3]) for b in blobs])
+
+
+def blob_tuples(msg: HandObservation) -> list[tuple[int, float, float, int]]:
+    """(colour, x, y, pixel count) of each blob of ``msg``'s parallel arrays."""
+    xy = list(msg.blob_centroids)
+    return [(int(c), xy[2 * k], xy[2 * k + 1], int(n))
+            for k, (c, n) in enumerate(zip(msg.blob_colors, msg.blob_pixel_counts, strict=True))]
 
 
 def sample_observation(seq: int) -> HandObservation:
@@ -17,8 +35,7 @@ def sample_observation(seq: int) -> HandObservation:
     msg.image_width, msg.image_height = 640, 480
     msg.tiny_labels = rng.integers(0, 11, HandObservation.TINY_SIZE ** 2, dtype=np.uint8).tolist()
     msg.crop_scale, msg.crop_offset_x, msg.crop_offset_y = 3.25, 100.5 + seq, 80.25
-    msg.blobs = [PatchBlob(color_label=c, x=10.0 * c + 0.5, y=20.0 * c, pixel_count=100 * c)
-                 for c in range(1, 11)]
+    set_blobs(msg, [(c, 10.0 * c + 0.5, 20.0 * c, 100 * c) for c in range(1, 11)])
     msg.glove_pixel_count = 5500
     msg.processing_time_ms = 4.5
     return msg

@@ -7,7 +7,9 @@ layout and read nonsense. :func:`definition_changes` finds such topics (comparin
 hash with the installed definition's) and says which fields differ; :func:`convert_message`
 rebuilds a message decoded with the recorded definition as the installed type, field by field
 by name (fields the installed type lacks are dropped, new fields get their defaults; a value
-the installed field cannot hold exactly is a :class:`DefinitionConversionError`)."""
+the installed field cannot hold exactly is a :class:`DefinitionConversionError`). A field this
+package moved is carried over rather than dropped: ``HandObservation``'s ``PatchBlob[] blobs``
+(before session 27) fills its parallel blob arrays (:data:`MOVED_FIELDS`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, is_dataclass
@@ -17,8 +19,10 @@ import numpy as np
 from rosbags.interfaces import MessageDefinitionFormat, Nodetype
 from rosbags.typesys.store import Typestore
 
-__all__ = ['DefinitionChange', 'DefinitionConversionError', 'convert_message',
+__all__ = ['DefinitionChange', 'DefinitionConversionError', 'MOVED_FIELDS', 'convert_message',
            'definition_changes']
+
+_OBSERVATION = 'colorglove_msgs/msg/HandObservation'
 
 _BASE, _NAME, _ARRAY, _SEQUENCE = Nodetype.BASE, Nodetype.NAME, Nodetype.ARRAY, Nodetype.SEQUENCE
 # (rosbags reads and writes a scalar ``byte`` as signed)
@@ -50,11 +54,47 @@ class DefinitionChange:
             return (f'{self.topic}: recorded with another definition of {self.msgtype} than '
                     'the installed one (its type hash differs), and the bag does not hold that '
                     'definition, so its messages cannot be converted')
+        moves = _moved_in(self)
+        moved = [f'{old} -> {", ".join(new)}' for old, new in moves]
+        # a moved field and its elements are converted, neither dropped nor at defaults
+        dropped = [path for path in self.dropped
+                   if not any(path == old or path.startswith(f'{old}[]') for old, _ in moves)]
+        added = [path for path in self.added if not any(path in new for _, new in moves)]
         parts = [f'{name} {", ".join(items)}' for name, items in
-                 (('dropped:', self.dropped), ('new, at defaults:', self.added),
-                  ('retyped:', self.retyped)) if items]
+                 (('dropped:', dropped), ('new, at defaults:', added),
+                  ('retyped:', self.retyped), ('converted:', moved)) if items]
         return (f'{self.topic}: recorded with another definition of {self.msgtype} than the '
                 f'installed one ({"; ".join(parts) or "same field names, other layout"})')
+
+
+def _blobs_as_arrays(present: dict[str, Any], values: dict[str, Any], path: str) -> None:
+    """A ``HandObservation`` recorded with ``PatchBlob[] blobs``: its blobs into the
+    installed parallel arrays (colour, (x, y), pixel count), each value kept exactly."""
+    blobs = present['blobs']
+    values['blob_colors'] = _exact_numbers([b.color_label for b in blobs], np.uint8,
+                                           f'{path}blobs[].color_label')
+    values['blob_centroids'] = _exact_numbers(
+        [value for b in blobs for value in (b.x, b.y)], np.float64, f'{path}blobs[].x/y')
+    values['blob_pixel_counts'] = _exact_numbers([b.pixel_count for b in blobs], np.uint32,
+                                                 f'{path}blobs[].pixel_count')
+
+
+# (type, recorded field, installed fields it fills, conversion(recorded fields, installed
+# values, dotted prefix)): fields this package moved, converted instead of dropped
+MOVED_FIELDS = ((_OBSERVATION, 'blobs', ('blob_colors', 'blob_centroids', 'blob_pixel_counts'),
+                 _blobs_as_arrays),)
+
+
+def _moved_in(change: DefinitionChange) -> list[tuple[str, tuple[str, ...]]]:
+    """(recorded path, installed paths) of the :data:`MOVED_FIELDS` a change converts."""
+    out = []
+    for path in change.dropped:
+        for _, old, new, _ in MOVED_FIELDS:
+            prefix = path[:-len(old)]
+            if path.endswith(old) and (not prefix or prefix.endswith('.')) and all(
+                    f'{prefix}{name}' in change.added for name in new):
+                out.append((path, tuple(f'{prefix}{name}' for name in new)))
+    return out
 
 
 def _field_types(store: Typestore, msgtype: str, prefix: str = '') -> dict[str, str]:
@@ -186,4 +226,9 @@ def convert_message(message: Any, msgtype: str, store: Typestore, prefix: str = 
     for name, (kind, spec) in store.fielddefs[msgtype][1]:
         values[name] = (_convert(present[name], store, kind, spec, f'{prefix}{name}')
                         if name in present else _default(store, kind, spec))
+    installed = {name for name, _ in store.fielddefs[msgtype][1]}
+    for kind, old, new, move in MOVED_FIELDS:
+        if (kind == msgtype and old in present and old not in installed
+                and set(new) <= installed and not set(new) & set(present)):
+            move(present, values, prefix)
     return store.types[msgtype](**values)

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 import numpy as np
 from builtin_interfaces.msg import Time
 from colorglove_msgs.msg import GestureEvent as GestureEventMsg
-from colorglove_msgs.msg import HandObservation, HandPoseCandidates, PatchBlob
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from geometry_msgs.msg import Point, Point32, PolygonStamped, Pose, PoseStamped, Quaternion
 from sensor_msgs.msg import CameraInfo, JointState
 from std_msgs.msg import ColorRGBA, Header
@@ -32,7 +32,8 @@ __all__ = [
     'pose_to_joint_state_msg',
     'pose_to_wrist_pose_msg', 'pose_from_joint_state_msg', 'pose_from_msgs',
     'crop_from_observation_msg',
-    'tiny_labels_from_observation_msg', 'blobs_from_observation_msg', 'camera_observation_from_msg',
+    'tiny_labels_from_observation_msg', 'blob_count_of_observation_msg',
+    'blobs_from_observation_msg', 'camera_observation_from_msg',
     'candidates_to_msg', 'candidate_arrays_from_msg', 'constraint_arrays_from_msg',
     'pose_prior_from_candidates_msg', 'skeleton_to_markers_msg',
     'observation_to_msg', 'wrist_pose_to_tf_msg', 'gesture_event_to_msg',
@@ -127,13 +128,25 @@ def tiny_labels_from_observation_msg(msg: HandObservation) -> np.ndarray:
     return labels.reshape(TINY_SIZE, TINY_SIZE)
 
 
+def blob_count_of_observation_msg(msg: HandObservation) -> int:
+    """How many blobs the observation's parallel blob arrays describe; ValueError naming the
+    arrays if their lengths disagree (one colour, one (x, y) and one pixel count a blob)."""
+    count = len(msg.blob_colors)
+    if len(msg.blob_centroids) != 2 * count or len(msg.blob_pixel_counts) != count:
+        raise ValueError(f'blob arrays disagree: {count} blob_colors, '
+                         f'{len(msg.blob_centroids)} blob_centroids values (expected '
+                         f'{2 * count}), {len(msg.blob_pixel_counts)} blob_pixel_counts')
+    return count
+
+
 def blobs_from_observation_msg(msg: HandObservation) -> Blobs:
-    """The observation's glove blobs (colour, full-image centroid, pixel count)."""
-    if not msg.blobs:
+    """The observation's glove blobs (colour, full-image centroid, pixel count), copied from
+    its parallel arrays; ValueError if their lengths disagree."""
+    if not blob_count_of_observation_msg(msg):
         return Blobs.empty()
-    return Blobs(color=np.array([b.color_label for b in msg.blobs]),
-                 centroid_px=np.array([[b.x, b.y] for b in msg.blobs]),
-                 pixel_count=np.array([b.pixel_count for b in msg.blobs], dtype=float))
+    return Blobs(color=np.frombuffer(msg.blob_colors, np.uint8).astype(np.int64),
+                 centroid_px=np.array(msg.blob_centroids, np.float64).reshape(-1, 2),
+                 pixel_count=np.frombuffer(msg.blob_pixel_counts, np.uint32).astype(float))
 
 
 def camera_observation_from_msg(msg: HandObservation, blobs: Blobs | None = None
@@ -277,8 +290,11 @@ def observation_to_msg(observation: Observation, header: Header) -> HandObservat
         msg.tiny_labels = array('B', np.ascontiguousarray(observation.tiny_labels,
                                                           np.uint8).tobytes())
     blobs = sorted(observation.blobs, key=lambda b: -b.pixel_count)
-    msg.blobs = [PatchBlob(color_label=int(b.color_label), x=float(b.centroid_x),
-                           y=float(b.centroid_y), pixel_count=int(b.pixel_count)) for b in blobs]
+    # the numeric arrays take an array.array of their own type as it is (no per-element check)
+    msg.blob_colors = array('B', [int(b.color_label) for b in blobs])
+    msg.blob_centroids = array('d', [value for b in blobs
+                                     for value in (float(b.centroid_x), float(b.centroid_y))])
+    msg.blob_pixel_counts = array('I', [int(b.pixel_count) for b in blobs])
     return msg
 
 

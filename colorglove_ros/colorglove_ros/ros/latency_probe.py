@@ -29,8 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from colorglove_ros import signal_exit
+from colorglove_ros.core.errors import ColorGloveError
 
-__all__ = ['ProbeRecord', 'LatencyProbe', 'window_summaries', 'main']
+__all__ = ['ProbeError', 'ProbeRecord', 'LatencyProbe', 'window_summaries', 'main']
 
 JOINT_STATES_TOPIC = '/hand/joint_states'
 
@@ -94,6 +95,11 @@ def window_summaries(record: ProbeRecord, window_s: float) -> list[dict[str, flo
     return rows
 
 
+class ProbeError(ColorGloveError, RuntimeError):
+    """The latency probe's process did not start, ended before the run did, or wrote no
+    record: the run has no latency figures."""
+
+
 class LatencyProbe:
     """The probe as a separate process: ``start()``, run the pipeline, ``stop()`` -> record."""
 
@@ -122,7 +128,7 @@ class LatencyProbe:
         deadline = time.monotonic() + ready_timeout_s
         while not ready.exists():
             if self.process.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError('the latency probe did not start')
+                raise ProbeError('the latency probe did not start')
             time.sleep(0.05)
 
     def wait_for_first(self, timeout_s: float) -> bool:
@@ -134,13 +140,41 @@ class LatencyProbe:
             time.sleep(0.05)
         return True
 
+    def failure(self) -> str:
+        """Why the started process is no longer running (its exit code), '' while it runs."""
+        if self.process is None:
+            return 'the latency probe was not started'
+        code = self.process.poll()
+        if code is None:
+            return ''
+        how = f'was killed by signal {-code}' if code < 0 else f'exited with code {code}'
+        return f'the latency probe (pid {self.process.pid}) {how} before the run ended'
+
+    def cpu_seconds(self) -> float:
+        """CPU time (user + system, seconds) the running process has used so far;
+        :class:`ProbeError` if it has ended."""
+        from colorglove_ros.ros.launcher import process_cpu_seconds
+
+        failure = self.failure()
+        if not failure:
+            try:
+                return process_cpu_seconds(self.process.pid)
+            except OSError:         # ended (and was reaped) after the poll
+                failure = self.failure() or 'the latency probe ended before the run did'
+        raise ProbeError(failure)
+
     def stop(self, timeout_s: float = 10.0) -> ProbeRecord:
-        """Stop the process (SIGINT) and return what it recorded."""
+        """Stop the process (SIGINT) and return what it recorded; :class:`ProbeError` if it
+        had already ended (it then wrote no record) or wrote none."""
+        failure = self.failure()
+        if failure:
+            self.close()
+            raise ProbeError(failure)
         self._end_process(timeout_s)
         try:
             data = json.loads(self.output.read_text())
         except (OSError, ValueError) as exc:
-            raise RuntimeError(f'the latency probe wrote no record: {exc}') from exc
+            raise ProbeError(f'the latency probe wrote no record: {exc}') from exc
         finally:
             self.folder.cleanup()
         return ProbeRecord(*(np.asarray(data[key], np.int64) for key in (

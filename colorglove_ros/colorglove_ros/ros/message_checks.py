@@ -35,9 +35,13 @@ def checked_observation_msg(msg: HandObservation, camera_size: tuple[int, int] |
     :class:`~colorglove_ros.core.validation.InvalidObservationError` naming the field."""
     if not msg.hand_found:
         raise InvalidObservationError('hand_found is false')
-    if len(msg.blobs) > MAX_BLOBS:      # refused before building arrays of them
-        raise InvalidObservationError(f'{len(msg.blobs)} blobs, at most {MAX_BLOBS} allowed')
-    blobs = blobs_from_observation_msg(msg)
+    if len(msg.blob_colors) > MAX_BLOBS:      # refused before building arrays of them
+        raise InvalidObservationError(f'{len(msg.blob_colors)} blobs, at most {MAX_BLOBS} '
+                                      'allowed')
+    try:
+        blobs = blobs_from_observation_msg(msg)
+    except ValueError as exc:           # the parallel blob arrays' lengths disagree
+        raise InvalidObservationError(str(exc)) from exc
     tiny = validate_observation(
         image_width=msg.image_width, image_height=msg.image_height,
         tiny_labels=msg.tiny_labels,

@@ -41,11 +41,10 @@ from colorglove_ros.ros.conversions import pose_from_msgs, stamp_key
 from colorglove_ros.ros.frame_camera import CAMERA_REFUSAL_PREFIX
 from colorglove_ros.ros.image import image_to_rgb8
 from colorglove_ros.ros.image_codec import header_stamp_from_cdr
-from colorglove_ros.ros.latency_probe import LatencyProbe, ProbeRecord
+from colorglove_ros.ros.latency_probe import LatencyProbe, ProbeError, ProbeRecord
 from colorglove_ros.ros.launcher import (
     Launcher,
     NodeSpec,
-    process_cpu_seconds,
     use_fastdds_profile,
 )
 from colorglove_ros.ros.lean_executor import LeanExecutor
@@ -208,6 +207,8 @@ class PipelineRun:
     # process: the monitor, the feed's thread), 'probe' (the latency probe's process) and
     # 'player' (the feed's process, whole run)
     cpu_s: dict[str, float] = field(default_factory=dict)
+    # why the latency probe gave no record ('' if it ran to the end): the run has no latency
+    probe_error: str = ''
 
     def missed_frames(self) -> str:
         """Why a run segmented fewer frames than it saw, for a failure message: the frames
@@ -311,7 +312,9 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
     ``extra_inputs`` maps their input topics to their node names, awaited like the stages'.
     With ``single_process`` the tracker's nodes run in one process (:func:`node_specs`).
     ``stage_topics`` ((topic, type), e.g. :data:`STAGE_OUTPUTS`) are also recorded by the
-    latency probe (``ProbeRecord.stage_latencies_s``)."""
+    latency probe (``ProbeRecord.stage_latencies_s``). A latency probe that ended before the
+    run did ends nothing else: the run then has an empty record, NaN probe CPU and the reason
+    in ``probe_error``."""
     use_fastdds_profile()
     with tempfile.TemporaryDirectory() as folder:
         params_file = write_params(parameters, Path(folder))
@@ -331,6 +334,7 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
             replace(spec, parameters=[params_file, *spec.parameters]) for spec in extra_nodes])
         probe = LatencyProbe(stage_topics=stage_topics)
         record = None
+        probe_errors: list[str] = []
         cpu_s: dict[str, float] = {}
         try:
             probe.start()
@@ -340,7 +344,7 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
                 def cpu_now() -> dict[str, float]:
                     # the node processes, this process (the monitor) and the latency probe
                     return {**launcher.cpu_seconds(), 'monitor': time.process_time(),
-                            'probe': process_cpu_seconds(probe.process.pid)}
+                            'probe': _probe_cpu_seconds(probe, probe_errors)}
 
                 started = time.monotonic()
                 cpu_before = cpu_now()
@@ -356,7 +360,11 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
                 launcher.start()
                 completed = monitor.wait_for_frames(expected_frames, timeout_s)
             duration = monitor.active_duration() or time.monotonic() - started
-            record = probe.stop()
+            try:
+                record = probe.stop()
+            except ProbeError as exc:
+                probe_errors.append(str(exc))
+                record = ProbeRecord(np.zeros(0, np.int64), np.zeros(0, np.int64))
         finally:
             if record is None:
                 probe.close()
@@ -369,7 +377,18 @@ def run_pipeline(parameters: dict[str, dict[str, Any]], expected_frames: int,
     run.timed_out = not completed
     run.feed_output = getattr(feed, 'output', '')
     run.cpu_s = cpu_s
+    run.probe_error = probe_errors[0] if probe_errors else ''
     return run
+
+
+def _probe_cpu_seconds(probe: LatencyProbe, errors: list[str]) -> float:
+    """The probe process's CPU seconds so far; NaN, with the reason appended to ``errors``,
+    if it has ended."""
+    try:
+        return probe.cpu_seconds()
+    except ProbeError as exc:
+        errors.append(str(exc))
+        return float('nan')
 
 
 def _cpu_since(before: dict[str, float], after: dict[str, float]) -> dict[str, float]:

@@ -27,7 +27,8 @@ from std_msgs.msg import Header
 
 from colorglove_ros.ros.image import array_to_image
 
-__all__ = ['STAGE_NAMES', 'StageTimes', 'profile_stages', 'stage_summary', 'frames_of_bag']
+__all__ = ['STAGE_NAMES', 'StageTimes', 'profile_stages', 'stage_summary', 'passes_summary',
+           'frames_of_bag']
 
 #: The timed stages, in pipeline order.
 STAGE_NAMES = ('segmentation', 'lookup', 'ik')
@@ -182,6 +183,30 @@ def stage_summary(times: StageTimes) -> list[dict[str, Any]]:
     rows.append(_row('frame', percentiles(times.frame_ms()), percentiles(times.frame_ms(True)),
                      percentiles(total)))
     return rows
+
+
+def passes_summary(passes: Sequence[StageTimes]) -> tuple[list[dict[str, Any]],
+                                                         list[dict[str, Any]]]:
+    """Several passes over the same frames (each through fresh nodes): the
+    :func:`stage_summary` rows with every figure the median over the passes of that pass's
+    figure (so the frame row's ``node_p50_ms`` is the median of the passes' per-frame
+    medians), and one row per pass with its per-frame medians (frame wall and CPU, each stage's
+    node time) and its tracked frames."""
+    if not passes:
+        raise ValueError('passes_summary needs at least one pass')
+    summaries = [stage_summary(times) for times in passes]
+    rows = [{key: (row[key] if key == 'stage' else
+                   float(np.median([summary[i][key] for summary in summaries])))
+             for key in row} for i, row in enumerate(summaries[0])]
+    per_pass = []
+    for number, (summary, times) in enumerate(zip(summaries, passes, strict=True), start=1):
+        by_stage = {row['stage']: row for row in summary}
+        per_pass.append({'pass': number, 'frame_p50_ms': by_stage['frame']['node_p50_ms'],
+                         'frame_cpu_p50_ms': by_stage['frame']['node_cpu_p50_ms'],
+                         **{f'{name}_p50_ms': by_stage[name]['node_p50_ms']
+                            for name in STAGE_NAMES},
+                         'tracked': int(sum(times.tracked))})
+    return rows, per_pass
 
 
 def _row(stage: str, node: tuple[float, float], cpu: tuple[float, float],

@@ -59,6 +59,8 @@ def _demo(args: argparse.Namespace) -> int:
     if run.timed_out:
         print(f'[demo] timed out: {run.frames} of {args.frames} frames seen, '
               f'{run.tracked} tracked', flush=True)
+    if run.probe_error:
+        print(f'[demo] {run.probe_error}: no latency figures', flush=True)
     figures = summarize(run, default_hand()[0])
     print_table([{'figure': key, 'value': value} for key, value in figures.items()],
                 title=f'colorglove demo: {args.frames} synthetic frames, database {database}')

@@ -209,3 +209,104 @@ def _as_dataclass(values: SimpleNamespace):
 
     names = list(vars(values))
     return make_dataclass('Recorded', names)(**vars(values))
+
+
+OBSERVATION = 'colorglove_msgs/msg/HandObservation'
+# HandObservation's blobs before session 27: a list of PatchBlob messages
+_PATCH_BLOB = """uint8 color_label
+float64 x
+float64 y
+uint32 pixel_count
+"""
+_NEW_BLOB_FIELDS = ('uint8[] blob_colors', 'float64[] blob_centroids',
+                    'uint32[] blob_pixel_counts')
+
+
+def _patch_blob_store():
+    """The installed type store with HandObservation's blobs as ``PatchBlob[] blobs``."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.register(get_types_from_msg(_PATCH_BLOB, 'colorglove_msgs/msg/PatchBlob'))
+    for path in colorglove_msg_files():
+        text = path.read_text()
+        if path.stem == 'HandObservation':
+            lines = [line for line in text.splitlines()
+                     if not line.startswith(_NEW_BLOB_FIELDS)]
+            text = '\n'.join(lines) + '\nPatchBlob[] blobs\n'
+        store.register(get_types_from_msg(text, f'colorglove_msgs/msg/{path.stem}'))
+    return store
+
+
+def _blob_values(seq: int) -> list[tuple[int, float, float, int]]:
+    rng = np.random.default_rng(seq)
+    return [(int(rng.integers(1, 11)), float(rng.uniform(0, 640)), float(rng.uniform(0, 480)),
+             int(rng.integers(1, 4_000_000_000))) for _ in range(int(rng.integers(0, 25)))]
+
+
+def _patch_blob_candidates(store, seq: int):
+    """sample_candidates(seq) in the PatchBlob store, its observation's blobs
+    :func:`_blob_values` as PatchBlob messages."""
+    installed = colorglove_typestore()
+    current = deserialize_cdr(serialize_message(sample_candidates(seq)), CANDIDATES, installed)
+    blob = store.types['colorglove_msgs/msg/PatchBlob']
+    observation = current.observation
+    old_observation = store.types[OBSERVATION](**{
+        name: getattr(observation, name) for name, _ in store.fielddefs[OBSERVATION][1]
+        if name != 'blobs'}, blobs=[blob(color_label=c, x=x, y=y, pixel_count=n)
+                                    for c, x, y, n in _blob_values(seq)])
+    old_observation.header = _header(store, observation.header)
+    values = {name: getattr(current, name) for name, _ in store.fielddefs[CANDIDATES][1]}
+    values['observation'] = old_observation
+    values['header'] = _header(store, current.header)
+    return store.types[CANDIDATES](**values)
+
+
+def _header(store, header):
+    """``header`` as ``store``'s std_msgs/Header."""
+    return store.types['std_msgs/msg/Header'](
+        stamp=store.types['builtin_interfaces/msg/Time'](sec=header.stamp.sec,
+                                                         nanosec=header.stamp.nanosec),
+        frame_id=header.frame_id)
+
+
+def test_patch_blob_bags_convert_their_blobs_into_the_parallel_arrays(tmp_path: Path) -> None:
+    """A bag recorded before the blobs became parallel arrays: the change names the blobs as
+    converted, and every blob's colour, centroid and pixel count reaches the installed arrays
+    exactly, in order (nested in the candidates and on an observation topic)."""
+    store = _patch_blob_store()
+    with Writer(tmp_path / 'old', version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        candidates = writer.add_connection(TOPIC, CANDIDATES, typestore=store)
+        observations = writer.add_connection('/hand/observation', OBSERVATION, typestore=store)
+        for seq in range(4):
+            message = _patch_blob_candidates(store, seq)
+            writer.write(candidates, 1_000 + seq,
+                         bytes(store.serialize_cdr(message, CANDIDATES)))
+            writer.write(observations, 1_000 + seq,
+                         bytes(store.serialize_cdr(message.observation, OBSERVATION)))
+    installed = colorglove_typestore()
+    with AnyReader([tmp_path / 'old'], default_typestore=installed) as reader:
+        changes = {c.topic: c for c in definition_changes(reader.connections, reader.typestore,
+                                                          installed)}
+        assert 'converted: observation.blobs -> observation.blob_colors, ' \
+            'observation.blob_centroids, observation.blob_pixel_counts' \
+            in changes[TOPIC].describe()
+        assert 'converted: blobs -> blob_colors' in changes['/hand/observation'].describe()
+        assert 'dropped' not in changes[TOPIC].describe()       # the blobs are carried over
+        assert 'at defaults' not in changes['/hand/observation'].describe()
+        recorded = [(c.topic, reader.deserialize(raw, c.msgtype))
+                    for c, _, raw in reader.messages()]
+    from colorglove_msgs.msg import HandObservation
+
+    seen = 0
+    for k, (topic, old) in enumerate(recorded):
+        kind, cls = ((CANDIDATES, HandPoseCandidates) if topic == TOPIC
+                     else (OBSERVATION, HandObservation))
+        converted = convert_message(old, kind, installed)
+        message = deserialize_message(bytes(installed.serialize_cdr(converted, kind)), cls)
+        observation = message.observation if topic == TOPIC else message
+        blobs = _blob_values(k // 2)
+        assert list(observation.blob_colors) == [b[0] for b in blobs]
+        assert list(observation.blob_centroids) == [v for b in blobs for v in b[1:3]]
+        assert list(observation.blob_pixel_counts) == [b[3] for b in blobs]
+        assert observation.crop_scale == sample_candidates(k // 2).observation.crop_scale
+        seen += len(blobs)
+    assert seen > 0

@@ -178,7 +178,7 @@ def test_checked_observation_returns_the_blobs_it_checked() -> None:
     q, same = checked_candidates_msg(candidates_to_msg(observation, _lookup_result()), 100)
     assert len(q) == NUM_DOFS and np.array_equal(same.centroid_px, expected.centroid_px)
     assert camera_observation_from_msg(observation, blobs).blobs is blobs
-    observation.blobs[1].x = float('nan')
+    observation.blob_centroids[2] = float('nan')           # blob 1's x
     with pytest.raises(InvalidObservationError, match='blob centroid must be finite'):
         checked_observation_msg(observation)
 
@@ -195,3 +195,52 @@ def test_stamp_key_is_exact_where_float_seconds_are_not() -> None:
     assert stamp_to_seconds(first) == stamp_to_seconds(second)
     assert stamp_key(first) == (1_796_236_811, 574_676_832) != stamp_key(second)
     assert stamp_key(Time(sec=1_796_236_811, nanosec=574_676_832)) == stamp_key(first)
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_blobs_travel_as_parallel_arrays_bit_for_bit(seed: int) -> None:
+    """The observation's blobs go into the message as three flat arrays (colours, (x, y) pairs,
+    pixel counts), largest first, and come back as the same bits in the dtypes the IK takes
+    (int64, float64, float64), writable and contiguous, through a serialised message too."""
+    from colorglove_msgs.msg import HandObservation
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    rng = np.random.default_rng(seed)
+    count = int(rng.integers(0, 40))
+    blobs = [Blob(int(rng.integers(1, 11)), float(rng.uniform(-0.5, 639.5)),
+                  float(rng.uniform(-0.5, 479.5)), int(rng.integers(1, 300_000)))
+             for _ in range(count)]
+    msg = observation_to_msg(Observation(True, '', 640, 480, np.ones((40, 40), np.uint8),
+                                         CropTransform(4.5, 220.0, 120.0), blobs,
+                                         glove_pixel_count=10), HEADER)
+    ordered = sorted(blobs, key=lambda b: -b.pixel_count)
+    assert list(msg.blob_colors) == [b.color_label for b in ordered]
+    assert list(msg.blob_centroids) == [v for b in ordered for v in (b.centroid_x, b.centroid_y)]
+    assert list(msg.blob_pixel_counts) == [b.pixel_count for b in ordered]
+    for message in (msg, deserialize_message(serialize_message(msg), HandObservation)):
+        back = blobs_from_observation_msg(message)
+        expected = (np.array([b.color_label for b in ordered], np.int64).reshape(-1),
+                    np.array([[b.centroid_x, b.centroid_y] for b in ordered]).reshape(-1, 2),
+                    np.array([b.pixel_count for b in ordered], float).reshape(-1))
+        for got, want in zip((back.color, back.centroid_px, back.pixel_count), expected,
+                             strict=True):
+            assert got.dtype == want.dtype and got.shape == want.shape
+            assert got.tobytes() == want.tobytes()
+            assert got.flags.writeable and got.flags.c_contiguous
+
+
+@pytest.mark.parametrize(('field', 'change'), [
+    ('blob_colors', lambda v: v[:-1]), ('blob_centroids', lambda v: v[:-1]),
+    ('blob_centroids', lambda v: v + v[:2]), ('blob_pixel_counts', lambda v: v + v[:1])])
+def test_blob_arrays_of_different_lengths_are_refused_naming_them(field: str, change) -> None:
+    from colorglove_ros.core.validation import InvalidObservationError
+    from colorglove_ros.ros.message_checks import checked_observation_msg
+
+    msg = observation_to_msg(Observation(
+        True, '', 640, 480, np.ones((40, 40), np.uint8), CropTransform(4.5, 220.0, 120.0),
+        [Blob(3, 310.5, 200.25, 90), Blob(7, 100.0, 50.5, 12)], glove_pixel_count=102), HEADER)
+    setattr(msg, field, change(getattr(msg, field)))
+    with pytest.raises(ValueError, match='blob arrays disagree'):
+        blobs_from_observation_msg(msg)
+    with pytest.raises(InvalidObservationError, match='blob arrays disagree'):
+        checked_observation_msg(msg, (640, 480))

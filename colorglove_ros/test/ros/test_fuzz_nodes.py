@@ -10,7 +10,8 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
-from colorglove_msgs.msg import HandObservation, HandPoseCandidates, PatchBlob
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates
+from message_samples import set_blobs
 from node_fixtures import NodeAssets, header, ik_node, lookup_node, running, segmentation_node
 from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import String
@@ -75,27 +76,23 @@ def bad_images(rng: np.random.Generator, count: int) -> list[Image]:
     return [makers[i % len(makers)]() for i in range(count)]
 
 
-def _blob(color: int, x: float, y: float, count: int) -> PatchBlob:
-    return PatchBlob(color_label=color, x=x, y=y, pixel_count=count)
-
-
 def bad_observations(rng: np.random.Generator, good: HandObservation, count: int
                      ) -> list[HandObservation]:
     """The good observation spoiled in one field each (as reported in issue 16)."""
     def spoil(msg: HandObservation) -> None:
-        kind = int(rng.integers(0, 14))
+        kind = int(rng.integers(0, 15))
         value = float(rng.choice([np.nan, np.inf, -np.inf, 1e155, 1.34e154, 0.0, -1.0, 1e30]))
         if kind == 0:
             msg.crop_scale = value
         elif kind == 1:
             msg.crop_offset_x, msg.crop_offset_y = value, float(rng.normal(0, 1e6))
         elif kind == 2:
-            msg.blobs[int(rng.integers(len(msg.blobs)))].color_label = int(
+            msg.blob_colors[int(rng.integers(len(msg.blob_colors)))] = int(
                 rng.choice([0, 11, 200, 255]))
         elif kind == 3:
-            msg.blobs[0].x = float(rng.choice([np.nan, np.inf, -1e9, 1e9]))
+            msg.blob_centroids[0] = float(rng.choice([np.nan, np.inf, -1e9, 1e9]))
         elif kind == 4:
-            msg.blobs[0].pixel_count = int(rng.choice([0, 4_000_000_000]))
+            msg.blob_pixel_counts[0] = int(rng.choice([0, 4_000_000_000]))
         elif kind == 5:
             msg.image_width, msg.image_height = 0, 0
         elif kind == 6:
@@ -107,12 +104,16 @@ def bad_observations(rng: np.random.Generator, good: HandObservation, count: int
         elif kind == 9:
             msg.image_width, msg.image_height = 320, 240
         elif kind == 10:
-            msg.blobs = [_blob(int(rng.integers(1, 11)), float(rng.uniform(0, 640)),
-                               float(rng.uniform(0, 480)), 20) for _ in range(2000)]
+            set_blobs(msg, [(int(rng.integers(1, 11)), float(rng.uniform(0, 640)),
+                             float(rng.uniform(0, 480)), 20) for _ in range(2000)])
         elif kind == 11:
             msg.tiny_labels = [11] * 1600
         elif kind == 12:
             msg.image_width = 2 ** 32 - 1
+        elif kind == 13:        # the parallel blob arrays of different lengths
+            which = ('blob_colors', 'blob_centroids', 'blob_pixel_counts')[int(rng.integers(3))]
+            values = getattr(msg, which)
+            setattr(msg, which, values[:-1] if rng.integers(2) else values + values[:1])
         else:
             msg.crop_scale = float(rng.uniform(1e-300, 1e-200))
 
@@ -121,9 +122,9 @@ def bad_observations(rng: np.random.Generator, good: HandObservation, count: int
         msg = copy.deepcopy(good)
         spoil(msg)
         out.append(msg)
-    # the one from the issue: 50,000 blobs (sent once; it is 1.2 MB)
-    out[-1].blobs = [_blob(1 + i % 10, float(i % 640), float(i % 480), 12)
-                     for i in range(50_000)]
+    # the one from the issue: 50,000 blobs (sent once; it is about 1 MB)
+    set_blobs(out[-1], [(1 + i % 10, float(i % 640), float(i % 480), 12)
+                        for i in range(50_000)])
     return out
 
 

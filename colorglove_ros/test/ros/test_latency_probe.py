@@ -163,3 +163,22 @@ def test_probe_records_the_stage_topics_stamps_apart_from_the_joint_states() -> 
         assert list(record.stage_stamp_ns[keep]) == sent
         latencies = record.stage_latencies_s(index)
         assert np.all(latencies >= 0.020) and np.all(latencies < 1.0)
+
+
+@pytest.mark.dds
+@pytest.mark.usefixtures('isolated_ros_domain')
+def test_a_probe_that_ended_gives_a_probe_error_with_its_exit() -> None:
+    """The CPU reading and stop() of a probe whose process was killed (reaped or not) raise
+    ProbeError naming how it ended, not OSError or a missing record."""
+    from colorglove_ros.ros.latency_probe import ProbeError
+
+    probe = LatencyProbe()
+    probe.start()
+    assert probe.failure() == '' and probe.cpu_seconds() >= 0.0
+    probe.process.kill()
+    probe.process.wait()
+    with pytest.raises(ProbeError, match='killed by signal 9 before the run ended'):
+        probe.cpu_seconds()
+    with pytest.raises(ProbeError, match='killed by signal 9'):
+        probe.stop()
+    assert not probe.output.parent.exists()

@@ -63,3 +63,46 @@ def test_a_paced_feed_passes_its_pace_timeout_to_the_player(tmp_path: Path) -> N
     assert command[command.index('--pace-timeout') + 1] == '7.5'
     assert '--pace-timeout' not in bag_feed(tmp_path, paced=True).command
     assert '--pace-timeout' not in bag_feed(tmp_path, pace_timeout_s=7.5).command
+
+
+@pytest.mark.dds
+@pytest.mark.usefixtures('isolated_ros_domain')
+def test_a_probe_that_dies_during_the_run_leaves_a_run_that_says_so(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The latency probe killed (and reaped) while the feed plays: the run ends normally with
+    no latency, NaN probe CPU and the probe's fate in ``probe_error`` (it raised OSError from
+    the CPU reading before)."""
+    from colorglove_ros.ros import pipeline_run
+
+    probes: list = []
+
+    class Probe(pipeline_run.LatencyProbe):
+        def start(self, ready_timeout_s: float = 30.0) -> None:
+            super().start(ready_timeout_s)
+            probes.append(self)
+
+    class NoNodes:           # the launcher's place: no tracker nodes
+        def __init__(self, specs: list) -> None:
+            pass
+
+        def start(self) -> None:
+            pass
+
+        def stop(self) -> None:
+            pass
+
+        def cpu_seconds(self) -> dict[str, float]:
+            return {}
+
+    def feed() -> None:
+        probes[0].process.kill()
+        probes[0].process.wait()
+
+    monkeypatch.setattr(pipeline_run, 'LatencyProbe', Probe)
+    monkeypatch.setattr(pipeline_run, 'Launcher', NoNodes)
+    monkeypatch.setattr(pipeline_run, '_wait_for_graph', lambda *args: None)
+    run = pipeline_run.run_pipeline({}, 0, feed=feed, timeout_s=10.0)
+    assert 'was killed by signal 9 before the run ended' in run.probe_error
+    assert np.isnan(run.cpu_s['probe'])
+    assert run.latencies_s == [] and len(run.probe.stamp_ns) == 0
+    assert np.isnan(summarize(run, None)['latency_p95_ms'])

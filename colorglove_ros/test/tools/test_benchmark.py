@@ -74,3 +74,82 @@ def test_stage_latency_figures_per_stage_output() -> None:
     assert figures['pose_candidates_latency_p50_ms'] == pytest.approx(22.0)
     assert np.isnan(stage_latency_figures(ProbeRecord(np.zeros(0), np.zeros(0)))[
         'observation_latency_p50_ms'])
+
+
+def test_a_pass_whose_latency_probe_died_is_a_failed_row_and_verdict(
+        monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
+    """A DDS pass whose probe ended early gives a row naming it (no latency, no JointState
+    counted), and the targets of that pass FAIL with the reason in their note."""
+    from colorglove_ros.ros.latency_probe import ProbeRecord
+    from colorglove_ros.ros.pipeline_run import PipelineRun
+
+    empty = np.zeros(0, np.int64)
+    reason = 'the latency probe (pid 7) was killed by signal 9 before the run ended'
+    run = PipelineRun(frames_expected=30, frames=30, segmented=30, tracked=30, duration_s=1.0,
+                      latencies_s=[], estimated=np.zeros((0, 26)), truth=np.zeros((0, 26)),
+                      segmentation_ms=[], lookup_ms=[], probe=ProbeRecord(empty, empty),
+                      cpu_s={'probe': float('nan')}, probe_error=reason)
+    monkeypatch.setattr(benchmark, 'run_pipeline', lambda *args, **kwargs: run)
+    monkeypatch.setattr(benchmark, 'bag_feed', lambda *args, **kwargs: None)
+    row = benchmark.dds_pass(tmp_path, {'ik': {}}, 30, 60.0, single_process=False)
+    assert row['probe_error'] == reason
+    assert row['joint_states_per_s'] == 0 and np.isnan(row['latency_p95_ms'])
+    runs = [row, _run('separate processes', 1, 60.0, 59.0, 25.0),
+            _run('separate processes', 1, 30.0, 30.0, 15.0)]
+    targets = {r['target']: r for r in benchmark.check_targets(
+        benchmark._target_figures([], runs), benchmark.probe_failure_notes(runs))}
+    for name in ('60 Hz offered: >= 57 JointStates/s', '60 Hz offered: latency p95 <= 33 ms'):
+        assert targets[name]['result'] == 'FAIL'
+        assert targets[name]['note'] == ('latency probe failed in 1 of 2 passes (counted as '
+                                         f'no JointState): {reason}')
+    assert 'note' not in targets['30 Hz offered: latency p95 <= 20 ms']
+
+
+def test_the_in_process_verdict_is_the_median_of_counted_passes_after_a_warm_up(
+        monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
+    """``--no-dds``: a warm-up pass (not profiled, not counted), then ``--in-process-passes``
+    passes; the frame target judges the median of their per-frame medians and the JSON keeps
+    each pass, their range and the warm-up's frame row; ``--no-warm-up`` runs none."""
+    import json
+
+    from colorglove_ros.ros import stage_profile
+    from colorglove_ros.ros.stage_profile import StageTimes
+
+    medians = iter([30.0, 9.0, 7.0, 8.5, 8.2, 9.6])     # warm-up, then the counted passes
+    calls = []
+
+    def profile_stages(frames, parameters, *, profile=False):
+        frame = next(medians)
+        calls.append(profile)
+        node = {'segmentation': [frame / 2] * 3, 'lookup': [frame / 4] * 3, 'ik': [frame / 4] * 3}
+        return StageTimes(node_ms=node, cpu_ms=node, compute_ms=node, tracked=[True] * 3)
+
+    monkeypatch.setenv('ROS_DOMAIN_ID', '77')       # the benchmark sets it for its graph
+    monkeypatch.setattr(benchmark, 'prepare_assets', lambda database: tmp_path)
+    monkeypatch.setattr(benchmark, 'ensure_bag', lambda *args: tmp_path / 'bag')
+    monkeypatch.setattr(benchmark, 'pipeline_parameters',
+                        lambda *args: {'camera': {}, 'ik': {}})
+    monkeypatch.setattr(stage_profile, 'frames_of_bag', lambda bag, frames: [])
+    monkeypatch.setattr(stage_profile, 'profile_stages', profile_stages)
+    out = tmp_path / 'bench.json'
+    assert benchmark.main(['--no-dds', '--in-process-passes', '3', '--profile', '--json',
+                           str(out)]) == 0
+    assert calls == [False, True, True, True]
+    report = json.loads(out.read_text())
+    assert [row['frame_p50_ms'] for row in report['in_process_passes']] == [9.0, 7.0, 8.5]
+    assert report['in_process_frame_p50_range_ms'] == [7.0, 9.0]
+    assert report['in_process_warm_up']['node_p50_ms'] == 30.0
+    frame = next(row for row in report['in_process'] if row['stage'] == 'frame')
+    assert frame['node_p50_ms'] == 8.5
+    target = report['targets'][0]
+    assert target['measured'] == 8.5 and target['result'] == 'FAIL'
+    assert report['in_process_tracked'] == 3
+    calls.clear()
+    assert benchmark.main(['--no-dds', '--in-process-passes', '2', '--no-warm-up', '--json',
+                           str(out)]) == 0
+    assert calls == [False, False]
+    report = json.loads(out.read_text())
+    assert report['in_process_warm_up'] is None
+    assert report['in_process_frame_p50_range_ms'] == [8.2, 9.6]
+    with pytest.raises(SystemExit):
+        benchmark.main(['--in-process-passes', '0'])

@@ -186,13 +186,13 @@ def _observation(k: int, tiny: np.ndarray) -> object:
     """Frame ``k``'s HandObservation of a found hand with the tiny label image ``tiny``."""
     from array import array
 
-    from colorglove_msgs.msg import HandObservation, PatchBlob
+    from colorglove_msgs.msg import HandObservation
 
     return HandObservation(
         header=_frame(k), hand_found=True, image_width=640, image_height=480,
         tiny_labels=array('B', tiny.tobytes()), crop_scale=4.0, crop_offset_x=100.0,
-        crop_offset_y=80.0, blobs=[PatchBlob(color_label=1, x=220.0, y=180.0,
-                                             pixel_count=1024)])
+        crop_offset_y=80.0, blob_colors=array('B', [1]), blob_centroids=array('d', [220.0, 180.0]),
+        blob_pixel_counts=array('I', [1024]))
 
 
 def test_spelling_node_reads_each_poses_own_observation_with_an_image_classifier(tmp_path

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from geometry_msgs.msg import PoseStamped
+from message_samples import blob_tuples, set_blobs
 from node_fixtures import (
     SMALL_DATABASE_GATES,
     NodeAssets,
@@ -127,9 +128,8 @@ def _upscaled_observation(msg: HandObservation, k: int = 2) -> HandObservation:
     big.crop_scale = msg.crop_scale * k
     big.crop_offset_x, big.crop_offset_y = (msg.crop_offset_x * k + shift,
                                             msg.crop_offset_y * k + shift)
-    for blob in big.blobs:
-        blob.x, blob.y, blob.pixel_count = blob.x * k + shift, blob.y * k + shift, \
-            blob.pixel_count * k * k
+    set_blobs(big, [(color, x * k + shift, y * k + shift, count * k * k)
+                    for color, x, y, count in blob_tuples(msg)])
     big.glove_pixel_count = msg.glove_pixel_count * k * k
     return big
 

@@ -11,8 +11,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from colorglove_msgs.msg import HandObservation, HandPoseCandidates, PatchBlob
+from colorglove_msgs.msg import HandObservation, HandPoseCandidates
 from geometry_msgs.msg import PolygonStamped, PoseStamped
+from message_samples import blob_tuples, set_blobs
 from node_fixtures import (
     NodeAssets,
     background_rgb,
@@ -73,18 +74,18 @@ def test_segmentation_node_rgb8_and_bgr8(node_assets: NodeAssets, good_rgb: np.n
         tiny = tiny_labels_from_observation_msg(msg)
         assert tiny.shape == (TINY_SIZE, TINY_SIZE) and len(msg.tiny_labels) == 1600
         np.testing.assert_array_equal(tiny, expected.tiny_labels)
-        colors = [b.color_label for b in msg.blobs]
+        blobs = blob_tuples(msg)
+        colors = [b[0] for b in blobs]
         assert set(colors) <= set(range(1, 11)) and len(set(colors)) >= 8
-        counts = [b.pixel_count for b in msg.blobs]
+        counts = [b[3] for b in blobs]
         assert counts == sorted(counts, reverse=True)
-        assert all(0 <= b.x < 640 and 0 <= b.y < 480 for b in msg.blobs)
+        assert all(0 <= x < 640 and 0 <= y < 480 for _, x, y, _ in blobs)
         assert msg.crop_scale == pytest.approx(expected.crop.scale)
         assert msg.crop_offset_x == pytest.approx(expected.crop.offset_x)
         assert msg.glove_pixel_count == expected.glove_pixel_count
     # the same pixels in either channel order give the same observation
     assert list(rgb_msg.tiny_labels) == list(bgr_msg.tiny_labels)
-    assert [(b.color_label, b.pixel_count) for b in rgb_msg.blobs] == \
-        [(b.color_label, b.pixel_count) for b in bgr_msg.blobs]
+    assert blob_tuples(rgb_msg) == blob_tuples(bgr_msg)
 
 
 def test_segmentation_node_padded_rows_and_debug_image(node_assets: NodeAssets,
@@ -105,7 +106,7 @@ def test_segmentation_node_padded_rows_and_debug_image(node_assets: NodeAssets,
         second = h.exchange(pub, padded, out)
         assert h.spin_until(lambda: len(debug) >= 2, 5.0)
     assert first.hand_found and list(first.tiny_labels) == list(second.tiny_labels)
-    assert [b.pixel_count for b in first.blobs] == [b.pixel_count for b in second.blobs]
+    assert blob_tuples(first) == blob_tuples(second)
     image = debug[1]
     assert (image.width, image.height, image.encoding) == (640, 480, 'rgb8')
     assert image.header.stamp.sec == 120 and image.header.frame_id == 'cam'
@@ -139,7 +140,7 @@ def test_segmentation_node_reports_bad_frames_and_keeps_going(node_assets: NodeA
             assert not msg.hand_found, name
             assert msg.status.startswith('bad image') and problem in msg.status, msg.status
             assert msg.header.stamp.sec == 10 + 2 * sec and msg.header.frame_id == 'bad'
-            assert len(msg.tiny_labels) == 0 and len(msg.blobs) == 0
+            assert len(msg.tiny_labels) == 0 and len(msg.blob_colors) == 0
             good = h.exchange(pub, array_to_image(good_rgb, 'rgb8', header(11 + 2 * sec)), out)
             assert good.hand_found and good.header.stamp.sec == 11 + 2 * sec, name
 
@@ -209,7 +210,7 @@ def test_lookup_node_candidates(node_assets: NodeAssets, good_observation: HandO
     assert all(0 <= p < 20 for p in msg.constraint_patch_ids)
     assert list(msg.observation.tiny_labels) == list(good_observation.tiny_labels)
     assert msg.observation.crop_scale == good_observation.crop_scale
-    assert len(msg.observation.blobs) == len(good_observation.blobs)
+    assert blob_tuples(msg.observation) == blob_tuples(good_observation)
     assert msg.lookup_time_ms > 0.0
 
 
@@ -438,10 +439,9 @@ def _with_clutter_blobs(good: HandPoseCandidates, nearest_distance: float
     msg.header = header(200, 400_000_000, 'camera_optical_frame')
     msg.candidate_distances[0] = nearest_distance
     seen = msg.observation
-    count = 3 * len(seen.blobs)
-    seen.blobs = list(seen.blobs) + [
-        PatchBlob(color_label=1 + k % 10, x=10.0 + 9.0 * k, y=5.0, pixel_count=40)
-        for k in range(count)]
+    count = 3 * len(seen.blob_colors)
+    set_blobs(seen, blob_tuples(seen) + [(1 + k % 10, 10.0 + 9.0 * k, 5.0, 40)
+                                         for k in range(count)])
     seen.glove_pixel_count += 40 * count
     return msg
 
