@@ -30,6 +30,7 @@ import numpy as np
 
 from colorglove_ros import signal_exit
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.topic_arguments import topic_argument
 
 __all__ = ['ProbeError', 'ProbeRecord', 'LatencyProbe', 'window_summaries', 'main']
 
@@ -210,8 +211,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--first-file', type=Path, help='touched on the first JointState')
     parser.add_argument('--topics', nargs='+', default=[JOINT_STATES_TOPIC],
                         help='JointState topics to record')
-    parser.add_argument('--stage-topics', nargs='*', default=[], type=_stage_topic,
-                        metavar='TOPIC=TYPE',
+    parser.add_argument('--stage-topics', nargs='*', default=[],
+                        type=topic_argument('TYPE', str), metavar='TOPIC=TYPE',
                         help='also record the stamp and arrival of these topics\' messages '
                              '(types whose messages start with a std_msgs/Header, e.g. '
                              'colorglove_msgs/msg/HandObservation), taken serialized')
@@ -276,14 +277,6 @@ def main(argv: list[str] | None = None) -> int:
                                'topic_index': topic_index, **stage}))
     os.replace(tmp, args.output)
     return 0
-
-
-def _stage_topic(text: str) -> tuple[str, str]:
-    """``TOPIC=TYPE`` of ``--stage-topics`` as (topic, type)."""
-    topic, sep, kind = text.partition('=')
-    if not (sep and topic and kind):
-        raise argparse.ArgumentTypeError(f'expected TOPIC=TYPE, got {text!r}')
-    return topic, kind
 
 
 if __name__ == '__main__':

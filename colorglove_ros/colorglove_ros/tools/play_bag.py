@@ -33,6 +33,7 @@ from colorglove_ros.ros.bags import BagError, bag_messages, open_bag_reader
 from colorglove_ros.ros.image_codec import header_stamp_from_cdr
 from colorglove_ros.ros.typestore import colorglove_typestore, deserialize_cdr, message_class
 from colorglove_ros.tools._cli import tool_parser
+from colorglove_ros.topic_arguments import topic_argument
 
 __all__ = ['BagDefinitionError', 'BagPlayer', 'PLAYBACK_OPTIONS', 'STAMP_LOG_HEADER',
            'read_stamp_log', 'main']
@@ -94,14 +95,11 @@ def read_stamp_log(path: str | Path) -> dict[int, int]:
     return mapping
 
 
-def _topic_count(text: str) -> tuple[str, int]:
-    """``TOPIC=COUNT`` (``--wait-for``) as (topic, count); an ArgumentTypeError otherwise."""
-    import argparse
-
-    topic, _, count = text.rpartition('=')
-    if not topic or not count.isdigit():
-        raise argparse.ArgumentTypeError(f'expected TOPIC=COUNT, got {text!r}')
-    return topic, int(count)
+def _count(text: str) -> int:
+    """A subscriber count of ``--wait-for``: digits only (ValueError otherwise)."""
+    if not text.isdigit():
+        raise ValueError(f'not a count: {text!r}')
+    return int(text)
 
 
 def _wait_until(condition: Callable[[], bool], timeout_s: float) -> bool:
@@ -350,7 +348,7 @@ def main(argv: list[str] | None = None) -> int:
                         'type (an older colorglove_msgs) by converting each message field by '
                         'field by name; without it such a bag is refused, naming the fields')
     parser.add_argument('--wait-for', nargs='+', default=[], metavar='TOPIC=COUNT',
-                        type=_topic_count,
+                        type=topic_argument('COUNT', _count),
                         help='also wait (up to --wait-subscribers) until each TOPIC of the bag '
                         'has COUNT subscribers before starting, e.g. a second camera\'s image '
                         'and CameraInfo topics')

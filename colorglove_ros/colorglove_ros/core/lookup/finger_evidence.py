@@ -93,9 +93,10 @@ def finger_scores(patch_xy: np.ndarray, patch_pixels: np.ndarray, patch_digit: n
     (b + 1))|) against its nearest same-colour blob."""
     cap = float(config.cap_tiny_px)
     xy = np.asarray(patch_xy, np.float64)
-    k, p = xy.shape[:2]
+    k, p = xy.shape[:2] if xy.ndim == 3 else (0, 0)
     digit = np.asarray(patch_digit)
-    if digit.shape != (k, p) or np.shape(patch_pixels) != (k, p) or np.shape(patch_color) != (p,):
+    if (xy.shape != (k, p, 2) or digit.shape != (k, p) or np.shape(patch_pixels) != (k, p)
+            or np.shape(patch_color) != (p,)):
         raise FingerEvidenceError('entry patch arrays disagree in shape')
     residual = np.full((k, p), cap)
     bcol = np.asarray(blob_color).reshape(-1)
@@ -105,8 +106,9 @@ def finger_scores(patch_xy: np.ndarray, patch_pixels: np.ndarray, patch_digit: n
         from colorglove_ros.core.lookup import lookup_kernel
 
         bxy = np.ascontiguousarray(np.asarray(blob_xy, np.float64).reshape(-1, 2))
-        if len(bxy) != len(bcol):
-            raise FingerEvidenceError(f'{len(bcol)} blob colours but {len(bxy)} centroids')
+        if len(bxy) != len(bcol) or np.size(blob_pixels) != len(bcol):
+            raise FingerEvidenceError(f'{len(bcol)} blob colours but {len(bxy)} centroids '
+                                      f'and {np.size(blob_pixels)} areas')
         lookup_kernel.compile_kernels()
         d = np.empty((k, p))
         nearest = np.empty((k, p), np.int64)

@@ -11,16 +11,21 @@ from colorglove_ros.core.colorimetry import (
     linear_to_srgb,
     srgb_to_linear,
 )
+from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.segmentation.color_model import ColorCalibrationError
 from colorglove_ros.core.segmentation.crop import compiled_kernels
 
-__all__ = ['LIGHT_TEMPERATURES_K', 'colour_means', 'solve_light', 'estimate_light_gains',
-           'gain_table', 'planckian_illuminants']
+__all__ = ['LIGHT_TEMPERATURES_K', 'LightEstimateError', 'colour_means', 'solve_light',
+           'estimate_light_gains', 'gain_table', 'planckian_illuminants']
 
 #: Bounds of everyday light colour, as seen through the camera's fixed white balance: from
 #: 3300 K (the warm end of the 'intermediate' lamp class of EN 12464-1) to 20000 K (shade
 #: under a clear blue sky, the bluest common daylight). Not the evaluation's test conditions.
 LIGHT_TEMPERATURES_K = (3300.0, 20000.0)
+
+
+class LightEstimateError(ColorGloveError, ValueError):
+    """Pixels, labels or a light table whose shapes do not belong together."""
 
 def _log_floored(colours: np.ndarray, floor: float = 1e-3) -> np.ndarray:
     """Log of colours (N, 3), each channel floored at ``floor`` times the colour's brightest."""
@@ -38,8 +43,13 @@ def colour_means(linear_rgb: np.ndarray, labels: np.ndarray, num_colors: int,
     ``labels``."""
     num = num_colors + 1
     if table is not None:
-        counts, sums = compiled_kernels().colour_sums(linear_rgb, table,
-                                                      np.asarray(labels, np.uint8), num)
+        labels = np.asarray(labels, np.uint8)
+        if np.shape(linear_rgb) != (*labels.shape, 3) or np.shape(table) != (256,):
+            raise LightEstimateError(
+                f'colour means of a table-mapped image need a (H, W, 3) image, (H, W) labels '
+                f'and a (256,) table, got {np.shape(linear_rgb)}, {labels.shape} and '
+                f'{np.shape(table)}')
+        counts, sums = compiled_kernels().colour_sums(linear_rgb, table, labels, num)
         counts, sums = counts[1:], sums[1:]
         present = np.flatnonzero(counts >= min_pixels)
         if not len(present):

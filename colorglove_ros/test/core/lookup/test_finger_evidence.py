@@ -52,6 +52,20 @@ def test_scores_measure_each_finger_on_its_own_patches() -> None:
     np.testing.assert_allclose(s[:, 2:], CONFIG.cap_tiny_px)
 
 
+@pytest.mark.parametrize('broken', ['xy_one_coordinate', 'xy_flat', 'areas_short'])
+def test_scores_refuse_arrays_the_compiled_loop_would_read_past(broken: str) -> None:
+    """Centroids without two coordinates, or fewer blob areas than blobs: a clear error."""
+    xy, pixels, digit, color, bcol, bxy, bpix = _two_entries()
+    if broken == 'xy_one_coordinate':
+        xy = xy[..., :1]
+    elif broken == 'xy_flat':
+        xy = xy.reshape(2, -1)
+    else:
+        bpix = bpix[:2]
+    with pytest.raises(FingerEvidenceError):
+        finger_scores(xy, pixels, digit, color, bcol, bxy, bpix, CONFIG)
+
+
 def test_area_mismatch_and_missing_colour_cost() -> None:
     xy, pixels, digit, color, bcol, bxy, bpix = _two_entries()
     s0 = finger_scores(xy, pixels, digit, color, bcol, bxy, bpix, CONFIG)

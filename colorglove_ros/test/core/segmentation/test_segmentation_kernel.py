@@ -35,7 +35,11 @@ from colorglove_ros.core.segmentation.detection import (
     keep_near_junctions,
     scene_colour_table,
 )
-from colorglove_ros.core.segmentation.light import colour_means, estimate_light_gains
+from colorglove_ros.core.segmentation.light import (
+    LightEstimateError,
+    colour_means,
+    estimate_light_gains,
+)
 from colorglove_ros.core.segmentation.segmenter import (
     _LINEAR_RGB,
     keep_multicolor_components,
@@ -484,6 +488,23 @@ def test_colour_means_through_a_table_are_the_float_images(trial: int) -> None:
     np.testing.assert_array_equal(
         estimate_light_gains(image, labels, reference, table=_LINEAR_RGB),
         estimate_light_gains(linear, labels, reference))
+
+
+@pytest.mark.parametrize('image_shape, labels_shape, table_shape', [
+    ((8, 9, 3), (9, 8), (256,)),      # labels of another region
+    ((8, 9), (8, 9), (256,)),         # a grey image
+    ((8, 9, 4), (8, 9), (256,)),      # four channels
+    ((8, 9, 3), (8, 9), (255,)),      # a short table
+])
+def test_colour_means_through_a_table_refuse_shapes_that_do_not_belong_together(
+        image_shape: tuple[int, ...], labels_shape: tuple[int, ...],
+        table_shape: tuple[int, ...]) -> None:
+    """The compiled pass reads the image at every label's pixel and the table at every byte:
+    mismatched shapes are a clear error, not reads past the arrays."""
+    image = np.full(image_shape, 200, np.uint8)
+    labels = np.ones(labels_shape, np.uint8)
+    with pytest.raises(LightEstimateError, match='belong|need'):
+        colour_means(image, labels, 10, 1, table=np.ones(table_shape, np.float32))
 
 
 @pytest.mark.parametrize('trial', range(16))
