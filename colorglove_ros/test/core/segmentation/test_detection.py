@@ -574,3 +574,36 @@ def test_the_gated_contact_filter_still_drops_face_like_clutter(calibration) -> 
     assert GloveSegmenter(calibration).process(image).crop.half_size > 1.12 * plain.crop.half_size
     assert gated.hand_found and gated.crop == ungated.crop
     assert gated.crop.half_size < 1.05 * plain.crop.half_size
+
+
+def _shipped_contact_settings() -> dict[str, float]:
+    """The contact filter's settings in the shipped ``config/color_calibration.yaml``."""
+    from scene_samples import segmenter_settings
+
+    return {name: value for name, value in segmenter_settings().items()
+            if name.startswith('glove_contact')}
+
+
+def test_the_shipped_contact_filter_drops_face_like_clutter(calibration) -> None:
+    """With the shipped config's contact-filter settings (on, gated by
+    ``glove_contact_min_drop``) the face-like stripes beside a rendered glove no longer pull
+    its crop: it keeps about the size it has without them."""
+    frame = _rendered_glove((0.0, 0.0, 0.6))
+    plain = GloveSegmenter(calibration).process(frame.image_rgb)
+    image = _with_face_like_stripes(frame)
+    shipped = GloveSegmenter(calibration, **_shipped_contact_settings()).process(image)
+    assert GloveSegmenter(calibration).process(image).crop.half_size > 1.12 * plain.crop.half_size
+    assert shipped.hand_found and shipped.crop.half_size < 1.05 * plain.crop.half_size
+
+
+@pytest.mark.parametrize('seed', [1, 4])
+def test_the_shipped_contact_filter_leaves_a_glove_without_clutter_whole(calibration,
+                                                                       seed: int) -> None:
+    """The rendered gloves whose silhouette patch the ungated filter drops (as above): with
+    the shipped settings their label image and observation are the filter-off ones."""
+    image = _rendered_glove((0.0, 0.0, 0.6), seed).image_rgb
+    off, shipped = (GloveSegmenter(calibration, **settings).process(image, keep_labels=True)
+                    for settings in ({}, _shipped_contact_settings()))
+    assert _shipped_contact_settings()['glove_contact_share'] > 0
+    assert np.array_equal(shipped.label_image, off.label_image)
+    assert shipped.crop == off.crop and shipped.blobs == off.blobs
