@@ -45,8 +45,8 @@ from colorglove_ros.core.segmentation.crop_prediction import (
 
 __all__ = [
     'SceneCondition', 'SCENE_LADDER', 'HAND_SHAPES', 'MOTIONS', 'FINGER_FACTOR_SPREAD',
-    'NO_HAND_TAIL_FRACTION', 'OFF_POSE_MM', 'BORDER_DEPTH_MM', 'SceneRun', 'FrameEvidence',
-    'frame_evidence', 'varied_finger_factors', 'fully_visible', 'scene_poses', 'run_scene',
+    'NO_HAND_TAIL_FRACTION', 'OFF_POSE_MM', 'BORDER_DEPTH_MM', 'SceneRun', 'GateEvidence',
+    'gate_evidence', 'varied_finger_factors', 'fully_visible', 'scene_poses', 'run_scene',
     'summarize_scene', 'frame_records',
 ]
 
@@ -114,7 +114,7 @@ def scene_poses(condition: SceneCondition, seed: int, num_frames: int, camera: P
 
 
 @dataclass(frozen=True)
-class FrameEvidence:
+class GateEvidence:
     """What one frame's gates saw: the outcome's reason ('' when tracked), the nearest
     database image's distance (tiny px; NaN without a lookup), and of the fit (NaN / 0 when
     none was made) the share of the glove blobs explained, the mean reprojection residual at
@@ -127,8 +127,8 @@ class FrameEvidence:
     constraints: int
 
 
-def frame_evidence(outcome: Tracked | NoHand, found: Any, tracker: Any) -> FrameEvidence:
-    """The :class:`FrameEvidence` of one ``FramePipeline.process`` outcome, its lookup
+def gate_evidence(outcome: Tracked | NoHand, found: Any, tracker: Any) -> GateEvidence:
+    """The :class:`GateEvidence` of one ``FramePipeline.process`` outcome, its lookup
     ``found`` (``FramePipeline.last_lookup``) and the ``tracker`` that fitted it."""
     result = outcome.result if isinstance(outcome, Tracked) else outcome.partial
     lookup = None if found is None else found.result
@@ -137,7 +137,7 @@ def frame_evidence(outcome: Tracked | NoHand, found: Any, tracker: Any) -> Frame
     distances = np.asarray(getattr(lookup, 'distances', ()), float).reshape(-1)
     fitted = (getattr(result, 'q', None) is not None
               and hasattr(result, 'reprojection_error_px'))
-    return FrameEvidence(
+    return GateEvidence(
         '' if isinstance(outcome, Tracked) else outcome.reason,
         float(distances[0]) if len(distances) else float('nan'),
         float(result.explained_blob_share) if fitted else float('nan'),
@@ -161,7 +161,7 @@ class SceneRun:
     reasons: Counter                    # 'no hand' reasons on frames with a visible hand
     true_model: HandModel
     tracker_model: HandModel
-    evidence: tuple[FrameEvidence, ...] = ()   # per frame, :func:`frame_evidence`
+    evidence: tuple[GateEvidence, ...] = ()   # per frame, :func:`gate_evidence`
 
 
 def fully_visible(labels: np.ndarray, keypoints_uv: np.ndarray) -> bool:
@@ -223,7 +223,7 @@ def run_scene(condition: SceneCondition, seed: int, num_frames: int, *, lookup: 
         fully = np.zeros(n, bool)
         empty = np.zeros(n, bool)
         reasons: Counter = Counter()
-        evidence: list[FrameEvidence] = []
+        evidence: list[GateEvidence] = []
         for i in range(n):
             frame = synth.render_frame(poses[i], camera, np.random.default_rng([seed, i, 11]),
                                        look)
@@ -231,7 +231,7 @@ def run_scene(condition: SceneCondition, seed: int, num_frames: int, *, lookup: 
                                      camera.project(true_hand[0].keypoints(poses[i])))
             empty[i] = not np.any(frame.labels)
             outcome = pipeline.process(tracker, [frame.image_rgb], i / fps)
-            evidence.append(frame_evidence(outcome, pipeline.last_lookup, tracker))
+            evidence.append(gate_evidence(outcome, pipeline.last_lookup, tracker))
             if isinstance(outcome, Tracked):
                 tracked[i] = True
                 q_est[i] = outcome.result.q
@@ -311,7 +311,7 @@ def summarize_scene(runs: Sequence[SceneRun]) -> dict[str, Any]:
 
 def frame_records(run: SceneRun) -> list[dict[str, Any]]:
     """One record per frame of ``run``: its class (fully visible / partly visible / no hand),
-    whether a pose was published, :class:`FrameEvidence`, and for a published pose on a
+    whether a pose was published, :class:`GateEvidence`, and for a published pose on a
     frame with a hand the fingertip errors per digit (thumb..little, absolute, mm), their mean
     (the figure ``OFF_POSE_MM`` is judged on) and the wrist depth error (estimate minus truth,
     mm): the frame-by-frame view behind :func:`summarize_scene`."""
