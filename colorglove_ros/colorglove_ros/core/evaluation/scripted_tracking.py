@@ -38,9 +38,10 @@ def _plain(value: Any) -> Any:
                 if f.name not in _PROVENANCE_FIELDS}
     if isinstance(value, dict):
         return {str(k): _plain(v) for k, v in sorted(value.items())}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return [_plain(v) for v in np.asarray(value, dtype=object).reshape(-1)] \
-            if isinstance(value, np.ndarray) else [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return [_plain(v) for v in value.reshape(-1)]
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, Path):
