@@ -2,6 +2,10 @@
 see when they run on the tracker's output instead of the noise model (cached per sequence)."""
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import json
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -14,13 +18,67 @@ from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.hand.observation_features import empty_observation_record
 from colorglove_ros.core.lookup.database import DatabaseError, contents_tag
 
-__all__ = ['TRACKED_FORMAT_VERSION', 'TRACKER_MODE', 'ScriptedTracker', 'TrackedScript']
+__all__ = ['TRACKED_FORMAT_VERSION', 'TRACKER_MODE', 'ScriptedTracker', 'TrackedScript',
+           'tracking_settings', 'settings_tag']
 
 # 2: with the tracker's evidence per frame; 3: and the primary camera's observation per frame
 TRACKED_FORMAT_VERSION = 3
 _READABLE_VERSIONS = (2, 3)     # a version 2 cache serves everything but the observation
 _OBSERVATION_KEYS = tuple(empty_observation_record(0))
 TRACKER_MODE = 'ik_smooth'        # the mode ik_node runs (IK and smoothing on)
+# fields that name where a setting came from, not what it is
+_PROVENANCE_FIELDS = ('source', 'name', 'frame_id')
+
+
+def _plain(value: Any) -> Any:
+    """``value`` as JSON data: dataclasses as mappings of their fields (but the provenance
+    fields), arrays as lists; floats keep every digit."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)
+                if f.name not in _PROVENANCE_FIELDS}
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in sorted(value.items())}
+    if isinstance(value, np.ndarray):
+        return [_plain(v) for v in value.reshape(-1)]
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def tracking_settings(ik_config: Path, calibration: Path, labels: str) -> dict[str, Any]:
+    """Every setting that changes the tracked poses of a scripted sequence besides the database
+    and the script: the parsed IK config (``load_ik_config``: its covariance file's values, not
+    its path), the primary camera, the tracker mode, the label source and, with
+    ``labels='segmented'``, the segmenter's settings and a checksum of the colour calibration
+    file (``'missing'`` when it is not there yet: the first tracking fits it)."""
+    from colorglove_ros.core.camera import load_calibration
+    from colorglove_ros.core.tracking.config import load_ik_config
+
+    settings: dict[str, Any] = {
+        'ik': _plain(load_ik_config(str(ik_config)).with_mode(TRACKER_MODE)),
+        'camera': _plain(load_calibration(str(calibration)).cameras[0]),
+        'mode': TRACKER_MODE, 'labels': labels}
+    if labels == 'segmented':
+        from colorglove_ros.core.segmentation.calibration_fit import DEFAULT_COLOR_CONFIG
+        from colorglove_ros.core.segmentation.color_model import read_calibration_config
+
+        color = read_calibration_config(DEFAULT_COLOR_CONFIG)
+        path = Path(color['calibration_file'])
+        settings['segmenter'] = _plain(color['segmenter'])
+        settings['color_calibration'] = f'crc32 {zlib.crc32(path.read_bytes()):08x}' \
+            if path.is_file() else 'missing'
+    return settings
+
+
+def settings_tag(settings: dict[str, Any]) -> str:
+    """A short name of :func:`tracking_settings` for cache file names (equal settings, equal
+    name)."""
+    text = json.dumps(settings, sort_keys=True, allow_nan=True)
+    return 'ik' + hashlib.sha1(text.encode()).hexdigest()[:10]
 
 
 @dataclass(frozen=True)
@@ -42,9 +100,11 @@ class ScriptedTracker:
     the seed, the primary camera of ``calibration``), runs the per-frame recipe (segmentation
     with ``labels='segmented'``, lookup, IK with smoothing) and returns the tracked poses and
     the found flags. Results are cached in ``cache_dir`` as ``<name>_<seed>_<frames>_<labels>
-    _<database tag>.npz`` (versioned, with the true poses, so a changed script is tracked
-    anew; the tag is the database's ``contents_tag``, so a rebuilt or another database never
-    reads a cache of other tracking)."""
+    _<database tag>_<settings tag>.npz`` (versioned, with the true poses, so a changed script
+    is tracked anew; the database tag is its ``contents_tag`` and the settings tag
+    :func:`settings_tag` of :func:`tracking_settings`, so a rebuilt or another database, another
+    ``ik.yaml``, camera or colour calibration never reads a cache of other tracking; a change
+    of the tracking code is not seen: empty ``cache_dir`` then)."""
 
     database: Path
     ik_config: Path
@@ -55,6 +115,7 @@ class ScriptedTracker:
     def __post_init__(self) -> None:
         self._evaluator: Any = None
         self.frames_tracked = 0       # frames run through the tracker (not from the cache)
+        self._settings_tag: str | None = None
 
     def _cache_path(self, name: str, seed: int, frames: int) -> Path:
         try:
@@ -62,7 +123,11 @@ class ScriptedTracker:
         except DatabaseError as exc:
             raise ScriptError(f'{self.database}: no readable pose database manifest: {exc}') \
                 from exc
-        return Path(self.cache_dir) / f'{name}_{seed}_{frames}_{self.labels}_{tag}.npz'
+        if self._settings_tag is None:      # read once, as the evaluator reads them once
+            self._settings_tag = settings_tag(tracking_settings(self.ik_config, self.calibration,
+                                                                self.labels))
+        return Path(self.cache_dir) / \
+            f'{name}_{seed}_{frames}_{self.labels}_{tag}_{self._settings_tag}.npz'
 
     def _load(self, path: Path, truth: np.ndarray, observation: bool = False
               ) -> TrackedScript | None:

@@ -6,10 +6,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
+from repo_paths import CONFIG_DIR
 from small_databases import blob_database
 
 from colorglove_ros.core.evaluation.scripted_hands import ScriptError
-from colorglove_ros.core.evaluation.scripted_tracking import TRACKED_FORMAT_VERSION, ScriptedTracker
+from colorglove_ros.core.evaluation.scripted_tracking import (
+    TRACKED_FORMAT_VERSION,
+    ScriptedTracker,
+    settings_tag,
+    tracking_settings,
+)
 from colorglove_ros.core.evaluation.sequences import EVIDENCE_FIELDS
 from colorglove_ros.core.hand.observation_features import empty_observation_record
 from colorglove_ros.core.lookup.database import contents_tag, save_database
@@ -24,15 +31,18 @@ def _saved(tmp_path: Path, name: str, seed: int) -> Path:
     return save_database(db, tmp_path / name)
 
 
+IK, CAMERAS = CONFIG_DIR / 'ik.yaml', CONFIG_DIR / 'calibration.yaml'
+
+
 def test_an_unreadable_database_manifest_is_a_script_error(tmp_path: Path) -> None:
     a = _saved(tmp_path, 'a', 0)
     manifest = json.loads((a / 'manifest.json').read_text())
     del manifest['arrays']['codes']
     (a / 'manifest.json').write_text(json.dumps(manifest))
-    tracker = ScriptedTracker(a, Path('ik.yaml'), Path('cal.yaml'), tmp_path)
+    tracker = ScriptedTracker(a, IK, CAMERAS, tmp_path)
     with pytest.raises(ScriptError, match='manifest'):
         tracker._cache_path('spelling', 7, 3)
-    missing = ScriptedTracker(tmp_path / 'missing', Path('ik.yaml'), Path('cal.yaml'), tmp_path)
+    missing = ScriptedTracker(tmp_path / 'missing', IK, CAMERAS, tmp_path)
     with pytest.raises(ScriptError):
         missing._cache_path('spelling', 7, 3)
 
@@ -42,14 +52,59 @@ def test_each_database_has_its_own_cache(tmp_path: Path) -> None:
     cache of the database before: every cache file is named by the database's contents."""
     truth = np.zeros((3, 26))
     first, rebuilt = _saved(tmp_path, 'a', 0), _saved(tmp_path, 'b', 1)
-    before = ScriptedTracker(first, Path('ik.yaml'), Path('cal.yaml'), tmp_path)
-    after = ScriptedTracker(rebuilt, Path('ik.yaml'), Path('cal.yaml'), tmp_path)
+    before = ScriptedTracker(first, IK, CAMERAS, tmp_path)
+    after = ScriptedTracker(rebuilt, IK, CAMERAS, tmp_path)
     path = before._cache_path('spelling', 7, 3)
     _write_cache(path, truth)
     assert before._load(path, truth) is not None
-    assert path.name == f'spelling_7_3_segmented_{contents_tag(first)}.npz'
+    tag = settings_tag(tracking_settings(IK, CAMERAS, 'segmented'))
+    assert path.name == f'spelling_7_3_segmented_{contents_tag(first)}_{tag}.npz'
     other = after._cache_path('spelling', 7, 3)
     assert other != path and not other.exists()
+
+
+def _edited_ik(tmp_path: Path, name: str, **changes: object) -> Path:
+    data = yaml.safe_load(IK.read_text())
+    data.update(changes)
+    path = tmp_path / f'{name}.yaml'
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_each_ik_config_camera_and_label_source_has_its_own_cache(tmp_path: Path) -> None:
+    """A cache made with one ``ik.yaml`` is never read with another that tracks differently
+    (one IK setting changed, or the covariances of a covariance file), nor with another
+    primary camera or label source; the same settings written differently (no comments, other
+    order) read the same cache."""
+    from colorglove_ros.core.tracking.config import default_covariances, save_covariances
+
+    truth = np.zeros((3, 26))
+    db = _saved(tmp_path, 'a', 0)
+    base = ScriptedTracker(db, IK, CAMERAS, tmp_path)
+    path = base._cache_path('gestures', 7, 3)
+    _write_cache(path, truth)
+    same = ScriptedTracker(db, _edited_ik(tmp_path, 'same'), CAMERAS, tmp_path)
+    assert same._cache_path('gestures', 7, 3) == path
+    cov = default_covariances()
+    cov_file = save_covariances(tmp_path / 'cov.yaml', cov)
+    assert ScriptedTracker(db, _edited_ik(tmp_path, 'cov_same', covariance_file=str(cov_file)),
+                           CAMERAS, tmp_path)._cache_path('gestures', 7, 3) == path
+    save_covariances(tmp_path / 'cov2.yaml', type(cov)(cov.r_var_px2 * 4, cov.q_var, cov.p_var))
+    camera = yaml.safe_load(CAMERAS.read_text())
+    camera['cameras'][0]['fx'] = 500.0
+    (tmp_path / 'cameras.yaml').write_text(yaml.safe_dump(camera))
+    others = [ScriptedTracker(db, _edited_ik(tmp_path, 'iterations', max_iterations=4), CAMERAS,
+                              tmp_path),
+              ScriptedTracker(db, _edited_ik(tmp_path, 'blob_ratio', max_blob_ratio=3.0), CAMERAS,
+                              tmp_path),
+              ScriptedTracker(db, _edited_ik(tmp_path, 'cov', covariance_file=str(
+                  tmp_path / 'cov2.yaml')), CAMERAS, tmp_path),
+              ScriptedTracker(db, IK, tmp_path / 'cameras.yaml', tmp_path),
+              ScriptedTracker(db, IK, CAMERAS, tmp_path, labels='truth')]
+    names = {other._cache_path('gestures', 7, 3) for other in others}
+    assert path not in names and len(names) == len(others)
+    assert all(other._load(other._cache_path('gestures', 7, 3), truth) is None
+               for other in others)
 
 
 def _write_cache(path: Path, truth: np.ndarray, version: int = TRACKED_FORMAT_VERSION,
@@ -68,7 +123,7 @@ def test_the_cache_holds_the_trackers_evidence_per_frame(tmp_path: Path) -> None
     """The cache gives back the tracker's evidence with the poses; a cache written before the
     evidence was recorded (format 1) is not read (the sequence is tracked anew)."""
     truth = np.zeros((3, 26))
-    tracker = ScriptedTracker(_saved(tmp_path, 'a', 0), Path('ik.yaml'), Path('cal.yaml'),
+    tracker = ScriptedTracker(_saved(tmp_path, 'a', 0), IK, CAMERAS,
                               tmp_path)
     path = tracker._cache_path('gestures', 7, 3)
     _write_cache(path, truth)
@@ -84,7 +139,7 @@ def test_the_cache_holds_the_observation_and_reads_an_evidence_only_cache(tmp_pa
     image, blobs); a format 2 cache (evidence, no observation) still serves the poses and the
     evidence, but not a caller that needs the observation (tracked anew)."""
     truth = np.zeros((3, 26))
-    tracker = ScriptedTracker(_saved(tmp_path, 'a', 0), Path('ik.yaml'), Path('cal.yaml'),
+    tracker = ScriptedTracker(_saved(tmp_path, 'a', 0), IK, CAMERAS,
                               tmp_path)
     path = tracker._cache_path('spelling', 7, 3)
     _write_cache(path, truth)
