@@ -93,3 +93,38 @@ def test_the_thread_cpu_is_averaged_over_the_published_frames() -> None:
     assert fig['cpu_ms_mean'] == 10.0 and fig['thread_cpu_ms_mean'] == 5.0
     empty = sequence_figures(HandModel(), truth, [None] * 3, [], [False] * 3)
     assert math.isnan(empty['thread_cpu_ms_mean'])
+
+
+@pytest.mark.parametrize('flags, dofs, abduction, spread', [
+    ([], EdgeTrackerConfig.finger_refit_dofs, EdgeTrackerConfig.finger_refit_abduction,
+     EdgeTrackerConfig.finger_refit_spread_deg),
+    (['--finger-refit-dofs', 'digit', '--finger-refit-abduction', 'spread',
+      '--finger-refit-spread-deg', '5'], 'digit', 'spread', 5.0),
+    (['--finger-refit-dofs', 'flexion', '--finger-refit-abduction', 'kept'],
+     'flexion', 'kept', EdgeTrackerConfig.finger_refit_spread_deg)])
+def test_the_finger_refit_settings_reach_the_tracker(tmp_path, monkeypatch, flags: list[str],
+                                                     dofs: str, abduction: str,
+                                                     spread: float) -> None:
+    from colorglove_ros.tools import eval_edges
+
+    configs = []
+    tracker = eval_edges.EdgeTracker
+
+    def recording(model, cameras, config=None, backgrounds=None):
+        configs.append(config)
+        return tracker(model, cameras, config, backgrounds)
+
+    monkeypatch.setattr(eval_edges, 'EdgeTracker', recording)
+    out = tmp_path / 'refit.json'
+    assert main(['--seeds', '1', '--frames', '2', '--speeds', '1', '--cameras', '1', *flags,
+                 '--json', str(out)]) == 0
+    settings = json.loads(out.read_text())['settings']
+    assert (settings['finger_refit_dofs'], settings['finger_refit_abduction'],
+            settings['finger_refit_spread_deg']) == (dofs, abduction, spread)
+    assert [(c.finger_refit_dofs, c.finger_refit_abduction, c.finger_refit_spread_deg)
+            for c in configs] == [(dofs, abduction, spread)]
+
+
+def test_an_unknown_finger_refit_mode_is_refused() -> None:
+    with pytest.raises(SystemExit):
+        main(['--seeds', '1', '--frames', '2', '--finger-refit-dofs', 'wrist'])

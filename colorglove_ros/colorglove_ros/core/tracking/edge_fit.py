@@ -70,6 +70,7 @@ __all__ = [
     'feature_points', 'EdgePrediction', 'EdgeMeasurement', 'EdgeFit', 'link_axis_residuals',
     'tip_residuals', 'predict_features', 'measure_features', 'stack_residuals', 'fit_pose',
     'fingertip_disagreement', 'hand_outline', 'LineRows', 'line_rows', 'even_subsample',
+    'REFIT_DOFS', 'REFIT_ABDUCTION',
 ]
 
 # every phalanx except the thumb metacarpal, which lies inside the palm's outline

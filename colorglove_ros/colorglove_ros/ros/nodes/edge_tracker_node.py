@@ -143,6 +143,19 @@ class EdgeTrackerNode(Node):
                                          'finger_refit: share of the hand silhouette left '
                                          'unexplained near one digit that triggers its re-fit',
                                          0.0, 1.0)
+        refit_dofs = declare(self, 'finger_refit_dofs', defaults.finger_refit_dofs,
+                             'finger_refit: what a re-fit candidate fits (hand: every DOF; '
+                             'abduction: all but the digit\'s abduction; digit: the digit\'s '
+                             'DOFs; flexion: its flexions), the rest held at the frame\'s fit')
+        refit_abduction = declare(self, 'finger_refit_abduction',
+                                  defaults.finger_refit_abduction,
+                                  'finger_refit: where a candidate\'s abduction starts (start: '
+                                  'with its other start angles; kept: at the frame\'s fit; '
+                                  'both: one candidate of each; spread: kept, and moved '
+                                  'finger_refit_spread_deg out and in)')
+        refit_spread = declare(self, 'finger_refit_spread_deg', defaults.finger_refit_spread_deg,
+                               'finger_refit_abduction spread: how far the abduction is '
+                               'moved, degrees', 0.1, 90.0)
         silhouette_palm = declare(self, 'silhouette_palm', defaults.silhouette_palm,
                                   'with silhouettes: the unexplained foreground next to the '
                                   'palm pulls the palm (the whole hand) toward it')
@@ -182,6 +195,8 @@ class EdgeTrackerNode(Node):
                 silhouette_weight=float(silhouette_weight),
                 max_unexplained=float(max_unexplained), finger_refit=bool(finger_refit),
                 max_finger_unexplained=float(max_finger_unexplained),
+                finger_refit_dofs=str(refit_dofs), finger_refit_abduction=str(refit_abduction),
+                finger_refit_spread_deg=float(refit_spread),
                 silhouette_palm=bool(silhouette_palm),
                 max_finger_off_silhouette=float(max_finger_off),
                 retry_dofs=tuple(retry_dofs), retry_step_deg=float(retry_step),
