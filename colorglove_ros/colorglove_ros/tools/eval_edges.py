@@ -24,7 +24,8 @@ below 1 (off by default) the tracker also withholds a frame where a finger's axi
 silhouette (the track is kept): ``finger_withheld`` counts those frames, which break the runs
 of published frames. ``--measurement-rounds``, ``--fault-round`` and
 ``--min-camera-found-fraction`` set the tracker's rounds per frame, its extra round on a
-faulted frame (``fault_rounds`` counts those frames) and its per-camera coverage check,
+faulted frame (``fault_rounds`` counts those frames), its per-camera coverage check,
+``--round-min-move-px`` the move below which it makes no further round,
 ``--finger-refit-dofs``, ``--finger-refit-abduction`` and ``--finger-refit-spread-deg`` what
 its finger re-fits fit and where their abduction starts (default ``EdgeTrackerConfig``'s).
 
@@ -159,7 +160,8 @@ def _python_loop_s() -> float:
 
 #: The edge tracker's fit settings both evaluations take as flags (``EdgeTrackerConfig`` fields).
 FIT_SETTINGS = ('finger_refit', 'silhouette_palm', 'measurement_rounds',
-                'min_camera_found_fraction', 'fault_round', 'finger_refit_dofs',
+                'min_camera_found_fraction', 'fault_round', 'round_min_move_px',
+                'finger_refit_dofs',
                 'finger_refit_abduction', 'finger_refit_spread_deg')
 
 
@@ -189,6 +191,11 @@ def add_fit_arguments(parser: argparse.ArgumentParser, applies: str = '') -> Non
                         help=f'{applies}the tracker\'s fault_round: a tracked frame whose fit '
                         'fails a check is measured and fitted once more from that fit '
                         '(default: EdgeTrackerConfig\'s)')
+    parser.add_argument('--round-min-move-px', type=float,
+                        default=EdgeTrackerConfig.round_min_move_px,
+                        help=f'{applies}the tracker\'s round_min_move_px: a further measurement '
+                        'round only after a round that moved some feature point by more than '
+                        'this, px (0: every round; default: EdgeTrackerConfig\'s)')
     parser.add_argument('--finger-refit-dofs', choices=REFIT_DOFS,
                         default=EdgeTrackerConfig.finger_refit_dofs,
                         help=f'{applies}the tracker\'s finger_refit_dofs: what a re-fit '

@@ -95,16 +95,20 @@ def test_the_thread_cpu_is_averaged_over_the_published_frames() -> None:
     assert math.isnan(empty['thread_cpu_ms_mean'])
 
 
-@pytest.mark.parametrize('flags, dofs, abduction, spread', [
-    ([], EdgeTrackerConfig.finger_refit_dofs, EdgeTrackerConfig.finger_refit_abduction,
-     EdgeTrackerConfig.finger_refit_spread_deg),
+_DEFAULTS = EdgeTrackerConfig()
+_REFIT_NAMES = ('finger_refit_dofs', 'finger_refit_abduction', 'finger_refit_spread_deg',
+                'round_min_move_px')
+
+
+@pytest.mark.parametrize('flags, expected', [
+    ([], tuple(getattr(_DEFAULTS, n) for n in _REFIT_NAMES)),
     (['--finger-refit-dofs', 'digit', '--finger-refit-abduction', 'spread',
-      '--finger-refit-spread-deg', '5'], 'digit', 'spread', 5.0),
-    (['--finger-refit-dofs', 'flexion', '--finger-refit-abduction', 'kept'],
-     'flexion', 'kept', EdgeTrackerConfig.finger_refit_spread_deg)])
-def test_the_finger_refit_settings_reach_the_tracker(tmp_path, monkeypatch, flags: list[str],
-                                                     dofs: str, abduction: str,
-                                                     spread: float) -> None:
+      '--finger-refit-spread-deg', '5', '--round-min-move-px', '4'], ('digit', 'spread', 5.0, 4.0)),
+    (['--finger-refit-dofs', 'flexion', '--finger-refit-abduction', 'kept',
+      '--round-min-move-px', '0'],
+     ('flexion', 'kept', _DEFAULTS.finger_refit_spread_deg, 0.0))])
+def test_the_finger_refit_settings_and_the_round_gate_reach_the_tracker(
+        tmp_path, monkeypatch, flags: list[str], expected: tuple) -> None:
     from colorglove_ros.tools import eval_edges
 
     configs = []
@@ -119,10 +123,8 @@ def test_the_finger_refit_settings_reach_the_tracker(tmp_path, monkeypatch, flag
     assert main(['--seeds', '1', '--frames', '2', '--speeds', '1', '--cameras', '1', *flags,
                  '--json', str(out)]) == 0
     settings = json.loads(out.read_text())['settings']
-    assert (settings['finger_refit_dofs'], settings['finger_refit_abduction'],
-            settings['finger_refit_spread_deg']) == (dofs, abduction, spread)
-    assert [(c.finger_refit_dofs, c.finger_refit_abduction, c.finger_refit_spread_deg)
-            for c in configs] == [(dofs, abduction, spread)]
+    assert tuple(settings[n] for n in _REFIT_NAMES) == expected
+    assert [tuple(getattr(c, n) for n in _REFIT_NAMES) for c in configs] == [expected]
 
 
 def test_an_unknown_finger_refit_mode_is_refused() -> None:

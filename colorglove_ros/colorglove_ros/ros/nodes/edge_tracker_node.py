@@ -112,6 +112,9 @@ class EdgeTrackerNode(Node):
         fault_round = declare(self, 'fault_round', defaults.fault_round,
                               'a tracked frame whose fit fails a check is measured and '
                               'fitted once more from that fit before it is judged')
+        min_move = declare(self, 'round_min_move_px', defaults.round_min_move_px,
+                           'a further measurement round only after a round that moved some '
+                           'feature point by more than this, px (0: every round)', 0.0, 100.0)
         polarity = declare(self, 'polarity', defaults.polarity,
                            '+1 hand brighter than the background, -1 darker, 0 either', -1, 1)
         camera_check = declare(self, 'camera_check', defaults.camera_check,
@@ -190,6 +193,7 @@ class EdgeTrackerNode(Node):
                 min_found_fraction=float(min_found),
                 min_camera_found_fraction=float(min_camera), loss_patience=int(patience),
                 measurement_rounds=int(rounds), fault_round=bool(fault_round),
+                round_min_move_px=float(min_move),
                 polarity=int(polarity), camera_check=bool(camera_check),
                 max_camera_disagreement_mm=float(max_disagreement),
                 silhouette_weight=float(silhouette_weight),

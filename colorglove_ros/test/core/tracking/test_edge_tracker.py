@@ -910,3 +910,38 @@ def test_the_defaults_measure_twice_retry_faults_and_let_one_link_of_ten_pass(ri
     assert tracker._check_fit(EdgeFit(q, 1.0, (14, 1), (14, 8), (5, 1), 3)) == ('', '')
     assert tracker._check_fit(EdgeFit(q, 1.0, (14, 1), (14, 11), (5, 1), 3))[0] == 'coverage'
     assert tracker._check_fit(EdgeFit(q, 1.0, (14, 0), (14, 5), (5, 1), 3))[0] == 'coverage'
+
+
+def test_a_round_that_barely_moved_ends_the_fit(rig) -> None:
+    """``round_min_move_px``: a 2-round fit whose first round moved no feature point by more
+    than it is the 1-round fit, exactly; one whose first round moved more makes the second
+    round."""
+    from colorglove_ros.core.tracking.edge_fit import _largest_move_px, fit_pose
+    from colorglove_ros.core.tracking.kinematics import FastKinematics
+
+    cameras, seq, frames = rig
+    model, config = seq.synth.model, EdgeTrackerConfig()
+    kin = FastKinematics(model)
+    points = feature_points(model, config.tracked_links, config.use_tips, config.palm_sides)
+    greys = [to_grey(f) for f in frames[21]]
+    start = seq.poses[20].copy()
+    start[model.dof_names.index('index_mcp_flex')] += 0.25
+    start[0] += 0.006
+    one = fit_pose(kin, points, cameras, greys, start, config, 1)
+    two = fit_pose(kin, points, cameras, greys, start, config, 2)
+    assert not np.allclose(one.q, two.q) and two.iterations == 2 * config.gn_iterations
+    world = [kin.points(q, points.point_link, points.point_local, False)[0]
+             for q in (kin.clamp(start), one.q)]
+    moved = _largest_move_px(cameras, greys, *world)
+    assert moved > 1.0
+    stopped = fit_pose(kin, points, cameras, greys, start,
+                       replace(config, round_min_move_px=moved + 0.01), 2)
+    assert np.array_equal(stopped.q, one.q) and stopped.rms_px == one.rms_px
+    assert stopped.links_found == one.links_found and stopped.iterations == one.iterations
+    kept = fit_pose(kin, points, cameras, greys, start,
+                    replace(config, round_min_move_px=moved - 0.01), 2)
+    assert np.array_equal(kept.q, two.q) and kept.rms_px == two.rms_px
+    # the move is counted only in cameras with an image
+    assert _largest_move_px(cameras, [greys[0], None], *world) <= moved
+    with pytest.raises(EdgeTrackerError):
+        EdgeTrackerConfig(round_min_move_px=-1.0)

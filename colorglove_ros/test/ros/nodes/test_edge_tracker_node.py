@@ -132,12 +132,13 @@ def test_the_measurement_rounds_and_fault_round_parameters_reach_the_tracker() -
         assert config.measurement_rounds == 1 and config.fault_round
 
 
-def test_the_finger_refit_parameters_reach_the_tracker() -> None:
+def test_the_finger_refit_and_round_gate_parameters_reach_the_tracker() -> None:
     with running(_node(finger_refit_dofs='digit', finger_refit_abduction='spread',
-                       finger_refit_spread_deg=5.0)) as h:
+                       finger_refit_spread_deg=5.0, round_min_move_px=4.0)) as h:
         config = h.nodes[0].config
     assert (config.finger_refit_dofs, config.finger_refit_abduction,
-            config.finger_refit_spread_deg) == ('digit', 'spread', 5.0)
+            config.finger_refit_spread_deg, config.round_min_move_px) \
+        == ('digit', 'spread', 5.0, 4.0)
     with pytest.raises(StartupError, match='finger_refit_dofs'):
         with running(_node(finger_refit_dofs='wrist')):
             pass
@@ -152,7 +153,7 @@ def test_the_node_defaults_are_the_tracker_defaults() -> None:
     defaults = EdgeTrackerConfig()
     for name in ('finger_refit', 'silhouette_palm', 'measurement_rounds', 'fault_round',
                  'finger_refit_dofs', 'finger_refit_abduction', 'finger_refit_spread_deg',
-                 'max_finger_off_silhouette',
+                 'round_min_move_px', 'max_finger_off_silhouette',
                  'max_finger_unexplained', 'max_unexplained', 'silhouette_weight',
                  'retry_dofs', 'retry_step_deg', 'retry_max_wrist_move_m',
                  'retry_rest_margin_px'):
