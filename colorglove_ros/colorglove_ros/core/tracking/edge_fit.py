@@ -118,10 +118,11 @@ class EdgeTrackerConfig:
     a further round would be), before the finger re-fits and the checks judge it: the first
     fit is often close enough for the second measurement to find the links the first missed
     (the 45-degree camera's above all); a fit that still fails publishes nothing.
-    ``round_min_move_px`` > 0 (0, the default: off): a fit of several rounds (a frame's, a
-    finger re-fit's, the initialisation's) makes a further round only when the round before
-    moved some feature point by more than this many pixels in some camera (measured again
-    near where it was measured, the edges would be the same ones).
+    ``round_min_move_px`` > 0 (0, the default: off): a tracked frame's fit and a finger
+    re-fit's make a further round only when the round before moved some feature point by more
+    than this many pixels in some camera (the initialisation's fit, which starts far from the
+    hand, makes all of its rounds): a CPU cut that keeps the two-camera bare-hand runs but not
+    the 3-D mouse's clicks (docs/RESULTS.md, DigitEyes nineteenth pass).
     Link slices hidden behind the palm (:func:`_behind_palm`, points within
     ``palm_occlusion_px``; 0 turns it off) are not searched nor counted as missing.
     ``camera_weights`` scale each camera's residual weights in the fit

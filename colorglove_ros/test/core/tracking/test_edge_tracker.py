@@ -945,3 +945,28 @@ def test_a_round_that_barely_moved_ends_the_fit(rig) -> None:
     assert _largest_move_px(cameras, [greys[0], None], *world) <= moved
     with pytest.raises(EdgeTrackerError):
         EdgeTrackerConfig(round_min_move_px=-1.0)
+
+
+def test_the_initialisation_makes_all_its_rounds_whatever_the_round_gate(rig,
+                                                                         monkeypatch) -> None:
+    """With ``round_min_move_px`` set, the initialisation's fit (from the documented pose,
+    far from the hand) still makes every one of its ``init_rounds``; a tracked frame's fit
+    is gated."""
+    from colorglove_ros.core.tracking import edge_tracker
+
+    cameras, seq, frames = rig
+    seen: list[tuple[int, float]] = []
+    fit_pose = edge_tracker.fit_pose
+
+    def recording(kin, points, cameras, greys, q_start, config, rounds, **kwargs):
+        seen.append((rounds, config.round_min_move_px))
+        return fit_pose(kin, points, cameras, greys, q_start, config, rounds, **kwargs)
+
+    monkeypatch.setattr(edge_tracker, 'fit_pose', recording)
+    config = EdgeTrackerConfig(round_min_move_px=1e6, finger_refit=False, fault_round=False)
+    tracker = EdgeTracker(seq.synth.model, cameras, config)
+    tracker.update(frames[0])                        # waiting: the initialisation's fit
+    assert seen == [(config.init_rounds, 0.0)]
+    tracker.initialize(seq.poses[20])
+    tracker.update(frames[21])
+    assert seen[1:] == [(config.measurement_rounds, 1e6)]
