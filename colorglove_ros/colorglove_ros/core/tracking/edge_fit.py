@@ -121,8 +121,9 @@ class EdgeTrackerConfig:
     ``round_min_move_px`` > 0 (0, the default: off): a tracked frame's fit and a finger
     re-fit's make a further round only when the round before moved some feature point by more
     than this many pixels in some camera (the initialisation's fit, which starts far from the
-    hand, makes all of its rounds): a CPU cut that keeps the two-camera bare-hand runs but not
-    the 3-D mouse's clicks (docs/RESULTS.md, DigitEyes nineteenth pass).
+    hand, makes all of its rounds). At 6 px it kept the two-camera bare-hand runs and the 3-D
+    mouse's clicks of fresh held-out seeds with less CPU than two full rounds, but not under
+    issue 17's 10 ms, so it is off (docs/RESULTS.md, DigitEyes nineteenth pass).
     Link slices hidden behind the palm (:func:`_behind_palm`, points within
     ``palm_occlusion_px``; 0 turns it off) are not searched nor counted as missing.
     ``camera_weights`` scale each camera's residual weights in the fit
