@@ -49,6 +49,21 @@ def test_the_refits_and_the_palm_pull_are_on_unless_turned_off(tmp_path, flags: 
     assert settings['finger_refit'] is on and settings['silhouette_palm'] is on
 
 
+def _recorded_configs(monkeypatch) -> list[EdgeTrackerConfig]:
+    """The configs ``colorglove_eval_edges`` makes its trackers with, from now on."""
+    from colorglove_ros.tools import eval_edges
+
+    configs: list[EdgeTrackerConfig] = []
+    tracker = eval_edges.EdgeTracker
+
+    def recording(model, cameras, config=None, backgrounds=None):
+        configs.append(config)
+        return tracker(model, cameras, config, backgrounds)
+
+    monkeypatch.setattr(eval_edges, 'EdgeTracker', recording)
+    return configs
+
+
 @pytest.mark.parametrize('flags, rounds, fault, camera', [
     ([], EdgeTrackerConfig.measurement_rounds, EdgeTrackerConfig.fault_round,
      EdgeTrackerConfig.min_camera_found_fraction),
@@ -59,16 +74,7 @@ def test_the_refits_and_the_palm_pull_are_on_unless_turned_off(tmp_path, flags: 
 def test_the_measurement_rounds_and_fault_round_reach_the_tracker(
         tmp_path, monkeypatch, flags: list[str], rounds: int, fault: bool,
         camera: float) -> None:
-    from colorglove_ros.tools import eval_edges
-
-    configs = []
-    tracker = eval_edges.EdgeTracker
-
-    def recording(model, cameras, config=None, backgrounds=None):
-        configs.append(config)
-        return tracker(model, cameras, config, backgrounds)
-
-    monkeypatch.setattr(eval_edges, 'EdgeTracker', recording)
+    configs = _recorded_configs(monkeypatch)
     out = tmp_path / 'rounds.json'
     assert main(['--seeds', '1', '--frames', '2', '--speeds', '1', '--cameras', '1', *flags,
                  '--json', str(out)]) == 0
@@ -109,16 +115,7 @@ _REFIT_NAMES = ('finger_refit_dofs', 'finger_refit_abduction', 'finger_refit_spr
      ('flexion', 'kept', _DEFAULTS.finger_refit_spread_deg, 0.0))])
 def test_the_finger_refit_settings_and_the_round_gate_reach_the_tracker(
         tmp_path, monkeypatch, flags: list[str], expected: tuple) -> None:
-    from colorglove_ros.tools import eval_edges
-
-    configs = []
-    tracker = eval_edges.EdgeTracker
-
-    def recording(model, cameras, config=None, backgrounds=None):
-        configs.append(config)
-        return tracker(model, cameras, config, backgrounds)
-
-    monkeypatch.setattr(eval_edges, 'EdgeTracker', recording)
+    configs = _recorded_configs(monkeypatch)
     out = tmp_path / 'refit.json'
     assert main(['--seeds', '1', '--frames', '2', '--speeds', '1', '--cameras', '1', *flags,
                  '--json', str(out)]) == 0

@@ -826,20 +826,27 @@ def test_finger_refit_candidates_start_and_hold_as_configured(rig, monkeypatch, 
         EdgeTrackerConfig(finger_refit_abduction='out')
 
 
-def test_a_fit_continued_with_its_start_as_anchor_is_one_more_round(rig) -> None:
-    """``fit_pose(anchor=...)``: one round from a 1-round fit's pose, anchored at that fit's
-    start, lands where a 2-round fit does; anchored at its own start it does not."""
-    from colorglove_ros.core.tracking.edge_fit import fit_pose
+def _frame_21_from_a_moved_start(rig):
+    """What a fit of frame 21 needs, from frame 20's pose with the index flexed 0.25 rad more
+    and the wrist 6 mm off: (kin, points, cameras, greys, start, default config)."""
     from colorglove_ros.core.tracking.kinematics import FastKinematics
 
     cameras, seq, frames = rig
     model, config = seq.synth.model, EdgeTrackerConfig()
-    kin = FastKinematics(model)
     points = feature_points(model, config.tracked_links, config.use_tips, config.palm_sides)
-    greys = [to_grey(f) for f in frames[21]]
     start = seq.poses[20].copy()
     start[model.dof_names.index('index_mcp_flex')] += 0.25
     start[0] += 0.006
+    return (FastKinematics(model), points, cameras, [to_grey(f) for f in frames[21]], start,
+            config)
+
+
+def test_a_fit_continued_with_its_start_as_anchor_is_one_more_round(rig) -> None:
+    """``fit_pose(anchor=...)``: one round from a 1-round fit's pose, anchored at that fit's
+    start, lands where a 2-round fit does; anchored at its own start it does not."""
+    from colorglove_ros.core.tracking.edge_fit import fit_pose
+
+    kin, points, cameras, greys, start, config = _frame_21_from_a_moved_start(rig)
     two = fit_pose(kin, points, cameras, greys, start, config, 2)
     one = fit_pose(kin, points, cameras, greys, start, config, 1)
     assert not np.allclose(one.q, two.q)
@@ -917,16 +924,8 @@ def test_a_round_that_barely_moved_ends_the_fit(rig) -> None:
     than it is the 1-round fit, exactly; one whose first round moved more makes the second
     round."""
     from colorglove_ros.core.tracking.edge_fit import _largest_move_px, fit_pose
-    from colorglove_ros.core.tracking.kinematics import FastKinematics
 
-    cameras, seq, frames = rig
-    model, config = seq.synth.model, EdgeTrackerConfig()
-    kin = FastKinematics(model)
-    points = feature_points(model, config.tracked_links, config.use_tips, config.palm_sides)
-    greys = [to_grey(f) for f in frames[21]]
-    start = seq.poses[20].copy()
-    start[model.dof_names.index('index_mcp_flex')] += 0.25
-    start[0] += 0.006
+    kin, points, cameras, greys, start, config = _frame_21_from_a_moved_start(rig)
     one = fit_pose(kin, points, cameras, greys, start, config, 1)
     two = fit_pose(kin, points, cameras, greys, start, config, 2)
     assert not np.allclose(one.q, two.q) and two.iterations == 2 * config.gn_iterations
