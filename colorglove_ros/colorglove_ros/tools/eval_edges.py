@@ -24,8 +24,10 @@ below 1 (off by default) the tracker also withholds a frame where a finger's axi
 silhouette (the track is kept): ``finger_withheld`` counts those frames, which break the runs
 of published frames. ``--measurement-rounds``, ``--fault-round`` and
 ``--min-camera-found-fraction`` set the tracker's rounds per frame, its extra round on a
-faulted frame (``fault_rounds`` counts those frames) and its per-camera coverage check
-(default ``EdgeTrackerConfig``'s).
+faulted frame (``fault_rounds`` counts those frames), its per-camera coverage check,
+``--round-min-move-px`` the move below which it makes no further round,
+``--finger-refit-dofs``, ``--finger-refit-abduction`` and ``--finger-refit-spread-deg`` what
+its finger re-fits fit and where their abduction starts (default ``EdgeTrackerConfig``'s).
 
 Seeds: the tracker was tuned on seeds 1-8 (``TUNING_SEEDS``) and checked on seeds 21-24,
 31-36, 41-46, 51-56, 61-66 and 71-74 (``CHECK_SEEDS``, a fresh set each pass); the reported figures
@@ -47,7 +49,7 @@ from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.synthetic.bare_hand import BareHandSequence
-from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
+from colorglove_ros.core.tracking.edge_fit import REFIT_ABDUCTION, REFIT_DOFS, EdgeTrackerConfig
 from colorglove_ros.core.tracking.edge_tracker import FINGER_WITHHELD, EdgeTracker
 from colorglove_ros.core.tracking.silhouette import BackgroundModel
 from colorglove_ros.paths import resolve_path
@@ -158,7 +160,9 @@ def _python_loop_s() -> float:
 
 #: The edge tracker's fit settings both evaluations take as flags (``EdgeTrackerConfig`` fields).
 FIT_SETTINGS = ('finger_refit', 'silhouette_palm', 'measurement_rounds',
-                'min_camera_found_fraction', 'fault_round')
+                'min_camera_found_fraction', 'fault_round', 'round_min_move_px',
+                'finger_refit_dofs',
+                'finger_refit_abduction', 'finger_refit_spread_deg')
 
 
 def add_fit_arguments(parser: argparse.ArgumentParser, applies: str = '') -> None:
@@ -187,6 +191,28 @@ def add_fit_arguments(parser: argparse.ArgumentParser, applies: str = '') -> Non
                         help=f'{applies}the tracker\'s fault_round: a tracked frame whose fit '
                         'fails a check is measured and fitted once more from that fit '
                         '(default: EdgeTrackerConfig\'s)')
+    parser.add_argument('--round-min-move-px', type=float,
+                        default=EdgeTrackerConfig.round_min_move_px,
+                        help=f'{applies}the tracker\'s round_min_move_px: a further measurement '
+                        'round only after a round that moved some feature point by more than '
+                        'this, px (0: every round; default: EdgeTrackerConfig\'s)')
+    parser.add_argument('--finger-refit-dofs', choices=REFIT_DOFS,
+                        default=EdgeTrackerConfig.finger_refit_dofs,
+                        help=f'{applies}the tracker\'s finger_refit_dofs: what a re-fit '
+                        'candidate fits (hand: every DOF; abduction: all but the digit\'s '
+                        'abduction; digit: the digit\'s DOFs; flexion: its flexions; '
+                        'default: EdgeTrackerConfig\'s)')
+    parser.add_argument('--finger-refit-abduction', choices=REFIT_ABDUCTION,
+                        default=EdgeTrackerConfig.finger_refit_abduction,
+                        help=f'{applies}the tracker\'s finger_refit_abduction: where a re-fit '
+                        'candidate\'s abduction starts (start: with its other start angles; '
+                        'kept: at the frame\'s fit; both: one of each; spread: kept and moved '
+                        '--finger-refit-spread-deg out and in; default: EdgeTrackerConfig\'s)')
+    parser.add_argument('--finger-refit-spread-deg', type=float,
+                        default=EdgeTrackerConfig.finger_refit_spread_deg,
+                        help=f'{applies}the tracker\'s finger_refit_spread_deg: with '
+                        '--finger-refit-abduction spread, how far the abduction is moved, '
+                        'degrees (default: EdgeTrackerConfig\'s)')
 
 
 def fit_settings(args: Any) -> dict[str, Any]:

@@ -36,8 +36,10 @@ with them the tracker's ``finger_refit`` and ``silhouette_palm`` act (on, as in
 ``--retry-dofs`` sets its ``retry_dofs`` (off by default), with
 ``--retry-max-wrist-move-mm`` and ``--retry-rest-margin-px`` its retry guards;
 ``--measurement-rounds``, ``--fault-round`` and ``--min-camera-found-fraction`` its rounds per
-frame, its extra round on a faulted frame and its per-camera coverage check (default
-``EdgeTrackerConfig``'s). The mouse is
+frame, its extra round on a faulted frame, its per-camera coverage check,
+``--round-min-move-px`` the move below which it makes no further round,
+``--finger-refit-dofs``, ``--finger-refit-abduction`` and ``--finger-refit-spread-deg`` its
+finger re-fits' DOFs and abduction starts (default ``EdgeTrackerConfig``'s). The mouse is
 fed each pose's edge residual (as ``edge_tracker_node``'s status line gives it to
 ``mouse_node``), so ``--press-max-residual-ratio`` sets its press gate
 (``core.tracking.mouse``).
@@ -460,6 +462,12 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'fault_round': edge_config.fault_round,
                                             'min_camera_found_fraction':
                                                 edge_config.min_camera_found_fraction,
+                                            'round_min_move_px': edge_config.round_min_move_px,
+                                            'finger_refit_dofs': edge_config.finger_refit_dofs,
+                                            'finger_refit_abduction':
+                                                edge_config.finger_refit_abduction,
+                                            'finger_refit_spread_deg':
+                                                edge_config.finger_refit_spread_deg,
                                             'retry_dofs': list(edge_config.retry_dofs),
                                             **{name: value if math.isfinite(value) else None
                                                for name, value in (

@@ -49,6 +49,21 @@ def test_the_refits_and_the_palm_pull_are_on_unless_turned_off(tmp_path, flags: 
     assert settings['finger_refit'] is on and settings['silhouette_palm'] is on
 
 
+def _recorded_configs(monkeypatch) -> list[EdgeTrackerConfig]:
+    """The configs ``colorglove_eval_edges`` makes its trackers with, from now on."""
+    from colorglove_ros.tools import eval_edges
+
+    configs: list[EdgeTrackerConfig] = []
+    tracker = eval_edges.EdgeTracker
+
+    def recording(model, cameras, config=None, backgrounds=None):
+        configs.append(config)
+        return tracker(model, cameras, config, backgrounds)
+
+    monkeypatch.setattr(eval_edges, 'EdgeTracker', recording)
+    return configs
+
+
 @pytest.mark.parametrize('flags, rounds, fault, camera', [
     ([], EdgeTrackerConfig.measurement_rounds, EdgeTrackerConfig.fault_round,
      EdgeTrackerConfig.min_camera_found_fraction),
@@ -59,16 +74,7 @@ def test_the_refits_and_the_palm_pull_are_on_unless_turned_off(tmp_path, flags: 
 def test_the_measurement_rounds_and_fault_round_reach_the_tracker(
         tmp_path, monkeypatch, flags: list[str], rounds: int, fault: bool,
         camera: float) -> None:
-    from colorglove_ros.tools import eval_edges
-
-    configs = []
-    tracker = eval_edges.EdgeTracker
-
-    def recording(model, cameras, config=None, backgrounds=None):
-        configs.append(config)
-        return tracker(model, cameras, config, backgrounds)
-
-    monkeypatch.setattr(eval_edges, 'EdgeTracker', recording)
+    configs = _recorded_configs(monkeypatch)
     out = tmp_path / 'rounds.json'
     assert main(['--seeds', '1', '--frames', '2', '--speeds', '1', '--cameras', '1', *flags,
                  '--json', str(out)]) == 0
@@ -93,3 +99,31 @@ def test_the_thread_cpu_is_averaged_over_the_published_frames() -> None:
     assert fig['cpu_ms_mean'] == 10.0 and fig['thread_cpu_ms_mean'] == 5.0
     empty = sequence_figures(HandModel(), truth, [None] * 3, [], [False] * 3)
     assert math.isnan(empty['thread_cpu_ms_mean'])
+
+
+_DEFAULTS = EdgeTrackerConfig()
+_REFIT_NAMES = ('finger_refit_dofs', 'finger_refit_abduction', 'finger_refit_spread_deg',
+                'round_min_move_px')
+
+
+@pytest.mark.parametrize('flags, expected', [
+    ([], tuple(getattr(_DEFAULTS, n) for n in _REFIT_NAMES)),
+    (['--finger-refit-dofs', 'digit', '--finger-refit-abduction', 'spread',
+      '--finger-refit-spread-deg', '5', '--round-min-move-px', '4'], ('digit', 'spread', 5.0, 4.0)),
+    (['--finger-refit-dofs', 'flexion', '--finger-refit-abduction', 'kept',
+      '--round-min-move-px', '0'],
+     ('flexion', 'kept', _DEFAULTS.finger_refit_spread_deg, 0.0))])
+def test_the_finger_refit_settings_and_the_round_gate_reach_the_tracker(
+        tmp_path, monkeypatch, flags: list[str], expected: tuple) -> None:
+    configs = _recorded_configs(monkeypatch)
+    out = tmp_path / 'refit.json'
+    assert main(['--seeds', '1', '--frames', '2', '--speeds', '1', '--cameras', '1', *flags,
+                 '--json', str(out)]) == 0
+    settings = json.loads(out.read_text())['settings']
+    assert tuple(settings[n] for n in _REFIT_NAMES) == expected
+    assert [tuple(getattr(c, n) for n in _REFIT_NAMES) for c in configs] == [expected]
+
+
+def test_an_unknown_finger_refit_mode_is_refused() -> None:
+    with pytest.raises(SystemExit):
+        main(['--seeds', '1', '--frames', '2', '--finger-refit-dofs', 'wrist'])

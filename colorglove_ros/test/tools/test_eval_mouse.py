@@ -229,3 +229,15 @@ def test_the_edge_trackers_rounds_reach_its_settings(tmp_path, flags: list[str],
     settings = json.loads(out.read_text())['settings']
     assert settings['measurement_rounds'] == rounds and settings['fault_round'] is fault
     assert settings['min_camera_found_fraction'] == camera
+
+
+def test_the_edge_trackers_refit_settings_and_round_gate_reach_its_settings(tmp_path) -> None:
+    out = tmp_path / 'mouse.json'
+    assert eval_mouse_main(['--source', 'noise', '--seeds', '0', '--seconds', '2',
+                            '--finger-refit-dofs', 'abduction', '--finger-refit-abduction',
+                            'both', '--finger-refit-spread-deg', '6', '--round-min-move-px',
+                            '3', '--json', str(out)]) == 0
+    settings = json.loads(out.read_text())['settings']
+    assert (settings['finger_refit_dofs'], settings['finger_refit_abduction'],
+            settings['finger_refit_spread_deg'], settings['round_min_move_px']) \
+        == ('abduction', 'both', 6.0, 3.0)

@@ -70,6 +70,7 @@ __all__ = [
     'feature_points', 'EdgePrediction', 'EdgeMeasurement', 'EdgeFit', 'link_axis_residuals',
     'tip_residuals', 'predict_features', 'measure_features', 'stack_residuals', 'fit_pose',
     'fingertip_disagreement', 'hand_outline', 'LineRows', 'line_rows', 'even_subsample',
+    'REFIT_DOFS', 'REFIT_ABDUCTION',
 ]
 
 # every phalanx except the thumb metacarpal, which lies inside the palm's outline
@@ -117,6 +118,12 @@ class EdgeTrackerConfig:
     a further round would be), before the finger re-fits and the checks judge it: the first
     fit is often close enough for the second measurement to find the links the first missed
     (the 45-degree camera's above all); a fit that still fails publishes nothing.
+    ``round_min_move_px`` > 0 (0, the default: off): a tracked frame's fit and a finger
+    re-fit's make a further round only when the round before moved some feature point by more
+    than this many pixels in some camera (the initialisation's fit, which starts far from the
+    hand, makes all of its rounds). At 6 px it kept the two-camera bare-hand runs and the 3-D
+    mouse's clicks of fresh held-out seeds with less CPU than two full rounds, but not under
+    issue 17's 10 ms, so it is off (docs/RESULTS.md, DigitEyes nineteenth pass).
     Link slices hidden behind the palm (:func:`_behind_palm`, points within
     ``palm_occlusion_px``; 0 turns it off) are not searched nor counted as missing.
     ``camera_weights`` scale each camera's residual weights in the fit
@@ -202,6 +209,7 @@ class EdgeTrackerConfig:
     polarity: int = 0
     measurement_rounds: int = 2
     fault_round: bool = True
+    round_min_move_px: float = 0.0
     gn_iterations: int = 3
     stabilizer: tuple[float, float, float] = (4.0e4, 1.0e3, 200.0)
     tip_weight: float = 1.0
@@ -265,6 +273,8 @@ class EdgeTrackerConfig:
             raise EdgeTrackerError(f'polarity must be -1, 0 or 1, got {self.polarity}')
         if self.measurement_rounds < 1 or self.gn_iterations < 1 or self.init_rounds < 1:
             raise EdgeTrackerError('measurement_rounds, gn_iterations, init_rounds must be >= 1')
+        if not self.round_min_move_px >= 0:
+            raise EdgeTrackerError(f'round_min_move_px must be >= 0, got {self.round_min_move_px}')
         if any(not w >= 0 for w in self.camera_weights):
             raise EdgeTrackerError(f'camera_weights must be >= 0, got {self.camera_weights}')
         if len(self.stabilizer) != 3 or min(self.stabilizer) < 0:
@@ -1214,7 +1224,10 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
     found: tuple[int, ...] = ()
     usable: tuple[int, ...] = ()
     tips: tuple[int, ...] = ()
-    for _ in range(rounds):
+    moved = math.inf
+    for k in range(rounds):
+        if k > 0 and not moved > config.round_min_move_px:
+            break               # the last round barely moved: the same edges again
         world = kin.points(q, points.point_link, points.point_local, True)
         measured: list[EdgeMeasurement | None] = []
         for cam, grey, sil in zip(cameras, greys, sils, strict=True):
@@ -1241,10 +1254,13 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
         if sum(found) == 0:
             return EdgeFit(q, math.nan, found, usable, tips, iterations,
                            digit_links_found=digit_found, digit_links_usable=digit_usable)
+        before = world[0]
         q, steps = _gauss_newton(kin, points, cameras, measured, world, q, q_anchor, S, C,
                                  config, held)
         iterations += steps
         world = kin.points(q, points.point_link, points.point_local, False)
+        if config.round_min_move_px > 0 and k + 1 < rounds:
+            moved = _largest_move_px(cameras, greys, before, world[0])
         r, _, w = stack_residuals(points, cameras, measured, world, config, jacobian=False)
         rms = float(np.sqrt(np.mean(w * r**2))) if len(r) else math.nan
     disagreement = math.nan
@@ -1270,6 +1286,18 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
     return EdgeFit(q, rms, found, usable, tips, iterations, disagreement, float(shares[0]),
                    float(shares[1]), tuple(float(v) for v in shares[2:2 + D]),
                    tuple(float(v) for v in shares[2 + D:]), digit_found, digit_usable)
+
+
+def _largest_move_px(cameras: Sequence[PinholeCamera], greys: Sequence[np.ndarray | None],
+                     before: np.ndarray, after: np.ndarray) -> float:
+    """The largest image distance (pixels) any of the points moved from ``before`` to
+    ``after`` (primary-frame points (N, 3)) in the cameras with an image."""
+    out = 0.0
+    for cam, grey in zip(cameras, greys, strict=True):
+        if grey is not None:
+            d = _project(cam, after, None)[0] - _project(cam, before, None)[0]
+            out = max(out, float(np.sqrt(np.max(np.einsum('ij,ij->i', d, d)))))
+    return out
 
 
 def _digit_counts(points: FeaturePoints, measured: Sequence[EdgeMeasurement | None]

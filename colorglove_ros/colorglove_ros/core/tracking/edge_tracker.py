@@ -103,6 +103,8 @@ class EdgeTracker:
                                      self.config.palm_sides)
         self.init_pose = initialisation_pose(model, self.config.init_wrist_position,
                                              self.config.init_rotation_vector)
+        # the initialisation's fit starts far from the hand: it makes all of its rounds
+        self._init_config = replace(self.config, round_min_move_px=0.0)
         self._names = tuple(c.name for c in self.cameras)
         self.backgrounds: tuple[BackgroundModel | None, ...] = (None,) * len(self.cameras)
         if backgrounds is not None:
@@ -267,8 +269,8 @@ class EdgeTracker:
         """One frame's state machine (initialisation, fit, loss), untimed."""
         cfg = self.config
         if self._q is None:
-            fit = fit_pose(self.kin, self.points, self.cameras, greys, self.init_pose, cfg,
-                           cfg.init_rounds, silhouettes=silhouettes)
+            fit = fit_pose(self.kin, self.points, self.cameras, greys, self.init_pose,
+                           self._init_config, cfg.init_rounds, silhouettes=silhouettes)
             reason = self._fit_problem(fit)
             offset = float(np.linalg.norm(fit.q[0:3] - self.init_pose[0:3]))
             if not reason and offset > cfg.init_max_offset_m:

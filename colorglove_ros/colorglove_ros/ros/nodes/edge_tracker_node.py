@@ -112,6 +112,9 @@ class EdgeTrackerNode(Node):
         fault_round = declare(self, 'fault_round', defaults.fault_round,
                               'a tracked frame whose fit fails a check is measured and '
                               'fitted once more from that fit before it is judged')
+        min_move = declare(self, 'round_min_move_px', defaults.round_min_move_px,
+                           'a further measurement round only after a round that moved some '
+                           'feature point by more than this, px (0: every round)', 0.0, 100.0)
         polarity = declare(self, 'polarity', defaults.polarity,
                            '+1 hand brighter than the background, -1 darker, 0 either', -1, 1)
         camera_check = declare(self, 'camera_check', defaults.camera_check,
@@ -143,6 +146,19 @@ class EdgeTrackerNode(Node):
                                          'finger_refit: share of the hand silhouette left '
                                          'unexplained near one digit that triggers its re-fit',
                                          0.0, 1.0)
+        refit_dofs = declare(self, 'finger_refit_dofs', defaults.finger_refit_dofs,
+                             'finger_refit: what a re-fit candidate fits (hand: every DOF; '
+                             'abduction: all but the digit\'s abduction; digit: the digit\'s '
+                             'DOFs; flexion: its flexions), the rest held at the frame\'s fit')
+        refit_abduction = declare(self, 'finger_refit_abduction',
+                                  defaults.finger_refit_abduction,
+                                  'finger_refit: where a candidate\'s abduction starts (start: '
+                                  'with its other start angles; kept: at the frame\'s fit; '
+                                  'both: one candidate of each; spread: kept, and moved '
+                                  'finger_refit_spread_deg out and in)')
+        refit_spread = declare(self, 'finger_refit_spread_deg', defaults.finger_refit_spread_deg,
+                               'finger_refit_abduction spread: how far the abduction is '
+                               'moved, degrees', 0.1, 90.0)
         silhouette_palm = declare(self, 'silhouette_palm', defaults.silhouette_palm,
                                   'with silhouettes: the unexplained foreground next to the '
                                   'palm pulls the palm (the whole hand) toward it')
@@ -177,11 +193,14 @@ class EdgeTrackerNode(Node):
                 min_found_fraction=float(min_found),
                 min_camera_found_fraction=float(min_camera), loss_patience=int(patience),
                 measurement_rounds=int(rounds), fault_round=bool(fault_round),
+                round_min_move_px=float(min_move),
                 polarity=int(polarity), camera_check=bool(camera_check),
                 max_camera_disagreement_mm=float(max_disagreement),
                 silhouette_weight=float(silhouette_weight),
                 max_unexplained=float(max_unexplained), finger_refit=bool(finger_refit),
                 max_finger_unexplained=float(max_finger_unexplained),
+                finger_refit_dofs=str(refit_dofs), finger_refit_abduction=str(refit_abduction),
+                finger_refit_spread_deg=float(refit_spread),
                 silhouette_palm=bool(silhouette_palm),
                 max_finger_off_silhouette=float(max_finger_off),
                 retry_dofs=tuple(retry_dofs), retry_step_deg=float(retry_step),

@@ -826,20 +826,27 @@ def test_finger_refit_candidates_start_and_hold_as_configured(rig, monkeypatch, 
         EdgeTrackerConfig(finger_refit_abduction='out')
 
 
-def test_a_fit_continued_with_its_start_as_anchor_is_one_more_round(rig) -> None:
-    """``fit_pose(anchor=...)``: one round from a 1-round fit's pose, anchored at that fit's
-    start, lands where a 2-round fit does; anchored at its own start it does not."""
-    from colorglove_ros.core.tracking.edge_fit import fit_pose
+def _frame_21_from_a_moved_start(rig):
+    """What a fit of frame 21 needs, from frame 20's pose with the index flexed 0.25 rad more
+    and the wrist 6 mm off: (kin, points, cameras, greys, start, default config)."""
     from colorglove_ros.core.tracking.kinematics import FastKinematics
 
     cameras, seq, frames = rig
     model, config = seq.synth.model, EdgeTrackerConfig()
-    kin = FastKinematics(model)
     points = feature_points(model, config.tracked_links, config.use_tips, config.palm_sides)
-    greys = [to_grey(f) for f in frames[21]]
     start = seq.poses[20].copy()
     start[model.dof_names.index('index_mcp_flex')] += 0.25
     start[0] += 0.006
+    return (FastKinematics(model), points, cameras, [to_grey(f) for f in frames[21]], start,
+            config)
+
+
+def test_a_fit_continued_with_its_start_as_anchor_is_one_more_round(rig) -> None:
+    """``fit_pose(anchor=...)``: one round from a 1-round fit's pose, anchored at that fit's
+    start, lands where a 2-round fit does; anchored at its own start it does not."""
+    from colorglove_ros.core.tracking.edge_fit import fit_pose
+
+    kin, points, cameras, greys, start, config = _frame_21_from_a_moved_start(rig)
     two = fit_pose(kin, points, cameras, greys, start, config, 2)
     one = fit_pose(kin, points, cameras, greys, start, config, 1)
     assert not np.allclose(one.q, two.q)
@@ -910,3 +917,55 @@ def test_the_defaults_measure_twice_retry_faults_and_let_one_link_of_ten_pass(ri
     assert tracker._check_fit(EdgeFit(q, 1.0, (14, 1), (14, 8), (5, 1), 3)) == ('', '')
     assert tracker._check_fit(EdgeFit(q, 1.0, (14, 1), (14, 11), (5, 1), 3))[0] == 'coverage'
     assert tracker._check_fit(EdgeFit(q, 1.0, (14, 0), (14, 5), (5, 1), 3))[0] == 'coverage'
+
+
+def test_a_round_that_barely_moved_ends_the_fit(rig) -> None:
+    """``round_min_move_px``: a 2-round fit whose first round moved no feature point by more
+    than it is the 1-round fit, exactly; one whose first round moved more makes the second
+    round."""
+    from colorglove_ros.core.tracking.edge_fit import _largest_move_px, fit_pose
+
+    kin, points, cameras, greys, start, config = _frame_21_from_a_moved_start(rig)
+    one = fit_pose(kin, points, cameras, greys, start, config, 1)
+    two = fit_pose(kin, points, cameras, greys, start, config, 2)
+    assert not np.allclose(one.q, two.q) and two.iterations == 2 * config.gn_iterations
+    world = [kin.points(q, points.point_link, points.point_local, False)[0]
+             for q in (kin.clamp(start), one.q)]
+    moved = _largest_move_px(cameras, greys, *world)
+    assert moved > 1.0
+    stopped = fit_pose(kin, points, cameras, greys, start,
+                       replace(config, round_min_move_px=moved + 0.01), 2)
+    assert np.array_equal(stopped.q, one.q) and stopped.rms_px == one.rms_px
+    assert stopped.links_found == one.links_found and stopped.iterations == one.iterations
+    kept = fit_pose(kin, points, cameras, greys, start,
+                    replace(config, round_min_move_px=moved - 0.01), 2)
+    assert np.array_equal(kept.q, two.q) and kept.rms_px == two.rms_px
+    # the move is counted only in cameras with an image
+    assert _largest_move_px(cameras, [greys[0], None], *world) <= moved
+    with pytest.raises(EdgeTrackerError):
+        EdgeTrackerConfig(round_min_move_px=-1.0)
+
+
+def test_the_initialisation_makes_all_its_rounds_whatever_the_round_gate(rig,
+                                                                         monkeypatch) -> None:
+    """With ``round_min_move_px`` set, the initialisation's fit (from the documented pose,
+    far from the hand) still makes every one of its ``init_rounds``; a tracked frame's fit
+    is gated."""
+    from colorglove_ros.core.tracking import edge_tracker
+
+    cameras, seq, frames = rig
+    seen: list[tuple[int, float]] = []
+    fit_pose = edge_tracker.fit_pose
+
+    def recording(kin, points, cameras, greys, q_start, config, rounds, **kwargs):
+        seen.append((rounds, config.round_min_move_px))
+        return fit_pose(kin, points, cameras, greys, q_start, config, rounds, **kwargs)
+
+    monkeypatch.setattr(edge_tracker, 'fit_pose', recording)
+    config = EdgeTrackerConfig(round_min_move_px=1e6, finger_refit=False, fault_round=False)
+    tracker = EdgeTracker(seq.synth.model, cameras, config)
+    tracker.update(frames[0])                        # waiting: the initialisation's fit
+    assert seen == [(config.init_rounds, 0.0)]
+    tracker.initialize(seq.poses[20])
+    tracker.update(frames[21])
+    assert seen[1:] == [(config.measurement_rounds, 1e6)]

@@ -132,6 +132,18 @@ def test_the_measurement_rounds_and_fault_round_parameters_reach_the_tracker() -
         assert config.measurement_rounds == 1 and config.fault_round
 
 
+def test_the_finger_refit_and_round_gate_parameters_reach_the_tracker() -> None:
+    with running(_node(finger_refit_dofs='digit', finger_refit_abduction='spread',
+                       finger_refit_spread_deg=5.0, round_min_move_px=4.0)) as h:
+        config = h.nodes[0].config
+    assert (config.finger_refit_dofs, config.finger_refit_abduction,
+            config.finger_refit_spread_deg, config.round_min_move_px) \
+        == ('digit', 'spread', 5.0, 4.0)
+    with pytest.raises(StartupError, match='finger_refit_dofs'):
+        with running(_node(finger_refit_dofs='wrist')):
+            pass
+
+
 def test_the_node_defaults_are_the_tracker_defaults() -> None:
     """The node's parameters default to EdgeTrackerConfig's (one home for each default)."""
     from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
@@ -140,7 +152,8 @@ def test_the_node_defaults_are_the_tracker_defaults() -> None:
         config = h.nodes[0].config
     defaults = EdgeTrackerConfig()
     for name in ('finger_refit', 'silhouette_palm', 'measurement_rounds', 'fault_round',
-                 'max_finger_off_silhouette',
+                 'finger_refit_dofs', 'finger_refit_abduction', 'finger_refit_spread_deg',
+                 'round_min_move_px', 'max_finger_off_silhouette',
                  'max_finger_unexplained', 'max_unexplained', 'silhouette_weight',
                  'retry_dofs', 'retry_step_deg', 'retry_max_wrist_move_m',
                  'retry_rest_margin_px'):
