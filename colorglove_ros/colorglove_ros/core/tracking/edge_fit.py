@@ -118,12 +118,12 @@ class EdgeTrackerConfig:
     a further round would be), before the finger re-fits and the checks judge it: the first
     fit is often close enough for the second measurement to find the links the first missed
     (the 45-degree camera's above all); a fit that still fails publishes nothing.
-    ``round_min_move_px`` > 0 (0, the default: off): a tracked frame's fit and a finger
-    re-fit's make a further round only when the round before moved some feature point by more
-    than this many pixels in some camera (the initialisation's fit, which starts far from the
-    hand, makes all of its rounds). At 6 px it kept the two-camera bare-hand runs and the 3-D
-    mouse's clicks of fresh held-out seeds with less CPU than two full rounds, but not under
-    issue 17's 10 ms, so it is off (docs/RESULTS.md, DigitEyes nineteenth pass).
+    ``round_min_move_px`` > 0 (6 by default; 0: every round): a tracked frame's fit and a
+    finger re-fit's make a further round only when the round before moved some feature point
+    by more than this many pixels in some camera (the initialisation's fit, which starts far
+    from the hand, makes all of its rounds): on fresh held-out seeds it kept the two-camera
+    bare-hand runs and the 3-D mouse's clicks with less CPU than two full rounds
+    (docs/RESULTS.md, DigitEyes nineteenth pass and the lead's decision after it).
     Link slices hidden behind the palm (:func:`_behind_palm`, points within
     ``palm_occlusion_px``; 0 turns it off) are not searched nor counted as missing.
     ``camera_weights`` scale each camera's residual weights in the fit
@@ -209,7 +209,7 @@ class EdgeTrackerConfig:
     polarity: int = 0
     measurement_rounds: int = 2
     fault_round: bool = True
-    round_min_move_px: float = 0.0
+    round_min_move_px: float = 6.0
     gn_iterations: int = 3
     stabilizer: tuple[float, float, float] = (4.0e4, 1.0e3, 200.0)
     tip_weight: float = 1.0
