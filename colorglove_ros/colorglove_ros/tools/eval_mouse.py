@@ -82,7 +82,7 @@ from colorglove_ros.core.tracking.mouse import (
 from colorglove_ros.core.tracking.silhouette import BackgroundModel
 from colorglove_ros.paths import data_dir, resolve_path, share_dir
 from colorglove_ros.tools._cli import run_tool, tool_parser
-from colorglove_ros.tools.eval_edges import add_fit_arguments, fit_settings
+from colorglove_ros.tools.eval_edges import FIT_SETTINGS, add_fit_arguments, fit_settings
 
 __all__ = ['main', 'scripted_sequence', 'evaluate_seed', 'noisy_poses', 'edge_tracked_poses',
            'glove_tracked_poses', 'reinitialisation_pose', 'track_scripted', 'REINIT_MODES',
@@ -455,19 +455,8 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'calibration': args.calibration,
                                             'cameras': [c.name for c in cameras],
                                             'camera_weights': list(edge_config.camera_weights),
-                                            'finger_refit': edge_config.finger_refit,
-                                            'silhouette_palm': edge_config.silhouette_palm,
-                                            'measurement_rounds':
-                                                edge_config.measurement_rounds,
-                                            'fault_round': edge_config.fault_round,
-                                            'min_camera_found_fraction':
-                                                edge_config.min_camera_found_fraction,
-                                            'round_min_move_px': edge_config.round_min_move_px,
-                                            'finger_refit_dofs': edge_config.finger_refit_dofs,
-                                            'finger_refit_abduction':
-                                                edge_config.finger_refit_abduction,
-                                            'finger_refit_spread_deg':
-                                                edge_config.finger_refit_spread_deg,
+                                            **{name: getattr(edge_config, name)
+                                               for name in FIT_SETTINGS},
                                             'retry_dofs': list(edge_config.retry_dofs),
                                             **{name: value if math.isfinite(value) else None
                                                for name, value in (
