@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -14,6 +13,7 @@ import numpy as np
 
 from colorglove_ros.core.evaluation.scripted_hands import ScriptedSequence, ScriptError
 from colorglove_ros.core.evaluation.sequences import EVIDENCE_FIELDS
+from colorglove_ros.core.file_checksums import crc32_of_file
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.hand.observation_features import empty_observation_record
 from colorglove_ros.core.lookup.database import DatabaseError, contents_tag
@@ -69,7 +69,7 @@ def tracking_settings(ik_config: Path, calibration: Path, labels: str) -> dict[s
         color = read_calibration_config(DEFAULT_COLOR_CONFIG)
         path = Path(color['calibration_file'])
         settings['segmenter'] = _plain(color['segmenter'])
-        settings['color_calibration'] = f'crc32 {zlib.crc32(path.read_bytes()):08x}' \
+        settings['color_calibration'] = f'crc32 {crc32_of_file(path):08x}' \
             if path.is_file() else 'missing'
     return settings
 
