@@ -113,3 +113,28 @@ def test_eval_scenes_writes_every_frame_with_its_evidence(node_assets, tmp_path)
         assert all(f['reason'] for f in lost)
         assert sum(f['class'] == 'fully visible' and f['tracked'] for f in mine) == round(
             row['visible_tracked'] * row['fully_visible_frames'])
+
+
+def test_eval_scenes_records_each_stage_error_against_the_truth(node_assets, tmp_path) -> None:
+    frames_out = tmp_path / 'frames.json'
+    code = eval_scenes.main(['--conditions', 'clean', '--sequences', '1', '--frames', '24',
+                             '--database', str(node_assets.database),
+                             '--color-config', str(node_assets.color_config),
+                             '--frames-json', str(frames_out)])
+    assert code == 0
+    frames = json.loads(frames_out.read_text())['frames']
+    stages = ('nearest', 'blend', 'prior', 'previous')
+    tracked_before = False
+    carried = 0
+    for f in frames:
+        if f['class'] == 'no hand':
+            assert not any(f'{s}_mm' in f for s in stages)
+        elif f['tracked']:
+            for s in ('nearest', 'blend', 'prior'):
+                assert f[f'{s}_mm'] >= 0.0 and np.isfinite(f[f'{s}_depth_mm'])
+            # the previous output is this frame's stage exactly when the frame before was
+            # tracked (a refusal or a lost frame resets the tracker)
+            assert ('previous_mm' in f) == tracked_before
+            carried += 'previous_mm' in f
+        tracked_before = f['tracked']
+    assert carried > 0

@@ -21,7 +21,7 @@ from __future__ import annotations
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -29,7 +29,7 @@ import numpy as np
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.evaluation.metrics import fingertip_positions, translation_errors_mm
 from colorglove_ros.core.evaluation.sequences import EvaluationError
-from colorglove_ros.core.hand.model import HandModel
+from colorglove_ros.core.hand.model import NUM_DOFS, HandModel
 from colorglove_ros.core.pipeline import (
     NODE_LIMITS,
     FramePipeline,
@@ -46,8 +46,8 @@ from colorglove_ros.core.segmentation.crop_prediction import (
 __all__ = [
     'SceneCondition', 'SCENE_LADDER', 'HAND_SHAPES', 'MOTIONS', 'FINGER_FACTOR_SPREAD',
     'NO_HAND_TAIL_FRACTION', 'OFF_POSE_MM', 'BORDER_DEPTH_MM', 'SceneRun', 'GateEvidence',
-    'gate_evidence', 'varied_finger_factors', 'fully_visible', 'scene_poses', 'run_scene',
-    'summarize_scene', 'frame_records',
+    'gate_evidence', 'STAGES', 'stage_poses', 'varied_finger_factors', 'fully_visible',
+    'scene_poses', 'run_scene', 'summarize_scene', 'frame_records',
 ]
 
 HAND_SHAPES = ('model', 'varied', 'varied_calibrated')
@@ -146,6 +146,33 @@ def gate_evidence(outcome: Tracked | NoHand, found: Any, tracker: Any) -> GateEv
         int(result.num_constraints) if fitted else 0)
 
 
+STAGES = ('nearest', 'blend', 'prior', 'previous')
+"""The poses of one frame's stages :func:`stage_poses` records: the nearest database entry
+placed in the query's view, the lookup's blend, the IK prior q_b (the blend with its
+translation refitted to the matched blobs) and the tracker's previous output."""
+
+
+def stage_poses(outcome: Tracked | NoHand, found: Any, previous: np.ndarray | None
+                ) -> dict[str, np.ndarray | None]:
+    """The (26,) pose of every stage of :data:`STAGES` behind one ``FramePipeline.process``
+    outcome (None where the stage made none): from its lookup ``found``
+    (``FramePipeline.last_lookup``, also a refused one's result), the tracker's result (also a
+    refused fit's) and ``previous``, the tracker's ``previous_pose`` before the frame."""
+    lookup = None if found is None else found.result
+    if lookup is None and found is not None:
+        lookup = getattr(found.outcome, 'partial', None)
+    result = outcome.result if isinstance(outcome, Tracked) else outcome.partial
+    neighbours = np.asarray(getattr(lookup, 'poses', ()), float).reshape(-1, NUM_DOFS)
+
+    def pose(value: Any) -> np.ndarray | None:
+        return None if value is None else np.asarray(value, float).reshape(NUM_DOFS).copy()
+
+    return {'nearest': neighbours[0].copy() if len(neighbours) else None,
+            'blend': pose(getattr(lookup, 'blended', None)),
+            'prior': pose(getattr(result, 'q_prior', None)),
+            'previous': pose(previous)}
+
+
 @dataclass
 class SceneRun:
     """One sequence of one rung: truth, outputs and per-frame classes."""
@@ -162,6 +189,8 @@ class SceneRun:
     true_model: HandModel
     tracker_model: HandModel
     evidence: tuple[GateEvidence, ...] = ()   # per frame, :func:`gate_evidence`
+    # per stage of STAGES, (N, 26) poses (NaN where the stage made none): :func:`stage_poses`
+    stages: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def fully_visible(labels: np.ndarray, keypoints_uv: np.ndarray) -> bool:
@@ -224,14 +253,19 @@ def run_scene(condition: SceneCondition, seed: int, num_frames: int, *, lookup: 
         empty = np.zeros(n, bool)
         reasons: Counter = Counter()
         evidence: list[GateEvidence] = []
+        stages = {name: np.full((n, poses.shape[1]), np.nan) for name in STAGES}
         for i in range(n):
             frame = synth.render_frame(poses[i], camera, np.random.default_rng([seed, i, 11]),
                                        look)
             fully[i] = fully_visible(frame.labels,
                                      camera.project(true_hand[0].keypoints(poses[i])))
             empty[i] = not np.any(frame.labels)
+            previous = getattr(tracker, 'previous_pose', None)
             outcome = pipeline.process(tracker, [frame.image_rgb], i / fps)
             evidence.append(gate_evidence(outcome, pipeline.last_lookup, tracker))
+            for name, q in stage_poses(outcome, pipeline.last_lookup, previous).items():
+                if q is not None:
+                    stages[name][i] = q
             if isinstance(outcome, Tracked):
                 tracked[i] = True
                 q_est[i] = outcome.result.q
@@ -241,7 +275,7 @@ def run_scene(condition: SceneCondition, seed: int, num_frames: int, *, lookup: 
                 progress(i)
         return SceneRun(condition.name, seed, poses, q_est, tracked, fully, empty,
                         np.array(timed_ms), reasons, true_hand[0], tracker_hand[0],
-                        tuple(evidence))
+                        tuple(evidence), stages)
     finally:
         synth.release()
 
@@ -314,7 +348,10 @@ def frame_records(run: SceneRun) -> list[dict[str, Any]]:
     whether a pose was published, :class:`GateEvidence`, and for a published pose on a
     frame with a hand the fingertip errors per digit (thumb..little, absolute, mm), their mean
     (the figure ``OFF_POSE_MM`` is judged on) and the wrist depth error (estimate minus truth,
-    mm): the frame-by-frame view behind :func:`summarize_scene`."""
+    mm): the frame-by-frame view behind :func:`summarize_scene`. On a frame with a hand, every
+    stage of :data:`STAGES` that made a pose adds its mean fingertip error and wrist depth
+    error against the same truth (``<stage>_mm``, ``<stage>_depth_mm``): which stage was
+    already wrong."""
     records = []
     for i in range(len(run.q_true)):
         kind = ('no hand' if run.no_hand[i] else
@@ -333,5 +370,18 @@ def frame_records(run: SceneRun) -> list[dict[str, Any]]:
             rec.update({'fingertip_mm': [float(t) for t in tips],
                         'fingertip_mean_mm': float(tips.mean()),
                         'depth_error_mm': float(1e3 * (run.q_est[i, 2] - run.q_true[i, 2]))})
+        if not run.no_hand[i]:
+            for name, poses in run.stages.items():
+                if np.all(np.isfinite(poses[i])):
+                    rec.update(_pose_errors(run, poses[i], i, name))
         records.append(rec)
     return records
+
+
+def _pose_errors(run: SceneRun, q: np.ndarray, i: int, name: str) -> dict[str, float]:
+    """Mean fingertip error (mm) and wrist depth error (estimate minus truth, mm) of pose
+    ``q`` (of ``run``'s tracker's hand) against frame ``i``'s truth, keyed by ``name``."""
+    tips = np.linalg.norm(fingertip_positions(run.tracker_model, q[None])[0]
+                          - fingertip_positions(run.true_model, run.q_true[i:i + 1])[0], axis=1)
+    return {f'{name}_mm': float(1e3 * tips.mean()),
+            f'{name}_depth_mm': float(1e3 * (q[2] - run.q_true[i, 2]))}
