@@ -364,9 +364,7 @@ def frame_records(run: SceneRun) -> list[dict[str, Any]]:
                         'explained_blob_share': e.explained_blob_share,
                         'residual_px': e.residual_px, 'constraints': e.constraints})
         if run.tracked[i] and not run.no_hand[i]:
-            tips = 1e3 * np.linalg.norm(
-                fingertip_positions(run.tracker_model, run.q_est[i:i + 1])[0]
-                - fingertip_positions(run.true_model, run.q_true[i:i + 1])[0], axis=1)
+            tips = _fingertip_errors_mm(run, run.q_est[i], i)
             rec.update({'fingertip_mm': [float(t) for t in tips],
                         'fingertip_mean_mm': float(tips.mean()),
                         'depth_error_mm': float(1e3 * (run.q_est[i, 2] - run.q_true[i, 2]))})
@@ -378,10 +376,16 @@ def frame_records(run: SceneRun) -> list[dict[str, Any]]:
     return records
 
 
+def _fingertip_errors_mm(run: SceneRun, q: np.ndarray, i: int) -> np.ndarray:
+    """Per-digit fingertip errors (5,), mm, of pose ``q`` (of ``run``'s tracker's hand)
+    against frame ``i``'s truth (of the true hand)."""
+    return 1e3 * np.linalg.norm(fingertip_positions(run.tracker_model, q[None])[0]
+                                - fingertip_positions(run.true_model, run.q_true[i:i + 1])[0],
+                                axis=1)
+
+
 def _pose_errors(run: SceneRun, q: np.ndarray, i: int, name: str) -> dict[str, float]:
     """Mean fingertip error (mm) and wrist depth error (estimate minus truth, mm) of pose
     ``q`` (of ``run``'s tracker's hand) against frame ``i``'s truth, keyed by ``name``."""
-    tips = np.linalg.norm(fingertip_positions(run.tracker_model, q[None])[0]
-                          - fingertip_positions(run.true_model, run.q_true[i:i + 1])[0], axis=1)
-    return {f'{name}_mm': float(1e3 * tips.mean()),
+    return {f'{name}_mm': float(_fingertip_errors_mm(run, q, i).mean()),
             f'{name}_depth_mm': float(1e3 * (q[2] - run.q_true[i, 2]))}
