@@ -2,6 +2,7 @@
 see when they run on the tracker's output instead of the noise model (cached per sequence)."""
 from __future__ import annotations
 
+import ast
 import dataclasses
 import hashlib
 import json
@@ -18,8 +19,9 @@ from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.hand.observation_features import empty_observation_record
 from colorglove_ros.core.lookup.database import DatabaseError, contents_tag
 
-__all__ = ['TRACKED_FORMAT_VERSION', 'TRACKER_MODE', 'ScriptedTracker', 'TrackedScript',
-           'tracking_settings', 'settings_tag']
+__all__ = ['TRACKED_FORMAT_VERSION', 'TRACKER_MODE', 'TRACKING_MODULES', 'ScriptedTracker',
+           'TrackedScript', 'tracking_settings', 'settings_tag', 'tracking_sources',
+           'tracking_code_tag']
 
 # 2: with the tracker's evidence per frame; 3: and the primary camera's observation per frame
 TRACKED_FORMAT_VERSION = 3
@@ -28,6 +30,13 @@ _OBSERVATION_KEYS = tuple(empty_observation_record(0))
 TRACKER_MODE = 'ik_smooth'        # the mode ik_node runs (IK and smoothing on)
 # fields that name where a setting came from, not what it is
 _PROVENANCE_FIELDS = ('source', 'name', 'frame_id')
+# the modules the tracking of a scripted sequence runs (:meth:`ScriptedTracker._make_evaluator`);
+# the cache key covers their code and that of every package module they import
+TRACKING_MODULES = ('colorglove_ros.core.evaluation.sequences', 'colorglove_ros.core.lookup.search',
+                    'colorglove_ros.core.tracking.config', 'colorglove_ros.core.camera')
+_PACKAGE = 'colorglove_ros'
+# the folder holding the package folder, whose sources the code tag reads
+SOURCE_ROOT = Path(__file__).resolve().parents[3]
 
 
 def _plain(value: Any) -> Any:
@@ -50,18 +59,19 @@ def _plain(value: Any) -> Any:
 
 
 def tracking_settings(ik_config: Path, calibration: Path, labels: str) -> dict[str, Any]:
-    """Every setting that changes the tracked poses of a scripted sequence besides the database
-    and the script: the parsed IK config (``load_ik_config``: its covariance file's values, not
-    its path), the primary camera, the tracker mode, the label source and, with
-    ``labels='segmented'``, the segmenter's settings and a checksum of the colour calibration
-    file (``'missing'`` when it is not there yet: the first tracking fits it)."""
+    """Everything that changes the tracked poses of a scripted sequence besides the database
+    and the script: the tracking code (:func:`tracking_code_tag`), the parsed IK config
+    (``load_ik_config``: its covariance file's values, not its path), the primary camera, the
+    tracker mode, the label source and, with ``labels='segmented'``, the segmenter's settings
+    and a checksum of the colour calibration file (``'missing'`` when it is not there yet: the
+    first tracking fits it)."""
     from colorglove_ros.core.camera import load_calibration
     from colorglove_ros.core.tracking.config import load_ik_config
 
     settings: dict[str, Any] = {
         'ik': _plain(load_ik_config(str(ik_config)).with_mode(TRACKER_MODE)),
         'camera': _plain(load_calibration(str(calibration)).cameras[0]),
-        'mode': TRACKER_MODE, 'labels': labels}
+        'mode': TRACKER_MODE, 'labels': labels, 'code': tracking_code_tag()}
     if labels == 'segmented':
         from colorglove_ros.core.segmentation.calibration_fit import DEFAULT_COLOR_CONFIG
         from colorglove_ros.core.segmentation.color_model import read_calibration_config
@@ -72,6 +82,84 @@ def tracking_settings(ik_config: Path, calibration: Path, labels: str) -> dict[s
         settings['color_calibration'] = f'crc32 {crc32_of_file(path):08x}' \
             if path.is_file() else 'missing'
     return settings
+
+
+def _module_file(module: str, root: Path) -> Path | None:
+    """The source file of package module ``module`` under ``root`` (None: not one)."""
+    base = root.joinpath(*module.split('.'))
+    for path in (base.with_suffix('.py'), base / '__init__.py'):
+        if path.is_file():
+            return path
+    return None
+
+
+def _imports(path: Path, module: str) -> set[str]:
+    """The package modules the source ``path`` of ``module`` imports anywhere in it (inside
+    functions too), with the packages they sit in; ``from a import b`` names both ``a`` and
+    ``a.b`` (``b`` may be a module)."""
+    package = module if path.name == '__init__.py' else module.rpartition('.')[0]
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ''
+            if node.level:
+                parent = package.rsplit('.', node.level - 1)[0] if node.level > 1 else package
+                base = f'{parent}.{base}' if base else parent
+            names.add(base)
+            names.update(f'{base}.{alias.name}' for alias in node.names)
+    return {m for name in names if name.split('.')[0] == _PACKAGE for m in _with_packages(name)}
+
+
+def _with_packages(module: str) -> list[str]:
+    """``module`` and the packages it sits in (importing it runs their ``__init__``)."""
+    parts = module.split('.')
+    return ['.'.join(parts[:k]) for k in range(1, len(parts) + 1)]
+
+
+def tracking_sources(modules: tuple[str, ...] = TRACKING_MODULES,
+                     root: Path | None = None) -> list[Path]:
+    """The source files of ``modules`` and of every package module they import, at any depth
+    (read, not imported), under ``root`` (default :data:`SOURCE_ROOT`), sorted."""
+    root = SOURCE_ROOT if root is None else Path(root)
+    seen: dict[str, Path] = {}
+    todo = [m for name in modules for m in _with_packages(name)]
+    while todo:
+        module = todo.pop()
+        if module in seen:
+            continue
+        path = _module_file(module, root)
+        if path is None:
+            continue
+        seen[module] = path
+        todo.extend(_imports(path, module) - seen.keys())
+    return sorted(set(seen.values()))
+
+
+def _code_of(path: Path) -> str:
+    """The code of a source file without its comments, layout and docstrings (its syntax
+    tree)."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    for node in ast.walk(tree):
+        body = getattr(node, 'body', None)
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) \
+                and body and isinstance(body[0], ast.Expr) and \
+                isinstance(body[0].value, ast.Constant) and isinstance(body[0].value.value, str):
+            node.body = body[1:] or [ast.Pass()]
+    return ast.dump(tree)
+
+
+def tracking_code_tag(root: Path | None = None) -> str:
+    """A checksum of the tracking code (:func:`tracking_sources` under ``root``): each file's
+    path and syntax tree, so a changed statement changes it and a changed comment, docstring
+    or layout does not."""
+    root = SOURCE_ROOT if root is None else Path(root)
+    digest = hashlib.sha1()
+    for path in tracking_sources(root=root):
+        digest.update(path.relative_to(root).as_posix().encode() + b'\0')
+        digest.update(_code_of(path).encode() + b'\0')
+    return 'sha1 ' + digest.hexdigest()[:16]
 
 
 def settings_tag(settings: dict[str, Any]) -> str:
@@ -103,8 +191,8 @@ class ScriptedTracker:
     _<database tag>_<settings tag>.npz`` (versioned, with the true poses, so a changed script
     is tracked anew; the database tag is its ``contents_tag`` and the settings tag
     :func:`settings_tag` of :func:`tracking_settings`, so a rebuilt or another database, another
-    ``ik.yaml``, camera or colour calibration never reads a cache of other tracking; a change
-    of the tracking code is not seen: empty ``cache_dir`` then)."""
+    ``ik.yaml``, camera, colour calibration or tracking code never reads a cache of other
+    tracking)."""
 
     database: Path
     ik_config: Path

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ from colorglove_ros.core.evaluation.scripted_tracking import (
     ScriptedTracker,
     settings_tag,
     tracking_settings,
+    tracking_sources,
 )
 from colorglove_ros.core.evaluation.sequences import EVIDENCE_FIELDS
 from colorglove_ros.core.hand.observation_features import empty_observation_record
@@ -105,6 +107,70 @@ def test_each_ik_config_camera_and_label_source_has_its_own_cache(tmp_path: Path
     assert path not in names and len(names) == len(others)
     assert all(other._load(other._cache_path('gestures', 7, 3), truth) is None
                for other in others)
+
+
+def test_a_change_of_the_tracking_code_gives_another_cache(tmp_path: Path,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """The cache name holds a checksum of the tracking code: a changed statement in a module
+    the tracking runs (the IK solver, the per-finger blend) gives another name whose cache is
+    not there; a changed comment or docstring, or a change to a module the tracking does not
+    import (the gesture detector), reads the same cache."""
+    from colorglove_ros.core.evaluation import scripted_tracking
+
+    copy = tmp_path / 'src'
+    shutil.copytree(scripted_tracking.SOURCE_ROOT / 'colorglove_ros', copy / 'colorglove_ros',
+                    ignore=shutil.ignore_patterns('__pycache__'))
+    monkeypatch.setattr(scripted_tracking, 'SOURCE_ROOT', copy)
+    db, truth = _saved(tmp_path, 'a', 0), np.zeros((3, 26))
+
+    def cache() -> Path:
+        return ScriptedTracker(db, IK, CAMERAS, tmp_path)._cache_path('gestures', 7, 3)
+
+    def edit(module: str, old: str, new: str) -> str:
+        path = copy / 'colorglove_ros' / module
+        text = path.read_text()
+        assert old in text
+        path.write_text(text.replace(old, new, 1))
+        return text
+
+    first = cache()
+    _write_cache(first, truth)
+    solver = edit('core/tracking/solver.py', '\n\n', '\n\n# a comment\n\n')
+    edit('core/tracking/solver.py', '"""', '"""Another docstring. ')
+    edit('core/hand/gestures.py', '\n\n', '\n\n_NOT_TRACKING = 1\n\n')
+    assert cache() == first
+    (copy / 'colorglove_ros/core/tracking/solver.py').write_text(solver + '\n_CHANGED = 1\n')
+    changed = cache()
+    assert changed != first and ScriptedTracker(db, IK, CAMERAS, tmp_path)._load(
+        changed, truth) is None
+    (copy / 'colorglove_ros/core/tracking/solver.py').write_text(solver)
+    assert cache() == first
+    edit('core/lookup/finger_evidence.py', 'sigma_tiny_px: float = 1.0',
+         'sigma_tiny_px: float = 1.5')
+    assert cache() not in (first, changed)
+
+
+def test_the_tracking_sources_are_the_modules_the_tracking_imports(tmp_path: Path) -> None:
+    """The code checksum reads every package module the tracking imports at any depth
+    (function-level and relative imports too, and the packages' ``__init__``), and no other."""
+    from colorglove_ros.core.evaluation.scripted_tracking import SOURCE_ROOT
+
+    names = {p.relative_to(SOURCE_ROOT / 'colorglove_ros').as_posix() for p in tracking_sources()}
+    assert {'__init__.py', 'core/tracking/solver.py', 'core/tracking/tracker.py',
+            'core/lookup/__init__.py', 'core/lookup/finger_evidence.py', 'core/pipeline.py',
+            'core/segmentation/segmenter.py', 'core/synthetic/render.py'} <= names
+    assert not any(n in ('core/hand/gestures.py', 'core/hand/spelling.py') or
+                   n.startswith(('tools/', 'ros/')) for n in names)
+    package = tmp_path / 'colorglove_ros'
+    (package / 'sub').mkdir(parents=True)
+    for name, text in {'__init__.py': '', 'sub/__init__.py': '',
+                       'sub/a.py': 'from . import b\nfrom ..c import X\n',
+                       'sub/b.py': 'def f():\n    import colorglove_ros.d\n',
+                       'c.py': 'import numpy\nX = 1\n', 'd.py': '', 'e.py': ''}.items():
+        (package / name).write_text(text)
+    found = tracking_sources(('colorglove_ros.sub.a',), root=tmp_path)
+    assert [p.relative_to(package).as_posix() for p in found] == [
+        '__init__.py', 'c.py', 'd.py', 'sub/__init__.py', 'sub/a.py', 'sub/b.py']
 
 
 def _write_cache(path: Path, truth: np.ndarray, version: int = TRACKED_FORMAT_VERSION,
