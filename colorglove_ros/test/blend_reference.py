@@ -1,18 +1,30 @@
 """The lookup blend as numpy wrote it: the per-finger scores before the compiled nearest-blob
 search, and, before their compiled loops (issue 19, twenty-third pass), the per-finger weighted
-moments and blend, the projection constraints' patch sources, the wrists' placement on the
-query's rays and ``PoseLookup.blend`` made of them. References for the compiled versions,
-which must give the same bits."""
+moments and blend, the Gaussian weights of the image distances, the projection constraints'
+patch sources, the wrists' placement on the query's rays and ``PoseLookup.blend`` made of them.
+References for the compiled versions, which must give the same bits."""
 from __future__ import annotations
 
 import numpy as np
 
-from colorglove_ros.core.lookup.blend import blend_poses_with_quaternions, blend_weights
+from colorglove_ros.core.lookup.blend import blend_poses_with_quaternions
 from colorglove_ros.core.segmentation.crop import tiny_to_full
 
-__all__ = ['finger_scores_reference', 'weighted_fingers_reference', 'finger_blend_reference',
-           'constraints_reference', 'place_wrists_reference', 'blend_reference']
+__all__ = ['blend_weights_reference', 'finger_scores_reference', 'weighted_fingers_reference',
+           'finger_blend_reference', 'constraints_reference', 'place_wrists_reference',
+           'blend_reference']
 
+
+
+def blend_weights_reference(distances: np.ndarray) -> np.ndarray:
+    """``blend.blend_weights`` in numpy: exp(-(d / mean d)^2) over its sum, equal weights
+    when the mean is not positive."""
+    d = np.asarray(distances, np.float64)
+    sigma = float(d.mean())
+    if sigma <= 0.0:
+        return np.full(len(d), 1.0 / len(d))
+    w = np.exp(-(d / sigma) ** 2)
+    return w / w.sum()
 
 def finger_scores_reference(patch_xy, patch_pixels, patch_digit, patch_color, blob_color, blob_xy,
                             blob_pixels, config) -> np.ndarray:
@@ -131,7 +143,7 @@ def blend_reference(lookup: object, found: object, camera: object, blobs: object
     near = near[np.lexsort((cand[near], dist[near]))]
     k = min(lookup.num_blend, len(cand))
     idx, d = cand[near[:k]], dist[near[:k]]
-    weights = blend_weights(d)
+    weights = blend_weights_reference(d)
     poses = a['poses'][idx].astype(np.float64)
     terms = lookup._place_table[idx]
     poses[:, 0:3] = place_wrists_reference(terms, lookup.db.render_camera, crop, camera)

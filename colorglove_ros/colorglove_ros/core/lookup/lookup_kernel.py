@@ -15,7 +15,9 @@ blend's search (``finger_evidence.finger_scores``) of each entry patch's nearest
 colour: the same distances as numpy's (a subtraction, two products, their sum and ``sqrt``, in
 that order) and the first of equal ones.
 
-The blend's small steps on the 10-30 nearest entries (:func:`patch_residual_terms`,
+The blend's small steps on the 10-30 nearest entries (:func:`gaussian_exponents`,
+:func:`divide_by_sum`, :func:`usable_blobs_in_tiny_frame`,
+:func:`patch_residual_terms`,
 :func:`digit_mean_residuals`, :func:`finger_moments`, :func:`constraint_patches`,
 :func:`wrists_on_rays`) replace runs of small numpy calls with the same operations in the same
 order, so their results keep numpy's bits: products and sums are not fused, each sum runs in
@@ -33,7 +35,8 @@ from numba.extending import intrinsic
 from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['hamming_histogram', 'at_most', 'query_sums', 'candidate_sums',
-           'nearest_same_colour', 'patch_residual_terms', 'digit_mean_residuals',
+           'nearest_same_colour', 'gaussian_exponents', 'divide_by_sum',
+           'usable_blobs_in_tiny_frame', 'patch_residual_terms', 'digit_mean_residuals',
            'finger_moments', 'constraint_patches', 'wrists_on_rays', 'compile_kernels',
            'PAIRWISE_BLOCK', 'PREFETCH_AHEAD']
 
@@ -45,6 +48,8 @@ PREFETCH_AHEAD = 2
 """How many candidates ahead the re-rank's gathers ask for a row to be read into the cache."""
 
 _JIT = {'cache': True, 'nogil': True}
+_NUMPY_ERRORS = {**_JIT, 'error_model': 'numpy'}
+"""The blend's kernels: a division by zero gives infinity or NaN, as numpy's does."""
 
 
 @intrinsic
@@ -273,7 +278,57 @@ def nearest_same_colour(patch_xy: np.ndarray, patch_color: np.ndarray, blob_colo
                                                           patch_color[j], blob_color, blob_xy)
 
 
-@numba.njit(**_JIT)
+@numba.njit(**_NUMPY_ERRORS)
+def gaussian_exponents(distances: np.ndarray, out: np.ndarray) -> float:
+    """The blend's sigma, numpy's mean of ``distances`` (0 + their pairwise sum, over their
+    count), and unless sigma <= 0, ``out`` = -(distances / sigma)^2; returns sigma."""
+    n = len(distances)
+    sigma = (0.0 + _pairwise(distances, np.arange(n), n)) / n
+    if not sigma <= 0.0:
+        for i in range(n):
+            t = distances[i] / sigma
+            out[i] = -(t * t)
+    return sigma
+
+
+@numba.njit(**_NUMPY_ERRORS)
+def divide_by_sum(values: np.ndarray) -> None:
+    """``values`` over their sum (0 + numpy's pairwise sum), in place."""
+    n = len(values)
+    total = 0.0 + _pairwise(values, np.arange(n), n)
+    for i in range(n):
+        values[i] = values[i] / total
+
+
+@numba.njit(**_NUMPY_ERRORS)
+def usable_blobs_in_tiny_frame(color: np.ndarray, centroid: np.ndarray, pixels: np.ndarray,
+                               scale: float, offset_x: float, offset_y: float,
+                               area_scale: float
+                               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The blobs with a finite centroid (B, 2) and a finite positive pixel count, in order,
+    mapped into a query's tiny frame: colours, centroids (centroid - offset) / scale and
+    areas pixels / area_scale (the caller's scale squared)."""
+    m = 0
+    keep = np.empty(len(color), np.bool_)
+    for b in range(len(color)):
+        keep[b] = (np.isfinite(centroid[b, 0]) and np.isfinite(centroid[b, 1])
+                   and np.isfinite(pixels[b]) and pixels[b] > 0)
+        m += keep[b]
+    out_color = np.empty(m, np.int64)
+    out_xy = np.empty((m, 2))
+    out_pixels = np.empty(m)
+    at = 0
+    for b in range(len(color)):
+        if keep[b]:
+            out_color[at] = color[b]
+            out_xy[at, 0] = (centroid[b, 0] - offset_x) / scale
+            out_xy[at, 1] = (centroid[b, 1] - offset_y) / scale
+            out_pixels[at] = pixels[b] / area_scale
+            at += 1
+    return out_color, out_xy, out_pixels
+
+
+@numba.njit(**_NUMPY_ERRORS)
 def patch_residual_terms(patch_xy: np.ndarray, patch_pixels: np.ndarray,
                          patch_color: np.ndarray, blob_color: np.ndarray, blob_xy: np.ndarray,
                          blob_pixels: np.ndarray, distance: np.ndarray, area_ratio: np.ndarray
@@ -291,7 +346,7 @@ def patch_residual_terms(patch_xy: np.ndarray, patch_pixels: np.ndarray,
             area_ratio[i, j] = (patch_pixels[i, j] + 1.0) / (blob_pixels[at] + 1.0)
 
 
-@numba.njit(**_JIT)
+@numba.njit(**_NUMPY_ERRORS)
 def digit_mean_residuals(distance: np.ndarray, log_area_ratio: np.ndarray, digit: np.ndarray,
                          num_digits: int, cap: float, area_weight: float, out: np.ndarray
                          ) -> None:
@@ -317,7 +372,7 @@ def digit_mean_residuals(distance: np.ndarray, log_area_ratio: np.ndarray, digit
             out[i, g] = (0.0 + _pairwise(row, order, p)) / count if count > 0 else cap
 
 
-@numba.njit(**_JIT)
+@numba.njit(**_NUMPY_ERRORS)
 def finger_moments(poses: np.ndarray, weights: np.ndarray, normalise: bool, first_dof: int,
                    mean: np.ndarray, std: np.ndarray) -> None:
     """Per digit g the weighted mean ``mean[g * D + d]`` and standard deviation ``std`` of
@@ -395,7 +450,7 @@ def constraint_patches(entry: int, finger_entries: np.ndarray, patch_vertex: np.
     return ids, colors, vertices, tiny_xy, pixels
 
 
-@numba.njit(**_JIT)
+@numba.njit(**_NUMPY_ERRORS)
 def wrists_on_rays(pixels: np.ndarray, terms: np.ndarray, cx: float, cy: float, fx: float,
                    fy: float, range_factor: float, out: np.ndarray) -> None:
     """``out[i]`` (K, 3): the point at range ``terms[i, 2] * range_factor`` along the ray
@@ -428,6 +483,11 @@ _SIGNATURES = {
     nearest_same_colour: (_array(numba.float64, 3), _array(numba.int64, 1),
                           _array(numba.int64, 1), _array(numba.float64, 2),
                           _array(numba.float64, 2, False), _array(numba.int64, 2, False)),
+    gaussian_exponents: (_array(numba.float64, 1), _array(numba.float64, 1, False)),
+    divide_by_sum: (_array(numba.float64, 1, False),),
+    usable_blobs_in_tiny_frame: (_array(numba.int64, 1), _array(numba.float64, 2),
+                                 _array(numba.float64, 1), numba.float64, numba.float64,
+                                 numba.float64, numba.float64),
     patch_residual_terms: (_array(numba.float64, 3), _array(numba.float64, 2),
                            _array(numba.int64, 1), _array(numba.int64, 1),
                            _array(numba.float64, 2), _array(numba.float64, 1),

@@ -378,16 +378,18 @@ class PoseLookup:
                               ) from exc
         if not len(color) == len(xy) == len(pixels):
             raise SearchError('blob colour, centroid and pixel-count arrays differ in length')
-        usable = np.isfinite(xy).all(axis=1) & np.isfinite(pixels) & (pixels > 0)
-        if not usable.any():
-            return None
         scale, ox, oy = crop
+        # the blobs with a finite centroid and pixels, in the query's tiny frame
+        color, xy, pixels = self._kernels.usable_blobs_in_tiny_frame(
+            np.ascontiguousarray(color, np.int64), np.ascontiguousarray(xy),
+            np.ascontiguousarray(pixels), scale, ox, oy, scale ** 2)
+        if not len(color):
+            return None
         try:
             scores = finger_scores(self._a['patch_xy'][entries],
                                    self._a['patch_pixels'][entries],
                                    self._patch_digit[entries], self._a['patch_color'],
-                                   color[usable], (xy[usable] - (ox, oy)) / scale,
-                                   pixels[usable] / scale ** 2, self.finger_evidence)
+                                   color, xy, pixels, self.finger_evidence)
             fingers, spread, seen = finger_blend(self._a['poses'][entries], scores,
                                                  self.finger_evidence)
         except FingerEvidenceError as exc:

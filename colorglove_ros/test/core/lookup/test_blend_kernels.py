@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from blend_reference import (
     blend_reference,
+    blend_weights_reference,
     constraints_reference,
     finger_blend_reference,
     finger_scores_reference,
@@ -18,6 +19,7 @@ from blend_reference import (
 
 from colorglove_ros.core.camera import PinholeCamera
 from colorglove_ros.core.lookup import lookup_kernel
+from colorglove_ros.core.lookup.blend import blend_weights
 from colorglove_ros.core.lookup.finger_evidence import (
     FingerEvidenceConfig,
     finger_blend,
@@ -72,6 +74,18 @@ def test_finger_moments_are_the_einsums_bit_for_bit(seed: int) -> None:
     lookup_kernel.finger_moments(np.asarray(poses, np.float64), w, True, 6, mean, std)
     _same(mean, want[0], 'kernel mean')
     _same(std, want[1], 'kernel std')
+
+
+@pytest.mark.parametrize('count', [1, 2, 7, 8, 10, 30, 129, 300])
+def test_blend_weights_are_numpys_bit_for_bit(count: int) -> None:
+    """The Gaussian weights of 1-300 distances (numpy's mean and sum: in order up to 8 terms,
+    eight accumulators up to 128, halves above), all zero (equal weights), one far outlier."""
+    rng = np.random.default_rng(count)
+    for d in (rng.uniform(0.0, 3.0, count) * 10.0 ** rng.uniform(-3, 2), np.zeros(count),
+              np.append(rng.uniform(0.5, 1.0, count - 1), 1e4)):
+        _same(blend_weights(d), blend_weights_reference(d), f'{count} distances')
+    sigma = lookup_kernel.gaussian_exponents(np.zeros(count), np.zeros(count))
+    assert sigma == 0.0
 
 
 @pytest.mark.parametrize('patches', [1, 7, 8, 20, 129, 300])
