@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 
 from colorglove_ros.core.conventions import NUM_COLORS, TINY_SIZE
@@ -21,6 +22,9 @@ diagonal, 40*sqrt(2) = 56.57 px, just above the largest possible in-image distan
 DT_SCALE = 4.0
 """Stored distance transforms are ``uint8(round(dt * DT_SCALE))``: 0.25 px steps, error
 <= 0.125 px, ABSENT_PENALTY -> 226 fits in a byte."""
+
+
+_COLORS = np.arange(1, NUM_COLORS + 1, dtype=np.uint8)[:, None, None]
 
 
 class DistanceError(ColorGloveError):
@@ -42,19 +46,35 @@ def _check_labels(labels: np.ndarray, batch: bool) -> np.ndarray:
     return labels
 
 
-def _dts_into(labels: np.ndarray, out: np.ndarray) -> None:
-    """Fill ``out`` (NUM_COLORS, 40, 40) float32 with the per-colour exact Euclidean DTs,
-    clipped (``lookup_kernel.exact_distance_transforms``: the square roots of the integer
-    squared distances, the same bits wherever ``out`` lies)."""
-    from colorglove_ros.core.lookup import lookup_kernel
+_DT_ALIGN = 64
+"""Byte alignment of the planes OpenCV's precise distance transform writes: its result
+differs in the last bit with the output's address (vector loops peel a misaligned head), and
+NumPy aligns a fresh array to 16 bytes only, so the same label image could give other
+distances (and, through the re-rank, other poses) from run to run."""
 
-    lookup_kernel.compile_kernels()
-    work = out if out.flags.c_contiguous and out.flags.writeable else \
-        np.empty((NUM_COLORS, TINY_SIZE, TINY_SIZE), np.float32)
-    lookup_kernel.exact_distance_transforms(np.ascontiguousarray(labels, np.uint8), NUM_COLORS,
-                                            ABSENT_PENALTY, work)
-    if work is not out:
-        out[...] = work
+
+def _aligned_dts() -> np.ndarray:
+    """An uninitialised (NUM_COLORS, 40, 40) float32 array starting on a
+    :data:`_DT_ALIGN`-byte boundary (each 6400-byte plane does too)."""
+    nbytes = NUM_COLORS * TINY_SIZE * TINY_SIZE * 4
+    raw = np.empty(nbytes + _DT_ALIGN, np.uint8)
+    start = -raw.ctypes.data % _DT_ALIGN
+    return raw[start:start + nbytes].view(np.float32).reshape(NUM_COLORS, TINY_SIZE, TINY_SIZE)
+
+
+def _dts_into(labels: np.ndarray, out: np.ndarray) -> None:
+    """Fill ``out`` (NUM_COLORS, 40, 40) float32 with clipped per-colour Euclidean DTs (the
+    same bits whatever ``out``'s address: computed in aligned planes, :data:`_DT_ALIGN`)."""
+    present = np.bincount(labels.ravel(), minlength=NUM_COLORS + 1)
+    masks = (labels[None] != _COLORS).view(np.uint8)      # all ten masks in one pass
+    work = out if out.ctypes.data % _DT_ALIGN == 0 and out.flags.c_contiguous \
+        else _aligned_dts()
+    for c in range(1, NUM_COLORS + 1):
+        if present[c] == 0:
+            work[c - 1] = ABSENT_PENALTY
+            continue
+        cv2.distanceTransform(masks[c - 1], cv2.DIST_L2, cv2.DIST_MASK_PRECISE, dst=work[c - 1])
+    np.minimum(work, ABSENT_PENALTY, out=out)
 
 
 def distance_transforms(labels: np.ndarray) -> np.ndarray:
@@ -64,7 +84,7 @@ def distance_transforms(labels: np.ndarray) -> np.ndarray:
     (x, y) to the nearest pixel of colour c, clipped to :data:`ABSENT_PENALTY` (which is
     also the value everywhere when colour c is absent)."""
     labels = _check_labels(labels, batch=False)
-    out = np.empty((NUM_COLORS, TINY_SIZE, TINY_SIZE), np.float32)
+    out = _aligned_dts()
     _dts_into(labels, out)
     return out
 
@@ -115,7 +135,7 @@ class QueryDistance:
     def __init__(self, labels: np.ndarray, dts: np.ndarray | None = None) -> None:
         self.labels = _check_labels(labels, batch=False)
         if dts is None:
-            self.dts = np.empty((NUM_COLORS, TINY_SIZE, TINY_SIZE), np.float32)
+            self.dts = _aligned_dts()
             _dts_into(self.labels, self.dts)
         else:
             self.dts = np.asarray(dts, np.float32)

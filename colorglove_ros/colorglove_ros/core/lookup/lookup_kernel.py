@@ -37,8 +37,7 @@ from colorglove_ros.core.kernel_compile import compile_signatures
 __all__ = ['hamming_histogram', 'at_most', 'query_sums', 'candidate_sums',
            'nearest_same_colour', 'gaussian_exponents', 'divide_by_sum',
            'usable_blobs_in_tiny_frame', 'patch_residual_terms', 'digit_mean_residuals',
-           'finger_moments', 'constraint_patches', 'wrists_on_rays',
-           'exact_distance_transforms', 'compile_kernels',
+           'finger_moments', 'constraint_patches', 'wrists_on_rays', 'compile_kernels',
            'PAIRWISE_BLOCK', 'PREFETCH_AHEAD']
 
 PAIRWISE_BLOCK = 128
@@ -467,71 +466,6 @@ def wrists_on_rays(pixels: np.ndarray, terms: np.ndarray, cx: float, cy: float, 
         out[i, 2] = f - terms[i, 9]
 
 
-@numba.njit(**_JIT)
-def exact_distance_transforms(labels: np.ndarray, num_colors: int, absent: float,
-                              out: np.ndarray) -> None:
-    """``out[c - 1, y, x]`` (float32) for every label c in 1..``num_colors`` of ``labels``
-    (H, W): the Euclidean distance from (x, y) to the nearest pixel labelled c, the square
-    root (rounded once, to float32) of the exact integer squared distance, at most
-    ``absent``; ``absent`` everywhere when no pixel is labelled c. Felzenszwalb and
-    Huttenlocher's two passes: per column the distance to the nearest such pixel above or
-    below, then per row the lower envelope of the parabolas (x - q)^2 + g_q^2, their
-    intersections compared as integer fractions."""
-    h, w = labels.shape
-    bound = np.float32(absent)
-    count = np.zeros(num_colors + 1, np.int64)
-    for y in range(h):
-        for x in range(w):
-            if labels[y, x] <= num_colors:
-                count[labels[y, x]] += 1
-    none = h + w                           # a column distance this large: no such pixel
-    roots = np.empty((h - 1) * (h - 1) + (w - 1) * (w - 1) + 1, np.float32)
-    for i in range(len(roots)):
-        root = np.sqrt(np.float32(i))
-        roots[i] = root if root < bound else bound
-    g = np.empty((h, w), np.int64)
-    v = np.empty(w, np.int64)                # the envelope's parabolas: their column,
-    f = np.empty(w, np.int64)                # squared column distance,
-    zn = np.empty(w, np.int64)               # and left end zn / zd (zd > 0)
-    zd = np.empty(w, np.int64)
-    for c in range(1, num_colors + 1):
-        if count[c] == 0:
-            out[c - 1] = bound
-            continue
-        for x in range(w):
-            g[0, x] = 0 if labels[0, x] == c else none
-        for y in range(1, h):
-            for x in range(w):
-                g[y, x] = 0 if labels[y, x] == c else min(g[y - 1, x] + 1, none)
-        for y in range(h - 2, -1, -1):
-            for x in range(w):
-                g[y, x] = min(g[y, x], g[y + 1, x] + 1)
-        for y in range(h):
-            k = -1
-            for q in range(w):
-                if g[y, q] >= none:
-                    continue
-                fq = g[y, q] * g[y, q]
-                if k < 0:
-                    k = 0
-                    v[0], f[0] = q, fq
-                    continue
-                while True:                  # drop the parabolas the new one hides
-                    p = v[k]
-                    num = (fq + q * q) - (f[k] + p * p)
-                    den = 2 * (q - p)
-                    if k == 0 or num * zd[k] > zn[k] * den:
-                        break
-                    k -= 1
-                k += 1
-                v[k], f[k], zn[k], zd[k] = q, fq, num, den
-            j = 0
-            for x in range(w):
-                while j < k and zn[j + 1] < x * zd[j + 1]:
-                    j += 1
-                out[c - 1, y, x] = roots[(x - v[j]) * (x - v[j]) + f[j]]
-
-
 def _array(dtype: object, ndim: int, readonly: bool = True) -> object:
     """A C-contiguous array type (read-only: writable arrays convert to it)."""
     return numba.types.Array(dtype, ndim, 'C', readonly=readonly)
@@ -567,8 +501,6 @@ _SIGNATURES = {
     constraint_patches: (numba.int64, _array(numba.int64, 1), _array(numba.int32, 2),
                          _array(numba.int8, 2), _array(numba.float32, 3),
                          _array(numba.float32, 2), _array(numba.uint8, 1)),
-    exact_distance_transforms: (_array(numba.uint8, 2), numba.int64, numba.float64,
-                                _array(numba.float32, 3, False)),
     wrists_on_rays: (_array(numba.float64, 2), _array(numba.float64, 2), numba.float64,
                      numba.float64, numba.float64, numba.float64, numba.float64,
                      _array(numba.float64, 2, False)),
