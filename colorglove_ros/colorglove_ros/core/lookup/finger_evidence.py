@@ -130,6 +130,7 @@ def weighted_fingers(poses: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray
     (K, 26), with one normalised weight column per digit (K, 5) or one weight per pose (K,)."""
     poses = _checked_poses(poses)
     w = np.asarray(weights, np.float64)
+    # a fresh array either way (the kernel takes its weights writable)
     w = np.repeat(w[:, None], NUM_DIGITS, axis=1) if w.ndim == 1 else np.array(w)
     if w.shape != (len(poses), NUM_DIGITS):
         raise FingerEvidenceError(f'need weights (K,) or (K, 5), got {w.shape}')
@@ -156,8 +157,7 @@ def _moments(poses: np.ndarray, weights: np.ndarray, normalise: bool
     mean = np.empty(NUM_DIGITS * FINGER_DOFS_PER_DIGIT)
     std = np.empty(NUM_DIGITS * FINGER_DOFS_PER_DIGIT)
     lookup_kernel.finger_moments(np.ascontiguousarray(poses), np.ascontiguousarray(weights),
-                                 normalise,
-                                 FIRST_FINGER_DOF, mean, std)
+                                 normalise, FIRST_FINGER_DOF, mean, std)
     return mean, std
 
 
