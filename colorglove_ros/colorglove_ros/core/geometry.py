@@ -103,7 +103,7 @@ def rotvec_to_quaternion(r: np.ndarray) -> np.ndarray:
 def quaternion_to_rotvec(q: np.ndarray) -> np.ndarray:
     """One quaternion (x, y, z, w) of any sign and non-zero norm -> rotation vector (3,) with
     angle in [0, pi]."""
-    x, y, z, w = (float(v) for v in np.asarray(q).reshape(4))
+    x, y, z, w = np.asarray(q, np.float64).reshape(4).tolist()
     if w < 0.0:
         x, y, z, w = -x, -y, -z, -w
     s = math.sqrt(x * x + y * y + z * z)

@@ -13,12 +13,20 @@ __all__ = ['blend_weights', 'blend_poses', 'blend_poses_with_quaternions']
 def blend_weights(distances: np.ndarray) -> np.ndarray:
     """Normalised weights exp(-d^2 / sigma^2) with sigma = mean distance (paper eq. 1); if all
     distances are zero the weights are equal."""
-    d = np.asarray(distances, np.float64)
-    sigma = float(d.mean())
-    if sigma <= 0.0:
+    from colorglove_ros.core.lookup import lookup_kernel
+
+    d = np.ascontiguousarray(distances, np.float64)
+    flat = d.reshape(-1)
+    if not len(flat):
+        return np.empty(d.shape)
+    lookup_kernel.compile_kernels()
+    w = np.empty(len(flat))
+    # the mean, sums and powers in numpy's order, exp by numpy
+    if lookup_kernel.gaussian_exponents(flat, w) <= 0.0:
         return np.full(len(d), 1.0 / len(d))
-    w = np.exp(-(d / sigma) ** 2)
-    return w / w.sum()
+    np.exp(w, out=w)
+    lookup_kernel.divide_by_sum(w)
+    return w.reshape(d.shape)
 
 
 def blend_poses(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:

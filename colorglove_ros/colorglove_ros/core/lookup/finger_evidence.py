@@ -92,56 +92,73 @@ def finger_scores(patch_xy: np.ndarray, patch_pixels: np.ndarray, patch_digit: n
     frame. A patch's residual is min(cap, |centroid - blob| + area_weight |log((a + 1) /
     (b + 1))|) against its nearest same-colour blob."""
     cap = float(config.cap_tiny_px)
-    xy = np.asarray(patch_xy, np.float64)
+    xy = np.ascontiguousarray(patch_xy, np.float64)
     k, p = xy.shape[:2] if xy.ndim == 3 else (0, 0)
     digit = np.asarray(patch_digit)
     if (xy.shape != (k, p, 2) or digit.shape != (k, p) or np.shape(patch_pixels) != (k, p)
             or np.shape(patch_color) != (p,)):
         raise FingerEvidenceError('entry patch arrays disagree in shape')
-    residual = np.full((k, p), cap)
+    from colorglove_ros.core.lookup import lookup_kernel
+
+    lookup_kernel.compile_kernels()
     bcol = np.asarray(blob_color).reshape(-1)
     if len(bcol):
         # each patch against its same-colour blobs only, the first of equal distances
-        # (a compiled loop: lookup_kernel.nearest_same_colour)
-        from colorglove_ros.core.lookup import lookup_kernel
-
         bxy = np.ascontiguousarray(np.asarray(blob_xy, np.float64).reshape(-1, 2))
         if len(bxy) != len(bcol) or np.size(blob_pixels) != len(bcol):
             raise FingerEvidenceError(f'{len(bcol)} blob colours but {len(bxy)} centroids '
                                       f'and {np.size(blob_pixels)} areas')
-        lookup_kernel.compile_kernels()
-        d = np.empty((k, p))
-        nearest = np.empty((k, p), np.int64)
-        lookup_kernel.nearest_same_colour(
-            np.ascontiguousarray(xy), np.ascontiguousarray(patch_color, np.int64),
-            np.ascontiguousarray(bcol, np.int64), bxy, d, nearest)
-        area = np.asarray(blob_pixels, np.float64).reshape(-1)[nearest]
-        area_term = np.abs(np.log((np.asarray(patch_pixels, np.float64) + 1.0) / (area + 1.0)))
-        with np.errstate(invalid='ignore'):
-            residual = np.minimum(cap, d + config.area_weight * area_term)
-        residual[~np.isfinite(residual)] = cap
-    # per digit: the mean residual of its patches (cap without any), every digit at once
-    member = digit[:, None, :] == np.arange(NUM_DIGITS)[None, :, None]     # (K, 5, P)
-    count = member.sum(axis=2)
-    total = np.where(member, residual[:, None, :], 0.0).sum(axis=2)
-    return np.where(count > 0, total / np.maximum(count, 1), cap)
+        distance = np.empty((k, p))
+        log_ratio = np.empty((k, p))
+        lookup_kernel.patch_residual_terms(
+            xy, np.ascontiguousarray(patch_pixels, np.float64),
+            np.ascontiguousarray(patch_color, np.int64), np.ascontiguousarray(bcol, np.int64),
+            bxy, np.ascontiguousarray(np.asarray(blob_pixels, np.float64).reshape(-1)),
+            distance, log_ratio)
+        np.log(log_ratio, out=log_ratio)
+    else:
+        distance = np.full((k, p), np.inf)       # no blob: every patch's residual is the cap
+        log_ratio = np.zeros((k, p))
+    scores = np.empty((k, NUM_DIGITS))
+    lookup_kernel.digit_mean_residuals(distance, log_ratio, np.ascontiguousarray(digit, np.int64),
+                                       NUM_DIGITS, cap, float(config.area_weight), scores)
+    return scores
 
 
 def weighted_fingers(poses: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Weighted means (20,) and standard deviations (20,) of the finger DOFs of ``poses``
     (K, 26), with one normalised weight column per digit (K, 5) or one weight per pose (K,)."""
+    poses = _checked_poses(poses)
+    w = np.asarray(weights, np.float64)
+    # a fresh array either way (the kernel takes its weights writable)
+    w = np.repeat(w[:, None], NUM_DIGITS, axis=1) if w.ndim == 1 else np.array(w)
+    if w.shape != (len(poses), NUM_DIGITS):
+        raise FingerEvidenceError(f'need weights (K,) or (K, 5), got {w.shape}')
+    return _moments(poses, w, normalise=False)
+
+
+def _checked_poses(poses: np.ndarray) -> np.ndarray:
+    """``poses`` as (K, 26) float64 with K >= 1, else :class:`FingerEvidenceError`."""
     poses = np.asarray(poses, np.float64)
     if poses.ndim != 2 or poses.shape[1] != FIRST_FINGER_DOF + NUM_DIGITS * FINGER_DOFS_PER_DIGIT \
             or not len(poses):
         raise FingerEvidenceError(f'need poses (K, 26), got {poses.shape}')
-    w = np.asarray(weights, np.float64)
-    w = np.repeat(w[:, None], NUM_DIGITS, axis=1) if w.ndim == 1 else w
-    if w.shape != (len(poses), NUM_DIGITS):
-        raise FingerEvidenceError(f'need weights (K,) or (K, 5), got {w.shape}')
-    fingers = poses[:, FIRST_FINGER_DOF:].reshape(len(poses), NUM_DIGITS, FINGER_DOFS_PER_DIGIT)
-    mean = np.einsum('kg,kgd->gd', w, fingers)
-    var = np.einsum('kg,kgd->gd', w, (fingers - mean) ** 2)
-    return mean.reshape(-1), np.sqrt(var).reshape(-1)
+    return poses
+
+
+def _moments(poses: np.ndarray, weights: np.ndarray, normalise: bool
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`weighted_fingers` of checked (K, 26) float64 poses and (K, 5) float64 weights
+    (``lookup_kernel.finger_moments``; ``normalise``: each column divided by its sum first, in
+    place)."""
+    from colorglove_ros.core.lookup import lookup_kernel
+
+    lookup_kernel.compile_kernels()
+    mean = np.empty(NUM_DIGITS * FINGER_DOFS_PER_DIGIT)
+    std = np.empty(NUM_DIGITS * FINGER_DOFS_PER_DIGIT)
+    lookup_kernel.finger_moments(np.ascontiguousarray(poses), np.ascontiguousarray(weights),
+                                 normalise, FIRST_FINGER_DOF, mean, std)
+    return mean, std
 
 
 def finger_blend(poses: np.ndarray, scores: np.ndarray, config: FingerEvidenceConfig
@@ -157,7 +174,6 @@ def finger_blend(poses: np.ndarray, scores: np.ndarray, config: FingerEvidenceCo
                                   f'{scores.shape}')
     s = scores / config.sigma_tiny_px
     w = np.exp(-s * s)
-    total = w.sum(axis=0)
-    w = np.where(total > 0, w / np.where(total > 0, total, 1.0), 1.0 / max(len(scores), 1))
-    mean, spread = weighted_fingers(poses, w)
+    # each column over its sum (equal weights where the sum is not positive)
+    mean, spread = _moments(_checked_poses(poses), w, normalise=True)
     return mean, spread, scores.min(axis=0) < config.cap_tiny_px

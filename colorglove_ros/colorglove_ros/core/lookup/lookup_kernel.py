@@ -14,6 +14,15 @@ can run one while the caller runs another. :func:`nearest_same_colour` is the pe
 blend's search (``finger_evidence.finger_scores``) of each entry patch's nearest blob of its
 colour: the same distances as numpy's (a subtraction, two products, their sum and ``sqrt``, in
 that order) and the first of equal ones.
+
+The blend's small steps on the 10-30 nearest entries (:func:`gaussian_exponents`,
+:func:`divide_by_sum`, :func:`usable_blobs_in_tiny_frame`,
+:func:`patch_residual_terms`,
+:func:`digit_mean_residuals`, :func:`finger_moments`, :func:`constraint_patches`,
+:func:`wrists_on_rays`) replace runs of small numpy calls with the same operations in the same
+order, so their results keep numpy's bits: products and sums are not fused, each sum runs in
+numpy's order (pairwise along a contiguous row, in order across rows), and ``log`` and ``exp``
+stay numpy calls (numpy's own vector versions, which libm need not match in the last bit).
 """
 from __future__ import annotations
 
@@ -26,7 +35,10 @@ from numba.extending import intrinsic
 from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['hamming_histogram', 'at_most', 'query_sums', 'candidate_sums',
-           'nearest_same_colour', 'compile_kernels', 'PAIRWISE_BLOCK', 'PREFETCH_AHEAD']
+           'nearest_same_colour', 'gaussian_exponents', 'divide_by_sum',
+           'usable_blobs_in_tiny_frame', 'patch_residual_terms', 'digit_mean_residuals',
+           'finger_moments', 'constraint_patches', 'wrists_on_rays', 'compile_kernels',
+           'PAIRWISE_BLOCK', 'PREFETCH_AHEAD']
 
 PAIRWISE_BLOCK = 128
 """numpy's pairwise summation block (``PW_BLOCKSIZE``): rows up to this length are summed with
@@ -36,6 +48,8 @@ PREFETCH_AHEAD = 2
 """How many candidates ahead the re-rank's gathers ask for a row to be read into the cache."""
 
 _JIT = {'cache': True, 'nogil': True}
+_NUMPY_ERRORS = {**_JIT, 'error_model': 'numpy'}
+"""The blend's kernels: a division by zero gives infinity or NaN, as numpy's does."""
 
 
 @intrinsic
@@ -172,7 +186,7 @@ def _block_sum(table: np.ndarray, keys: np.ndarray, start: int, n: int) -> np.fl
 
 @numba.njit(**_JIT)
 def _pairwise(table: np.ndarray, keys: np.ndarray, n: int) -> np.float32:
-    """numpy's pairwise float32 sum of ``table[keys[:n]]``: blocks of up to
+    """numpy's pairwise sum (in ``table``'s float type) of ``table[keys[:n]]``: blocks of up to
     :data:`PAIRWISE_BLOCK` by :func:`_block_sum`, a longer run split into two halves (the first
     a multiple of 8) whose sums are added; the recursion unrolled on an explicit stack (numba's
     cache does not load recursive functions)."""
@@ -181,7 +195,7 @@ def _pairwise(table: np.ndarray, keys: np.ndarray, n: int) -> np.float32:
     starts = np.empty(64, np.int64)
     sizes = np.empty(64, np.int64)
     phases = np.zeros(64, np.int64)          # 0: left half next, 1: right half next, 2: add
-    sums = np.empty(64, np.float32)
+    sums = np.empty(64, table.dtype)
     starts[0], sizes[0], phases[0] = 0, n, 0
     depth, stacked = 1, 0
     while depth:
@@ -227,6 +241,30 @@ def candidate_sums(table: np.ndarray, keys: np.ndarray, idx: np.ndarray, widths:
 
 
 @numba.njit(**_JIT)
+def _nearest_blob(x: float, y: float, color: int, blob_color: np.ndarray, blob_xy: np.ndarray
+                  ) -> tuple[float, int]:
+    """The distance from (x, y) to the nearest blob of colour ``color`` and that blob: the
+    first of equal distances, the first NaN one (as ``np.argmin``), (infinity, 0) when no blob
+    has the colour."""
+    best = np.inf
+    at = 0
+    found = False
+    for b in range(len(blob_color)):
+        if blob_color[b] != color:
+            continue
+        dx = x - blob_xy[b, 0]
+        dy = y - blob_xy[b, 1]
+        d = np.sqrt(dx * dx + dy * dy)
+        if np.isnan(d):
+            return d, b
+        if not found or d < best:
+            best = d
+            at = b
+            found = True
+    return best, at
+
+
+@numba.njit(**_JIT)
 def nearest_same_colour(patch_xy: np.ndarray, patch_color: np.ndarray, blob_color: np.ndarray,
                         blob_xy: np.ndarray, distance: np.ndarray, nearest: np.ndarray) -> None:
     """For every patch j of every entry i (``patch_xy`` (K, P, 2), ``patch_color`` (P,)):
@@ -236,27 +274,196 @@ def nearest_same_colour(patch_xy: np.ndarray, patch_color: np.ndarray, blob_colo
     none has its colour)."""
     for i in range(distance.shape[0]):
         for j in range(distance.shape[1]):
-            x = patch_xy[i, j, 0]
-            y = patch_xy[i, j, 1]
-            best = np.inf
-            at = 0
-            found = False
-            for b in range(len(blob_color)):
-                if blob_color[b] != patch_color[j]:
-                    continue
-                dx = x - blob_xy[b, 0]
-                dy = y - blob_xy[b, 1]
-                d = np.sqrt(dx * dx + dy * dy)
-                if np.isnan(d):
-                    best = d
-                    at = b
-                    break
-                if not found or d < best:
-                    best = d
-                    at = b
-                    found = True
-            distance[i, j] = best
-            nearest[i, j] = at
+            distance[i, j], nearest[i, j] = _nearest_blob(patch_xy[i, j, 0], patch_xy[i, j, 1],
+                                                          patch_color[j], blob_color, blob_xy)
+
+
+@numba.njit(**_NUMPY_ERRORS)
+def gaussian_exponents(distances: np.ndarray, out: np.ndarray) -> float:
+    """The blend's sigma, numpy's mean of ``distances`` (0 + their pairwise sum, over their
+    count), and unless sigma <= 0, ``out`` = -(distances / sigma)^2; returns sigma."""
+    n = len(distances)
+    sigma = (0.0 + _pairwise(distances, np.arange(n), n)) / n
+    if not sigma <= 0.0:
+        for i in range(n):
+            t = distances[i] / sigma
+            out[i] = -(t * t)
+    return sigma
+
+
+@numba.njit(**_NUMPY_ERRORS)
+def divide_by_sum(values: np.ndarray) -> None:
+    """``values`` over their sum (0 + numpy's pairwise sum), in place."""
+    n = len(values)
+    total = 0.0 + _pairwise(values, np.arange(n), n)
+    for i in range(n):
+        values[i] = values[i] / total
+
+
+@numba.njit(**_NUMPY_ERRORS)
+def usable_blobs_in_tiny_frame(color: np.ndarray, centroid: np.ndarray, pixels: np.ndarray,
+                               scale: float, offset_x: float, offset_y: float,
+                               area_scale: float
+                               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The blobs with a finite centroid (B, 2) and a finite positive pixel count, in order,
+    mapped into a query's tiny frame: colours, centroids (centroid - offset) / scale and
+    areas pixels / area_scale (the caller's scale squared)."""
+    m = 0
+    keep = np.empty(len(color), np.bool_)
+    for b in range(len(color)):
+        keep[b] = (np.isfinite(centroid[b, 0]) and np.isfinite(centroid[b, 1])
+                   and np.isfinite(pixels[b]) and pixels[b] > 0)
+        m += keep[b]
+    out_color = np.empty(m, np.int64)
+    out_xy = np.empty((m, 2))
+    out_pixels = np.empty(m)
+    at = 0
+    for b in range(len(color)):
+        if keep[b]:
+            out_color[at] = color[b]
+            out_xy[at, 0] = (centroid[b, 0] - offset_x) / scale
+            out_xy[at, 1] = (centroid[b, 1] - offset_y) / scale
+            out_pixels[at] = pixels[b] / area_scale
+            at += 1
+    return out_color, out_xy, out_pixels
+
+
+@numba.njit(**_NUMPY_ERRORS)
+def patch_residual_terms(patch_xy: np.ndarray, patch_pixels: np.ndarray,
+                         patch_color: np.ndarray, blob_color: np.ndarray, blob_xy: np.ndarray,
+                         blob_pixels: np.ndarray, distance: np.ndarray, area_ratio: np.ndarray
+                         ) -> None:
+    """The per-finger blend's two terms of every patch j of every entry i (``patch_xy``
+    (K, P, 2), ``patch_pixels`` (K, P), ``patch_color`` (P,)): ``distance[i, j]`` to the nearest
+    blob of its colour (:func:`nearest_same_colour`) and ``area_ratio[i, j]`` = (patch area + 1)
+    / (that blob's area + 1), blob 0's where no blob has the colour (the caller takes the
+    log, in numpy)."""
+    for i in range(distance.shape[0]):
+        for j in range(distance.shape[1]):
+            d, at = _nearest_blob(patch_xy[i, j, 0], patch_xy[i, j, 1], patch_color[j],
+                                  blob_color, blob_xy)
+            distance[i, j] = d
+            area_ratio[i, j] = (patch_pixels[i, j] + 1.0) / (blob_pixels[at] + 1.0)
+
+
+@numba.njit(**_NUMPY_ERRORS)
+def digit_mean_residuals(distance: np.ndarray, log_area_ratio: np.ndarray, digit: np.ndarray,
+                         num_digits: int, cap: float, area_weight: float, out: np.ndarray
+                         ) -> None:
+    """``out[i, g]`` (K, num_digits): the mean over entry i's patches on digit g (``digit``
+    (K, P)) of the residual min(cap, distance + area_weight |log_area_ratio|) (the cap where it
+    is not finite), the cap for a digit without patches. numpy's sums: per entry and digit the
+    row of P residuals with zeros off the digit, 0 + its pairwise sum (non-negative terms), over
+    the count."""
+    k, p = distance.shape
+    residual = np.empty(p)
+    row = np.empty(p)
+    order = np.arange(p)
+    for i in range(k):
+        for j in range(p):
+            r = distance[i, j] + area_weight * np.abs(log_area_ratio[i, j])
+            residual[j] = min(cap, r) if np.isfinite(r) else cap
+        for g in range(num_digits):
+            count = 0
+            for j in range(p):
+                member = digit[i, j] == g
+                row[j] = residual[j] if member else 0.0
+                count += member
+            out[i, g] = (0.0 + _pairwise(row, order, p)) / count if count > 0 else cap
+
+
+@numba.njit(**_NUMPY_ERRORS)
+def finger_moments(poses: np.ndarray, weights: np.ndarray, normalise: bool, first_dof: int,
+                   mean: np.ndarray, std: np.ndarray) -> None:
+    """Per digit g the weighted mean ``mean[g * D + d]`` and standard deviation ``std`` of
+    the finger DOFs ``poses[:, first_dof + g * D + d]`` (K, 26) with the weights column
+    ``weights[:, g]`` (K, G; D = (26 - first_dof) / G DOFs a digit): the sums in order over
+    the entries from 0 (as ``np.einsum('kg,kgd->gd')``). ``normalise``: each column first
+    divided by its sum in order (equal weights 1 / K where the sum is not positive), in place."""
+    k, digits = weights.shape
+    per = len(mean) // digits
+    if normalise:
+        for g in range(digits):
+            total = weights[0, g]
+            for i in range(1, k):
+                total += weights[i, g]
+            for i in range(k):
+                weights[i, g] = weights[i, g] / total if total > 0 else 1.0 / max(k, 1)
+    for g in range(digits):
+        for d in range(per):
+            col = first_dof + g * per + d
+            m = 0.0
+            for i in range(k):
+                m += weights[i, g] * poses[i, col]
+            v = 0.0
+            for i in range(k):
+                e = poses[i, col] - m
+                v += weights[i, g] * (e * e)
+            mean[g * per + d] = m
+            std[g * per + d] = np.sqrt(v)
+
+
+@numba.njit(**_JIT)
+def constraint_patches(entry: int, finger_entries: np.ndarray, patch_vertex: np.ndarray,
+                       patch_digit: np.ndarray, patch_xy: np.ndarray, patch_pixels: np.ndarray,
+                       patch_color: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The lookup's projection constraints (``PoseLookup._constraints``): entry ``entry``'s
+    visible patches (``patch_vertex`` >= 0), then digit by digit in order where
+    ``finger_entries[g]`` is another entry, the nearest's patches on digit g dropped and that
+    entry's patches on digit g taken (``finger_entries`` empty: all from ``entry``). Returns
+    the patch ids, colours, vertices, tiny-image centroids (M, 2) and areas, by patch id."""
+    p = patch_vertex.shape[1]
+    source = np.empty(p, np.int64)
+    for j in range(p):
+        source[j] = entry if patch_vertex[entry, j] >= 0 else -1
+    for g in range(len(finger_entries)):
+        e = finger_entries[g]
+        if e == entry:
+            continue
+        for j in range(p):
+            if patch_digit[entry, j] == g and source[j] == entry:
+                source[j] = -1
+        for j in range(p):
+            if patch_digit[e, j] == g:
+                source[j] = e
+    m = 0
+    for j in range(p):
+        m += source[j] >= 0
+    ids = np.empty(m, np.int64)
+    colors = np.empty(m, np.int64)
+    vertices = np.empty(m, np.int64)
+    tiny_xy = np.empty((m, 2))
+    pixels = np.empty(m)
+    at = 0
+    for j in range(p):
+        e = source[j]
+        if e < 0:
+            continue
+        ids[at] = j
+        colors[at] = patch_color[j]
+        vertices[at] = patch_vertex[e, j]
+        tiny_xy[at, 0] = patch_xy[e, j, 0]
+        tiny_xy[at, 1] = patch_xy[e, j, 1]
+        pixels[at] = patch_pixels[e, j]
+        at += 1
+    return ids, colors, vertices, tiny_xy, pixels
+
+
+@numba.njit(**_NUMPY_ERRORS)
+def wrists_on_rays(pixels: np.ndarray, terms: np.ndarray, cx: float, cy: float, fx: float,
+                   fy: float, range_factor: float, out: np.ndarray) -> None:
+    """``out[i]`` (K, 3): the point at range ``terms[i, 2] * range_factor`` along the ray
+    through the undistorted pixel ``pixels[i]`` of a camera (cx, cy, fx, fy), less the anchor's
+    offset from the wrist ``terms[i, 7:10]`` (``search._place_wrists``: the ray's direction
+    ((u - cx) / fx, (v - cy) / fy, 1) scaled by range / its length)."""
+    for i in range(len(out)):
+        x = (pixels[i, 0] - cx) / fx
+        y = (pixels[i, 1] - cy) / fy
+        f = terms[i, 2] * range_factor / np.sqrt(x * x + y * y + 1.0)
+        out[i, 0] = x * f - terms[i, 7]
+        out[i, 1] = y * f - terms[i, 8]
+        out[i, 2] = f - terms[i, 9]
 
 
 def _array(dtype: object, ndim: int, readonly: bool = True) -> object:
@@ -276,6 +483,27 @@ _SIGNATURES = {
     nearest_same_colour: (_array(numba.float64, 3), _array(numba.int64, 1),
                           _array(numba.int64, 1), _array(numba.float64, 2),
                           _array(numba.float64, 2, False), _array(numba.int64, 2, False)),
+    gaussian_exponents: (_array(numba.float64, 1), _array(numba.float64, 1, False)),
+    divide_by_sum: (_array(numba.float64, 1, False),),
+    usable_blobs_in_tiny_frame: (_array(numba.int64, 1), _array(numba.float64, 2),
+                                 _array(numba.float64, 1), numba.float64, numba.float64,
+                                 numba.float64, numba.float64),
+    patch_residual_terms: (_array(numba.float64, 3), _array(numba.float64, 2),
+                           _array(numba.int64, 1), _array(numba.int64, 1),
+                           _array(numba.float64, 2), _array(numba.float64, 1),
+                           _array(numba.float64, 2, False), _array(numba.float64, 2, False)),
+    digit_mean_residuals: (_array(numba.float64, 2), _array(numba.float64, 2),
+                           _array(numba.int64, 2), numba.int64, numba.float64, numba.float64,
+                           _array(numba.float64, 2, False)),
+    finger_moments: (_array(numba.float64, 2), _array(numba.float64, 2, False), numba.boolean,
+                     numba.int64, _array(numba.float64, 1, False),
+                     _array(numba.float64, 1, False)),
+    constraint_patches: (numba.int64, _array(numba.int64, 1), _array(numba.int32, 2),
+                         _array(numba.int8, 2), _array(numba.float32, 3),
+                         _array(numba.float32, 2), _array(numba.uint8, 1)),
+    wrists_on_rays: (_array(numba.float64, 2), _array(numba.float64, 2), numba.float64,
+                     numba.float64, numba.float64, numba.float64, numba.float64,
+                     _array(numba.float64, 2, False)),
 }
 
 

@@ -33,6 +33,9 @@ DEFAULT_THREADS = 1
 whose hand-off and wait cost more than its share of the compiled gathers on a busy machine)."""
 
 
+_NO_FINGER_ENTRIES = np.zeros(0, np.int64)
+
+
 class SearchError(ColorGloveError):
     """Bad lookup input (image shape, empty query, camera)."""
 
@@ -100,20 +103,19 @@ def _entry_place_terms(entry_global: np.ndarray, entry_crop: np.ndarray,
 def _place_wrists(terms: np.ndarray, render_camera: dict,
                   query_crop: tuple[float, float, float], camera: PinholeCamera) -> np.ndarray:
     """Wrist positions (k, 3) in the query camera from :func:`_entry_place_terms` rows."""
-    rc = render_camera
+    from colorglove_ros.core.lookup import lookup_kernel
+
     sq, oqx, oqy = query_crop
-    full = terms[:, 0:2] * sq
-    full += (oqx, oqy)
+    full = tiny_to_full(terms[:, 0:2], sq, oqx, oqy)
     if np.any(camera.distortion):
         full = camera.undistort_pixels(full)
     out = np.empty((len(terms), 3))
-    out[:, 0] = (full[:, 0] - camera.cx) / camera.fx
-    out[:, 1] = (full[:, 1] - camera.cy) / camera.fy
-    out[:, 2] = 1.0
     # range along the unit ray through the anchor's pixel
-    r = terms[:, 2] * ((camera.fx + camera.fy) / (rc['fx'] + rc['fy']) / sq)
-    out *= (r / np.sqrt(out[:, 0] ** 2 + out[:, 1] ** 2 + 1.0))[:, None]
-    out -= terms[:, 7:10]
+    lookup_kernel.compile_kernels()
+    lookup_kernel.wrists_on_rays(
+        np.ascontiguousarray(full, np.float64), np.ascontiguousarray(terms, np.float64),
+        camera.cx, camera.cy, camera.fx, camera.fy,
+        (camera.fx + camera.fy) / (render_camera['fx'] + render_camera['fy']) / sq, out)
     return out
 
 
@@ -376,16 +378,18 @@ class PoseLookup:
                               ) from exc
         if not len(color) == len(xy) == len(pixels):
             raise SearchError('blob colour, centroid and pixel-count arrays differ in length')
-        usable = np.isfinite(xy).all(axis=1) & np.isfinite(pixels) & (pixels > 0)
-        if not usable.any():
-            return None
         scale, ox, oy = crop
+        # the blobs with a finite centroid and pixels, in the query's tiny frame
+        color, xy, pixels = self._kernels.usable_blobs_in_tiny_frame(
+            np.ascontiguousarray(color, np.int64), np.ascontiguousarray(xy),
+            np.ascontiguousarray(pixels), scale, ox, oy, scale ** 2)
+        if not len(color):
+            return None
         try:
             scores = finger_scores(self._a['patch_xy'][entries],
                                    self._a['patch_pixels'][entries],
                                    self._patch_digit[entries], self._a['patch_color'],
-                                   color[usable], (xy[usable] - (ox, oy)) / scale,
-                                   pixels[usable] / scale ** 2, self.finger_evidence)
+                                   color, xy, pixels, self.finger_evidence)
             fingers, spread, seen = finger_blend(self._a['poses'][entries], scores,
                                                  self.finger_evidence)
         except FingerEvidenceError as exc:
@@ -413,20 +417,11 @@ class PoseLookup:
         """Projection constraints of ``entry``'s visible patches; with ``finger_entries``
         (5,), the patches on digit g are taken from entry ``finger_entries[g]`` (the entry
         that best explains that finger) instead."""
-        source = np.where(self._a['patch_vertex'][entry] >= 0, entry, -1)
-        if finger_entries is not None:
-            entries = np.asarray(finger_entries, np.int64)
-            digits = self._patch_digit[np.append(entries, entry)]
-            for g, e in enumerate(entries):
-                if e != entry:
-                    # the finger's patches all come from entry e, none from the nearest
-                    source[(digits[-1] == g) & (source == entry)] = -1
-                    source[digits[g] == g] = e
-        vis = np.flatnonzero(source >= 0)
-        src = source[vis]
-        tiny_xy = self._a['patch_xy'][src, vis].astype(np.float64)
-        full_xy = tiny_to_full(tiny_xy, *crop)
-        return ProjectionConstraints(
-            patch_ids=vis, colors=self._a['patch_color'][vis],
-            vertices=self._a['patch_vertex'][src, vis], tiny_xy=tiny_xy,
-            pixel_counts=self._a['patch_pixels'][src, vis].astype(np.float64), full_xy=full_xy)
+        finger = _NO_FINGER_ENTRIES if finger_entries is None else \
+            np.ascontiguousarray(finger_entries, np.int64)
+        ids, colors, vertices, tiny_xy, pixels = self._kernels.constraint_patches(
+            entry, finger, self._a['patch_vertex'], self._patch_digit, self._a['patch_xy'],
+            self._a['patch_pixels'], self._a['patch_color'])
+        return ProjectionConstraints(patch_ids=ids, colors=colors, vertices=vertices,
+                                     tiny_xy=tiny_xy, pixel_counts=pixels,
+                                     full_xy=tiny_to_full(tiny_xy, *crop))

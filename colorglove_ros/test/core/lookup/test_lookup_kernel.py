@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from blend_reference import finger_scores_reference
 from label_samples import random_blob_images
 from small_databases import blob_database, poses_on_axis
 
@@ -189,38 +190,6 @@ def test_kernels_have_one_signature() -> None:
                                  np.zeros(1, np.intp), np.zeros(1, np.uint32))
 
 
-def _numpy_finger_scores(patch_xy, patch_pixels, patch_digit, patch_color, blob_color, blob_xy,
-                         blob_pixels, config) -> np.ndarray:
-    """finger_evidence.finger_scores as it was in numpy (the reference of the compiled search
-    for each patch's nearest same-colour blob)."""
-    cap = float(config.cap_tiny_px)
-    xy = np.asarray(patch_xy, np.float64)
-    k, p = xy.shape[:2]
-    digit = np.asarray(patch_digit)
-    residual = np.full((k, p), cap)
-    bcol = np.asarray(blob_color).reshape(-1)
-    if len(bcol):
-        bxy = np.asarray(blob_xy, np.float64).reshape(-1, 2)
-        same = np.asarray(patch_color)[:, None] == bcol[None, :]
-        slots = max(1, int(same.sum(axis=1).max()))
-        blob = np.argsort(~same, axis=1, kind='stable')[:, :slots]
-        dx = xy[:, :, 0, None] - bxy[blob, 0]
-        dy = xy[:, :, 1, None] - bxy[blob, 1]
-        dist = np.where(np.take_along_axis(same, blob, axis=1)[None],
-                        np.sqrt(dx * dx + dy * dy), np.inf)
-        nearest = np.argmin(dist, axis=2)
-        d = np.take_along_axis(dist, nearest[..., None], axis=2)[..., 0]
-        area = np.asarray(blob_pixels, np.float64).reshape(-1)[blob[np.arange(p), nearest]]
-        area_term = np.abs(np.log((np.asarray(patch_pixels, np.float64) + 1.0) / (area + 1.0)))
-        with np.errstate(invalid='ignore'):
-            residual = np.minimum(cap, d + config.area_weight * area_term)
-        residual[~np.isfinite(residual)] = cap
-    member = digit[:, None, :] == np.arange(5)[None, :, None]
-    count = member.sum(axis=2)
-    total = np.where(member, residual[:, None, :], 0.0).sum(axis=2)
-    return np.where(count > 0, total / np.maximum(count, 1), cap)
-
-
 @pytest.mark.parametrize('seed', range(40))
 def test_finger_scores_equal_numpy_bit_for_bit(seed: int) -> None:
     """The per-finger scores with the compiled nearest-blob search are numpy's, bit for bit:
@@ -245,7 +214,7 @@ def test_finger_scores_equal_numpy_bit_for_bit(seed: int) -> None:
     config = FingerEvidenceConfig(cap_tiny_px=float(rng.uniform(2.0, 8.0)))
     args = (xy, pixels, digit, color, bcol, bxy, bpix, config)
     got = finger_scores(*args)
-    want = _numpy_finger_scores(*args)
+    want = finger_scores_reference(*args)
     assert got.dtype == want.dtype and got.shape == want.shape == (k, 5)
     assert got.tobytes() == want.tobytes()
 
