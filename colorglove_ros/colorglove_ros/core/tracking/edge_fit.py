@@ -561,6 +561,31 @@ def _project(camera: PinholeCamera, p_world: np.ndarray, J_world: np.ndarray | N
     return pix, A @ J_world, depth
 
 
+# the feature points' projections of the last few point sets: a round's prediction, its
+# first Gauss-Newton step, its move and its final checks project the same points again
+_PROJECTED: dict[tuple[int, tuple[int, ...], bytes], tuple[object, ...]] = {}
+_PROJECTED_SIZE = 8
+
+
+def _project_points(camera: PinholeCamera, p_world: np.ndarray, J_world: np.ndarray | None
+                    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """:func:`_project` of the feature points (read-only arrays), remembered for the last few
+    (camera, points) and, with Jacobians, for the last ``J_world`` array of those points."""
+    key = (id(camera), p_world.shape, p_world.tobytes())
+    hit = _PROJECTED.get(key)
+    if hit is not None and (J_world is None or hit[3] is J_world):
+        return hit[1], (None if J_world is None else hit[4]), hit[2]   # type: ignore[return-value]
+    pix, Jpix, depth = _project(camera, p_world, J_world)
+    for a in (pix, Jpix, depth):
+        if a is not None:
+            a.setflags(write=False)
+    if hit is None and len(_PROJECTED) >= _PROJECTED_SIZE:
+        _PROJECTED.pop(next(iter(_PROJECTED)))
+    # the camera and the Jacobians are kept so that their ids are not reused while cached
+    _PROJECTED[key] = (camera, pix, depth, J_world, Jpix)
+    return pix, Jpix, depth
+
+
 def _pixel_radius(radius: np.ndarray, camera: PinholeCamera, depth: np.ndarray) -> np.ndarray:
     """Image radius (pixels) of cylinders or discs of ``radius`` (m) at ``depth`` (m)."""
     focal = 0.5 * (camera.fx + camera.fy)
@@ -574,7 +599,7 @@ def predict_features(kin: FastKinematics, points: FeaturePoints, camera: Pinhole
     primary-frame points and Jacobians) and decide which slices and tips can be measured."""
     p, J = world if world is not None else kin.points(q, points.point_link,
                                                       points.point_local, True)
-    pix, Jpix, depth = _project(camera, p, J)
+    pix, Jpix, depth = _project_points(camera, p, J)
     L = len(points.links)
     base, end = pix[0:2 * L:2], pix[1:2 * L:2]
     Jb, Je = Jpix[0:2 * L:2], Jpix[1:2 * L:2]
@@ -1064,50 +1089,40 @@ def stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
     (points, Jacobians), their Jacobian and their weights (robust x feature x camera
     weight); per camera the rows are links, tips, palm sides, silhouette."""
     p, Jw = world
+    kernels = compiled_kernels()
+    cauchy = config.robust_loss == 'cauchy'
     rs, Js, ws = [], [], []
     for index, (cam, meas) in enumerate(zip(cameras, measured, strict=True)):
         if meas is None:
             continue
-        pix, Jpix, depth = _project(cam, p, Jw if jacobian else None)
+        pix, Jpix, depth = _project_points(cam, p, Jw if jacobian else None)
         lines = line_rows(points, meas)
-        rows_b, rows_e, alpha, n_link = lines.base, lines.end, lines.alpha, lines.num_links
-        cam_r, cam_J, cam_w = [], [], []
-        if len(rows_b):
-            # (1 - 0) x + 0 y is x exactly: link lines and palm lines in one set of products
-            r, J = link_axis_residuals(
-                lines.normal, lines.offset, _blend(pix, rows_b, alpha),
-                _blend(pix, rows_e, alpha),
-                _blend(Jpix, rows_b, alpha) if jacobian else np.zeros((len(rows_b), 2, 1)),
-                _blend(Jpix, rows_e, alpha) if jacobian else np.zeros((len(rows_b), 2, 1)))
-            w = _robust(r, config.huber_px, config.robust_loss)
-            cam_r.append(r[:2 * n_link])
-            cam_J.append(J[:2 * n_link])
-            cam_w.append(w[:2 * n_link])
-        if len(lines.tips):
-            tip_rows = lines.tips
-            rt, Jt = tip_residuals(pix[tip_rows], meas.tips.centre[meas.tip_found],
-                                   Jpix[tip_rows] if jacobian else np.zeros((len(tip_rows), 2, 1)))
-            cam_r.append(rt)
-            cam_J.append(Jt)
-            cam_w.append(config.tip_weight * _robust(rt, config.huber_px, config.robust_loss))
-        if len(rows_b) > n_link:
-            cam_r.append(r[2 * n_link:])
-            cam_J.append(J[2 * n_link:])
-            cam_w.append(config.palm_weight * w[2 * n_link:])
+        scaled = index < len(config.camera_weights)
+        # links, tips, palm sides (edge_kernel.line_rows: link_axis_residuals,
+        # tip_residuals and _robust in one pass)
+        r, J, w = kernels.line_rows(
+            pix, Jpix if jacobian else _NO_JACOBIAN, lines.base, lines.end, lines.alpha,
+            lines.normal, lines.offset, lines.num_links, lines.tips,
+            meas.tips.centre[meas.tip_found], float(config.huber_px), cauchy,
+            float(config.tip_weight), float(config.palm_weight),
+            float(config.camera_weights[index]) if scaled else 1.0, scaled, jacobian)
+        rs.append(r)
+        Js.append(J)
+        ws.append(w)
         if meas.silhouette is not None and config.silhouette_weight > 0 and jacobian:
             r, J = _silhouette_residuals(points, cam, meas, pix, Jpix, depth, config, world)
             if len(r):
-                cam_r.append(r)
-                cam_J.append(J)
-                cam_w.append(np.full(len(r), config.silhouette_weight))
-        if index < len(config.camera_weights):
-            cam_w = [config.camera_weights[index] * w for w in cam_w]
-        rs += cam_r
-        Js += cam_J
-        ws += cam_w
+                w = np.full(len(r), config.silhouette_weight)
+                rs.append(r)
+                Js.append(J)
+                ws.append(config.camera_weights[index] * w if scaled else w)
     if not rs:
         return np.zeros(0), np.zeros((0, NUM_DOFS)) if jacobian else None, np.zeros(0)
     return (np.concatenate(rs), np.concatenate(Js) if jacobian else None, np.concatenate(ws))
+
+
+_NO_JACOBIAN = np.zeros((0, 2, NUM_DOFS))
+_NO_JACOBIAN.setflags(write=False)
 
 
 # ---------------------------------------------------------------------------- estimation
@@ -1238,7 +1253,7 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
             meas = measure_features(grey, pred, config, points.tip_row, polarity)
             extra: dict[str, object] = {'lines': line_rows(points, meas)}
             if sil is not None and config.silhouette_weight > 0:
-                pix, _, depth = _project(cam, world[0], None)
+                pix, _, depth = _project_points(cam, world[0], None)
                 outline = hand_outline(points, cam, q, pix, depth)
                 loose = sil.unexplained(outline, config.silhouette_tolerance_px)[0]
                 extra.update(silhouette=sil, loose=_silhouette_targets(
@@ -1280,7 +1295,7 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
         per_camera = []
         for cam, sil in zip(cameras, sils, strict=True):
             if sil is not None:
-                pix, _, depth = _project(cam, p_final, None)
+                pix, _, depth = _project_points(cam, p_final, None)
                 per_camera.append(silhouette_measures(points, cam, sil, q, pix, depth, config))
         shares = np.max(per_camera, axis=0)
     return EdgeFit(q, rms, found, usable, tips, iterations, disagreement, float(shares[0]),
@@ -1295,7 +1310,7 @@ def _largest_move_px(cameras: Sequence[PinholeCamera], greys: Sequence[np.ndarra
     out = 0.0
     for cam, grey in zip(cameras, greys, strict=True):
         if grey is not None:
-            d = _project(cam, after, None)[0] - _project(cam, before, None)[0]
+            d = _project_points(cam, after, None)[0] - _project_points(cam, before, None)[0]
             out = max(out, float(np.sqrt(np.max(np.einsum('ij,ij->i', d, d)))))
     return out
 

@@ -20,7 +20,7 @@ import numpy as np
 from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['derivative', 'pair_search', 'edge_peaks', 'tip_peaks', 'segment_distances',
-           'occluded_slices', 'behind_palm', 'compile_kernels']
+           'occluded_slices', 'behind_palm', 'line_rows', 'compile_kernels']
 
 _JIT = {'cache': True, 'nogil': True}
 _NO_EDGE = -1.0e9   # edge_features._NO_EDGE: any pair using such a sample scores < 0
@@ -278,12 +278,79 @@ def behind_palm(hull: np.ndarray, centres: np.ndarray, palm_px: np.ndarray,
     return out
 
 
+@numba.njit(inline='always', **_JIT)
+def _robust_weight(r: float, k: float, cauchy: bool) -> float:
+    """``edge_fit._robust`` of one residual: 1 for ``k`` <= 0, else Cauchy's
+    ``1 / (1 + (|r| / k)^2)`` or Huber's ``1`` within ``k``, ``k / max(|r|, 1e-12)`` beyond."""
+    if k <= 0.0:
+        return 1.0
+    a = abs(r)
+    if cauchy:
+        s = a / k
+        return 1.0 / (1.0 + s * s)
+    if a <= k:
+        return 1.0
+    return k / (a if a >= 1e-12 or np.isnan(a) else 1e-12)
+
+
+@numba.njit(**_JIT)
+def line_rows(pix: np.ndarray, jpix: np.ndarray, rows_b: np.ndarray, rows_e: np.ndarray,
+              alpha: np.ndarray, normal: np.ndarray, offset: np.ndarray, num_links: int,
+              tip_rows: np.ndarray, tip_centre: np.ndarray, k: float, cauchy: bool,
+              tip_weight: float, palm_weight: float, camera_weight: float, scaled: bool,
+              jacobian: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One camera's link, tip and palm-side rows of ``edge_fit.stack_residuals`` from the
+    projected feature points ``pix`` (N, 2) and their Jacobians ``jpix`` (N, 2, D; read only
+    with ``jacobian``): the lines' end points blended between a row and the one two rows on
+    by ``alpha`` (``edge_fit._blend``), their signed distances ``n . x - rho`` (two rows a
+    line, ``edge_fit.link_axis_residuals``), the tips' predicted minus measured centres (two
+    rows a tip), the robust weights (the tips' times ``tip_weight``, the palm sides' times
+    ``palm_weight``, all times ``camera_weight`` when ``scaled``), numpy's operations in
+    numpy's order. Rows: links (the first ``num_links`` lines), tips, palm sides; returns
+    the residuals, their Jacobian ((rows, D), (rows, 0) without ``jacobian``) and weights."""
+    lines, tips = len(rows_b), len(tip_rows)
+    dofs = jpix.shape[2] if jacobian else 0
+    rows = 2 * lines + 2 * tips
+    r = np.empty(rows)
+    J = np.empty((rows, dofs))
+    w = np.empty(rows)
+    for i in range(lines):
+        out = 2 * i if i < num_links else 2 * i + 2 * tips
+        a = alpha[i]
+        n0, n1 = normal[i, 0], normal[i, 1]
+        for side in range(2):
+            row = rows_b[i] if side == 0 else rows_e[i]
+            x = (1.0 - a) * pix[row, 0] + a * pix[row + 2, 0]
+            y = (1.0 - a) * pix[row, 1] + a * pix[row + 2, 1]
+            v = ((0.0 + n0 * x) + n1 * y) - offset[i]       # einsum's sum starts at 0
+            r[out + side] = v
+            weight = _robust_weight(v, k, cauchy)
+            if i >= num_links:
+                weight = palm_weight * weight
+            w[out + side] = camera_weight * weight if scaled else weight
+            for d in range(dofs):
+                jx = (1.0 - a) * jpix[row, 0, d] + a * jpix[row + 2, 0, d]
+                jy = (1.0 - a) * jpix[row, 1, d] + a * jpix[row + 2, 1, d]
+                J[out + side, d] = (0.0 + n0 * jx) + n1 * jy
+    for t in range(tips):
+        out = 2 * num_links + 2 * t
+        for c in range(2):
+            v = pix[tip_rows[t], c] - tip_centre[t, c]
+            r[out + c] = v
+            weight = tip_weight * _robust_weight(v, k, cauchy)
+            w[out + c] = camera_weight * weight if scaled else weight
+            for d in range(dofs):
+                J[out + c, d] = jpix[tip_rows[t], c, d]
+    return r, J, w
+
+
 def _array(dtype: object, ndim: int) -> object:
     """A read-only C-contiguous array type (writable arrays convert to it)."""
     return numba.types.Array(dtype, ndim, 'C', readonly=True)
 
 
 _F1, _F2 = _array(numba.float64, 1), _array(numba.float64, 2)
+_I1 = _array(numba.int64, 1)
 _SIGNATURES = {
     derivative: (_array(numba.float32, 2), _F1),
     pair_search: (_array(numba.float32, 2), _array(numba.int64, 1), numba.boolean,
@@ -294,6 +361,9 @@ _SIGNATURES = {
     occluded_slices: (_F2, numba.int64, _F2, _F2, _F1, _F1, _F1, _F1, numba.float64,
                       _array(numba.boolean, 1), _array(numba.boolean, 2)),
     behind_palm: (_F2, _F2, _F2, _F1, numba.float64, _F1, _F1),
+    line_rows: (_F2, _array(numba.float64, 3), _I1, _I1, _F1, _F2, _F1, numba.int64, _I1, _F2,
+                numba.float64, numba.boolean, numba.float64, numba.float64, numba.float64,
+                numba.boolean, numba.boolean),
 }
 
 
