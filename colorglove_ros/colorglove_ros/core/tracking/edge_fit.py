@@ -929,27 +929,18 @@ def _silhouette_residuals(points: FeaturePoints, camera: PinholeCamera, meas: Ed
     capsule and (palm targets, ``world`` the feature points and Jacobians) from its point of
     the palm (rows only where positive)."""
     tol = config.silhouette_tolerance_px
-    ax, _, _ = _axis_points(points, pix, None, camera)
+    kernels = compiled_kernels()
+    L = len(points.links)
+    ax, place = kernels.axis_points(pix, L, points.tip_slice.start, len(points.tip_links),
+                                    camera.width, camera.height)
     d, grad = meas.silhouette.outside_distance(ax)
-    off = d > tol
-    r = [d[off] - tol]
-    J = [np.zeros((0, Jpix.shape[-1]))]
-    if off.any():          # the axis points' Jacobians only when one is off
-        J = [np.einsum('ij,ijd->id', grad[off], _axis_points(points, pix, Jpix, camera)[1][off])]
     t = meas.loose
-    if t is not None and len(t.px):
-        L = len(points.links)
-        Jb, Je = Jpix[0:2 * L:2][t.link], Jpix[1:2 * L:2][t.link]
-        c = (1.0 - t.along)[:, None] * pix[0:2 * L:2][t.link] + t.along[:, None] \
-            * pix[1:2 * L:2][t.link]
-        z = 0.5 * (depth[0:2 * L:2] + depth[1:2 * L:2])[t.link]
-        hw = _pixel_radius(points.radius[t.link], camera, z)
-        rl = np.einsum('ij,ij->i', t.direction, t.px - c) - hw - tol
-        Jl = -np.einsum('ij,ijd->id', t.direction,
-                        (1.0 - t.along)[:, None, None] * Jb + t.along[:, None, None] * Je)
-        keep = rl > 0
-        r.append(rl[keep])
-        J.append(Jl[keep])
+    targets = t if t is not None and len(t.px) else _NO_TARGETS
+    rows, Jrows = kernels.silhouette_rows(
+        pix, Jpix, depth, L, points.tip_slice.start, place, np.ascontiguousarray(d), grad,
+        float(tol), targets.px, targets.link, targets.along, targets.direction,
+        points.radius, 0.5 * (camera.fx + camera.fy))
+    r, J = [rows], [Jrows]
     if t is not None and len(t.palm_px) and world is not None and world[1] is not None:
         rigid = points.palm_rigid
         c, Jc, _ = _project(camera, t.palm_weights @ world[0][rigid],
@@ -995,6 +986,10 @@ class SilhouetteTargets:
     palm_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     palm_weights: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     palm_direction: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+
+_NO_TARGETS = SilhouetteTargets(np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0),
+                                np.zeros((0, 2)))
 
 
 def measure_features(grey: np.ndarray, prediction: EdgePrediction, config: EdgeTrackerConfig,

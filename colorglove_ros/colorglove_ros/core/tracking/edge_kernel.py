@@ -20,7 +20,8 @@ import numpy as np
 from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['derivative', 'pair_search', 'edge_peaks', 'tip_peaks', 'segment_distances',
-           'occluded_slices', 'behind_palm', 'line_rows', 'compile_kernels']
+           'occluded_slices', 'behind_palm', 'line_rows', 'axis_points', 'silhouette_rows',
+           'compile_kernels']
 
 _JIT = {'cache': True, 'nogil': True}
 _NO_EDGE = -1.0e9   # edge_features._NO_EDGE: any pair using such a sample scores < 0
@@ -344,6 +345,99 @@ def line_rows(pix: np.ndarray, jpix: np.ndarray, rows_b: np.ndarray, rows_e: np.
     return r, J, w
 
 
+@numba.njit(**_JIT)
+def axis_points(pix: np.ndarray, links: int, tip_start: int, tips: int, width: int,
+                height: int) -> tuple[np.ndarray, np.ndarray]:
+    """``edge_fit._axis_points``' pixels: of the hand's axis points (each link's base, middle
+    and end, the links' bases at even rows of ``pix`` from 0 and their ends after them, then
+    the tip centres every second row from ``tip_start``), in that order (bases, middles,
+    ends, tips), those inside the ``width`` x ``height`` image (M, 2) and their places in
+    that order (M,)."""
+    total = 3 * links + tips
+    px = np.empty((total, 2))
+    place = np.empty(total, np.int64)
+    m = 0
+    for k in range(total):
+        if k < links:
+            x, y = pix[2 * k, 0], pix[2 * k, 1]
+        elif k < 2 * links:
+            i = k - links
+            x = 0.5 * (pix[2 * i, 0] + pix[2 * i + 1, 0])
+            y = 0.5 * (pix[2 * i, 1] + pix[2 * i + 1, 1])
+        elif k < 3 * links:
+            x, y = pix[2 * (k - 2 * links) + 1, 0], pix[2 * (k - 2 * links) + 1, 1]
+        else:
+            x, y = pix[tip_start + 2 * (k - 3 * links), 0], pix[tip_start + 2 * (k - 3 * links), 1]
+        if x >= 0 and x < width and y >= 0 and y < height:
+            px[m, 0], px[m, 1] = x, y
+            place[m] = k
+            m += 1
+    return px[:m].copy(), place[:m].copy()
+
+
+@numba.njit(**_JIT)
+def silhouette_rows(pix: np.ndarray, jpix: np.ndarray, depth: np.ndarray, links: int,
+                    tip_start: int, place: np.ndarray, distance: np.ndarray,
+                    gradient: np.ndarray, tolerance: float, target_px: np.ndarray,
+                    target_link: np.ndarray, target_along: np.ndarray,
+                    target_direction: np.ndarray, radius: np.ndarray, focal: float
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """``edge_fit._silhouette_residuals``' axis and link rows, numpy's operations in numpy's
+    dtypes and order: each axis point (``place`` as :func:`axis_points` gives it) whose
+    outside distance (float32, with its float32 ``gradient``) exceeds the tolerance gives
+    that excess (in float32) and the gradient times the point's pixel Jacobian; each
+    unexplained pixel ``target_px`` gives its distance along ``target_direction`` from the
+    point ``target_along`` of the way along its link ``target_link`` less the link's
+    projected radius (``radius`` times ``focal`` over the depth) and the tolerance, and minus
+    that distance's Jacobian, where the distance is positive."""
+    dofs = jpix.shape[2]
+    n_axis, n_target = len(place), len(target_px)
+    r = np.empty(n_axis + n_target)
+    J = np.empty((n_axis + n_target, dofs))
+    tol32 = np.float32(tolerance)
+    row = 0
+    for m in range(n_axis):
+        if not distance[m] > tol32:
+            continue
+        r[row] = np.float64(np.float32(distance[m] - tol32))
+        g0, g1 = np.float64(gradient[m, 0]), np.float64(gradient[m, 1])
+        k = place[m]
+        for d in range(dofs):
+            if k < links:
+                jx, jy = jpix[2 * k, 0, d], jpix[2 * k, 1, d]
+            elif k < 2 * links:
+                i = k - links
+                jx = 0.5 * (jpix[2 * i, 0, d] + jpix[2 * i + 1, 0, d])
+                jy = 0.5 * (jpix[2 * i, 1, d] + jpix[2 * i + 1, 1, d])
+            elif k < 3 * links:
+                i = 2 * (k - 2 * links) + 1
+                jx, jy = jpix[i, 0, d], jpix[i, 1, d]
+            else:
+                i = tip_start + 2 * (k - 3 * links)
+                jx, jy = jpix[i, 0, d], jpix[i, 1, d]
+            J[row, d] = (0.0 + g0 * jx) + g1 * jy
+        row += 1
+    for j in range(n_target):
+        li, s = target_link[j], target_along[j]
+        b, e = 2 * li, 2 * li + 1
+        cx = (1.0 - s) * pix[b, 0] + s * pix[e, 0]
+        cy = (1.0 - s) * pix[b, 1] + s * pix[e, 1]
+        z = 0.5 * (depth[b] + depth[e])
+        hw = radius[li] * focal / (z if z >= 1e-6 or np.isnan(z) else 1e-6)
+        dx, dy = target_direction[j, 0], target_direction[j, 1]
+        v = (((0.0 + dx * (target_px[j, 0] - cx)) + dy * (target_px[j, 1] - cy)) - hw) \
+            - tolerance
+        if not v > 0:
+            continue
+        r[row] = v
+        for d in range(dofs):
+            jx = (1.0 - s) * jpix[b, 0, d] + s * jpix[e, 0, d]
+            jy = (1.0 - s) * jpix[b, 1, d] + s * jpix[e, 1, d]
+            J[row, d] = -((0.0 + dx * jx) + dy * jy)
+        row += 1
+    return r[:row].copy(), J[:row].copy()
+
+
 def _array(dtype: object, ndim: int) -> object:
     """A read-only C-contiguous array type (writable arrays convert to it)."""
     return numba.types.Array(dtype, ndim, 'C', readonly=True)
@@ -364,6 +458,10 @@ _SIGNATURES = {
     line_rows: (_F2, _array(numba.float64, 3), _I1, _I1, _F1, _F2, _F1, numba.int64, _I1, _F2,
                 numba.float64, numba.boolean, numba.float64, numba.float64, numba.float64,
                 numba.boolean, numba.boolean),
+    axis_points: (_F2, numba.int64, numba.int64, numba.int64, numba.int64, numba.int64),
+    silhouette_rows: (_F2, _array(numba.float64, 3), _F1, numba.int64, numba.int64, _I1,
+                      _array(numba.float32, 1), _array(numba.float32, 2), numba.float64, _F2,
+                      _I1, _F1, _F2, _F1, numba.float64),
 }
 
 

@@ -116,3 +116,72 @@ def test_a_remembered_projection_is_the_fresh_one_and_read_only() -> None:
     for a in first:
         with pytest.raises(ValueError):
             a[0] = 0.0
+
+
+def _axis_ref(pix, L, tip_slice, width, height, Jpix=None):
+    """edge_fit._axis_points as main computed it (pixels, Jacobians)."""
+    base, end = pix[0:2 * L:2], pix[1:2 * L:2]
+    px = np.concatenate([base, 0.5 * (base + end), end, pix[tip_slice]])
+    inside = (px[:, 0] >= 0) & (px[:, 0] < width) & (px[:, 1] >= 0) & (px[:, 1] < height)
+    J = None
+    if Jpix is not None:
+        Jb, Je = Jpix[0:2 * L:2], Jpix[1:2 * L:2]
+        J = np.concatenate([Jb, 0.5 * (Jb + Je), Je, Jpix[tip_slice]])[inside]
+    return px[inside], J
+
+
+def _silhouette_rows_ref(pix, Jpix, depth, L, tip_slice, width, height, d, grad, tol, t_px,
+                         t_link, t_along, t_dir, radius, focal):
+    """The axis and link rows of edge_fit._silhouette_residuals as main computed them."""
+    off = d > tol
+    r = [d[off] - tol]
+    J = [np.zeros((0, Jpix.shape[-1]))]
+    if off.any():
+        J = [np.einsum('ij,ijd->id', grad[off],
+                       _axis_ref(pix, L, tip_slice, width, height, Jpix)[1][off])]
+    if len(t_px):
+        Jb, Je = Jpix[0:2 * L:2][t_link], Jpix[1:2 * L:2][t_link]
+        c = (1.0 - t_along)[:, None] * pix[0:2 * L:2][t_link] + t_along[:, None] \
+            * pix[1:2 * L:2][t_link]
+        z = 0.5 * (depth[0:2 * L:2] + depth[1:2 * L:2])[t_link]
+        hw = radius[t_link] * focal / np.maximum(z, 1e-6)
+        rl = np.einsum('ij,ij->i', t_dir, t_px - c) - hw - tol
+        Jl = -np.einsum('ij,ijd->id', t_dir,
+                        (1.0 - t_along)[:, None, None] * Jb + t_along[:, None, None] * Je)
+        keep = rl > 0
+        r.append(rl[keep])
+        J.append(Jl[keep])
+    return np.concatenate(r).astype(float), np.concatenate(J)
+
+
+def test_the_silhouette_row_kernels_give_the_numpy_codes_bits() -> None:
+    """Axis points inside and outside the image, off and on the foreground (float32
+    distances and gradients), unexplained pixels on either side of their capsules."""
+    rng = np.random.default_rng(29)
+    width, height = 640, 480
+    for trial in range(80):
+        L, T, D = int(rng.integers(1, 15)), int(rng.integers(0, 6)), 26
+        N = 2 * L + 2 * T + int(rng.integers(0, 6))
+        tip_slice = slice(2 * L, 2 * L + 2 * T, 2)
+        pix = rng.uniform(-60.0, 700.0, (N, 2))
+        Jpix = rng.normal(0.0, 300.0, (N, 2, D))
+        depth = rng.uniform(0.3, 0.7, N)
+        if trial % 9 == 0:
+            depth[0] = 0.0                                  # the 1e-6 floor
+        ax, place = edge_kernel.axis_points(pix, L, tip_slice.start, T, width, height)
+        assert _same(ax, _axis_ref(pix, L, tip_slice, width, height)[0])
+        d = np.abs(rng.normal(3.0, 4.0, len(ax))).astype(np.float32)
+        d[rng.random(len(ax)) < 0.3] = 0.0
+        grad = rng.normal(0.0, 1.0, (len(ax), 2)).astype(np.float32)
+        M = int(rng.integers(0, 30)) if trial % 4 else 0
+        t_link = rng.integers(0, L, M)
+        t_along = np.clip(rng.uniform(-0.2, 1.2, M), 0.0, 1.0)
+        t_px = rng.uniform(0.0, 640.0, (M, 2))
+        angle = rng.uniform(-np.pi, np.pi, M)
+        t_dir = np.stack([np.cos(angle), np.sin(angle)], axis=1)
+        radius = rng.uniform(0.005, 0.011, L)
+        got = edge_kernel.silhouette_rows(pix, Jpix, depth, L, tip_slice.start, place, d, grad,
+                                          4.0, t_px, t_link, t_along, t_dir, radius, 605.0)
+        want = _silhouette_rows_ref(pix, Jpix, depth, L, tip_slice, width, height, d, grad,
+                                    4.0, t_px, t_link, t_along, t_dir, radius, 605.0)
+        assert _same(got[0], want[0]) and _same(got[1], want[1])
