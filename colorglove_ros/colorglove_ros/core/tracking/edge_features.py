@@ -17,6 +17,7 @@ often brighter than it on the lit side and darker on the other).
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from types import ModuleType
 
@@ -28,6 +29,7 @@ from colorglove_ros.core.errors import ColorGloveError
 __all__ = [
     'EdgeFeatureError', 'EdgeSearchConfig', 'LinkAxes', 'TipPoints', 'measure_link_axes',
     'measure_outline_edges', 'measure_tips', 'to_grey', 'segment_distances', 'compiled_kernels',
+    'fixed_linspace',
 ]
 
 
@@ -121,14 +123,28 @@ def _sample(grey: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return out.reshape(shape)
 
 
+_KERNELS: list[ModuleType] = []      # edge_kernel, once compiled
+
+
 def compiled_kernels() -> ModuleType:
     """The edge searches' compiled kernels (:mod:`edge_kernel`): numba is imported, and the
     kernels compiled or loaded from their on-disk cache, on the first call (so importing this
     module, or the nodes that import it, loads no numba)."""
-    from colorglove_ros.core.tracking import edge_kernel
+    if not _KERNELS:
+        from colorglove_ros.core.tracking import edge_kernel
 
-    edge_kernel.compile_kernels()
-    return edge_kernel
+        edge_kernel.compile_kernels()
+        _KERNELS.append(edge_kernel)
+    return _KERNELS[0]
+
+
+@functools.lru_cache(maxsize=64)
+def fixed_linspace(start: float, stop: float, num: int) -> np.ndarray:
+    """``np.linspace(start, stop, num)``, remembered and read-only: the slices' places and
+    sample offsets, the same every frame."""
+    out = np.linspace(start, stop, num)
+    out.setflags(write=False)
+    return out
 
 
 def _derivative(profile: np.ndarray, step: np.ndarray) -> np.ndarray:
@@ -160,33 +176,12 @@ def _fit_lines(base: np.ndarray, end: np.ndarray, centres: np.ndarray, n: np.nda
     at fractions ``frac`` (S,); the offset along n is fitted as a linear function of the
     position along the segment (least squares), then refitted without the points farther than
     ``fit_outlier_px``. Returns the lines' unit normals (L, 2) and offsets (L,), the kept
-    points' weights (L, S) and the points (L, S, 2; NaN where not kept)."""
-    L = len(base)
-    axis = end - base
-    length = np.linalg.norm(axis, axis=1)
-    u = axis / np.maximum(length, 1e-9)[:, None]
-    s_along = (frac[None, :] - 0.5) * length[:, None]                          # (L, S)
-    w = valid.astype(float)
-    a = b = np.zeros(L)
-    for _ in range(2):
-        sw = w.sum(1)
-        safe = np.maximum(sw, 1e-9)
-        ms = (w * s_along).sum(1) / safe
-        mo = (w * off).sum(1) / safe
-        var = (w * (s_along - ms[:, None]) ** 2).sum(1)
-        cov = (w * (s_along - ms[:, None]) * (off - mo[:, None])).sum(1)
-        b = np.where(var > 1e-9, cov / np.maximum(var, 1e-9), 0.0)
-        a = mo - b * ms
-        resid = np.abs(off - (a[:, None] + b[:, None] * s_along))
-        w = (valid & (resid <= cfg.fit_outlier_px)).astype(float)
-    # the fitted line: point centre + n * a, direction u + b n
-    direction = u + b[:, None] * n
-    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
-    mid_point = 0.5 * (base + end) + a[:, None] * n
-    offset = np.einsum('ij,ij->i', normal, mid_point)
-    points = centres + off[..., None] * n[:, None, :]
-    return normal, offset, w, np.where((w > 0)[..., None], points, np.nan)
+    points' weights (L, S) and the points (L, S, 2; NaN where not kept)
+    (``edge_kernel.fit_lines``)."""
+    return compiled_kernels().fit_lines(
+        np.ascontiguousarray(base), np.ascontiguousarray(end), np.ascontiguousarray(centres),
+        np.ascontiguousarray(n), np.ascontiguousarray(frac), np.ascontiguousarray(off),
+        np.ascontiguousarray(valid, dtype=bool), float(cfg.fit_outlier_px))
 
 
 def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
@@ -203,10 +198,10 @@ def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
     length = np.linalg.norm(axis, axis=1)
     u = axis / np.maximum(length, 1e-9)[:, None]
     n = np.stack([-u[:, 1], u[:, 0]], axis=1)
-    frac = np.linspace(cfg.slice_range[0], cfg.slice_range[1], S)
+    frac = fixed_linspace(cfg.slice_range[0], cfg.slice_range[1], S)
     centres = base[:, None, :] + frac[None, :, None] * axis[:, None, :]        # (L, S, 2)
     reach = hw + cfg.search_px                                                 # (L,)
-    t = np.linspace(-1.0, 1.0, W)
+    t = fixed_linspace(-1.0, 1.0, W)
     offsets = reach[:, None] * t[None, :]                                      # (L, W)
     step = 2.0 * reach / (W - 1)                                               # (L,)
     # only the slices that may be measured are searched (R rows of the (L, S) slices)
@@ -273,9 +268,9 @@ def measure_outline_edges(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndar
     u = axis / np.maximum(np.linalg.norm(axis, axis=1), 1e-9)[:, None]
     n = np.stack([-u[:, 1], u[:, 0]], axis=1)
     n *= np.where(np.einsum('ij,ij->i', n, out) < 0, -1.0, 1.0)[:, None]
-    frac = np.linspace(*(slice_range or cfg.slice_range), S)
+    frac = fixed_linspace(*(slice_range or cfg.slice_range), S)
     centres = base[:, None, :] + frac[None, :, None] * axis[:, None, :]        # (L, S, 2)
-    t = np.linspace(-cfg.search_px, cfg.search_px, W)                          # (W,)
+    t = fixed_linspace(-cfg.search_px, cfg.search_px, W)                       # (W,)
     step = np.full((L, S), 2.0 * cfg.search_px / (W - 1))
     xy = centres[:, :, None, :] + t[None, None, :, None] * n[:, None, None, :]
     d = _derivative(_sample(grey, xy), step).reshape(L * S, W)
@@ -319,7 +314,7 @@ def measure_tips(grey: np.ndarray, axis_point_px: np.ndarray, direction_px: np.n
     along_end = np.einsum('ij,ij->i', end - p0, u)
     start = p0 + (along_end - cfg.tip_search_px - r)[:, None] * u              # (T, 2)
     span = 2.0 * cfg.tip_search_px + r
-    t = np.linspace(0.0, 1.0, cfg.tip_samples)
+    t = fixed_linspace(0.0, 1.0, cfg.tip_samples)
     pos = span[:, None] * t[None, :]                                           # (T, N)
     xy = start[:, None, :] + pos[..., None] * u[:, None, :]
     profile = _sample(grey, xy)

@@ -57,6 +57,7 @@ from colorglove_ros.core.tracking.edge_features import (
     LinkAxes,
     TipPoints,
     compiled_kernels,
+    fixed_linspace,
     measure_link_axes,
     measure_outline_edges,
     measure_tips,
@@ -609,7 +610,7 @@ def predict_features(kin: FastKinematics, points: FeaturePoints, camera: Pinhole
     long_enough = np.linalg.norm(end - base, axis=1) >= config.min_link_px
     usable = in_front & long_enough
     S = config.search.slices_per_link
-    frac = np.linspace(*config.search.slice_range, S)
+    frac = fixed_linspace(*config.search.slice_range, S)
     centres = base[:, None, :] + frac[None, :, None] * (end - base)[:, None, :]
     margin = hw[:, None] + config.search.search_px
     inside = ((centres[..., 0] >= margin) & (centres[..., 0] < camera.width - margin)
@@ -730,7 +731,7 @@ def _predict_palm(points: FeaturePoints, camera: PinholeCamera, config: EdgeTrac
     n *= np.where(np.einsum('ij,ij->i', n, pb - pc) < 0, -1.0, 1.0)[:, None]
     in_front = (zpb > config.min_depth_m) & (zpe > config.min_depth_m)
     long_enough = np.linalg.norm(pe - pb, axis=1) >= config.min_link_px
-    frac = np.linspace(*config.palm_slice_range, S)
+    frac = fixed_linspace(*config.palm_slice_range, S)
     centres = pb[:, None, :] + frac[None, :, None] * (pe - pb)[:, None, :]
     margin = config.search.search_px
     inside = ((centres[..., 0] >= margin) & (centres[..., 0] < camera.width - margin)

@@ -20,8 +20,8 @@ import numpy as np
 from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['derivative', 'pair_search', 'edge_peaks', 'tip_peaks', 'segment_distances',
-           'occluded_slices', 'behind_palm', 'line_rows', 'axis_points', 'silhouette_rows',
-           'compile_kernels']
+           'occluded_slices', 'behind_palm', 'fit_lines', 'line_rows', 'axis_points',
+           'silhouette_rows', 'compile_kernels']
 
 _JIT = {'cache': True, 'nogil': True}
 _NO_EDGE = -1.0e9   # edge_features._NO_EDGE: any pair using such a sample scores < 0
@@ -279,6 +279,100 @@ def behind_palm(hull: np.ndarray, centres: np.ndarray, palm_px: np.ndarray,
     return out
 
 
+@numba.njit('float64(float64[::1], int64, int64)', **_JIT)   # typed: it calls itself
+def _pairwise_sum(a: np.ndarray, start: int, n: int) -> float:
+    """numpy's pairwise sum of ``a[start:start + n]`` (float64; what ``ndarray.sum`` along a
+    contiguous axis adds): in order below 8 values, 8 running sums up to 128, halves
+    beyond."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[start + i]
+        return res
+    if n <= 128:
+        r = np.empty(8)
+        for j in range(8):
+            r[j] = a[start + j]
+        i = 8
+        while i < n - (n % 8):
+            for j in range(8):
+                r[j] += a[start + i + j]
+            i += 8
+        res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+        while i < n:
+            res += a[start + i]
+            i += 1
+        return res
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise_sum(a, start, n2) + _pairwise_sum(a, start + n2, n - n2)
+
+
+@numba.njit(error_model='numpy', **_JIT)      # 0 / 0 is NaN, as numpy's
+def fit_lines(base: np.ndarray, end: np.ndarray, centres: np.ndarray, n: np.ndarray,
+              frac: np.ndarray, off: np.ndarray, valid: np.ndarray, outlier_px: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``edge_features._fit_lines``, numpy's operations in numpy's order (sums over a
+    segment's slices as ``_pairwise_sum``): per segment ``base -> end`` (L, 2) the offset
+    ``off`` (L, S) of its valid points along ``n`` (L, 2) from the slice ``centres`` (L, S, 2)
+    at fractions ``frac`` (S,) fitted as a linear function of the place along the segment,
+    then again without the points farther than ``outlier_px``. Returns the lines' unit
+    normals (L, 2), offsets (L,), the kept points' weights (L, S) and the points (L, S, 2;
+    NaN where not kept)."""
+    L, S = off.shape
+    normal = np.empty((L, 2))
+    offset = np.empty(L)
+    w = np.empty((L, S))
+    points = np.empty((L, S, 2))
+    s_along = np.empty(S)
+    tmp = np.empty(S)
+    for li in range(L):
+        ax, ay = end[li, 0] - base[li, 0], end[li, 1] - base[li, 1]
+        length = np.sqrt(ax * ax + ay * ay)
+        safe_len = length if length >= 1e-9 or np.isnan(length) else 1e-9
+        ux, uy = ax / safe_len, ay / safe_len
+        for k in range(S):
+            s_along[k] = (frac[k] - 0.5) * length
+            w[li, k] = 1.0 if valid[li, k] else 0.0
+        a = b = 0.0
+        for _ in range(2):
+            sw = _pairwise_sum(w[li], 0, S)
+            safe = sw if sw >= 1e-9 or np.isnan(sw) else 1e-9
+            for k in range(S):
+                tmp[k] = w[li, k] * s_along[k]
+            ms = _pairwise_sum(tmp, 0, S) / safe
+            for k in range(S):
+                tmp[k] = w[li, k] * off[li, k]
+            mo = _pairwise_sum(tmp, 0, S) / safe
+            for k in range(S):
+                ds = s_along[k] - ms
+                tmp[k] = w[li, k] * (ds * ds)
+            var = _pairwise_sum(tmp, 0, S)
+            for k in range(S):
+                tmp[k] = (w[li, k] * (s_along[k] - ms)) * (off[li, k] - mo)
+            cov = _pairwise_sum(tmp, 0, S)
+            b = cov / (var if var >= 1e-9 or np.isnan(var) else 1e-9) if var > 1e-9 else 0.0
+            a = mo - b * ms
+            for k in range(S):
+                resid = abs(off[li, k] - (a + b * s_along[k]))
+                w[li, k] = 1.0 if valid[li, k] and resid <= outlier_px else 0.0
+        nx, ny = n[li, 0], n[li, 1]
+        dx, dy = ux + b * nx, uy + b * ny
+        norm = np.sqrt(dx * dx + dy * dy)
+        dx, dy = dx / norm, dy / norm
+        normal[li, 0], normal[li, 1] = -dy, dx
+        mx = 0.5 * (base[li, 0] + end[li, 0]) + a * nx
+        my = 0.5 * (base[li, 1] + end[li, 1]) + a * ny
+        offset[li] = (0.0 + -dy * mx) + dx * my
+        for k in range(S):
+            if w[li, k] > 0:
+                points[li, k, 0] = centres[li, k, 0] + off[li, k] * nx
+                points[li, k, 1] = centres[li, k, 1] + off[li, k] * ny
+            else:
+                points[li, k, 0] = points[li, k, 1] = np.nan
+    return normal, offset, w, points
+
+
 @numba.njit(inline='always', **_JIT)
 def _robust_weight(r: float, k: float, cauchy: bool) -> float:
     """``edge_fit._robust`` of one residual: 1 for ``k`` <= 0, else Cauchy's
@@ -458,6 +552,8 @@ _SIGNATURES = {
     line_rows: (_F2, _array(numba.float64, 3), _I1, _I1, _F1, _F2, _F1, numba.int64, _I1, _F2,
                 numba.float64, numba.boolean, numba.float64, numba.float64, numba.float64,
                 numba.boolean, numba.boolean),
+    fit_lines: (_F2, _F2, _array(numba.float64, 3), _F2, _F1, _F2, _array(numba.boolean, 2),
+                numba.float64),
     axis_points: (_F2, numba.int64, numba.int64, numba.int64, numba.int64, numba.int64),
     silhouette_rows: (_F2, _array(numba.float64, 3), _F1, numba.int64, numba.int64, _I1,
                       _array(numba.float32, 1), _array(numba.float32, 2), numba.float64, _F2,

@@ -202,41 +202,42 @@ class Silhouette:
         ``pixels``) farther than ``tolerance_px`` from every part of ``outline``, and their
         share of the hand's foreground (the forearm, beyond the wrist, left out of both)."""
         s = self.scale
-        covered = np.zeros(self.mask.shape, np.uint8)
         tol = float(tolerance_px)
         shift = s * self.offset
+        # the forearm: the half-plane beyond the line through the wrist across the hand axis,
+        # cleared from a copy of the mask
+        h, w = self.mask.shape
+        big = 4.0 * (h + w + np.abs(self.offset).sum())
+        a = np.asarray(outline.axis, dtype=float)
+        across = np.array([-a[1], a[0]])
+        start = (outline.wrist - shift + 0.5) / s - 0.5 - (tol / s) * a
+        quad = start + big * np.array([across, -across, -across - a, across - a])
+        hand = self._mask_u8.copy()
+        cv2.fillConvexPoly(hand, np.round(quad * 16).astype(np.int32), 0, cv2.LINE_8, 4)
+        count = cv2.countNonZero(hand)
+        if count == 0:
+            return np.zeros((0, 2)), 0.0
+        # what the hand explains (capsules, tip discs, the palm's hull, each widened by the
+        # tolerance) cleared from it in turn: the pixels left are the unexplained ones
+        loose = hand
         ok = np.isfinite(outline.base).all(1) & np.isfinite(outline.end).all(1)
         thick = np.maximum(1, np.round(2.0 * (outline.half_width + tol) / s)).astype(int)
         ends = np.stack([_fixed(outline.base[ok] - shift, s), _fixed(outline.end[ok] - shift, s)],
                         axis=1)                                   # (K, 2, 2) capsule ends
         # one call per thickness: a two-point polyline is drawn as cv2.line draws it
         for t in np.unique(thick[ok]):
-            cv2.polylines(covered, list(ends[thick[ok] == t]), False, 1, int(t), cv2.LINE_8, 4)
+            cv2.polylines(loose, list(ends[thick[ok] == t]), False, 0, int(t), cv2.LINE_8, 4)
         ok = np.isfinite(outline.tip).all(1)
         radius = np.maximum(1, np.round(16 * (outline.tip_radius + tol) / s)).astype(int)
         for c, r in zip(_pts(outline.tip[ok] - shift, s), radius[ok], strict=True):
-            cv2.circle(covered, c, int(r), 1, -1, cv2.LINE_8, 4)
+            cv2.circle(loose, c, int(r), 0, -1, cv2.LINE_8, 4)
         if len(outline.palm) >= 3 and np.all(np.isfinite(outline.palm)):
             hull = cv2.convexHull(np.round(((outline.palm - shift + 0.5) / s - 0.5) * 16)
                                   .astype(np.int32))
-            cv2.fillConvexPoly(covered, hull, 1, cv2.LINE_8, 4)
+            cv2.fillConvexPoly(loose, hull, 0, cv2.LINE_8, 4)
             if tol > 0:
-                cv2.polylines(covered, [hull], True, 1, max(1, int(round(2.0 * tol / s))),
+                cv2.polylines(loose, [hull], True, 0, max(1, int(round(2.0 * tol / s))),
                               cv2.LINE_8, 4)
-        # the forearm: the half-plane beyond the line through the wrist across the hand axis
-        h, w = self.mask.shape
-        big = 4.0 * (h + w + np.abs(self.offset).sum())
-        a = np.asarray(outline.axis, dtype=float)
-        across = np.array([-a[1], a[0]])
-        start = (outline.wrist - shift + 0.5) / s - 0.5 - (tol / s) * a
-        arm = np.zeros_like(covered)
-        quad = start + big * np.array([across, -across, -across - a, across - a])
-        cv2.fillConvexPoly(arm, np.round(quad * 16).astype(np.int32), 1, cv2.LINE_8, 4)
-        hand = cv2.bitwise_and(self._mask_u8, 1 - arm)
-        count = cv2.countNonZero(hand)
-        if count == 0:
-            return np.zeros((0, 2)), 0.0
-        loose = cv2.bitwise_and(hand, 1 - covered)
         if not pixels:
             return np.zeros((0, 2)), float(cv2.countNonZero(loose)) / float(count)
         found = cv2.findNonZero(loose)

@@ -17,7 +17,12 @@ from colorglove_ros.core.tracking.edge_fit import (
 
 
 def _same(a: np.ndarray, b: np.ndarray) -> bool:
-    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+    """Same dtype, shape and bits, NaN wherever the other is NaN (of any sign or payload)."""
+    if a.dtype != b.dtype or a.shape != b.shape:
+        return False
+    nan = np.isnan(a) if a.dtype.kind == 'f' else np.zeros(a.shape, bool)
+    return bool(np.array_equal(nan, np.isnan(b) if b.dtype.kind == 'f' else nan)) \
+        and a[~nan].tobytes() == b[~nan].tobytes()
 
 
 def _line_rows_ref(pix, Jpix, rows_b, rows_e, alpha, normal, offset, n_link, tips, centre,
@@ -185,3 +190,150 @@ def test_the_silhouette_row_kernels_give_the_numpy_codes_bits() -> None:
         want = _silhouette_rows_ref(pix, Jpix, depth, L, tip_slice, width, height, d, grad,
                                     4.0, t_px, t_link, t_along, t_dir, radius, 605.0)
         assert _same(got[0], want[0]) and _same(got[1], want[1])
+
+
+def _fit_lines_ref(base, end, centres, n, frac, off, valid, outlier_px):
+    """edge_features._fit_lines as main computed it."""
+    L = len(base)
+    axis = end - base
+    length = np.linalg.norm(axis, axis=1)
+    u = axis / np.maximum(length, 1e-9)[:, None]
+    s_along = (frac[None, :] - 0.5) * length[:, None]
+    w = valid.astype(float)
+    a = b = np.zeros(L)
+    for _ in range(2):
+        sw = w.sum(1)
+        safe = np.maximum(sw, 1e-9)
+        ms = (w * s_along).sum(1) / safe
+        mo = (w * off).sum(1) / safe
+        var = (w * (s_along - ms[:, None]) ** 2).sum(1)
+        cov = (w * (s_along - ms[:, None]) * (off - mo[:, None])).sum(1)
+        b = np.where(var > 1e-9, cov / np.maximum(var, 1e-9), 0.0)
+        a = mo - b * ms
+        resid = np.abs(off - (a[:, None] + b[:, None] * s_along))
+        w = (valid & (resid <= outlier_px)).astype(float)
+    direction = u + b[:, None] * n
+    with np.errstate(invalid='ignore'):
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
+    mid_point = 0.5 * (base + end) + a[:, None] * n
+    offset = np.einsum('ij,ij->i', normal, mid_point)
+    points = centres + off[..., None] * n[:, None, :]
+    return normal, offset, w, np.where((w > 0)[..., None], points, np.nan)
+
+
+@pytest.mark.parametrize('slices', [2, 6, 9, 17])
+def test_the_line_fit_kernel_gives_the_numpy_codes_bits(slices: int) -> None:
+    """Segments of every direction (one of zero length), a few or no valid slices, outliers,
+    slice counts on both sides of numpy's eight-way pairwise sums."""
+    rng = np.random.default_rng(slices)
+    for _ in range(60):
+        L = int(rng.integers(1, 16))
+        base = rng.uniform(0.0, 640.0, (L, 2))
+        end = base + rng.normal(0.0, 40.0, (L, 2))
+        end[0] = base[0] if L > 2 else end[0]
+        axis = end - base
+        u = axis / np.maximum(np.linalg.norm(axis, axis=1), 1e-9)[:, None]
+        n = np.stack([-u[:, 1], u[:, 0]], axis=1)
+        frac = np.linspace(0.2, 0.85, slices)
+        centres = base[:, None, :] + frac[None, :, None] * axis[:, None, :]
+        off = rng.normal(0.0, 1.5, (L, slices)) + rng.normal(0.0, 3.0, (L, 1))
+        off[rng.random((L, slices)) < 0.15] += 9.0                    # outliers
+        valid = rng.random((L, slices)) < 0.8
+        valid[-1] = False
+        got = edge_kernel.fit_lines(base, end, centres, n, frac, off, valid, 2.0)
+        for g, w in zip(got, _fit_lines_ref(base, end, centres, n, frac, off, valid, 2.0),
+                        strict=True):
+            assert _same(g, w)
+
+
+def test_the_pairwise_sum_is_numpys() -> None:
+    """Every length from 0 to 300 (in order, eight running sums, halves) on values of mixed
+    sizes."""
+    rng = np.random.default_rng(5)
+    a = rng.normal(0.0, 1.0, 300) * 10.0 ** rng.uniform(-6, 6, 300)
+    for n in range(301):
+        for start in (0, 3):
+            assert edge_kernel._pairwise_sum(a, start, min(n, 300 - start)) \
+                == a[start:start + n].sum()
+
+
+def _unexplained_ref(sil, outline, tolerance_px, pixels=True):
+    """Silhouette.unexplained as main computed it (the covered parts and the forearm drawn
+    into images of their own, then masked out)."""
+    import cv2
+
+    from colorglove_ros.core.tracking.silhouette import _fixed, _pts
+    s = sil.scale
+    covered = np.zeros(sil.mask.shape, np.uint8)
+    tol = float(tolerance_px)
+    shift = s * sil.offset
+    ok = np.isfinite(outline.base).all(1) & np.isfinite(outline.end).all(1)
+    thick = np.maximum(1, np.round(2.0 * (outline.half_width + tol) / s)).astype(int)
+    ends = np.stack([_fixed(outline.base[ok] - shift, s), _fixed(outline.end[ok] - shift, s)],
+                    axis=1)
+    for t in np.unique(thick[ok]):
+        cv2.polylines(covered, list(ends[thick[ok] == t]), False, 1, int(t), cv2.LINE_8, 4)
+    ok = np.isfinite(outline.tip).all(1)
+    radius = np.maximum(1, np.round(16 * (outline.tip_radius + tol) / s)).astype(int)
+    for c, r in zip(_pts(outline.tip[ok] - shift, s), radius[ok], strict=True):
+        cv2.circle(covered, c, int(r), 1, -1, cv2.LINE_8, 4)
+    if len(outline.palm) >= 3 and np.all(np.isfinite(outline.palm)):
+        hull = cv2.convexHull(np.round(((outline.palm - shift + 0.5) / s - 0.5) * 16)
+                              .astype(np.int32))
+        cv2.fillConvexPoly(covered, hull, 1, cv2.LINE_8, 4)
+        if tol > 0:
+            cv2.polylines(covered, [hull], True, 1, max(1, int(round(2.0 * tol / s))),
+                          cv2.LINE_8, 4)
+    h, w = sil.mask.shape
+    big = 4.0 * (h + w + np.abs(sil.offset).sum())
+    a = np.asarray(outline.axis, dtype=float)
+    across = np.array([-a[1], a[0]])
+    start = (outline.wrist - shift + 0.5) / s - 0.5 - (tol / s) * a
+    arm = np.zeros_like(covered)
+    quad = start + big * np.array([across, -across, -across - a, across - a])
+    cv2.fillConvexPoly(arm, np.round(quad * 16).astype(np.int32), 1, cv2.LINE_8, 4)
+    hand = cv2.bitwise_and(sil._mask_u8, 1 - arm)
+    count = cv2.countNonZero(hand)
+    if count == 0:
+        return np.zeros((0, 2)), 0.0
+    loose = cv2.bitwise_and(hand, 1 - covered)
+    if not pixels:
+        return np.zeros((0, 2)), float(cv2.countNonZero(loose)) / float(count)
+    found = cv2.findNonZero(loose)
+    if found is None:
+        return np.zeros((0, 2)), 0.0
+    pix = (found.reshape(-1, 2) + sil.offset + 0.5) * s - 0.5
+    return pix, float(len(pix)) / float(count)
+
+
+@pytest.mark.parametrize('scale', [1, 2])
+def test_the_unexplained_pixels_are_main_codes(scale: int) -> None:
+    """Random hands (capsules, some not finite, tips, palms) over random blobs, offsets and
+    tolerances: the same pixels and shares, listed or not."""
+    from colorglove_ros.core.tracking.silhouette import HandOutline, Silhouette
+    rng = np.random.default_rng(11 + scale)
+    for trial in range(60):
+        h, w = int(rng.integers(20, 120)), int(rng.integers(20, 120))
+        mask = np.zeros((h, w), bool)
+        for _ in range(int(rng.integers(0, 6))):
+            y, x, r = rng.integers(0, h), rng.integers(0, w), rng.integers(2, 25)
+            yy, xx = np.ogrid[:h, :w]
+            mask |= (yy - y) ** 2 + (xx - x) ** 2 <= r * r
+        sil = Silhouette(mask, scale, (int(rng.integers(0, 30)), int(rng.integers(0, 30))))
+        origin = sil.offset * scale
+        L, T = int(rng.integers(0, 12)), int(rng.integers(0, 6))
+        base = origin + rng.uniform(-20, w * scale + 20, (L, 2))
+        end = base + rng.normal(0, 25, (L, 2))
+        if L and trial % 5 == 0:
+            end[0] = np.nan
+        tip = origin + rng.uniform(0, w * scale, (T, 2))
+        palm = origin + rng.uniform(0, w * scale, (int(rng.choice([0, 2, 8])), 2))
+        axis = rng.normal(0, 1, 2)
+        outline = HandOutline(base, end, rng.uniform(1, 9, L), tip, rng.uniform(2, 8, T), palm,
+                              origin + rng.uniform(0, w * scale, 2), axis / np.linalg.norm(axis))
+        for tol in (0.0, 4.0):
+            for pixels in (True, False):
+                got = sil.unexplained(outline, tol, pixels)
+                want = _unexplained_ref(sil, outline, tol, pixels)
+                assert got[1] == want[1] and _same(got[0], want[0])
