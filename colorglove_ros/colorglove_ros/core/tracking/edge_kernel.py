@@ -21,7 +21,7 @@ from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['derivative', 'pair_search', 'edge_peaks', 'tip_peaks', 'segment_distances',
            'occluded_slices', 'behind_palm', 'fit_lines', 'line_rows', 'axis_points',
-           'silhouette_rows', 'compile_kernels']
+           'silhouette_rows', 'probe_maps', 'probe_gradients', 'compile_kernels']
 
 _JIT = {'cache': True, 'nogil': True}
 _NO_EDGE = -1.0e9   # edge_features._NO_EDGE: any pair using such a sample scores < 0
@@ -532,6 +532,45 @@ def silhouette_rows(pix: np.ndarray, jpix: np.ndarray, depth: np.ndarray, links:
     return r[:row].copy(), J[:row].copy()
 
 
+_PROBES = ((0.0, 0.0), (1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))
+
+
+@numba.njit(**_JIT)
+def probe_maps(px: np.ndarray, scale: int, offset: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """``silhouette.Silhouette.outside_distance``'s sample maps: each of (N, 2) pixels and its
+    four neighbours ``scale`` pixels away (right, left, down, up) as float32 mask coordinates
+    (the mask ``scale`` times smaller, its first pixel at ``offset``), x and y (5N, 1) each,
+    in numpy's dtypes and order."""
+    n = len(px)
+    mx = np.empty((5 * n, 1), np.float32)
+    my = np.empty((5 * n, 1), np.float32)
+    h = np.float64(scale)
+    half, s32 = np.float32(0.5), np.float32(scale)
+    for i in range(n):
+        for k in range(5):
+            x = np.float32(px[i, 0] + h * _PROBES[k][0])
+            y = np.float32(px[i, 1] + h * _PROBES[k][1])
+            mx[5 * i + k, 0] = np.float32(np.float64((x + half) / s32 - half) - offset[0])
+            my[5 * i + k, 0] = np.float32(np.float64((y + half) / s32 - half) - offset[1])
+    return mx, my
+
+
+@numba.njit(**_JIT)
+def probe_gradients(values: np.ndarray, scale: int) -> tuple[np.ndarray, np.ndarray]:
+    """The outside distances at N pixels and their central-difference gradients (N, 2) from
+    the samples of :func:`probe_maps` (5N, 1) float32, in float32."""
+    n = len(values) // 5
+    dist = np.empty(n, np.float32)
+    grad = np.empty((n, 2), np.float32)
+    twice = np.float32(2.0 * np.float64(scale))
+    for i in range(n):
+        dist[i] = values[5 * i, 0]
+        grad[i, 0] = (values[5 * i + 1, 0] - values[5 * i + 2, 0]) / twice
+        grad[i, 1] = (values[5 * i + 3, 0] - values[5 * i + 4, 0]) / twice
+    return dist, grad
+
+
 def _array(dtype: object, ndim: int) -> object:
     """A read-only C-contiguous array type (writable arrays convert to it)."""
     return numba.types.Array(dtype, ndim, 'C', readonly=True)
@@ -554,6 +593,8 @@ _SIGNATURES = {
                 numba.boolean, numba.boolean),
     fit_lines: (_F2, _F2, _array(numba.float64, 3), _F2, _F1, _F2, _array(numba.boolean, 2),
                 numba.float64),
+    probe_maps: (_F2, numba.int64, _F1),
+    probe_gradients: (_array(numba.float32, 2), numba.int64),
     axis_points: (_F2, numba.int64, numba.int64, numba.int64, numba.int64, numba.int64),
     silhouette_rows: (_F2, _array(numba.float64, 3), _F1, numba.int64, numba.int64, _I1,
                       _array(numba.float32, 1), _array(numba.float32, 2), numba.float64, _F2,

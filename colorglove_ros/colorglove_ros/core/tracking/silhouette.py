@@ -32,6 +32,7 @@ import cv2
 import numpy as np
 
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.tracking.edge_features import compiled_kernels
 
 __all__ = ['SilhouetteError', 'SilhouetteConfig', 'BackgroundModel', 'Silhouette',
            'HandOutline', 'read_background']
@@ -176,25 +177,16 @@ class Silhouette:
         """Foreground area in full-resolution pixels."""
         return float(self.mask.sum()) * self.scale ** 2
 
-    def _sample(self, xy: np.ndarray) -> np.ndarray:
-        if not np.size(xy):
-            return np.zeros(np.shape(xy)[:-1], np.float32)
-        flat = ((np.asarray(xy, np.float32).reshape(-1, 2) + 0.5) / self.scale - 0.5
-                - self.offset).astype(np.float32)
-        out = cv2.remap(self._outside, np.ascontiguousarray(flat[:, :1]),
-                        np.ascontiguousarray(flat[:, 1:]), cv2.INTER_LINEAR,
-                        borderMode=cv2.BORDER_REPLICATE)
-        return out.reshape(np.shape(xy)[:-1])
-
     def outside_distance(self, px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Distance (full-resolution pixels, 0 inside) from each of (N, 2) pixels to the
         foreground, and its gradient (N, 2) (central differences one mask pixel apart)."""
-        px = np.asarray(px, dtype=float).reshape(-1, 2)
-        h = float(self.scale)
-        probe = px[:, None, :] + h * np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1]])
-        v = self._sample(probe)
-        grad = np.stack([v[:, 1] - v[:, 2], v[:, 3] - v[:, 4]], axis=1) / (2.0 * h)
-        return v[:, 0], grad
+        px = np.ascontiguousarray(px, dtype=float).reshape(-1, 2)
+        if not len(px):
+            return np.zeros(0, np.float32), np.zeros((0, 2), np.float32)
+        kernels = compiled_kernels()
+        mx, my = kernels.probe_maps(px, self.scale, self.offset)
+        v = cv2.remap(self._outside, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        return kernels.probe_gradients(v.reshape(-1, 1), self.scale)
 
     def unexplained(self, outline: HandOutline, tolerance_px: float, pixels: bool = True
                     ) -> tuple[np.ndarray, float]:

@@ -337,3 +337,40 @@ def test_the_unexplained_pixels_are_main_codes(scale: int) -> None:
                 got = sil.unexplained(outline, tol, pixels)
                 want = _unexplained_ref(sil, outline, tol, pixels)
                 assert got[1] == want[1] and _same(got[0], want[0])
+
+
+def _outside_distance_ref(sil, px):
+    """Silhouette.outside_distance as main computed it."""
+    import cv2
+
+    px = np.asarray(px, dtype=float).reshape(-1, 2)
+    h = float(sil.scale)
+    probe = px[:, None, :] + h * np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1]])
+    if not np.size(probe):
+        v = np.zeros(probe.shape[:-1], np.float32)
+    else:
+        flat = ((np.asarray(probe, np.float32).reshape(-1, 2) + 0.5) / sil.scale - 0.5
+                - sil.offset).astype(np.float32)
+        v = cv2.remap(sil._outside, np.ascontiguousarray(flat[:, :1]),
+                      np.ascontiguousarray(flat[:, 1:]), cv2.INTER_LINEAR,
+                      borderMode=cv2.BORDER_REPLICATE).reshape(probe.shape[:-1])
+    grad = np.stack([v[:, 1] - v[:, 2], v[:, 3] - v[:, 4]], axis=1) / (2.0 * h)
+    return v[:, 0], grad
+
+
+@pytest.mark.parametrize('scale', [1, 2, 3])
+def test_the_outside_distances_are_main_codes(scale: int) -> None:
+    """Pixels on, off and far off random blobs, fractional, outside the mask, none."""
+    from colorglove_ros.core.tracking.silhouette import Silhouette
+    rng = np.random.default_rng(scale)
+    for _ in range(40):
+        h, w = int(rng.integers(10, 90)), int(rng.integers(10, 90))
+        yy, xx = np.ogrid[:h, :w]
+        mask = (yy - rng.integers(0, h)) ** 2 + (xx - rng.integers(0, w)) ** 2 \
+            <= rng.integers(0, 30) ** 2
+        sil = Silhouette(mask, scale, (int(rng.integers(0, 40)), int(rng.integers(0, 40))))
+        px = rng.uniform(-20.0, (w + 60) * scale, (int(rng.integers(0, 50)), 2)) \
+            + sil.offset * scale
+        for got, want in zip(sil.outside_distance(px), _outside_distance_ref(sil, px),
+                             strict=True):
+            assert _same(got, want)
