@@ -193,24 +193,20 @@ def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
     slices known to be occluded or outside the image. Returns :class:`LinkAxes`."""
     cfg = config or EdgeSearchConfig()
     base, end, hw = _check_segments(base_px, end_px, half_width_px)
+    base, end, hw = (np.ascontiguousarray(x) for x in (base, end, hw))
     L, S, W = len(base), cfg.slices_per_link, cfg.samples_per_slice
-    axis = end - base
-    length = np.linalg.norm(axis, axis=1)
-    u = axis / np.maximum(length, 1e-9)[:, None]
-    n = np.stack([-u[:, 1], u[:, 0]], axis=1)
     frac = fixed_linspace(cfg.slice_range[0], cfg.slice_range[1], S)
-    centres = base[:, None, :] + frac[None, :, None] * axis[:, None, :]        # (L, S, 2)
-    reach = hw + cfg.search_px                                                 # (L,)
-    t = fixed_linspace(-1.0, 1.0, W)
-    offsets = reach[:, None] * t[None, :]                                      # (L, W)
-    step = 2.0 * reach / (W - 1)                                               # (L,)
-    # only the slices that may be measured are searched (R rows of the (L, S) slices)
-    rows = np.flatnonzero(np.ones(L * S, dtype=bool) if slice_valid is None
-                          else np.asarray(slice_valid, dtype=bool).reshape(-1))
-    li = rows // S                                                             # (R,) link
-    xy = centres.reshape(-1, 2)[rows][:, None, :] + offsets[li][:, :, None] * n[li][:, None, :]
-    profile = _sample(grey, xy)                                                # (R, W)
-    d = _derivative(profile, step[li])
+    kernels = compiled_kernels()
+    # the slices' normals, centres, reach and spacing, and the sample maps of those that may
+    # be measured (R rows of the (L, S) slices): edge_kernel.link_slice_maps
+    n, centres, reach, step, rows, li, mx, my = kernels.link_slice_maps(
+        base, end, hw, frac, fixed_linspace(-1.0, 1.0, W), float(cfg.search_px),
+        np.ones(L * S, dtype=bool) if slice_valid is None
+        else np.ascontiguousarray(slice_valid, dtype=bool).reshape(-1))
+    profile = np.zeros((0, W), np.float32) if not len(rows) else cv2.remap(
+        grey, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+        borderValue=np.nan).reshape(len(rows), W)                              # (R, W)
+    d = kernels.derivative(profile, step[li])
     pol = np.broadcast_to(np.asarray(polarity, dtype=np.int64), (L,))[li][:, None]
     # edge strengths: a link brighter than its surroundings rises then falls (+1), a darker
     # one falls then rises (-1); with polarity 0 each edge may have either sign, since a
@@ -228,24 +224,15 @@ def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
     agree = np.where(ok_width, np.exp(-0.5 * ((width - 2.0 * hw[:, None])
                                               / (cfg.width_sigma * 2.0 * hw[:, None])) ** 2),
                      0.0)
-    found_pair, sign_i, sign_j, ei, ej = compiled_kernels().pair_search(
+    found_pair, sign_i, sign_j, ei, ej = kernels.pair_search(
         d, np.ascontiguousarray(pol[:, 0]), bool(np.any(pol != 0)), float(cfg.min_gradient),
         agree, li, g_lo)
     # back to (L, S); a slice not searched has no pair (its offset 0 is weighted 0)
-    valid = np.zeros(L * S, dtype=bool)
-    valid[rows] = found_pair
-    valid = valid.reshape(L, S)
-    best_sign = np.zeros(L * S, dtype=np.int64)
-    best_sign[rows] = np.where(sign_i == -sign_j, sign_i, 0)
-    best_sign = best_sign.reshape(L, S)
-    mid_t = np.zeros(L * S)
-    mid_t[rows] = (ei + ej) / (W - 1) - 1.0      # mean of the two sample positions in [-1, 1]
-    mid_off = mid_t.reshape(L, S) * reach[:, None]                             # (L, S)
+    valid, best_sign, mid_off = kernels.pair_midpoints(found_pair, sign_i, sign_j, ei, ej,
+                                                       rows, L, S, W, reach)
     normal, offset, w, midpoints = _fit_lines(base, end, centres, n, frac, mid_off, valid, cfg)
-    found = w.sum(1) >= cfg.min_slices
-    signs = np.where(w > 0, best_sign, 0).sum(1)
-    return LinkAxes(normal, offset, found, w.sum(1).astype(np.int64),
-                    np.sign(signs).astype(np.int64), midpoints)
+    found, count, sign = kernels.axis_counts(w, best_sign, cfg.min_slices)
+    return LinkAxes(normal, offset, found, count, sign, midpoints)
 
 
 def measure_outline_edges(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,

@@ -21,7 +21,8 @@ from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['derivative', 'pair_search', 'edge_peaks', 'tip_peaks', 'segment_distances',
            'occluded_slices', 'behind_palm', 'fit_lines', 'line_rows', 'axis_points',
-           'silhouette_rows', 'probe_maps', 'probe_gradients', 'compile_kernels']
+           'silhouette_rows', 'probe_maps', 'probe_gradients', 'link_slice_maps',
+           'pair_midpoints', 'axis_counts', 'compile_kernels']
 
 _JIT = {'cache': True, 'nogil': True}
 _NO_EDGE = -1.0e9   # edge_features._NO_EDGE: any pair using such a sample scores < 0
@@ -532,6 +533,90 @@ def silhouette_rows(pix: np.ndarray, jpix: np.ndarray, depth: np.ndarray, links:
     return r[:row].copy(), J[:row].copy()
 
 
+@numba.njit(**_JIT)
+def link_slice_maps(base: np.ndarray, end: np.ndarray, half_width: np.ndarray,
+                    frac: np.ndarray, t: np.ndarray, search_px: float, valid: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                               np.ndarray, np.ndarray, np.ndarray]:
+    """``edge_features.measure_link_axes``' slices, numpy's operations in numpy's order: per
+    link ``base -> end`` (L, 2) of projected radius ``half_width`` (L,) the unit normal
+    (L, 2), the slice centres at ``frac`` (L, S, 2), the reach past the radius and the
+    sample spacing (L,); the slices to search (``valid`` (L * S,)) as rows (R,) and their
+    links (R,); their samples at ``t`` (W,) times the reach along the normal as float32 x and
+    y maps (R * W, 1) each."""
+    L, S, W = len(base), len(frac), len(t)
+    n = np.empty((L, 2))
+    centres = np.empty((L, S, 2))
+    reach = np.empty(L)
+    step = np.empty(L)
+    for li in range(L):
+        ax, ay = end[li, 0] - base[li, 0], end[li, 1] - base[li, 1]
+        length = np.sqrt(ax * ax + ay * ay)
+        safe = length if length >= 1e-9 or np.isnan(length) else 1e-9
+        n[li, 0], n[li, 1] = -(ay / safe), ax / safe
+        for k in range(S):
+            centres[li, k, 0] = base[li, 0] + frac[k] * ax
+            centres[li, k, 1] = base[li, 1] + frac[k] * ay
+        reach[li] = half_width[li] + search_px
+        step[li] = 2.0 * reach[li] / (W - 1)
+    rows = np.flatnonzero(valid)
+    links = rows // S
+    mx = np.empty((len(rows) * W, 1), np.float32)
+    my = np.empty((len(rows) * W, 1), np.float32)
+    for r in range(len(rows)):
+        li, k = links[r], rows[r] % S
+        for j in range(W):
+            off = reach[li] * t[j]
+            mx[r * W + j, 0] = np.float32(centres[li, k, 0] + off * n[li, 0])
+            my[r * W + j, 0] = np.float32(centres[li, k, 1] + off * n[li, 1])
+    return n, centres, reach, step, rows, links, mx, my
+
+
+@numba.njit(**_JIT)
+def pair_midpoints(found: np.ndarray, sign_i: np.ndarray, sign_j: np.ndarray,
+                   ei: np.ndarray, ej: np.ndarray, rows: np.ndarray, links: int,
+                   slices: int, samples: int, reach: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`pair_search`'s pairs of the searched ``rows`` back on the (L, S) slices: where
+    a pair was found, the sign of its entering edge where the two edges' signs are opposite
+    (else 0), and the pair's midpoint offset along the normal (the mean of the two sample
+    positions in [-1, 1] times the reach; 0 where nothing was searched)."""
+    valid = np.zeros((links, slices), np.bool_)
+    best_sign = np.zeros((links, slices), np.int64)
+    mid_t = np.zeros((links, slices))
+    for r in range(len(rows)):
+        li, k = rows[r] // slices, rows[r] % slices
+        valid[li, k] = found[r]
+        best_sign[li, k] = sign_i[r] if sign_i[r] == -sign_j[r] else 0
+        mid_t[li, k] = (ei[r] + ej[r]) / (samples - 1) - 1.0
+    mid_off = np.empty((links, slices))
+    for li in range(links):
+        for k in range(slices):
+            mid_off[li, k] = mid_t[li, k] * reach[li]
+    return valid, best_sign, mid_off
+
+
+@numba.njit(**_JIT)
+def axis_counts(w: np.ndarray, sign: np.ndarray, min_slices: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per line of (L, S) kept-point weights (0 or 1): whether at least ``min_slices`` were
+    kept, how many, and the sign of the kept slices' summed ``sign`` (L,) each."""
+    L, S = w.shape
+    found = np.empty(L, np.bool_)
+    count = np.empty(L, np.int64)
+    polarity = np.empty(L, np.int64)
+    for li in range(L):
+        total, signs = 0.0, 0
+        for k in range(S):
+            total += w[li, k]
+            if w[li, k] > 0:
+                signs += sign[li, k]
+        found[li] = total >= min_slices
+        count[li] = np.int64(total)
+        polarity[li] = 1 if signs > 0 else (-1 if signs < 0 else 0)
+    return found, count, polarity
+
+
 _PROBES = ((0.0, 0.0), (1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))
 
 
@@ -593,6 +678,10 @@ _SIGNATURES = {
                 numba.boolean, numba.boolean),
     fit_lines: (_F2, _F2, _array(numba.float64, 3), _F2, _F1, _F2, _array(numba.boolean, 2),
                 numba.float64),
+    link_slice_maps: (_F2, _F2, _F1, _F1, _F1, numba.float64, _array(numba.boolean, 1)),
+    pair_midpoints: (_array(numba.boolean, 1), _I1, _I1, _F1, _F1, _I1, numba.int64,
+                     numba.int64, numba.int64, _F1),
+    axis_counts: (_F2, _array(numba.int64, 2), numba.int64),
     probe_maps: (_F2, numba.int64, _F1),
     probe_gradients: (_array(numba.float32, 2), numba.int64),
     axis_points: (_F2, numba.int64, numba.int64, numba.int64, numba.int64, numba.int64),
