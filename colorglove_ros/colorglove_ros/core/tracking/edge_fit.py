@@ -602,59 +602,60 @@ def predict_features(kin: FastKinematics, points: FeaturePoints, camera: Pinhole
                                                       points.point_local, True)
     pix, Jpix, depth = _project_points(camera, p, J)
     L = len(points.links)
-    base, end = pix[0:2 * L:2], pix[1:2 * L:2]
     Jb, Je = Jpix[0:2 * L:2], Jpix[1:2 * L:2]
-    zb, ze = depth[0:2 * L:2], depth[1:2 * L:2]
-    hw = _pixel_radius(points.radius, camera, 0.5 * (zb + ze))
-    in_front = (zb > config.min_depth_m) & (ze > config.min_depth_m)
-    long_enough = np.linalg.norm(end - base, axis=1) >= config.min_link_px
-    usable = in_front & long_enough
     S = config.search.slices_per_link
     frac = fixed_linspace(*config.search.slice_range, S)
-    centres = base[:, None, :] + frac[None, :, None] * (end - base)[:, None, :]
-    margin = hw[:, None] + config.search.search_px
-    inside = ((centres[..., 0] >= margin) & (centres[..., 0] < camera.width - margin)
-              & (centres[..., 1] >= margin) & (centres[..., 1] < camera.height - margin))
+    focal = 0.5 * (camera.fx + camera.fy)           # as _pixel_radius takes it
+    kernels = compiled_kernels()
+    # the links' ends, depths, radii, usability and slices (edge_kernel.link_prediction)
+    base, end, zb, ze, hw, usable, centres, inside, z_self = kernels.link_prediction(
+        pix, depth, L, points.radius, focal, frac, float(config.min_depth_m),
+        float(config.min_link_px), float(config.search.search_px), camera.width,
+        camera.height)
     # occlusion: a slice is spoilt where the silhouette of a nearer link (other than its
     # neighbours in the chain, which meet it at the joints outside the slice range) overlaps
     # its own, widened by ``occlusion_margin_px`` (edge_kernel.occluded_slices)
-    z_self = zb[:, None] + frac[None, :] * (ze - zb)[:, None]
-    parent = np.asarray(kin.model.link_parent)[points.links]
-    exempt = (np.eye(L, dtype=bool) | (parent[:, None] == points.links[None, :])
-              | (parent[None, :] == points.links[:, None]))
-    occluded = compiled_kernels().occluded_slices(
-        np.ascontiguousarray(centres.reshape(-1, 2)), S, np.ascontiguousarray(base),
-        np.ascontiguousarray(end), np.ascontiguousarray(zb), np.ascontiguousarray(ze), hw,
-        np.ascontiguousarray(z_self.reshape(-1)), float(config.occlusion_margin_px), usable,
-        exempt).reshape(L, S)
+    occluded = kernels.occluded_slices(
+        centres, S, base, end, zb, ze, hw, z_self, float(config.occlusion_margin_px), usable,
+        _exempt_links(kin, points)).reshape(L, S)
+    centres = centres.reshape(L, S, 2)
     if config.palm_occlusion_px > 0 and len(points.palm_surface):
-        occluded |= _behind_palm(points, camera, config, q, centres, z_self)
+        occluded |= _behind_palm(points, camera, config, q, centres, z_self.reshape(L, S))
     slice_valid = usable[:, None] & inside & ~occluded
     link_usable = slice_valid.sum(1) >= config.search.min_slices
     T = len(points.tip_links)
     tip = pix[points.tip_slice]
     tip_end = pix[2 * L + 1:points.palm_start:2]
     Jt = Jpix[points.tip_slice] if T else np.zeros((0, 2, NUM_DOFS))
-    zt = depth[points.tip_slice]
-    tip_r = _pixel_radius(points.tip_radius, camera, zt)
-    rows = points.tip_row
-    tip_ok = (rows >= 0) & (zt > config.min_depth_m)
-    tip_ok &= np.where(rows >= 0, link_usable[np.maximum(rows, 0)], False)
-    margin_t = config.search.tip_search_px + tip_r
-    tip_ok &= ((tip_end[:, 0] >= margin_t) & (tip_end[:, 0] < camera.width - margin_t)
-               & (tip_end[:, 1] >= margin_t) & (tip_end[:, 1] < camera.height - margin_t))
-    if T:
-        # a tip lying on another (nearer) link cannot be told from it
-        dt, st = segment_distances(tip_end, base, end)
-        zt_other = zb[None, :] + st * (ze - zb)[None, :]
-        tip_row_mask = np.zeros((T, L), dtype=bool)
-        tip_row_mask[np.arange(T)[rows >= 0], rows[rows >= 0]] = True
-        over = (dt < hw[None, :] + tip_r[:, None]) & (zt_other < zt[:, None]) & ~tip_row_mask
-        tip_ok &= ~np.any(over & usable[None, :], axis=1)
+    # a tip lying on another (nearer) link cannot be told from it (edge_kernel.tip_prediction)
+    tip_r, tip_ok = kernels.tip_prediction(
+        pix, depth, points.tip_slice.start, T, points.tip_radius, focal, points.tip_row,
+        link_usable, float(config.min_depth_m), float(config.search.tip_search_px),
+        camera.width, camera.height, base, end, zb, ze, hw, usable)
     palm = _predict_palm(points, camera, config, q, p, pix, depth, base, end, zb, ze, hw,
                          usable)
     return EdgePrediction(base, end, Jb, Je, hw, slice_valid, link_usable, tip, tip_end, Jt,
                           tip_r, tip_ok, *palm)
+
+
+_EXEMPT: dict[tuple[int, int], tuple[FastKinematics, FeaturePoints, np.ndarray]] = {}
+
+
+def _exempt_links(kin: FastKinematics, points: FeaturePoints) -> np.ndarray:
+    """(L, L) the tracked links each link's occlusion test leaves out: itself, its parent and
+    its children (remembered per kinematics and feature points)."""
+    key = (id(kin), id(points))
+    hit = _EXEMPT.get(key)
+    if hit is None:
+        L = len(points.links)
+        parent = np.asarray(kin.model.link_parent)[points.links]
+        exempt = (np.eye(L, dtype=bool) | (parent[:, None] == points.links[None, :])
+                  | (parent[None, :] == points.links[:, None]))
+        exempt.setflags(write=False)
+        if len(_EXEMPT) >= 8:
+            _EXEMPT.pop(next(iter(_EXEMPT)))
+        hit = _EXEMPT[key] = (kin, points, exempt)    # kept: their ids are not reused
+    return hit[2]
 
 
 def _behind_palm(points: FeaturePoints, camera: PinholeCamera, config: EdgeTrackerConfig,

@@ -22,7 +22,8 @@ from colorglove_ros.core.kernel_compile import compile_signatures
 __all__ = ['derivative', 'pair_search', 'edge_peaks', 'tip_peaks', 'segment_distances',
            'occluded_slices', 'behind_palm', 'fit_lines', 'line_rows', 'axis_points',
            'silhouette_rows', 'probe_maps', 'probe_gradients', 'link_slice_maps',
-           'pair_midpoints', 'axis_counts', 'compile_kernels']
+           'pair_midpoints', 'axis_counts', 'link_prediction', 'tip_prediction',
+           'compile_kernels']
 
 _JIT = {'cache': True, 'nogil': True}
 _NO_EDGE = -1.0e9   # edge_features._NO_EDGE: any pair using such a sample scores < 0
@@ -534,6 +535,85 @@ def silhouette_rows(pix: np.ndarray, jpix: np.ndarray, depth: np.ndarray, links:
 
 
 @numba.njit(**_JIT)
+def link_prediction(pix: np.ndarray, depth: np.ndarray, links: int, radius: np.ndarray,
+                    focal: float, frac: np.ndarray, min_depth: float, min_length: float,
+                    search_px: float, width: int, height: int
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                               np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``edge_fit.predict_features``' links, numpy's operations in numpy's order: from the
+    projected feature points (``pix`` (N, 2), ``depth`` (N,); link l's base at row 2l, its end
+    at 2l + 1) each link's base and end (L, 2), their depths (L,), projected radius
+    (``radius`` times ``focal`` over the mean depth), whether it is usable (both ends
+    farther than ``min_depth``, at least ``min_length`` pixels long), its slice centres at
+    ``frac`` (L * S, 2), which lie inside the image by the radius plus ``search_px`` (L, S)
+    and their depths (L * S,)."""
+    L, S = links, len(frac)
+    base = np.empty((L, 2))
+    end = np.empty((L, 2))
+    zb = np.empty(L)
+    ze = np.empty(L)
+    hw = np.empty(L)
+    usable = np.empty(L, np.bool_)
+    centres = np.empty((L * S, 2))
+    inside = np.empty((L, S), np.bool_)
+    z_self = np.empty(L * S)
+    for li in range(L):
+        for c in range(2):
+            base[li, c], end[li, c] = pix[2 * li, c], pix[2 * li + 1, c]
+        zb[li], ze[li] = depth[2 * li], depth[2 * li + 1]
+        z = 0.5 * (zb[li] + ze[li])
+        hw[li] = radius[li] * focal / (z if z >= 1e-6 or np.isnan(z) else 1e-6)
+        dx, dy = end[li, 0] - base[li, 0], end[li, 1] - base[li, 1]
+        usable[li] = zb[li] > min_depth and ze[li] > min_depth \
+            and np.sqrt(dx * dx + dy * dy) >= min_length
+        margin = hw[li] + search_px
+        for k in range(S):
+            cx = base[li, 0] + frac[k] * dx
+            cy = base[li, 1] + frac[k] * dy
+            centres[li * S + k, 0], centres[li * S + k, 1] = cx, cy
+            inside[li, k] = cx >= margin and cx < width - margin and cy >= margin \
+                and cy < height - margin
+            z_self[li * S + k] = zb[li] + frac[k] * (ze[li] - zb[li])
+    return base, end, zb, ze, hw, usable, centres, inside, z_self
+
+
+@numba.njit(**_JIT)
+def tip_prediction(pix: np.ndarray, depth: np.ndarray, tip_start: int, tips: int,
+                   tip_radius: np.ndarray, focal: float, tip_row: np.ndarray,
+                   link_usable: np.ndarray, min_depth: float, search_px: float, width: int,
+                   height: int, base: np.ndarray, end: np.ndarray, zb: np.ndarray,
+                   ze: np.ndarray, hw: np.ndarray, usable: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """``edge_fit.predict_features``' tips, numpy's operations in numpy's order: each tip's
+    projected radius (T,) and whether it may be measured: its distal link (row ``tip_row``,
+    -1: none) usable, its centre (row ``tip_start + 2t``) farther than ``min_depth``, its
+    extremity (the next row) inside the image by ``search_px`` plus its radius, and not on
+    another usable link's capsule (``base -> end``, half-widths ``hw``) nearer the camera."""
+    radius = np.empty(tips)
+    ok = np.empty(tips, np.bool_)
+    for t in range(tips):
+        zt = depth[tip_start + 2 * t]
+        radius[t] = tip_radius[t] * focal / (zt if zt >= 1e-6 or np.isnan(zt) else 1e-6)
+        row = tip_row[t]
+        x, y = pix[tip_start + 2 * t + 1, 0], pix[tip_start + 2 * t + 1, 1]
+        margin = search_px + radius[t]
+        good = row >= 0 and zt > min_depth and link_usable[max(row, 0)] \
+            and x >= margin and x < width - margin and y >= margin and y < height - margin
+        for m in range(len(base)):
+            if not good:
+                break
+            if m == row or not usable[m]:
+                continue
+            ax, ay = base[m, 0], base[m, 1]
+            bx, by = end[m, 0] - ax, end[m, 1] - ay
+            dist, s = _closest(x, y, ax, ay, bx, by, _squared_length(bx, by))
+            if dist < hw[m] + radius[t] and zb[m] + s * (ze[m] - zb[m]) < zt:
+                good = False
+        ok[t] = good
+    return radius, ok
+
+
+@numba.njit(**_JIT)
 def link_slice_maps(base: np.ndarray, end: np.ndarray, half_width: np.ndarray,
                     frac: np.ndarray, t: np.ndarray, search_px: float, valid: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
@@ -678,6 +758,11 @@ _SIGNATURES = {
                 numba.boolean, numba.boolean),
     fit_lines: (_F2, _F2, _array(numba.float64, 3), _F2, _F1, _F2, _array(numba.boolean, 2),
                 numba.float64),
+    link_prediction: (_F2, _F1, numba.int64, _F1, numba.float64, _F1, numba.float64,
+                      numba.float64, numba.float64, numba.int64, numba.int64),
+    tip_prediction: (_F2, _F1, numba.int64, numba.int64, _F1, numba.float64, _I1,
+                     _array(numba.boolean, 1), numba.float64, numba.float64, numba.int64,
+                     numba.int64, _F2, _F2, _F1, _F1, _F1, _array(numba.boolean, 1)),
     link_slice_maps: (_F2, _F2, _F1, _F1, _F1, numba.float64, _array(numba.boolean, 1)),
     pair_midpoints: (_array(numba.boolean, 1), _I1, _I1, _F1, _F1, _I1, numba.int64,
                      numba.int64, numba.int64, _F1),
