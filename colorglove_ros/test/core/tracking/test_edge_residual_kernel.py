@@ -374,3 +374,77 @@ def test_the_outside_distances_are_main_codes(scale: int) -> None:
         for got, want in zip(sil.outside_distance(px), _outside_distance_ref(sil, px),
                              strict=True):
             assert _same(got, want)
+
+
+def _link_prediction_ref(pix, depth, L, radius, focal, frac, min_depth, min_len, search,
+                         width, height):
+    """predict_features' links as main computed them."""
+    base, end = pix[0:2 * L:2], pix[1:2 * L:2]
+    zb, ze = depth[0:2 * L:2], depth[1:2 * L:2]
+    hw = radius * focal / np.maximum(0.5 * (zb + ze), 1e-6)
+    usable = (zb > min_depth) & (ze > min_depth) \
+        & (np.linalg.norm(end - base, axis=1) >= min_len)
+    centres = base[:, None, :] + frac[None, :, None] * (end - base)[:, None, :]
+    margin = hw[:, None] + search
+    inside = ((centres[..., 0] >= margin) & (centres[..., 0] < width - margin)
+              & (centres[..., 1] >= margin) & (centres[..., 1] < height - margin))
+    z_self = zb[:, None] + frac[None, :] * (ze - zb)[:, None]
+    return (base.copy(), end.copy(), zb.copy(), ze.copy(), hw, usable,
+            centres.reshape(-1, 2), inside, z_self.reshape(-1))
+
+
+def _tip_prediction_ref(pix, depth, L, T, tip_radius, focal, rows, link_usable, min_depth,
+                        search, width, height, base, end, zb, ze, hw, usable):
+    """predict_features' tips as main computed them."""
+    from colorglove_ros.core.tracking.edge_features import segment_distances
+    tip_slice = slice(2 * L, 2 * L + 2 * T, 2)
+    tip_end = pix[2 * L + 1:2 * L + 2 * T:2]
+    zt = depth[tip_slice]
+    tip_r = tip_radius * focal / np.maximum(zt, 1e-6)
+    tip_ok = (rows >= 0) & (zt > min_depth)
+    tip_ok &= np.where(rows >= 0, link_usable[np.maximum(rows, 0)], False)
+    margin_t = search + tip_r
+    tip_ok &= ((tip_end[:, 0] >= margin_t) & (tip_end[:, 0] < width - margin_t)
+               & (tip_end[:, 1] >= margin_t) & (tip_end[:, 1] < height - margin_t))
+    if T:
+        dt, st = segment_distances(tip_end, base, end)
+        zt_other = zb[None, :] + st * (ze - zb)[None, :]
+        mask = np.zeros((T, L), dtype=bool)
+        mask[np.arange(T)[rows >= 0], rows[rows >= 0]] = True
+        over = (dt < hw[None, :] + tip_r[:, None]) & (zt_other < zt[:, None]) & ~mask
+        tip_ok &= ~np.any(over & usable[None, :], axis=1)
+    return tip_r, tip_ok
+
+
+def test_the_prediction_kernels_give_the_numpy_codes_bits() -> None:
+    """Links behind the camera, short, at the image's border; tips without a distal link,
+    on nearer links, outside the image."""
+    rng = np.random.default_rng(41)
+    width, height = 640, 480
+    for trial in range(80):
+        L, T = int(rng.integers(1, 15)), int(rng.integers(0, 6))
+        N = 2 * L + 2 * T + 3
+        pix = rng.uniform(-40.0, 680.0, (N, 2))
+        if trial % 3 == 0:                  # tips close to links
+            pix[2 * L:2 * L + 2 * T] = pix[:2 * T] + rng.normal(0, 5, (2 * T, 2)) \
+                if 2 * T <= 2 * L else pix[2 * L:2 * L + 2 * T]
+        depth = rng.uniform(-0.05, 0.7, N)
+        radius = rng.uniform(0.005, 0.011, L)
+        frac = np.linspace(0.2, 0.85, int(rng.integers(2, 9)))
+        got = edge_kernel.link_prediction(pix, depth, L, radius, 605.0, frac, 0.1, 10.0, 8.0,
+                                          width, height)
+        want = _link_prediction_ref(pix, depth, L, radius, 605.0, frac, 0.1, 10.0, 8.0, width,
+                                    height)
+        for g, w in zip(got, want, strict=True):
+            assert _same(g, w)
+        base, end, zb, ze, hw, usable = want[:6]
+        rows = rng.integers(-1, L, T).astype(np.int64)
+        link_usable = rng.random(L) < 0.8
+        tip_radius = rng.uniform(0.007, 0.01, T)
+        got = edge_kernel.tip_prediction(pix, depth, 2 * L, T, tip_radius, 605.0, rows,
+                                         link_usable, 0.1, 10.0, width, height, base, end, zb,
+                                         ze, hw, usable)
+        want = _tip_prediction_ref(pix, depth, L, T, tip_radius, 605.0, rows, link_usable, 0.1,
+                                   10.0, width, height, base, end, zb, ze, hw, usable)
+        for g, w in zip(got, want, strict=True):
+            assert _same(g, w)
