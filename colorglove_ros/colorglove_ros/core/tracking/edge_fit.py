@@ -724,27 +724,13 @@ def _predict_palm(points: FeaturePoints, camera: PinholeCamera, config: EdgeTrac
     pos = np.clip(np.interp(angle, PALM_ANGLES, np.arange(A)), 0.0, A - 1 - 1e-9)
     generator = np.stack([np.floor(pos), pos - np.floor(pos)], axis=1)
     rb, re, alpha = palm_rows(points, generator)
-    pb, pe = _blend(pix, rb, alpha), _blend(pix, re, alpha)
-    zpb, zpe = _blend(depth, rb, alpha), _blend(depth, re, alpha)
-    pc = pix[centre_rows]
-    u = (pe - pb) / np.maximum(np.linalg.norm(pe - pb, axis=1, keepdims=True), 1e-9)
-    n = np.stack([-u[:, 1], u[:, 0]], axis=1)
-    n *= np.where(np.einsum('ij,ij->i', n, pb - pc) < 0, -1.0, 1.0)[:, None]
-    in_front = (zpb > config.min_depth_m) & (zpe > config.min_depth_m)
-    long_enough = np.linalg.norm(pe - pb, axis=1) >= config.min_link_px
-    frac = fixed_linspace(*config.palm_slice_range, S)
-    centres = pb[:, None, :] + frac[None, :, None] * (pe - pb)[:, None, :]
-    margin = config.search.search_px
-    inside = ((centres[..., 0] >= margin) & (centres[..., 0] < camera.width - margin)
-              & (centres[..., 1] >= margin) & (centres[..., 1] < camera.height - margin))
-    dist, along = segment_distances(centres.reshape(-1, 2), base, end)
-    dist, along = dist.reshape(P, S, len(base)), along.reshape(P, S, len(base))
-    z_link = zb[None, None, :] + along * (ze - zb)[None, None, :]
-    z_self = (zpb[:, None] + frac[None, :] * (zpe - zpb)[:, None])[..., None]
-    covered = (dist < hw[None, None, :] + config.search.search_px) & (z_link < z_self) \
-        & link_usable[None, None, :]
-    slice_valid = (in_front & long_enough)[:, None] & inside & ~np.any(covered, axis=2)
-    usable = slice_valid.sum(1) >= config.search.min_slices
+    # the generators' ends, normals and usable slices (edge_kernel.palm_prediction)
+    pb, pe, n, slice_valid, usable = compiled_kernels().palm_prediction(
+        pix, depth, rb, re, np.ascontiguousarray(alpha), centre_rows,
+        fixed_linspace(*config.palm_slice_range, S),
+        float(config.min_depth_m), float(config.min_link_px), float(config.search.search_px),
+        camera.width, camera.height, base, end, zb, ze, hw, link_usable,
+        config.search.min_slices)
     return pb, pe, n, generator, slice_valid, usable
 
 

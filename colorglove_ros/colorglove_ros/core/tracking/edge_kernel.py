@@ -23,6 +23,7 @@ __all__ = ['derivative', 'pair_search', 'edge_peaks', 'tip_peaks', 'segment_dist
            'occluded_slices', 'behind_palm', 'fit_lines', 'line_rows', 'axis_points',
            'silhouette_rows', 'probe_maps', 'probe_gradients', 'link_slice_maps',
            'pair_midpoints', 'axis_counts', 'link_prediction', 'tip_prediction',
+           'palm_prediction',
            'compile_kernels']
 
 _JIT = {'cache': True, 'nogil': True}
@@ -614,6 +615,65 @@ def tip_prediction(pix: np.ndarray, depth: np.ndarray, tip_start: int, tips: int
 
 
 @numba.njit(**_JIT)
+def palm_prediction(pix: np.ndarray, depth: np.ndarray, rows_b: np.ndarray,
+                    rows_e: np.ndarray, alpha: np.ndarray, centre_rows: np.ndarray,
+                    frac: np.ndarray, min_depth: float, min_length: float, search_px: float,
+                    width: int, height: int, base: np.ndarray, end: np.ndarray,
+                    zb: np.ndarray, ze: np.ndarray, hw: np.ndarray, link_usable: np.ndarray,
+                    min_slices: int
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``edge_fit._predict_palm`` after the generators' choice, numpy's operations in numpy's
+    order: per palm side its generator's base and end (P, 2; rows ``rows_b``, ``rows_e``
+    blended with the rows two on by ``alpha``), the unit normal pointing away from the palm's
+    centre (row ``centre_rows``), which slices at ``frac`` lie inside the image by
+    ``search_px`` and not behind a nearer usable link's capsule (``base -> end``, half-widths
+    ``hw`` plus ``search_px``) on a side in front of the camera and long enough (P, S), and
+    which sides have at least ``min_slices`` of them."""
+    P, S, L = len(rows_b), len(frac), len(base)
+    pb = np.empty((P, 2))
+    pe = np.empty((P, 2))
+    n = np.empty((P, 2))
+    valid = np.empty((P, S), np.bool_)
+    usable = np.empty(P, np.bool_)
+    for i in range(P):
+        a = alpha[i]
+        for c in range(2):
+            pb[i, c] = (1.0 - a) * pix[rows_b[i], c] + a * pix[rows_b[i] + 2, c]
+            pe[i, c] = (1.0 - a) * pix[rows_e[i], c] + a * pix[rows_e[i] + 2, c]
+        zpb = (1.0 - a) * depth[rows_b[i]] + a * depth[rows_b[i] + 2]
+        zpe = (1.0 - a) * depth[rows_e[i]] + a * depth[rows_e[i] + 2]
+        dx, dy = pe[i, 0] - pb[i, 0], pe[i, 1] - pb[i, 1]
+        length = np.sqrt(dx * dx + dy * dy)
+        safe = length if length >= 1e-9 or np.isnan(length) else 1e-9
+        nx, ny = -(dy / safe), dx / safe
+        cx, cy = pix[centre_rows[i], 0], pix[centre_rows[i], 1]
+        flip = -1.0 if (0.0 + nx * (pb[i, 0] - cx)) + ny * (pb[i, 1] - cy) < 0 else 1.0
+        n[i, 0], n[i, 1] = nx * flip, ny * flip
+        side_ok = zpb > min_depth and zpe > min_depth and length >= min_length
+        count = 0
+        for k in range(S):
+            sx = pb[i, 0] + frac[k] * dx
+            sy = pb[i, 1] + frac[k] * dy
+            ok = side_ok and sx >= search_px and sx < width - search_px \
+                and sy >= search_px and sy < height - search_px
+            z_self = zpb + frac[k] * (zpe - zpb)
+            for m in range(L):
+                if not ok:
+                    break
+                if not link_usable[m]:
+                    continue
+                ax, ay = base[m, 0], base[m, 1]
+                bx, by = end[m, 0] - ax, end[m, 1] - ay
+                dist, s = _closest(sx, sy, ax, ay, bx, by, _squared_length(bx, by))
+                if dist < hw[m] + search_px and zb[m] + s * (ze[m] - zb[m]) < z_self:
+                    ok = False
+            valid[i, k] = ok
+            count += ok
+        usable[i] = count >= min_slices
+    return pb, pe, n, valid, usable
+
+
+@numba.njit(**_JIT)
 def link_slice_maps(base: np.ndarray, end: np.ndarray, half_width: np.ndarray,
                     frac: np.ndarray, t: np.ndarray, search_px: float, valid: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
@@ -763,6 +823,9 @@ _SIGNATURES = {
     tip_prediction: (_F2, _F1, numba.int64, numba.int64, _F1, numba.float64, _I1,
                      _array(numba.boolean, 1), numba.float64, numba.float64, numba.int64,
                      numba.int64, _F2, _F2, _F1, _F1, _F1, _array(numba.boolean, 1)),
+    palm_prediction: (_F2, _F1, _I1, _I1, _F1, _I1, _F1, numba.float64, numba.float64,
+                      numba.float64, numba.int64, numba.int64, _F2, _F2, _F1, _F1, _F1,
+                      _array(numba.boolean, 1), numba.int64),
     link_slice_maps: (_F2, _F2, _F1, _F1, _F1, numba.float64, _array(numba.boolean, 1)),
     pair_midpoints: (_array(numba.boolean, 1), _I1, _I1, _F1, _F1, _I1, numba.int64,
                      numba.int64, numba.int64, _F1),

@@ -448,3 +448,57 @@ def test_the_prediction_kernels_give_the_numpy_codes_bits() -> None:
                                    10.0, width, height, base, end, zb, ze, hw, usable)
         for g, w in zip(got, want, strict=True):
             assert _same(g, w)
+
+
+def _palm_prediction_ref(pix, depth, rb, re, alpha, centre_rows, frac, min_depth, min_len,
+                         search, width, height, base, end, zb, ze, hw, link_usable,
+                         min_slices):
+    """_predict_palm after the generators' choice, as main computed it."""
+    from colorglove_ros.core.tracking.edge_features import segment_distances
+    P, S = len(rb), len(frac)
+    pb, pe = _blend(pix, rb, alpha), _blend(pix, re, alpha)
+    zpb, zpe = _blend(depth, rb, alpha), _blend(depth, re, alpha)
+    pc = pix[centre_rows]
+    u = (pe - pb) / np.maximum(np.linalg.norm(pe - pb, axis=1, keepdims=True), 1e-9)
+    n = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    n *= np.where(np.einsum('ij,ij->i', n, pb - pc) < 0, -1.0, 1.0)[:, None]
+    in_front = (zpb > min_depth) & (zpe > min_depth)
+    long_enough = np.linalg.norm(pe - pb, axis=1) >= min_len
+    centres = pb[:, None, :] + frac[None, :, None] * (pe - pb)[:, None, :]
+    inside = ((centres[..., 0] >= search) & (centres[..., 0] < width - search)
+              & (centres[..., 1] >= search) & (centres[..., 1] < height - search))
+    dist, along = segment_distances(centres.reshape(-1, 2), base, end)
+    dist, along = dist.reshape(P, S, len(base)), along.reshape(P, S, len(base))
+    z_link = zb[None, None, :] + along * (ze - zb)[None, None, :]
+    z_self = (zpb[:, None] + frac[None, :] * (zpe - zpb)[:, None])[..., None]
+    covered = (dist < hw[None, None, :] + search) & (z_link < z_self) \
+        & link_usable[None, None, :]
+    slice_valid = (in_front & long_enough)[:, None] & inside & ~np.any(covered, axis=2)
+    return pb, pe, n, slice_valid, slice_valid.sum(1) >= min_slices
+
+
+def test_the_palm_prediction_kernel_gives_the_numpy_codes_bits() -> None:
+    """Palm sides between two generators, behind the camera, short, behind nearer links."""
+    rng = np.random.default_rng(43)
+    for trial in range(80):
+        L, P, N = int(rng.integers(1, 15)), int(rng.integers(1, 3)), 60
+        pix = rng.uniform(-20.0, 660.0, (N, 2))
+        depth = rng.uniform(-0.05, 0.7, N)
+        rb = rng.integers(0, N - 3, P).astype(np.int64)
+        re = (rb + 1).astype(np.int64)
+        alpha = rng.random(P)
+        centre_rows = rng.integers(0, N, P).astype(np.int64)
+        base = rng.uniform(0.0, 640.0, (L, 2))
+        end = base + rng.normal(0.0, 60.0, (L, 2))
+        if trial % 4 == 0:                              # links over the palm's side
+            base[0] = pix[rb[0]] + rng.normal(0, 3, 2)
+            end[0] = pix[re[0]] + rng.normal(0, 3, 2)
+        zb, ze = rng.uniform(0.2, 0.6, L), rng.uniform(0.2, 0.6, L)
+        hw = rng.uniform(3.0, 12.0, L)
+        link_usable = rng.random(L) < 0.8
+        frac = np.linspace(0.15, 0.95, int(rng.integers(2, 9)))
+        args = (pix, depth, rb, re, alpha, centre_rows, frac, 0.1, 10.0, 8.0, 640, 480, base,
+                end, zb, ze, hw, link_usable, 3)
+        for g, w in zip(edge_kernel.palm_prediction(*args), _palm_prediction_ref(*args),
+                        strict=True):
+            assert _same(g, w)
