@@ -23,7 +23,7 @@ __all__ = ['derivative', 'pair_search', 'edge_peaks', 'tip_peaks', 'segment_dist
            'occluded_slices', 'behind_palm', 'fit_lines', 'line_rows', 'axis_points',
            'silhouette_rows', 'probe_maps', 'probe_gradients', 'link_slice_maps',
            'pair_midpoints', 'axis_counts', 'link_prediction', 'tip_prediction',
-           'palm_prediction',
+           'palm_prediction', 'outline_drawing',
            'compile_kernels']
 
 _JIT = {'cache': True, 'nogil': True}
@@ -757,6 +757,50 @@ def axis_counts(w: np.ndarray, sign: np.ndarray, min_slices: int
     return found, count, polarity
 
 
+@numba.njit(**_JIT)
+def outline_drawing(base: np.ndarray, end: np.ndarray, half_width: np.ndarray,
+                    tip: np.ndarray, tip_radius: np.ndarray, shift: np.ndarray, scale: int,
+                    tolerance: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``silhouette.Silhouette.unexplained``'s drawing of a hand outline, numpy's operations
+    in numpy's order: the capsules with finite ends (``base -> end`` less ``shift``, as cv2
+    drawing coordinates with 4 fractional bits at 1 / ``scale``; (K, 2, 2) int32) sorted by
+    their line thickness (the half-width plus ``tolerance``, at least 1; (K,), stable), and
+    the finite tips' centres (T, 2) int32 and radii (T,) in drawing units."""
+    L = len(base)
+    keep = np.empty(L, np.int64)
+    thick_all = np.empty(L, np.int64)
+    K = 0
+    s = np.float64(scale)
+    for i in range(L):
+        if np.isfinite(base[i, 0]) and np.isfinite(base[i, 1]) and np.isfinite(end[i, 0]) \
+                and np.isfinite(end[i, 1]):
+            keep[K] = i
+            v = np.rint(2.0 * (half_width[i] + tolerance) / s)
+            thick_all[K] = np.int64(v if v >= 1 or np.isnan(v) else 1.0)
+            K += 1
+    order = np.argsort(thick_all[:K], kind='mergesort')
+    ends = np.empty((K, 2, 2), np.int32)
+    thick = np.empty(K, np.int64)
+    for j in range(K):
+        i = keep[order[j]]
+        thick[j] = thick_all[order[j]]
+        for c in range(2):
+            ends[j, 0, c] = np.int32(np.rint((base[i, c] - shift[c] + 0.5) / s * 16 - 8))
+            ends[j, 1, c] = np.int32(np.rint((end[i, c] - shift[c] + 0.5) / s * 16 - 8))
+    T = 0
+    centres = np.empty((len(tip), 2), np.int32)
+    radii = np.empty(len(tip), np.int64)
+    for t in range(len(tip)):
+        if np.isfinite(tip[t, 0]) and np.isfinite(tip[t, 1]):
+            for c in range(2):
+                centres[T, c] = np.int32(np.rint((tip[t, c] - shift[c] + 0.5) / s * 16 - 8))
+            v = np.rint(16 * (tip_radius[t] + tolerance) / s)
+            radii[T] = np.int64(v if v >= 1 or np.isnan(v) else 1.0)
+            T += 1
+    return ends, thick, centres[:T].copy(), radii[:T].copy()
+
+
 _PROBES = ((0.0, 0.0), (1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))
 
 
@@ -830,6 +874,7 @@ _SIGNATURES = {
     pair_midpoints: (_array(numba.boolean, 1), _I1, _I1, _F1, _F1, _I1, numba.int64,
                      numba.int64, numba.int64, _F1),
     axis_counts: (_F2, _array(numba.int64, 2), numba.int64),
+    outline_drawing: (_F2, _F2, _F1, _F2, _F1, _F1, numba.int64, numba.float64),
     probe_maps: (_F2, numba.int64, _F1),
     probe_gradients: (_array(numba.float32, 2), numba.int64),
     axis_points: (_F2, numba.int64, numba.int64, numba.int64, numba.int64, numba.int64),

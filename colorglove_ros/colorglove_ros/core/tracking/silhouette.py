@@ -212,17 +212,22 @@ class Silhouette:
         # what the hand explains (capsules, tip discs, the palm's hull, each widened by the
         # tolerance) cleared from it in turn: the pixels left are the unexplained ones
         loose = hand
-        ok = np.isfinite(outline.base).all(1) & np.isfinite(outline.end).all(1)
-        thick = np.maximum(1, np.round(2.0 * (outline.half_width + tol) / s)).astype(int)
-        ends = np.stack([_fixed(outline.base[ok] - shift, s), _fixed(outline.end[ok] - shift, s)],
-                        axis=1)                                   # (K, 2, 2) capsule ends
-        # one call per thickness: a two-point polyline is drawn as cv2.line draws it
-        for t in np.unique(thick[ok]):
-            cv2.polylines(loose, list(ends[thick[ok] == t]), False, 0, int(t), cv2.LINE_8, 4)
-        ok = np.isfinite(outline.tip).all(1)
-        radius = np.maximum(1, np.round(16 * (outline.tip_radius + tol) / s)).astype(int)
-        for c, r in zip(_pts(outline.tip[ok] - shift, s), radius[ok], strict=True):
-            cv2.circle(loose, c, int(r), 0, -1, cv2.LINE_8, 4)
+        ends, thick, tips, radii = compiled_kernels().outline_drawing(
+            np.ascontiguousarray(outline.base, dtype=float),
+            np.ascontiguousarray(outline.end, dtype=float),
+            np.ascontiguousarray(outline.half_width, dtype=float),
+            np.ascontiguousarray(outline.tip, dtype=float).reshape(-1, 2),
+            np.ascontiguousarray(outline.tip_radius, dtype=float), shift, s, tol)
+        # one call per thickness (the capsules come sorted by it): a two-point polyline is
+        # drawn as cv2.line draws it
+        start = 0
+        for stop in [*np.flatnonzero(np.diff(thick)) + 1, len(thick)]:
+            if stop > start:
+                cv2.polylines(loose, list(ends[start:stop]), False, 0, int(thick[start]),
+                              cv2.LINE_8, 4)
+            start = stop
+        for c, r in zip(tips.tolist(), radii.tolist(), strict=True):
+            cv2.circle(loose, tuple(c), r, 0, -1, cv2.LINE_8, 4)
         if len(outline.palm) >= 3 and np.all(np.isfinite(outline.palm)):
             hull = cv2.convexHull(np.round(((outline.palm - shift + 0.5) / s - 0.5) * 16)
                                   .astype(np.int32))
@@ -238,13 +243,3 @@ class Silhouette:
         pix = (found.reshape(-1, 2) + self.offset + 0.5) * s - 0.5
         return pix, float(len(pix)) / float(count)
 
-
-def _fixed(xy: np.ndarray, scale: int) -> np.ndarray:
-    """Full-resolution pixels (N, 2) as cv2 drawing coordinates (4 fractional bits) at
-    1 / scale, (N, 2) int32."""
-    return np.round((np.asarray(xy) + 0.5) / scale * 16 - 8).astype(np.int32)
-
-
-def _pts(xy: np.ndarray, scale: int) -> list[tuple[int, int]]:
-    """:func:`_fixed` as a list of (x, y) tuples."""
-    return [tuple(p) for p in _fixed(xy, scale).tolist()]

@@ -263,7 +263,12 @@ def _unexplained_ref(sil, outline, tolerance_px, pixels=True):
     into images of their own, then masked out)."""
     import cv2
 
-    from colorglove_ros.core.tracking.silhouette import _fixed, _pts
+    def _fixed(xy, scale):
+        return np.round((np.asarray(xy) + 0.5) / scale * 16 - 8).astype(np.int32)
+
+    def _pts(xy, scale):
+        return [tuple(p) for p in _fixed(xy, scale).tolist()]
+
     s = sil.scale
     covered = np.zeros(sil.mask.shape, np.uint8)
     tol = float(tolerance_px)
