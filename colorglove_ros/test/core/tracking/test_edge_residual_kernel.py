@@ -337,6 +337,19 @@ def test_the_unexplained_pixels_are_main_codes(scale: int) -> None:
         axis = rng.normal(0, 1, 2)
         outline = HandOutline(base, end, rng.uniform(1, 9, L), tip, rng.uniform(2, 8, T), palm,
                               origin + rng.uniform(0, w * scale, 2), axis / np.linalg.norm(axis))
+        ends, thick, tips, radii = edge_kernel.outline_drawing(
+            base, end, outline.half_width, tip, outline.tip_radius, sil.offset * scale, scale,
+            4.0)
+        ok = np.isfinite(base).all(1) & np.isfinite(end).all(1)
+        fixed = np.round((np.stack([base[ok], end[ok]], axis=1) - sil.offset * scale + 0.5)
+                         / scale * 16 - 8).astype(np.int32)
+        width = np.maximum(1, np.round(2.0 * (outline.half_width[ok] + 4.0) / scale)).astype(int)
+        order = np.argsort(width, kind='stable')
+        assert _same(ends, fixed[order]) and _same(thick, width[order])
+        assert _same(tips, np.round((tip - sil.offset * scale + 0.5) / scale * 16 - 8)
+                     .astype(np.int32))
+        assert _same(radii, np.maximum(1, np.round(16 * (outline.tip_radius + 4.0) / scale))
+                     .astype(int))
         for tol in (0.0, 4.0):
             for pixels in (True, False):
                 got = sil.unexplained(outline, tol, pixels)
@@ -376,6 +389,12 @@ def test_the_outside_distances_are_main_codes(scale: int) -> None:
         sil = Silhouette(mask, scale, (int(rng.integers(0, 40)), int(rng.integers(0, 40))))
         px = rng.uniform(-20.0, (w + 60) * scale, (int(rng.integers(0, 50)), 2)) \
             + sil.offset * scale
+        if len(px):
+            probe = px[:, None, :] + scale * np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1]])
+            flat = ((probe.astype(np.float32).reshape(-1, 2) + 0.5) / scale - 0.5
+                    - sil.offset).astype(np.float32)
+            mx, my = edge_kernel.probe_maps(px, scale, sil.offset)
+            assert _same(mx, flat[:, :1].copy()) and _same(my, flat[:, 1:].copy())
         for got, want in zip(sil.outside_distance(px), _outside_distance_ref(sil, px),
                              strict=True):
             assert _same(got, want)
