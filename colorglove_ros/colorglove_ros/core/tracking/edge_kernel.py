@@ -180,6 +180,12 @@ def tip_peaks(d: np.ndarray, polarity: np.ndarray, min_gradient: float
 
 
 @numba.njit(inline='always', **_JIT)
+def _at_least(x: float, floor: float) -> float:
+    """``np.maximum(x, floor)`` of one value (NaN kept)."""
+    return x if x >= floor or np.isnan(x) else floor
+
+
+@numba.njit(inline='always', **_JIT)
 def _closest(px: float, py: float, ax: float, ay: float, bx: float, by: float, den: float
              ) -> tuple[float, float]:
     """Distance from (px, py) to the segment from (ax, ay) along (bx, by) (``den``: its
@@ -198,7 +204,7 @@ def _closest(px: float, py: float, ax: float, ay: float, bx: float, by: float, d
 def _squared_length(bx: float, by: float) -> float:
     """``np.maximum(bx^2 + by^2, 1e-12)`` (NaN kept)."""
     den = bx * bx + by * by
-    return den if den >= 1e-12 or np.isnan(den) else 1e-12
+    return _at_least(den, 1e-12)
 
 
 @numba.njit(**_JIT)
@@ -332,7 +338,7 @@ def fit_lines(base: np.ndarray, end: np.ndarray, centres: np.ndarray, n: np.ndar
     for li in range(L):
         ax, ay = end[li, 0] - base[li, 0], end[li, 1] - base[li, 1]
         length = np.sqrt(ax * ax + ay * ay)
-        safe_len = length if length >= 1e-9 or np.isnan(length) else 1e-9
+        safe_len = _at_least(length, 1e-9)
         ux, uy = ax / safe_len, ay / safe_len
         for k in range(S):
             s_along[k] = (frac[k] - 0.5) * length
@@ -340,7 +346,7 @@ def fit_lines(base: np.ndarray, end: np.ndarray, centres: np.ndarray, n: np.ndar
         a = b = 0.0
         for _ in range(2):
             sw = _pairwise_sum(w[li], 0, S)
-            safe = sw if sw >= 1e-9 or np.isnan(sw) else 1e-9
+            safe = _at_least(sw, 1e-9)
             for k in range(S):
                 tmp[k] = w[li, k] * s_along[k]
             ms = _pairwise_sum(tmp, 0, S) / safe
@@ -354,7 +360,7 @@ def fit_lines(base: np.ndarray, end: np.ndarray, centres: np.ndarray, n: np.ndar
             for k in range(S):
                 tmp[k] = (w[li, k] * (s_along[k] - ms)) * (off[li, k] - mo)
             cov = _pairwise_sum(tmp, 0, S)
-            b = cov / (var if var >= 1e-9 or np.isnan(var) else 1e-9) if var > 1e-9 else 0.0
+            b = cov / _at_least(var, 1e-9) if var > 1e-9 else 0.0
             a = mo - b * ms
             for k in range(S):
                 resid = abs(off[li, k] - (a + b * s_along[k]))
@@ -388,7 +394,7 @@ def _robust_weight(r: float, k: float, cauchy: bool) -> float:
         return 1.0 / (1.0 + s * s)
     if a <= k:
         return 1.0
-    return k / (a if a >= 1e-12 or np.isnan(a) else 1e-12)
+    return k / _at_least(a, 1e-12)
 
 
 @numba.njit(**_JIT)
@@ -520,7 +526,7 @@ def silhouette_rows(pix: np.ndarray, jpix: np.ndarray, depth: np.ndarray, links:
         cx = (1.0 - s) * pix[b, 0] + s * pix[e, 0]
         cy = (1.0 - s) * pix[b, 1] + s * pix[e, 1]
         z = 0.5 * (depth[b] + depth[e])
-        hw = radius[li] * focal / (z if z >= 1e-6 or np.isnan(z) else 1e-6)
+        hw = radius[li] * focal / _at_least(z, 1e-6)
         dx, dy = target_direction[j, 0], target_direction[j, 1]
         v = (((0.0 + dx * (target_px[j, 0] - cx)) + dy * (target_px[j, 1] - cy)) - hw) \
             - tolerance
@@ -563,7 +569,7 @@ def link_prediction(pix: np.ndarray, depth: np.ndarray, links: int, radius: np.n
             base[li, c], end[li, c] = pix[2 * li, c], pix[2 * li + 1, c]
         zb[li], ze[li] = depth[2 * li], depth[2 * li + 1]
         z = 0.5 * (zb[li] + ze[li])
-        hw[li] = radius[li] * focal / (z if z >= 1e-6 or np.isnan(z) else 1e-6)
+        hw[li] = radius[li] * focal / _at_least(z, 1e-6)
         dx, dy = end[li, 0] - base[li, 0], end[li, 1] - base[li, 1]
         usable[li] = zb[li] > min_depth and ze[li] > min_depth \
             and np.sqrt(dx * dx + dy * dy) >= min_length
@@ -594,7 +600,7 @@ def tip_prediction(pix: np.ndarray, depth: np.ndarray, tip_start: int, tips: int
     ok = np.empty(tips, np.bool_)
     for t in range(tips):
         zt = depth[tip_start + 2 * t]
-        radius[t] = tip_radius[t] * focal / (zt if zt >= 1e-6 or np.isnan(zt) else 1e-6)
+        radius[t] = tip_radius[t] * focal / _at_least(zt, 1e-6)
         row = tip_row[t]
         x, y = pix[tip_start + 2 * t + 1, 0], pix[tip_start + 2 * t + 1, 1]
         margin = search_px + radius[t]
@@ -644,7 +650,7 @@ def palm_prediction(pix: np.ndarray, depth: np.ndarray, rows_b: np.ndarray,
         zpe = (1.0 - a) * depth[rows_e[i]] + a * depth[rows_e[i] + 2]
         dx, dy = pe[i, 0] - pb[i, 0], pe[i, 1] - pb[i, 1]
         length = np.sqrt(dx * dx + dy * dy)
-        safe = length if length >= 1e-9 or np.isnan(length) else 1e-9
+        safe = _at_least(length, 1e-9)
         nx, ny = -(dy / safe), dx / safe
         cx, cy = pix[centre_rows[i], 0], pix[centre_rows[i], 1]
         flip = -1.0 if (0.0 + nx * (pb[i, 0] - cx)) + ny * (pb[i, 1] - cy) < 0 else 1.0
@@ -692,7 +698,7 @@ def link_slice_maps(base: np.ndarray, end: np.ndarray, half_width: np.ndarray,
     for li in range(L):
         ax, ay = end[li, 0] - base[li, 0], end[li, 1] - base[li, 1]
         length = np.sqrt(ax * ax + ay * ay)
-        safe = length if length >= 1e-9 or np.isnan(length) else 1e-9
+        safe = _at_least(length, 1e-9)
         n[li, 0], n[li, 1] = -(ay / safe), ax / safe
         for k in range(S):
             centres[li, k, 0] = base[li, 0] + frac[k] * ax
@@ -777,7 +783,7 @@ def outline_drawing(base: np.ndarray, end: np.ndarray, half_width: np.ndarray,
                 and np.isfinite(end[i, 1]):
             keep[K] = i
             v = np.rint(2.0 * (half_width[i] + tolerance) / s)
-            thick_all[K] = np.int64(v if v >= 1 or np.isnan(v) else 1.0)
+            thick_all[K] = np.int64(_at_least(v, 1.0))
             K += 1
     order = np.argsort(thick_all[:K], kind='mergesort')
     ends = np.empty((K, 2, 2), np.int32)
@@ -796,7 +802,7 @@ def outline_drawing(base: np.ndarray, end: np.ndarray, half_width: np.ndarray,
             for c in range(2):
                 centres[T, c] = np.int32(np.rint((tip[t, c] - shift[c] + 0.5) / s * 16 - 8))
             v = np.rint(16 * (tip_radius[t] + tolerance) / s)
-            radii[T] = np.int64(v if v >= 1 or np.isnan(v) else 1.0)
+            radii[T] = np.int64(_at_least(v, 1.0))
             T += 1
     return ends, thick, centres[:T].copy(), radii[:T].copy()
 

@@ -16,6 +16,13 @@ from colorglove_ros.core.tracking.edge_fit import (
 )
 
 
+@pytest.fixture(autouse=True, scope='module')
+def _compiled() -> None:
+    """The kernels compiled for their one signature before any is called here (a call first
+    would compile another, for writable arrays)."""
+    edge_kernel.compile_kernels()
+
+
 def _same(a: np.ndarray, b: np.ndarray) -> bool:
     """Same dtype, shape and bits, NaN wherever the other is NaN (of any sign or payload)."""
     if a.dtype != b.dtype or a.shape != b.shape:
