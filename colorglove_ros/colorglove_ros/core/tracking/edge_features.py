@@ -17,6 +17,7 @@ often brighter than it on the lit side and darker on the other).
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from types import ModuleType
 
@@ -28,6 +29,7 @@ from colorglove_ros.core.errors import ColorGloveError
 __all__ = [
     'EdgeFeatureError', 'EdgeSearchConfig', 'LinkAxes', 'TipPoints', 'measure_link_axes',
     'measure_outline_edges', 'measure_tips', 'to_grey', 'segment_distances', 'compiled_kernels',
+    'fixed_linspace',
 ]
 
 
@@ -121,14 +123,28 @@ def _sample(grey: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return out.reshape(shape)
 
 
+_KERNELS: list[ModuleType] = []      # edge_kernel, once compiled
+
+
 def compiled_kernels() -> ModuleType:
     """The edge searches' compiled kernels (:mod:`edge_kernel`): numba is imported, and the
     kernels compiled or loaded from their on-disk cache, on the first call (so importing this
     module, or the nodes that import it, loads no numba)."""
-    from colorglove_ros.core.tracking import edge_kernel
+    if not _KERNELS:
+        from colorglove_ros.core.tracking import edge_kernel
 
-    edge_kernel.compile_kernels()
-    return edge_kernel
+        edge_kernel.compile_kernels()
+        _KERNELS.append(edge_kernel)
+    return _KERNELS[0]
+
+
+@functools.lru_cache(maxsize=64)
+def fixed_linspace(start: float, stop: float, num: int) -> np.ndarray:
+    """``np.linspace(start, stop, num)``, remembered and read-only: the slices' places and
+    sample offsets, the same every frame."""
+    out = np.linspace(start, stop, num)
+    out.setflags(write=False)
+    return out
 
 
 def _derivative(profile: np.ndarray, step: np.ndarray) -> np.ndarray:
@@ -160,33 +176,12 @@ def _fit_lines(base: np.ndarray, end: np.ndarray, centres: np.ndarray, n: np.nda
     at fractions ``frac`` (S,); the offset along n is fitted as a linear function of the
     position along the segment (least squares), then refitted without the points farther than
     ``fit_outlier_px``. Returns the lines' unit normals (L, 2) and offsets (L,), the kept
-    points' weights (L, S) and the points (L, S, 2; NaN where not kept)."""
-    L = len(base)
-    axis = end - base
-    length = np.linalg.norm(axis, axis=1)
-    u = axis / np.maximum(length, 1e-9)[:, None]
-    s_along = (frac[None, :] - 0.5) * length[:, None]                          # (L, S)
-    w = valid.astype(float)
-    a = b = np.zeros(L)
-    for _ in range(2):
-        sw = w.sum(1)
-        safe = np.maximum(sw, 1e-9)
-        ms = (w * s_along).sum(1) / safe
-        mo = (w * off).sum(1) / safe
-        var = (w * (s_along - ms[:, None]) ** 2).sum(1)
-        cov = (w * (s_along - ms[:, None]) * (off - mo[:, None])).sum(1)
-        b = np.where(var > 1e-9, cov / np.maximum(var, 1e-9), 0.0)
-        a = mo - b * ms
-        resid = np.abs(off - (a[:, None] + b[:, None] * s_along))
-        w = (valid & (resid <= cfg.fit_outlier_px)).astype(float)
-    # the fitted line: point centre + n * a, direction u + b n
-    direction = u + b[:, None] * n
-    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
-    mid_point = 0.5 * (base + end) + a[:, None] * n
-    offset = np.einsum('ij,ij->i', normal, mid_point)
-    points = centres + off[..., None] * n[:, None, :]
-    return normal, offset, w, np.where((w > 0)[..., None], points, np.nan)
+    points' weights (L, S) and the points (L, S, 2; NaN where not kept)
+    (``edge_kernel.fit_lines``)."""
+    return compiled_kernels().fit_lines(
+        np.ascontiguousarray(base), np.ascontiguousarray(end), np.ascontiguousarray(centres),
+        np.ascontiguousarray(n), np.ascontiguousarray(frac), np.ascontiguousarray(off),
+        np.ascontiguousarray(valid, dtype=bool), float(cfg.fit_outlier_px))
 
 
 def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
@@ -198,24 +193,20 @@ def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
     slices known to be occluded or outside the image. Returns :class:`LinkAxes`."""
     cfg = config or EdgeSearchConfig()
     base, end, hw = _check_segments(base_px, end_px, half_width_px)
+    base, end, hw = (np.ascontiguousarray(x) for x in (base, end, hw))
     L, S, W = len(base), cfg.slices_per_link, cfg.samples_per_slice
-    axis = end - base
-    length = np.linalg.norm(axis, axis=1)
-    u = axis / np.maximum(length, 1e-9)[:, None]
-    n = np.stack([-u[:, 1], u[:, 0]], axis=1)
-    frac = np.linspace(cfg.slice_range[0], cfg.slice_range[1], S)
-    centres = base[:, None, :] + frac[None, :, None] * axis[:, None, :]        # (L, S, 2)
-    reach = hw + cfg.search_px                                                 # (L,)
-    t = np.linspace(-1.0, 1.0, W)
-    offsets = reach[:, None] * t[None, :]                                      # (L, W)
-    step = 2.0 * reach / (W - 1)                                               # (L,)
-    # only the slices that may be measured are searched (R rows of the (L, S) slices)
-    rows = np.flatnonzero(np.ones(L * S, dtype=bool) if slice_valid is None
-                          else np.asarray(slice_valid, dtype=bool).reshape(-1))
-    li = rows // S                                                             # (R,) link
-    xy = centres.reshape(-1, 2)[rows][:, None, :] + offsets[li][:, :, None] * n[li][:, None, :]
-    profile = _sample(grey, xy)                                                # (R, W)
-    d = _derivative(profile, step[li])
+    frac = fixed_linspace(cfg.slice_range[0], cfg.slice_range[1], S)
+    kernels = compiled_kernels()
+    # the slices' normals, centres, reach and spacing, and the sample maps of those that may
+    # be measured (R rows of the (L, S) slices): edge_kernel.link_slice_maps
+    n, centres, reach, step, rows, li, mx, my = kernels.link_slice_maps(
+        base, end, hw, frac, fixed_linspace(-1.0, 1.0, W), float(cfg.search_px),
+        np.ones(L * S, dtype=bool) if slice_valid is None
+        else np.ascontiguousarray(slice_valid, dtype=bool).reshape(-1))
+    profile = np.zeros((0, W), np.float32) if not len(rows) else cv2.remap(
+        grey, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+        borderValue=np.nan).reshape(len(rows), W)                              # (R, W)
+    d = kernels.derivative(profile, step[li])
     pol = np.broadcast_to(np.asarray(polarity, dtype=np.int64), (L,))[li][:, None]
     # edge strengths: a link brighter than its surroundings rises then falls (+1), a darker
     # one falls then rises (-1); with polarity 0 each edge may have either sign, since a
@@ -233,24 +224,15 @@ def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
     agree = np.where(ok_width, np.exp(-0.5 * ((width - 2.0 * hw[:, None])
                                               / (cfg.width_sigma * 2.0 * hw[:, None])) ** 2),
                      0.0)
-    found_pair, sign_i, sign_j, ei, ej = compiled_kernels().pair_search(
+    found_pair, sign_i, sign_j, ei, ej = kernels.pair_search(
         d, np.ascontiguousarray(pol[:, 0]), bool(np.any(pol != 0)), float(cfg.min_gradient),
         agree, li, g_lo)
     # back to (L, S); a slice not searched has no pair (its offset 0 is weighted 0)
-    valid = np.zeros(L * S, dtype=bool)
-    valid[rows] = found_pair
-    valid = valid.reshape(L, S)
-    best_sign = np.zeros(L * S, dtype=np.int64)
-    best_sign[rows] = np.where(sign_i == -sign_j, sign_i, 0)
-    best_sign = best_sign.reshape(L, S)
-    mid_t = np.zeros(L * S)
-    mid_t[rows] = (ei + ej) / (W - 1) - 1.0      # mean of the two sample positions in [-1, 1]
-    mid_off = mid_t.reshape(L, S) * reach[:, None]                             # (L, S)
+    valid, best_sign, mid_off = kernels.pair_midpoints(found_pair, sign_i, sign_j, ei, ej,
+                                                       rows, L, S, W, reach)
     normal, offset, w, midpoints = _fit_lines(base, end, centres, n, frac, mid_off, valid, cfg)
-    found = w.sum(1) >= cfg.min_slices
-    signs = np.where(w > 0, best_sign, 0).sum(1)
-    return LinkAxes(normal, offset, found, w.sum(1).astype(np.int64),
-                    np.sign(signs).astype(np.int64), midpoints)
+    found, count, sign = kernels.axis_counts(w, best_sign, cfg.min_slices)
+    return LinkAxes(normal, offset, found, count, sign, midpoints)
 
 
 def measure_outline_edges(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
@@ -273,9 +255,9 @@ def measure_outline_edges(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndar
     u = axis / np.maximum(np.linalg.norm(axis, axis=1), 1e-9)[:, None]
     n = np.stack([-u[:, 1], u[:, 0]], axis=1)
     n *= np.where(np.einsum('ij,ij->i', n, out) < 0, -1.0, 1.0)[:, None]
-    frac = np.linspace(*(slice_range or cfg.slice_range), S)
+    frac = fixed_linspace(*(slice_range or cfg.slice_range), S)
     centres = base[:, None, :] + frac[None, :, None] * axis[:, None, :]        # (L, S, 2)
-    t = np.linspace(-cfg.search_px, cfg.search_px, W)                          # (W,)
+    t = fixed_linspace(-cfg.search_px, cfg.search_px, W)                       # (W,)
     step = np.full((L, S), 2.0 * cfg.search_px / (W - 1))
     xy = centres[:, :, None, :] + t[None, None, :, None] * n[:, None, None, :]
     d = _derivative(_sample(grey, xy), step).reshape(L * S, W)
@@ -319,7 +301,7 @@ def measure_tips(grey: np.ndarray, axis_point_px: np.ndarray, direction_px: np.n
     along_end = np.einsum('ij,ij->i', end - p0, u)
     start = p0 + (along_end - cfg.tip_search_px - r)[:, None] * u              # (T, 2)
     span = 2.0 * cfg.tip_search_px + r
-    t = np.linspace(0.0, 1.0, cfg.tip_samples)
+    t = fixed_linspace(0.0, 1.0, cfg.tip_samples)
     pos = span[:, None] * t[None, :]                                           # (T, N)
     xy = start[:, None, :] + pos[..., None] * u[:, None, :]
     profile = _sample(grey, xy)

@@ -57,6 +57,7 @@ from colorglove_ros.core.tracking.edge_features import (
     LinkAxes,
     TipPoints,
     compiled_kernels,
+    fixed_linspace,
     measure_link_axes,
     measure_outline_edges,
     measure_tips,
@@ -561,6 +562,31 @@ def _project(camera: PinholeCamera, p_world: np.ndarray, J_world: np.ndarray | N
     return pix, A @ J_world, depth
 
 
+# the feature points' projections of the last few point sets: a round's prediction, its
+# first Gauss-Newton step, its move and its final checks project the same points again
+_PROJECTED: dict[tuple[int, tuple[int, ...], bytes], tuple[object, ...]] = {}
+_PROJECTED_SIZE = 8
+
+
+def _project_points(camera: PinholeCamera, p_world: np.ndarray, J_world: np.ndarray | None
+                    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """:func:`_project` of the feature points (read-only arrays), remembered for the last few
+    (camera, points) and, with Jacobians, for the last ``J_world`` array of those points."""
+    key = (id(camera), p_world.shape, p_world.tobytes())
+    hit = _PROJECTED.get(key)
+    if hit is not None and (J_world is None or hit[3] is J_world):
+        return hit[1], (None if J_world is None else hit[4]), hit[2]   # type: ignore[return-value]
+    pix, Jpix, depth = _project(camera, p_world, J_world)
+    for a in (pix, Jpix, depth):
+        if a is not None:
+            a.setflags(write=False)
+    if hit is None and len(_PROJECTED) >= _PROJECTED_SIZE:
+        _PROJECTED.pop(next(iter(_PROJECTED)))
+    # the camera and the Jacobians are kept so that their ids are not reused while cached
+    _PROJECTED[key] = (camera, pix, depth, J_world, Jpix)
+    return pix, Jpix, depth
+
+
 def _pixel_radius(radius: np.ndarray, camera: PinholeCamera, depth: np.ndarray) -> np.ndarray:
     """Image radius (pixels) of cylinders or discs of ``radius`` (m) at ``depth`` (m)."""
     focal = 0.5 * (camera.fx + camera.fy)
@@ -574,61 +600,62 @@ def predict_features(kin: FastKinematics, points: FeaturePoints, camera: Pinhole
     primary-frame points and Jacobians) and decide which slices and tips can be measured."""
     p, J = world if world is not None else kin.points(q, points.point_link,
                                                       points.point_local, True)
-    pix, Jpix, depth = _project(camera, p, J)
+    pix, Jpix, depth = _project_points(camera, p, J)
     L = len(points.links)
-    base, end = pix[0:2 * L:2], pix[1:2 * L:2]
     Jb, Je = Jpix[0:2 * L:2], Jpix[1:2 * L:2]
-    zb, ze = depth[0:2 * L:2], depth[1:2 * L:2]
-    hw = _pixel_radius(points.radius, camera, 0.5 * (zb + ze))
-    in_front = (zb > config.min_depth_m) & (ze > config.min_depth_m)
-    long_enough = np.linalg.norm(end - base, axis=1) >= config.min_link_px
-    usable = in_front & long_enough
     S = config.search.slices_per_link
-    frac = np.linspace(*config.search.slice_range, S)
-    centres = base[:, None, :] + frac[None, :, None] * (end - base)[:, None, :]
-    margin = hw[:, None] + config.search.search_px
-    inside = ((centres[..., 0] >= margin) & (centres[..., 0] < camera.width - margin)
-              & (centres[..., 1] >= margin) & (centres[..., 1] < camera.height - margin))
+    frac = fixed_linspace(*config.search.slice_range, S)
+    focal = 0.5 * (camera.fx + camera.fy)           # as _pixel_radius takes it
+    kernels = compiled_kernels()
+    # the links' ends, depths, radii, usability and slices (edge_kernel.link_prediction)
+    base, end, zb, ze, hw, usable, centres, inside, z_self = kernels.link_prediction(
+        pix, depth, L, points.radius, focal, frac, float(config.min_depth_m),
+        float(config.min_link_px), float(config.search.search_px), camera.width,
+        camera.height)
     # occlusion: a slice is spoilt where the silhouette of a nearer link (other than its
     # neighbours in the chain, which meet it at the joints outside the slice range) overlaps
     # its own, widened by ``occlusion_margin_px`` (edge_kernel.occluded_slices)
-    z_self = zb[:, None] + frac[None, :] * (ze - zb)[:, None]
-    parent = np.asarray(kin.model.link_parent)[points.links]
-    exempt = (np.eye(L, dtype=bool) | (parent[:, None] == points.links[None, :])
-              | (parent[None, :] == points.links[:, None]))
-    occluded = compiled_kernels().occluded_slices(
-        np.ascontiguousarray(centres.reshape(-1, 2)), S, np.ascontiguousarray(base),
-        np.ascontiguousarray(end), np.ascontiguousarray(zb), np.ascontiguousarray(ze), hw,
-        np.ascontiguousarray(z_self.reshape(-1)), float(config.occlusion_margin_px), usable,
-        exempt).reshape(L, S)
+    occluded = kernels.occluded_slices(
+        centres, S, base, end, zb, ze, hw, z_self, float(config.occlusion_margin_px), usable,
+        _exempt_links(kin, points)).reshape(L, S)
+    centres = centres.reshape(L, S, 2)
     if config.palm_occlusion_px > 0 and len(points.palm_surface):
-        occluded |= _behind_palm(points, camera, config, q, centres, z_self)
+        occluded |= _behind_palm(points, camera, config, q, centres, z_self.reshape(L, S))
     slice_valid = usable[:, None] & inside & ~occluded
     link_usable = slice_valid.sum(1) >= config.search.min_slices
     T = len(points.tip_links)
     tip = pix[points.tip_slice]
     tip_end = pix[2 * L + 1:points.palm_start:2]
     Jt = Jpix[points.tip_slice] if T else np.zeros((0, 2, NUM_DOFS))
-    zt = depth[points.tip_slice]
-    tip_r = _pixel_radius(points.tip_radius, camera, zt)
-    rows = points.tip_row
-    tip_ok = (rows >= 0) & (zt > config.min_depth_m)
-    tip_ok &= np.where(rows >= 0, link_usable[np.maximum(rows, 0)], False)
-    margin_t = config.search.tip_search_px + tip_r
-    tip_ok &= ((tip_end[:, 0] >= margin_t) & (tip_end[:, 0] < camera.width - margin_t)
-               & (tip_end[:, 1] >= margin_t) & (tip_end[:, 1] < camera.height - margin_t))
-    if T:
-        # a tip lying on another (nearer) link cannot be told from it
-        dt, st = segment_distances(tip_end, base, end)
-        zt_other = zb[None, :] + st * (ze - zb)[None, :]
-        tip_row_mask = np.zeros((T, L), dtype=bool)
-        tip_row_mask[np.arange(T)[rows >= 0], rows[rows >= 0]] = True
-        over = (dt < hw[None, :] + tip_r[:, None]) & (zt_other < zt[:, None]) & ~tip_row_mask
-        tip_ok &= ~np.any(over & usable[None, :], axis=1)
+    # a tip lying on another (nearer) link cannot be told from it (edge_kernel.tip_prediction)
+    tip_r, tip_ok = kernels.tip_prediction(
+        pix, depth, points.tip_slice.start, T, points.tip_radius, focal, points.tip_row,
+        link_usable, float(config.min_depth_m), float(config.search.tip_search_px),
+        camera.width, camera.height, base, end, zb, ze, hw, usable)
     palm = _predict_palm(points, camera, config, q, p, pix, depth, base, end, zb, ze, hw,
                          usable)
     return EdgePrediction(base, end, Jb, Je, hw, slice_valid, link_usable, tip, tip_end, Jt,
                           tip_r, tip_ok, *palm)
+
+
+_EXEMPT: dict[tuple[int, int], tuple[FastKinematics, FeaturePoints, np.ndarray]] = {}
+
+
+def _exempt_links(kin: FastKinematics, points: FeaturePoints) -> np.ndarray:
+    """(L, L) the tracked links each link's occlusion test leaves out: itself, its parent and
+    its children (remembered per kinematics and feature points)."""
+    key = (id(kin), id(points))
+    hit = _EXEMPT.get(key)
+    if hit is None:
+        L = len(points.links)
+        parent = np.asarray(kin.model.link_parent)[points.links]
+        exempt = (np.eye(L, dtype=bool) | (parent[:, None] == points.links[None, :])
+                  | (parent[None, :] == points.links[:, None]))
+        exempt.setflags(write=False)
+        if len(_EXEMPT) >= 8:
+            _EXEMPT.pop(next(iter(_EXEMPT)))
+        hit = _EXEMPT[key] = (kin, points, exempt)    # kept: their ids are not reused
+    return hit[2]
 
 
 def _behind_palm(points: FeaturePoints, camera: PinholeCamera, config: EdgeTrackerConfig,
@@ -697,27 +724,13 @@ def _predict_palm(points: FeaturePoints, camera: PinholeCamera, config: EdgeTrac
     pos = np.clip(np.interp(angle, PALM_ANGLES, np.arange(A)), 0.0, A - 1 - 1e-9)
     generator = np.stack([np.floor(pos), pos - np.floor(pos)], axis=1)
     rb, re, alpha = palm_rows(points, generator)
-    pb, pe = _blend(pix, rb, alpha), _blend(pix, re, alpha)
-    zpb, zpe = _blend(depth, rb, alpha), _blend(depth, re, alpha)
-    pc = pix[centre_rows]
-    u = (pe - pb) / np.maximum(np.linalg.norm(pe - pb, axis=1, keepdims=True), 1e-9)
-    n = np.stack([-u[:, 1], u[:, 0]], axis=1)
-    n *= np.where(np.einsum('ij,ij->i', n, pb - pc) < 0, -1.0, 1.0)[:, None]
-    in_front = (zpb > config.min_depth_m) & (zpe > config.min_depth_m)
-    long_enough = np.linalg.norm(pe - pb, axis=1) >= config.min_link_px
-    frac = np.linspace(*config.palm_slice_range, S)
-    centres = pb[:, None, :] + frac[None, :, None] * (pe - pb)[:, None, :]
-    margin = config.search.search_px
-    inside = ((centres[..., 0] >= margin) & (centres[..., 0] < camera.width - margin)
-              & (centres[..., 1] >= margin) & (centres[..., 1] < camera.height - margin))
-    dist, along = segment_distances(centres.reshape(-1, 2), base, end)
-    dist, along = dist.reshape(P, S, len(base)), along.reshape(P, S, len(base))
-    z_link = zb[None, None, :] + along * (ze - zb)[None, None, :]
-    z_self = (zpb[:, None] + frac[None, :] * (zpe - zpb)[:, None])[..., None]
-    covered = (dist < hw[None, None, :] + config.search.search_px) & (z_link < z_self) \
-        & link_usable[None, None, :]
-    slice_valid = (in_front & long_enough)[:, None] & inside & ~np.any(covered, axis=2)
-    usable = slice_valid.sum(1) >= config.search.min_slices
+    # the generators' ends, normals and usable slices (edge_kernel.palm_prediction)
+    pb, pe, n, slice_valid, usable = compiled_kernels().palm_prediction(
+        pix, depth, rb, re, np.ascontiguousarray(alpha), centre_rows,
+        fixed_linspace(*config.palm_slice_range, S),
+        float(config.min_depth_m), float(config.min_link_px), float(config.search.search_px),
+        camera.width, camera.height, base, end, zb, ze, hw, link_usable,
+        config.search.min_slices)
     return pb, pe, n, generator, slice_valid, usable
 
 
@@ -904,27 +917,18 @@ def _silhouette_residuals(points: FeaturePoints, camera: PinholeCamera, meas: Ed
     capsule and (palm targets, ``world`` the feature points and Jacobians) from its point of
     the palm (rows only where positive)."""
     tol = config.silhouette_tolerance_px
-    ax, _, _ = _axis_points(points, pix, None, camera)
+    kernels = compiled_kernels()
+    L = len(points.links)
+    ax, place = kernels.axis_points(pix, L, points.tip_slice.start, len(points.tip_links),
+                                    camera.width, camera.height)
     d, grad = meas.silhouette.outside_distance(ax)
-    off = d > tol
-    r = [d[off] - tol]
-    J = [np.zeros((0, Jpix.shape[-1]))]
-    if off.any():          # the axis points' Jacobians only when one is off
-        J = [np.einsum('ij,ijd->id', grad[off], _axis_points(points, pix, Jpix, camera)[1][off])]
     t = meas.loose
-    if t is not None and len(t.px):
-        L = len(points.links)
-        Jb, Je = Jpix[0:2 * L:2][t.link], Jpix[1:2 * L:2][t.link]
-        c = (1.0 - t.along)[:, None] * pix[0:2 * L:2][t.link] + t.along[:, None] \
-            * pix[1:2 * L:2][t.link]
-        z = 0.5 * (depth[0:2 * L:2] + depth[1:2 * L:2])[t.link]
-        hw = _pixel_radius(points.radius[t.link], camera, z)
-        rl = np.einsum('ij,ij->i', t.direction, t.px - c) - hw - tol
-        Jl = -np.einsum('ij,ijd->id', t.direction,
-                        (1.0 - t.along)[:, None, None] * Jb + t.along[:, None, None] * Je)
-        keep = rl > 0
-        r.append(rl[keep])
-        J.append(Jl[keep])
+    targets = t if t is not None and len(t.px) else _NO_TARGETS
+    rows, Jrows = kernels.silhouette_rows(
+        pix, Jpix, depth, L, points.tip_slice.start, place, np.ascontiguousarray(d), grad,
+        float(tol), targets.px, targets.link, targets.along, targets.direction,
+        points.radius, 0.5 * (camera.fx + camera.fy))
+    r, J = [rows], [Jrows]
     if t is not None and len(t.palm_px) and world is not None and world[1] is not None:
         rigid = points.palm_rigid
         c, Jc, _ = _project(camera, t.palm_weights @ world[0][rigid],
@@ -970,6 +974,10 @@ class SilhouetteTargets:
     palm_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     palm_weights: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     palm_direction: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+
+_NO_TARGETS = SilhouetteTargets(np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0),
+                                np.zeros((0, 2)))
 
 
 def measure_features(grey: np.ndarray, prediction: EdgePrediction, config: EdgeTrackerConfig,
@@ -1064,50 +1072,40 @@ def stack_residuals(points: FeaturePoints, cameras: Sequence[PinholeCamera],
     (points, Jacobians), their Jacobian and their weights (robust x feature x camera
     weight); per camera the rows are links, tips, palm sides, silhouette."""
     p, Jw = world
+    kernels = compiled_kernels()
+    cauchy = config.robust_loss == 'cauchy'
     rs, Js, ws = [], [], []
     for index, (cam, meas) in enumerate(zip(cameras, measured, strict=True)):
         if meas is None:
             continue
-        pix, Jpix, depth = _project(cam, p, Jw if jacobian else None)
+        pix, Jpix, depth = _project_points(cam, p, Jw if jacobian else None)
         lines = line_rows(points, meas)
-        rows_b, rows_e, alpha, n_link = lines.base, lines.end, lines.alpha, lines.num_links
-        cam_r, cam_J, cam_w = [], [], []
-        if len(rows_b):
-            # (1 - 0) x + 0 y is x exactly: link lines and palm lines in one set of products
-            r, J = link_axis_residuals(
-                lines.normal, lines.offset, _blend(pix, rows_b, alpha),
-                _blend(pix, rows_e, alpha),
-                _blend(Jpix, rows_b, alpha) if jacobian else np.zeros((len(rows_b), 2, 1)),
-                _blend(Jpix, rows_e, alpha) if jacobian else np.zeros((len(rows_b), 2, 1)))
-            w = _robust(r, config.huber_px, config.robust_loss)
-            cam_r.append(r[:2 * n_link])
-            cam_J.append(J[:2 * n_link])
-            cam_w.append(w[:2 * n_link])
-        if len(lines.tips):
-            tip_rows = lines.tips
-            rt, Jt = tip_residuals(pix[tip_rows], meas.tips.centre[meas.tip_found],
-                                   Jpix[tip_rows] if jacobian else np.zeros((len(tip_rows), 2, 1)))
-            cam_r.append(rt)
-            cam_J.append(Jt)
-            cam_w.append(config.tip_weight * _robust(rt, config.huber_px, config.robust_loss))
-        if len(rows_b) > n_link:
-            cam_r.append(r[2 * n_link:])
-            cam_J.append(J[2 * n_link:])
-            cam_w.append(config.palm_weight * w[2 * n_link:])
+        scaled = index < len(config.camera_weights)
+        # links, tips, palm sides (edge_kernel.line_rows: link_axis_residuals,
+        # tip_residuals and _robust in one pass)
+        r, J, w = kernels.line_rows(
+            pix, Jpix if jacobian else _NO_JACOBIAN, lines.base, lines.end, lines.alpha,
+            lines.normal, lines.offset, lines.num_links, lines.tips,
+            meas.tips.centre[meas.tip_found], float(config.huber_px), cauchy,
+            float(config.tip_weight), float(config.palm_weight),
+            float(config.camera_weights[index]) if scaled else 1.0, scaled, jacobian)
+        rs.append(r)
+        Js.append(J)
+        ws.append(w)
         if meas.silhouette is not None and config.silhouette_weight > 0 and jacobian:
             r, J = _silhouette_residuals(points, cam, meas, pix, Jpix, depth, config, world)
             if len(r):
-                cam_r.append(r)
-                cam_J.append(J)
-                cam_w.append(np.full(len(r), config.silhouette_weight))
-        if index < len(config.camera_weights):
-            cam_w = [config.camera_weights[index] * w for w in cam_w]
-        rs += cam_r
-        Js += cam_J
-        ws += cam_w
+                w = np.full(len(r), config.silhouette_weight)
+                rs.append(r)
+                Js.append(J)
+                ws.append(config.camera_weights[index] * w if scaled else w)
     if not rs:
         return np.zeros(0), np.zeros((0, NUM_DOFS)) if jacobian else None, np.zeros(0)
     return (np.concatenate(rs), np.concatenate(Js) if jacobian else None, np.concatenate(ws))
+
+
+_NO_JACOBIAN = np.zeros((0, 2, NUM_DOFS))
+_NO_JACOBIAN.setflags(write=False)
 
 
 # ---------------------------------------------------------------------------- estimation
@@ -1238,7 +1236,7 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
             meas = measure_features(grey, pred, config, points.tip_row, polarity)
             extra: dict[str, object] = {'lines': line_rows(points, meas)}
             if sil is not None and config.silhouette_weight > 0:
-                pix, _, depth = _project(cam, world[0], None)
+                pix, _, depth = _project_points(cam, world[0], None)
                 outline = hand_outline(points, cam, q, pix, depth)
                 loose = sil.unexplained(outline, config.silhouette_tolerance_px)[0]
                 extra.update(silhouette=sil, loose=_silhouette_targets(
@@ -1280,7 +1278,7 @@ def fit_pose(kin: FastKinematics, points: FeaturePoints, cameras: Sequence[Pinho
         per_camera = []
         for cam, sil in zip(cameras, sils, strict=True):
             if sil is not None:
-                pix, _, depth = _project(cam, p_final, None)
+                pix, _, depth = _project_points(cam, p_final, None)
                 per_camera.append(silhouette_measures(points, cam, sil, q, pix, depth, config))
         shares = np.max(per_camera, axis=0)
     return EdgeFit(q, rms, found, usable, tips, iterations, disagreement, float(shares[0]),
@@ -1295,7 +1293,7 @@ def _largest_move_px(cameras: Sequence[PinholeCamera], greys: Sequence[np.ndarra
     out = 0.0
     for cam, grey in zip(cameras, greys, strict=True):
         if grey is not None:
-            d = _project(cam, after, None)[0] - _project(cam, before, None)[0]
+            d = _project_points(cam, after, None)[0] - _project_points(cam, before, None)[0]
             out = max(out, float(np.sqrt(np.max(np.einsum('ij,ij->i', d, d)))))
     return out
 

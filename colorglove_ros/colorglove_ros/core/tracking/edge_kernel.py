@@ -20,7 +20,11 @@ import numpy as np
 from colorglove_ros.core.kernel_compile import compile_signatures
 
 __all__ = ['derivative', 'pair_search', 'edge_peaks', 'tip_peaks', 'segment_distances',
-           'occluded_slices', 'behind_palm', 'compile_kernels']
+           'occluded_slices', 'behind_palm', 'fit_lines', 'line_rows', 'axis_points',
+           'silhouette_rows', 'probe_maps', 'probe_gradients', 'link_slice_maps',
+           'pair_midpoints', 'axis_counts', 'link_prediction', 'tip_prediction',
+           'palm_prediction', 'outline_drawing',
+           'compile_kernels']
 
 _JIT = {'cache': True, 'nogil': True}
 _NO_EDGE = -1.0e9   # edge_features._NO_EDGE: any pair using such a sample scores < 0
@@ -176,6 +180,12 @@ def tip_peaks(d: np.ndarray, polarity: np.ndarray, min_gradient: float
 
 
 @numba.njit(inline='always', **_JIT)
+def _at_least(x: float, floor: float) -> float:
+    """``np.maximum(x, floor)`` of one value (NaN kept)."""
+    return x if x >= floor or np.isnan(x) else floor
+
+
+@numba.njit(inline='always', **_JIT)
 def _closest(px: float, py: float, ax: float, ay: float, bx: float, by: float, den: float
              ) -> tuple[float, float]:
     """Distance from (px, py) to the segment from (ax, ay) along (bx, by) (``den``: its
@@ -194,7 +204,7 @@ def _closest(px: float, py: float, ax: float, ay: float, bx: float, by: float, d
 def _squared_length(bx: float, by: float) -> float:
     """``np.maximum(bx^2 + by^2, 1e-12)`` (NaN kept)."""
     den = bx * bx + by * by
-    return den if den >= 1e-12 or np.isnan(den) else 1e-12
+    return _at_least(den, 1e-12)
 
 
 @numba.njit(**_JIT)
@@ -278,12 +288,571 @@ def behind_palm(hull: np.ndarray, centres: np.ndarray, palm_px: np.ndarray,
     return out
 
 
+@numba.njit('float64(float64[::1], int64, int64)', **_JIT)   # typed: it calls itself
+def _pairwise_sum(a: np.ndarray, start: int, n: int) -> float:
+    """numpy's pairwise sum of ``a[start:start + n]`` (float64; what ``ndarray.sum`` along a
+    contiguous axis adds): in order below 8 values, 8 running sums up to 128, halves
+    beyond."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[start + i]
+        return res
+    if n <= 128:
+        r = np.empty(8)
+        for j in range(8):
+            r[j] = a[start + j]
+        i = 8
+        while i < n - (n % 8):
+            for j in range(8):
+                r[j] += a[start + i + j]
+            i += 8
+        res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+        while i < n:
+            res += a[start + i]
+            i += 1
+        return res
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise_sum(a, start, n2) + _pairwise_sum(a, start + n2, n - n2)
+
+
+@numba.njit(error_model='numpy', **_JIT)      # 0 / 0 is NaN, as numpy's
+def fit_lines(base: np.ndarray, end: np.ndarray, centres: np.ndarray, n: np.ndarray,
+              frac: np.ndarray, off: np.ndarray, valid: np.ndarray, outlier_px: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``edge_features._fit_lines``, numpy's operations in numpy's order (sums over a
+    segment's slices as ``_pairwise_sum``): per segment ``base -> end`` (L, 2) the offset
+    ``off`` (L, S) of its valid points along ``n`` (L, 2) from the slice ``centres`` (L, S, 2)
+    at fractions ``frac`` (S,) fitted as a linear function of the place along the segment,
+    then again without the points farther than ``outlier_px``. Returns the lines' unit
+    normals (L, 2), offsets (L,), the kept points' weights (L, S) and the points (L, S, 2;
+    NaN where not kept)."""
+    L, S = off.shape
+    normal = np.empty((L, 2))
+    offset = np.empty(L)
+    w = np.empty((L, S))
+    points = np.empty((L, S, 2))
+    s_along = np.empty(S)
+    tmp = np.empty(S)
+    for li in range(L):
+        ax, ay = end[li, 0] - base[li, 0], end[li, 1] - base[li, 1]
+        length = np.sqrt(ax * ax + ay * ay)
+        safe_len = _at_least(length, 1e-9)
+        ux, uy = ax / safe_len, ay / safe_len
+        for k in range(S):
+            s_along[k] = (frac[k] - 0.5) * length
+            w[li, k] = 1.0 if valid[li, k] else 0.0
+        a = b = 0.0
+        for _ in range(2):
+            sw = _pairwise_sum(w[li], 0, S)
+            safe = _at_least(sw, 1e-9)
+            for k in range(S):
+                tmp[k] = w[li, k] * s_along[k]
+            ms = _pairwise_sum(tmp, 0, S) / safe
+            for k in range(S):
+                tmp[k] = w[li, k] * off[li, k]
+            mo = _pairwise_sum(tmp, 0, S) / safe
+            for k in range(S):
+                ds = s_along[k] - ms
+                tmp[k] = w[li, k] * (ds * ds)
+            var = _pairwise_sum(tmp, 0, S)
+            for k in range(S):
+                tmp[k] = (w[li, k] * (s_along[k] - ms)) * (off[li, k] - mo)
+            cov = _pairwise_sum(tmp, 0, S)
+            b = cov / _at_least(var, 1e-9) if var > 1e-9 else 0.0
+            a = mo - b * ms
+            for k in range(S):
+                resid = abs(off[li, k] - (a + b * s_along[k]))
+                w[li, k] = 1.0 if valid[li, k] and resid <= outlier_px else 0.0
+        nx, ny = n[li, 0], n[li, 1]
+        dx, dy = ux + b * nx, uy + b * ny
+        norm = np.sqrt(dx * dx + dy * dy)
+        dx, dy = dx / norm, dy / norm
+        normal[li, 0], normal[li, 1] = -dy, dx
+        mx = 0.5 * (base[li, 0] + end[li, 0]) + a * nx
+        my = 0.5 * (base[li, 1] + end[li, 1]) + a * ny
+        offset[li] = (0.0 + -dy * mx) + dx * my
+        for k in range(S):
+            if w[li, k] > 0:
+                points[li, k, 0] = centres[li, k, 0] + off[li, k] * nx
+                points[li, k, 1] = centres[li, k, 1] + off[li, k] * ny
+            else:
+                points[li, k, 0] = points[li, k, 1] = np.nan
+    return normal, offset, w, points
+
+
+@numba.njit(inline='always', **_JIT)
+def _robust_weight(r: float, k: float, cauchy: bool) -> float:
+    """``edge_fit._robust`` of one residual: 1 for ``k`` <= 0, else Cauchy's
+    ``1 / (1 + (|r| / k)^2)`` or Huber's ``1`` within ``k``, ``k / max(|r|, 1e-12)`` beyond."""
+    if k <= 0.0:
+        return 1.0
+    a = abs(r)
+    if cauchy:
+        s = a / k
+        return 1.0 / (1.0 + s * s)
+    if a <= k:
+        return 1.0
+    return k / _at_least(a, 1e-12)
+
+
+@numba.njit(**_JIT)
+def line_rows(pix: np.ndarray, jpix: np.ndarray, rows_b: np.ndarray, rows_e: np.ndarray,
+              alpha: np.ndarray, normal: np.ndarray, offset: np.ndarray, num_links: int,
+              tip_rows: np.ndarray, tip_centre: np.ndarray, k: float, cauchy: bool,
+              tip_weight: float, palm_weight: float, camera_weight: float, scaled: bool,
+              jacobian: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One camera's link, tip and palm-side rows of ``edge_fit.stack_residuals`` from the
+    projected feature points ``pix`` (N, 2) and their Jacobians ``jpix`` (N, 2, D; read only
+    with ``jacobian``): the lines' end points blended between a row and the one two rows on
+    by ``alpha`` (``edge_fit._blend``), their signed distances ``n . x - rho`` (two rows a
+    line, ``edge_fit.link_axis_residuals``), the tips' predicted minus measured centres (two
+    rows a tip), the robust weights (the tips' times ``tip_weight``, the palm sides' times
+    ``palm_weight``, all times ``camera_weight`` when ``scaled``), numpy's operations in
+    numpy's order. Rows: links (the first ``num_links`` lines), tips, palm sides; returns
+    the residuals, their Jacobian ((rows, D), (rows, 0) without ``jacobian``) and weights."""
+    lines, tips = len(rows_b), len(tip_rows)
+    dofs = jpix.shape[2] if jacobian else 0
+    rows = 2 * lines + 2 * tips
+    r = np.empty(rows)
+    J = np.empty((rows, dofs))
+    w = np.empty(rows)
+    for i in range(lines):
+        out = 2 * i if i < num_links else 2 * i + 2 * tips
+        a = alpha[i]
+        n0, n1 = normal[i, 0], normal[i, 1]
+        for side in range(2):
+            row = rows_b[i] if side == 0 else rows_e[i]
+            x = (1.0 - a) * pix[row, 0] + a * pix[row + 2, 0]
+            y = (1.0 - a) * pix[row, 1] + a * pix[row + 2, 1]
+            v = ((0.0 + n0 * x) + n1 * y) - offset[i]       # einsum's sum starts at 0
+            r[out + side] = v
+            weight = _robust_weight(v, k, cauchy)
+            if i >= num_links:
+                weight = palm_weight * weight
+            w[out + side] = camera_weight * weight if scaled else weight
+            for d in range(dofs):
+                jx = (1.0 - a) * jpix[row, 0, d] + a * jpix[row + 2, 0, d]
+                jy = (1.0 - a) * jpix[row, 1, d] + a * jpix[row + 2, 1, d]
+                J[out + side, d] = (0.0 + n0 * jx) + n1 * jy
+    for t in range(tips):
+        out = 2 * num_links + 2 * t
+        for c in range(2):
+            v = pix[tip_rows[t], c] - tip_centre[t, c]
+            r[out + c] = v
+            weight = tip_weight * _robust_weight(v, k, cauchy)
+            w[out + c] = camera_weight * weight if scaled else weight
+            for d in range(dofs):
+                J[out + c, d] = jpix[tip_rows[t], c, d]
+    return r, J, w
+
+
+@numba.njit(**_JIT)
+def axis_points(pix: np.ndarray, links: int, tip_start: int, tips: int, width: int,
+                height: int) -> tuple[np.ndarray, np.ndarray]:
+    """``edge_fit._axis_points``' pixels: of the hand's axis points (each link's base, middle
+    and end, the links' bases at even rows of ``pix`` from 0 and their ends after them, then
+    the tip centres every second row from ``tip_start``), in that order (bases, middles,
+    ends, tips), those inside the ``width`` x ``height`` image (M, 2) and their places in
+    that order (M,)."""
+    total = 3 * links + tips
+    px = np.empty((total, 2))
+    place = np.empty(total, np.int64)
+    m = 0
+    for k in range(total):
+        if k < links:
+            x, y = pix[2 * k, 0], pix[2 * k, 1]
+        elif k < 2 * links:
+            i = k - links
+            x = 0.5 * (pix[2 * i, 0] + pix[2 * i + 1, 0])
+            y = 0.5 * (pix[2 * i, 1] + pix[2 * i + 1, 1])
+        elif k < 3 * links:
+            x, y = pix[2 * (k - 2 * links) + 1, 0], pix[2 * (k - 2 * links) + 1, 1]
+        else:
+            x, y = pix[tip_start + 2 * (k - 3 * links), 0], pix[tip_start + 2 * (k - 3 * links), 1]
+        if x >= 0 and x < width and y >= 0 and y < height:
+            px[m, 0], px[m, 1] = x, y
+            place[m] = k
+            m += 1
+    return px[:m].copy(), place[:m].copy()
+
+
+@numba.njit(**_JIT)
+def silhouette_rows(pix: np.ndarray, jpix: np.ndarray, depth: np.ndarray, links: int,
+                    tip_start: int, place: np.ndarray, distance: np.ndarray,
+                    gradient: np.ndarray, tolerance: float, target_px: np.ndarray,
+                    target_link: np.ndarray, target_along: np.ndarray,
+                    target_direction: np.ndarray, radius: np.ndarray, focal: float
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """``edge_fit._silhouette_residuals``' axis and link rows, numpy's operations in numpy's
+    dtypes and order: each axis point (``place`` as :func:`axis_points` gives it) whose
+    outside distance (float32, with its float32 ``gradient``) exceeds the tolerance gives
+    that excess (in float32) and the gradient times the point's pixel Jacobian; each
+    unexplained pixel ``target_px`` gives its distance along ``target_direction`` from the
+    point ``target_along`` of the way along its link ``target_link`` less the link's
+    projected radius (``radius`` times ``focal`` over the depth) and the tolerance, and minus
+    that distance's Jacobian, where the distance is positive."""
+    dofs = jpix.shape[2]
+    n_axis, n_target = len(place), len(target_px)
+    r = np.empty(n_axis + n_target)
+    J = np.empty((n_axis + n_target, dofs))
+    tol32 = np.float32(tolerance)
+    row = 0
+    for m in range(n_axis):
+        if not distance[m] > tol32:
+            continue
+        r[row] = np.float64(np.float32(distance[m] - tol32))
+        g0, g1 = np.float64(gradient[m, 0]), np.float64(gradient[m, 1])
+        k = place[m]
+        for d in range(dofs):
+            if k < links:
+                jx, jy = jpix[2 * k, 0, d], jpix[2 * k, 1, d]
+            elif k < 2 * links:
+                i = k - links
+                jx = 0.5 * (jpix[2 * i, 0, d] + jpix[2 * i + 1, 0, d])
+                jy = 0.5 * (jpix[2 * i, 1, d] + jpix[2 * i + 1, 1, d])
+            elif k < 3 * links:
+                i = 2 * (k - 2 * links) + 1
+                jx, jy = jpix[i, 0, d], jpix[i, 1, d]
+            else:
+                i = tip_start + 2 * (k - 3 * links)
+                jx, jy = jpix[i, 0, d], jpix[i, 1, d]
+            J[row, d] = (0.0 + g0 * jx) + g1 * jy
+        row += 1
+    for j in range(n_target):
+        li, s = target_link[j], target_along[j]
+        b, e = 2 * li, 2 * li + 1
+        cx = (1.0 - s) * pix[b, 0] + s * pix[e, 0]
+        cy = (1.0 - s) * pix[b, 1] + s * pix[e, 1]
+        z = 0.5 * (depth[b] + depth[e])
+        hw = radius[li] * focal / _at_least(z, 1e-6)
+        dx, dy = target_direction[j, 0], target_direction[j, 1]
+        v = (((0.0 + dx * (target_px[j, 0] - cx)) + dy * (target_px[j, 1] - cy)) - hw) \
+            - tolerance
+        if not v > 0:
+            continue
+        r[row] = v
+        for d in range(dofs):
+            jx = (1.0 - s) * jpix[b, 0, d] + s * jpix[e, 0, d]
+            jy = (1.0 - s) * jpix[b, 1, d] + s * jpix[e, 1, d]
+            J[row, d] = -((0.0 + dx * jx) + dy * jy)
+        row += 1
+    return r[:row].copy(), J[:row].copy()
+
+
+@numba.njit(**_JIT)
+def link_prediction(pix: np.ndarray, depth: np.ndarray, links: int, radius: np.ndarray,
+                    focal: float, frac: np.ndarray, min_depth: float, min_length: float,
+                    search_px: float, width: int, height: int
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                               np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``edge_fit.predict_features``' links, numpy's operations in numpy's order: from the
+    projected feature points (``pix`` (N, 2), ``depth`` (N,); link l's base at row 2l, its end
+    at 2l + 1) each link's base and end (L, 2), their depths (L,), projected radius
+    (``radius`` times ``focal`` over the mean depth), whether it is usable (both ends
+    farther than ``min_depth``, at least ``min_length`` pixels long), its slice centres at
+    ``frac`` (L * S, 2), which lie inside the image by the radius plus ``search_px`` (L, S)
+    and their depths (L * S,)."""
+    L, S = links, len(frac)
+    base = np.empty((L, 2))
+    end = np.empty((L, 2))
+    zb = np.empty(L)
+    ze = np.empty(L)
+    hw = np.empty(L)
+    usable = np.empty(L, np.bool_)
+    centres = np.empty((L * S, 2))
+    inside = np.empty((L, S), np.bool_)
+    z_self = np.empty(L * S)
+    for li in range(L):
+        for c in range(2):
+            base[li, c], end[li, c] = pix[2 * li, c], pix[2 * li + 1, c]
+        zb[li], ze[li] = depth[2 * li], depth[2 * li + 1]
+        z = 0.5 * (zb[li] + ze[li])
+        hw[li] = radius[li] * focal / _at_least(z, 1e-6)
+        dx, dy = end[li, 0] - base[li, 0], end[li, 1] - base[li, 1]
+        usable[li] = zb[li] > min_depth and ze[li] > min_depth \
+            and np.sqrt(dx * dx + dy * dy) >= min_length
+        margin = hw[li] + search_px
+        for k in range(S):
+            cx = base[li, 0] + frac[k] * dx
+            cy = base[li, 1] + frac[k] * dy
+            centres[li * S + k, 0], centres[li * S + k, 1] = cx, cy
+            inside[li, k] = cx >= margin and cx < width - margin and cy >= margin \
+                and cy < height - margin
+            z_self[li * S + k] = zb[li] + frac[k] * (ze[li] - zb[li])
+    return base, end, zb, ze, hw, usable, centres, inside, z_self
+
+
+@numba.njit(**_JIT)
+def tip_prediction(pix: np.ndarray, depth: np.ndarray, tip_start: int, tips: int,
+                   tip_radius: np.ndarray, focal: float, tip_row: np.ndarray,
+                   link_usable: np.ndarray, min_depth: float, search_px: float, width: int,
+                   height: int, base: np.ndarray, end: np.ndarray, zb: np.ndarray,
+                   ze: np.ndarray, hw: np.ndarray, usable: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """``edge_fit.predict_features``' tips, numpy's operations in numpy's order: each tip's
+    projected radius (T,) and whether it may be measured: its distal link (row ``tip_row``,
+    -1: none) usable, its centre (row ``tip_start + 2t``) farther than ``min_depth``, its
+    extremity (the next row) inside the image by ``search_px`` plus its radius, and not on
+    another usable link's capsule (``base -> end``, half-widths ``hw``) nearer the camera."""
+    radius = np.empty(tips)
+    ok = np.empty(tips, np.bool_)
+    for t in range(tips):
+        zt = depth[tip_start + 2 * t]
+        radius[t] = tip_radius[t] * focal / _at_least(zt, 1e-6)
+        row = tip_row[t]
+        x, y = pix[tip_start + 2 * t + 1, 0], pix[tip_start + 2 * t + 1, 1]
+        margin = search_px + radius[t]
+        good = row >= 0 and zt > min_depth and link_usable[max(row, 0)] \
+            and x >= margin and x < width - margin and y >= margin and y < height - margin
+        for m in range(len(base)):
+            if not good:
+                break
+            if m == row or not usable[m]:
+                continue
+            ax, ay = base[m, 0], base[m, 1]
+            bx, by = end[m, 0] - ax, end[m, 1] - ay
+            dist, s = _closest(x, y, ax, ay, bx, by, _squared_length(bx, by))
+            if dist < hw[m] + radius[t] and zb[m] + s * (ze[m] - zb[m]) < zt:
+                good = False
+        ok[t] = good
+    return radius, ok
+
+
+@numba.njit(**_JIT)
+def palm_prediction(pix: np.ndarray, depth: np.ndarray, rows_b: np.ndarray,
+                    rows_e: np.ndarray, alpha: np.ndarray, centre_rows: np.ndarray,
+                    frac: np.ndarray, min_depth: float, min_length: float, search_px: float,
+                    width: int, height: int, base: np.ndarray, end: np.ndarray,
+                    zb: np.ndarray, ze: np.ndarray, hw: np.ndarray, link_usable: np.ndarray,
+                    min_slices: int
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``edge_fit._predict_palm`` after the generators' choice, numpy's operations in numpy's
+    order: per palm side its generator's base and end (P, 2; rows ``rows_b``, ``rows_e``
+    blended with the rows two on by ``alpha``), the unit normal pointing away from the palm's
+    centre (row ``centre_rows``), which slices at ``frac`` lie inside the image by
+    ``search_px`` and not behind a nearer usable link's capsule (``base -> end``, half-widths
+    ``hw`` plus ``search_px``) on a side in front of the camera and long enough (P, S), and
+    which sides have at least ``min_slices`` of them."""
+    P, S, L = len(rows_b), len(frac), len(base)
+    pb = np.empty((P, 2))
+    pe = np.empty((P, 2))
+    n = np.empty((P, 2))
+    valid = np.empty((P, S), np.bool_)
+    usable = np.empty(P, np.bool_)
+    for i in range(P):
+        a = alpha[i]
+        for c in range(2):
+            pb[i, c] = (1.0 - a) * pix[rows_b[i], c] + a * pix[rows_b[i] + 2, c]
+            pe[i, c] = (1.0 - a) * pix[rows_e[i], c] + a * pix[rows_e[i] + 2, c]
+        zpb = (1.0 - a) * depth[rows_b[i]] + a * depth[rows_b[i] + 2]
+        zpe = (1.0 - a) * depth[rows_e[i]] + a * depth[rows_e[i] + 2]
+        dx, dy = pe[i, 0] - pb[i, 0], pe[i, 1] - pb[i, 1]
+        length = np.sqrt(dx * dx + dy * dy)
+        safe = _at_least(length, 1e-9)
+        nx, ny = -(dy / safe), dx / safe
+        cx, cy = pix[centre_rows[i], 0], pix[centre_rows[i], 1]
+        flip = -1.0 if (0.0 + nx * (pb[i, 0] - cx)) + ny * (pb[i, 1] - cy) < 0 else 1.0
+        n[i, 0], n[i, 1] = nx * flip, ny * flip
+        side_ok = zpb > min_depth and zpe > min_depth and length >= min_length
+        count = 0
+        for k in range(S):
+            sx = pb[i, 0] + frac[k] * dx
+            sy = pb[i, 1] + frac[k] * dy
+            ok = side_ok and sx >= search_px and sx < width - search_px \
+                and sy >= search_px and sy < height - search_px
+            z_self = zpb + frac[k] * (zpe - zpb)
+            for m in range(L):
+                if not ok:
+                    break
+                if not link_usable[m]:
+                    continue
+                ax, ay = base[m, 0], base[m, 1]
+                bx, by = end[m, 0] - ax, end[m, 1] - ay
+                dist, s = _closest(sx, sy, ax, ay, bx, by, _squared_length(bx, by))
+                if dist < hw[m] + search_px and zb[m] + s * (ze[m] - zb[m]) < z_self:
+                    ok = False
+            valid[i, k] = ok
+            count += ok
+        usable[i] = count >= min_slices
+    return pb, pe, n, valid, usable
+
+
+@numba.njit(**_JIT)
+def link_slice_maps(base: np.ndarray, end: np.ndarray, half_width: np.ndarray,
+                    frac: np.ndarray, t: np.ndarray, search_px: float, valid: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                               np.ndarray, np.ndarray, np.ndarray]:
+    """``edge_features.measure_link_axes``' slices, numpy's operations in numpy's order: per
+    link ``base -> end`` (L, 2) of projected radius ``half_width`` (L,) the unit normal
+    (L, 2), the slice centres at ``frac`` (L, S, 2), the reach past the radius and the
+    sample spacing (L,); the slices to search (``valid`` (L * S,)) as rows (R,) and their
+    links (R,); their samples at ``t`` (W,) times the reach along the normal as float32 x and
+    y maps (R * W, 1) each."""
+    L, S, W = len(base), len(frac), len(t)
+    n = np.empty((L, 2))
+    centres = np.empty((L, S, 2))
+    reach = np.empty(L)
+    step = np.empty(L)
+    for li in range(L):
+        ax, ay = end[li, 0] - base[li, 0], end[li, 1] - base[li, 1]
+        length = np.sqrt(ax * ax + ay * ay)
+        safe = _at_least(length, 1e-9)
+        n[li, 0], n[li, 1] = -(ay / safe), ax / safe
+        for k in range(S):
+            centres[li, k, 0] = base[li, 0] + frac[k] * ax
+            centres[li, k, 1] = base[li, 1] + frac[k] * ay
+        reach[li] = half_width[li] + search_px
+        step[li] = 2.0 * reach[li] / (W - 1)
+    rows = np.flatnonzero(valid)
+    links = rows // S
+    mx = np.empty((len(rows) * W, 1), np.float32)
+    my = np.empty((len(rows) * W, 1), np.float32)
+    for r in range(len(rows)):
+        li, k = links[r], rows[r] % S
+        for j in range(W):
+            off = reach[li] * t[j]
+            mx[r * W + j, 0] = np.float32(centres[li, k, 0] + off * n[li, 0])
+            my[r * W + j, 0] = np.float32(centres[li, k, 1] + off * n[li, 1])
+    return n, centres, reach, step, rows, links, mx, my
+
+
+@numba.njit(**_JIT)
+def pair_midpoints(found: np.ndarray, sign_i: np.ndarray, sign_j: np.ndarray,
+                   ei: np.ndarray, ej: np.ndarray, rows: np.ndarray, links: int,
+                   slices: int, samples: int, reach: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`pair_search`'s pairs of the searched ``rows`` back on the (L, S) slices: where
+    a pair was found, the sign of its entering edge where the two edges' signs are opposite
+    (else 0), and the pair's midpoint offset along the normal (the mean of the two sample
+    positions in [-1, 1] times the reach; 0 where nothing was searched)."""
+    valid = np.zeros((links, slices), np.bool_)
+    best_sign = np.zeros((links, slices), np.int64)
+    mid_t = np.zeros((links, slices))
+    for r in range(len(rows)):
+        li, k = rows[r] // slices, rows[r] % slices
+        valid[li, k] = found[r]
+        best_sign[li, k] = sign_i[r] if sign_i[r] == -sign_j[r] else 0
+        mid_t[li, k] = (ei[r] + ej[r]) / (samples - 1) - 1.0
+    mid_off = np.empty((links, slices))
+    for li in range(links):
+        for k in range(slices):
+            mid_off[li, k] = mid_t[li, k] * reach[li]
+    return valid, best_sign, mid_off
+
+
+@numba.njit(**_JIT)
+def axis_counts(w: np.ndarray, sign: np.ndarray, min_slices: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per line of (L, S) kept-point weights (0 or 1): whether at least ``min_slices`` were
+    kept, how many, and the sign of the kept slices' summed ``sign`` (L,) each."""
+    L, S = w.shape
+    found = np.empty(L, np.bool_)
+    count = np.empty(L, np.int64)
+    polarity = np.empty(L, np.int64)
+    for li in range(L):
+        total, signs = 0.0, 0
+        for k in range(S):
+            total += w[li, k]
+            if w[li, k] > 0:
+                signs += sign[li, k]
+        found[li] = total >= min_slices
+        count[li] = np.int64(total)
+        polarity[li] = 1 if signs > 0 else (-1 if signs < 0 else 0)
+    return found, count, polarity
+
+
+@numba.njit(**_JIT)
+def outline_drawing(base: np.ndarray, end: np.ndarray, half_width: np.ndarray,
+                    tip: np.ndarray, tip_radius: np.ndarray, shift: np.ndarray, scale: int,
+                    tolerance: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``silhouette.Silhouette.unexplained``'s drawing of a hand outline, numpy's operations
+    in numpy's order: the capsules with finite ends (``base -> end`` less ``shift``, as cv2
+    drawing coordinates with 4 fractional bits at 1 / ``scale``; (K, 2, 2) int32) sorted by
+    their line thickness (the half-width plus ``tolerance``, at least 1; (K,), stable), and
+    the finite tips' centres (T, 2) int32 and radii (T,) in drawing units."""
+    L = len(base)
+    keep = np.empty(L, np.int64)
+    thick_all = np.empty(L, np.int64)
+    K = 0
+    s = np.float64(scale)
+    for i in range(L):
+        if np.isfinite(base[i, 0]) and np.isfinite(base[i, 1]) and np.isfinite(end[i, 0]) \
+                and np.isfinite(end[i, 1]):
+            keep[K] = i
+            v = np.rint(2.0 * (half_width[i] + tolerance) / s)
+            thick_all[K] = np.int64(_at_least(v, 1.0))
+            K += 1
+    order = np.argsort(thick_all[:K], kind='mergesort')
+    ends = np.empty((K, 2, 2), np.int32)
+    thick = np.empty(K, np.int64)
+    for j in range(K):
+        i = keep[order[j]]
+        thick[j] = thick_all[order[j]]
+        for c in range(2):
+            ends[j, 0, c] = np.int32(np.rint((base[i, c] - shift[c] + 0.5) / s * 16 - 8))
+            ends[j, 1, c] = np.int32(np.rint((end[i, c] - shift[c] + 0.5) / s * 16 - 8))
+    T = 0
+    centres = np.empty((len(tip), 2), np.int32)
+    radii = np.empty(len(tip), np.int64)
+    for t in range(len(tip)):
+        if np.isfinite(tip[t, 0]) and np.isfinite(tip[t, 1]):
+            for c in range(2):
+                centres[T, c] = np.int32(np.rint((tip[t, c] - shift[c] + 0.5) / s * 16 - 8))
+            v = np.rint(16 * (tip_radius[t] + tolerance) / s)
+            radii[T] = np.int64(_at_least(v, 1.0))
+            T += 1
+    return ends, thick, centres[:T].copy(), radii[:T].copy()
+
+
+_PROBES = ((0.0, 0.0), (1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))
+
+
+@numba.njit(**_JIT)
+def probe_maps(px: np.ndarray, scale: int, offset: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """``silhouette.Silhouette.outside_distance``'s sample maps: each of (N, 2) pixels and its
+    four neighbours ``scale`` pixels away (right, left, down, up) as float32 mask coordinates
+    (the mask ``scale`` times smaller, its first pixel at ``offset``), x and y (5N, 1) each,
+    in numpy's dtypes and order."""
+    n = len(px)
+    mx = np.empty((5 * n, 1), np.float32)
+    my = np.empty((5 * n, 1), np.float32)
+    h = np.float64(scale)
+    half, s32 = np.float32(0.5), np.float32(scale)
+    for i in range(n):
+        for k in range(5):
+            x = np.float32(px[i, 0] + h * _PROBES[k][0])
+            y = np.float32(px[i, 1] + h * _PROBES[k][1])
+            mx[5 * i + k, 0] = np.float32(np.float64((x + half) / s32 - half) - offset[0])
+            my[5 * i + k, 0] = np.float32(np.float64((y + half) / s32 - half) - offset[1])
+    return mx, my
+
+
+@numba.njit(**_JIT)
+def probe_gradients(values: np.ndarray, scale: int) -> tuple[np.ndarray, np.ndarray]:
+    """The outside distances at N pixels and their central-difference gradients (N, 2) from
+    the samples of :func:`probe_maps` (5N, 1) float32, in float32."""
+    n = len(values) // 5
+    dist = np.empty(n, np.float32)
+    grad = np.empty((n, 2), np.float32)
+    twice = np.float32(2.0 * np.float64(scale))
+    for i in range(n):
+        dist[i] = values[5 * i, 0]
+        grad[i, 0] = (values[5 * i + 1, 0] - values[5 * i + 2, 0]) / twice
+        grad[i, 1] = (values[5 * i + 3, 0] - values[5 * i + 4, 0]) / twice
+    return dist, grad
+
+
 def _array(dtype: object, ndim: int) -> object:
     """A read-only C-contiguous array type (writable arrays convert to it)."""
     return numba.types.Array(dtype, ndim, 'C', readonly=True)
 
 
 _F1, _F2 = _array(numba.float64, 1), _array(numba.float64, 2)
+_I1 = _array(numba.int64, 1)
 _SIGNATURES = {
     derivative: (_array(numba.float32, 2), _F1),
     pair_search: (_array(numba.float32, 2), _array(numba.int64, 1), numba.boolean,
@@ -294,6 +863,30 @@ _SIGNATURES = {
     occluded_slices: (_F2, numba.int64, _F2, _F2, _F1, _F1, _F1, _F1, numba.float64,
                       _array(numba.boolean, 1), _array(numba.boolean, 2)),
     behind_palm: (_F2, _F2, _F2, _F1, numba.float64, _F1, _F1),
+    line_rows: (_F2, _array(numba.float64, 3), _I1, _I1, _F1, _F2, _F1, numba.int64, _I1, _F2,
+                numba.float64, numba.boolean, numba.float64, numba.float64, numba.float64,
+                numba.boolean, numba.boolean),
+    fit_lines: (_F2, _F2, _array(numba.float64, 3), _F2, _F1, _F2, _array(numba.boolean, 2),
+                numba.float64),
+    link_prediction: (_F2, _F1, numba.int64, _F1, numba.float64, _F1, numba.float64,
+                      numba.float64, numba.float64, numba.int64, numba.int64),
+    tip_prediction: (_F2, _F1, numba.int64, numba.int64, _F1, numba.float64, _I1,
+                     _array(numba.boolean, 1), numba.float64, numba.float64, numba.int64,
+                     numba.int64, _F2, _F2, _F1, _F1, _F1, _array(numba.boolean, 1)),
+    palm_prediction: (_F2, _F1, _I1, _I1, _F1, _I1, _F1, numba.float64, numba.float64,
+                      numba.float64, numba.int64, numba.int64, _F2, _F2, _F1, _F1, _F1,
+                      _array(numba.boolean, 1), numba.int64),
+    link_slice_maps: (_F2, _F2, _F1, _F1, _F1, numba.float64, _array(numba.boolean, 1)),
+    pair_midpoints: (_array(numba.boolean, 1), _I1, _I1, _F1, _F1, _I1, numba.int64,
+                     numba.int64, numba.int64, _F1),
+    axis_counts: (_F2, _array(numba.int64, 2), numba.int64),
+    outline_drawing: (_F2, _F2, _F1, _F2, _F1, _F1, numba.int64, numba.float64),
+    probe_maps: (_F2, numba.int64, _F1),
+    probe_gradients: (_array(numba.float32, 2), numba.int64),
+    axis_points: (_F2, numba.int64, numba.int64, numba.int64, numba.int64, numba.int64),
+    silhouette_rows: (_F2, _array(numba.float64, 3), _F1, numba.int64, numba.int64, _I1,
+                      _array(numba.float32, 1), _array(numba.float32, 2), numba.float64, _F2,
+                      _I1, _F1, _F2, _F1, numba.float64),
 }
 
 

@@ -32,6 +32,7 @@ import cv2
 import numpy as np
 
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.tracking.edge_features import compiled_kernels
 
 __all__ = ['SilhouetteError', 'SilhouetteConfig', 'BackgroundModel', 'Silhouette',
            'HandOutline', 'read_background']
@@ -176,25 +177,16 @@ class Silhouette:
         """Foreground area in full-resolution pixels."""
         return float(self.mask.sum()) * self.scale ** 2
 
-    def _sample(self, xy: np.ndarray) -> np.ndarray:
-        if not np.size(xy):
-            return np.zeros(np.shape(xy)[:-1], np.float32)
-        flat = ((np.asarray(xy, np.float32).reshape(-1, 2) + 0.5) / self.scale - 0.5
-                - self.offset).astype(np.float32)
-        out = cv2.remap(self._outside, np.ascontiguousarray(flat[:, :1]),
-                        np.ascontiguousarray(flat[:, 1:]), cv2.INTER_LINEAR,
-                        borderMode=cv2.BORDER_REPLICATE)
-        return out.reshape(np.shape(xy)[:-1])
-
     def outside_distance(self, px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Distance (full-resolution pixels, 0 inside) from each of (N, 2) pixels to the
         foreground, and its gradient (N, 2) (central differences one mask pixel apart)."""
-        px = np.asarray(px, dtype=float).reshape(-1, 2)
-        h = float(self.scale)
-        probe = px[:, None, :] + h * np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1]])
-        v = self._sample(probe)
-        grad = np.stack([v[:, 1] - v[:, 2], v[:, 3] - v[:, 4]], axis=1) / (2.0 * h)
-        return v[:, 0], grad
+        px = np.ascontiguousarray(px, dtype=float).reshape(-1, 2)
+        if not len(px):
+            return np.zeros(0, np.float32), np.zeros((0, 2), np.float32)
+        kernels = compiled_kernels()
+        mx, my = kernels.probe_maps(px, self.scale, self.offset)
+        v = cv2.remap(self._outside, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        return kernels.probe_gradients(v.reshape(-1, 1), self.scale)
 
     def unexplained(self, outline: HandOutline, tolerance_px: float, pixels: bool = True
                     ) -> tuple[np.ndarray, float]:
@@ -202,41 +194,47 @@ class Silhouette:
         ``pixels``) farther than ``tolerance_px`` from every part of ``outline``, and their
         share of the hand's foreground (the forearm, beyond the wrist, left out of both)."""
         s = self.scale
-        covered = np.zeros(self.mask.shape, np.uint8)
         tol = float(tolerance_px)
         shift = s * self.offset
-        ok = np.isfinite(outline.base).all(1) & np.isfinite(outline.end).all(1)
-        thick = np.maximum(1, np.round(2.0 * (outline.half_width + tol) / s)).astype(int)
-        ends = np.stack([_fixed(outline.base[ok] - shift, s), _fixed(outline.end[ok] - shift, s)],
-                        axis=1)                                   # (K, 2, 2) capsule ends
-        # one call per thickness: a two-point polyline is drawn as cv2.line draws it
-        for t in np.unique(thick[ok]):
-            cv2.polylines(covered, list(ends[thick[ok] == t]), False, 1, int(t), cv2.LINE_8, 4)
-        ok = np.isfinite(outline.tip).all(1)
-        radius = np.maximum(1, np.round(16 * (outline.tip_radius + tol) / s)).astype(int)
-        for c, r in zip(_pts(outline.tip[ok] - shift, s), radius[ok], strict=True):
-            cv2.circle(covered, c, int(r), 1, -1, cv2.LINE_8, 4)
-        if len(outline.palm) >= 3 and np.all(np.isfinite(outline.palm)):
-            hull = cv2.convexHull(np.round(((outline.palm - shift + 0.5) / s - 0.5) * 16)
-                                  .astype(np.int32))
-            cv2.fillConvexPoly(covered, hull, 1, cv2.LINE_8, 4)
-            if tol > 0:
-                cv2.polylines(covered, [hull], True, 1, max(1, int(round(2.0 * tol / s))),
-                              cv2.LINE_8, 4)
-        # the forearm: the half-plane beyond the line through the wrist across the hand axis
+        # the forearm: the half-plane beyond the line through the wrist across the hand axis,
+        # cleared from a copy of the mask
         h, w = self.mask.shape
         big = 4.0 * (h + w + np.abs(self.offset).sum())
         a = np.asarray(outline.axis, dtype=float)
         across = np.array([-a[1], a[0]])
         start = (outline.wrist - shift + 0.5) / s - 0.5 - (tol / s) * a
-        arm = np.zeros_like(covered)
         quad = start + big * np.array([across, -across, -across - a, across - a])
-        cv2.fillConvexPoly(arm, np.round(quad * 16).astype(np.int32), 1, cv2.LINE_8, 4)
-        hand = cv2.bitwise_and(self._mask_u8, 1 - arm)
+        hand = self._mask_u8.copy()
+        cv2.fillConvexPoly(hand, np.round(quad * 16).astype(np.int32), 0, cv2.LINE_8, 4)
         count = cv2.countNonZero(hand)
         if count == 0:
             return np.zeros((0, 2)), 0.0
-        loose = cv2.bitwise_and(hand, 1 - covered)
+        # what the hand explains (capsules, tip discs, the palm's hull, each widened by the
+        # tolerance) cleared from it in turn: the pixels left are the unexplained ones
+        loose = hand
+        ends, thick, tips, radii = compiled_kernels().outline_drawing(
+            np.ascontiguousarray(outline.base, dtype=float),
+            np.ascontiguousarray(outline.end, dtype=float),
+            np.ascontiguousarray(outline.half_width, dtype=float),
+            np.ascontiguousarray(outline.tip, dtype=float).reshape(-1, 2),
+            np.ascontiguousarray(outline.tip_radius, dtype=float), shift, s, tol)
+        # one call per thickness (the capsules come sorted by it): a two-point polyline is
+        # drawn as cv2.line draws it
+        start = 0
+        for stop in [*np.flatnonzero(np.diff(thick)) + 1, len(thick)]:
+            if stop > start:
+                cv2.polylines(loose, list(ends[start:stop]), False, 0, int(thick[start]),
+                              cv2.LINE_8, 4)
+            start = stop
+        for c, r in zip(tips.tolist(), radii.tolist(), strict=True):
+            cv2.circle(loose, tuple(c), r, 0, -1, cv2.LINE_8, 4)
+        if len(outline.palm) >= 3 and np.all(np.isfinite(outline.palm)):
+            hull = cv2.convexHull(np.round(((outline.palm - shift + 0.5) / s - 0.5) * 16)
+                                  .astype(np.int32))
+            cv2.fillConvexPoly(loose, hull, 0, cv2.LINE_8, 4)
+            if tol > 0:
+                cv2.polylines(loose, [hull], True, 0, max(1, int(round(2.0 * tol / s))),
+                              cv2.LINE_8, 4)
         if not pixels:
             return np.zeros((0, 2)), float(cv2.countNonZero(loose)) / float(count)
         found = cv2.findNonZero(loose)
@@ -245,13 +243,3 @@ class Silhouette:
         pix = (found.reshape(-1, 2) + self.offset + 0.5) * s - 0.5
         return pix, float(len(pix)) / float(count)
 
-
-def _fixed(xy: np.ndarray, scale: int) -> np.ndarray:
-    """Full-resolution pixels (N, 2) as cv2 drawing coordinates (4 fractional bits) at
-    1 / scale, (N, 2) int32."""
-    return np.round((np.asarray(xy) + 0.5) / scale * 16 - 8).astype(np.int32)
-
-
-def _pts(xy: np.ndarray, scale: int) -> list[tuple[int, int]]:
-    """:func:`_fixed` as a list of (x, y) tuples."""
-    return [tuple(p) for p in _fixed(xy, scale).tolist()]
