@@ -11,11 +11,13 @@ from pathlib import Path
 from typing import Any
 
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.opencv_threads import OPENCV_THREADS
 from colorglove_ros.core.report import write_json
 from colorglove_ros.signal_exit import exit_on_signals
 
 __all__ = ['tool_parser', 'sequence_tool_parser', 'ScriptedSettings', 'ScriptedEvaluation',
-           'run_scripted_evaluation', 'add_pipeline_arguments', 'tool_error', 'run_tool']
+           'run_scripted_evaluation', 'add_pipeline_arguments', 'add_opencv_threads_argument',
+           'tool_error', 'run_tool']
 
 
 def tool_parser(description: str | None, *, raw_description: bool = False,
@@ -240,6 +242,16 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, *, frames: int, seed
     parser.add_argument('--seed', type=int, default=seed, help=f'seed of the {sequence}')
     parser.add_argument('--database', type=Path,
                         help='pose database (default: the one config/database.yaml names)')
+
+
+def add_opencv_threads_argument(parser: argparse.ArgumentParser) -> None:
+    """``--opencv-threads``: OpenCV's threads in the tool's process, defaulting to the nodes'
+    ``opencv_threads`` (:data:`~colorglove_ros.core.opencv_threads.OPENCV_THREADS`), so that the
+    process CPU a tool reports is what the node would take."""
+    parser.add_argument('--opencv-threads', type=int, default=OPENCV_THREADS,
+                        help='OpenCV threads of this process (cv2.setNumThreads), as the nodes\' '
+                        f'opencv_threads parameter (default {OPENCV_THREADS}: every OpenCV call in '
+                        'the calling thread; -1: OpenCV\'s own default, all cores)')
 
 
 def tool_error(name: str, exc: Exception) -> int:

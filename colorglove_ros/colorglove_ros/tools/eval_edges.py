@@ -47,13 +47,14 @@ import numpy as np
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
+from colorglove_ros.core.opencv_threads import use_opencv_threads
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.synthetic.bare_hand import BareHandSequence
 from colorglove_ros.core.tracking.edge_fit import REFIT_ABDUCTION, REFIT_DOFS, EdgeTrackerConfig
 from colorglove_ros.core.tracking.edge_tracker import FINGER_WITHHELD, EdgeTracker
 from colorglove_ros.core.tracking.silhouette import BackgroundModel
 from colorglove_ros.paths import resolve_path
-from colorglove_ros.tools._cli import run_tool, tool_parser
+from colorglove_ros.tools._cli import add_opencv_threads_argument, run_tool, tool_parser
 
 __all__ = ['main', 'TUNING_SEEDS', 'CHECK_SEEDS', 'EVALUATION_SEEDS', 'TARGETS', 'evaluate_run',
            'sequence_figures']
@@ -237,6 +238,7 @@ def main(argv: list[str] | None = None) -> int:
                         help='empty: silhouettes against one frame of the empty scene per '
                         'camera; none: edges only')
     add_fit_arguments(parser)
+    add_opencv_threads_argument(parser)
     parser.add_argument('--max-finger-off-silhouette', type=float,
                         default=EdgeTrackerConfig.max_finger_off_silhouette,
                         help='the tracker\'s finger gate: a frame where a finger other than '
@@ -248,6 +250,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(args: Any) -> int:
+    use_opencv_threads(args.opencv_threads)
     calibration = load_calibration(resolve_path(args.calibration))
     cams_all = calibration.cameras[:max(args.cameras)]
     rows: list[dict[str, Any]] = []
@@ -303,8 +306,8 @@ def _run(args: Any) -> int:
     load = os.getloadavg()
     print(f'conditions: python loop sum(range(3e6)) {loop_s:.3f} s; load average '
           f'{load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} CPUs; tracker '
-          f'single-threaded in this process (time: wall clock, cpu: this process, thread_cpu: '
-          f'the tracker\'s thread)', flush=True)
+          f'single-threaded in this process, OpenCV threads {args.opencv_threads} (time: wall '
+          f'clock, cpu: this process, thread_cpu: the tracker\'s thread)', flush=True)
     if args.json:
         write_json(args.json, {'settings': {'seeds': args.seeds, 'tuning_seeds': TUNING_SEEDS,
                                             'check_seeds': CHECK_SEEDS,
@@ -314,6 +317,7 @@ def _run(args: Any) -> int:
                                             **fit_settings(args),
                                             'max_finger_off_silhouette':
                                                 args.max_finger_off_silhouette,
+                                            'opencv_threads': args.opencv_threads,
                                             'python_loop_s': loop_s, 'load_average': load},
                                'rows': rows, 'summary': summary, 'targets': targets})
     return 0

@@ -68,6 +68,7 @@ from colorglove_ros.core.evaluation.sequences import find_database
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.geometry import matrix_to_rotvec
 from colorglove_ros.core.hand.model import DOF_NAMES, KEYPOINT_NAMES, HandModel
+from colorglove_ros.core.opencv_threads import use_opencv_threads
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.synthetic.bare_hand import BareHandSequence
 from colorglove_ros.core.tracking.edge_fit import EdgeTrackerConfig
@@ -81,7 +82,7 @@ from colorglove_ros.core.tracking.mouse import (
 )
 from colorglove_ros.core.tracking.silhouette import BackgroundModel
 from colorglove_ros.paths import data_dir, resolve_path, share_dir
-from colorglove_ros.tools._cli import run_tool, tool_parser
+from colorglove_ros.tools._cli import add_opencv_threads_argument, run_tool, tool_parser
 from colorglove_ros.tools.eval_edges import FIT_SETTINGS, add_fit_arguments, fit_settings
 
 __all__ = ['main', 'scripted_sequence', 'evaluate_seed', 'noisy_poses', 'edge_tracked_poses',
@@ -352,6 +353,7 @@ def main(argv: list[str] | None = None) -> int:
                         help='with --source edges: the edge tracker\'s camera_weights '
                         '(default: EdgeTrackerConfig\'s)')
     add_fit_arguments(parser, applies='with --source edges: ')
+    add_opencv_threads_argument(parser)
     parser.add_argument('--reinit', choices=REINIT_MODES, default=DEFAULT_REINIT,
                         help='with --source edges: (re-)initialise the edge tracker from the '
                         'true pose with the buttons\' joints at rest (default), or from the '
@@ -374,6 +376,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(args: Any) -> int:
+    use_opencv_threads(args.opencv_threads)
     calibration = load_calibration(resolve_path(args.calibration))
     if args.source == 'edges' and len(calibration.cameras) < args.cameras:
         raise ColorGloveError(f'{args.calibration} has {len(calibration.cameras)} camera(s), '
@@ -452,6 +455,7 @@ def _evaluate_all(args: Any, model: HandModel, config: MouseConfig, noise: dict[
                                             'source': args.source, 'seconds': args.seconds,
                                             'background': args.background,
                                             'reinit': args.reinit,
+                                            'opencv_threads': args.opencv_threads,
                                             'calibration': args.calibration,
                                             'cameras': [c.name for c in cameras],
                                             'camera_weights': list(edge_config.camera_weights),

@@ -47,6 +47,7 @@ from colorglove_ros.core.hand.frames import (
 from colorglove_ros.core.hand.model import HandModel, calibrated_hand_model
 from colorglove_ros.core.hand.observation_features import OBSERVATION_FEATURES, frame_features
 from colorglove_ros.core.hand.pose_classifier import PoseClassifier, load_pose_classifier
+from colorglove_ros.core.opencv_threads import OPENCV_THREADS, use_opencv_threads
 from colorglove_ros.paths import resolve_path
 from colorglove_ros.ros.conversions import (
     blobs_from_observation_msg,
@@ -124,23 +125,14 @@ def declare_limit(node: Node, name: str, default: float, description: str,
                     description, float(off), maximum)
     return float(value) if value > off else math.inf
 
-#: Default of the ``opencv_threads`` parameter of the nodes that run OpenCV per frame: one
-#: thread. Their images are small (a coarse frame, a region of interest, 40x40 tiny images),
-#: so OpenCV's worker threads cost the calling thread more in dispatch than they take off it,
-#: and the four processes of the graph share the machine's cores anyway.
-OPENCV_THREADS = 1
-
-
 def declare_opencv_threads(node: Node) -> int:
-    """Declare ``opencv_threads`` and apply it to the process (``cv2.setNumThreads``, which is
-    process-wide: in one process the last node started sets it); return it."""
-    import cv2
-
+    """Declare ``opencv_threads`` (default :data:`OPENCV_THREADS`) and apply it to the process
+    (``cv2.setNumThreads``, which is process-wide: in one process the last node started sets
+    it); return it."""
     threads = declare(node, 'opencv_threads', OPENCV_THREADS,
                       'OpenCV threads of this process (cv2.setNumThreads): 1 runs every OpenCV '
                       'call in the calling thread; -1 OpenCV\'s own default (all cores)', -1, 64)
-    cv2.setNumThreads(threads)
-    return threads
+    return use_opencv_threads(threads)
 
 
 @contextmanager

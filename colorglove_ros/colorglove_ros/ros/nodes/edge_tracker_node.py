@@ -56,6 +56,7 @@ from colorglove_ros.ros.nodes.common import (
     declare_frame_prefix,
     declare_hand_length,
     declare_limit,
+    declare_opencv_threads,
     declare_topic_list,
     run_node,
     startup_errors,
@@ -70,6 +71,7 @@ class EdgeTrackerNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('edge_tracker', **kwargs)
+        declare_opencv_threads(self)
         calibration_file = declare_calibration_file(
             self, 'camera calibration YAML (all its cameras are used; camera 0 is the primary); '
             'empty: one camera from the first CameraInfo on camera_info_topic', default='')
