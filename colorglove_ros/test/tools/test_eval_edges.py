@@ -127,3 +127,24 @@ def test_the_finger_refit_settings_and_the_round_gate_reach_the_tracker(
 def test_an_unknown_finger_refit_mode_is_refused() -> None:
     with pytest.raises(SystemExit):
         main(['--seeds', '1', '--frames', '2', '--finger-refit-dofs', 'wrist'])
+
+
+@pytest.mark.parametrize('flags, threads', [([], 1), (['--opencv-threads', '2'], 2)])
+def test_the_tool_runs_opencv_as_the_node_does(tmp_path, flags: list[str], threads: int) -> None:
+    """OpenCV's threads default to the nodes' ``opencv_threads`` (``OPENCV_THREADS``), so the
+    process CPU the tool reports is what edge_tracker_node would take; the JSON says which."""
+    import cv2
+
+    from colorglove_ros.core.opencv_threads import OPENCV_THREADS
+
+    assert OPENCV_THREADS == 1
+    before = cv2.getNumThreads()
+    try:
+        cv2.setNumThreads(3)
+        out = tmp_path / 'threads.json'
+        assert main(['--seeds', '1', '--frames', '2', '--speeds', '1', '--cameras', '1', *flags,
+                     '--json', str(out)]) == 0
+        assert cv2.getNumThreads() == threads
+        assert json.loads(out.read_text())['settings']['opencv_threads'] == threads
+    finally:
+        cv2.setNumThreads(before)

@@ -241,3 +241,22 @@ def test_the_edge_trackers_refit_settings_and_round_gate_reach_its_settings(tmp_
     assert (settings['finger_refit_dofs'], settings['finger_refit_abduction'],
             settings['finger_refit_spread_deg'], settings['round_min_move_px']) \
         == ('abduction', 'both', 6.0, 3.0)
+
+
+def test_the_tool_runs_opencv_as_the_node_does(tmp_path) -> None:
+    """OpenCV's threads default to the nodes' ``opencv_threads``; ``--opencv-threads`` sets it."""
+    import cv2
+
+    from colorglove_ros.core.opencv_threads import OPENCV_THREADS
+
+    before = cv2.getNumThreads()
+    try:
+        for flags, threads in (([], OPENCV_THREADS), (['--opencv-threads', '2'], 2)):
+            cv2.setNumThreads(3)
+            out = tmp_path / 'mouse.json'
+            assert eval_mouse_main(['--source', 'noise', '--seeds', '0', '--seconds', '2',
+                                    *flags, '--json', str(out)]) == 0
+            assert cv2.getNumThreads() == threads
+            assert json.loads(out.read_text())['settings']['opencv_threads'] == threads
+    finally:
+        cv2.setNumThreads(before)

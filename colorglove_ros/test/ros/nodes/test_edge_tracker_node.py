@@ -203,3 +203,21 @@ def test_background_images_give_the_tracker_silhouettes(tmp_path, sequence) -> N
     with pytest.raises(StartupError):
         with running(_node(background_images=[str(tmp_path / 'missing.png')])):
             pass
+
+
+@pytest.mark.parametrize('threads', [None, 2])
+def test_the_node_runs_opencv_in_the_calling_thread_by_default(threads) -> None:
+    """``opencv_threads`` (default ``OPENCV_THREADS``, as the glove nodes) reaches the process."""
+    import cv2
+
+    from colorglove_ros.core.opencv_threads import OPENCV_THREADS
+
+    before = cv2.getNumThreads()
+    try:
+        cv2.setNumThreads(3)
+        overrides = {} if threads is None else {'opencv_threads': threads}
+        with running(_node(**overrides)) as h:
+            assert h.nodes[0].get_parameter('opencv_threads').value == (threads or OPENCV_THREADS)
+            assert cv2.getNumThreads() == (threads or OPENCV_THREADS)
+    finally:
+        cv2.setNumThreads(before)
