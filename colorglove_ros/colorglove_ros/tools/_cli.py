@@ -244,11 +244,19 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, *, frames: int, seed
                         help='pose database (default: the one config/database.yaml names)')
 
 
+def _opencv_thread_count(text: str) -> int:
+    """``--opencv-threads``' value: an integer from -1 to 64, as the nodes' parameter."""
+    value = int(text)
+    if not -1 <= value <= 64:
+        raise argparse.ArgumentTypeError(f'{value} is not in -1..64')
+    return value
+
+
 def add_opencv_threads_argument(parser: argparse.ArgumentParser) -> None:
     """``--opencv-threads``: OpenCV's threads in the tool's process, defaulting to the nodes'
     ``opencv_threads`` (:data:`~colorglove_ros.core.opencv_threads.OPENCV_THREADS`), so that the
     process CPU a tool reports is what the node would take."""
-    parser.add_argument('--opencv-threads', type=int, default=OPENCV_THREADS,
+    parser.add_argument('--opencv-threads', type=_opencv_thread_count, default=OPENCV_THREADS,
                         help='OpenCV threads of this process (cv2.setNumThreads), as the nodes\' '
                         f'opencv_threads parameter (default {OPENCV_THREADS}: every OpenCV call in '
                         'the calling thread; -1: OpenCV\'s own default, all cores)')

@@ -148,3 +148,9 @@ def test_the_tool_runs_opencv_as_the_node_does(tmp_path, flags: list[str], threa
         assert json.loads(out.read_text())['settings']['opencv_threads'] == threads
     finally:
         cv2.setNumThreads(before)
+
+
+@pytest.mark.parametrize('value', ['65', '-2', 'two'])
+def test_an_opencv_thread_count_outside_the_nodes_range_is_refused(value: str) -> None:
+    with pytest.raises(SystemExit):
+        main(['--seeds', '1', '--frames', '2', '--opencv-threads', value])

@@ -30,9 +30,11 @@ _OBSERVATION_KEYS = tuple(empty_observation_record(0))
 TRACKER_MODE = 'ik_smooth'        # the mode ik_node runs (IK and smoothing on)
 # fields that name where a setting came from, not what it is
 _PROVENANCE_FIELDS = ('source', 'name', 'frame_id')
-# the modules the tracking of a scripted sequence runs (:meth:`ScriptedTracker._make_evaluator`);
-# the cache key covers their code and that of every package module they import
-TRACKING_MODULES = ('colorglove_ros.core.evaluation.sequences', 'colorglove_ros.core.lookup.search',
+# this module (its tracking loop) and the modules the tracking of a scripted sequence runs
+# (:meth:`ScriptedTracker._make_evaluator`); the cache key covers their code and that of every
+# package module they import
+TRACKING_MODULES = ('colorglove_ros.core.evaluation.scripted_tracking',
+                    'colorglove_ros.core.evaluation.sequences', 'colorglove_ros.core.lookup.search',
                     'colorglove_ros.core.tracking.config', 'colorglove_ros.core.camera')
 _PACKAGE = 'colorglove_ros'
 # the folder holding the package folder, whose sources the code tag reads

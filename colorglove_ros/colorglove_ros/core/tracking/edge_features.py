@@ -206,7 +206,7 @@ def measure_link_axes(grey: np.ndarray, base_px: np.ndarray, end_px: np.ndarray,
     profile = np.zeros((0, W), np.float32) if not len(rows) else cv2.remap(
         grey, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
         borderValue=np.nan).reshape(len(rows), W)                              # (R, W)
-    d = kernels.derivative(profile, step[li])
+    d = kernels.derivative(np.ascontiguousarray(profile, dtype=np.float32), step[li])
     pol = np.broadcast_to(np.asarray(polarity, dtype=np.int64), (L,))[li][:, None]
     # edge strengths: a link brighter than its surroundings rises then falls (+1), a darker
     # one falls then rises (-1); with polarity 0 each edge may have either sign, since a

@@ -153,3 +153,13 @@ def test_outline_edge_found_from_an_offset_prediction_normal_outward(shift_px: f
     assert axes.found[0] and axes.polarity[0] == 1
     assert np.allclose(axes.normal[0], [1.0, 0.0], atol=1e-3)
     assert abs(axes.offset[0] - 199.5) < 0.3     # the step lies between pixels 199 and 200
+
+
+@pytest.mark.parametrize('dtype', [np.uint8, np.float64])
+def test_link_axes_are_measured_in_a_grey_image_of_any_dtype(dtype) -> None:
+    """An 8-bit or float64 grey image is sampled as it is and its samples differentiated as
+    float32, as the outline and tip measurements do (not only the tracker's float32 grey)."""
+    grey = _bar_image(A, B, R)
+    image = np.clip(np.rint(grey), 0, 255).astype(dtype)
+    axes = measure_link_axes(image, A[None], B[None], np.array([R]))
+    assert axes.found[0] and _line_error(axes, 0, A, B) < 0.5
