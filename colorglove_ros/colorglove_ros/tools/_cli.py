@@ -6,11 +6,12 @@ import math
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.hand.frame_evidence import EvidenceGate
 from colorglove_ros.core.opencv_threads import OPENCV_THREADS
 from colorglove_ros.core.report import write_json
 from colorglove_ros.signal_exit import exit_on_signals
@@ -73,7 +74,9 @@ class ScriptedSettings:
     default_count: int
     classifier: str               # default trained classifier (package-relative; '': none)
     feature_set: str              # its feature set (core.hand.pose_classifier)
-    evidence_gate: bool = False   # evaluate(...) takes evidence=EvidenceGate (--evidence-*)
+    # when not None: evaluate(...) takes evidence=EvidenceGate, this one (the core's) with the
+    # fields --evidence-* give replaced
+    evidence_gate: EvidenceGate | None = None
     # evaluate(...) takes image_classifier= and image_weight= (--image-classifier, --image-weight)
     # when not None: the image classifier used with --tracker by default (package-relative;
     # '': none)
@@ -138,6 +141,7 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
     from colorglove_ros.core.evaluation.scripted_hands import load_tracking_noise
     from colorglove_ros.core.evaluation.scripted_tracking import ScriptedTracker
     from colorglove_ros.core.evaluation.sequences import LABEL_SOURCES, find_database
+    from colorglove_ros.core.pipeline import NODE_LIMITS, UNGATED
     from colorglove_ros.paths import data_dir, share_dir
 
     config = share_dir() / 'config'
@@ -158,6 +162,11 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
     parser.add_argument('--labels', choices=LABEL_SOURCES, default='segmented',
                         help="with --tracker: 'segmented' (colour segmentation of the "
                         "rendered images) or 'truth' (the renderer's labels)")
+    parser.add_argument('--ungated', action='store_true',
+                        help="with --tracker: every output of the tracker reaches the "
+                        "consumer (core.pipeline.UNGATED), also the frames lookup_node and "
+                        "ik_node refuse (cut by the image border, weak evidence, ...); "
+                        "default: only the poses the nodes publish (NODE_LIMITS)")
     parser.add_argument('--database', type=Path,
                         help='with --tracker: pose database (default: the largest under data/; '
                         'tracked poses are cached per database contents)')
@@ -167,14 +176,15 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
                         f'default: {settings.classifier or "none, the templates"})')
     parser.add_argument('--rules', action='store_true',
                         help='score with the hand-written rules / templates, no classifier')
-    if settings.evidence_gate:
+    gate = settings.evidence_gate
+    if gate is not None:
         parser.add_argument('--evidence-min-constraints', type=float,
                             help="with --tracker: skip frames whose tracker evidence (the "
                             "status line a node has) matched fewer constraints (0: off; "
-                            "default: the core's)")
+                            f"default: the core's, {gate.min_constraints:g})")
         parser.add_argument('--evidence-max-reprojection-px', type=float,
                             help='with --tracker: skip frames whose reprojection error is '
-                            "larger (default: the core's, off)")
+                            f"larger (0: off; default: the core's, {gate.max_reprojection_px:g})")
     if settings.image_classifier is not None:
         parser.add_argument('--image-classifier',
                             help="with --tracker: a classifier of the frames' observation "
@@ -191,10 +201,12 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
     if args.tracker:
         database = args.database or find_database(data_dir())
         # tracked poses are cached under a tag of the database's contents
+        limits = UNGATED if args.ungated else NODE_LIMITS
         source: Any = ScriptedTracker(database, config / 'ik.yaml', config / 'calibration.yaml',
-                                      data_dir() / 'scripted_tracking', args.labels)
+                                      data_dir() / 'scripted_tracking', args.labels, limits)
         source_settings: dict[str, Any] = {'source': 'tracker', 'labels': args.labels,
-                                           'database': str(database)}
+                                           'database': str(database),
+                                           'gates': 'ungated' if args.ungated else 'nodes'}
     else:
         noise = load_tracking_noise(args.noise_config)
         if args.noise_mae_deg is not None:
@@ -205,13 +217,15 @@ def run_scripted_evaluation(argv: list[str] | None, description: str | None,
     source_settings['classifier'] = 'rules' if classifier is None else str(args.classifier)
     started = time.perf_counter()
     extra: dict[str, Any] = {}
-    if settings.evidence_gate and (args.evidence_min_constraints is not None
-                                   or args.evidence_max_reprojection_px is not None):
-        from colorglove_ros.core.hand.frame_evidence import EvidenceGate
-
-        extra['evidence'] = EvidenceGate(args.evidence_max_reprojection_px or math.inf,
-                                         args.evidence_min_constraints or 0.0)
-        source_settings['evidence_gate'] = asdict(extra['evidence'])
+    if gate is not None:
+        given: dict[str, Any] = {}
+        if args.evidence_min_constraints is not None:
+            given['min_constraints'] = args.evidence_min_constraints
+        if args.evidence_max_reprojection_px is not None:
+            given['max_reprojection_px'] = args.evidence_max_reprojection_px or math.inf
+        if given:
+            extra['evidence'] = replace(gate, **given)
+        source_settings['evidence_gate'] = asdict(extra.get('evidence', gate))
     image_path = None if settings.image_classifier is None else args.image_classifier
     if image_path is None and args.tracker and settings.image_classifier:
         image_path = str(share_dir() / settings.image_classifier)

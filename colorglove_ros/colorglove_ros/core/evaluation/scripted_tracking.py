@@ -18,6 +18,7 @@ from colorglove_ros.core.file_checksums import crc32_of_file
 from colorglove_ros.core.hand.model import HandModel
 from colorglove_ros.core.hand.observation_features import empty_observation_record
 from colorglove_ros.core.lookup.database import DatabaseError, contents_tag
+from colorglove_ros.core.pipeline import NODE_LIMITS, StageLimits
 
 __all__ = ['TRACKED_FORMAT_VERSION', 'TRACKER_MODE', 'TRACKING_MODULES', 'ScriptedTracker',
            'TrackedScript', 'tracking_settings', 'settings_tag', 'tracking_sources',
@@ -60,20 +61,22 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def tracking_settings(ik_config: Path, calibration: Path, labels: str) -> dict[str, Any]:
+def tracking_settings(ik_config: Path, calibration: Path, labels: str,
+                      limits: StageLimits = NODE_LIMITS) -> dict[str, Any]:
     """Everything that changes the tracked poses of a scripted sequence besides the database
     and the script: the tracking code (:func:`tracking_code_tag`), the parsed IK config
     (``load_ik_config``: its covariance file's values, not its path), the primary camera, the
-    tracker mode, the label source and, with ``labels='segmented'``, the segmenter's settings
-    and a checksum of the colour calibration file (``'missing'`` when it is not there yet: the
-    first tracking fits it)."""
+    tracker mode, the label source, the pipeline's gates (``limits``) and, with
+    ``labels='segmented'``, the segmenter's settings and a checksum of the colour calibration
+    file (``'missing'`` when it is not there yet: the first tracking fits it)."""
     from colorglove_ros.core.camera import load_calibration
     from colorglove_ros.core.tracking.config import load_ik_config
 
     settings: dict[str, Any] = {
         'ik': _plain(load_ik_config(str(ik_config)).with_mode(TRACKER_MODE)),
         'camera': _plain(load_calibration(str(calibration)).cameras[0]),
-        'mode': TRACKER_MODE, 'labels': labels, 'code': tracking_code_tag()}
+        'mode': TRACKER_MODE, 'labels': labels, 'code': tracking_code_tag(),
+        'limits': _plain(limits)}
     if labels == 'segmented':
         from colorglove_ros.core.segmentation.calibration_fit import DEFAULT_COLOR_CONFIG
         from colorglove_ros.core.segmentation.color_model import read_calibration_config
@@ -189,18 +192,22 @@ class ScriptedTracker:
     """Renders a scripted sequence's true poses (the glove, test-split imaging conditions from
     the seed, the primary camera of ``calibration``), runs the per-frame recipe (segmentation
     with ``labels='segmented'``, lookup, IK with smoothing) and returns the tracked poses and
-    the found flags. Results are cached in ``cache_dir`` as ``<name>_<seed>_<frames>_<labels>
+    the found flags. A frame counts as found when the nodes would publish its pose: the
+    pipeline's gates are ``limits`` (default ``NODE_LIMITS``, lookup_node's and ik_node's:
+    what a consumer node such as gesture_node is given; ``UNGATED``: every output of the
+    tracker). Results are cached in ``cache_dir`` as ``<name>_<seed>_<frames>_<labels>
     _<database tag>_<settings tag>.npz`` (versioned, with the true poses, so a changed script
     is tracked anew; the database tag is its ``contents_tag`` and the settings tag
     :func:`settings_tag` of :func:`tracking_settings`, so a rebuilt or another database, another
-    ``ik.yaml``, camera, colour calibration or tracking code never reads a cache of other
-    tracking)."""
+    ``ik.yaml``, camera, colour calibration, gates or tracking code never reads a cache of
+    other tracking)."""
 
     database: Path
     ik_config: Path
     calibration: Path
     cache_dir: Path
     labels: str = 'segmented'
+    limits: StageLimits = NODE_LIMITS
 
     def __post_init__(self) -> None:
         self._evaluator: Any = None
@@ -215,7 +222,7 @@ class ScriptedTracker:
                 from exc
         if self._settings_tag is None:      # read once, as the evaluator reads them once
             self._settings_tag = settings_tag(tracking_settings(self.ik_config, self.calibration,
-                                                                self.labels))
+                                                                self.labels, self.limits))
         return Path(self.cache_dir) / \
             f'{name}_{seed}_{frames}_{self.labels}_{tag}_{self._settings_tag}.npz'
 
@@ -255,7 +262,7 @@ class ScriptedTracker:
         return SequenceEvaluator(PoseLookup(db), {'1 camera': cameras[:1]}, [TRACKER_MODE],
                                  config, make_observer(self.labels, None,
                                                        config.min_blob_pixels),
-                                 evidence=True, observation=True)
+                                 limits=self.limits, evidence=True, observation=True)
 
     def observe(self, name: str, seed: int, truth: ScriptedSequence, model: HandModel
                 ) -> tuple[np.ndarray, np.ndarray]:

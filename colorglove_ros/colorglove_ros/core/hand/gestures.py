@@ -16,9 +16,11 @@ logistic ramps around thresholds:
 
 A finger's curl is its MCP + PIP + DIP flexion over the sum of their upper limits (0 straight,
 1 fully bent). The scores go through the shared hold-and-release hysteresis
-(``core/hand/hysteresis.py``: smoothing, on / off thresholds and hold times); a lost hand
-ends every active gesture at once. The confidence of an event is the gesture's smoothed score
-on the frame that decided it (for a loss: 0).
+(``core/hand/hysteresis.py``: smoothing, on / off thresholds and hold times); a hand lost
+for ``lose_after_s`` (frames with no pose: no hand seen, or a pose the tracker refused) ends
+every active gesture at once; a shorter loss decides nothing, so a gesture held through a
+few refused frames is neither ended nor started again. The confidence of an event is the
+gesture's smoothed score on the frame that decided it (for a loss: 0).
 
 An optional image classifier (the same kind, feature set ``tiny_observation`` or its upright
 variant ``tiny_observation_upright``, on the frame's observation:
@@ -117,8 +119,10 @@ class ShapeGate:
 class GestureConfig:
     """Rule thresholds (pinch distances as a fraction of the hand length, curls in [0, 1]) and
     the width of each logistic ramp, used without a classifier; the hysteresis (``hold``);
-    the gate that skips frames of weak tracker evidence (``evidence``: frames whose pose
-    matched fewer than 11 constraints; ``EvidenceGate()`` turns it off); the image
+    how long the hand must be lost before the active gestures end (``lose_after_s``; 0: at
+    the first frame without a pose); the gate that skips frames of weak tracker evidence
+    (``evidence``: frames whose pose matched fewer than 11 constraints; ``EvidenceGate()``
+    turns it off); the image
     classifier's weight (``image_weight``, with one); the geometric bounds on a classifier's
     scores (``shape``: pinches within 0.275 hand lengths, a grab's and a point's curled fingers
     above 0.55; ``ShapeGate()`` turns them off)."""
@@ -132,6 +136,7 @@ class GestureConfig:
     curl_width: float = 0.04
     hold: HoldConfig = field(default_factory=lambda: HoldConfig(
         smoothing=0.25, on_score=0.75, off_score=0.3, hold_on_s=0.1, hold_off_s=0.1))
+    lose_after_s: float = 0.3
     evidence: EvidenceGate = field(default_factory=lambda: EvidenceGate(min_constraints=11.0))
     image_weight: float = 0.25
     shape: ShapeGate = field(default_factory=lambda: ShapeGate(max_pinch_distance=0.275,
@@ -139,8 +144,9 @@ class GestureConfig:
 
     def __post_init__(self) -> None:
         check_number('image_weight', self.image_weight, low=0.0, error=GestureError)
+        check_number('lose_after_s', self.lose_after_s, low=0.0, error=GestureError)
         for f in fields(self):
-            if f.name not in ('hold', 'evidence', 'image_weight', 'shape'):
+            if f.name not in ('hold', 'evidence', 'image_weight', 'shape', 'lose_after_s'):
                 check_number(f.name, getattr(self, f.name), low=0.0, low_open=True,
                              error=GestureError)
         if self.extended >= self.curled:
@@ -240,6 +246,7 @@ class GestureDetector:
             raise GestureError('an image classifier is combined with a pose classifier: '
                                'give one (the rules have no probabilities)')
         self._hysteresis = ScoreHysteresis(GESTURE_NAMES, self.config.hold)
+        self._lost_since: float | None = None     # stamp of the first frame of a loss
 
     @property
     def active(self) -> tuple[str, ...]:
@@ -254,6 +261,7 @@ class GestureDetector:
     def reset(self) -> None:
         """Forget the history without events (:meth:`update` with None ends the active ones)."""
         self._hysteresis.reset()
+        self._lost_since = None
 
     def log_proba(self, features: np.ndarray, observations: np.ndarray | None = None
                   ) -> np.ndarray:
@@ -292,12 +300,18 @@ class GestureDetector:
         """Feed one frame's pose (None: no hand), the tracker's evidence for it (None:
         unknown) and its observation features (None: none; read with an image classifier);
         returns the events it decided. A frame the config's evidence gate finds weak is
-        skipped: it decides nothing."""
+        skipped: it decides nothing; so is a frame without a pose until the hand has been lost
+        for ``lose_after_s``, when the active gestures end."""
         if q is not None and self.config.evidence.weak(evidence):
             return []
         if q is None:
+            if self._lost_since is None:
+                self._lost_since = stamp
+            if stamp - self._lost_since < self.config.lose_after_s - 1e-9:
+                return []
             changes = self._hysteresis.lose(stamp)
         else:
+            self._lost_since = None
             q = np.asarray(q, dtype=float)
             if not np.all(np.isfinite(q)):
                 raise GestureError('pose must be finite')

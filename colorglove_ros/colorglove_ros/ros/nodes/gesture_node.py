@@ -1,7 +1,9 @@
 """gesture_node: gesture events (pinches, grab, point, open hand) from ``hand/joint_states``,
 each as a ``colorglove_msgs/GestureEvent`` on ``hand/gestures`` and, as before, as a
 ``std_msgs/String`` line ``name:state:confidence`` on ``hand/gesture_events`` (e.g.
-``pinch_index:start:0.93``); a ``no hand`` on ``hand/tracking_status`` ends the active ones.
+``pinch_index:start:0.93``); ``no hand`` lines on ``hand/tracking_status`` for ``lose_after_s``
+(default the core's) end the active ones, a shorter loss (a few refused frames) decides
+nothing.
 The evidence of each frame's own ``tracking:`` status line (``core.hand.frame_evidence``,
 paired by the frame's stamp) gates it (``evidence_min_constraints``, default the core's;
 ``evidence_max_reprojection_px``, default off; 0 turns either off): a frame of weak evidence
@@ -93,6 +95,9 @@ class GestureNode(Node):
         max_reprojection = declare(self, 'evidence_max_reprojection_px', 0.0,
                                    'skip frames whose newest tracking status has a larger '
                                    'reprojection error, px (0: off)', 0.0, 1000.0)
+        lose_after_s = declare(self, 'lose_after_s', GestureConfig().lose_after_s,
+                               'seconds of no-hand status lines before the active gestures '
+                               'end (0: at the first)', 0.0, 60.0)
         image, image_weight = declare_image_classifier(
             self, 'gesture_node', DEFAULT_GESTURE_IMAGE_CLASSIFIER,
             'colorglove_train_hand_classifiers --what gesture_images',
@@ -100,7 +105,8 @@ class GestureNode(Node):
         gate = EvidenceGate(max_reprojection or math.inf, min_constraints)
         with startup_errors('gesture_node'):
             self.detector = GestureDetector(
-                self.model, GestureConfig(evidence=gate, image_weight=image_weight),
+                self.model, GestureConfig(evidence=gate, image_weight=image_weight,
+                                          lose_after_s=lose_after_s),
                 classifier, image)
         self.observations = ObservationFeatures(self) if image is not None else None
         # each JointState (with its observation's features) waits for its frame's status line

@@ -22,6 +22,7 @@ from colorglove_ros.core.evaluation.scripted_tracking import (
 from colorglove_ros.core.evaluation.sequences import EVIDENCE_FIELDS
 from colorglove_ros.core.hand.observation_features import empty_observation_record
 from colorglove_ros.core.lookup.database import contents_tag, save_database
+from colorglove_ros.core.pipeline import NODE_LIMITS, UNGATED
 
 
 def _saved(tmp_path: Path, name: str, seed: int) -> Path:
@@ -76,8 +77,8 @@ def _edited_ik(tmp_path: Path, name: str, **changes: object) -> Path:
 def test_each_ik_config_camera_and_label_source_has_its_own_cache(tmp_path: Path) -> None:
     """A cache made with one ``ik.yaml`` is never read with another that tracks differently
     (one IK setting changed, or the covariances of a covariance file), nor with another
-    primary camera or label source; the same settings written differently (no comments, other
-    order) read the same cache."""
+    primary camera, label source or pipeline gates; the same settings written differently (no
+    comments, other order) read the same cache."""
     from colorglove_ros.core.tracking.config import default_covariances, save_covariances
 
     truth = np.zeros((3, 26))
@@ -102,7 +103,8 @@ def test_each_ik_config_camera_and_label_source_has_its_own_cache(tmp_path: Path
               ScriptedTracker(db, _edited_ik(tmp_path, 'cov', covariance_file=str(
                   tmp_path / 'cov2.yaml')), CAMERAS, tmp_path),
               ScriptedTracker(db, IK, tmp_path / 'cameras.yaml', tmp_path),
-              ScriptedTracker(db, IK, CAMERAS, tmp_path, labels='truth')]
+              ScriptedTracker(db, IK, CAMERAS, tmp_path, labels='truth'),
+              ScriptedTracker(db, IK, CAMERAS, tmp_path, limits=UNGATED)]
     names = {other._cache_path('gestures', 7, 3) for other in others}
     assert path not in names and len(names) == len(others)
     assert all(other._load(other._cache_path('gestures', 7, 3), truth) is None
@@ -220,6 +222,43 @@ def test_the_cache_holds_the_observation_and_reads_an_evidence_only_cache(tmp_pa
     assert old is not None and old.observation == {}
     np.testing.assert_array_equal(old.q_est, truth + 1.0)
     assert tracker._load(path, truth, observation=True) is None
+
+
+def test_the_consumers_get_the_poses_the_nodes_publish(small_database_path: Path,
+                                                      tmp_path: Path) -> None:
+    """By default a scripted sequence is tracked through the nodes' gates (NODE_LIMITS): a
+    hand the image's border cuts is no hand, as ik_node refuses it, while UNGATED tracks
+    every frame; a hand in view is tracked either way."""
+    from repo_paths import CONFIG_DIR
+
+    from colorglove_ros.core.camera import load_calibration
+    from colorglove_ros.core.evaluation.scripted_hands import ScriptedSequence
+    from colorglove_ros.core.hand.model import HandModel
+
+    model = HandModel()
+    camera = load_calibration(str(CONFIG_DIR / 'calibration.yaml')).cameras[0]
+    fingers = np.zeros(20)
+    q_in = np.concatenate([[0.0, 0.0, 0.45], [0.0, 0.0, 0.0], fingers])
+    # far to the left at the same depth: the fingers leave the image, the palm stays in it
+    q_cut = q_in.copy()
+    q_cut[0] = -(camera.cx / camera.fx) * 0.45 - 0.02
+    uv = camera.project(model.keypoints(q_cut))
+    assert (uv[:, 0] < 0).any() and (uv[:, 0] >= 0).any()
+    poses = np.stack([q_in] * 3 + [q_cut] * 3)
+    truth = ScriptedSequence(poses, np.array([0, 0, 0, 1, 1, 1]), np.array([''] * 6),
+                             np.ones(6, bool), 30.0)
+    found = {}
+    for name, limits in (('nodes', NODE_LIMITS), ('ungated', UNGATED)):
+        tracker = ScriptedTracker(small_database_path, CONFIG_DIR / 'ik.yaml',
+                                  CONFIG_DIR / 'calibration.yaml', tmp_path / name,
+                                  labels='truth', limits=limits)
+        try:
+            found[name] = tracker.track('gates', 1, truth, model).found
+        finally:
+            if tracker._evaluator is not None:
+                tracker._evaluator.close()
+    assert found['ungated'][3:].all() and not found['nodes'][3:].any(), found
+    assert found['nodes'][:3].any() and found['ungated'][:3].any(), found
 
 
 def test_hold_frames_are_rendered_through_the_segmentation_and_cached(

@@ -2,6 +2,8 @@
 the evaluation on a noise-free scripted sequence."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from pose_samples import MODEL, hand_pose
@@ -73,9 +75,23 @@ def test_hysteresis_and_loss() -> None:
     events = [e for k in range(20) for e in detector.update(fist, 0.5 + k / 30)]
     assert sorted((e.name, e.state) for e in events) == [('grab', 'start'), ('open_hand', 'end')]
     assert detector.active == ('grab',)
-    lost = detector.update(None, 2.0)
+    # a loss shorter than lose_after_s decides nothing: the grab goes on, not started again
+    after = config.lose_after_s
+    assert [e for k in range(3) for e in detector.update(None, 1.5 + k / 30)] == []
+    assert [e for k in range(5) for e in detector.update(fist, 1.6 + k / 30)] == []
+    assert detector.active == ('grab',)
+    assert detector.update(None, 2.0) == []
+    assert detector.update(None, 2.0 + after - 0.01) == []
+    lost = detector.update(None, 2.0 + after)
     assert [(e.name, e.state, e.confidence) for e in lost] == [('grab', 'end', 0.0)]
     assert detector.active == ()
+    assert detector.update(None, 3.0) == []
+    at_once = GestureDetector(MODEL, replace(config, lose_after_s=0.0))
+    for k in range(10):
+        at_once.update(flat, k / 30)
+    assert [e.state for e in at_once.update(None, 0.4)] == ['end']
+    with pytest.raises(GestureError):
+        GestureConfig(lose_after_s=-0.1)
 
 
 def test_event_text_round_trip() -> None:
@@ -151,7 +167,8 @@ def test_frames_of_weak_evidence_decide_nothing() -> None:
     assert [(e.name, e.state) for e in started] == [('open_hand', 'start')]
     assert [e for k in range(15) for e in gated.update(fist, 1.0 + k / 30, weak)] == []
     assert gated.active == ('open_hand',)
-    assert [e.state for e in gated.update(None, 2.0, weak)] == ['end']      # still a loss
+    lost = [e for k in range(12) for e in gated.update(None, 2.0 + k / 30, weak)]
+    assert [e.state for e in lost] == ['end']      # still a loss
     assert GestureConfig().evidence.enabled
     plain = GestureDetector(MODEL, GestureConfig(hold=hold, evidence=EvidenceGate()))
     events = [e for k in range(15) for e in plain.update(flat, k / 30, weak)]

@@ -2,6 +2,8 @@
 outputs in, their outputs checked against the core modules run directly."""
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 from colorglove_msgs.msg import GestureEvent as GestureEventMsg
@@ -58,7 +60,7 @@ def test_keypoints_node_publishes_both_frames() -> None:
 
 def test_gesture_node_events_and_loss() -> None:
     with running(lambda ctx: GestureNode(context=ctx, parameter_overrides=params(
-            frame_prefix='left_', hand='left'))) as h:
+            frame_prefix='left_', hand='left', lose_after_s=0.5))) as h:
         events = h.collect(String, 'hand/gesture_events')
         messages = h.collect(GestureEventMsg, 'hand/gestures')
         joints_pub = h.publisher(JointState, 'hand/joint_states')
@@ -67,8 +69,22 @@ def test_gesture_node_events_and_loss() -> None:
             joints_pub.publish(pose_to_joint_state_msg(_pose(GESTURE_SHAPES['flat']), _frame(k),
                                                        finger_joint_names('left_')))
         assert h.spin_until(lambda: len(events) >= 1 and len(messages) >= 1, 10.0)
-        status_pub.publish(String(data='no hand: lost'))
-        assert h.spin_until(lambda: len(events) >= 2 and len(messages) >= 2, 10.0)
+        # a loss shorter than lose_after_s (0.5 s here) ends nothing; a longer one does
+        for _ in range(3):
+            status_pub.publish(String(data='no hand: lost'))
+            h.settle(0.05)
+        h.settle(0.3)
+        assert len(events) == 1
+        for k in range(10, 13):       # the hand back: the loss starts anew
+            joints_pub.publish(pose_to_joint_state_msg(_pose(GESTURE_SHAPES['flat']), _frame(k),
+                                                       finger_joint_names('left_')))
+        h.settle(0.3)
+        lost_at = time.monotonic()
+        while len(events) < 2 and time.monotonic() - lost_at < 10.0:
+            status_pub.publish(String(data='no hand: lost'))
+            h.settle(0.05)
+        assert len(events) >= 2 and h.spin_until(lambda: len(messages) >= 2, 5.0)
+        assert time.monotonic() - lost_at >= 0.45
     name, state, confidence = events[0].data.split(':')
     assert (name, state) == ('open_hand', 'start') and float(confidence) >= 0.7
     assert events[1].data == 'open_hand:end:0.00'
