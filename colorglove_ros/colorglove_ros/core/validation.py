@@ -183,6 +183,7 @@ SEGMENTER_RULES: dict[str, SettingRule] = {
     'junction_min_pull': ('float', 0.0, 100.0, False),
     'junction_max_window_kept': ('float', 0.0, 1.0, False),
     'sleeve_reach': ('float', 0.0, 10.0, False),
+    'sleeve_min_share': ('float', 0.0, 1.0, False),
     'glove_contact_share': ('float', 0.0, 1.0, False),
     'glove_contact_min_drop': ('float', 0.0, 1.0, False),
     'scene_colour_min_share': ('float', 0.0, 1.0, False),

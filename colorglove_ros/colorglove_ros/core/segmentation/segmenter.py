@@ -374,9 +374,11 @@ class GloveSegmenter:
     ``junction_min_pull`` times the junctions' own (0: every frame), and is kept only where it
     shrinks that window to at most ``junction_max_window_kept`` of its size (0: always kept;
     a finger cut back at the silhouette moves it little). The same for the
-    regions that reach the image's border only, with ``sleeve_reach`` (0 off): a sleeve of a
-    glove colour (a red sleeve is glove red) runs off the image, and joined to the glove it
-    would pull the crop down the forearm and make the hand look cut by the border. Colours
+    regions that reach the image's border only, with ``sleeve_reach`` (0 off), oversized
+    meaning larger than ``sleeve_min_share`` of the hand's window: a sleeve of a glove colour
+    (a red sleeve is glove red) runs off the image, and joined to the glove it would pull the
+    crop down the forearm and make the hand look cut by the border, however short its
+    visible piece. Colours
     the coarse pass labelled glove but found to be background (at least
     ``scene_colour_min_share`` of the coarse frame in one quantised colour: surfaces, not
     small clutter) are the scene's own colours in this frame: the region of interest labels
@@ -472,6 +474,7 @@ class GloveSegmenter:
                  junction_min_share: float = LARGEST_PATCH_WINDOW_SHARE,
                  junction_surfaces_only: int = 0, junction_min_pull: float = 0.0,
                  junction_max_window_kept: float = 0.0, sleeve_reach: float = 0.0,
+                 sleeve_min_share: float = LARGEST_PATCH_WINDOW_SHARE,
                  glove_contact_share: float = 0.0, glove_contact_min_drop: float = 0.0,
                  scene_colour_min_share: float = 0.001,
                  background_frames: int = 0, background_tolerance: float = 12.0,
@@ -931,12 +934,14 @@ class GloveSegmenter:
         bottom, on the image's border: :func:`image_edges`) with a glove-coloured sleeve cut
         back to the glove: an oversized single-colour region reaching the image's border keeps
         only its pixels within ``sleeve_reach`` times the hand's half window of a patch
-        junction (``keep_near_junctions``). Nothing is done (or spent) unless some glove
-        label lies on the image's border."""
+        junction (``keep_near_junctions``); oversized here: larger than ``sleeve_min_share`` of
+        the hand's window (a sleeve's visible piece is short while the wrist is near the
+        border). Nothing is done (or spent) unless some glove label lies on the image's
+        border."""
         if self.sleeve_reach <= 0 or not any(line.any() for line in border_lines(labels, edges)):
             return labels
         return keep_near_junctions(labels, self.calibration.num_colors, self.sleeve_reach,
-                                   JUNCTION_MIN_PIXELS, edges=edges)
+                                   JUNCTION_MIN_PIXELS, self.sleeve_min_share, edges=edges)
 
     def _glove_adjacency(self) -> np.ndarray:
         """Which glove colours border each other on the printed glove (the standard glove,

@@ -11,6 +11,7 @@ from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB, default_colour_adj
 from colorglove_ros.core.segmentation.color_model import index_tables
 from colorglove_ros.core.segmentation.crop import compiled_kernels
 from colorglove_ros.core.segmentation.detection import (
+    LARGEST_PATCH_WINDOW_SHARE,
     colour_diversity,
     drop_oversized_components,
     glove_region_mask,
@@ -426,16 +427,54 @@ def test_a_red_sleeve_running_off_the_image_does_not_cut_the_hand(calibration) -
     assert on.crop.half_size < 1.5 * plain.crop.half_size
 
 
+def test_a_short_red_sleeve_near_the_border_does_not_cut_the_hand(calibration) -> None:
+    """The glove whole in view with its wrist 45 px above the image's bottom: the red
+    sleeve's visible piece, joined to the glove's red wrist patch, is smaller than the
+    largest printed patch, so with ``sleeve_min_share`` at that patch (the class default) it
+    is kept and the hand looks cut by the border with a crop pulled down the forearm; with
+    the shipped ``sleeve_min_share`` it is cut back, the hand is not cut and the crop is the
+    one the glove has higher up."""
+    from colorglove_ros.core.segmentation.color_model import read_calibration_config
+    from colorglove_ros.core.synthetic.conditions import SLEEVE_ALBEDOS
+
+    shipped = read_calibration_config('config/color_calibration.yaml')['segmenter']
+    camera = synth.default_camera()
+    q = synth.sample_pose(np.random.default_rng(4), camera, out_of_frame_prob=0.0)
+    crops = []
+    for y in (0.12, 0.18):
+        q[0:3] = [0.0, y, 0.6]
+        red = synth.render_frame(q, camera, np.random.default_rng(5),
+                                 FrameConditions(sleeve_rgb=SLEEVE_ALBEDOS['red']))
+        assert not red.labels[-1].any() and red.labels.any()   # the glove is whole in view
+        seen = [GloveSegmenter(calibration, sleeve_reach=shipped['sleeve_reach'],
+                               sleeve_min_share=share).process(red.image_rgb)
+                for share in (LARGEST_PATCH_WINDOW_SHARE, shipped['sleeve_min_share'])]
+        assert all(o.hand_found for o in seen)
+        crops.append([o.crop.half_size for o in seen])
+    old, new = seen
+    assert shipped['sleeve_min_share'] < LARGEST_PATCH_WINDOW_SHARE
+    assert old.cut_by_border and not new.cut_by_border
+    assert old.crop.half_size > 1.3 * new.crop.half_size
+    assert abs(new.crop.half_size - crops[0][1]) < 0.1 * crops[0][1]
+
+
 def test_a_glove_really_cut_by_the_border_stays_cut_with_sleeve_reach(calibration) -> None:
     """The same glove moved down until a third of it is outside the image: cut by the
-    border with ``sleeve_reach`` as without (its own patches run off the image)."""
+    border with ``sleeve_reach`` and the shipped ``sleeve_min_share`` as without (its own
+    patches run off the image)."""
+    from colorglove_ros.core.segmentation.color_model import read_calibration_config
+
     _, grey = _glove_with_a_red_sleeve()
     plain = GloveSegmenter(calibration).process(grey, keep_labels=True)
     ys = np.nonzero(plain.label_image)[0]
     shift = 480 - int(ys.max()) + int(0.3 * (ys.max() - ys.min()))
     image = np.concatenate([np.repeat(grey[:1], shift, 0), grey[:480 - shift]])
-    for segmenter in (GloveSegmenter(calibration), GloveSegmenter(calibration,
-                                                                  sleeve_reach=0.1)):
+    for segmenter in (GloveSegmenter(calibration),
+                      GloveSegmenter(calibration, sleeve_reach=0.1),
+                      GloveSegmenter(calibration, sleeve_reach=0.1,
+                                     sleeve_min_share=read_calibration_config(
+                                         'config/color_calibration.yaml')['segmenter'][
+                                         'sleeve_min_share'])):
         seen = segmenter.process(image)
         assert seen.hand_found and seen.cut_by_border
 
