@@ -17,6 +17,7 @@ import rclpy
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 
+from colorglove_ros.ros.heap_tuning import keep_freed_buffers
 from colorglove_ros.ros.nodes.common import (
     StartupError,
     ending_on_shutdown,
@@ -49,6 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--threads', type=int, default=DEFAULT_THREADS,
                         help='executor threads (default: %(default)s)')
     args = parser.parse_args(argv[:split])
+    keep_freed_buffers()
     clean_stale_fastdds_segments()
     rclpy.init(args=['colorglove_single_process', *argv[split:]])
     nodes: list[Node] = []

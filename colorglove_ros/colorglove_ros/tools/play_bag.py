@@ -30,6 +30,7 @@ from colorglove_ros.ros.bag_definitions import (
 )
 from colorglove_ros.ros.bag_qos import publisher_qos_for_recorded
 from colorglove_ros.ros.bags import BagError, bag_messages, open_bag_reader
+from colorglove_ros.ros.heap_tuning import keep_freed_buffers
 from colorglove_ros.ros.image_codec import header_stamp_from_cdr
 from colorglove_ros.ros.typestore import colorglove_typestore, deserialize_cdr, message_class
 from colorglove_ros.tools._cli import tool_parser
@@ -364,6 +365,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.stamp_log and not args.restamp:
         print('colorglove_play_bag: --stamp-log needs --restamp', file=sys.stderr)
         return 2
+    keep_freed_buffers()     # the frames' buffers, as in the nodes (ros.heap_tuning)
     rclpy.init(args=ros_args)
     player = None
     executor = rclpy.executors.SingleThreadedExecutor()

@@ -59,6 +59,7 @@ from colorglove_ros.ros.conversions import (
     tiny_labels_from_observation_msg,
 )
 from colorglove_ros.ros.frame_camera import FrameCamera
+from colorglove_ros.ros.heap_tuning import keep_freed_buffers
 from colorglove_ros.ros.lean_executor import LeanExecutor
 from colorglove_ros.ros.pose_pairing import PosePairer
 from colorglove_ros.ros.shm_cleanup import clean_stale_fastdds_segments
@@ -166,8 +167,10 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     Shared-memory segments of killed Fast DDS participants are removed first (a respawned
     node must not pile them up). The start-up objects are frozen before spinning
     (:func:`freeze_startup_objects`). The node spins on a :class:`LeanExecutor` (its wait set
-    kept between wakes, ``ros.lean_executor``).
+    kept between wakes, ``ros.lean_executor``). Freed frame buffers stay in the heap
+    (``ros.heap_tuning.keep_freed_buffers``).
     """
+    heap = keep_freed_buffers()
     clean_stale_fastdds_segments()
     rclpy.init(args=args)
     node = None
@@ -175,6 +178,7 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     try:
         with ending_on_shutdown():
             node = factory()
+            node.get_logger().debug(heap.note)
             freeze_startup_objects()
             executor = LeanExecutor()
             executor.add_node(node)
