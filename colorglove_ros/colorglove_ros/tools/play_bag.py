@@ -237,7 +237,8 @@ class BagPlayer(Node):
                 sec, nanosec = header_stamp_from_cdr(data)
                 self.stamp_log.write(f'{sec * 10**9 + nanosec},{now_ns}\n')
                 self.stamp_log.flush()
-        return data[:4] + self.new_stamps[old] + data[12:]
+        # one copy of the (image-sized) rest, not a slice and then a concatenation
+        return b''.join((data[:4], self.new_stamps[old], memoryview(data)[12:]))
 
     def publish_clock(self, clock_topic: str = '/clock') -> None:
         """Also publish each message's bag time on ``clock_topic`` (rosgraph_msgs/Clock)."""
