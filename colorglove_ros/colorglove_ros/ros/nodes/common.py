@@ -170,7 +170,7 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     kept between wakes, ``ros.lean_executor``). Freed frame buffers stay in the heap
     (``ros.heap_tuning.keep_freed_buffers``).
     """
-    heap = keep_freed_buffers()
+    keep_freed_buffers()
     clean_stale_fastdds_segments()
     rclpy.init(args=args)
     node = None
@@ -178,7 +178,6 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     try:
         with ending_on_shutdown():
             node = factory()
-            node.get_logger().debug(heap.note)
             freeze_startup_objects()
             executor = LeanExecutor()
             executor.add_node(node)
