@@ -4,11 +4,11 @@ kernel: :func:`keep_freed_buffers`, called by every node process before it start
 A node taking 640x480 images allocates and frees several buffers of about a megabyte per
 frame (the taken message, its Python bytes, decoded arrays). glibc's malloc serves blocks that
 large with a fresh ``mmap`` and trims the top of its heap once more than twice that much is
-free, so each frame's buffers come back as new pages: hundreds of page faults a frame, paid in
-the kernel on the image's path (docs/RESULTS.md, Speed (issue 19), "Session 32"). Raising the
-mmap threshold above a frame's size and the trim threshold above a few frames' worth keeps the
-pages mapped between frames; the heap then holds on to at most ``TRIM_THRESHOLD_BYTES`` of
-free memory beyond the process's peak use.
+free, so each frame's buffers come back as new pages: a page fault for every page of them, every
+frame, paid in the kernel on the image's path (figures: docs/RESULTS.md, Speed (issue 19),
+"Session 32"). Raising the mmap threshold above a frame's size and the trim threshold above a
+few frames' worth keeps the pages mapped between frames; the heap then holds on to at most
+``TRIM_THRESHOLD_BYTES`` of free memory beyond the process's peak use.
 
 Only glibc has these settings; elsewhere nothing changes. A process whose environment already
 sets glibc's malloc variables (``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_`` or malloc
