@@ -9,7 +9,8 @@ the camera stamp, taken by a lean subscriber in its own process; the bag is rest
 publish time; and each process's CPU time per offered frame, which the machine's other load
 disturbs less than the wall-clock figures) and two cameras at 30 Hz. The four-process graph
 always; with ``--single-process`` also every node in one process
-(``colorglove_single_process``)."""
+(``colorglove_single_process``). Before and after, the machine's own speed on fixed workloads
+(``core.evaluation.machine_speed``), so each figure can be read with the machine's state."""
 from __future__ import annotations
 
 import argparse
@@ -22,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.evaluation.machine_speed import measure_machine_speed
 from colorglove_ros.core.evaluation.metrics import latency_summary_ms
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.glove import default_hand
@@ -298,6 +300,7 @@ def _benchmark(args: argparse.Namespace) -> int:
     del parameters['camera']
     parameters['ik']['publish_overlay'] = args.overlay
     report: dict[str, Any] = {'bag': bag.name, 'database': database.name}
+    speeds = [measure_machine_speed().row('before')]
     stages: list[dict[str, Any]] = []
     if args.in_process_frames > 0:
         print(f'[benchmark] in process: {args.in_process_frames} frames, '
@@ -346,6 +349,11 @@ def _benchmark(args: argparse.Namespace) -> int:
         report['dds'] = runs
         print_table(runs, title='over DDS (latency: lean subscriber, JointState arrival minus '
                                 'camera stamp)')
+    speeds.append(measure_machine_speed().row('after'))
+    report['machine_speed'] = speeds
+    print_table(speeds, title='machine speed: the same fixed workloads before and after the '
+                              'passes (core.evaluation.machine_speed; slower there = a slower '
+                              'machine, not a slower tracker)')
     targets = check_targets(_target_figures(stages, runs), probe_failure_notes(runs))
     report['targets'] = targets
     print_table(targets, title='issue 19 targets (measured on this machine)')

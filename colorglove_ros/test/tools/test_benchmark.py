@@ -144,6 +144,10 @@ def test_the_in_process_verdict_is_the_median_of_counted_passes_after_a_warm_up(
     target = report['targets'][0]
     assert target['measured'] == 8.5 and target['result'] == 'FAIL'
     assert report['in_process_tracked'] == 3
+    # the machine's speed before and after the passes, beside the figures it explains
+    assert [row['when'] for row in report['machine_speed']] == ['before', 'after']
+    assert all(row['python_loop_ms'] > 0 and row['numpy_sort_ms'] > 0
+               for row in report['machine_speed'])
     calls.clear()
     assert benchmark.main(['--no-dds', '--in-process-passes', '2', '--no-warm-up', '--json',
                            str(out)]) == 0

@@ -1,0 +1,67 @@
+"""How fast the machine is right now: a fixed workload timed beside a speed measurement.
+
+This machine's speed changes by tens of percent within minutes (a virtual machine whose host is
+shared), and every timing figure moves with it. A speed figure is readable only with the speed
+of the machine it was taken on, so the benchmarks time the same two small workloads, which do
+not depend on this project's code, before and after their passes: a pure-Python loop (the
+interpreter, where the nodes' glue runs) and a sort of four million seeded random floats (compiled
+code on memory, like the per-pixel and lookup kernels). No rclpy import.
+"""
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ['MachineSpeed', 'measure_machine_speed', 'PYTHON_LOOP_STEPS', 'SORTED_VALUES']
+
+PYTHON_LOOP_STEPS = 1_000_000
+"""Steps of the reference pure-Python loop."""
+
+SORTED_VALUES = 1 << 22
+"""Random float64 values the reference sort orders."""
+
+
+@dataclass(frozen=True)
+class MachineSpeed:
+    """The reference workloads' median times (ms) over ``repeats`` runs, and the 1-minute load
+    average when they ran (NaN where the system does not give it)."""
+
+    python_loop_ms: float
+    numpy_sort_ms: float
+    repeats: int
+    load_1min: float
+
+    def row(self, when: str) -> dict[str, Any]:
+        """A table row of these figures, labelled ``when`` (e.g. 'before', 'after')."""
+        return {'when': when, **asdict(self)}
+
+
+def _python_loop() -> int:
+    total = 0
+    for step in range(PYTHON_LOOP_STEPS):
+        total += step & 7
+    return total
+
+
+def measure_machine_speed(repeats: int = 5) -> MachineSpeed:
+    """Time the reference workloads ``repeats`` times each (at least once) and return their
+    medians."""
+    repeats = max(int(repeats), 1)
+    values = np.random.default_rng(0).random(SORTED_VALUES)
+    loop_ms, sort_ms = [], []
+    for _ in range(repeats):
+        started = time.perf_counter()
+        _python_loop()
+        loop_ms.append(1e3 * (time.perf_counter() - started))
+        started = time.perf_counter()
+        np.sort(values)
+        sort_ms.append(1e3 * (time.perf_counter() - started))
+    try:
+        load = float(os.getloadavg()[0])
+    except OSError:
+        load = float('nan')
+    return MachineSpeed(float(np.median(loop_ms)), float(np.median(sort_ms)), repeats, load)
