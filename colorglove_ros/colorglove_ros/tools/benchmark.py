@@ -9,8 +9,9 @@ the camera stamp, taken by a lean subscriber in its own process; the bag is rest
 publish time; and each process's CPU time per offered frame, which the machine's other load
 disturbs less than the wall-clock figures) and two cameras at 30 Hz. The four-process graph
 always; with ``--single-process`` also every node in one process
-(``colorglove_single_process``). Before and after, the machine's own speed on fixed workloads
-(``core.evaluation.machine_speed``), so each figure can be read with the machine's state."""
+(``colorglove_single_process``). Before every pass and after the last, the machine's own speed
+on fixed workloads (``core.evaluation.machine_speed``; each pass's row carries the one taken
+just before it), so each figure can be read with the machine's state."""
 from __future__ import annotations
 
 import argparse
@@ -23,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.evaluation.machine_speed import measure_machine_speed
+from colorglove_ros.core.evaluation.machine_speed import MachineSpeed, measure_machine_speed
 from colorglove_ros.core.evaluation.metrics import latency_summary_ms
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.glove import default_hand
@@ -142,9 +143,20 @@ def in_process(bag: Path, parameters: dict[str, dict], frames: int, profile: boo
 
     chosen = frames_of_bag(bag, frames)
     warm = stage_summary(profile_stages(chosen, parameters))[-1] if warm_up else None
-    runs = [profile_stages(chosen, parameters, profile=profile) for _ in range(passes)]
+    runs, speeds = [], []
+    for _ in range(passes):
+        speeds.append(measure_machine_speed())
+        runs.append(profile_stages(chosen, parameters, profile=profile))
     stages, per_pass = passes_summary(runs)
+    for row, speed in zip(per_pass, speeds, strict=True):
+        row.update(_machine_columns(speed))
     return {'stages': stages, 'passes': per_pass, 'warm_up': warm, 'times': runs[-1]}
+
+
+def _machine_columns(speed: MachineSpeed) -> dict[str, float]:
+    """The machine's speed just before a pass, as that pass's row's columns."""
+    return {'machine_python_loop_ms': speed.python_loop_ms,
+            'machine_numpy_sort_ms': speed.numpy_sort_ms}
 
 
 def _second_camera(parameters: dict[str, dict]
@@ -315,7 +327,8 @@ def _benchmark(args: argparse.Namespace) -> int:
         report['in_process_passes'] = per_pass
         report['in_process_frame_p50_range_ms'] = [min(frame_p50), max(frame_p50)]
         report['in_process_warm_up'] = result['warm_up']
-        print_table(per_pass, title='in process, each pass (per-frame medians, ms)')
+        print_table(per_pass, title='in process, each pass (per-frame medians, ms; machine_*: the '
+                                    'fixed workloads just before the pass)')
         warm = result['warm_up']
         print(f'[benchmark] frame p50 over {len(per_pass)} pass(es): median '
               f'{np.median(frame_p50):.2f} ms, range {min(frame_p50):.2f}-{max(frame_p50):.2f}'
@@ -340,15 +353,18 @@ def _benchmark(args: argparse.Namespace) -> int:
                 passes.append((stereo, BAG_RATE_HZ, True))
             for repeat, (which, rate, two) in itertools.product(range(1, args.repeats + 1),
                                                                  passes):
+                speed = measure_machine_speed()
                 row = dds_pass(which, parameters, args.frames, rate, single, two,
                                args.stage_latency)
                 if row is None:
                     return 1
                 row['repeat'] = repeat
+                row.update(_machine_columns(speed))
                 runs.append(row)
         report['dds'] = runs
         print_table(runs, title='over DDS (latency: lean subscriber, JointState arrival minus '
-                                'camera stamp)')
+                                'camera stamp; machine_*: the fixed workloads just before the '
+                                'pass)')
     speeds.append(measure_machine_speed().row('after'))
     report['machine_speed'] = speeds
     print_table(speeds, title='machine speed: the same fixed workloads before and after the '

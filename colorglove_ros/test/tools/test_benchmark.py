@@ -137,6 +137,9 @@ def test_the_in_process_verdict_is_the_median_of_counted_passes_after_a_warm_up(
     assert calls == [False, True, True, True]
     report = json.loads(out.read_text())
     assert [row['frame_p50_ms'] for row in report['in_process_passes']] == [9.0, 7.0, 8.5]
+    # each counted pass with the machine's speed just before it
+    assert all(row['machine_python_loop_ms'] > 0 and row['machine_numpy_sort_ms'] > 0
+               for row in report['in_process_passes'])
     assert report['in_process_frame_p50_range_ms'] == [7.0, 9.0]
     assert report['in_process_warm_up']['node_p50_ms'] == 30.0
     frame = next(row for row in report['in_process'] if row['stage'] == 'frame')
@@ -157,3 +160,38 @@ def test_the_in_process_verdict_is_the_median_of_counted_passes_after_a_warm_up(
     assert report['in_process_frame_p50_range_ms'] == [8.2, 9.6]
     with pytest.raises(SystemExit):
         benchmark.main(['--in-process-passes', '0'])
+
+
+def test_every_dds_row_carries_the_machine_speed_before_it(
+        monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
+    """Each DDS pass's row gets the fixed workloads' times measured just before that pass,
+    and the report the machine's speed before and after the run."""
+    import json
+
+    from colorglove_ros.core.evaluation import machine_speed
+
+    measured = iter(range(1, 100))
+
+    def fake_speed(repeats: int = 5) -> machine_speed.MachineSpeed:
+        value = float(next(measured))
+        return machine_speed.MachineSpeed(value, 10 * value, repeats, 0.0)
+
+    def fake_pass(bag, parameters, frames, rate, single, two, stage_latency):
+        return {'graph': 'separate processes', 'cameras': 1, 'offered_hz': rate,
+                'joint_states_per_s': rate, 'latency_p95_ms': 10.0}
+
+    monkeypatch.setenv('ROS_DOMAIN_ID', '77')
+    monkeypatch.setattr(benchmark, 'prepare_assets', lambda database: tmp_path)
+    monkeypatch.setattr(benchmark, 'ensure_bag', lambda *args: tmp_path / 'bag')
+    monkeypatch.setattr(benchmark, 'pipeline_parameters', lambda *args: {'camera': {}, 'ik': {}})
+    monkeypatch.setattr(benchmark, 'measure_machine_speed', fake_speed)
+    monkeypatch.setattr(benchmark, 'dds_pass', fake_pass)
+    out = tmp_path / 'bench.json'
+    assert benchmark.main(['--in-process-frames', '0', '--rates', '30', '60',
+                           '--no-two-cameras', '--json', str(out)]) == 0
+    report = json.loads(out.read_text())
+    # 1: before the run, 2 and 3: before each pass, 4: after
+    assert [(row['offered_hz'], row['machine_python_loop_ms'], row['machine_numpy_sort_ms'])
+            for row in report['dds']] == [(30.0, 2.0, 20.0), (60.0, 3.0, 30.0)]
+    assert [(row['when'], row['python_loop_ms']) for row in report['machine_speed']] == [
+        ('before', 1.0), ('after', 4.0)]
