@@ -17,13 +17,12 @@ import rclpy
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 
-from colorglove_ros.ros.heap_tuning import keep_freed_buffers
 from colorglove_ros.ros.nodes.common import (
     StartupError,
     ending_on_shutdown,
     freeze_startup_objects,
+    prepare_node_process,
 )
-from colorglove_ros.ros.shm_cleanup import clean_stale_fastdds_segments
 
 __all__ = ['DEFAULT_THREADS', 'node_classes', 'main']
 
@@ -50,8 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--threads', type=int, default=DEFAULT_THREADS,
                         help='executor threads (default: %(default)s)')
     args = parser.parse_args(argv[:split])
-    keep_freed_buffers()
-    clean_stale_fastdds_segments()
+    prepare_node_process()
     rclpy.init(args=['colorglove_single_process', *argv[split:]])
     nodes: list[Node] = []
     executor = MultiThreadedExecutor(num_threads=max(1, args.threads))

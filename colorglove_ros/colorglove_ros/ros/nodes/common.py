@@ -65,7 +65,7 @@ from colorglove_ros.ros.pose_pairing import PosePairer
 from colorglove_ros.ros.shm_cleanup import clean_stale_fastdds_segments
 
 __all__ = ['LATEST_ONLY', 'LATEST_IMAGE', 'declare', 'declare_limit', 'ending_on_shutdown',
-           'run_node',
+           'run_node', 'prepare_node_process',
            'DEFAULT_CALIBRATION_FILE', 'DEFAULT_DATABASE_CONFIG', 'declare_database',
            'HAND_LENGTH_RANGE_M', 'startup_errors',
            'declare_calibration_file', 'declare_hand_length', 'declare_hand',
@@ -160,18 +160,24 @@ def freeze_startup_objects() -> None:
     gc.freeze()
 
 
+def prepare_node_process() -> None:
+    """What a process that runs nodes does before ``rclpy.init``: freed frame buffers stay in
+    the heap (``ros.heap_tuning.keep_freed_buffers``) and the shared-memory segments of killed
+    Fast DDS participants are removed (a respawned node must not pile them up;
+    ``ros.shm_cleanup``)."""
+    keep_freed_buffers()
+    clean_stale_fastdds_segments()
+
+
 def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Init rclpy, spin the node made by ``factory`` until shutdown, and clean up (Jazzy style).
 
     A node that cannot start (bad configuration) logs the reason and exits with code 1.
-    Shared-memory segments of killed Fast DDS participants are removed first (a respawned
-    node must not pile them up). The start-up objects are frozen before spinning
-    (:func:`freeze_startup_objects`). The node spins on a :class:`LeanExecutor` (its wait set
-    kept between wakes, ``ros.lean_executor``). Freed frame buffers stay in the heap
-    (``ros.heap_tuning.keep_freed_buffers``).
+    The process is prepared first (:func:`prepare_node_process`). The start-up objects are
+    frozen before spinning (:func:`freeze_startup_objects`). The node spins on a
+    :class:`LeanExecutor` (its wait set kept between wakes, ``ros.lean_executor``).
     """
-    keep_freed_buffers()
-    clean_stale_fastdds_segments()
+    prepare_node_process()
     rclpy.init(args=args)
     node = None
     executor = None

@@ -70,7 +70,7 @@ def test_run_node_freezes_the_start_up_heap_once_before_spinning(monkeypatch) ->
                       'destroyed', 'shutdown']
 
 
-def test_single_process_freezes_once_after_every_node_is_built(monkeypatch) -> None:
+def test_single_process_prepares_then_freezes_once_after_every_node_is_built(monkeypatch) -> None:
     import gc
 
     import colorglove_ros.ros.single_process as single
@@ -97,11 +97,11 @@ def test_single_process_freezes_once_after_every_node_is_built(monkeypatch) -> N
         def destroy_node(self) -> None:
             pass
 
-    monkeypatch.setattr(single, 'clean_stale_fastdds_segments', lambda: None)
+    monkeypatch.setattr(single, 'prepare_node_process', lambda: events.append('prepared'))
     monkeypatch.setattr(single.rclpy, 'init', lambda args=None: None)
     monkeypatch.setattr(single.rclpy, 'try_shutdown', lambda: None)
     monkeypatch.setattr(single, 'MultiThreadedExecutor', Executor)
     monkeypatch.setattr(single, 'node_classes', lambda with_camera: [Built, Built])
     monkeypatch.setattr(gc, 'freeze', lambda: events.append('freeze'))
     assert single.main(['--no-camera']) == 0
-    assert events == ['built', 'added', 'built', 'added', 'freeze', 'spin']
+    assert events == ['prepared', 'built', 'added', 'built', 'added', 'freeze', 'spin']
