@@ -11,6 +11,7 @@ dropped, so every frame is measured."""
 from __future__ import annotations
 
 import cProfile
+import gc
 import io
 import pstats
 import time
@@ -95,7 +96,17 @@ def profile_stages(frames: Iterable[tuple[int, np.ndarray]], parameters: dict[st
                    ) -> StageTimes:
     """Run ``frames`` ((stamp ns, RGB image)) through segmentation_node, lookup_node and ik_node
     built in this process with ``parameters`` ({node name: {parameter: value}}; the nodes read
-    their camera from ``calibration_file``, not CameraInfo) and time each stage."""
+    their camera from ``calibration_file``, not CameraInfo) and time each stage. The nodes
+    are freed before it returns (their reference cycles collected), so passes run one after
+    another each start with one set of nodes in memory, as a node process holds."""
+    try:
+        return _profile_stages(frames, parameters, profile, frame_id)
+    finally:
+        gc.collect()
+
+
+def _profile_stages(frames: Iterable[tuple[int, np.ndarray]], parameters: dict[str, dict],
+                    profile: bool, frame_id: str) -> StageTimes:
     from colorglove_ros.ros.nodes.ik_node import IKNode
     from colorglove_ros.ros.nodes.lookup_node import LookupNode
     from colorglove_ros.ros.nodes.segmentation_node import SegmentationNode

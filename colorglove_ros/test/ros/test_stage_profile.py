@@ -2,6 +2,8 @@
 stage's output carried to the next as serialised messages."""
 from __future__ import annotations
 
+import gc
+
 import numpy as np
 import pytest
 from node_fixtures import (
@@ -12,6 +14,9 @@ from node_fixtures import (
     glove_frame,
 )
 
+from colorglove_ros.ros.nodes.ik_node import IKNode
+from colorglove_ros.ros.nodes.lookup_node import LookupNode
+from colorglove_ros.ros.nodes.segmentation_node import SegmentationNode
 from colorglove_ros.ros.stage_profile import (
     STAGE_NAMES,
     StageTimes,
@@ -68,6 +73,9 @@ def test_every_frame_passes_every_stage_and_a_hand_gives_a_joint_state(
                **SMALL_DATABASE_GATES},
     }
     times = profile_stages(frames, parameters, profile=True)
+    # the nodes are gone when it returns: a next pass starts with one set of nodes in memory
+    assert not [obj for obj in gc.get_objects() if isinstance(obj, (SegmentationNode, LookupNode,
+                                                                    IKNode))]
     for name in STAGE_NAMES:
         assert len(times.node_ms[name]) == len(frames)
         assert all(t > 0 for t in times.node_ms[name])
