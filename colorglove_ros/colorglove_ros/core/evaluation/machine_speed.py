@@ -3,7 +3,7 @@
 This machine's speed changes by tens of percent within minutes (a virtual machine whose host is
 shared), and every timing figure moves with it. A speed figure is readable only with the speed
 of the machine it was taken on, so the benchmarks time the same two small workloads, which do
-not depend on this project's code, before and after their passes: a pure-Python loop (the
+not depend on this project's code, before every pass and after the last: a pure-Python loop (the
 interpreter, where the nodes' glue runs) and a sort of four million seeded random floats (compiled
 code on memory, like the per-pixel and lookup kernels). No rclpy import.
 """
