@@ -24,7 +24,11 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.evaluation.machine_speed import MachineSpeed, measure_machine_speed
+from colorglove_ros.core.evaluation.machine_speed import (
+    MACHINE_SPEED_TITLE,
+    MachineSpeed,
+    measure_machine_speed,
+)
 from colorglove_ros.core.evaluation.metrics import latency_summary_ms
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.glove import default_hand
@@ -367,9 +371,7 @@ def _benchmark(args: argparse.Namespace) -> int:
                                 'pass)')
     speeds.append(measure_machine_speed().row('after'))
     report['machine_speed'] = speeds
-    print_table(speeds, title='machine speed: the same fixed workloads before and after the '
-                              'passes (core.evaluation.machine_speed; slower there = a slower '
-                              'machine, not a slower tracker)')
+    print_table(speeds, title=MACHINE_SPEED_TITLE)
     targets = check_targets(_target_figures(stages, runs), probe_failure_notes(runs))
     report['targets'] = targets
     print_table(targets, title='issue 19 targets (measured on this machine)')

@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.camera import load_calibration
+from colorglove_ros.core.evaluation.machine_speed import MACHINE_SPEED_TITLE, measure_machine_speed
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
 from colorglove_ros.core.opencv_threads import use_opencv_threads
@@ -153,12 +154,6 @@ def _mean_rows(rows: list[dict[str, Any]], keys: Sequence[str]) -> dict[str, Any
     return out
 
 
-def _python_loop_s() -> float:
-    t = time.perf_counter()
-    sum(range(3_000_000))
-    return time.perf_counter() - t
-
-
 #: The edge tracker's fit settings both evaluations take as flags (``EdgeTrackerConfig`` fields).
 FIT_SETTINGS = ('finger_refit', 'silhouette_palm', 'measurement_rounds',
                 'min_camera_found_fraction', 'fault_round', 'round_min_move_px',
@@ -255,7 +250,7 @@ def _run(args: Any) -> int:
     cams_all = calibration.cameras[:max(args.cameras)]
     rows: list[dict[str, Any]] = []
     trackers: dict[int, EdgeTracker] = {}
-    loop_s = _python_loop_s()
+    machine = [measure_machine_speed().row('before')]
     for speed in args.speeds:
         for seed in args.seeds:
             seq = BareHandSequence(cams_all[0], seed=seed, num_frames=args.frames, speed=speed,
@@ -303,11 +298,11 @@ def _run(args: Any) -> int:
         value = row['min_longest_run'] if key == 'longest_run_frames' else row[key]
         targets.append({**target_row(text, value, threshold, comparison)})
     print_table(targets, 'targets (longest run: the worst seed)')
-    load = os.getloadavg()
-    print(f'conditions: python loop sum(range(3e6)) {loop_s:.3f} s; load average '
-          f'{load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} CPUs; tracker '
-          f'single-threaded in this process, OpenCV threads {args.opencv_threads} (time: wall '
-          f'clock, cpu: this process, thread_cpu: the tracker\'s thread)', flush=True)
+    machine.append(measure_machine_speed().row('after'))
+    print_table(machine, MACHINE_SPEED_TITLE)
+    print(f'conditions: {os.cpu_count()} CPUs; tracker single-threaded in this process, OpenCV '
+          f'threads {args.opencv_threads} (time: wall clock, cpu: this process, thread_cpu: the '
+          'tracker\'s thread)', flush=True)
     if args.json:
         write_json(args.json, {'settings': {'seeds': args.seeds, 'tuning_seeds': TUNING_SEEDS,
                                             'check_seeds': CHECK_SEEDS,
@@ -317,9 +312,9 @@ def _run(args: Any) -> int:
                                             **fit_settings(args),
                                             'max_finger_off_silhouette':
                                                 args.max_finger_off_silhouette,
-                                            'opencv_threads': args.opencv_threads,
-                                            'python_loop_s': loop_s, 'load_average': load},
-                               'rows': rows, 'summary': summary, 'targets': targets})
+                                            'opencv_threads': args.opencv_threads},
+                               'machine_speed': machine, 'rows': rows, 'summary': summary,
+                               'targets': targets})
     return 0
 
 

@@ -15,12 +15,12 @@ lets glove-like distractors touch the hand, as in the tracking sequences.
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import cv2
 import numpy as np
 
 from colorglove_ros.core.conventions import NUM_COLORS
+from colorglove_ros.core.evaluation.machine_speed import MACHINE_SPEED_TITLE, measure_machine_speed
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.segmentation.color_model import (
     ColorCalibrationError,
@@ -243,6 +243,7 @@ def main(argv: list[str] | None = None) -> int:
                              args.clutter_near_hand)
     except ValueError as exc:
         return tool_error('colorglove_eval_segmentation', exc)
+    machine = [measure_machine_speed().row('before')]
     t0 = time.perf_counter()
     result = evaluate(seg, frames, args.repeats)
     summary = result['summary']
@@ -253,13 +254,13 @@ def main(argv: list[str] | None = None) -> int:
                 'misses (fractions of glove pixels)')
     print_table(result['timings'], title='time per 640x480 frame by stage (ms): all frames, '
                 'and glove frames only')
-    load = ' '.join(Path('/proc/loadavg').read_text().split()[:3]) \
-        if Path('/proc/loadavg').is_file() else 'n/a'
-    print(f'evaluation took {time.perf_counter() - t0:.1f} s; load average {load}')
+    print(f'evaluation took {time.perf_counter() - t0:.1f} s')
+    machine.append(measure_machine_speed().row('after'))
+    print_table(machine, MACHINE_SPEED_TITLE)
     if args.json:
         write_json(args.json, {'source': args.source, 'seed': args.seed,
                                'clutter_near_hand': args.clutter_near_hand,
-                               'calibration': str(cal_path), 'load_average': load, **result})
+                               'calibration': str(cal_path), 'machine_speed': machine, **result})
     return 0
 
 

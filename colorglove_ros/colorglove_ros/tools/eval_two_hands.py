@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.errors import ColorGloveError
+from colorglove_ros.core.evaluation.machine_speed import load_average_1min
 from colorglove_ros.core.evaluation.metrics import fingertip_errors_mm
 from colorglove_ros.core.evaluation.sequences import eval_seeds, open_database_for_calibration
 from colorglove_ros.core.evaluation.targets import target_row
@@ -136,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
             frame_critical_ms.append(pipeline.last_timing.critical_path_ms)
             frame_serial_ms.append(pipeline.last_timing.serial_ms)
             if i % 10 == 0:
-                loads.append(os.getloadavg()[0])
+                loads.append(load_average_1min())
             for k, h in enumerate(HANDS):
                 one_pipeline, one_tracker = alone[h]
                 one = one_pipeline.process(one_tracker, [singles[h].image_rgb], i / args.fps)

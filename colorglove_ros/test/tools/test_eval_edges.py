@@ -33,9 +33,14 @@ def test_tracker_options_reach_the_settings(tmp_path) -> None:
     assert main(['--seeds', '1', '--frames', '2', '--speeds', '1', '--cameras', '1',
                  '--finger-refit', '--silhouette-palm', '--max-finger-off-silhouette', '0.15',
                  '--json', str(out)]) == 0
-    settings = json.loads(out.read_text())['settings']
+    report = json.loads(out.read_text())
+    settings = report['settings']
     assert settings['finger_refit'] and settings['silhouette_palm']
     assert settings['max_finger_off_silhouette'] == 0.15
+    # the machine's speed on the fixed workloads before and after the timed tracking
+    assert [row['when'] for row in report['machine_speed']] == ['before', 'after']
+    assert all(row['python_loop_ms'] > 0 and row['numpy_sort_ms'] > 0
+               for row in report['machine_speed'])
 
 
 @pytest.mark.parametrize('flags, on', [([], True), (['--finger-refit', '--silhouette-palm'], True),

@@ -2,10 +2,13 @@
 
 This machine's speed changes by tens of percent within minutes (a virtual machine whose host is
 shared), and every timing figure moves with it. A speed figure is readable only with the speed
-of the machine it was taken on, so the benchmarks time the same two small workloads, which do
-not depend on this project's code, before every pass and after the last: a pure-Python loop (the
-interpreter, where the nodes' glue runs) and a sort of four million seeded random floats (compiled
-code on memory, like the per-pixel and lookup kernels). No rclpy import.
+of the machine it was taken on, so every tool that prints a time (the benchmarks, the edge
+tracker's and the segmentation's evaluations, the render benchmark) times the same two small
+workloads, which do not depend on this project's code, before its work and after it (the
+benchmark also before every pass): a pure-Python loop (the interpreter, where the nodes' glue
+runs) and a sort of four million seeded random floats (compiled code on memory, like the
+per-pixel and lookup kernels). This module is also the one place the load average is read. No
+rclpy import.
 """
 from __future__ import annotations
 
@@ -16,13 +19,19 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['MachineSpeed', 'measure_machine_speed', 'PYTHON_LOOP_STEPS', 'SORTED_VALUES']
+__all__ = ['MachineSpeed', 'measure_machine_speed', 'load_average_1min', 'MACHINE_SPEED_TITLE',
+           'PYTHON_LOOP_STEPS', 'SORTED_VALUES']
 
 PYTHON_LOOP_STEPS = 1_000_000
 """Steps of the reference pure-Python loop."""
 
 SORTED_VALUES = 1 << 22
 """Random float64 values the reference sort orders."""
+
+MACHINE_SPEED_TITLE = ('machine speed: the same fixed workloads before and after the run '
+                       '(core.evaluation.machine_speed; slower there = a slower machine, not '
+                       'slower code)')
+"""The title of the table of :meth:`MachineSpeed.row` rows every timing tool prints."""
 
 
 @dataclass(frozen=True)
@@ -60,8 +69,13 @@ def measure_machine_speed(repeats: int = 5) -> MachineSpeed:
         started = time.perf_counter()
         np.sort(values)
         sort_ms.append(1e3 * (time.perf_counter() - started))
+    return MachineSpeed(float(np.median(loop_ms)), float(np.median(sort_ms)), repeats,
+                        load_average_1min())
+
+
+def load_average_1min() -> float:
+    """The system's 1-minute load average now (NaN where the system does not give it)."""
     try:
-        load = float(os.getloadavg()[0])
+        return float(os.getloadavg()[0])
     except OSError:
-        load = float('nan')
-    return MachineSpeed(float(np.median(loop_ms)), float(np.median(sort_ms)), repeats, load)
+        return float('nan')

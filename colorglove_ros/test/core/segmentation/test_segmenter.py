@@ -12,6 +12,7 @@ from segmentation_samples import blob_glove_calibration, printed_glove_calibrati
 
 from colorglove_ros.core.colorimetry import srgb_to_linear
 from colorglove_ros.core.conventions import TINY_SIZE
+from colorglove_ros.core.evaluation.machine_speed import MACHINE_SPEED_TITLE
 from colorglove_ros.core.hand.glove import GLOVE_PALETTE_RGB
 from colorglove_ros.core.segmentation.calibration_fit import (
     read_labelled_frames,
@@ -473,7 +474,9 @@ def test_tools_calibrate_and_evaluate(tmp_path: Path, capsys) -> None:
                                                                    'sensor noise'}
     assert sum(row['frames'] for row in figures['conditions']
                if row['condition'] == 'light level') == 3     # the glove frames
-    assert 'time per 640x480 frame' in capsys.readouterr().out
+    assert [row['when'] for row in figures['machine_speed']] == ['before', 'after']
+    printed = capsys.readouterr().out
+    assert 'time per 640x480 frame' in printed and MACHINE_SPEED_TITLE in printed
     # glove-like clutter next to the hand exists only in the synthetic frames
     assert eval_segmentation.main(['--config', str(config), '--source', 'blobs',
                                    '--clutter-near-hand']) == 1
