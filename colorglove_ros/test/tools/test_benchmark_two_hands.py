@@ -112,3 +112,4 @@ def test_short_run_over_dds(node_assets, tmp_path: Path, isolated_ros_domain: di
                for row in report['dds'])
     assert (tmp_path / 'bag_visibility.json').is_file()
     assert [row['result'] in ('PASS', 'FAIL') for row in report['targets']] == [True, True]
+    assert [row['when'] for row in report['machine_speed']] == ['before', 'after']

@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 
+from colorglove_ros.core.evaluation.machine_speed import MACHINE_SPEED_TITLE
 from colorglove_ros.core.evaluation.scenes import (
     NO_HAND_TAIL_FRACTION,
     SCENE_LADDER,
@@ -80,6 +81,9 @@ def test_eval_scenes_prints_and_writes_the_ladder(node_assets, tmp_path, capsys)
         assert row['no_hand_with_pose_count'] == 0
         assert row['partial_depth_over_100mm'] == 0
     assert any(t['target'].startswith('clean: fully visible') for t in figures['targets'])
+    # the segmentation time target is read with the machine's speed before and after
+    assert [row['when'] for row in figures['settings']['machine_speed']] == ['before', 'after']
+    assert MACHINE_SPEED_TITLE in text
 
 
 def test_eval_scenes_refuses_a_missing_database(tmp_path, capsys) -> None:
