@@ -182,18 +182,22 @@ def _check_observation(observation: Observation) -> None:
 
 
 def segment_frame(segmenter: Any, image_rgb: np.ndarray, keep_labels: bool = False,
-                  prediction: CropPrediction | None = None) -> Observation | NoHand:
+                  prediction: CropPrediction | None = None,
+                  defer_learning: bool = False) -> Observation | NoHand:
     """Segment one (H, W, 3) uint8 RGB image (``GloveSegmenter.process``; with the hand's
-    crop ``prediction`` from the tracked pose, :func:`tracked_crop`). The observation
+    crop ``prediction`` from the tracked pose, :func:`tracked_crop`; with
+    ``defer_learning`` the static background learns from it only when the caller calls
+    ``segmenter.learn_deferred()``, e.g. after publishing). The observation
     says itself whether the glove was found (``hand_found``, ``status``); :class:`NoHand` for
     an image the segmenter refuses ('bad image') or an observation with a hand that fails its
     own checks ('implausible observation')."""
     from colorglove_ros.core.segmentation.segmenter import SegmentationInputError
 
+    options: dict[str, Any] = {} if prediction is None else {'prediction': prediction}
+    if defer_learning:
+        options['defer_learning'] = True
     try:
-        observation = segmenter.process(image_rgb, keep_labels=keep_labels,
-                                        **({} if prediction is None else
-                                           {'prediction': prediction}))
+        observation = segmenter.process(image_rgb, keep_labels=keep_labels, **options)
     except SegmentationInputError as exc:
         return bad_image(exc)
     if observation.hand_found:

@@ -447,10 +447,13 @@ class GloveSegmenter:
 
     The static background's learning from a frame (its glove-like mask and update) is
     needed only by the next frame: with ``learn_in_thread`` 1 (0, inline, is the class's
-    default; ``config/color_calibration.yaml`` sets 1) it runs on one worker thread shared
+    default and ``config/color_calibration.yaml``'s) it runs on one worker thread shared
     by the process's segmenters while the region of interest is segmented (OpenCV and NumPy
     release the GIL), and :meth:`process` waits for it before returning, so the
-    observations and what is learnt are the same.
+    observations and what is learnt are the same. A caller that publishes the observation
+    can also have it wait (``process(..., defer_learning=True)``) and run it after
+    publishing (:meth:`learn_deferred`): off the frame's latency, with the same observations
+    (the next :meth:`process` runs a learning still pending first).
 
     Every setting is checked (ranges, odd median kernel, finite numbers) by
     ``core.validation.validate_segmenter_settings`` however the segmenter is built; a bad one
@@ -520,6 +523,10 @@ class GloveSegmenter:
         # the shared worker while the region of interest is segmented (done before
         # :meth:`process` returns)
         self._learning: Future[None] | None = None
+        # process(defer_learning=True): this frame's learning, left for learn_deferred
+        self._defer_learning = False
+        self._deferred: tuple[np.ndarray, tuple[int, int, int, int], np.ndarray,
+                              tuple[tuple[float, float], float] | None] | None = None
         compiled_kernels()   # (compiled or loaded now, not on the first frame)
 
     def lose_track(self) -> None:
@@ -896,7 +903,9 @@ class GloveSegmenter:
         scene = self._scene_colours(small, table, region, labels)
         self._found = None if found is None else (found, small.shape[:2])
         if learn and self.background.enabled:
-            if self.learn_in_thread:
+            if self._defer_learning:
+                self._deferred = (small, region, labels, found)
+            elif self.learn_in_thread:
                 self._learning = _learner().submit(self._learn, small, region, labels, found)
             else:
                 self._learn(small, region, labels, found)
@@ -920,6 +929,15 @@ class GloveSegmenter:
                                                 found[1]))
         self.background.update(small, glove)
         self._glove_like_mask = glove
+
+    def learn_deferred(self) -> None:
+        """Run the static background's learning from the last frame that
+        :meth:`process` was given with ``defer_learning`` (nothing if there is none): what
+        it would have learnt before returning, for a caller that first publishes the
+        observation."""
+        deferred, self._deferred = self._deferred, None
+        if deferred is not None:
+            self._learn(*deferred)
 
     def _learnt(self) -> None:
         """Wait for the static background's learning on the worker (``learn_in_thread``),
@@ -1010,16 +1028,21 @@ class GloveSegmenter:
 
     # ------------------------------------------------------------------ main entry
     def process(self, image_rgb: np.ndarray, keep_labels: bool = False,
-                prediction: CropPrediction | None = None) -> Observation:
+                prediction: CropPrediction | None = None,
+                defer_learning: bool = False) -> Observation:
         """Segment one (H, W, 3) uint8 RGB frame. Never raises on such a frame; raises
         :class:`SegmentationInputError` on anything else. ``prediction``: the hand's crop
         predicted from the tracked pose (``core.segmentation.crop_prediction``), used when
-        ``prediction_margin`` > 0 and it is for this frame's size."""
+        ``prediction_margin`` > 0 and it is for this frame's size. ``defer_learning``: the
+        static background learns from this frame only in :meth:`learn_deferred` (or at the
+        start of the next call), not before this one returns."""
         image = _check_image(image_rgb)
+        self.learn_deferred()     # the last frame's, if its caller left it pending
         if (self.prediction_margin <= 0 or prediction is None
                 or prediction.image_size != (image.shape[1], image.shape[0])):
             prediction = None
         t0 = time.perf_counter()
+        self._defer_learning = bool(defer_learning)
         try:
             followed = self._without_search(image)
             obs = (None if followed is None
@@ -1027,6 +1050,7 @@ class GloveSegmenter:
             if obs is None:   # not found whole inside the followed region: search after all
                 obs = self._segment(image, keep_labels, t0, prediction)
         finally:
+            self._defer_learning = False
             self._learnt()
         assert obs is not None   # (only a frame without the search is given up)
         obs.timings_ms['total'] = (time.perf_counter() - t0) * 1e3   # (the learning too)

@@ -241,8 +241,9 @@ class SegmentationNode(Node):
         prediction = None
         if header.frame_id == self.prediction_frame_id:
             prediction = self.feedback.for_frame(stamp_to_seconds(header.stamp))
+        # the static background learns from the frame after its observation is published
         observation = segment_frame(self.segmenter, rgb, keep_labels=self.publish_debug,
-                                    prediction=prediction)
+                                    prediction=prediction, defer_learning=True)
         if self.hand == DEFAULT_HAND or isinstance(observation, NoHand):
             return observation
         # a left hand's query is the mirrored image's (the debug image stays as seen)
@@ -280,6 +281,21 @@ class SegmentationNode(Node):
 
     def _process(self, header: Header, size: tuple[int, int],
                  decode: Callable[[], np.ndarray]) -> None:
+        """Answer one frame (:meth:`_answer`), then let the segmenter learn from it: the
+        static background's learning is needed only by the next frame, so it runs after the
+        observation is published, off the frame's latency. A failure of the learning is
+        logged; the node keeps running."""
+        try:
+            self._answer(header, size, decode)
+        finally:
+            try:
+                self.segmenter.learn_deferred()
+            except Exception as exc:   # a frame must never stop the node
+                self.get_logger().error(f'background learning failed: {exc!r}\n'
+                                        f'{traceback.format_exc()}', throttle_duration_sec=1.0)
+
+    def _answer(self, header: Header, size: tuple[int, int],
+                decode: Callable[[], np.ndarray]) -> None:
         """Decode (``size``: the image's, as far as known before) and segment one frame; an
         image that does not decode is a bad image (a throttled error), and such frames and
         observations that fail their own checks are reported as 'no hand' with the reason and

@@ -138,3 +138,44 @@ def test_a_failed_learning_in_the_thread_is_raised_by_process(monkeypatch,
         seg.process(_printed_frame(4))
     assert seg._learning is None
 
+
+
+def test_a_deferred_learning_gives_the_same_observations_and_waits_for_its_call(
+        printed_calibration) -> None:
+    """``defer_learning``: the frame's static-background learning runs only in
+    ``learn_deferred`` (the node calls it after publishing) or, if nobody calls it, at the
+    start of the next ``process``; frame after frame the observations, the glove-like mask and
+    the learnt counts are those of learning inline."""
+    images = [_printed_frame(4), _printed_frame(5), _printed_frame(4), _printed_frame(6)]
+    settings = {'background_frames': 2, 'background_memory': 1}
+    inline = segmenter_module.GloveSegmenter(printed_calibration, **settings)
+    called = segmenter_module.GloveSegmenter(printed_calibration, **settings)
+    next_call = segmenter_module.GloveSegmenter(printed_calibration, **settings)
+    for image in images:
+        one = inline.process(image)
+        before = _copy(called.background._matched)
+        two = called.process(image, defer_learning=True)
+        assert called._deferred is not None          # not learnt yet
+        _assert_same(called.background._matched, before)
+        called.learn_deferred()
+        assert called._deferred is None
+        three = next_call.process(image, defer_learning=True)
+        for other in (two, three):
+            assert one.status == other.status and one.crop == other.crop
+            assert one.blobs == other.blobs
+            np.testing.assert_array_equal(one.tiny_labels, other.tiny_labels)
+        np.testing.assert_array_equal(inline._glove_like_mask, called._glove_like_mask)
+        np.testing.assert_array_equal(inline.background._matched, called.background._matched)
+    assert one.hand_found and inline.background._matched is not None
+    called.learn_deferred()                           # nothing pending: nothing happens
+    np.testing.assert_array_equal(inline.background._matched, called.background._matched)
+
+
+def _copy(values: np.ndarray | None) -> np.ndarray | None:
+    return None if values is None else values.copy()
+
+
+def _assert_same(values: np.ndarray | None, expected: np.ndarray | None) -> None:
+    assert (values is None) == (expected is None)
+    if expected is not None:
+        np.testing.assert_array_equal(values, expected)
