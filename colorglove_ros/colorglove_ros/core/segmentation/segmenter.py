@@ -1053,7 +1053,8 @@ class GloveSegmenter:
             self._defer_learning = False
             self._learnt()
         assert obs is not None   # (only a frame without the search is given up)
-        obs.timings_ms['total'] = (time.perf_counter() - t0) * 1e3   # (the learning too)
+        # the learning is in the total unless it was deferred (defer_learning)
+        obs.timings_ms['total'] = (time.perf_counter() - t0) * 1e3
         return obs
 
     def _segment(self, image: np.ndarray, keep_labels: bool, t0: float,
