@@ -46,6 +46,9 @@ class FrameStats:
     """Per-frame outcomes of one node: call :meth:`hand` or :meth:`no_hand` once per frame,
     :meth:`summary` once per period (which starts the next period).
 
+    Failures beside a frame's output (:meth:`fault`: the output went out, some work after it
+    failed) are counted per :func:`refusal_kind` too and make the period WARN.
+
     Refusals are counted per :func:`refusal_kind` since start-up; kinds in ``counted_elsewhere``
     are read from that counter instead (e.g. ``{'camera': FrameCamera.refused}``, which counts
     its refusals per kind itself) and reported as ``'<kind>: <sub-kind>'``. ``what`` names the
@@ -59,6 +62,9 @@ class FrameStats:
         self.frames = 0
         self.frames_with_hand = 0
         self.refused: Counter[str] = Counter()
+        self.faults: Counter[str] = Counter()
+        self.last_fault = ''
+        self._period_faults = 0
         self.last_reason = ''
         self.last_was_error = False
         self.last_values: dict[str, str] = {}
@@ -91,6 +97,14 @@ class FrameStats:
         self._period_errors += bool(error)
         self.last_values = {}
 
+    def fault(self, reason: str) -> None:
+        """A failure beside the frame's output (counted once more, the frame itself as it
+        was counted), e.g. the segmenter's background learning after the observation went
+        out."""
+        self.faults[refusal_kind(reason)] += 1
+        self.last_fault = reason
+        self._period_faults += 1
+
     def refusals(self) -> dict[str, int]:
         """Frames refused since start-up per kind (other counters' kinds as
         ``'<kind>: <sub-kind>'``)."""
@@ -103,10 +117,11 @@ class FrameStats:
         """The report of the period of ``period_s`` seconds that ends now; starts the next.
 
         ERROR: every frame of the period failed (bad input, a stage failing, a refused fit);
-        WARN: no frame in the period, some failed, or the newest frame had no hand (hand lost);
-        OK otherwise."""
+        WARN: no frame in the period, some failed, the newest frame had no hand (hand lost),
+        or some work beside the outputs failed (:meth:`fault`); OK otherwise."""
         frames, errors, latency = self._period_frames, self._period_errors, \
             self._period_latency_s
+        faults, self._period_faults = self._period_faults, 0
         self._period_frames, self._period_errors, self._period_latency_s = 0, 0, []
         rate = frames / period_s if period_s > 0 else 0.0
         values = {'rate (Hz)': f'{rate:.1f}', 'frames': str(self.frames),
@@ -116,6 +131,7 @@ class FrameStats:
             values['latency max (ms)'] = f'{1e3 * max(latency):.1f}'
         values.update({f'refused: {kind}': str(n) for kind, n in
                        sorted(self.refusals().items())})
+        values.update({f'fault: {kind}': str(n) for kind, n in sorted(self.faults.items())})
         values.update(self.last_values)
         if frames == 0:
             level, message = WARN, f'no frames in the last {period_s:g} s'
@@ -127,6 +143,8 @@ class FrameStats:
                        else f'{self.what} lost: {self.last_reason}')
         elif errors:
             level, message = WARN, f'{errors} of {frames} frames refused, {rate:.1f} Hz'
+        elif faults:
+            level, message = WARN, f'{faults} fault(s) beside the outputs: {self.last_fault}'
         else:
             level, message = OK, f'{rate:.1f} Hz'
         return Summary(level, message, values)

@@ -73,3 +73,21 @@ def test_messages_as_diagnostic_updater_publishes_them() -> None:
     assert array.status[0].level == OK and array.status[0].name == 'ik: tracking'
     assert array.status[0].hardware_id == 'camera_optical_frame'
     assert {kv.key: kv.value for kv in array.status[0].values}['constraints'] == '3'
+
+
+def test_a_fault_beside_the_outputs_is_counted_and_warns() -> None:
+    """Work after an output that failed (the output itself went out): counted per kind since
+    start-up, the period WARN with the reason; the next period without one is OK again."""
+    stats = FrameStats()
+    stats.hand(0.010)
+    stats.fault("background learning: RuntimeError('disk full')")
+    stats.hand(0.012)
+    summary = stats.summary(1.0)
+    assert summary.level == WARN
+    assert summary.message == ("1 fault(s) beside the outputs: background learning: "
+                               "RuntimeError('disk full')")
+    assert summary.values['fault: background learning'] == '1'
+    assert stats.frames == 2 and stats.frames_with_hand == 2 and not stats.refusals()
+    stats.hand(0.011)
+    later = stats.summary(1.0)
+    assert later.level == OK and later.values['fault: background learning'] == '1'

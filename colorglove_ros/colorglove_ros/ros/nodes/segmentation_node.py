@@ -284,13 +284,14 @@ class SegmentationNode(Node):
         """Answer one frame (:meth:`_answer`), then let the segmenter learn from it: the
         static background's learning is needed only by the next frame, so it runs after the
         observation is published, off the frame's latency. A failure of the learning is
-        logged; the node keeps running."""
+        logged and counted as a fault in the diagnostics; the node keeps running."""
         try:
             self._answer(header, size, decode)
         finally:
             try:
                 self.segmenter.learn_deferred()
             except Exception as exc:   # a frame must never stop the node
+                self.stats.fault(f'background learning: {exc!r}')
                 self.get_logger().error(f'background learning failed: {exc!r}\n'
                                         f'{traceback.format_exc()}', throttle_duration_sec=1.0)
 

@@ -1,6 +1,6 @@
 """segmentation_node publishes a frame's observation before its segmenter learns the static
 background from that frame (the learning is needed only by the next frame), and a failed
-learning is logged while the node keeps answering frames (issue 19)."""
+learning is logged and counted as a fault while the node keeps answering frames (issue 19)."""
 from __future__ import annotations
 
 import numpy as np
@@ -71,3 +71,6 @@ def test_a_failed_learning_is_logged_and_the_next_frame_answered(
     assert [m.header.stamp.sec for m in published] == [30, 31]
     assert all(m.hand_found for m in published)
     assert len(errors) == 1 and 'background learning failed' in errors[0]
+    # in the diagnostics too: a fault beside the outputs, the two frames answered
+    assert node.stats.faults == {'background learning': 1} and node.stats.frames == 2
+    assert node.stats.refused == {}
