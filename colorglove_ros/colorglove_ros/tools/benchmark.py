@@ -25,8 +25,9 @@ import numpy as np
 
 from colorglove_ros.core.camera import load_calibration
 from colorglove_ros.core.evaluation.machine_speed import (
-    MACHINE_SPEED_TITLE,
     MachineSpeed,
+    machine_speed_after,
+    machine_speed_before,
     measure_machine_speed,
 )
 from colorglove_ros.core.evaluation.metrics import latency_summary_ms
@@ -316,7 +317,7 @@ def _benchmark(args: argparse.Namespace) -> int:
     del parameters['camera']
     parameters['ik']['publish_overlay'] = args.overlay
     report: dict[str, Any] = {'bag': bag.name, 'database': database.name}
-    speeds = [measure_machine_speed().row('before')]
+    speeds = machine_speed_before()
     stages: list[dict[str, Any]] = []
     if args.in_process_frames > 0:
         print(f'[benchmark] in process: {args.in_process_frames} frames, '
@@ -369,9 +370,7 @@ def _benchmark(args: argparse.Namespace) -> int:
         print_table(runs, title='over DDS (latency: lean subscriber, JointState arrival minus '
                                 'camera stamp; machine_*: the fixed workloads just before the '
                                 'pass)')
-    speeds.append(measure_machine_speed().row('after'))
-    report['machine_speed'] = speeds
-    print_table(speeds, title=MACHINE_SPEED_TITLE)
+    report['machine_speed'] = machine_speed_after(speeds)
     targets = check_targets(_target_figures(stages, runs), probe_failure_notes(runs))
     report['targets'] = targets
     print_table(targets, title='issue 19 targets (measured on this machine)')

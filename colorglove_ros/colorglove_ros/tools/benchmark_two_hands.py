@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from colorglove_ros.core.evaluation.machine_speed import MACHINE_SPEED_TITLE, measure_machine_speed
+from colorglove_ros.core.evaluation.machine_speed import machine_speed_after, machine_speed_before
 from colorglove_ros.core.evaluation.metrics import latency_summary_ms
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.evaluation.two_hand_frames import RATE_TARGET_PER_HAND_HZ
@@ -300,7 +300,7 @@ def _benchmark(args: argparse.Namespace) -> int:
     visible = frame_visibility(bag, args.seed, args.frames)
     parameters = node_parameters(args, database)
     rows: list[dict[str, Any]] = []
-    machine = [measure_machine_speed().row('before')]
+    machine = machine_speed_before()
     started = time.monotonic()
     for rate in args.rates:
         rows.extend(dds_pass(bag, parameters, args.frames, rate, visible, args.startup_s))
@@ -314,8 +314,7 @@ def _benchmark(args: argparse.Namespace) -> int:
                           RATE_TARGET_PER_HAND_HZ, '>=')
                for row in rows if row['offered_hz'] == BAG_RATE_HZ]
     print_table(targets, title='issue 18 rate target (measured on this machine)')
-    machine.append(measure_machine_speed().row('after'))
-    print_table(machine, MACHINE_SPEED_TITLE)
+    machine_speed_after(machine)
     if args.json:
         write_json(args.json, {'bag': bag.name, 'database': database.name,
                                'node_parameters': {k: v for k, v in parameters.items()

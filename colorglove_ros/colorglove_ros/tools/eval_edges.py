@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from colorglove_ros.core.camera import load_calibration
-from colorglove_ros.core.evaluation.machine_speed import MACHINE_SPEED_TITLE, measure_machine_speed
+from colorglove_ros.core.evaluation.machine_speed import machine_speed_after, machine_speed_before
 from colorglove_ros.core.evaluation.targets import target_row
 from colorglove_ros.core.hand.model import KEYPOINT_NAMES, HandModel
 from colorglove_ros.core.opencv_threads import use_opencv_threads
@@ -250,7 +250,7 @@ def _run(args: Any) -> int:
     cams_all = calibration.cameras[:max(args.cameras)]
     rows: list[dict[str, Any]] = []
     trackers: dict[int, EdgeTracker] = {}
-    machine = [measure_machine_speed().row('before')]
+    machine = machine_speed_before()
     for speed in args.speeds:
         for seed in args.seeds:
             seq = BareHandSequence(cams_all[0], seed=seed, num_frames=args.frames, speed=speed,
@@ -298,8 +298,7 @@ def _run(args: Any) -> int:
         value = row['min_longest_run'] if key == 'longest_run_frames' else row[key]
         targets.append({**target_row(text, value, threshold, comparison)})
     print_table(targets, 'targets (longest run: the worst seed)')
-    machine.append(measure_machine_speed().row('after'))
-    print_table(machine, MACHINE_SPEED_TITLE)
+    machine_speed_after(machine)
     print(f'conditions: {os.cpu_count()} CPUs; tracker single-threaded in this process, OpenCV '
           f'threads {args.opencv_threads} (time: wall clock, cpu: this process, thread_cpu: the '
           'tracker\'s thread)', flush=True)

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from colorglove_ros.core.errors import ColorGloveError
-from colorglove_ros.core.evaluation.machine_speed import MACHINE_SPEED_TITLE, measure_machine_speed
+from colorglove_ros.core.evaluation.machine_speed import machine_speed_after, machine_speed_before
 from colorglove_ros.core.evaluation.scenes import (
     BORDER_DEPTH_MM,
     OFF_POSE_MM,
@@ -158,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     def observer_factory(feedback: CropFeedback) -> Any:
         return image_observer(load_segmenter(args.color_config), feedback=feedback)
 
-    machine = [measure_machine_speed().row('before')]
+    machine = machine_speed_before()
     started = time.perf_counter()
     rows = []
     records: list[dict[str, Any]] = []
@@ -199,8 +199,7 @@ def main(argv: list[str] | None = None) -> int:
                                  'frames with a hand')
     targets = evaluate_targets(rows)
     print_table(targets, 'Targets (measured, not asserted)')
-    machine.append(measure_machine_speed().row('after'))
-    print_table(machine, MACHINE_SPEED_TITLE)
+    machine_speed_after(machine)
     settings = {'database': str(db_path), 'entries': len(db), 'seeds': seeds,
                 'seed_offset': args.seed_offset, 'frames_per_sequence': args.frames,
                 'color_config': args.color_config, 'ik_config': args.ik_config,

@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from colorglove_ros.core.conventions import NUM_COLORS
-from colorglove_ros.core.evaluation.machine_speed import MACHINE_SPEED_TITLE, measure_machine_speed
+from colorglove_ros.core.evaluation.machine_speed import machine_speed_after, machine_speed_before
 from colorglove_ros.core.report import print_table, write_json
 from colorglove_ros.core.segmentation.color_model import (
     ColorCalibrationError,
@@ -243,7 +243,7 @@ def main(argv: list[str] | None = None) -> int:
                              args.clutter_near_hand)
     except ValueError as exc:
         return tool_error('colorglove_eval_segmentation', exc)
-    machine = [measure_machine_speed().row('before')]
+    machine = machine_speed_before()
     t0 = time.perf_counter()
     result = evaluate(seg, frames, args.repeats)
     summary = result['summary']
@@ -255,8 +255,7 @@ def main(argv: list[str] | None = None) -> int:
     print_table(result['timings'], title='time per 640x480 frame by stage (ms): all frames, '
                 'and glove frames only')
     print(f'evaluation took {time.perf_counter() - t0:.1f} s')
-    machine.append(measure_machine_speed().row('after'))
-    print_table(machine, MACHINE_SPEED_TITLE)
+    machine_speed_after(machine)
     if args.json:
         write_json(args.json, {'source': args.source, 'seed': args.seed,
                                'clutter_near_hand': args.clutter_near_hand,

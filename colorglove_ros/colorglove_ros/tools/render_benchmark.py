@@ -7,7 +7,7 @@ import time
 import numpy as np
 
 from colorglove_ros.core.camera import PinholeCamera
-from colorglove_ros.core.evaluation.machine_speed import MACHINE_SPEED_TITLE, measure_machine_speed
+from colorglove_ros.core.evaluation.machine_speed import machine_speed_after, machine_speed_before
 from colorglove_ros.core.hand.glove import default_hand
 from colorglove_ros.core.hand.poses import pose_collection, sample_global_rotations
 from colorglove_ros.core.report import print_table, write_json
@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--seed', type=int, default=0)
     args = parser.parse_args(argv)
     _, mesh, _ = default_hand()
-    machine = [measure_machine_speed().row('before')]
+    machine = machine_speed_before()
     rows = [
         _label_rate((40, 40), args.images, args.batch, args.seed),
         _label_rate((96, 96), args.images, args.batch, args.seed),
@@ -103,10 +103,9 @@ def main(argv: list[str] | None = None) -> int:
         _shaded_rate(args.full_images, args.seed, smooth=True),
         _shaded_rate(args.full_images, args.seed, smooth=True, supersample=2),
     ]
-    machine.append(measure_machine_speed().row('after'))
     print_table(rows, title=f'render benchmark (mesh: {mesh.num_vertices} vertices, '
                             f'{mesh.num_faces} faces; {os.cpu_count()} CPUs)')
-    print_table(machine, MACHINE_SPEED_TITLE)
+    machine_speed_after(machine)
     if args.json:
         write_json(args.json, {'machine_speed': machine, 'mesh_vertices': mesh.num_vertices,
                                'mesh_faces': mesh.num_faces, 'rows': rows})

@@ -184,7 +184,9 @@ def test_every_dds_row_carries_the_machine_speed_before_it(
     monkeypatch.setattr(benchmark, 'prepare_assets', lambda database: tmp_path)
     monkeypatch.setattr(benchmark, 'ensure_bag', lambda *args: tmp_path / 'bag')
     monkeypatch.setattr(benchmark, 'pipeline_parameters', lambda *args: {'camera': {}, 'ik': {}})
+    # the passes' readings (benchmark's) and the before / after rows (machine_speed's)
     monkeypatch.setattr(benchmark, 'measure_machine_speed', fake_speed)
+    monkeypatch.setattr(machine_speed, 'measure_machine_speed', fake_speed)
     monkeypatch.setattr(benchmark, 'dds_pass', fake_pass)
     out = tmp_path / 'bench.json'
     assert benchmark.main(['--in-process-frames', '0', '--rates', '30', '60',

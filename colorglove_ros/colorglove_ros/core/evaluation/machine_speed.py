@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['MachineSpeed', 'measure_machine_speed', 'load_average_1min', 'MACHINE_SPEED_TITLE',
-           'PYTHON_LOOP_STEPS', 'SORTED_VALUES']
+__all__ = ['MachineSpeed', 'measure_machine_speed', 'machine_speed_before', 'machine_speed_after',
+           'load_average_1min', 'MACHINE_SPEED_TITLE', 'PYTHON_LOOP_STEPS', 'SORTED_VALUES']
 
 PYTHON_LOOP_STEPS = 1_000_000
 """Steps of the reference pure-Python loop."""
@@ -71,6 +71,21 @@ def measure_machine_speed(repeats: int = 5) -> MachineSpeed:
         sort_ms.append(1e3 * (time.perf_counter() - started))
     return MachineSpeed(float(np.median(loop_ms)), float(np.median(sort_ms)), repeats,
                         load_average_1min())
+
+
+def machine_speed_before() -> list[dict[str, Any]]:
+    """A timing tool's machine-speed rows, begun: the 'before' row, measured now."""
+    return [measure_machine_speed().row('before')]
+
+
+def machine_speed_after(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """``rows`` (from :func:`machine_speed_before`) with the 'after' row, measured now,
+    appended, and printed under :data:`MACHINE_SPEED_TITLE`; returns ``rows``."""
+    from colorglove_ros.core.report import print_table
+
+    rows.append(measure_machine_speed().row('after'))
+    print_table(rows, MACHINE_SPEED_TITLE)
+    return rows
 
 
 def load_average_1min() -> float:

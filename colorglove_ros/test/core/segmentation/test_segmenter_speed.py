@@ -139,7 +139,6 @@ def test_a_failed_learning_in_the_thread_is_raised_by_process(monkeypatch,
     assert seg._learning is None
 
 
-
 def test_a_deferred_learning_gives_the_same_observations_and_waits_for_its_call(
         printed_calibration) -> None:
     """``defer_learning``: the frame's static-background learning runs only in
