@@ -72,7 +72,11 @@ class StageLimits:
     camera (``core.validation.validate_hand_depth``) is refused. With ``refuse_cut_hands`` a
     hand cut by the primary image's border (``CameraObservation.cut_by_border``) is no hand:
     the lookup normalises the visible part as if it were the whole hand, so neither the crop's
-    size (depth) nor the nearest entries (pose) can be trusted, tracked or not.
+    size (depth) nor the nearest entries (pose) can be trusted. With ``follow_cut_hands`` a
+    hand tracked on the frame before is followed from that pose instead, without the lookup
+    (``HandTracker.follow``: the visible patches matched where the last pose puts them), and
+    published when it passes every gate below as a fit without a close lookup; a hand first
+    seen cut stays no hand.
 
     Weak evidence: a fit whose lookup was not a close match (nearest database image farther
     than ``close_match_distance``, or unknown) and that explains less than
@@ -98,6 +102,7 @@ class StageLimits:
     require_constraint: bool = True
     check_depth: bool = True
     refuse_cut_hands: bool = True
+    follow_cut_hands: bool = True
     close_match_distance: float = 2.0
     min_explained_blob_share: float = 0.5
     max_weak_match_residual_px: float = 6.0
@@ -114,7 +119,8 @@ NODE_LIMITS = StageLimits()
 # Every output of the tracker counts (a non-finite pose is still refused): the IK evaluation
 # measures the tracker itself, as its figures always have, not the nodes' refusals.
 UNGATED = StageLimits(max_image_distance=math.inf, require_constraint=False, check_depth=False,
-                      refuse_cut_hands=False, min_explained_blob_share=0.0,
+                      refuse_cut_hands=False, follow_cut_hands=False,
+                      min_explained_blob_share=0.0,
                       max_weak_match_residual_px=math.inf, max_missing_glove_share=1.0,
                       max_outside_blob_share=1.0)
 
@@ -334,18 +340,19 @@ def hand_keypoints_at_plausible_depth(tracker: Any, q: np.ndarray) -> np.ndarray
     return keypoints
 
 
-def weak_evidence(prior: PosePrior, result: IKResult, limits: StageLimits) -> str:
+def weak_evidence(image_distance: float, result: IKResult, limits: StageLimits) -> str:
     """Why the fit rests on too little evidence ('' when it does not): the lookup was not a
-    close match and the fitted hand explains too few of the observed glove blobs
+    close match (its nearest database image ``image_distance`` tiny pixels away; NaN: no
+    lookup, never close) and the fitted hand explains too few of the observed glove blobs
     (:class:`StageLimits`)."""
     share = result.explained_blob_share
     if (limits.min_explained_blob_share <= 0.0
-            or prior.image_distance <= limits.close_match_distance
+            or image_distance <= limits.close_match_distance
             or share >= limits.min_explained_blob_share):
         return ''
     return (f'weak evidence: the fitted hand explains {share:.0%} of the glove blobs (less '
             f'than {limits.min_explained_blob_share:.0%}) and the nearest database image is '
-            f'{prior.image_distance:.2f} tiny px away (more than {limits.close_match_distance:g})')
+            f'{image_distance:.2f} tiny px away (more than {limits.close_match_distance:g})')
 
 
 def primary_pixel_scale(tracker: Any) -> float:
@@ -358,13 +365,15 @@ def primary_pixel_scale(tracker: Any) -> float:
     return 1.0 if config is None else pixel_scale(tracker.cameras[0], config.reference_focal_px)
 
 
-def poor_fit(tracker: Any, prior: PosePrior, result: IKResult, limits: StageLimits) -> str:
+def poor_fit(tracker: Any, image_distance: float, result: IKResult, limits: StageLimits
+             ) -> str:
     """Why the fit does not fit its own blobs well enough to stand without a close lookup
-    ('' when it does, or the gate is off): the lookup was not a close match and the mean
+    ('' when it does, or the gate is off): the lookup was not a close match (its nearest
+    database image ``image_distance`` tiny pixels away; NaN: no lookup) and the mean
     reprojection residual is more than ``limits.max_weak_match_residual_px`` (scaled to the
     primary camera's pixels, :func:`primary_pixel_scale`; :class:`StageLimits`)."""
     if (limits.max_weak_match_residual_px >= math.inf
-            or prior.image_distance <= limits.close_match_distance):
+            or image_distance <= limits.close_match_distance):
         return ''
     residual = float(result.reprojection_error_px) / primary_pixel_scale(tracker)
     if not residual > limits.max_weak_match_residual_px:
@@ -372,7 +381,7 @@ def poor_fit(tracker: Any, prior: PosePrior, result: IKResult, limits: StageLimi
     return (f'poor fit: the fitted hand misses its matched blobs by {residual:.1f} px on '
             f'average (more than max_weak_match_residual_px '
             f'{limits.max_weak_match_residual_px:g}) and the nearest database image is '
-            f'{prior.image_distance:.2f} tiny px away (more than {limits.close_match_distance:g})')
+            f'{image_distance:.2f} tiny px away (more than {limits.close_match_distance:g})')
 
 
 def glove_seen(tracker: Any, q: np.ndarray, observation: CameraObservation,
@@ -463,13 +472,13 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
     match (:func:`poor_fit`), glove the image lacks (:func:`missing_glove`),
     glove the fitted hand leaves outside (:func:`glove_outside`) or
     a hand at an implausible depth (``limits.check_depth``); with ``limits.refuse_cut_hands``
-    a hand cut by the primary image's border is not tracked (:data:`CUT_BY_BORDER`). A
-    refusal resets the tracker.
+    a hand cut by the primary image's border is not tracked from the lookup
+    (:data:`CUT_BY_BORDER`, or followed: :func:`_follow_cut_hand`). A refusal resets the
+    tracker.
     """
     if (limits.refuse_cut_hands and prior is not None and observations
             and observations[0].hand_found and observations[0].cut_by_border):
-        tracker.reset()
-        return NoHand(CUT_BY_BORDER)
+        return _follow_cut_hand(tracker, observations, stamp, limits)
     if temporal is not None and prior is not None:
         from colorglove_ros.core.lookup.temporal_prior import reweight_by_previous
 
@@ -485,15 +494,46 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
         return bad_prior(tracker, exc)
     if not result.found or result.q is None:
         return NoHand(upstream_reason or 'lost', partial=result)
+    return _gated(tracker, math.nan if prior is None else prior.image_distance, result,
+                  observations, limits)
+
+
+def _follow_cut_hand(tracker: Any, observations: Sequence[CameraObservation], stamp: float,
+                     limits: StageLimits) -> Tracked | NoHand:
+    """A hand the primary image's border cuts: with ``limits.follow_cut_hands`` and a hand
+    tracked on the frame before, followed from that pose without the lookup
+    (``HandTracker.follow``) and gated as a fit after a far lookup (the evidence and residual
+    gates apply in full); else, or when that fails, :data:`CUT_BY_BORDER`. A hand first seen
+    cut is never tracked: nothing but the crop would give its depth."""
+    follow = getattr(tracker, 'follow', None)
+    last = tracker.previous_pose
+    if not (limits.follow_cut_hands and follow is not None and last is not None):
+        tracker.reset()
+        return NoHand(CUT_BY_BORDER)
+    try:
+        result = follow(observations, stamp)
+    except (IKError, InvalidInputError, ValueError) as exc:
+        return bad_prior(tracker, exc)
+    if not result.found or result.q is None:
+        tracker.reset()
+        return NoHand(CUT_BY_BORDER, partial=result)
+    return _gated(tracker, math.nan, result, observations, limits)
+
+
+def _gated(tracker: Any, image_distance: float, result: IKResult,
+           observations: Sequence[CameraObservation], limits: StageLimits) -> Tracked | NoHand:
+    """The fit ``result`` as published, or refused (the tracker reset) with the first gate
+    it fails (:func:`track`); ``image_distance`` is the lookup's nearest image distance
+    (NaN: none)."""
     reason = ''
     keypoints = None
     if limits.require_constraint and result.num_constraints == 0:
         reason = 'no constraint matched an observed blob'
     elif not np.all(np.isfinite(result.q)):
         reason = 'non-finite pose'
-    elif weak := weak_evidence(prior, result, limits):
+    elif weak := weak_evidence(image_distance, result, limits):
         reason = weak
-    elif poor := poor_fit(tracker, prior, result, limits):
+    elif poor := poor_fit(tracker, image_distance, result, limits):
         reason = poor
     elif missing := missing_glove(tracker, result.q, observations[0], limits):
         reason = missing

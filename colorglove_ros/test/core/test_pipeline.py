@@ -422,3 +422,89 @@ def test_track_refuses_a_fit_leaving_much_glove_outside_the_hand(tracker) -> Non
     assert out.reason.startswith('glove outside the hand: 50% of the glove blob pixels')
     wide = replace(limits, outside_reach=2.0)
     assert isinstance(track(fake, _prior(), seen(hand_px), 0.0, wide), Tracked)
+
+
+PATCH_CROP = CropTransform(6.0, 160.0, 120.0)
+
+
+def _patch_view(tracker: HandTracker, q: np.ndarray) -> tuple[np.ndarray, Blobs]:
+    """The glove patches pose ``q`` shows inside the image and a blob at each visible part's
+    centroid (its colour, its area): what a perfect segmentation gives (patch ids, blobs)."""
+    area, centroid = tracker.patch_surface.visible_patches(q, CAMERA)
+    inside = (area >= 30.0) & (centroid[:, 0] >= 0) & (centroid[:, 0] < CAMERA.width) \
+        & (centroid[:, 1] >= 0) & (centroid[:, 1] < CAMERA.height)
+    ids = np.flatnonzero(inside)
+    return ids, Blobs(tracker.patch_color[ids], centroid[ids], area[ids])
+
+
+def _patch_prior(tracker: HandTracker, hand, q: np.ndarray, ids: np.ndarray,
+                 blobs: Blobs) -> PosePrior:
+    """A close lookup at ``q`` whose constraints are, as the database's, the vertex of each
+    patch in ``ids`` nearest to where its blob in ``blobs`` is (also given in
+    :data:`PATCH_CROP`'s tiny image)."""
+    model, mesh, glove = hand
+    faces = np.asarray(mesh.faces)
+    face_patch = np.asarray(glove.face_patch)
+    points = mesh.skin(model, q)
+    projected = CAMERA.project(points)
+    vertices = []
+    for patch, xy in zip(ids, blobs.centroid_px, strict=True):
+        f = faces[face_patch == patch]
+        normal = np.cross(points[f[:, 1]] - points[f[:, 0]], points[f[:, 2]] - points[f[:, 0]])
+        own = np.unique(f[np.einsum('ij,ij->i', normal, -points[f[:, 0]]) > 0])   # facing
+        vertices.append(own[np.argmin(np.linalg.norm(projected[own] - xy, axis=1))])
+    vertices = np.array(vertices)
+    constraints = ProjectionConstraints(ids, tracker.patch_color[ids], vertices,
+                                        PATCH_CROP.to_tiny(blobs.centroid_px),
+                                        np.full(len(ids), 30))
+    return PosePrior(q.copy(), constraints, image_distance=0.5)
+
+
+def test_a_tracked_hand_the_border_cuts_is_followed_from_its_last_pose(hand) -> None:
+    model, mesh, glove = hand
+    q0 = synth.sample_pose(np.random.default_rng(3), CAMERA, out_of_frame_prob=0.0)
+    # the hand's lowest keypoint 20 px above the bottom border; then it moves 50 px down,
+    # and the border cuts it, while the fingers curl a little
+    low = CAMERA.project(model.keypoints(q0))[:, 1].max()
+    q0[1] += (CAMERA.height - 20 - low) * q0[2] / CAMERA.fy
+    q1 = q0.copy()
+    q1[1] += 50 * q0[2] / CAMERA.fy
+    q1[7::4] = np.clip(q1[7::4] + 0.05, model.lower_limits[7::4], model.upper_limits[7::4])
+    limits = replace(NODE_LIMITS, check_depth=True)
+
+    def tracker_after_one_frame() -> HandTracker:
+        tracker = HandTracker(model, mesh, [CAMERA], glove=glove)
+        ids, blobs = _patch_view(tracker, q0)
+        seen = [CameraObservation(True, blobs, PATCH_CROP)]
+        assert isinstance(track(tracker, _patch_prior(tracker, hand, q0, ids, blobs), seen,
+                                0.0, limits), Tracked)
+        return tracker
+
+    tracker = tracker_after_one_frame()
+    ids1, blobs1 = _patch_view(tracker, q1)
+    uncut = q1.copy()
+    uncut[:3] = q0[:3]
+    assert 0 < len(ids1) < len(_patch_view(tracker, uncut)[0])   # the border hides patches
+    cut = [CameraObservation(True, blobs1, PATCH_CROP, True)]
+    # the lookup of a cut hand is wrong: a prior far from the hand is not used
+    wrong = _patch_prior(tracker, hand, _pose(0.9), ids1, blobs1)
+    out = track(tracker, wrong, cut, 1 / 30, limits)
+    assert isinstance(out, Tracked), getattr(out, 'reason', '')
+    assert out.result.followed and out.result.num_constraints >= 3
+    error = np.linalg.norm(model.keypoints(out.result.q) - model.keypoints(q1), axis=1)
+    stayed = np.linalg.norm(model.keypoints(q0) - model.keypoints(q1), axis=1)
+    assert error.mean() < 0.25 * stayed.mean()            # it followed the image
+    assert abs(out.result.q[2] - q1[2]) < 0.01            # and kept the depth
+    # off: the cut hand is no hand, and the track ends
+    tracker = tracker_after_one_frame()
+    off = track(tracker, wrong, cut, 1 / 30, replace(limits, follow_cut_hands=False))
+    assert isinstance(off, NoHand) and off.reason == CUT_BY_BORDER
+    assert tracker.previous_pose is None
+    # a hand first seen cut is never tracked: nothing but the crop would give its depth
+    fresh = HandTracker(model, mesh, [CAMERA], glove=glove)
+    first = track(fresh, wrong, cut, 0.0, limits)
+    assert isinstance(first, NoHand) and first.reason == CUT_BY_BORDER
+    # nor after a gap longer than the tracker's max_gap_s
+    tracker = tracker_after_one_frame()
+    late = track(tracker, wrong, cut, 5.0, limits)
+    assert isinstance(late, NoHand) and late.reason == CUT_BY_BORDER

@@ -29,8 +29,8 @@ from colorglove_ros.core.errors import ColorGloveError
 from colorglove_ros.core.validation import check_number
 
 __all__ = ['FrameEvidenceError', 'FrameEvidence', 'EvidenceGate', 'EvidencePairer',
-           'Stamp', 'tracking_status', 'parse_tracking_status', 'edge_tracking_status',
-           'parse_edge_tracking_status']
+           'Stamp', 'FOLLOWED_NOTE', 'tracking_status', 'parse_tracking_status',
+           'edge_tracking_status', 'parse_edge_tracking_status']
 
 Stamp = tuple[int, int]          # a frame's header stamp (sec, nanosec)
 Frame = TypeVar('Frame')
@@ -86,12 +86,19 @@ _STATUS = re.compile(r'^tracking: (\d+) constraints\b.*?, reprojection (\S+) px\
 _STAMP = re.compile(r', frame (\d+)\.(\d{9})$')
 
 
+#: What a tracked frame's status line adds when the tracker followed a hand the image's
+#: border cuts from its last pose (``core.pipeline.StageLimits.follow_cut_hands``).
+FOLLOWED_NOTE = 'followed from the last pose (hand cut by the image border)'
+
+
 def tracking_status(constraints: int, per_camera: str, reprojection_px: float,
-                    ik_ms: float, stamp: Stamp | None = None) -> str:
-    """ik_node's status line of a tracked frame (``per_camera``: e.g. ``'cam0 12, cam1 4'``),
-    ending with the frame's header stamp (``frame <sec>.<nanosec>``) when given."""
+                    ik_ms: float, stamp: Stamp | None = None, followed: bool = False) -> str:
+    """ik_node's status line of a tracked frame (``per_camera``: e.g. ``'cam0 12, cam1 4'``;
+    ``followed``: :data:`FOLLOWED_NOTE` added), ending with the frame's header stamp
+    (``frame <sec>.<nanosec>``) when given."""
+    note = f', {FOLLOWED_NOTE}' if followed else ''
     return _stamped(f'tracking: {constraints} constraints ({per_camera}), reprojection '
-                    f'{reprojection_px:.1f} px, IK {ik_ms:.1f} ms', stamp)
+                    f'{reprojection_px:.1f} px, IK {ik_ms:.1f} ms{note}', stamp)
 
 
 def parse_tracking_status(text: str) -> FrameEvidence | None:

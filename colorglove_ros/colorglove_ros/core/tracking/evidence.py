@@ -37,12 +37,16 @@ def glove_evidence(surface: PatchSurface, patch_color: np.ndarray, q: np.ndarray
                    near_patch_sizes: float, min_blob_share: float) -> GloveEvidence:
     """Compare the glove at pose ``q`` (``surface``, ``patch_color`` per patch) in ``camera``
     with its observed ``blobs``. A patch counts when at least ``min_patch_px`` of it is
-    visible; it is found when a blob of its colour holding at least ``min_blob_share`` of
-    the patch's visible area lies within ``near_patch_sizes`` patch sizes (the square root of
-    the visible area) of the visible part's centroid."""
+    visible and the centroid of that part lies inside the image (a hand the border cuts
+    shows nothing beyond it); it is found when a blob of its colour holding at least
+    ``min_blob_share`` of the patch's visible area lies within ``near_patch_sizes`` patch
+    sizes (the square root of the visible area) of the visible part's centroid."""
     area, centroid = surface.visible_patches(q, camera)
     shown = float(area.sum())
-    counted = np.flatnonzero(area >= min_patch_px)
+    with np.errstate(invalid='ignore'):
+        in_image = ((centroid[:, 0] >= 0.0) & (centroid[:, 0] < camera.width)
+                    & (centroid[:, 1] >= 0.0) & (centroid[:, 1] < camera.height))
+    counted = np.flatnonzero((area >= min_patch_px) & in_image)
     if len(counted) == 0:
         return GloveEvidence(shown, math.nan, ())
     colors = np.asarray(patch_color)[counted]

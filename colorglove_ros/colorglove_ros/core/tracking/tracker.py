@@ -38,7 +38,7 @@ from colorglove_ros.core.tracking.types import (
     PosePrior,
 )
 
-__all__ = ['IKResult', 'HandTracker']
+__all__ = ['IKResult', 'HandTracker', 'away_from_border']
 
 
 @dataclass(frozen=True)
@@ -66,6 +66,8 @@ class IKResult:
     # share of the primary camera's blobs the fit's correspondences explain
     # (``matching.explained_blob_share``; NaN when there was no usable blob)
     explained_blob_share: float = math.nan
+    # tracked from the last pose without the lookup (:meth:`HandTracker.follow`)
+    followed: bool = False
 
 
 def _local_vertex_normals(mesh: MeshLike) -> np.ndarray | None:
@@ -111,6 +113,21 @@ class _FrameFit:
     rejected: int = 0
 
 
+def away_from_border(observation: CameraObservation | None, camera: PinholeCamera
+                     ) -> CameraObservation | None:
+    """``observation`` without the blobs whose centroid lies nearer to the image border than
+    their side (the square root of their pixel count): a patch the border cuts shows only
+    its inner part, whose centroid is not the patch's (the IK would pull the hand inward)."""
+    if observation is None or not observation.hand_found or not len(observation.blobs):
+        return observation
+    blobs = observation.blobs
+    x, y = blobs.centroid_px[:, 0], blobs.centroid_px[:, 1]
+    margin = np.minimum(np.minimum(x, camera.width - x), np.minimum(y, camera.height - y))
+    keep = margin >= np.sqrt(blobs.pixel_count)
+    return replace(observation, blobs=Blobs(blobs.color[keep], blobs.centroid_px[keep],
+                                            blobs.pixel_count[keep]))
+
+
 def _check_primary(camera: PinholeCamera) -> None:
     if not (np.allclose(camera.rotation, np.eye(3)) and np.allclose(camera.translation, 0.0)):
         raise IKError('cameras[0] (primary) must have identity extrinsics')
@@ -141,6 +158,7 @@ class HandTracker:
         self.config = config or IKConfig()
         self._q_prev: np.ndarray | None = None
         self._stamp_prev: float | None = None
+        self._constraints_prev: Any = None     # the last lookup's constraints (follow)
         self._local_normals = _local_vertex_normals(mesh)
         self._glove = glove
         self._patches = (PatchSurface(self.kin, mesh, self._glove_or_default().face_patch)
@@ -236,6 +254,7 @@ class HandTracker:
         """Forget the previous pose (hand lost, long gap, new sequence)."""
         self._q_prev = None
         self._stamp_prev = None
+        self._constraints_prev = None
 
     @property
     def previous_pose(self) -> np.ndarray | None:
@@ -243,9 +262,11 @@ class HandTracker:
         return None if self._q_prev is None else self._q_prev.copy()
 
     def _match_extras(self, prior: PosePrior, observations: Sequence[CameraObservation],
-                      q: np.ndarray, patch_points: bool = True) -> Correspondences:
-        """The other cameras' correspondences matched at pose ``q`` (constraints moved to
-        the patch points at ``q`` unless ``patch_points`` is false)."""
+                      q: np.ndarray, patch_points: bool = True, first_camera: int = 1
+                      ) -> Correspondences:
+        """The correspondences of cameras ``first_camera`` on (the other cameras; 0: every
+        camera) matched at pose ``q`` without a lookup (``match_extra_camera``), constraints
+        moved to the patch points at ``q`` unless ``patch_points`` is false."""
         cfg = self.config
         cons = prior.constraints
         v = cons.vertices
@@ -258,7 +279,7 @@ class HandTracker:
             Rs, _, _ = self.kin.frames(q)
             normals = (Rs[self.kin.link_frame[links]] @ self._local_normals[v][:, :, None])[..., 0]
         out = []
-        for ci in range(1, len(self.cameras)):
+        for ci in range(first_camera, len(self.cameras)):
             obs = observations[ci] if ci < len(observations) else None
             if obs is None or not obs.hand_found or len(obs.blobs) == 0:
                 continue
@@ -309,7 +330,42 @@ class HandTracker:
             if cfg.line_features and cfg.enable_ik else None
         priors = _FramePriors(q_b, q_prev, cfg.prior_covariances(prior.finger_std), lines)
         fit = self._fit_frame(prior, observations, corr0, tracked, priors)
+        self._constraints_prev = prior.constraints
         return self._finish(fit, stamp, t0, q_blend, priors, was_reset, primary.blobs)
+
+    def follow(self, observations: Sequence[CameraObservation], stamp: float) -> IKResult:
+        """Track one frame from the last pose alone, without a lookup: every camera's blobs
+        (the primary's too) are matched to the last lookup's constraints predicted at the
+        last pose, as the other cameras' always are (``match_extra_camera``), and the IK
+        starts from the last pose, which is both its prior and its smoothing anchor. For a
+        hand the primary image's border cuts, whose lookup normalises the visible part as if
+        it were the whole hand (``core.pipeline.track``). No hand (and a reset) without a
+        last pose, after a gap, without IK or with fewer than ``min_constraints`` matches."""
+        t0 = time.perf_counter()
+        cfg = self.config
+        primary = observations[0] if observations else None
+        was_reset = self._reset_after_gap(stamp)
+        if (was_reset or self._q_prev is None or self._constraints_prev is None
+                or primary is None or not primary.hand_found or not cfg.enable_ik):
+            self.reset()
+            return IKResult(False, stamp, reset=True, time_ms=1e3 * (time.perf_counter() - t0))
+        q_last = self._q_prev.copy()
+        last = PosePrior(q_last, self._constraints_prev)
+        inner = [away_from_border(obs, camera) for obs, camera in
+                 zip(observations, self.cameras, strict=False)]
+        corr = self._match_extras(last, inner, q_last, first_camera=0)
+        if len(corr) < cfg.min_constraints:
+            self.reset()
+            return IKResult(False, stamp, reset=True, time_ms=1e3 * (time.perf_counter() - t0))
+        priors = _FramePriors(q_last, q_last if cfg.enable_smoothing else None,
+                              cfg.prior_covariances(None))
+        fit = _FrameFit(q_last, corr)
+        iterations = cfg.multi_camera_iterations if len(self.cameras) > 1 \
+            else cfg.max_iterations
+        self._solve_into(fit, corr, q_last, max(iterations, 1), priors)
+        self._drop_outliers(fit, priors)
+        return replace(self._finish(fit, stamp, t0, q_last, priors, False, inner[0].blobs),
+                       followed=True)
 
     def _reset_after_gap(self, stamp: float) -> bool:
         """Reset when the time since the last frame is not in (0, ``max_gap_s``]."""

@@ -160,6 +160,12 @@ class IKNode(Node):
             name: self.live.declare(name, getattr(NODE_LIMITS, name), description,
                                     lambda v, name=name: self._check_limit(name, v), *bounds)
             for name, (description, bounds) in LIVE_EVIDENCE_LIMITS.items()})
+        self.limits = replace(self.limits, follow_cut_hands=bool(self.live.declare(
+            'follow_cut_hands', NODE_LIMITS.follow_cut_hands,
+            'a hand tracked on the frame before that the image border now cuts is followed '
+            'from its last pose without the lookup and gated as after a far lookup; false: no '
+            'pose until it is fully in view again (a hand first seen cut never has one)',
+            self._check_follow_cut_hands)))
         self.overlay_subscription = None
         self.publish_overlay = self.live.declare(
             'publish_overlay', False,
@@ -224,6 +230,11 @@ class IKNode(Node):
 
         def apply() -> None:
             self.limits = replace(self.limits, **{name: number})
+        return apply
+
+    def _check_follow_cut_hands(self, value: Any) -> Apply:
+        def apply() -> None:
+            self.limits = replace(self.limits, follow_cut_hands=bool(value))
         return apply
 
     def _check_publish_overlay(self, value: Any) -> Apply:
@@ -394,7 +405,7 @@ class IKNode(Node):
                                    strict=False))
         self.outputs.publish_status(tracking_status(
             result.num_constraints, per_camera, result.reprojection_error_px, result.time_ms,
-            stamp_key(msg.header.stamp)))
+            stamp_key(msg.header.stamp), followed=result.followed))
         self.stats.hand(self.diagnostics.latency_s(msg.header.stamp),
                         constraints=result.num_constraints,
                         **{f'constraints {camera.name}': count for camera, count in

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from colorglove_ros.core.hand.frame_evidence import (
+    FOLLOWED_NOTE,
     EvidenceGate,
     EvidencePairer,
     FrameEvidence,
@@ -28,6 +29,10 @@ def test_status_line_round_trip() -> None:
     assert stamped == ('tracking: 12 constraints (cam0 12), reprojection 2.1 px, IK 4.5 ms, '
                        'frame 100.033333333')
     assert parse_tracking_status(stamped) == FrameEvidence(12.0, 2.1, (100, 33333333))
+    followed = tracking_status(5, 'cam0 5', 1.04, 2.0, (100, 33333333), followed=True)
+    assert followed == ('tracking: 5 constraints (cam0 5), reprojection 1.0 px, IK 2.0 ms, '
+                        f'{FOLLOWED_NOTE}, frame 100.033333333')
+    assert parse_tracking_status(followed) == FrameEvidence(5.0, 1.0, (100, 33333333))
 
 
 def test_edge_tracker_status_line_carries_its_links_residual_and_stamp() -> None:

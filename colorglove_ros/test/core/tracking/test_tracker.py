@@ -31,7 +31,7 @@ from colorglove_ros.core.tracking.projection import (
     reprojection_errors,
 )
 from colorglove_ros.core.tracking.solver import solve_ik
-from colorglove_ros.core.tracking.tracker import HandTracker
+from colorglove_ros.core.tracking.tracker import HandTracker, away_from_border
 from colorglove_ros.core.tracking.types import (
     Blobs,
     CameraObservation,
@@ -747,3 +747,16 @@ def test_patch_points_predicted_at_the_previous_pose_while_tracking(rig):
         np.testing.assert_allclose(points[on].local, at.local, atol=1e-12)
         np.testing.assert_allclose(points[on].weight, at.weight, atol=1e-12)
     assert np.abs(points[True].local - points[False].local).max() > 1e-3
+
+
+def test_blobs_the_border_cuts_are_not_followed(rig):
+    cam = rig[3][0]
+    blobs = Blobs([1, 2, 3, 4], [[320.0, 240.0], [5.0, 200.0], [300.0, cam.height - 3.0],
+                                 [cam.width - 6.0, 100.0]], [400, 100, 64, 16])
+    kept = away_from_border(CameraObservation(True, blobs, CROP, True), cam)
+    # the centre blob and the small one 6 px from the right border (side 4) stay; the two
+    # whose centroid is nearer to the border than their side go
+    assert kept.blobs.color.tolist() == [1, 4] and kept.cut_by_border and kept.crop is CROP
+    assert away_from_border(None, cam) is None
+    lost = CameraObservation(False)
+    assert away_from_border(lost, cam) is lost

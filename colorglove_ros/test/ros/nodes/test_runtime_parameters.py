@@ -76,6 +76,11 @@ def test_ik_evidence_gate_is_settable_at_run_time(small_database_path: Path) -> 
         assert not _set(node, max_missing_glove_share=-0.1).successful
         assert _set(node, max_weak_match_residual_px=4.5).successful
         assert node.limits.max_weak_match_residual_px == 4.5
+        assert node.limits.follow_cut_hands
+        assert _set(node, follow_cut_hands=False).successful
+        assert not node.limits.follow_cut_hands
+        assert node.limits.max_weak_match_residual_px == 4.5    # the rest kept
+        assert not _set(node, follow_cut_hands='sometimes').successful
 
 
 def test_ik_gate_given_at_start_up_is_checked(small_database_path: Path) -> None:
