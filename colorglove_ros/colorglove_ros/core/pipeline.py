@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from colorglove_ros.core.hand.model import DIGITS, KEYPOINT_NAMES
 from colorglove_ros.core.lookup.types import LookupResult, Neighbours
 from colorglove_ros.core.segmentation.crop import TinyCrop
 from colorglove_ros.core.segmentation.crop_prediction import (
@@ -46,7 +47,8 @@ if TYPE_CHECKING:
 # imports only the stage it runs (start-up time).
 
 __all__ = [
-    'DEFAULT_MAX_IMAGE_DISTANCE', 'CUT_BY_BORDER', 'StageLimits', 'NODE_LIMITS', 'UNGATED',
+    'DEFAULT_MAX_IMAGE_DISTANCE', 'CUT_BY_BORDER', 'FINGERS_OUTSIDE', 'FINGERTIP_KEYPOINTS',
+    'fingertips_outside', 'StageLimits', 'NODE_LIMITS', 'UNGATED',
     'NoHand', 'Tracked', 'glove_seen',
     'TemporalPrior', 'Observer', 'FrameObservations', 'FrameLookup', 'FramePipeline',
     'segment_frame', 'bad_image', 'observe_image', 'image_observer', 'look_up', 'search',
@@ -61,6 +63,11 @@ __all__ = [
 DEFAULT_MAX_IMAGE_DISTANCE = 4.5
 #: The 'no hand' reason of a hand that reaches the image border.
 CUT_BY_BORDER = 'hand cut by the image border: its depth and pose are not known until it is in view'
+#: ... and of a followed hand (``StageLimits.follow_cut_hands``) whose fingers leave the image.
+FINGERS_OUTSIDE = ('hand cut by the image border: its fingers leave the image, their angles are '
+                   'not known until they are in view')
+#: The hand model's keypoints of the five fingertips.
+FINGERTIP_KEYPOINTS = tuple(KEYPOINT_NAMES.index(f'{d}_tip') for d in DIGITS)
 
 
 @dataclass(frozen=True)
@@ -75,8 +82,9 @@ class StageLimits:
     size (depth) nor the nearest entries (pose) can be trusted. With ``follow_cut_hands`` a
     hand tracked on the frame before is followed from that pose instead, without the lookup
     (``HandTracker.follow``: the visible patches matched where the last pose puts them), and
-    published when it passes every gate below as a fit without a close lookup; a hand first
-    seen cut stays no hand.
+    published while its fingertips stay in the image (:data:`FINGERS_OUTSIDE`), at least
+    ``follow_min_constraints`` of its patches are matched and it passes every gate below as a
+    fit without a close lookup; a hand first seen cut stays no hand.
 
     Weak evidence: a fit whose lookup was not a close match (nearest database image farther
     than ``close_match_distance``, or unknown) and that explains less than
@@ -103,6 +111,7 @@ class StageLimits:
     check_depth: bool = True
     refuse_cut_hands: bool = True
     follow_cut_hands: bool = True
+    follow_min_constraints: int = 10
     close_match_distance: float = 2.0
     min_explained_blob_share: float = 0.5
     max_weak_match_residual_px: float = 6.0
@@ -517,7 +526,26 @@ def _follow_cut_hand(tracker: Any, observations: Sequence[CameraObservation], st
     if not result.found or result.q is None:
         tracker.reset()
         return NoHand(CUT_BY_BORDER, partial=result)
+    if fingertips_outside(tracker, result.q):
+        tracker.reset()
+        return NoHand(FINGERS_OUTSIDE, partial=result)
+    if result.num_constraints < limits.follow_min_constraints:
+        tracker.reset()
+        return NoHand(f'{CUT_BY_BORDER} (followed, {result.num_constraints} patches matched, '
+                      f'fewer than {limits.follow_min_constraints})', partial=result)
     return _gated(tracker, math.nan, result, observations, limits)
+
+
+def fingertips_outside(tracker: Any, q: np.ndarray) -> bool:
+    """Whether a fingertip of pose ``q`` projects outside the tracker's primary image (or
+    behind it): a followed hand's fingers out of view would only keep their last angles."""
+    model = tracker.model
+    camera = tracker.cameras[0]
+    tips = camera.world_to_camera(model.keypoints(np.asarray(q, float))[list(FINGERTIP_KEYPOINTS)])
+    if np.any(tips[:, 2] <= 0.0):
+        return True
+    x, y = camera.project(tips).T
+    return bool(np.any((x < 0) | (x >= camera.width) | (y < 0) | (y >= camera.height)))
 
 
 def _gated(tracker: Any, image_distance: float, result: IKResult,

@@ -14,6 +14,8 @@ from colorglove_ros.core.lookup.search import PoseLookup
 from colorglove_ros.core.lookup.types import LookupResult, ProjectionConstraints
 from colorglove_ros.core.pipeline import (
     CUT_BY_BORDER,
+    FINGERS_OUTSIDE,
+    FINGERTIP_KEYPOINTS,
     NODE_LIMITS,
     UNGATED,
     FramePipeline,
@@ -21,6 +23,7 @@ from colorglove_ros.core.pipeline import (
     StageLimits,
     TemporalPrior,
     Tracked,
+    fingertips_outside,
     hand_keypoints_at_plausible_depth,
     image_observer,
     look_up,
@@ -462,9 +465,10 @@ def _patch_prior(tracker: HandTracker, hand, q: np.ndarray, ids: np.ndarray,
 
 def test_a_tracked_hand_the_border_cuts_is_followed_from_its_last_pose(hand) -> None:
     model, mesh, glove = hand
-    q0 = synth.sample_pose(np.random.default_rng(3), CAMERA, out_of_frame_prob=0.0)
-    # the hand's lowest keypoint 20 px above the bottom border; then it moves 50 px down,
-    # and the border cuts it, while the fingers curl a little
+    # a hand whose wrist is its lowest keypoint, 66 px below its lowest fingertip
+    q0 = synth.sample_pose(np.random.default_rng(11), CAMERA, out_of_frame_prob=0.0)
+    # the wrist 20 px above the bottom border; then the hand moves 50 px down, and the border
+    # cuts it below the fingertips, while the fingers curl a little
     low = CAMERA.project(model.keypoints(q0))[:, 1].max()
     q0[1] += (CAMERA.height - 20 - low) * q0[2] / CAMERA.fy
     q1 = q0.copy()
@@ -490,11 +494,28 @@ def test_a_tracked_hand_the_border_cuts_is_followed_from_its_last_pose(hand) -> 
     wrong = _patch_prior(tracker, hand, _pose(0.9), ids1, blobs1)
     out = track(tracker, wrong, cut, 1 / 30, limits)
     assert isinstance(out, Tracked), getattr(out, 'reason', '')
-    assert out.result.followed and out.result.num_constraints >= 3
+    assert out.result.followed
+    assert out.result.num_constraints >= NODE_LIMITS.follow_min_constraints
     error = np.linalg.norm(model.keypoints(out.result.q) - model.keypoints(q1), axis=1)
     stayed = np.linalg.norm(model.keypoints(q0) - model.keypoints(q1), axis=1)
     assert error.mean() < 0.25 * stayed.mean()            # it followed the image
     assert abs(out.result.q[2] - q1[2]) < 0.01            # and kept the depth
+    # further down a fingertip leaves the image: its angles would only be kept
+    tip_low = CAMERA.project(model.keypoints(q1)[list(FINGERTIP_KEYPOINTS)])[:, 1].max()
+    q2 = q1.copy()
+    q2[1] += (CAMERA.height + 30 - tip_low) * q0[2] / CAMERA.fy
+    assert fingertips_outside(tracker, q2) and not fingertips_outside(tracker, q1)
+    ids2, blobs2 = _patch_view(tracker, q2)
+    gone = track(tracker, wrong, [CameraObservation(True, blobs2, PATCH_CROP, True)], 2 / 30,
+                 limits)
+    assert isinstance(gone, NoHand) and gone.reason == FINGERS_OUTSIDE
+    assert tracker.previous_pose is None
+    # too few of its patches matched: no pose, and the track ends
+    tracker = tracker_after_one_frame()
+    few = track(tracker, wrong, cut, 1 / 30,
+                replace(limits, follow_min_constraints=out.result.num_constraints + 1))
+    assert isinstance(few, NoHand) and few.reason.startswith(CUT_BY_BORDER)
+    assert 'patches matched' in few.reason and tracker.previous_pose is None
     # off: the cut hand is no hand, and the track ends
     tracker = tracker_after_one_frame()
     off = track(tracker, wrong, cut, 1 / 30, replace(limits, follow_cut_hands=False))
