@@ -47,8 +47,8 @@ if TYPE_CHECKING:
 # imports only the stage it runs (start-up time).
 
 __all__ = [
-    'DEFAULT_MAX_IMAGE_DISTANCE', 'CUT_BY_BORDER', 'FINGERS_OUTSIDE', 'FINGERTIP_KEYPOINTS',
-    'fingertips_outside', 'StageLimits', 'NODE_LIMITS', 'UNGATED',
+    'DEFAULT_MAX_IMAGE_DISTANCE', 'CUT_BY_BORDER', 'FINGERS_OUTSIDE', 'LAST_JOINT_KEYPOINTS',
+    'fingers_outside', 'StageLimits', 'NODE_LIMITS', 'UNGATED',
     'NoHand', 'Tracked', 'glove_seen',
     'TemporalPrior', 'Observer', 'FrameObservations', 'FrameLookup', 'FramePipeline',
     'segment_frame', 'bad_image', 'observe_image', 'image_observer', 'look_up', 'search',
@@ -66,8 +66,11 @@ CUT_BY_BORDER = 'hand cut by the image border: its depth and pose are not known 
 #: ... and of a followed hand (``StageLimits.follow_cut_hands``) whose fingers leave the image.
 FINGERS_OUTSIDE = ('hand cut by the image border: its fingers leave the image, their angles are '
                    'not known until they are in view')
-#: The hand model's keypoints of the five fingertips.
-FINGERTIP_KEYPOINTS = tuple(KEYPOINT_NAMES.index(f'{d}_tip') for d in DIGITS)
+#: The hand model's keypoints of each digit's last joint (the thumb's IP, the fingers' DIP):
+#: a distal link beyond it follows the link before it (the DIP-PIP coupling), so a digit
+#: whose last joint is in view has no angle the image does not show.
+LAST_JOINT_KEYPOINTS = tuple(KEYPOINT_NAMES.index(f'{d}_{"ip" if d == "thumb" else "dip"}')
+                             for d in DIGITS)
 
 
 @dataclass(frozen=True)
@@ -82,9 +85,9 @@ class StageLimits:
     size (depth) nor the nearest entries (pose) can be trusted. With ``follow_cut_hands`` a
     hand tracked on the frame before is followed from that pose instead, without the lookup
     (``HandTracker.follow``: the visible patches matched where the last pose puts them), and
-    published while its fingertips stay in the image (:data:`FINGERS_OUTSIDE`), at least
-    ``follow_min_constraints`` of its patches are matched and it passes every gate below as a
-    fit without a close lookup; a hand first seen cut stays no hand.
+    published while every digit's last joint stays in the image (:data:`FINGERS_OUTSIDE`),
+    at least ``follow_min_constraints`` of its patches are matched and it passes every gate
+    below as a fit without a close lookup; a hand first seen cut stays no hand.
 
     Weak evidence: a fit whose lookup was not a close match (nearest database image farther
     than ``close_match_distance``, or unknown) and that explains less than
@@ -526,7 +529,7 @@ def _follow_cut_hand(tracker: Any, observations: Sequence[CameraObservation], st
     if not result.found or result.q is None:
         tracker.reset()
         return NoHand(CUT_BY_BORDER, partial=result)
-    if fingertips_outside(tracker, result.q):
+    if fingers_outside(tracker, result.q):
         tracker.reset()
         return NoHand(FINGERS_OUTSIDE, partial=result)
     if result.num_constraints < limits.follow_min_constraints:
@@ -536,12 +539,14 @@ def _follow_cut_hand(tracker: Any, observations: Sequence[CameraObservation], st
     return _gated(tracker, math.nan, result, observations, limits)
 
 
-def fingertips_outside(tracker: Any, q: np.ndarray) -> bool:
-    """Whether a fingertip of pose ``q`` projects outside the tracker's primary image (or
-    behind it): a followed hand's fingers out of view would only keep their last angles."""
+def fingers_outside(tracker: Any, q: np.ndarray) -> bool:
+    """Whether the last joint of a digit of pose ``q`` (:data:`LAST_JOINT_KEYPOINTS`)
+    projects outside the tracker's primary image (or behind it): a followed hand's finger out
+    of view would only keep its last angles."""
     model = tracker.model
     camera = tracker.cameras[0]
-    tips = camera.world_to_camera(model.keypoints(np.asarray(q, float))[list(FINGERTIP_KEYPOINTS)])
+    tips = camera.world_to_camera(
+        model.keypoints(np.asarray(q, float))[list(LAST_JOINT_KEYPOINTS)])
     if np.any(tips[:, 2] <= 0.0):
         return True
     x, y = camera.project(tips).T

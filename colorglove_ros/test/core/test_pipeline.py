@@ -15,7 +15,7 @@ from colorglove_ros.core.lookup.types import LookupResult, ProjectionConstraints
 from colorglove_ros.core.pipeline import (
     CUT_BY_BORDER,
     FINGERS_OUTSIDE,
-    FINGERTIP_KEYPOINTS,
+    LAST_JOINT_KEYPOINTS,
     NODE_LIMITS,
     UNGATED,
     FramePipeline,
@@ -23,7 +23,7 @@ from colorglove_ros.core.pipeline import (
     StageLimits,
     TemporalPrior,
     Tracked,
-    fingertips_outside,
+    fingers_outside,
     hand_keypoints_at_plausible_depth,
     image_observer,
     look_up,
@@ -500,11 +500,11 @@ def test_a_tracked_hand_the_border_cuts_is_followed_from_its_last_pose(hand) -> 
     stayed = np.linalg.norm(model.keypoints(q0) - model.keypoints(q1), axis=1)
     assert error.mean() < 0.25 * stayed.mean()            # it followed the image
     assert abs(out.result.q[2] - q1[2]) < 0.01            # and kept the depth
-    # further down a fingertip leaves the image: its angles would only be kept
-    tip_low = CAMERA.project(model.keypoints(q1)[list(FINGERTIP_KEYPOINTS)])[:, 1].max()
+    # further down a finger leaves the image: its angles would only be kept
+    tip_low = CAMERA.project(model.keypoints(q1)[list(LAST_JOINT_KEYPOINTS)])[:, 1].max()
     q2 = q1.copy()
     q2[1] += (CAMERA.height + 30 - tip_low) * q0[2] / CAMERA.fy
-    assert fingertips_outside(tracker, q2) and not fingertips_outside(tracker, q1)
+    assert fingers_outside(tracker, q2) and not fingers_outside(tracker, q1)
     ids2, blobs2 = _patch_view(tracker, q2)
     gone = track(tracker, wrong, [CameraObservation(True, blobs2, PATCH_CROP, True)], 2 / 30,
                  limits)
