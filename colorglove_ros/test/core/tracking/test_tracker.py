@@ -760,3 +760,24 @@ def test_blobs_the_border_cuts_are_not_followed(rig):
     assert away_from_border(None, cam) is None
     lost = CameraObservation(False)
     assert away_from_border(lost, cam) is lost
+
+
+def test_follow_fits_every_cameras_blobs_from_the_last_pose(rig):
+    model, mesh, kin, mono, stereo, verts = rig
+    rng = np.random.default_rng(21)
+    q0 = true_pose(model, rng)
+    tracker = HandTracker(model, mesh, stereo, VERTEX)
+    fresh = HandTracker(model, mesh, stereo, VERTEX)
+    prior, obs = observe(rig, q0, q0, stereo, rng)
+    assert not fresh.follow(obs, 0.0).found           # nothing to follow from
+    assert tracker.update(prior, obs, 0.0).found
+    q1 = q0.copy()
+    q1[0] += 0.01                                      # 1 cm sideways, fingers curling
+    q1[6:] = model.clamp(q1 + 0.05)[6:]
+    _, moved = observe(rig, q1, q1, stereo, rng, noise_px=0.5)
+    out = tracker.follow(moved, 1 / 30)
+    assert out.found and out.followed and not out.reset
+    assert all(n >= 10 for n in out.constraints_per_camera)
+    assert tip_error(model, out.q, q1) < 0.3 * tip_error(model, q0, q1)
+    assert not tracker.follow(moved, 1 / 30 + 5.0).found     # after a gap: no track
+    assert tracker.previous_pose is None
