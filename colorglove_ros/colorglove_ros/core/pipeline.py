@@ -400,8 +400,9 @@ def glove_seen(tracker: Any, q: np.ndarray, observation: CameraObservation,
                limits: StageLimits) -> GloveEvidence | None:
     """How much of the glove pose ``q`` shows in the tracker's primary camera has a
     same-colour blob of ``observation`` near it (``core.tracking.evidence.glove_evidence``
-    with the tracker's ``patch_surface`` and ``patch_color`` and ``limits``' patch settings);
-    None for a tracker without a ``patch_surface`` (a stand-in)."""
+    with the tracker's ``patch_surface`` and ``patch_color`` and ``limits``' patch settings;
+    of a hand the border cuts, only the patches centred inside the image); None for a tracker
+    without a ``patch_surface`` (a stand-in)."""
     from colorglove_ros.core.tracking.evidence import glove_evidence
 
     surface = getattr(tracker, 'patch_surface', None)
@@ -411,7 +412,8 @@ def glove_seen(tracker: Any, q: np.ndarray, observation: CameraObservation,
     return glove_evidence(surface, tracker.patch_color, q, tracker.cameras[0],
                           observation.blobs, min_patch_px=limits.min_shown_patch_px * scale**2,
                           near_patch_sizes=limits.near_patch_sizes,
-                          min_blob_share=limits.min_patch_blob_share)
+                          min_blob_share=limits.min_patch_blob_share,
+                          inside_image_only=observation.cut_by_border)
 
 
 def missing_glove(tracker: Any, q: np.ndarray, observation: CameraObservation,
@@ -488,8 +490,9 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
     (:data:`CUT_BY_BORDER`, or followed: :func:`_follow_cut_hand`). A refusal resets the
     tracker.
     """
-    if (limits.refuse_cut_hands and prior is not None and observations
-            and observations[0].hand_found and observations[0].cut_by_border):
+    if (limits.refuse_cut_hands and observations and observations[0].hand_found
+            and observations[0].cut_by_border
+            and (prior is not None or _followable(tracker, limits))):
         return _follow_cut_hand(tracker, observations, stamp, limits)
     if temporal is not None and prior is not None:
         from colorglove_ros.core.lookup.temporal_prior import reweight_by_previous
@@ -510,20 +513,26 @@ def track(tracker: Any, prior: PosePrior | LookupResult | None,
                   observations, limits)
 
 
+def _followable(tracker: Any, limits: StageLimits) -> bool:
+    """Whether ``limits`` let a cut hand be followed and ``tracker`` can follow it (it has a
+    ``follow`` method and tracked the frame before)."""
+    return (limits.follow_cut_hands and getattr(tracker, 'follow', None) is not None
+            and getattr(tracker, 'previous_pose', None) is not None)
+
+
 def _follow_cut_hand(tracker: Any, observations: Sequence[CameraObservation], stamp: float,
                      limits: StageLimits) -> Tracked | NoHand:
     """A hand the primary image's border cuts: with ``limits.follow_cut_hands`` and a hand
     tracked on the frame before, followed from that pose without the lookup
     (``HandTracker.follow``) and gated as a fit after a far lookup (the evidence and residual
-    gates apply in full); else, or when that fails, :data:`CUT_BY_BORDER`. A hand first seen
-    cut is never tracked: nothing but the crop would give its depth."""
-    follow = getattr(tracker, 'follow', None)
-    last = tracker.previous_pose
-    if not (limits.follow_cut_hands and follow is not None and last is not None):
+    gates apply in full), also when the lookup refused it; else, or when that fails,
+    :data:`CUT_BY_BORDER`. A hand first seen cut is never tracked: nothing but the crop would
+    give its depth."""
+    if not _followable(tracker, limits):
         tracker.reset()
         return NoHand(CUT_BY_BORDER)
     try:
-        result = follow(observations, stamp)
+        result = tracker.follow(observations, stamp)
     except (IKError, InvalidInputError, ValueError) as exc:
         return bad_prior(tracker, exc)
     if not result.found or result.q is None:

@@ -41,7 +41,7 @@ from colorglove_ros.core.segmentation.segmenter import GloveSegmenter
 from colorglove_ros.core.segmentation.types import Blob, Observation
 from colorglove_ros.core.synthetic import frames as synth
 from colorglove_ros.core.synthetic.conditions import sample_conditions
-from colorglove_ros.core.tracking.tracker import HandTracker, IKResult
+from colorglove_ros.core.tracking.tracker import HandTracker, IKResult, away_from_border
 from colorglove_ros.core.tracking.types import Blobs, CameraObservation, PosePrior
 from colorglove_ros.core.validation import InvalidInputError
 
@@ -500,6 +500,15 @@ def test_a_tracked_hand_the_border_cuts_is_followed_from_its_last_pose(hand) -> 
     stayed = np.linalg.norm(model.keypoints(q0) - model.keypoints(q1), axis=1)
     assert error.mean() < 0.25 * stayed.mean()            # it followed the image
     assert abs(out.result.q[2] - q1[2]) < 0.01            # and kept the depth
+    # the blobs the border cuts (centroid nearer to it than their side) are not matched
+    inner = away_from_border(cut[0], CAMERA).blobs
+    assert len(inner) < len(blobs1)
+    assert out.result.num_constraints <= len(inner)
+    # a cut hand the lookup refused (no prior) is followed all the same
+    refused = track(tracker_after_one_frame(), None, cut, 1 / 30, limits,
+                    upstream_reason='lookup: too far')
+    assert isinstance(refused, Tracked) and refused.result.followed
+    np.testing.assert_allclose(refused.result.q, out.result.q, atol=1e-9)
     # further down a finger leaves the image: its angles would only be kept
     tip_low = CAMERA.project(model.keypoints(q1)[list(LAST_JOINT_KEYPOINTS)])[:, 1].max()
     q2 = q1.copy()

@@ -34,19 +34,24 @@ class GloveEvidence:
 
 def glove_evidence(surface: PatchSurface, patch_color: np.ndarray, q: np.ndarray,
                    camera: PinholeCamera, blobs: Blobs, *, min_patch_px: float,
-                   near_patch_sizes: float, min_blob_share: float) -> GloveEvidence:
+                   near_patch_sizes: float, min_blob_share: float,
+                   inside_image_only: bool = False) -> GloveEvidence:
     """Compare the glove at pose ``q`` (``surface``, ``patch_color`` per patch) in ``camera``
     with its observed ``blobs``. A patch counts when at least ``min_patch_px`` of it is
-    visible and the centroid of that part lies inside the image (a hand the border cuts
-    shows nothing beyond it); it is found when a blob of its colour holding at least
-    ``min_blob_share`` of the patch's visible area lies within ``near_patch_sizes`` patch
-    sizes (the square root of the visible area) of the visible part's centroid."""
+    visible (and, with ``inside_image_only``, for a hand the image border cuts, which shows
+    nothing beyond it, the centroid of that part lies inside the image: an uncut hand's fit
+    putting glove beyond the border is wrong, and counts); it is found when a blob of its
+    colour holding at least ``min_blob_share`` of the patch's visible area lies within
+    ``near_patch_sizes`` patch sizes (the square root of the visible area) of the visible
+    part's centroid."""
     area, centroid = surface.visible_patches(q, camera)
     shown = float(area.sum())
-    with np.errstate(invalid='ignore'):
-        in_image = ((centroid[:, 0] >= 0.0) & (centroid[:, 0] < camera.width)
-                    & (centroid[:, 1] >= 0.0) & (centroid[:, 1] < camera.height))
-    counted = np.flatnonzero((area >= min_patch_px) & in_image)
+    counted = area >= min_patch_px
+    if inside_image_only:
+        with np.errstate(invalid='ignore'):
+            counted &= ((centroid[:, 0] >= 0.0) & (centroid[:, 0] < camera.width)
+                        & (centroid[:, 1] >= 0.0) & (centroid[:, 1] < camera.height))
+    counted = np.flatnonzero(counted)
     if len(counted) == 0:
         return GloveEvidence(shown, math.nan, ())
     colors = np.asarray(patch_color)[counted]

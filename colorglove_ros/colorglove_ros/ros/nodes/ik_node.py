@@ -356,14 +356,19 @@ class IKNode(Node):
         stamp = stamp_to_seconds(msg.header.stamp)
         try:
             prior = blobs = None
-            if msg.hand_found:
+            seen_cut = msg.observation.hand_found and msg.observation.cut_by_border
+            if msg.hand_found or seen_cut:
                 camera = self._camera_model(0, msg.observation)
                 if isinstance(camera, NoHand):
                     self.tracker.reset()
                     return camera
+            if msg.hand_found:
                 _, blobs = checked_candidates_msg(msg, self.num_vertices,
                                                   (camera.width, camera.height))
                 prior = pose_prior_from_candidates_msg(msg)
+            elif seen_cut:      # a cut hand the lookup refused may still be followed
+                _, blobs = checked_observation_msg(msg.observation,
+                                                   (camera.width, camera.height))
             observations = [camera_observation_from_msg(msg.observation, blobs),
                             *self._extra_camera_observations(stamp)]
         except (IKError, InvalidInputError, ValueError) as exc:

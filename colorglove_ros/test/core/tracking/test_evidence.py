@@ -101,3 +101,22 @@ def test_a_pose_showing_no_glove_has_no_share(scene) -> None:
     seen = glove_evidence(surface, np.asarray(synth.glove.patch_color), q, cam, Blobs.empty(),
                           **SETTINGS)
     assert np.isnan(seen.missing_share) and seen.shown_px == 0.0
+
+
+def test_of_a_cut_hand_only_the_glove_inside_the_image_counts(scene) -> None:
+    synth, cam, surface = scene
+    color = np.asarray(synth.glove.patch_color)
+    q = _poses(scene)[0].copy()
+    area, centroid = surface.visible_patches(q, cam)
+    shown = np.flatnonzero(area >= SETTINGS['min_patch_px'])
+    # the hand moved so that the border runs through the middle of its patches' rows
+    cut_row = float(np.median(centroid[shown, 1]))
+    q[1] += (cam.height - cut_row) * q[2] / cam.fy
+    area, centroid = surface.visible_patches(q, cam)
+    inside = (area > 0) & (centroid[:, 1] < cam.height)
+    seen = Blobs(color[inside], centroid[inside], area[inside])       # what the image holds
+    cut = glove_evidence(surface, color, q, cam, seen, inside_image_only=True, **SETTINGS)
+    uncut = glove_evidence(surface, color, q, cam, seen, **SETTINGS)
+    assert cut.missing_share == 0.0
+    # an uncut hand's fit that puts glove beyond the border is refused as before
+    assert uncut.missing_share > 0.3
