@@ -625,3 +625,29 @@ def test_start_up_parameters_are_read_only(node_assets: NodeAssets) -> None:
                                                 value='config/other.yaml')])[0]
         assert not result.successful and 'read-only' in result.reason
         assert node.get_parameter('color_calibration_file').value == str(node_assets.color_config)
+
+
+def test_ik_node_follows_a_tracked_hand_the_border_cuts(good_candidates: HandPoseCandidates,
+                                                       small_database_path: Path) -> None:
+    """A tracked hand whose next observation the border cuts, and which the lookup refused
+    (no candidates), is followed from its last pose and says so; with follow_cut_hands off
+    the frame is the lookup's 'no hand', as before."""
+    from colorglove_ros.core.hand.frame_evidence import FOLLOWED_NOTE
+
+    cut = copy.deepcopy(good_candidates)
+    cut.header.stamp.nanosec += 33_000_000
+    cut.observation.header.stamp = cut.header.stamp
+    cut.hand_found = False
+    cut.status = 'lookup: nearest database image too far'
+    cut.observation.cut_by_border = True
+    for follow, expected in ((True, 'tracking:'), (False, f'no hand: {cut.status}')):
+        with running(ik_node(small_database_path, follow_cut_hands=follow)) as h:
+            status = h.collect(String, 'hand/tracking_status')
+            joints = h.collect(JointState, 'hand/joint_states')
+            pub = h.publisher(HandPoseCandidates, 'hand/pose_candidates')
+            assert h.exchange(pub, good_candidates, status).data.startswith('tracking:')
+            answer = h.exchange(pub, cut, status).data
+            h.settle(0.2)
+        assert answer.startswith(expected), answer
+        assert (FOLLOWED_NOTE in answer) == follow
+        assert len(joints) == (2 if follow else 1)
