@@ -98,6 +98,13 @@ class PinholeCamera:
         xy = points_camera[..., :2] / z
         return xy * np.array([self.fx, self.fy]) + np.array([self.cx, self.cy])
 
+    def in_image(self, pixels: np.ndarray) -> np.ndarray:
+        """Whether each of (..., 2) pixels lies inside the image, x in [0, width) and y in
+        [0, height) (NaN: no)."""
+        px = np.asarray(pixels, dtype=float)
+        return ((px[..., 0] >= 0) & (px[..., 0] < self.width) & (px[..., 1] >= 0)
+                & (px[..., 1] < self.height))
+
     def project_jacobian(self, points_camera: np.ndarray) -> np.ndarray:
         """d(pixel)/d(point) for (N, 3) optical-frame points: (N, 2, 3)."""
         x, y, z = points_camera[:, 0], points_camera[:, 1], points_camera[:, 2]

@@ -552,14 +552,10 @@ def fingers_outside(tracker: Any, q: np.ndarray) -> bool:
     """Whether the last joint of a digit of pose ``q`` (:data:`LAST_JOINT_KEYPOINTS`)
     projects outside the tracker's primary image (or behind it): a followed hand's finger out
     of view would only keep its last angles."""
-    model = tracker.model
     camera = tracker.cameras[0]
-    tips = camera.world_to_camera(
-        model.keypoints(np.asarray(q, float))[list(LAST_JOINT_KEYPOINTS)])
-    if np.any(tips[:, 2] <= 0.0):
-        return True
-    x, y = camera.project(tips).T
-    return bool(np.any((x < 0) | (x >= camera.width) | (y < 0) | (y >= camera.height)))
+    joints = camera.world_to_camera(
+        tracker.model.keypoints(np.asarray(q, float))[list(LAST_JOINT_KEYPOINTS)])
+    return bool(np.any(joints[:, 2] <= 0.0) or not camera.in_image(camera.project(joints)).all())
 
 
 def _gated(tracker: Any, image_distance: float, result: IKResult,

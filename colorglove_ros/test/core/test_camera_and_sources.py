@@ -36,6 +36,14 @@ def test_projection_of_the_optical_axis_is_the_principal_point() -> None:
         np.testing.assert_allclose(jac[0, :, axis], numeric, rtol=1e-5, atol=1e-3)
 
 
+def test_in_image_is_the_half_open_pixel_rectangle() -> None:
+    w, h = CAMERA.width, CAMERA.height
+    pixels = np.array([[0.0, 0.0], [w - 0.01, h - 0.01], [w, 10.0], [10.0, h], [-0.01, 5.0],
+                       [5.0, -0.01], [np.nan, 5.0]])
+    assert CAMERA.in_image(pixels).tolist() == [True, True, False, False, False, False, False]
+    assert CAMERA.in_image(pixels.reshape(7, 1, 2)).shape == (7, 1)
+
+
 def test_look_at_puts_the_target_on_the_axis() -> None:
     rotation, translation = look_at_extrinsics(np.array([0.3, -0.1, 0.0]), np.array([0, 0, 0.5]))
     target = rotation @ np.array([0, 0, 0.5]) + translation

@@ -778,8 +778,7 @@ def _axis_points(points: FeaturePoints, pix: np.ndarray, Jpix: np.ndarray | None
     if Jpix is not None:
         Jb, Je = Jpix[0:2 * L:2], Jpix[1:2 * L:2]
         J = np.concatenate([Jb, 0.5 * (Jb + Je), Je, Jpix[points.tip_slice]])
-    inside = (px[:, 0] >= 0) & (px[:, 0] < camera.width) & (px[:, 1] >= 0) \
-        & (px[:, 1] < camera.height)
+    inside = camera.in_image(px)
     digit = np.concatenate([np.tile(points.outline_digit[:L], 3), points.tip_digit])
     return px[inside], None if J is None else J[inside], digit[inside]
 

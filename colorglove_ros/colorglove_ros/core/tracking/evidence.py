@@ -48,9 +48,7 @@ def glove_evidence(surface: PatchSurface, patch_color: np.ndarray, q: np.ndarray
     shown = float(area.sum())
     counted = area >= min_patch_px
     if inside_image_only:
-        with np.errstate(invalid='ignore'):
-            counted &= ((centroid[:, 0] >= 0.0) & (centroid[:, 0] < camera.width)
-                        & (centroid[:, 1] >= 0.0) & (centroid[:, 1] < camera.height))
+        counted &= camera.in_image(centroid)
     counted = np.flatnonzero(counted)
     if len(counted) == 0:
         return GloveEvidence(shown, math.nan, ())

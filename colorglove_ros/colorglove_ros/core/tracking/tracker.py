@@ -316,8 +316,7 @@ class HandTracker:
             prior = PosePrior.from_lookup(prior)
         primary = observations[0] if observations else None
         if prior is None or primary is None or not primary.hand_found:
-            self.reset()
-            return IKResult(False, stamp, reset=True, time_ms=1e3 * (time.perf_counter() - t0))
+            return self._lost(stamp, t0)
         was_reset = self._reset_after_gap(stamp)
         q_blend = self._blend_start(prior)
         corr0, tracked = self._match_start(prior, observations, q_blend)
@@ -347,16 +346,14 @@ class HandTracker:
         was_reset = self._reset_after_gap(stamp)
         if (was_reset or self._q_prev is None or self._constraints_prev is None
                 or primary is None or not primary.hand_found or not cfg.enable_ik):
-            self.reset()
-            return IKResult(False, stamp, reset=True, time_ms=1e3 * (time.perf_counter() - t0))
+            return self._lost(stamp, t0)
         q_last = self._q_prev.copy()
         last = PosePrior(q_last, self._constraints_prev)
         inner = [away_from_border(obs, camera) for obs, camera in
                  zip(observations, self.cameras, strict=False)]
         corr = self._match_extras(last, inner, q_last, first_camera=0)
         if len(corr) < cfg.min_constraints:
-            self.reset()
-            return IKResult(False, stamp, reset=True, time_ms=1e3 * (time.perf_counter() - t0))
+            return self._lost(stamp, t0)
         priors = _FramePriors(q_last, q_last if cfg.enable_smoothing else None,
                               cfg.prior_covariances(None))
         fit = _FrameFit(q_last, corr)
@@ -366,6 +363,11 @@ class HandTracker:
         self._drop_outliers(fit, priors)
         return replace(self._finish(fit, stamp, t0, q_last, priors, False, inner[0].blobs),
                        followed=True)
+
+    def _lost(self, stamp: float, t0: float) -> IKResult:
+        """No hand on this frame (begun at ``perf_counter`` ``t0``): the track is forgotten."""
+        self.reset()
+        return IKResult(False, stamp, reset=True, time_ms=1e3 * (time.perf_counter() - t0))
 
     def _reset_after_gap(self, stamp: float) -> bool:
         """Reset when the time since the last frame is not in (0, ``max_gap_s``]."""
