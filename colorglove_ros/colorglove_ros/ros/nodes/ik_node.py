@@ -165,7 +165,7 @@ class IKNode(Node):
             'a hand tracked on the frame before that the image border now cuts is followed '
             'from its last pose without the lookup and gated as after a far lookup; false: no '
             'pose until it is fully in view again (a hand first seen cut never has one)',
-            self._check_follow_cut_hands)))
+            lambda v: self._check_limit('follow_cut_hands', v, bool))))
         self.overlay_subscription = None
         self.publish_overlay = self.live.declare(
             'publish_overlay', False,
@@ -224,17 +224,13 @@ class IKNode(Node):
             self.tracker.config = replace(self.tracker.config, **{name: value})
         return apply
 
-    def _check_limit(self, name: str, value: Any) -> Apply:
-        """A new value of an evidence-gate setting (its range is the parameter's)."""
-        number = float(value)
+    def _check_limit(self, name: str, value: Any, kind: type = float) -> Apply:
+        """A new value of an evidence-gate setting, as ``kind`` (its range and type are the
+        parameter's)."""
+        converted = kind(value)
 
         def apply() -> None:
-            self.limits = replace(self.limits, **{name: number})
-        return apply
-
-    def _check_follow_cut_hands(self, value: Any) -> Apply:
-        def apply() -> None:
-            self.limits = replace(self.limits, follow_cut_hands=bool(value))
+            self.limits = replace(self.limits, **{name: converted})
         return apply
 
     def _check_publish_overlay(self, value: Any) -> Apply:
